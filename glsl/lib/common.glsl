@@ -1,0 +1,16 @@
+// Shared kernel prelude: extensions, buffer-reference types and the flat thread index.
+// Included first by every kernel. Buffers arrive as device addresses in the push-constant block.
+#extension GL_EXT_buffer_reference : require
+#extension GL_EXT_buffer_reference2 : require
+#extension GL_EXT_shader_explicit_arithmetic_types_int64 : require
+#extension GL_EXT_scalar_block_layout : require
+
+layout(buffer_reference, scalar, buffer_reference_align = 4) buffer F32Buf { float v[]; };
+layout(buffer_reference, scalar, buffer_reference_align = 4) buffer U32Buf { uint v[]; };
+layout(buffer_reference, scalar, buffer_reference_align = 4) buffer I32Buf { int v[]; };
+
+// Flat invocation index for 1-D work split over a 2-D dispatch grid (each dimension is limited to
+// 65535 workgroups); the host side is `gpu::Batch::dispatch_1d`.
+uint flat_id() {
+    return gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * gl_NumWorkGroups.x * gl_WorkGroupSize.x;
+}

@@ -1,0 +1,1 @@
+//! Numerics shared by the CPU twins and the f64 oracles.
