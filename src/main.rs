@@ -1,1 +1,5 @@
-fn main() {}
+//! The `alphasurf` command line: clap subcommands wired to library calls (see `src/cli/`).
+
+fn main() -> std::process::ExitCode {
+    alphasurf::cli::main()
+}

@@ -1,0 +1,1 @@
+//! Benchmarks behind `alphasurf bench …`: they print figures (and a JSON line with --json).
