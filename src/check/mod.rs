@@ -3,7 +3,7 @@
 
 use crate::gpu::Gpu;
 
-mod fill_pattern;
+pub mod fill_pattern;
 
 /// Result of comparing one kernel on the Vulkan device with its CPU twin.
 #[derive(Debug, Clone, serde::Serialize)]
