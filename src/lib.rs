@@ -6,5 +6,6 @@ pub mod check;
 pub mod cli;
 pub mod cpu;
 pub mod gpu;
+pub mod grid;
 pub mod kernels;
 pub mod math;
