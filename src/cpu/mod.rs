@@ -9,4 +9,4 @@ mod tv;
 
 pub use fill_pattern::fill_pattern;
 pub use rmsprop::rmsprop;
-pub use tv::{tv, tv_loss, TvChunk};
+pub use tv::{tv, TvChunk};

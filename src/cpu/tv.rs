@@ -86,18 +86,3 @@ pub fn tv(links: &[i32], data: &[f32], grad: &mut [f32], c: &TvChunk) {
         }
     }
 }
-
-/// The TV loss itself (scale·Σ TV over the chunk), for finite-difference tests and reporting.
-pub fn tv_loss(links: &[i32], data: &[f32], c: &TvChunk) -> f64 {
-    let start = c.start as usize;
-    let end = (start + c.count as usize).min(links.len());
-    (start..end)
-        .filter(|&s| links[s] >= 0)
-        .map(|s| {
-            (0..c.channels as usize)
-                .map(|ch| forward_diffs(links, data, c, s, links[s], ch)[3] as f64)
-                .sum::<f64>()
-        })
-        .sum::<f64>()
-        * c.scale as f64
-}
