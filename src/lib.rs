@@ -4,5 +4,8 @@
 pub mod bench;
 pub mod cli;
 pub mod cpu;
+pub mod data;
+pub mod io;
 pub mod kernels;
 pub mod math;
+pub mod scene;

@@ -1,6 +1,9 @@
 //! Command-line interface: argument types and the dispatch to library calls. Each subcommand's
 //! handler lives in its own module; this file only wires them together.
 
+pub mod inspect;
+pub mod make_scene;
+
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
@@ -22,7 +25,12 @@ pub struct Cli {
 
 /// Subcommands.
 #[derive(Subcommand, Debug)]
-pub enum Command {}
+pub enum Command {
+    /// Write a built-in procedural scene (NeRF-synthetic format + exact ground truth).
+    MakeScene(make_scene::MakeSceneArgs),
+    /// Summarise a NeRF-synthetic dataset: splits, cameras, object bounds, warnings.
+    Inspect(inspect::InspectArgs),
+}
 
 /// Entry point of the binary: parse, run, map errors to a message and exit code 1.
 pub fn main() -> ExitCode {
@@ -37,5 +45,9 @@ pub fn main() -> ExitCode {
 }
 
 fn run(cli: Cli) -> anyhow::Result<ExitCode> {
-    match cli.command {}
+    match cli.command {
+        Command::MakeScene(a) => make_scene::run(&a)?,
+        Command::Inspect(a) => inspect::run(&a)?,
+    }
+    Ok(ExitCode::SUCCESS)
 }
