@@ -2,7 +2,9 @@
 //! twin for every kernel. See README.md.
 
 pub mod bench;
+pub mod check;
 pub mod cli;
 pub mod cpu;
+pub mod gpu;
 pub mod kernels;
 pub mod math;

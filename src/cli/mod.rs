@@ -1,6 +1,10 @@
 //! Command-line interface: argument types and the dispatch to library calls. Each subcommand's
 //! handler lives in its own module; this file only wires them together.
 
+mod check_kernels;
+mod devices;
+
+use crate::gpu::{Gpu, GpuOptions};
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
@@ -22,7 +26,14 @@ pub struct Cli {
 
 /// Subcommands.
 #[derive(Subcommand, Debug)]
-pub enum Command {}
+pub enum Command {
+    /// List Vulkan devices (name, type, driver, memory, subgroup size, float atomics, limits) and
+    /// the CPU backend.
+    Devices,
+    /// Run every GPU kernel against its CPU twin on random and adversarial inputs; one row per
+    /// kernel; exit code 1 on any mismatch.
+    CheckKernels(check_kernels::CheckKernelsArgs),
+}
 
 /// Entry point of the binary: parse, run, map errors to a message and exit code 1.
 pub fn main() -> ExitCode {
@@ -36,6 +47,41 @@ pub fn main() -> ExitCode {
     }
 }
 
+/// Open the Vulkan device chosen by `--device` (validation on when `ALPHASURF_VALIDATION` is set).
+fn open_gpu(cli: &Cli) -> anyhow::Result<Gpu> {
+    Gpu::new(&GpuOptions {
+        device: cli.device,
+        validation: std::env::var_os("ALPHASURF_VALIDATION").is_some(),
+    })
+}
+
+fn exit(pass: bool) -> ExitCode {
+    if pass {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::FAILURE
+    }
+}
+
 fn run(cli: Cli) -> anyhow::Result<ExitCode> {
-    match cli.command {}
+    let mut gpu_used = None;
+    let code = match &cli.command {
+        Command::Devices => {
+            devices::run()?;
+            ExitCode::SUCCESS
+        }
+        Command::CheckKernels(args) => {
+            let gpu = gpu_used.insert(open_gpu(&cli)?);
+            exit(check_kernels::run(gpu, args)?)
+        }
+    };
+    if cli.profile {
+        use std::io::Write;
+        std::io::stdout().flush()?;
+        match &gpu_used {
+            Some(gpu) => eprint!("{}", gpu.profile().report()),
+            None => eprintln!("profile: this command ran nothing on the Vulkan device"),
+        }
+    }
+    Ok(code)
 }
