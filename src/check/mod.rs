@@ -3,7 +3,10 @@
 
 use crate::gpu::Gpu;
 
+pub mod dda_walk;
 mod fill_pattern;
+pub mod sh_eval;
+pub mod trilerp_eval;
 
 /// Result of comparing one kernel on the Vulkan device with its CPU twin.
 #[derive(Debug, Clone, serde::Serialize)]
@@ -28,7 +31,12 @@ pub struct CheckRow {
 pub type CheckFn = fn(&Gpu, u64) -> anyhow::Result<CheckRow>;
 
 /// Every registered parity check, in table order. Later kernels add themselves here.
-pub const CHECKS: &[(&str, CheckFn)] = &[("fill_pattern", fill_pattern::check)];
+pub const CHECKS: &[(&str, CheckFn)] = &[
+    ("fill_pattern", fill_pattern::check),
+    ("dda_walk", dda_walk::check),
+    ("trilerp_eval", trilerp_eval::check),
+    ("sh_eval", sh_eval::check),
+];
 
 /// Elementwise |a − b| ≤ abs + rel·|b| test with running maxima.
 #[derive(Debug, Default, Clone, Copy)]
