@@ -45,7 +45,11 @@ fn trilerp_value_and_gradient_against_f64_finite_differences() {
             let fd = (trilerp64(&c, hi) - trilerp64(&c, lo)) / (2.0 * h);
             let err = (g[a] as f64 - fd).abs() / s;
             worst = worst.max(err);
-            assert!(err < 1e-5, "axis {a}: analytic {} fd {fd} at {p:?} {c:?}", g[a]);
+            assert!(
+                err < 1e-5,
+                "axis {a}: analytic {} fd {fd} at {p:?} {c:?}",
+                g[a]
+            );
         }
     }
     println!("worst gradient error / max|corner|: {worst:e}");
@@ -116,14 +120,23 @@ fn sh_basis_and_colour_against_f64() {
         let y = sh_basis(d);
         let y64 = sh64(d.map(|x| x as f64));
         for k in 0..9 {
-            assert!((y[k] as f64 - y64[k]).abs() < 1e-6, "Y{k} at {d:?}: {} vs {}", y[k], y64[k]);
+            assert!(
+                (y[k] as f64 - y64[k]).abs() < 1e-6,
+                "Y{k} at {d:?}: {} vs {}",
+                y[k],
+                y64[k]
+            );
         }
         let coefs: [f32; 27] = std::array::from_fn(|_| rng.random_range(-1.0f32..1.0));
         let rgb = sh_rgb(&y, &coefs);
         for ch in 0..3 {
             let s: f64 = (0..9).map(|k| y64[k] * coefs[9 * ch + k] as f64).sum();
             let want = (s + 0.5).max(0.0);
-            assert!((rgb[ch] as f64 - want).abs() < 1e-5, "channel {ch}: {} vs {want}", rgb[ch]);
+            assert!(
+                (rgb[ch] as f64 - want).abs() < 1e-5,
+                "channel {ch}: {} vs {want}",
+                rgb[ch]
+            );
         }
     }
     // Colour of all-zero coefficients is mid-grey; a large negative DC clamps to 0, not below.
@@ -172,5 +185,9 @@ fn gpu_parity() {
         println!("{row:?}");
         assert!(row.pass, "{row:?}");
     }
-    assert!(gpu.validation_messages().is_empty(), "{:?}", gpu.validation_messages());
+    assert!(
+        gpu.validation_messages().is_empty(),
+        "{:?}",
+        gpu.validation_messages()
+    );
 }

@@ -41,8 +41,15 @@ const PARITY_RAYS: usize = 8192;
 
 /// Run the benchmark and print it; returns the parity verdict.
 pub fn run(gpu: &Gpu, args: &DdaBenchArgs) -> Result<bool> {
-    ensure!((2..=1024).contains(&args.res), "--res must be in 2..=1024, got {}", args.res);
-    ensure!(args.rays >= 1 && args.rays <= 1 << 24, "--rays must be in 1..=16777216");
+    ensure!(
+        (2..=1024).contains(&args.res),
+        "--res must be in 2..=1024, got {}",
+        args.res
+    );
+    ensure!(
+        args.rays >= 1 && args.rays <= 1 << 24,
+        "--rays must be in 1..=16777216"
+    );
     ensure!(args.repeats >= 1, "--repeats must be at least 1");
     let n = args.res;
     let rays = sphere_rays(args.rays, n, args.seed, 0.2);
@@ -88,7 +95,10 @@ pub fn run(gpu: &Gpu, args: &DdaBenchArgs) -> Result<bool> {
         rays.len(),
         cells as f64 / rays.len() as f64
     );
-    println!("{:<40} {:>12} {:>14} {:>12}", "backend", "time", "cells/s", "rays/s");
+    println!(
+        "{:<40} {:>12} {:>14} {:>12}",
+        "backend", "time", "cells/s", "rays/s"
+    );
     println!(
         "{:<40} {:>9.2} ms {:>14.3e} {:>12.3e}",
         format!("vulkan: {}", info.name),

@@ -105,12 +105,19 @@ fn exact(cmp: &mut Compare, gpu: u32, cpu: u32, what: impl FnOnce() -> String) {
 /// cells exactly, t within the tolerance. `label` names the ray set in failure notes.
 pub fn compare_into(cmp: &mut Compare, gpu: &DdaOut, cpu: &DdaOut, label: &str) {
     let k = cpu.k as usize;
-    for (r, (g, c)) in gpu.stats.chunks_exact(2).zip(cpu.stats.chunks_exact(2)).enumerate() {
+    for (r, (g, c)) in gpu
+        .stats
+        .chunks_exact(2)
+        .zip(cpu.stats.chunks_exact(2))
+        .enumerate()
+    {
         exact(cmp, g[0], c[0], || format!("{label} ray {r} count"));
         exact(cmp, g[1], c[1], || format!("{label} ray {r} checksum"));
         for j in 0..(c[0] as usize).min(k) {
             let e = r * k + j;
-            exact(cmp, gpu.cells[e], cpu.cells[e], || format!("{label} ray {r} cell {j}"));
+            exact(cmp, gpu.cells[e], cpu.cells[e], || {
+                format!("{label} ray {r} cell {j}")
+            });
             for w in 0..2 {
                 let (tg, tc) = (gpu.ts[2 * e + w] as f64, cpu.ts[2 * e + w] as f64);
                 cmp.value(tg, tc, || format!("{label} ray {r} cell {j} t{w}"));
@@ -122,7 +129,18 @@ pub fn compare_into(cmp: &mut Compare, gpu: &DdaOut, cpu: &DdaOut, label: &str) 
 /// Integer and half-integer coordinates around and on the faces of an `n`³ grid.
 fn adversarial_coords(n: u32) -> Vec<f32> {
     let m = (n - 1) as f32;
-    let mut c = vec![-1.0, -0.5, 0.0, 0.5, 1.0, m * 0.5, m - 0.5, m, m + 0.5, m + 1.0];
+    let mut c = vec![
+        -1.0,
+        -0.5,
+        0.0,
+        0.5,
+        1.0,
+        m * 0.5,
+        m - 0.5,
+        m,
+        m + 0.5,
+        m + 1.0,
+    ];
     c.sort_by(f32::total_cmp);
     c.dedup();
     c
@@ -142,17 +160,32 @@ pub fn adversarial_dirs() -> Vec<[f32; 3]> {
                 }
                 let d = [x as f32, y as f32, z as f32];
                 dirs.push(d);
-                let mags: Vec<i32> = [x, y, z].into_iter().filter(|v: &i32| *v != 0).map(i32::abs).collect();
+                let mags: Vec<i32> = [x, y, z]
+                    .into_iter()
+                    .filter(|v: &i32| *v != 0)
+                    .map(i32::abs)
+                    .collect();
                 if mags.iter().all(|m| *m == 1) && mags.len() > 1 {
                     dirs.push(crate::math::dda::ray_unit(d));
                 }
             }
         }
     }
-    for p in [[1, 2, 4], [1, 4, 2], [2, 1, 4], [2, 4, 1], [4, 1, 2], [4, 2, 1]] {
+    for p in [
+        [1, 2, 4],
+        [1, 4, 2],
+        [2, 1, 4],
+        [2, 4, 1],
+        [4, 1, 2],
+        [4, 2, 1],
+    ] {
         for s in 0..8 {
             let sg = |b: i32| if s >> b & 1 == 1 { -1.0 } else { 1.0 };
-            dirs.push([p[0] as f32 * sg(0), p[1] as f32 * sg(1), p[2] as f32 * sg(2)]);
+            dirs.push([
+                p[0] as f32 * sg(0),
+                p[1] as f32 * sg(1),
+                p[2] as f32 * sg(2),
+            ]);
         }
     }
     dirs

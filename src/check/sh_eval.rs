@@ -75,7 +75,11 @@ pub fn check(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
     for (i, (g, w)) in got.chunks_exact(12).zip(want.chunks_exact(12)).enumerate() {
         for j in 0..12 {
             cmp.value(g[j] as f64, w[j] as f64, || {
-                let what = if j < 9 { format!("Y{j}") } else { ["R", "G", "B"][j - 9].to_string() };
+                let what = if j < 9 {
+                    format!("Y{j}")
+                } else {
+                    ["R", "G", "B"][j - 9].to_string()
+                };
                 format!("case {i} {what}")
             });
         }

@@ -22,7 +22,11 @@ pub fn cases(count: usize, seed: u64) -> (Vec<f32>, Vec<f32>) {
     let mut points = Vec::with_capacity(3 * count);
     for i in 0..count {
         let scale = 10f32.powi(rng.random_range(-6..=6));
-        let base: f32 = if i % 5 == 0 { rng.random_range(-1.0..1.0) } else { 0.0 };
+        let base: f32 = if i % 5 == 0 {
+            rng.random_range(-1.0..1.0)
+        } else {
+            0.0
+        };
         let spread = if i % 5 == 0 { 1e-4 } else { 1.0 };
         for _ in 0..8 {
             corners.push(scale * (base + spread * rng.random_range(-1.0f32..1.0)));
@@ -63,15 +67,30 @@ pub fn check(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
     let mut cmp = Compare::new(ABS, REL);
     const NAMES: [&str; 4] = ["value", "d/dx", "d/dy", "d/dz"];
     for (i, (g, w)) in got.chunks_exact(12).zip(want.chunks_exact(12)).enumerate() {
-        let s = corners[8 * i..8 * i + 8].iter().fold(0f32, |m, c| m.max(c.abs())).max(1e-30) as f64;
+        let s = corners[8 * i..8 * i + 8]
+            .iter()
+            .fold(0f32, |m, c| m.max(c.abs()))
+            .max(1e-30) as f64;
         for j in 0..12 {
-            let (a, b) = if j < 4 { (g[j] as f64 / s, w[j] as f64 / s) } else { (g[j] as f64, w[j] as f64) };
+            let (a, b) = if j < 4 {
+                (g[j] as f64 / s, w[j] as f64 / s)
+            } else {
+                (g[j] as f64, w[j] as f64)
+            };
             cmp.value(a, b, || {
-                let what = if j < 4 { NAMES[j].to_string() } else { format!("w{}", j - 4) };
+                let what = if j < 4 {
+                    NAMES[j].to_string()
+                } else {
+                    format!("w{}", j - 4)
+                };
                 format!("case {i} {what}")
             });
         }
     }
     let n = corners.len() / 8;
-    Ok(cmp.row(INFO.name, n, "value and gradient / max|corner|; weights as is".into()))
+    Ok(cmp.row(
+        INFO.name,
+        n,
+        "value and gradient / max|corner|; weights as is".into(),
+    ))
 }

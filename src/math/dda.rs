@@ -178,7 +178,9 @@ mod tests {
     use super::*;
 
     fn walk(o: [f32; 3], d: [f32; 3], n: i32) -> Vec<([i32; 3], f32, f32)> {
-        dda_init(o, d, n, 0.0).map(|p| (p.cell, p.t0, p.t1)).collect()
+        dda_init(o, d, n, 0.0)
+            .map(|p| (p.cell, p.t0, p.t1))
+            .collect()
     }
 
     #[test]
@@ -188,9 +190,15 @@ mod tests {
         // Zero component outside the slab: miss; on the face: no constraint.
         let [a, b] = ray_box([-1.0, 4.0, 1.0], [1.0, 0.0, 0.0], lo, hi, 0.0);
         assert!(a >= b);
-        assert_eq!(ray_box([-1.0, 3.0, 1.0], [1.0, 0.0, 0.0], lo, hi, 0.0), [1.0, 4.0]);
+        assert_eq!(
+            ray_box([-1.0, 3.0, 1.0], [1.0, 0.0, 0.0], lo, hi, 0.0),
+            [1.0, 4.0]
+        );
         // Inside start: t_enter = t_min.
-        assert_eq!(ray_box([1.0, 1.0, 1.0], [-1.0, 0.0, 0.0], lo, hi, 0.0), [0.0, 1.0]);
+        assert_eq!(
+            ray_box([1.0, 1.0, 1.0], [-1.0, 0.0, 0.0], lo, hi, 0.0),
+            [0.0, 1.0]
+        );
         // Corner graze: one point, a miss.
         let [a, b] = ray_box([-1.0, 2.0, 1.0], [1.0, 1.0, 0.0], lo, hi, 0.0);
         assert!(a >= b, "{a} {b}");
