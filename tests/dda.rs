@@ -8,13 +8,19 @@
 //! and the product) may legitimately order them differently.
 //! Adversarial rays (exactly representable crossings) allow no exception at all.
 
-use alphasurf::check::dda_walk::{adversarial_rays, random_rays, sphere_rays};
+use alphasurf::check::dda_walk::{adversarial_rays, fuzz_rays, random_rays, sphere_rays};
 use alphasurf::math::dda::{dda_init, ray_box, DdaPiece};
 
 type Piece = ([i32; 3], f64, f64);
 
-/// f64 box clip against [0, n−1]³, written independently of the f32 slab code.
+/// f64 box clip against [0, n−1]³, written independently of the f32 slab code. Input conventions
+/// shared with the walk: non-finite rays miss, components of o and d below 1e-30 count as zero.
 fn reference_clip(o: [f64; 3], d: [f64; 3], n: i32, t_min: f64) -> Option<(f64, f64)> {
+    if !o.iter().chain(&d).all(|x| x.is_finite()) {
+        return None;
+    }
+    let o = o.map(|x| if x.abs() < 1e-30 { 0.0 } else { x });
+    let d = d.map(|x| if x.abs() < 1e-30 { 0.0 } else { x });
     let hi = (n - 1) as f64;
     let (mut t0, mut t1) = (t_min, f64::INFINITY);
     for a in 0..3 {
@@ -48,6 +54,8 @@ fn reference(o: [f64; 3], d: [f64; 3], n: i32, t_min: f64) -> Vec<Piece> {
     let Some((t0, t1)) = reference_clip(o, d, n, t_min) else {
         return Vec::new();
     };
+    let o = o.map(|x| if x.abs() < 1e-30 { 0.0 } else { x });
+    let d = d.map(|x| if x.abs() < 1e-30 { 0.0 } else { x });
     let mut ts: Vec<f64> = crossings(o, d, n)
         .into_iter()
         .map(|c| c.0)
@@ -282,4 +290,34 @@ fn gpu_parity() {
         "{:?}",
         gpu.validation_messages()
     );
+}
+
+#[test]
+fn fuzz_walks_terminate_in_range() {
+    let mut walked = 0usize;
+    for (i, n) in [2u32, 3, 17, 64, 299].into_iter().enumerate() {
+        let n = n as i32;
+        for r in fuzz_rays(40_000, n as u32, 9 + i as u64) {
+            let w: Vec<_> = dda_init([r[0], r[1], r[2]], [r[3], r[4], r[5]], n, 0.0)
+                .take(3 * n as usize + 10)
+                .collect();
+            assert!(
+                w.len() <= 3 * (n as usize - 1),
+                "ray {r:?} n {n}: {} pieces",
+                w.len()
+            );
+            for p in &w {
+                assert!(
+                    p.cell.iter().all(|c| (0..n - 1).contains(c)),
+                    "ray {r:?} n {n}: {p:?}"
+                );
+                assert!(
+                    p.t1 > p.t0 && p.t0.is_finite() && p.t1.is_finite(),
+                    "ray {r:?}: {p:?}"
+                );
+            }
+            walked += !w.is_empty() as usize;
+        }
+    }
+    assert!(walked > 5_000, "{walked} fuzz rays hit the box");
 }

@@ -193,7 +193,8 @@ pub fn adversarial_dirs() -> Vec<[f32; 3]> {
 
 /// Every adversarial origin (integer and half-integer coordinates inside, on the faces of and
 /// outside the `n`³ box) with every adversarial direction: starts inside and on faces, rays on
-/// the outer faces and edges with zero components, corner grazes, misses, negative directions.
+/// the outer faces and edges with zero components, corner grazes, misses, negative directions;
+/// plus rays with zero, denormal, NaN and infinite components.
 pub fn adversarial_rays(n: u32) -> Vec<[f32; 6]> {
     let c = adversarial_coords(n);
     let dirs = adversarial_dirs();
@@ -206,6 +207,21 @@ pub fn adversarial_rays(n: u32) -> Vec<[f32; 6]> {
                 }
             }
         }
+    }
+    // Degenerate input: zero, tiny (denormal) and non-finite components all miss or walk alike.
+    let h = 0.5 * (n - 1) as f32;
+    for bad in [
+        0.0,
+        1e-40,
+        -1e-31,
+        f32::NAN,
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+    ] {
+        rays.push([h, h, h, bad, bad, bad]);
+        rays.push([h, h, h, 1.0, bad, 0.5]);
+        rays.push([bad, h, h, 1.0, 0.25, 0.5]);
+        rays.push([-1.0, bad, h, 1.0, 1.0, 0.0]);
     }
     rays
 }
@@ -278,8 +294,23 @@ pub fn random_rays(count: usize, n: u32, seed: u64) -> Vec<[f32; 6]> {
     rays
 }
 
-/// Adversarial rays on an 8³ grid (all cells recorded) and random rays on 64³ (first 64 cells
-/// recorded, every walk checksummed), GPU against the CPU twin.
+/// `count` fuzz rays for an `n`³ grid: a third arbitrary bit patterns (NaN, infinities,
+/// denormals, huge values), a third of magnitudes 1e-8 … 1e12, a third within ±2n of the origin.
+pub fn fuzz_rays(count: usize, n: u32, seed: u64) -> Vec<[f32; 6]> {
+    let mut rng = Pcg64::seed_from_u64(seed);
+    (0..count)
+        .map(|i| {
+            std::array::from_fn(|_| match i % 3 {
+                0 => f32::from_bits(rng.random()),
+                1 => rng.random_range(-1.0f32..1.0) * 10f32.powi(rng.random_range(-8..12)),
+                _ => rng.random_range(-2.0f32..2.0) * n as f32,
+            })
+        })
+        .collect()
+}
+
+/// Adversarial rays on an 8³ grid (all cells recorded), random and fuzz rays on 64³ (first 64
+/// cells recorded, every walk checksummed), GPU against the CPU twin.
 pub fn check(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
     let mut cmp = Compare::new(T_ABS, T_REL);
     let adv = adversarial_rays(8);
@@ -292,10 +323,16 @@ pub fn check(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
     let c = run_cpu(&rnd, 64, 64, 0.0);
     compare_into(&mut cmp, &g, &c, "random 64³");
     cells += c.total_cells();
+    let fuzz = fuzz_rays(30_000, 64, seed);
+    let (g, _) = run_gpu(gpu, &fuzz, 64, 64, 0.0)?;
+    let c = run_cpu(&fuzz, 64, 64, 0.0);
+    compare_into(&mut cmp, &g, &c, "fuzz 64³");
+    cells += c.total_cells();
     let note = format!(
-        "{} adversarial rays on 8³ + {} random on 64³, {cells} cells; sequences exact",
+        "{} adversarial rays on 8³ + {} random + {} fuzz on 64³, {cells} cells; sequences exact",
         adv.len(),
-        rnd.len()
+        rnd.len(),
+        fuzz.len()
     );
-    Ok(cmp.row(INFO.name, adv.len() + rnd.len(), note))
+    Ok(cmp.row(INFO.name, adv.len() + rnd.len() + fuzz.len(), note))
 }
