@@ -106,6 +106,7 @@ fn sign_i(x: f32) -> i32 {
 }
 
 /// Starts a walk over the cells of an `n`³-vertex grid (clip box `[0, n−1]³`) from `t_min` on.
+#[allow(clippy::neg_cmp_op_on_partial_ord)] // `!(a < b)` is true on NaN, as in the GLSL
 pub fn dda_init(o: [f32; 3], d: [f32; 3], n: i32, t_min: f32) -> Dda {
     let o = dda_flush(o);
     let d = dda_flush(d);
@@ -155,6 +156,7 @@ pub fn dda_init(o: [f32; 3], d: [f32; 3], n: i32, t_min: f32) -> Dda {
 
 /// Next cell of the walk, front to back; `None` when the walk is over. Same loop shape as the
 /// GLSL (a do-while: past the end a call takes one zero-length step and returns `None`).
+#[allow(clippy::neg_cmp_op_on_partial_ord)] // `!(a < b)` is true on NaN, as in the GLSL
 pub fn dda_next(s: &mut Dda) -> Option<DdaPiece> {
     loop {
         let tm = s.t_next[0].min(s.t_next[1]).min(s.t_next[2].min(s.t_end));
