@@ -4,7 +4,8 @@
 use crate::gpu::Gpu;
 
 pub mod dda_walk;
-mod fill_pattern;
+pub mod fill_pattern;
+pub mod plenoxel;
 pub mod sh_eval;
 pub mod trilerp_eval;
 
@@ -36,6 +37,12 @@ pub const CHECKS: &[(&str, CheckFn)] = &[
     ("dda_walk", dda_walk::check),
     ("trilerp_eval", trilerp_eval::check),
     ("sh_eval", sh_eval::check),
+    ("occupancy", plenoxel::check_occupancy),
+    ("plenoxel_fwd", plenoxel::check_fwd),
+    ("plenoxel_train", plenoxel::check_train),
+    ("plenoxel_weights", plenoxel::check_weights),
+    ("rmsprop", plenoxel::check_rmsprop),
+    ("tv", plenoxel::check_tv),
 ];
 
 /// Elementwise |a − b| ≤ abs + rel·|b| test with running maxima.
