@@ -14,7 +14,7 @@
 
 // Stands for infinity (no NaN from 0·inf anywhere).
 const float DDA_BIG = 3.402823466e38;
-// Direction components with |d| < DDA_TINY count as zero (denormal-safe on every device).
+// Components of o and d with magnitude < DDA_TINY count as zero (denormal-safe on every device).
 const float DDA_TINY = 1e-30;
 
 // d / |d|.
@@ -25,7 +25,7 @@ vec3 ray_unit(vec3 d) {
     return u;
 }
 
-// Flushes tiny direction components to zero.
+// Flushes tiny components to zero (applied to o and d: denormals read alike on every device).
 vec3 dda_flush(vec3 d) {
     return mix(d, vec3(0.0), lessThan(abs(d), vec3(DDA_TINY)));
 }
@@ -39,8 +39,9 @@ vec3 dda_inv(vec3 d) {
 // Slab clip of o + t·d against [lo, hi]: (t_enter, t_exit) with t_enter = max(slab entries, t_min).
 // Hit iff t_enter < t_exit (a ray grazing an edge or corner in one point misses). A zero direction
 // component with o outside that slab misses; inside (faces included) it adds no constraint. A
-// zero direction vector misses.
+// zero direction vector, or a NaN or infinite component in o or d, misses.
 vec2 ray_box(vec3 o, vec3 d, vec3 lo, vec3 hi, float t_min) {
+    o = dda_flush(o);
     d = dda_flush(d);
     vec3 inv = dda_inv(d);
     precise vec3 ta = (lo - o) * inv;
@@ -55,6 +56,11 @@ vec2 ray_box(vec3 o, vec3 d, vec3 lo, vec3 hi, float t_min) {
         t1 = min(t1, tf);
     }
     if (t1 == DDA_BIG) t1 = -DDA_BIG;  // zero direction: miss
+    bool finite = all(lessThan(abs(o), vec3(DDA_BIG))) && all(lessThan(abs(d), vec3(DDA_BIG)));
+    if (!finite) {  // NaN or infinite input: miss
+        t0 = DDA_BIG;
+        t1 = -DDA_BIG;
+    }
     return vec2(t0, t1);
 }
 
@@ -72,6 +78,7 @@ struct Dda {
 // Starts a walk over the cells of an n³-vertex grid (clip box [0, n-1]³) from t_min on.
 Dda dda_init(vec3 o, vec3 d, int n, float t_min) {
     Dda s;
+    o = dda_flush(o);
     d = dda_flush(d);
     vec2 tt = ray_box(o, d, vec3(0.0), vec3(float(n - 1)), t_min);
     bvec3 zero = equal(d, vec3(0.0));
@@ -92,13 +99,20 @@ Dda dda_init(vec3 o, vec3 d, int n, float t_min) {
     s.cell = clamp(c, ivec3(0), ivec3(n - 2));
     precise vec3 tx = (vec3(s.cell + up) - o) * s.inv;
     s.t_next = mix(tx, vec3(DDA_BIG), zero);
+    if (!(tt.x < tt.y)) {  // miss: a state whose first dda_next ends the walk at once
+        s.t_next = vec3(DDA_BIG);
+        s.t = -DDA_BIG;
+        s.t_end = -DDA_BIG;
+    }
     return s;
 }
 
 // Next cell of the walk, front to back: its index and the t range [t0, t1] (t1 > t0).
-// Returns false when the walk is over.
+// Returns false when the walk is over. Written as one do-while (no return inside the loop), which
+// llvmpipe runs ~30 % faster than a while loop with a return inside; past the end a call takes
+// one zero-length step and returns false.
 bool dda_next(inout Dda s, out ivec3 cell, out float t0, out float t1) {
-    while (s.t < s.t_end) {
+    do {
         float tm = min(min(s.t_next.x, s.t_next.y), min(s.t_next.z, s.t_end));
         cell = s.cell;
         t0 = s.t;
@@ -108,9 +122,8 @@ bool dda_next(inout Dda s, out ivec3 cell, out float t0, out float t1) {
         precise vec3 tx = (vec3(s.cell + max(s.step, ivec3(0))) - s.o) * s.inv;
         s.t_next = mix(s.t_next, tx, hit);
         s.t = tm;
-        if (tm > t0) return true;
-    }
-    return false;
+    } while (!(t1 > t0) && s.t < s.t_end);
+    return t1 > t0;
 }
 
 // Linear index of a cell's (0,0,0) corner in the n³ vertex grid, x-major: (x·n + y)·n + z.

@@ -39,6 +39,22 @@ pub enum Command {
     MakeScene(make_scene::MakeSceneArgs),
     /// Summarise a NeRF-synthetic dataset: splits, cameras, object bounds, warnings.
     Inspect(inspect::InspectArgs),
+    /// Benchmarks: figures on the Vulkan device and the CPU twin, parity verdict, `--json` line.
+    Bench(BenchArgs),
+}
+
+/// `alphasurf bench <kind>`.
+#[derive(clap::Args, Debug)]
+pub struct BenchArgs {
+    #[command(subcommand)]
+    pub kind: BenchKind,
+}
+
+/// Which benchmark.
+#[derive(Subcommand, Debug)]
+pub enum BenchKind {
+    /// DDA cell walk: cells visited per second for random rays through a 256³ grid, and parity.
+    Dda(crate::bench::dda::DdaBenchArgs),
 }
 
 /// Entry point of the binary: parse, run, map errors to a message and exit code 1.
@@ -88,6 +104,12 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             inspect::run(a)?;
             ExitCode::SUCCESS
         }
+        Command::Bench(b) => match &b.kind {
+            BenchKind::Dda(args) => {
+                let gpu = gpu_used.insert(open_gpu(&cli)?);
+                exit(crate::bench::dda::run(gpu, args)?)
+            }
+        },
     };
     if cli.profile {
         use std::io::Write;

@@ -5,7 +5,7 @@
 
 /// Stands for infinity (no NaN from 0·inf anywhere).
 pub const DDA_BIG: f32 = f32::MAX;
-/// Direction components with |d| < `DDA_TINY` count as zero.
+/// Components of `o` and `d` with magnitude < `DDA_TINY` count as zero.
 pub const DDA_TINY: f32 = 1e-30;
 /// Initial value of the walk checksum ([`dda_hash`]).
 pub const DDA_HASH0: u32 = 2_166_136_261;
@@ -17,7 +17,7 @@ pub fn ray_unit(d: [f32; 3]) -> [f32; 3] {
     [d[0] * r, d[1] * r, d[2] * r]
 }
 
-/// Flushes tiny direction components to zero.
+/// Flushes tiny components to zero (applied to `o` and `d`: denormals read alike on every device).
 pub fn dda_flush(d: [f32; 3]) -> [f32; 3] {
     d.map(|x| if x.abs() < DDA_TINY { 0.0 } else { x })
 }
@@ -30,8 +30,10 @@ pub fn dda_inv(d: [f32; 3]) -> [f32; 3] {
 /// Slab clip of `o + t·d` against `[lo, hi]`: `[t_enter, t_exit]` with
 /// `t_enter = max(slab entries, t_min)`. Hit iff `t_enter < t_exit` (touching an edge or corner in
 /// one point misses). A zero direction component with `o` outside that slab misses; inside (faces
-/// included) it adds no constraint. A zero direction vector misses.
+/// included) it adds no constraint. A zero direction vector, or a NaN or infinite component in
+/// `o` or `d`, misses.
 pub fn ray_box(o: [f32; 3], d: [f32; 3], lo: [f32; 3], hi: [f32; 3], t_min: f32) -> [f32; 2] {
+    let o = dda_flush(o);
     let d = dda_flush(d);
     let inv = dda_inv(d);
     let mut t0 = t_min;
@@ -53,6 +55,11 @@ pub fn ray_box(o: [f32; 3], d: [f32; 3], lo: [f32; 3], hi: [f32; 3], t_min: f32)
         t1 = t1.min(tf);
     }
     if t1 == DDA_BIG {
+        t1 = -DDA_BIG;
+    }
+    let finite = o.iter().chain(&d).all(|x| x.abs() < DDA_BIG);
+    if !finite {
+        t0 = DDA_BIG;
         t1 = -DDA_BIG;
     }
     [t0, t1]
@@ -99,7 +106,9 @@ fn sign_i(x: f32) -> i32 {
 }
 
 /// Starts a walk over the cells of an `n`³-vertex grid (clip box `[0, n−1]³`) from `t_min` on.
+#[allow(clippy::neg_cmp_op_on_partial_ord)] // `!(a < b)` is true on NaN, as in the GLSL
 pub fn dda_init(o: [f32; 3], d: [f32; 3], n: i32, t_min: f32) -> Dda {
+    let o = dda_flush(o);
     let d = dda_flush(d);
     let hi = (n - 1) as f32;
     let [t, t_end] = ray_box(o, d, [0.0; 3], [hi; 3], t_min);
@@ -122,6 +131,18 @@ pub fn dda_init(o: [f32; 3], d: [f32; 3], n: i32, t_min: f32) -> Dda {
             t_next[a] = tx;
         }
     }
+    if !(t < t_end) {
+        // Miss: a state whose first dda_next ends the walk at once.
+        return Dda {
+            o,
+            inv,
+            cell,
+            step,
+            t_next: [DDA_BIG; 3],
+            t: -DDA_BIG,
+            t_end: -DDA_BIG,
+        };
+    }
     Dda {
         o,
         inv,
@@ -133,9 +154,11 @@ pub fn dda_init(o: [f32; 3], d: [f32; 3], n: i32, t_min: f32) -> Dda {
     }
 }
 
-/// Next cell of the walk, front to back; `None` when the walk is over.
+/// Next cell of the walk, front to back; `None` when the walk is over. Same loop shape as the
+/// GLSL (a do-while: past the end a call takes one zero-length step and returns `None`).
+#[allow(clippy::neg_cmp_op_on_partial_ord)] // `!(a < b)` is true on NaN, as in the GLSL
 pub fn dda_next(s: &mut Dda) -> Option<DdaPiece> {
-    while s.t < s.t_end {
+    loop {
         let tm = s.t_next[0].min(s.t_next[1]).min(s.t_next[2].min(s.t_end));
         let piece = DdaPiece {
             cell: s.cell,
@@ -152,8 +175,10 @@ pub fn dda_next(s: &mut Dda) -> Option<DdaPiece> {
         if tm > piece.t0 {
             return Some(piece);
         }
+        if !(s.t < s.t_end) {
+            return None;
+        }
     }
-    None
 }
 
 impl Iterator for Dda {

@@ -5,7 +5,8 @@
 pub const SH_C0: f32 = 0.282_094_79;
 /// |Y_1..Y_3| / coordinate.
 pub const SH_C1: f32 = 0.488_602_51;
-/// |Y_4|, |Y_5|, |Y_7| / product of coordinates.
+/// |Y_4|, |Y_5|, |Y_7| / product of coordinates. (Digits as written in method.md, like the GLSL.)
+#[allow(clippy::excessive_precision)]
 pub const SH_C2: f32 = 1.092_548_43;
 /// Y_6 / (2z² − x² − y²).
 pub const SH_C3: f32 = 0.315_391_57;
