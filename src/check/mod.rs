@@ -4,6 +4,7 @@
 use crate::gpu::Gpu;
 
 pub mod fill_pattern;
+pub mod plenoxel;
 
 /// Result of comparing one kernel on the Vulkan device with its CPU twin.
 #[derive(Debug, Clone, serde::Serialize)]
@@ -28,7 +29,15 @@ pub struct CheckRow {
 pub type CheckFn = fn(&Gpu, u64) -> anyhow::Result<CheckRow>;
 
 /// Every registered parity check, in table order. Later kernels add themselves here.
-pub const CHECKS: &[(&str, CheckFn)] = &[("fill_pattern", fill_pattern::check)];
+pub const CHECKS: &[(&str, CheckFn)] = &[
+    ("fill_pattern", fill_pattern::check),
+    ("occupancy", plenoxel::check_occupancy),
+    ("plenoxel_fwd", plenoxel::check_fwd),
+    ("plenoxel_train", plenoxel::check_train),
+    ("plenoxel_weights", plenoxel::check_weights),
+    ("rmsprop", plenoxel::check_rmsprop),
+    ("tv", plenoxel::check_tv),
+];
 
 /// Elementwise |a − b| ≤ abs + rel·|b| test with running maxima.
 #[derive(Debug, Default, Clone, Copy)]

@@ -3,6 +3,8 @@
 
 mod check_kernels;
 mod devices;
+pub mod inspect;
+pub mod make_scene;
 
 use crate::gpu::{Gpu, GpuOptions};
 use clap::{Parser, Subcommand};
@@ -33,6 +35,10 @@ pub enum Command {
     /// Run every GPU kernel against its CPU twin on random and adversarial inputs; one row per
     /// kernel; exit code 1 on any mismatch.
     CheckKernels(check_kernels::CheckKernelsArgs),
+    /// Write a built-in procedural scene (NeRF-synthetic format + exact ground truth).
+    MakeScene(make_scene::MakeSceneArgs),
+    /// Summarise a NeRF-synthetic dataset: splits, cameras, object bounds, warnings.
+    Inspect(inspect::InspectArgs),
 }
 
 /// Entry point of the binary: parse, run, map errors to a message and exit code 1.
@@ -73,6 +79,14 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::CheckKernels(args) => {
             let gpu = gpu_used.insert(open_gpu(&cli)?);
             exit(check_kernels::run(gpu, args)?)
+        }
+        Command::MakeScene(a) => {
+            make_scene::run(a)?;
+            ExitCode::SUCCESS
+        }
+        Command::Inspect(a) => {
+            inspect::run(a)?;
+            ExitCode::SUCCESS
         }
     };
     if cli.profile {
