@@ -3,7 +3,7 @@
 
 use std::fs;
 use std::io::{Cursor, Write};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use alphasurf::grid::checkpoint;
 use alphasurf::grid::npz::{self, NpzWriter};
@@ -65,7 +65,7 @@ fn assert_bit_exact(a: &Grid, b: &Grid) {
 }
 
 /// Write an npz by hand with `fill`.
-fn write_npz(path: &PathBuf, fill: impl FnOnce(&mut NpzWriter<Cursor<Vec<u8>>>)) {
+fn write_npz(path: &Path, fill: impl FnOnce(&mut NpzWriter<Cursor<Vec<u8>>>)) {
     let mut w = NpzWriter::new(Cursor::new(Vec::new()));
     fill(&mut w);
     fs::write(path, w.finish().unwrap().into_inner()).unwrap();
@@ -86,7 +86,7 @@ fn npy_bytes<T: npyz::AutoSerialize + Copy>(shape: &[u64], data: &[T]) -> Vec<u8
 }
 
 /// The full error chain of importing `path` as svox2.
-fn import_err(path: &PathBuf) -> String {
+fn import_err(path: &Path) -> String {
     format!("{:#}", npz::load_svox2(path).unwrap_err())
 }
 
@@ -98,7 +98,7 @@ fn assert_mentions(msg: &str, parts: &[&str]) {
 
 /// The svox2 arrays of `g` with one of them replaced (`skip` left out, `extra` added).
 fn svox2_with(
-    path: &PathBuf,
+    path: &Path,
     g: &Grid,
     skip: &str,
     extra: impl FnOnce(&mut NpzWriter<Cursor<Vec<u8>>>),
