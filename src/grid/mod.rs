@@ -3,6 +3,8 @@
 //! coefficients per vertex ([R0..R8, G0..G8, B0..B8]). Vertex (x, y, z) of an X×Y×Z grid sits at
 //! `links[(x·Y + y)·Z + z]`. World→grid: g = ((p − c)/(2r) + 0.5)·N − 0.5 per axis.
 
+pub mod checkpoint;
+pub mod npz;
 mod resample;
 
 pub use resample::{dilate, upsample};
