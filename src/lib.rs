@@ -17,3 +17,4 @@ pub mod kernels;
 pub mod math;
 pub mod plenoxel;
 pub mod scene;
+pub mod train;

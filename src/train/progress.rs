@@ -1,0 +1,68 @@
+//! The training progress bar: step, loss, PSNR (smoothed), rays/s after the warm-up, ETA. Hidden
+//! when stderr is not a terminal or progress is off; a summary line is logged every 10 % then.
+
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+
+/// Progress of a training stage.
+pub struct Progress {
+    bar: ProgressBar,
+    total: u64,
+    visible: bool,
+    ema_mse: Option<f64>,
+    next_log: u64,
+}
+
+impl Progress {
+    pub fn new(total: u64, start: u64, show: bool) -> Self {
+        let visible = show && console_is_terminal();
+        let bar = if visible {
+            ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::stderr())
+        } else {
+            ProgressBar::hidden()
+        };
+        bar.set_style(
+            ProgressStyle::with_template(
+                "{bar:30.cyan/blue} step {pos}/{len} {msg} elapsed {elapsed} ETA {eta}",
+            )
+            .expect("valid template"),
+        );
+        bar.set_position(start);
+        Progress {
+            bar,
+            total,
+            visible: show,
+            ema_mse: None,
+            next_log: start + total / 10,
+        }
+    }
+
+    /// Report step `pos` (1-based) with its batch MSE and the training throughput so far.
+    pub fn step(&mut self, pos: u64, mse: f64, rays_per_s: Option<f64>) {
+        let ema = self.ema_mse.map_or(mse, |e| 0.95 * e + 0.05 * mse);
+        self.ema_mse = Some(ema);
+        let rate = rays_per_s.map_or("warming up".to_string(), |r| format!("{:.0}k rays/s", r / 1e3));
+        let msg = format!("loss {mse:.5} PSNR {:.2} dB {rate}", -10.0 * ema.log10());
+        self.bar.set_position(pos);
+        self.bar.set_message(msg.clone());
+        if self.visible && self.bar.is_hidden() && (pos >= self.next_log || pos == self.total) {
+            eprintln!("step {pos}/{} {msg}", self.total);
+            self.next_log = pos + (self.total / 10).max(1);
+        }
+    }
+
+    /// A one-off line (e.g. "upsampling").
+    pub fn message(&self, text: &str) {
+        if self.visible {
+            self.bar.println(text);
+        }
+    }
+
+    pub fn finish(&self) {
+        self.bar.finish_and_clear();
+    }
+}
+
+fn console_is_terminal() -> bool {
+    use std::io::IsTerminal;
+    std::io::stderr().is_terminal()
+}
