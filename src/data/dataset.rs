@@ -243,7 +243,11 @@ fn load_split(root: &Path, name: &str, k: u32) -> Result<Option<Split>, DataErro
         path: json.clone(),
         line: e.line(),
         column: e.column(),
-        msg: e.to_string(),
+        msg: {
+            let full = e.to_string();
+            let suffix = format!(" at line {} column {}", e.line(), e.column());
+            full.strip_suffix(&suffix).unwrap_or(&full).to_string()
+        },
     })?;
     if parsed.frames.is_empty() {
         return Err(DataError::EmptySplit {
@@ -335,24 +339,22 @@ fn load_frame(
             height: h,
         });
     }
-    let camera = if let (None, Some(a)) = (intr.fl_x, intr.camera_angle_x) {
-        // The exact f32 formula the scene generator uses, so re-rendering is bit-exact.
-        let mut c = Camera::from_angle_x(c2w, w, h, a as f32);
-        c.fy = fy as f32;
-        c.cx = cx as f32;
-        c.cy = cy as f32;
-        c
-    } else {
-        Camera {
-            c2w,
-            fx: fx as f32,
-            fy: fy as f32,
-            cx: cx as f32,
-            cy: cy as f32,
-            width: w,
-            height: h,
-        }
+    let mut camera = Camera {
+        c2w,
+        fx: fx as f32,
+        fy: fy as f32,
+        cx: cx as f32,
+        cy: cy as f32,
+        width: w,
+        height: h,
     };
+    if let (None, Some(a)) = (intr.fl_x, intr.camera_angle_x) {
+        // The exact f32 formula the scene generator uses, so re-rendering is bit-exact.
+        camera.fx = super::camera::focal_from_angle(w, a as f32);
+        if intr.fl_y.is_none() && intr.camera_angle_y.is_none() {
+            camera.fy = camera.fx;
+        }
+    }
     let (ow, oh, data) = composite_and_downscale(w, h, &raw, k);
     Ok(Frame {
         file,
