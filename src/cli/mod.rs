@@ -1,9 +1,12 @@
 //! Command-line interface: argument types and the dispatch to library calls. Each subcommand's
 //! handler lives in its own module; this file only wires them together.
 
+mod check_kernels;
+mod devices;
 pub mod inspect;
 pub mod make_scene;
 
+use crate::gpu::{Gpu, GpuOptions};
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
@@ -26,6 +29,12 @@ pub struct Cli {
 /// Subcommands.
 #[derive(Subcommand, Debug)]
 pub enum Command {
+    /// List Vulkan devices (name, type, driver, memory, subgroup size, float atomics, limits) and
+    /// the CPU backend.
+    Devices,
+    /// Run every GPU kernel against its CPU twin on random and adversarial inputs; one row per
+    /// kernel; exit code 1 on any mismatch.
+    CheckKernels(check_kernels::CheckKernelsArgs),
     /// Write a built-in procedural scene (NeRF-synthetic format + exact ground truth).
     MakeScene(make_scene::MakeSceneArgs),
     /// Summarise a NeRF-synthetic dataset: splits, cameras, object bounds, warnings.
@@ -44,10 +53,49 @@ pub fn main() -> ExitCode {
     }
 }
 
-fn run(cli: Cli) -> anyhow::Result<ExitCode> {
-    match cli.command {
-        Command::MakeScene(a) => make_scene::run(&a)?,
-        Command::Inspect(a) => inspect::run(&a)?,
+/// Open the Vulkan device chosen by `--device` (validation on when `ALPHASURF_VALIDATION` is set).
+fn open_gpu(cli: &Cli) -> anyhow::Result<Gpu> {
+    Gpu::new(&GpuOptions {
+        device: cli.device,
+        validation: std::env::var_os("ALPHASURF_VALIDATION").is_some(),
+    })
+}
+
+fn exit(pass: bool) -> ExitCode {
+    if pass {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::FAILURE
     }
-    Ok(ExitCode::SUCCESS)
+}
+
+fn run(cli: Cli) -> anyhow::Result<ExitCode> {
+    let mut gpu_used = None;
+    let code = match &cli.command {
+        Command::Devices => {
+            devices::run()?;
+            ExitCode::SUCCESS
+        }
+        Command::CheckKernels(args) => {
+            let gpu = gpu_used.insert(open_gpu(&cli)?);
+            exit(check_kernels::run(gpu, args)?)
+        }
+        Command::MakeScene(a) => {
+            make_scene::run(a)?;
+            ExitCode::SUCCESS
+        }
+        Command::Inspect(a) => {
+            inspect::run(a)?;
+            ExitCode::SUCCESS
+        }
+    };
+    if cli.profile {
+        use std::io::Write;
+        std::io::stdout().flush()?;
+        match &gpu_used {
+            Some(gpu) => eprint!("{}", gpu.profile().report()),
+            None => eprintln!("profile: this command ran nothing on the Vulkan device"),
+        }
+    }
+    Ok(code)
 }

@@ -1,1 +1,42 @@
-//! Vulkan runtime.
+//! Vulkan compute runtime: instance and device choice (`device`), the context with its allocator
+//! and pipelines (`context`), RAII buffers addressed by device address (`buffer`), batched
+//! submission with timestamp queries (`batch`), and per-kernel profiles (`profile`).
+
+mod batch;
+mod buffer;
+mod context;
+mod device;
+mod instance;
+mod profile;
+
+pub use batch::{Batch, BatchTimes};
+pub use buffer::GpuBuffer;
+pub use context::{list_devices, Gpu, GpuOptions};
+pub use device::{pick_default, DeviceInfo};
+pub use profile::Profile;
+
+use std::sync::OnceLock;
+
+/// The shared context for tests: device from `ALPHASURF_DEVICE` (else the default choice) with the
+/// validation layer on when installed. Panics — failing the test, never skipping it — when no
+/// usable Vulkan device exists, or when `CI` is set and the validation layer is missing.
+pub fn test_gpu() -> &'static Gpu {
+    static GPU: OnceLock<Gpu> = OnceLock::new();
+    GPU.get_or_init(|| {
+        let device = std::env::var("ALPHASURF_DEVICE")
+            .ok()
+            .map(|s| s.parse().expect("ALPHASURF_DEVICE must be a device index"));
+        let gpu = Gpu::new(&GpuOptions {
+            device,
+            validation: true,
+        })
+        .unwrap_or_else(|e| panic!("tests need a Vulkan device (lavapipe in CI): {e:#}"));
+        if std::env::var_os("CI").is_some() {
+            assert!(
+                gpu.validation_active(),
+                "CI must run the tests under VK_LAYER_KHRONOS_validation (vulkan-validationlayers)"
+            );
+        }
+        gpu
+    })
+}

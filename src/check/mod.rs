@@ -1,0 +1,111 @@
+//! GPU-vs-CPU-twin parity checks, one row per kernel. `alphasurf check-kernels` prints them and
+//! `tests/parity.rs` asserts them: the same code decides pass/fail in both places.
+
+use crate::gpu::Gpu;
+
+pub mod fill_pattern;
+pub mod plenoxel;
+
+/// Result of comparing one kernel on the Vulkan device with its CPU twin.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct CheckRow {
+    /// Kernel name (`glsl/<kernel>.comp`).
+    pub kernel: &'static str,
+    /// Number of cases (inputs) compared.
+    pub cases: usize,
+    /// Largest absolute difference over compared outputs.
+    pub max_abs: f64,
+    /// Largest relative difference, |g − c| / max(|c|, tiny).
+    pub max_rel: f64,
+    /// Tolerance applied, in words (e.g. "abs 1e-6 + rel 1e-5 elementwise").
+    pub tolerance: String,
+    /// Whether every comparison met the tolerance.
+    pub pass: bool,
+    /// Extra detail: first mismatch, counts of exact-match discrete outputs, etc.
+    pub note: String,
+}
+
+/// One kernel's parity check.
+pub type CheckFn = fn(&Gpu, u64) -> anyhow::Result<CheckRow>;
+
+/// Every registered parity check, in table order. Later kernels add themselves here.
+pub const CHECKS: &[(&str, CheckFn)] = &[
+    ("fill_pattern", fill_pattern::check),
+    ("occupancy", plenoxel::check_occupancy),
+    ("plenoxel_fwd", plenoxel::check_fwd),
+    ("plenoxel_train", plenoxel::check_train),
+    ("plenoxel_weights", plenoxel::check_weights),
+    ("rmsprop", plenoxel::check_rmsprop),
+    ("tv", plenoxel::check_tv),
+];
+
+/// Elementwise |a − b| ≤ abs + rel·|b| test with running maxima.
+#[derive(Debug, Default, Clone, Copy)]
+pub struct Tolerance {
+    pub abs: f64,
+    pub rel: f64,
+}
+
+impl Tolerance {
+    pub fn describe(&self) -> String {
+        format!("|Δ| ≤ {:.0e} + {:.0e}·|cpu|", self.abs, self.rel)
+    }
+}
+
+/// Accumulates elementwise comparisons of GPU outputs against CPU-twin outputs.
+#[derive(Debug, Default)]
+pub struct Compare {
+    pub tol: Tolerance,
+    pub max_abs: f64,
+    pub max_rel: f64,
+    pub failures: usize,
+    pub compared: usize,
+    pub first_failure: Option<String>,
+}
+
+impl Compare {
+    pub fn new(abs: f64, rel: f64) -> Self {
+        Compare {
+            tol: Tolerance { abs, rel },
+            ..Default::default()
+        }
+    }
+
+    /// Compare one value; `what` names it in the first-failure note.
+    pub fn value(&mut self, gpu: f64, cpu: f64, what: impl FnOnce() -> String) {
+        self.compared += 1;
+        let d = (gpu - cpu).abs();
+        let ok = if gpu.is_nan() || cpu.is_nan() {
+            gpu.is_nan() && cpu.is_nan()
+        } else if gpu.is_infinite() || cpu.is_infinite() {
+            gpu == cpu
+        } else {
+            self.max_abs = self.max_abs.max(d);
+            self.max_rel = self.max_rel.max(d / cpu.abs().max(1e-30));
+            d <= self.tol.abs + self.tol.rel * cpu.abs()
+        };
+        if !ok {
+            self.failures += 1;
+            if self.first_failure.is_none() {
+                self.first_failure = Some(format!("{}: gpu {gpu:e} cpu {cpu:e}", what()));
+            }
+        }
+    }
+
+    /// Turn the comparison into a table row.
+    pub fn row(self, kernel: &'static str, cases: usize, note: String) -> CheckRow {
+        let mut note = note;
+        if let Some(f) = &self.first_failure {
+            note = format!("{} failures, first {f}. {note}", self.failures);
+        }
+        CheckRow {
+            kernel,
+            cases,
+            max_abs: self.max_abs,
+            max_rel: self.max_rel,
+            tolerance: self.tol.describe(),
+            pass: self.failures == 0 && self.compared > 0,
+            note,
+        }
+    }
+}

@@ -1,0 +1,188 @@
+//! Device buffers: an RAII owner over a gpu-allocator allocation with its device address, plus
+//! upload/download that write the mapping directly where the memory is host-visible (lavapipe's
+//! only memory type) and go through a staging buffer where it is not (a discrete GPU).
+
+use super::context::Gpu;
+use anyhow::{Context, Result};
+use ash::vk;
+use bytemuck::Pod;
+use gpu_allocator::vulkan::{Allocation, AllocationCreateDesc, AllocationScheme};
+use gpu_allocator::MemoryLocation;
+use std::sync::atomic::Ordering;
+
+/// A storage buffer on the device, freed when dropped. Kernels see it through `address()`.
+pub struct GpuBuffer {
+    gpu: Gpu,
+    buffer: vk::Buffer,
+    allocation: Option<Allocation>,
+    size: u64,
+    address: u64,
+}
+
+impl GpuBuffer {
+    pub(super) fn new(gpu: &Gpu, size: u64, location: MemoryLocation, name: &str) -> Result<Self> {
+        let inner = &gpu.inner;
+        let usage = vk::BufferUsageFlags::STORAGE_BUFFER
+            | vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS
+            | vk::BufferUsageFlags::TRANSFER_SRC
+            | vk::BufferUsageFlags::TRANSFER_DST;
+        let buffer = unsafe {
+            inner.device.create_buffer(
+                &vk::BufferCreateInfo::default()
+                    .size(size.max(4))
+                    .usage(usage)
+                    .sharing_mode(vk::SharingMode::EXCLUSIVE),
+                None,
+            )
+        }
+        .with_context(|| format!("creating a {size}-byte buffer ({name})"))?;
+        let requirements = unsafe { inner.device.get_buffer_memory_requirements(buffer) };
+        let allocation = inner
+            .allocator
+            .lock()
+            .unwrap()
+            .allocate(&AllocationCreateDesc {
+                name,
+                requirements,
+                location,
+                linear: true,
+                allocation_scheme: AllocationScheme::GpuAllocatorManaged,
+            });
+        let allocation = match allocation {
+            Ok(a) => a,
+            Err(e) => {
+                unsafe { inner.device.destroy_buffer(buffer, None) };
+                return Err(e)
+                    .with_context(|| format!("allocating {size} bytes of device memory ({name})"));
+            }
+        };
+        unsafe {
+            inner
+                .device
+                .bind_buffer_memory(buffer, allocation.memory(), allocation.offset())
+        }?;
+        let address = unsafe {
+            inner
+                .device
+                .get_buffer_device_address(&vk::BufferDeviceAddressInfo::default().buffer(buffer))
+        };
+        inner.live_buffers.fetch_add(1, Ordering::SeqCst);
+        Ok(GpuBuffer {
+            gpu: gpu.clone(),
+            buffer,
+            allocation: Some(allocation),
+            size,
+            address,
+        })
+    }
+
+    /// Device address to put in a kernel's push constants.
+    pub fn address(&self) -> u64 {
+        self.address
+    }
+
+    /// Size in bytes, as requested (the allocation holds at least 4).
+    pub fn size(&self) -> u64 {
+        self.size
+    }
+
+    pub(super) fn handle(&self) -> vk::Buffer {
+        self.buffer
+    }
+
+    fn mapped(&self) -> Option<*mut u8> {
+        self.allocation
+            .as_ref()
+            .and_then(|a| a.mapped_ptr())
+            .map(|p| p.as_ptr() as *mut u8)
+    }
+
+    /// Copy `data` to the start of the buffer (the device must not be using it).
+    pub fn write<T: Pod>(&self, data: &[T]) -> Result<()> {
+        let bytes: &[u8] = bytemuck::cast_slice(data);
+        anyhow::ensure!(
+            bytes.len() as u64 <= self.size,
+            "write of {} bytes into a {}-byte buffer",
+            bytes.len(),
+            self.size
+        );
+        if bytes.is_empty() {
+            return Ok(());
+        }
+        if let Some(p) = self.mapped() {
+            unsafe { std::ptr::copy_nonoverlapping(bytes.as_ptr(), p, bytes.len()) };
+            return Ok(());
+        }
+        let staging = GpuBuffer::new(
+            &self.gpu,
+            bytes.len() as u64,
+            MemoryLocation::CpuToGpu,
+            "staging-up",
+        )?;
+        staging.write(bytes)?;
+        let mut b = self.gpu.batch()?;
+        b.copy(&staging, self, bytes.len() as u64);
+        b.submit()?;
+        Ok(())
+    }
+
+    /// Read the whole buffer as `T`s (the device must be done with it).
+    pub fn download<T: Pod>(&self) -> Result<Vec<T>> {
+        let n = self.size as usize / std::mem::size_of::<T>();
+        let mut out = vec![T::zeroed(); n];
+        let dst: &mut [u8] = bytemuck::cast_slice_mut(&mut out);
+        if dst.is_empty() {
+            return Ok(out);
+        }
+        if let Some(p) = self.mapped() {
+            unsafe { std::ptr::copy_nonoverlapping(p, dst.as_mut_ptr(), dst.len()) };
+            return Ok(out);
+        }
+        let staging = GpuBuffer::new(
+            &self.gpu,
+            self.size,
+            MemoryLocation::GpuToCpu,
+            "staging-down",
+        )?;
+        let mut b = self.gpu.batch()?;
+        b.copy(self, &staging, self.size);
+        b.submit()?;
+        let p = staging
+            .mapped()
+            .context("staging buffer is not host-visible")?;
+        unsafe { std::ptr::copy_nonoverlapping(p, dst.as_mut_ptr(), dst.len()) };
+        Ok(out)
+    }
+}
+
+impl Drop for GpuBuffer {
+    fn drop(&mut self) {
+        let inner = &self.gpu.inner;
+        unsafe { inner.device.destroy_buffer(self.buffer, None) };
+        if let Some(a) = self.allocation.take() {
+            // A free can only fail on a foreign allocation; nothing to recover in a destructor.
+            let _ = inner.allocator.lock().unwrap().free(a);
+        }
+        inner.live_buffers.fetch_sub(1, Ordering::SeqCst);
+    }
+}
+
+impl Gpu {
+    /// A device buffer holding `data`.
+    pub fn upload<T: Pod>(&self, data: &[T]) -> Result<GpuBuffer> {
+        let bytes = std::mem::size_of_val(data) as u64;
+        let buf = GpuBuffer::new(self, bytes, MemoryLocation::GpuOnly, "upload")?;
+        buf.write(data)?;
+        Ok(buf)
+    }
+
+    /// A zero-filled device buffer of `len` elements of `T`.
+    pub fn zeros<T: Pod>(&self, len: usize) -> Result<GpuBuffer> {
+        let bytes = (len * std::mem::size_of::<T>()) as u64;
+        let buf = GpuBuffer::new(self, bytes, MemoryLocation::GpuOnly, "zeros")?;
+        let mut b = self.batch()?;
+        b.fill_zero(&buf);
+        b.submit()?;
+        Ok(buf)
+    }
+}
