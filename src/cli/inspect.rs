@@ -1,7 +1,7 @@
 //! `alphasurf inspect DATASET`: loads a NeRF-synthetic dataset and prints its splits, cameras,
 //! estimated object bounds, warnings, and the load time and memory.
 
-use crate::data::{inspect::inspect, Dataset, LoadOptions};
+use crate::data::{inspect::inspect, Dataset, LoadOptions, SceneBox};
 use std::path::PathBuf;
 
 /// Arguments of `inspect`.
@@ -12,13 +12,22 @@ pub struct InspectArgs {
     /// Box-downscale the images by this factor.
     #[arg(long, default_value_t = 1)]
     pub downscale: u32,
+    /// Blender → scaled-world factor; the grid box [-1, 1]^3 then covers [-1/scale, 1/scale]^3.
+    #[arg(long, default_value_t = 2.0 / 3.0)]
+    pub scale: f32,
 }
 
 /// Runs `inspect`.
 pub fn run(args: &InspectArgs) -> anyhow::Result<()> {
+    if !(args.scale > 0.0 && args.scale.is_finite()) {
+        anyhow::bail!("--scale must be positive, got {}", args.scale);
+    }
     let opts = LoadOptions {
         downscale: args.downscale,
-        ..LoadOptions::default()
+        scene: SceneBox {
+            scale: args.scale,
+            ..SceneBox::default()
+        },
     };
     let ds = Dataset::load(&args.dataset, &opts)?;
     let r = ds.report;

@@ -138,6 +138,13 @@ fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset, DataError> {
         });
     }
     let k = opts.downscale;
+    if k == 0 {
+        return Err(DataError::BadDownscale {
+            path: root.to_path_buf(),
+            factor: 0,
+            reason: "the factor must be at least 1".into(),
+        });
+    }
     let train = load_split(root, "train", k)?.ok_or_else(|| missing(root, "train"))?;
     let test = load_split(root, "test", k)?.ok_or_else(|| missing(root, "test"))?;
     let val_split = load_split(root, "val", k)?;
@@ -243,7 +250,11 @@ fn load_split(root: &Path, name: &str, k: u32) -> Result<Option<Split>, DataErro
         path: json.clone(),
         line: e.line(),
         column: e.column(),
-        msg: e.to_string(),
+        msg: {
+            let full = e.to_string();
+            let suffix = format!(" at line {} column {}", e.line(), e.column());
+            full.strip_suffix(&suffix).unwrap_or(&full).to_string()
+        },
     })?;
     if parsed.frames.is_empty() {
         return Err(DataError::EmptySplit {
@@ -258,11 +269,13 @@ fn load_split(root: &Path, name: &str, k: u32) -> Result<Option<Split>, DataErro
         let file = resolve_image(root, &json, i, &fr.file_path)?;
         jobs.push((file, c2w, fr.intr.or(parsed.intr)));
     }
-    let frames: Vec<Frame> = jobs
+    // Decode in parallel; report the first failing frame in file order (deterministic).
+    let frames: Vec<Result<Frame, DataError>> = jobs
         .into_par_iter()
         .enumerate()
         .map(|(i, (file, c2w, intr))| load_frame(&json, i, file, c2w, intr, k))
-        .collect::<Result<_, _>>()?;
+        .collect();
+    let frames: Vec<Frame> = frames.into_iter().collect::<Result<_, _>>()?;
     let (w, h) = (frames[0].image.width, frames[0].image.height);
     for f in &frames[1..] {
         if (f.image.width, f.image.height) != (w, h) {
@@ -327,32 +340,29 @@ fn load_frame(
             return Err(fmt(format!("invalid {name} = {v}")));
         }
     }
-    if k == 0 || w / k == 0 || h / k == 0 {
+    if w / k == 0 || h / k == 0 {
         return Err(DataError::BadDownscale {
             path: file,
             factor: k,
-            width: w,
-            height: h,
+            reason: format!("the image is only {w}x{h}"),
         });
     }
-    let camera = if let (None, Some(a)) = (intr.fl_x, intr.camera_angle_x) {
-        // The exact f32 formula the scene generator uses, so re-rendering is bit-exact.
-        let mut c = Camera::from_angle_x(c2w, w, h, a as f32);
-        c.fy = fy as f32;
-        c.cx = cx as f32;
-        c.cy = cy as f32;
-        c
-    } else {
-        Camera {
-            c2w,
-            fx: fx as f32,
-            fy: fy as f32,
-            cx: cx as f32,
-            cy: cy as f32,
-            width: w,
-            height: h,
-        }
+    let mut camera = Camera {
+        c2w,
+        fx: fx as f32,
+        fy: fy as f32,
+        cx: cx as f32,
+        cy: cy as f32,
+        width: w,
+        height: h,
     };
+    if let (None, Some(a)) = (intr.fl_x, intr.camera_angle_x) {
+        // The exact f32 formula the scene generator uses, so re-rendering is bit-exact.
+        camera.fx = super::camera::focal_from_angle(w, a as f32);
+        if intr.fl_y.is_none() && intr.camera_angle_y.is_none() {
+            camera.fy = camera.fx;
+        }
+    }
     let (ow, oh, data) = composite_and_downscale(w, h, &raw, k);
     Ok(Frame {
         file,

@@ -102,16 +102,14 @@ pub enum DataError {
         /// The offending `file_path`.
         file_path: String,
     },
-    /// A downscale factor that leaves no pixels.
-    #[error("{}: --downscale {factor} is invalid for {width}x{height} images", path.display())]
+    /// A downscale factor of 0, or one larger than the images.
+    #[error("{}: --downscale {factor} is invalid: {reason}", path.display())]
     BadDownscale {
-        /// The first image.
+        /// The dataset directory or the first image too small for the factor.
         path: PathBuf,
         /// The factor.
         factor: u32,
-        /// Image size.
-        width: u32,
-        /// Image size.
-        height: u32,
+        /// Why.
+        reason: String,
     },
 }

@@ -132,8 +132,11 @@ fn summarise(s: &Split) -> SplitSummary {
 }
 
 /// Carves a `HULL_RES`³ grid over the box with the training masks (alpha > 0): a cell is removed
-/// when some view sees its whole projected footprint inside the image with no covered pixel. The
-/// result is conservative (a superset of the object). Returns the bounds of the kept cells.
+/// when some view sees no covered pixel in its projected footprint. Where a view's mask touches
+/// the image border the object may extend outside that view, so there only footprints wholly
+/// inside the image carve; elsewhere the part of the footprint inside the image decides (a cell
+/// projecting outside the image is empty). The result is conservative (a superset of the
+/// object's visual hull). Returns the bounds of the kept cells.
 pub fn visual_hull_bounds(split: &Split, box_min: Vec3, box_max: Vec3) -> Option<(Vec3, Vec3)> {
     if split.frames.iter().all(|f| !f.image.had_alpha) {
         return None;
@@ -152,6 +155,9 @@ pub fn visual_hull_bounds(split: &Split, box_min: Vec3, box_max: Vec3) -> Option
                 sat[(y + 1) * (w + 1) + x + 1] = sat[y * (w + 1) + x + 1] + row;
             }
         }
+        let touches_border = (0..w)
+            .any(|x| pixel_covered(&sat, w, 0, x) || pixel_covered(&sat, w, h - 1, x))
+            || (0..h).any(|y| pixel_covered(&sat, w, y, 0) || pixel_covered(&sat, w, y, w - 1));
         let cam = f.camera;
         let w2c: Mat4 = cam.c2w.inverse();
         keep.par_iter_mut().enumerate().for_each(|(i, k)| {
@@ -176,11 +182,18 @@ pub fn visual_hull_bounds(split: &Split, box_min: Vec3, box_max: Vec3) -> Option
                 x1 = x1.max(px);
                 y1 = y1.max(py);
             }
-            if x0 < 0.0 || y0 < 0.0 || x1 > w as f32 || y1 > h as f32 {
-                return; // not wholly in view: cannot carve
+            if touches_border && (x0 < 0.0 || y0 < 0.0 || x1 > w as f32 || y1 > h as f32) {
+                return; // not wholly in view of a view the object may leave: cannot carve
             }
-            let (a, b) = (x0.floor() as usize, y0.floor() as usize);
-            let (c, d) = ((x1.ceil() as usize).min(w), (y1.ceil() as usize).min(h));
+            let (a, b) = (
+                (x0.floor().max(0.0) as usize).min(w),
+                (y0.floor().max(0.0) as usize).min(h),
+            );
+            let (c, d) = (
+                (x1.ceil().max(0.0) as usize).min(w),
+                (y1.ceil().max(0.0) as usize).min(h),
+            );
+            let (c, d) = (c.max(a), d.max(b));
             let covered = sat[d * (w + 1) + c] + sat[b * (w + 1) + a]
                 - sat[b * (w + 1) + c]
                 - sat[d * (w + 1) + a];
@@ -197,6 +210,12 @@ pub fn visual_hull_bounds(split: &Split, box_min: Vec3, box_max: Vec3) -> Option
         hi = hi.max(box_min + cell * (idx + Vec3::ONE));
     }
     lo.x.is_finite().then_some((lo, hi))
+}
+
+/// Whether pixel (x, y) is covered, read from the summed-area table.
+fn pixel_covered(sat: &[u32], w: usize, y: usize, x: usize) -> bool {
+    let at = |yy: usize, xx: usize| sat[yy * (w + 1) + xx];
+    at(y + 1, x + 1) + at(y, x) - at(y, x + 1) - at(y + 1, x) > 0
 }
 
 impl std::fmt::Display for Inspection {

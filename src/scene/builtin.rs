@@ -63,7 +63,11 @@ fn opaque(colors: [DVec3; 2], texture: Texture) -> Material {
     }
 }
 
-fn obj(name: impl Into<String>, shape: Shape, material: Material, thin: bool) -> Object {
+/// Wires thinner than this (1/100 of the 3-unit scene) are flagged `thin`.
+pub const THIN_DIAMETER: f64 = 0.03;
+
+fn obj(name: impl Into<String>, shape: Shape, material: Material) -> Object {
+    let thin = matches!(shape, Shape::Capsule { radius, .. } if 2.0 * radius < THIN_DIAMETER);
     Object {
         name: name.into(),
         shape,
@@ -107,25 +111,21 @@ fn thin<R: Rng>(rng: &mut R) -> Vec<Object> {
         "frame_bottom",
         aligned_box(DVec3::new(xm, 0.0, z0), DVec3::new(hx, 0.04, 0.05)),
         wood(rng),
-        false,
     ));
     v.push(obj(
         "frame_top",
         aligned_box(DVec3::new(xm, 0.0, z1), DVec3::new(hx, 0.04, 0.05)),
         wood(rng),
-        false,
     ));
     v.push(obj(
         "frame_left",
         aligned_box(DVec3::new(x0, 0.0, 0.0), DVec3::new(0.04, 0.04, 0.8)),
         wood(rng),
-        false,
     ));
     v.push(obj(
         "frame_right",
         aligned_box(DVec3::new(x1, 0.0, 0.0), DVec3::new(0.04, 0.04, 0.8)),
         wood(rng),
-        false,
     ));
     // Nine vertical wires, radius 0.004–0.008, ends buried in the bars.
     let metal = [rgb(0.75, 0.72, 0.55), rgb(0.35, 0.33, 0.30)];
@@ -147,7 +147,6 @@ fn thin<R: Rng>(rng: &mut R) -> Vec<Object> {
                     freq: 40.0,
                 },
             ),
-            true,
         ));
     }
     // Two diagonal wires in front of the vertical ones (no contact).
@@ -168,7 +167,7 @@ fn thin<R: Rng>(rng: &mut R) -> Vec<Object> {
                 freq: 30.0,
             },
         );
-        v.push(obj(format!("diagonal_{k}"), shape, mat, true));
+        v.push(obj(format!("diagonal_{k}"), shape, mat));
     }
     // Potted plant at x = 0.85.
     let base = DVec3::new(0.85, 0.0, -0.68);
@@ -179,7 +178,6 @@ fn thin<R: Rng>(rng: &mut R) -> Vec<Object> {
             [rgb(0.70, 0.35, 0.20), rgb(0.50, 0.22, 0.12)],
             Texture::Checker { freq: 30.0 },
         ),
-        false,
     ));
     let stem_pts = [
         base,
@@ -200,7 +198,7 @@ fn thin<R: Rng>(rng: &mut R) -> Vec<Object> {
             b: stem_pts[k + 1],
             radius: 0.012,
         };
-        v.push(obj(format!("stem_{k}"), shape, stem_mat.clone(), false));
+        v.push(obj(format!("stem_{k}"), shape, stem_mat.clone()));
     }
     let leaf_colors = [rgb(0.10, 0.45, 0.10), rgb(0.45, 0.75, 0.20)];
     for k in 0..24 {
@@ -222,7 +220,6 @@ fn thin<R: Rng>(rng: &mut R) -> Vec<Object> {
                 radius: 0.004,
             },
             stem_mat.clone(),
-            true,
         ));
         let half_len = 0.07 + 0.05 * rng.random::<f64>();
         let half_wid = 0.025 + 0.02 * rng.random::<f64>();
@@ -242,7 +239,7 @@ fn thin<R: Rng>(rng: &mut R) -> Vec<Object> {
                 freq: 90.0,
             },
         );
-        v.push(obj(format!("leaf_{k}"), shape, mat, false));
+        v.push(obj(format!("leaf_{k}"), shape, mat));
     }
     v
 }
@@ -263,7 +260,6 @@ fn translucent<R: Rng>(rng: &mut R) -> Vec<Object> {
                 freq: 14.0,
             },
         },
-        false,
     ));
     v.push(obj(
         "shell_inner",
@@ -276,7 +272,6 @@ fn translucent<R: Rng>(rng: &mut R) -> Vec<Object> {
             colors: [rgb(0.95, 0.65, 0.15), rgb(0.95, 0.85, 0.55)],
             texture: Texture::Checker { freq: 12.0 },
         },
-        false,
     ));
     let rot = DMat3::from_rotation_z(0.5) * DMat3::from_rotation_x(0.3);
     let phase = rng.random::<f64>() * 6.0;
@@ -287,7 +282,6 @@ fn translucent<R: Rng>(rng: &mut R) -> Vec<Object> {
             [rgb(0.80, 0.10, 0.10), rgb(0.25, 0.05, 0.30)],
             Texture::Waves { freq: 10.0, phase },
         ),
-        false,
     ));
     v.push(obj(
         "toy_ball",
@@ -299,7 +293,6 @@ fn translucent<R: Rng>(rng: &mut R) -> Vec<Object> {
             [rgb(0.10, 0.30, 0.80), rgb(0.85, 0.85, 0.20)],
             Texture::Checker { freq: 25.0 },
         ),
-        false,
     ));
     v.push(obj(
         "toy_handle",
@@ -315,7 +308,6 @@ fn translucent<R: Rng>(rng: &mut R) -> Vec<Object> {
                 freq: 40.0,
             },
         ),
-        false,
     ));
     v
 }
@@ -335,7 +327,6 @@ fn solid<R: Rng>(rng: &mut R) -> Vec<Object> {
                 [rgb(0.30, 0.30, 0.35), rgb(0.65, 0.60, 0.50)],
                 Texture::Waves { freq: 8.0, phase },
             ),
-            false,
         ),
         obj(
             "body",
@@ -347,7 +338,6 @@ fn solid<R: Rng>(rng: &mut R) -> Vec<Object> {
                 [rgb(0.85, 0.80, 0.70), rgb(0.55, 0.35, 0.20)],
                 Texture::Checker { freq: 14.0 },
             ),
-            false,
         ),
         obj(
             "head",
@@ -362,7 +352,6 @@ fn solid<R: Rng>(rng: &mut R) -> Vec<Object> {
                     phase: phase + 1.0,
                 },
             ),
-            false,
         ),
         obj(
             "arm_left",
@@ -378,7 +367,6 @@ fn solid<R: Rng>(rng: &mut R) -> Vec<Object> {
                     freq: 35.0,
                 },
             ),
-            false,
         ),
         obj(
             "arm_right",
@@ -394,7 +382,6 @@ fn solid<R: Rng>(rng: &mut R) -> Vec<Object> {
                     freq: 35.0,
                 },
             ),
-            false,
         ),
     ]
 }

@@ -1,0 +1,105 @@
+//! The `make-scene` and `inspect` commands end to end, and bad input giving exit code 1 with a
+//! message naming the file (no panic).
+
+mod data_common;
+
+use std::process::Command;
+
+fn alphasurf(args: &[&str]) -> (bool, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_alphasurf"))
+        .args(args)
+        .output()
+        .unwrap();
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn make_scene_then_inspect() {
+    let d = tempfile::tempdir().unwrap();
+    let out = d.path().join("thin");
+    let o = out.to_str().unwrap();
+    let (ok, stdout, stderr) = alphasurf(&[
+        "make-scene",
+        "--kind",
+        "thin",
+        "--out",
+        o,
+        "--res",
+        "48",
+        "--views",
+        "10",
+        "--seed",
+        "4",
+        "--gt-spacing",
+        "0.01",
+    ]);
+    assert!(ok, "{stderr}");
+    assert!(stdout.contains("wrote thin (13 views"), "{stdout}");
+    for f in [
+        "transforms_train.json",
+        "transforms_val.json",
+        "transforms_test.json",
+        "gt_points.ply",
+        "scene.json",
+        "train/r_9.png",
+        "val/r_0.png",
+        "test/r_1.png",
+    ] {
+        assert!(out.join(f).is_file(), "{f} missing");
+    }
+    let (ok, stdout, stderr) = alphasurf(&["inspect", o]);
+    assert!(ok, "{stderr}");
+    for want in [
+        "train   10 views  48x48",
+        "val      1 views",
+        "test     2 views",
+        "distance 4.000..4.000",
+        "object bounds (visual hull",
+    ] {
+        assert!(stdout.contains(want), "missing '{want}' in:\n{stdout}");
+    }
+    assert!(!stdout.contains("warning"), "{stdout}");
+}
+
+#[test]
+fn inspect_fixture() {
+    let f = data_common::fixture();
+    let (ok, stdout, stderr) = alphasurf(&["inspect", f.to_str().unwrap(), "--downscale", "2"]);
+    assert!(ok, "{stderr}");
+    assert!(
+        stdout.contains("train  100 views  128x128  focal 177.78"),
+        "{stdout}"
+    );
+}
+
+#[test]
+fn bad_input_exits_with_a_clear_error() {
+    let d = tempfile::tempdir().unwrap();
+    let (ok, _, stderr) = alphasurf(&["inspect", d.path().join("absent").to_str().unwrap()]);
+    assert!(
+        !ok && stderr.contains("absent") && stderr.contains("does not exist"),
+        "{stderr}"
+    );
+    data_common::write_dataset(d.path(), 1, 4, 4);
+    std::fs::write(d.path().join("transforms_train.json"), "{\"frames\": [}").unwrap();
+    let (ok, _, stderr) = alphasurf(&["inspect", d.path().to_str().unwrap()]);
+    assert!(
+        !ok && stderr.contains("transforms_train.json: malformed JSON at line 1, column 13"),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    let (ok, _, stderr) = alphasurf(&[
+        "make-scene",
+        "--kind",
+        "solid",
+        "--out",
+        d.path().join("x").to_str().unwrap(),
+        "--res",
+        "0",
+    ]);
+    assert!(!ok && stderr.contains("--res"), "{stderr}");
+}

@@ -1,0 +1,276 @@
+//! The loader, the camera convention, the sampler and `inspect` on the Blender-rendered fixture
+//! `../shared/fixtures/thin_lyre` (a missing fixture fails these tests).
+
+mod data_common;
+
+use alphasurf::data::image::decode_file;
+use alphasurf::data::inspect::inspect;
+use alphasurf::data::{Camera, Dataset, LoadOptions, RaySampler, Split};
+use data_common::fixture;
+use glam::{Mat4, Vec3, Vec4};
+use std::sync::OnceLock;
+
+fn dataset() -> &'static Dataset {
+    static DS: OnceLock<Dataset> = OnceLock::new();
+    DS.get_or_init(|| {
+        let ds = Dataset::load(&fixture(), &LoadOptions::default()).unwrap();
+        eprintln!(
+            "fixture: {} images in {:.3} s, {:.1} MiB of pixels, peak RSS {:?} bytes",
+            ds.report.n_images,
+            ds.report.seconds,
+            ds.report.image_bytes as f64 / 1048576.0,
+            ds.report.peak_rss_bytes
+        );
+        ds
+    })
+}
+
+fn gt_points() -> &'static Vec<[f32; 3]> {
+    static P: OnceLock<Vec<[f32; 3]>> = OnceLock::new();
+    P.get_or_init(|| alphasurf::io::read_points(&fixture().join("gt_points.ply")).unwrap())
+}
+
+#[test]
+fn loads_splits_sizes_and_focal() {
+    let ds = dataset();
+    assert_eq!(ds.train.frames.len(), 100);
+    assert_eq!(ds.val().frames.len(), 10);
+    assert_eq!(ds.test.frames.len(), 20);
+    assert!(ds.val_split.is_some());
+    let want_f = 0.5 * 256.0 / (0.5f32 * 0.6911112).tan();
+    for s in ds.splits() {
+        assert_eq!((s.width(), s.height()), (256, 256));
+        for f in &s.frames {
+            assert!((f.camera.fx - want_f).abs() < 1e-3 && f.camera.fx == f.camera.fy);
+            assert_eq!((f.camera.cx, f.camera.cy), (128.0, 128.0));
+            assert!((f.camera.centre().length() - 4.0).abs() < 1e-3);
+            assert!(f.image.had_alpha);
+        }
+    }
+    assert_eq!(ds.report.n_images, 130);
+    assert_eq!(ds.report.image_bytes, 130 * 256 * 256 * 4);
+}
+
+#[test]
+fn images_are_composited_on_white() {
+    let ds = dataset();
+    let f = &ds.train.frames[0];
+    let (w, _, raw, _) = decode_file(&f.file).unwrap();
+    for (x, y) in [(0, 0), (128, 128), (100, 60), (200, 190)] {
+        let i = 4 * (y * w as usize + x);
+        let a = raw[i + 3] as f32 / 255.0;
+        for c in 0..3 {
+            let want = raw[i + c] as f32 / 255.0 * a + 1.0 - a;
+            let got = f.image.rgb(x as u32, y as u32)[c];
+            assert!(
+                (got - want).abs() <= 0.5 / 255.0 + 1e-6,
+                "pixel ({x},{y}) channel {c}: {got} vs {want}"
+            );
+        }
+        assert_eq!(f.image.pixel(x as u32, y as u32)[3], raw[i + 3]);
+    }
+}
+
+#[test]
+fn downscale_composites_then_box_averages() {
+    let ds2 = Dataset::load(
+        &fixture(),
+        &LoadOptions {
+            downscale: 2,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let full = dataset();
+    let (f1, f2) = (&full.train.frames[3], &ds2.train.frames[3]);
+    assert_eq!((f2.image.width, f2.image.height), (128, 128));
+    assert!((f2.camera.fx - f1.camera.fx / 2.0).abs() < 1e-4);
+    assert_eq!((f2.camera.cx, f2.camera.cy), (64.0, 64.0));
+    let (w, _, raw, _) = decode_file(&f1.file).unwrap();
+    let mut checked = 0;
+    for y in (0..128).step_by(7) {
+        for x in (0..128).step_by(5) {
+            let mut acc = [0f32; 4];
+            for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                let i = 4 * ((2 * y + dy) * w as usize + 2 * x + dx);
+                let a = raw[i + 3] as f32 / 255.0;
+                for c in 0..3 {
+                    acc[c] += (raw[i + c] as f32 / 255.0 * a + 1.0 - a) / 4.0;
+                }
+                acc[3] += a / 4.0;
+            }
+            let p = f2.image.pixel(x as u32, y as u32);
+            for c in 0..4 {
+                assert!(
+                    (p[c] as f32 / 255.0 - acc[c]).abs() <= 0.5 / 255.0 + 1e-5,
+                    "({x},{y}) c{c}"
+                );
+            }
+            checked += 1;
+        }
+    }
+    assert!(checked > 400);
+}
+
+/// Fraction of `points` that project (with `c2w`) in front of the camera onto an alpha > 0 pixel.
+fn landed_fraction(
+    points: &[[f32; 3]],
+    split: &Split,
+    views: &[usize],
+    flip_to_opencv: bool,
+) -> f64 {
+    let (mut landed, mut total) = (0usize, 0usize);
+    for &v in views {
+        let f = &split.frames[v];
+        let mut cam: Camera = f.camera;
+        if flip_to_opencv {
+            cam.c2w *= Mat4::from_diagonal(Vec4::new(1.0, -1.0, -1.0, 1.0));
+        }
+        for p in points {
+            total += 1;
+            if let Some((px, py, _)) = cam.project(Vec3::from_array(*p)) {
+                if px >= 0.0
+                    && py >= 0.0
+                    && px < cam.width as f32
+                    && py < cam.height as f32
+                    && f.image.alpha(px as u32, py as u32) > 0.0
+                {
+                    landed += 1;
+                }
+            }
+        }
+    }
+    landed as f64 / total as f64
+}
+
+#[test]
+fn camera_convention_gt_points_land_on_alpha() {
+    let ds = dataset();
+    let pts: Vec<[f32; 3]> = gt_points().iter().step_by(97).copied().collect();
+    assert!(pts.len() > 10_000);
+    let views = [0, 17, 42, 63, 99];
+    let gl = landed_fraction(&pts, &ds.train, &views, false);
+    let cv = landed_fraction(&pts, &ds.train, &views, true);
+    eprintln!(
+        "fixture: {:.2}% land on alpha > 0 (OpenGL), {:.2}% (OpenCV)",
+        100.0 * gl,
+        100.0 * cv
+    );
+    assert!(
+        gl >= 0.95,
+        "OpenGL convention: only {:.2}% land on alpha > 0",
+        100.0 * gl
+    );
+    assert!(
+        cv <= 0.05,
+        "OpenCV convention should miss: {:.2}%",
+        100.0 * cv
+    );
+}
+
+#[test]
+fn rays_through_pixel_centres() {
+    let ds = dataset();
+    let cam = ds.train.frames[5].camera;
+    // The ray through the image centre is the optical axis (-Z of the camera).
+    let (o, d) = cam.ray_at(cam.cx, cam.cy);
+    assert!((o - cam.centre()).length() < 1e-6);
+    assert!((d - cam.forward()).length() < 1e-6);
+    // A pixel's ray projects back to its centre (u + 0.5, v + 0.5); +v goes down the image.
+    for (u, v) in [(0, 0), (255, 0), (17, 200), (128, 128)] {
+        let (o, d) = cam.pixel_ray(u, v);
+        let (px, py, depth) = cam.project(o + 3.0 * d).unwrap();
+        assert!((px - (u as f32 + 0.5)).abs() < 1e-3 && (py - (v as f32 + 0.5)).abs() < 1e-3);
+        assert!(depth > 0.0);
+        assert!((d.length() - 1.0).abs() < 1e-6);
+    }
+    let up = cam.c2w.y_axis.truncate();
+    let (_, top) = cam.pixel_ray(128, 0);
+    assert!(top.dot(up) > 0.0, "row 0 is the top of the image (+Y up)");
+}
+
+#[test]
+fn gt_points_match_scene_json() {
+    let pts = gt_points();
+    assert_eq!(pts.len(), 1_000_000);
+    let scene: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(fixture().join("scene.json")).unwrap())
+            .unwrap();
+    let (lo, hi) = (&scene["gt"]["bbox_min"], &scene["gt"]["bbox_max"]);
+    for a in 0..3 {
+        let mn = pts.iter().map(|p| p[a]).fold(f32::INFINITY, f32::min);
+        let mx = pts.iter().map(|p| p[a]).fold(f32::NEG_INFINITY, f32::max);
+        let (l, h) = (lo[a].as_f64().unwrap(), hi[a].as_f64().unwrap());
+        // Inside the mesh bounds, and reaching within 1 cm of them.
+        assert!(
+            mn as f64 >= l - 1e-5 && mn as f64 - l < 0.01,
+            "axis {a}: min {mn} vs {l}"
+        );
+        assert!(
+            mx as f64 <= h + 1e-5 && h - (mx as f64) < 0.01,
+            "axis {a}: max {mx} vs {h}"
+        );
+    }
+}
+
+#[test]
+fn inspect_estimates_object_bounds() {
+    let ds = dataset();
+    let r = inspect(ds);
+    let text = r.to_string();
+    eprintln!("{text}");
+    let scene: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(fixture().join("scene.json")).unwrap())
+            .unwrap();
+    let (lo, hi) = r.object_bounds.expect("bounds");
+    for a in 0..3 {
+        let (tlo, thi) = (
+            scene["bbox_min"][a].as_f64().unwrap() as f32,
+            scene["bbox_max"][a].as_f64().unwrap() as f32,
+        );
+        assert!(
+            lo[a] <= tlo && hi[a] >= thi,
+            "hull must contain the object on axis {a}"
+        );
+        assert!(
+            tlo - lo[a] < 0.1 && hi[a] - thi < 0.1,
+            "hull too loose on axis {a}: {lo} {hi}"
+        );
+    }
+    assert!(r.warnings.is_empty(), "{:?}", r.warnings);
+    assert!(
+        text.contains("train  100 views  256x256  focal 355.56"),
+        "{text}"
+    );
+}
+
+#[test]
+fn sampler_is_seeded_uniform_and_matches_pixels() {
+    let ds = dataset();
+    let batch = |seed| RaySampler::new(&ds.train, seed).next_batch(&ds.train, &ds.scene, 4096);
+    let (a, b, c) = (batch(1), batch(1), batch(2));
+    assert_eq!(a, b);
+    assert_ne!(a, c);
+    let mut s = RaySampler::new(&ds.train, 3);
+    let px = s.sample_pixels(200_000);
+    let mut per_view = vec![0usize; 100];
+    for p in &px {
+        per_view[p.view as usize] += 1;
+        assert!(p.x < 256 && p.y < 256);
+    }
+    // Uniform over views: each gets 2000 ± 5σ (σ ≈ 44).
+    assert!(
+        per_view.iter().all(|&n| (1780..=2220).contains(&n)),
+        "{per_view:?}"
+    );
+    // Rays: scaled origins, unit directions, the pixel's colour.
+    let mut s = RaySampler::new(&ds.train, 9);
+    let p = s.sample_pixels(1)[0];
+    let b = RaySampler::new(&ds.train, 9).next_batch(&ds.train, &ds.scene, 1);
+    let f = &ds.train.frames[p.view as usize];
+    let o = Vec3::from_array(b.origins[0]);
+    assert!((o - f.camera.centre() * (2.0 / 3.0)).length() < 1e-5);
+    assert!((Vec3::from_array(b.dirs[0]).length() - 1.0).abs() < 1e-5);
+    assert_eq!(b.rgb[0], f.image.rgb(p.x, p.y));
+    assert_eq!(b.alpha[0], f.image.alpha(p.x, p.y));
+}
