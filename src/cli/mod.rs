@@ -5,6 +5,7 @@ mod check_kernels;
 mod devices;
 pub mod inspect;
 pub mod make_scene;
+mod train;
 
 use crate::gpu::{Gpu, GpuOptions};
 use clap::{Parser, Subcommand};
@@ -39,6 +40,11 @@ pub enum Command {
     MakeScene(make_scene::MakeSceneArgs),
     /// Summarise a NeRF-synthetic dataset: splits, cameras, object bounds, warnings.
     Inspect(inspect::InspectArgs),
+    /// Train a reconstruction (stage 1: Plenoxels) with a progress bar, periodic atomic
+    /// checkpoints (`--resume`), test renders and metrics.json.
+    Train(train::TrainArgs),
+    /// Render a split of a trained run to PNG and print per-view and mean PSNR.
+    Render(train::RenderArgs),
     /// Benchmarks: figures on the Vulkan device and the CPU twin, parity verdict, `--json` line.
     Bench(BenchArgs),
 }
@@ -102,6 +108,22 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         }
         Command::Inspect(a) => {
             inspect::run(a)?;
+            ExitCode::SUCCESS
+        }
+        Command::Train(a) => {
+            let gpu = match a.backend {
+                train::Backend::Vulkan => Some(&*gpu_used.insert(open_gpu(&cli)?)),
+                train::Backend::Cpu => None,
+            };
+            train::run_train(a, gpu)?;
+            ExitCode::SUCCESS
+        }
+        Command::Render(a) => {
+            let gpu = match a.backend {
+                train::Backend::Vulkan => Some(&*gpu_used.insert(open_gpu(&cli)?)),
+                train::Backend::Cpu => None,
+            };
+            train::run_render(a, gpu)?;
             ExitCode::SUCCESS
         }
         Command::Bench(b) => match &b.kind {

@@ -1,0 +1,249 @@
+//! `alphasurf train` and `alphasurf render`: wire the dataset, a backend and the trainer.
+
+use crate::data::{dataset::peak_rss_bytes, Dataset, LoadOptions};
+use crate::gpu::Gpu;
+use crate::grid::Grid;
+use crate::plenoxel::{CpuPlenoxels, Plenoxels, VulkanPlenoxels};
+use crate::train::{render_split, stage1, Stage1Config};
+use anyhow::{bail, Context, Result};
+use serde_json::json;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Which stage to train.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Stage {
+    /// Stage 1: Plenoxels density + SH grid.
+    Plenoxels,
+}
+
+/// Where the kernels run.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Backend {
+    /// GLSL kernels on the Vulkan device (`--device`).
+    Vulkan,
+    /// Their CPU twins (rayon).
+    Cpu,
+}
+
+/// Arguments of `train`.
+#[derive(clap::Args, Debug)]
+pub struct TrainArgs {
+    /// Which stage.
+    #[arg(long, value_enum, default_value = "plenoxels")]
+    pub stage: Stage,
+    /// Dataset directory (NeRF-synthetic format, e.g. from `make-scene`).
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Run directory: checkpoints, test renders, metrics.json.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Schedule: `paper` (svox2's synthetic schedule, 256³→512³, 128k steps) or `fast` (sized for
+    /// a 2-core CPU: 64³→128³, 3000 steps).
+    #[arg(long, default_value = "fast")]
+    pub preset: String,
+    #[arg(long, value_enum, default_value = "vulkan")]
+    pub backend: Backend,
+    /// Number of steps (overrides the preset; the learning-rate decays keep their length).
+    #[arg(long)]
+    pub iters: Option<u32>,
+    /// Final grid resolution (the preset's upsampling schedule is scaled to it).
+    #[arg(long)]
+    pub res: Option<u32>,
+    /// Rays per batch (overrides the preset).
+    #[arg(long)]
+    pub batch: Option<u32>,
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Box-downscale the images by this factor.
+    #[arg(long, default_value_t = 1)]
+    pub downscale: u32,
+    /// Continue from the run directory's checkpoint (its configuration wins).
+    #[arg(long)]
+    pub resume: bool,
+    /// Hide the progress bar.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// Arguments of `render`.
+#[derive(clap::Args, Debug)]
+pub struct RenderArgs {
+    /// A run directory written by `train`.
+    #[arg(long)]
+    pub run: PathBuf,
+    /// Which split: train, val or test.
+    #[arg(long, default_value = "test")]
+    pub split: String,
+    /// Output directory for the PNGs.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Dataset directory (default: the one the run was trained on).
+    #[arg(long)]
+    pub data: Option<PathBuf>,
+    #[arg(long, value_enum, default_value = "vulkan")]
+    pub backend: Backend,
+}
+
+fn make_backend(kind: Backend, gpu: Option<&Gpu>, grid: Grid) -> Result<Box<dyn Plenoxels>> {
+    Ok(match kind {
+        Backend::Vulkan => Box::new(VulkanPlenoxels::new(
+            gpu.context("the Vulkan backend needs a device")?,
+            grid,
+        )?),
+        Backend::Cpu => Box::new(CpuPlenoxels::new(grid)),
+    })
+}
+
+fn config(args: &TrainArgs) -> Result<Stage1Config> {
+    let mut cfg = Stage1Config::preset(&args.preset)?;
+    cfg.seed = args.seed;
+    if let Some(n) = args.iters {
+        if n == 0 {
+            bail!("--iters must be at least 1");
+        }
+        cfg.upsample.iter_mut().for_each(|u| u.0 = (u.0 as u64 * n as u64 / cfg.iters as u64) as u32);
+        cfg.checkpoint_every = cfg.checkpoint_every.min(n);
+        cfg.iters = n;
+    }
+    if let Some(r) = args.res {
+        if !(8..=1024).contains(&r) {
+            bail!("--res {r}: expected 8 ..= 1024");
+        }
+        let last = cfg.upsample.last().map_or(cfg.res, |u| u.1);
+        cfg.res = (cfg.res as u64 * r as u64 / last as u64).max(8) as u32;
+        cfg.upsample.iter_mut().for_each(|u| u.1 = (u.1 as u64 * r as u64 / last as u64) as u32);
+    }
+    if let Some(b) = args.batch {
+        if b == 0 {
+            bail!("--batch must be at least 1");
+        }
+        cfg.batch = b;
+    }
+    Ok(cfg)
+}
+
+/// Run `train`.
+pub fn run_train(args: &TrainArgs, gpu: Option<&Gpu>) -> Result<()> {
+    let t_all = Instant::now();
+    let t = Instant::now();
+    let data = Dataset::load(
+        &args.data,
+        &LoadOptions {
+            downscale: args.downscale,
+            ..Default::default()
+        },
+    )?;
+    let load_s = t.elapsed().as_secs_f64();
+    let ckpt = stage1::checkpoint_path(&args.out);
+    let (mut backend, cfg, start) = if args.resume {
+        if !ckpt.exists() {
+            bail!("--resume: no checkpoint at {}", ckpt.display());
+        }
+        let probe = crate::grid::checkpoint::load(&ckpt)?;
+        let mut b = make_backend(args.backend, gpu, probe.grid)?;
+        let (step, cfg) = stage1::resume(b.as_mut(), &ckpt)?;
+        eprintln!("resuming {} at step {step} of {}", ckpt.display(), cfg.iters);
+        (b, cfg, step)
+    } else {
+        let cfg = config(args)?;
+        let grid = Grid::sphere(
+            cfg.res,
+            data.scene.centre.to_array(),
+            [data.scene.radius; 3],
+            1.0,
+            cfg.init_sigma,
+        );
+        (make_backend(args.backend, gpu, grid)?, cfg, 0)
+    };
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating run directory {}", args.out.display()))?;
+    let run_info = json!({ "data": std::fs::canonicalize(&args.data)?, "downscale": args.downscale });
+    std::fs::write(args.out.join("run.json"), serde_json::to_vec_pretty(&run_info)?)
+        .with_context(|| format!("writing {}", args.out.join("run.json").display()))?;
+    eprintln!(
+        "stage 1 on {} ({}): preset {}, {} steps of {} rays, grid {}³{}",
+        backend.name(),
+        gpu.map_or("rayon".to_string(), |g| g.info().name.clone()),
+        cfg.preset,
+        cfg.iters,
+        cfg.batch,
+        cfg.res,
+        cfg.upsample
+            .iter()
+            .map(|(s, r)| format!(" → {r}³ at step {s}"))
+            .collect::<String>()
+    );
+    let (report, rendered) = stage1::train(backend.as_mut(), &data, &cfg, &args.out, start, !args.quiet)?;
+    for (i, p) in rendered.psnr.iter().enumerate() {
+        println!("test view {i:>3}: PSNR {p:.2} dB");
+    }
+    println!(
+        "stage 1 done: test PSNR {:.2} dB, {:.0} training rays/s, {} vertices ({:.0} B each with optimiser state), {:.1} s",
+        report.test_psnr,
+        report.train_rays_per_s,
+        report.allocated_vertices,
+        report.bytes_per_vertex,
+        t_all.elapsed().as_secs_f64()
+    );
+    let metrics = json!({
+        "stage": "plenoxels",
+        "backend": backend.name(),
+        "device": gpu.map(|g| g.info().name.clone()),
+        "wall_seconds": {
+            "load": load_s,
+            "train": report.train_seconds,
+            "upsample": report.upsample_seconds,
+            "checkpoint": report.checkpoint_seconds,
+            "render_test": report.render_seconds,
+            "total": t_all.elapsed().as_secs_f64(),
+        },
+        "train_rays_per_s": report.train_rays_per_s,
+        "final_train_mse": report.final_mse,
+        "test_psnr": report.test_psnr,
+        "test_psnr_per_view": rendered.psnr,
+        "samples_per_ray": { "shaded": report.samples_per_ray[0], "empty": report.samples_per_ray[1], "skipped": report.samples_per_ray[2] },
+        "allocated_vertices": report.allocated_vertices,
+        "bytes_per_vertex": report.bytes_per_vertex,
+        "peak_rss_bytes": peak_rss_bytes(),
+        "config": cfg,
+    });
+    write_json(&args.out.join("metrics.json"), &metrics)
+}
+
+fn write_json(path: &Path, v: &serde_json::Value) -> Result<()> {
+    std::fs::write(path, serde_json::to_vec_pretty(v)?).with_context(|| format!("writing {}", path.display()))
+}
+
+/// Run `render`.
+pub fn run_render(args: &RenderArgs, gpu: Option<&Gpu>) -> Result<()> {
+    let data_dir = match &args.data {
+        Some(d) => d.clone(),
+        None => {
+            let p = args.run.join("run.json");
+            let text = std::fs::read_to_string(&p)
+                .with_context(|| format!("reading {} (or pass --data)", p.display()))?;
+            let v: serde_json::Value =
+                serde_json::from_str(&text).with_context(|| format!("parsing {}", p.display()))?;
+            PathBuf::from(v["data"].as_str().with_context(|| format!("{}: no \"data\" path", p.display()))?)
+        }
+    };
+    let data = Dataset::load(&data_dir, &LoadOptions::default())?;
+    let split = match args.split.as_str() {
+        "train" => &data.train,
+        "val" => data.val(),
+        "test" => &data.test,
+        s => bail!("--split {s}: expected train, val or test"),
+    };
+    let ckpt = crate::grid::checkpoint::load(&stage1::checkpoint_path(&args.run))?;
+    let stop = serde_json::from_value::<Stage1Config>(ckpt.meta["config"].clone())
+        .map(|c| c.stop_thresh)
+        .unwrap_or(1e-7);
+    let mut backend = make_backend(args.backend, gpu, ckpt.grid)?;
+    let r = render_split(backend.as_mut(), &data, split, stop, &args.out)?;
+    for (i, p) in r.psnr.iter().enumerate() {
+        println!("{} view {i:>3}: PSNR {p:.2} dB", r.split);
+    }
+    println!("mean PSNR {:.2} dB over {} views -> {}", r.mean_psnr, r.psnr.len(), args.out.display());
+    Ok(())
+}
