@@ -3,7 +3,7 @@
 // Thread mapping: one invocation per ray.
 // Inputs: the grid (links, density, sh, occupancy), rays as 6 floats (scene origin, unit
 // direction), grid = p·scale + offset, stop threshold on transmittance.
-// Outputs: rgb (3 floats per ray, white background); stats[0..3] += samples shaded,
+// Outputs: rgb (3 floats per ray, white background); step-buffer counters += samples shaded,
 // samples evaluated at σ ≤ 1e-8, samples skipped by the occupancy volume (subgroup-reduced).
 // CPU twin: cpu::plenoxel::render.
 #include "common.glsl"
@@ -16,7 +16,7 @@ layout(push_constant, scalar) uniform Push {
     U32Buf occ;
     F32Buf rays;
     F32Buf rgb;
-    U32Buf stats;
+    U32Buf step;
     uvec3 res;
     vec3 scale;
     vec3 offset;
@@ -25,6 +25,7 @@ layout(push_constant, scalar) uniform Push {
 } pc;
 
 #include "plenoxel.glsl"
+#include "step.glsl"
 
 void main() {
     uint r = flat_id();
@@ -56,5 +57,5 @@ void main() {
     pc.rgb.v[3u * r] = outc.x;
     pc.rgb.v[3u * r + 1u] = outc.y;
     pc.rgb.v[3u * r + 2u] = outc.z;
-    add_stats(pc.stats, counts);
+    add_stats(counts);
 }

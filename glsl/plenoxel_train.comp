@@ -7,8 +7,8 @@
 // corner: the basis Y_k is constant along a ray).
 // Thread mapping: one invocation per ray.
 // Inputs: grid, occupancy, rays (6 floats), targets (3 floats), scale/offset, stop threshold.
-// Outputs: grad_density, grad_sh (+= by float atomics), ray_loss[r] = Σ_channels (C − target)²,
-// stats as in plenoxel_fwd. CPU twin: cpu::plenoxel::train.
+// Outputs: grad_density, grad_sh (+= by float atomics; each vertex that gets one is touched), ray_loss[r] = Σ_channels (C − target)²,
+// sample counters as in plenoxel_fwd, touched vertices listed in the step buffer. CPU twin: cpu::plenoxel::train.
 #extension GL_EXT_shader_atomic_float : require
 #include "common.glsl"
 layout(local_size_x = 64) in;
@@ -23,7 +23,7 @@ layout(push_constant, scalar) uniform Push {
     F32Buf grad_density;
     F32Buf grad_sh;
     F32Buf ray_loss;
-    U32Buf stats;
+    U32Buf step;
     uvec3 res;
     vec3 scale;
     vec3 offset;
@@ -33,6 +33,7 @@ layout(push_constant, scalar) uniform Push {
 } pc;
 
 #include "plenoxel.glsl"
+#include "step.glsl"
 
 // Adds the per-cell accumulators to the gradients (one atomic per corner and parameter) and
 // clears them.
@@ -43,7 +44,8 @@ void flush(float y[9], int cur_lk[8], inout float acc_sigma[8], inout vec3 acc_c
         vec3 gc = acc_color[i];
         acc_sigma[i] = 0.0;
         acc_color[i] = vec3(0.0);
-        if (l < 0) continue;
+        if (l < 0 || (gs == 0.0 && gc == vec3(0.0))) continue;
+        touch(uint(l));
         if (gs != 0.0) atomicAdd(pc.grad_density.v[l], gs);
         for (int ch = 0; ch < 3; ch++) {
             if (gc[ch] == 0.0) continue;
@@ -84,7 +86,7 @@ void main() {
     precise vec3 total = color + vec3(T);
     precise vec3 diff = total - target;
     pc.ray_loss.v[r] = dot(diff, diff);
-    add_stats(pc.stats, counts);
+    add_stats(counts);
     vec3 g_c = pc.grad_scale * diff;
 
     // Backward: the same samples again, in the same order.

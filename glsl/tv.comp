@@ -8,7 +8,8 @@
 // no atomics are needed. Slots range over [start, start + count + Y·Z) to reach those neighbours.
 // Thread mapping: flat id = (slot − start)·channels + c.
 // Inputs: links, data (channels floats per allocated vertex), res, chunk, scale (λ/count).
-// Output: grad += (plain read-modify-write; one owner per element). CPU twin: cpu::tv.
+// Output: grad += (plain read-modify-write; one owner per element) for vertices with a TV term;
+// each is touched (step.glsl). CPU twin: cpu::tv.
 #include "common.glsl"
 layout(local_size_x = 256) in;
 
@@ -16,12 +17,15 @@ layout(push_constant, scalar) uniform Push {
     I32Buf links;
     F32Buf data;
     F32Buf grad;
+    U32Buf step;
     uvec3 res;
     uint start;
     uint count;
     uint channels;
     float scale;
 } pc;
+
+#include "step.glsl"
 
 float value(int link, uint c) {
     return pc.data.v[uint(link) * pc.channels + c];
@@ -63,6 +67,7 @@ void main() {
     if (l < 0) return;
     uint end = pc.start + pc.count;
     precise float g = 0.0;
+    bool contributed = s < end;
     if (s < end) {
         vec4 own = tv_of(s, l, c);
         g -= (own.x + own.y + own.z) / own.w;
@@ -77,7 +82,10 @@ void main() {
         if (lu < 0) continue;
         vec4 tu = tv_of(u, lu, c);
         g += tu[a] / tu.w;
+        contributed = true;
     }
+    if (!contributed) return;
     uint i = uint(l) * pc.channels + c;
     pc.grad.v[i] = pc.grad.v[i] + pc.scale * g;
+    if (c == 0u) touch(uint(l));
 }

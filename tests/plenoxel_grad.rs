@@ -179,7 +179,8 @@ fn tv_gradient_matches_finite_differences() {
         scale: 0.01,
     };
     let mut grad = vec![0.0f32; g.sh.len()];
-    tv(&g.links, &g.sh, &mut grad, &c);
+    let mut touched = vec![0u32; g.allocated()];
+    tv(&g.links, &g.sh, &mut grad, &mut touched, &c);
     // Independent f64 TV: forward differences, missing neighbour = equal, mean-free scale.
     let loss = |data: &[f64]| -> f64 {
         let mut total = 0.0;

@@ -14,8 +14,6 @@
 #ifndef PLENOXEL_GLSL
 #define PLENOXEL_GLSL
 
-#extension GL_KHR_shader_subgroup_arithmetic : require
-#extension GL_KHR_shader_subgroup_basic : require
 #include "trilerp.glsl"
 #include "sh.glsl"
 #include "dda.glsl"
@@ -186,14 +184,5 @@ bool march_next(March m, inout uint k, inout uvec3 counts, out Sample s) {
 
 #endif
 
-// stats[0..3] += (shaded, empty, skipped), reduced over the subgroup first: one atomic per subgroup.
-void add_stats(U32Buf stats, uvec3 counts) {
-    uvec3 s = subgroupAdd(counts);
-    if (subgroupElect()) {
-        atomicAdd(stats.v[0], s.x);
-        atomicAdd(stats.v[1], s.y);
-        atomicAdd(stats.v[2], s.z);
-    }
-}
 
 #endif

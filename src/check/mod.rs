@@ -41,7 +41,8 @@ pub const CHECKS: &[(&str, CheckFn)] = &[
     ("plenoxel_fwd", plenoxel::check_fwd),
     ("plenoxel_train", plenoxel::check_train),
     ("plenoxel_weights", plenoxel::check_weights),
-    ("rmsprop", plenoxel::check_rmsprop),
+    ("optim_args", plenoxel::check_optim_args),
+    ("rmsprop_sparse", plenoxel::check_rmsprop),
     ("tv", plenoxel::check_tv),
 ];
 

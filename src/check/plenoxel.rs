@@ -5,8 +5,9 @@
 
 use super::{CheckRow, Compare};
 use crate::cpu::plenoxel as twin;
-use crate::cpu::{rmsprop, tv, TvChunk};
-use crate::gpu::Gpu;
+use crate::cpu::step::{optim_args, STEP_COUNT, STEP_FLAGS, STEP_N};
+use crate::cpu::{rmsprop_sparse, tv, RmsProp, Stage1Params, TvChunk};
+use crate::gpu::{Gpu, GpuBuffer};
 use crate::grid::{Grid, SH_DIM};
 use crate::kernels;
 use crate::plenoxel::{CpuPlenoxels, Plenoxels, VulkanPlenoxels};
@@ -198,56 +199,174 @@ pub fn check_weights(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
     Ok(cmp.row("plenoxel_weights", rays.len() / 6, "T-stop 0.2".into()))
 }
 
-pub fn check_rmsprop(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
-    let mut rng = Pcg64::seed_from_u64(seed);
-    let n = 100_000;
-    let mut param: Vec<f32> = (0..n).map(|_| rng.random_range(-5.0..5.0)).collect();
-    // A third untouched (g = 0), a third with fresh state (r = 0), tiny and huge gradients.
-    let mut grad: Vec<f32> = (0..n)
-        .map(|i| match i % 3 {
-            0 => 0.0,
-            _ => rng.random_range(-1.0..1.0f32) * 10f32.powi(rng.random_range(-8..4)),
-        })
-        .collect();
-    let mut state: Vec<f32> = (0..n)
-        .map(|i| {
-            if i % 5 == 0 {
-                0.0
-            } else {
-                rng.random_range(0.0..2.0)
-            }
-        })
-        .collect();
-    let (pb, gb, sb) = (gpu.upload(&param)?, gpu.upload(&grad)?, gpu.upload(&state)?);
-    let (lr, beta, eps) = (0.3, 0.95, 1e-8);
-    gpu.run_1d(
-        &kernels::rmsprop::INFO,
-        &kernels::rmsprop::Push {
-            param: pb.address(),
-            grad: gb.address(),
-            state: sb.address(),
-            n: n as u32,
-            lr,
-            beta,
-            eps,
-        },
-        n as u32,
-    )?;
-    rmsprop(&mut param, &mut grad, &mut state, lr, beta, eps);
-    let mut cmp = Compare::new(1e-6, 1e-5);
-    for (what, got, want) in [
-        ("param", pb.download::<f32>()?, &param),
-        ("grad", gb.download::<f32>()?, &grad),
-        ("state", sb.download::<f32>()?, &state),
-    ] {
-        for (i, (&a, &b)) in got.iter().zip(want.iter()).enumerate() {
-            cmp.value(a as f64, b as f64, || format!("{what}[{i}]"));
+/// A step buffer (glsl/lib/step.glsl) for `n` vertices with the given vertices touched.
+fn step_buffer(n: usize, touched: &[usize]) -> Vec<u32> {
+    let mut v = vec![0u32; STEP_FLAGS + 2 * n];
+    v[STEP_N] = n as u32;
+    v[STEP_COUNT] = touched.len() as u32;
+    for (i, &t) in touched.iter().enumerate() {
+        v[STEP_FLAGS + t] = 1;
+        v[STEP_FLAGS + n + i] = t as u32;
+    }
+    v
+}
+
+pub fn check_optim_args(gpu: &Gpu, _seed: u64) -> Result<CheckRow> {
+    let mut cmp = Compare::new(0.0, 0.0);
+    let counts = [
+        0u32,
+        1,
+        63,
+        64,
+        65,
+        100_000,
+        64 * 32768,
+        64 * 32768 + 1,
+        5_000_000,
+    ];
+    for &count in &counts {
+        let mut step = vec![0u32; STEP_FLAGS];
+        step[STEP_COUNT] = count;
+        let sb = gpu.upload(&step)?;
+        let args = gpu.zeros::<u32>(3)?;
+        gpu.run_1d(
+            &kernels::optim_args::INFO,
+            &kernels::optim_args::Push {
+                step: sb.address(),
+                args: args.address(),
+            },
+            1,
+        )?;
+        let got: Vec<u32> = args.download()?;
+        for (i, (&g, &w)) in got.iter().zip(&optim_args(count)).enumerate() {
+            cmp.value(g as f64, w as f64, || format!("count {count} arg {i}"));
         }
     }
     Ok(cmp.row(
-        "rmsprop",
+        "optim_args",
+        counts.len(),
+        "exact; 0, group edges, multi-row".into(),
+    ))
+}
+
+pub fn check_rmsprop(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
+    let mut rng = Pcg64::seed_from_u64(seed);
+    let n = 20_000;
+    let mut vals = |len: usize, lo: f32, hi: f32| -> Vec<f32> {
+        (0..len).map(|_| rng.random_range(lo..hi)).collect()
+    };
+    let (mut density, mut sh) = (vals(n, -5.0, 5.0), vals(n * SH_DIM, -1.0, 1.0));
+    let mut state_density = vals(n, 0.0, 2.0);
+    let mut state_sh = vals(n * SH_DIM, 0.0, 2.0);
+    let mut grad_density = vals(n, -1.0, 1.0);
+    let mut grad_sh = vals(n * SH_DIM, -1.0, 1.0);
+    // Fresh state (r = 0) on a fifth, zero gradients on a seventh, 1e-8..1e4 magnitudes.
+    for i in 0..grad_sh.len() {
+        if i % 5 == 0 {
+            state_sh[i] = 0.0;
+        }
+        if i % 7 == 0 {
+            grad_sh[i] = 0.0;
+        }
+        grad_sh[i] *= 10f32.powi((i % 13) as i32 - 8);
+    }
+    for i in (0..n).step_by(5) {
+        state_density[i] = 0.0;
+    }
+    // Two thirds of the vertices touched, in scrambled order.
+    let mut touched_list: Vec<usize> = (0..n).filter(|v| v % 3 != 0).collect();
+    touched_list.reverse();
+    let mut flags = vec![0u32; n];
+    touched_list.iter().for_each(|&v| flags[v] = 1);
+    let bufs: Vec<GpuBuffer> = [
+        &density,
+        &sh,
+        &grad_density,
+        &grad_sh,
+        &state_density,
+        &state_sh,
+    ]
+    .iter()
+    .map(|v| gpu.upload(v))
+    .collect::<Result<_>>()?;
+    let step = gpu.upload(&step_buffer(n, &touched_list))?;
+    let args = gpu.zeros::<u32>(3)?;
+    let h = RmsProp {
+        lr_sigma: 0.3,
+        lr_sh: 0.01,
+        beta: 0.95,
+        eps: 1e-8,
+    };
+    let mut b = gpu.batch()?;
+    b.dispatch(
+        &kernels::optim_args::INFO,
+        &kernels::optim_args::Push {
+            step: step.address(),
+            args: args.address(),
+        },
+        [1, 1, 1],
+    )?;
+    b.dispatch_indirect(
+        &kernels::rmsprop_sparse::INFO,
+        &kernels::rmsprop_sparse::Push {
+            density: bufs[0].address(),
+            sh: bufs[1].address(),
+            grad_density: bufs[2].address(),
+            grad_sh: bufs[3].address(),
+            state_density: bufs[4].address(),
+            state_sh: bufs[5].address(),
+            step: step.address(),
+            lr_sigma: h.lr_sigma,
+            lr_sh: h.lr_sh,
+            beta: h.beta,
+            eps: h.eps,
+        },
+        &args,
+    )?;
+    b.submit()?;
+    rmsprop_sparse(
+        Stage1Params {
+            density: &mut density,
+            sh: &mut sh,
+            grad_density: &mut grad_density,
+            grad_sh: &mut grad_sh,
+            state_density: &mut state_density,
+            state_sh: &mut state_sh,
+        },
+        &mut flags,
+        &h,
+    );
+    let mut cmp = Compare::new(1e-6, 1e-5);
+    let names = [
+        "density",
+        "sh",
+        "grad_density",
+        "grad_sh",
+        "state_density",
+        "state_sh",
+    ];
+    let want = [
+        &density,
+        &sh,
+        &grad_density,
+        &grad_sh,
+        &state_density,
+        &state_sh,
+    ];
+    for ((buf, w), name) in bufs.iter().zip(want).zip(names) {
+        let got: Vec<f32> = buf.download()?;
+        for (i, (&a, &b)) in got.iter().zip(w.iter()).enumerate() {
+            cmp.value(a as f64, b as f64, || format!("{name}[{i}]"));
+        }
+    }
+    let got_flags: Vec<u32> = step.download_range(STEP_FLAGS, n)?;
+    for (i, (&a, &b)) in got_flags.iter().zip(&flags).enumerate() {
+        cmp.value(a as f64, b as f64, || format!("touched flag {i}"));
+    }
+    Ok(cmp.row(
+        "rmsprop_sparse",
         n,
-        "untouched entries, fresh state, 1e-8..1e4 gradients".into(),
+        "2/3 of vertices touched; fresh state, zero and 1e-8..1e4 gradients; flags cleared".into(),
     ))
 }
 
@@ -268,15 +387,18 @@ pub fn check_tv(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
                 scale: 0.7,
             };
             let mut want = vec![0.0f32; data.len()];
-            tv(&g.links, data, &mut want, &c);
+            let mut want_touched = vec![0u32; g.allocated()];
+            tv(&g.links, data, &mut want, &mut want_touched, &c);
             let db = gpu.upload(data)?;
             let gb = gpu.zeros::<f32>(data.len())?;
+            let step = gpu.upload(&step_buffer(g.allocated(), &[]))?;
             gpu.run_1d(
                 &kernels::tv::INFO,
                 &kernels::tv::Push {
                     links: links.address(),
                     data: db.address(),
                     grad: gb.address(),
+                    step: step.address(),
                     res: g.res,
                     start,
                     count,
@@ -298,6 +420,6 @@ pub fn check_tv(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
     Ok(cmp.row(
         "tv",
         cases,
-        "σ and SH, chunk inside and past the end".into(),
+        "σ and SH, chunk inside and past the end; touched flags exact".into(),
     ))
 }

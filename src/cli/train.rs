@@ -102,7 +102,9 @@ fn config(args: &TrainArgs) -> Result<Stage1Config> {
         if n == 0 {
             bail!("--iters must be at least 1");
         }
-        cfg.upsample.iter_mut().for_each(|u| u.0 = (u.0 as u64 * n as u64 / cfg.iters as u64) as u32);
+        cfg.upsample
+            .iter_mut()
+            .for_each(|u| u.0 = (u.0 as u64 * n as u64 / cfg.iters as u64) as u32);
         cfg.checkpoint_every = cfg.checkpoint_every.min(n);
         cfg.iters = n;
     }
@@ -112,7 +114,9 @@ fn config(args: &TrainArgs) -> Result<Stage1Config> {
         }
         let last = cfg.upsample.last().map_or(cfg.res, |u| u.1);
         cfg.res = (cfg.res as u64 * r as u64 / last as u64).max(8) as u32;
-        cfg.upsample.iter_mut().for_each(|u| u.1 = (u.1 as u64 * r as u64 / last as u64) as u32);
+        cfg.upsample
+            .iter_mut()
+            .for_each(|u| u.1 = (u.1 as u64 * r as u64 / last as u64) as u32);
     }
     if let Some(b) = args.batch {
         if b == 0 {
@@ -143,7 +147,11 @@ pub fn run_train(args: &TrainArgs, gpu: Option<&Gpu>) -> Result<()> {
         let probe = crate::grid::checkpoint::load(&ckpt)?;
         let mut b = make_backend(args.backend, gpu, probe.grid)?;
         let (step, cfg) = stage1::resume(b.as_mut(), &ckpt)?;
-        eprintln!("resuming {} at step {step} of {}", ckpt.display(), cfg.iters);
+        eprintln!(
+            "resuming {} at step {step} of {}",
+            ckpt.display(),
+            cfg.iters
+        );
         (b, cfg, step)
     } else {
         let cfg = config(args)?;
@@ -158,9 +166,13 @@ pub fn run_train(args: &TrainArgs, gpu: Option<&Gpu>) -> Result<()> {
     };
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating run directory {}", args.out.display()))?;
-    let run_info = json!({ "data": std::fs::canonicalize(&args.data)?, "downscale": args.downscale });
-    std::fs::write(args.out.join("run.json"), serde_json::to_vec_pretty(&run_info)?)
-        .with_context(|| format!("writing {}", args.out.join("run.json").display()))?;
+    let run_info =
+        json!({ "data": std::fs::canonicalize(&args.data)?, "downscale": args.downscale });
+    std::fs::write(
+        args.out.join("run.json"),
+        serde_json::to_vec_pretty(&run_info)?,
+    )
+    .with_context(|| format!("writing {}", args.out.join("run.json").display()))?;
     eprintln!(
         "stage 1 on {} ({}): preset {}, {} steps of {} rays, grid {}³{}",
         backend.name(),
@@ -174,7 +186,8 @@ pub fn run_train(args: &TrainArgs, gpu: Option<&Gpu>) -> Result<()> {
             .map(|(s, r)| format!(" → {r}³ at step {s}"))
             .collect::<String>()
     );
-    let (report, rendered) = stage1::train(backend.as_mut(), &data, &cfg, &args.out, start, !args.quiet)?;
+    let (report, rendered) =
+        stage1::train(backend.as_mut(), &data, &cfg, &args.out, start, !args.quiet)?;
     for (i, p) in rendered.psnr.iter().enumerate() {
         println!("test view {i:>3}: PSNR {p:.2} dB");
     }
@@ -212,7 +225,8 @@ pub fn run_train(args: &TrainArgs, gpu: Option<&Gpu>) -> Result<()> {
 }
 
 fn write_json(path: &Path, v: &serde_json::Value) -> Result<()> {
-    std::fs::write(path, serde_json::to_vec_pretty(v)?).with_context(|| format!("writing {}", path.display()))
+    std::fs::write(path, serde_json::to_vec_pretty(v)?)
+        .with_context(|| format!("writing {}", path.display()))
 }
 
 /// Run `render`.
@@ -225,7 +239,11 @@ pub fn run_render(args: &RenderArgs, gpu: Option<&Gpu>) -> Result<()> {
                 .with_context(|| format!("reading {} (or pass --data)", p.display()))?;
             let v: serde_json::Value =
                 serde_json::from_str(&text).with_context(|| format!("parsing {}", p.display()))?;
-            PathBuf::from(v["data"].as_str().with_context(|| format!("{}: no \"data\" path", p.display()))?)
+            PathBuf::from(
+                v["data"]
+                    .as_str()
+                    .with_context(|| format!("{}: no \"data\" path", p.display()))?,
+            )
         }
     };
     let data = Dataset::load(&data_dir, &LoadOptions::default())?;
@@ -244,6 +262,11 @@ pub fn run_render(args: &RenderArgs, gpu: Option<&Gpu>) -> Result<()> {
     for (i, p) in r.psnr.iter().enumerate() {
         println!("{} view {i:>3}: PSNR {p:.2} dB", r.split);
     }
-    println!("mean PSNR {:.2} dB over {} views -> {}", r.mean_psnr, r.psnr.len(), args.out.display());
+    println!(
+        "mean PSNR {:.2} dB over {} views -> {}",
+        r.mean_psnr,
+        r.psnr.len(),
+        args.out.display()
+    );
     Ok(())
 }

@@ -10,6 +10,12 @@ pub fn as_atomic(v: &mut [f32]) -> &[AtomicU32] {
     unsafe { &*(v as *mut [f32] as *const [AtomicU32]) }
 }
 
+/// View a u32 slice as atomics.
+pub fn as_atomic_u32(v: &mut [u32]) -> &[AtomicU32] {
+    // SAFETY: as for `as_atomic`.
+    unsafe { &*(v as *mut [u32] as *const [AtomicU32]) }
+}
+
 /// `*a += v` atomically.
 pub fn add(a: &AtomicU32, v: f32) {
     let _ = a.fetch_update(Ordering::Relaxed, Ordering::Relaxed, |bits| {

@@ -7,12 +7,13 @@ mod fill_pattern;
 pub mod plenoxel;
 mod rmsprop;
 mod sh_eval;
+pub mod step;
 mod trilerp_eval;
 mod tv;
 
 pub use dda_walk::dda_walk;
 pub use fill_pattern::fill_pattern;
-pub use rmsprop::rmsprop;
+pub use rmsprop::{rmsprop_one, rmsprop_sparse, RmsProp, Stage1Params};
 pub use sh_eval::sh_eval;
 pub use trilerp_eval::trilerp_eval;
 pub use tv::{tv, TvChunk};

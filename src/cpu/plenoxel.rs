@@ -3,12 +3,14 @@
 //! (`math::plenoxel`) and the same gradient formulation; scatters use CAS float atomics.
 
 use super::atomic;
+use super::step::touch;
 use crate::math::plenoxel::{
     march_init, march_next, occ_dims, sample_alpha, sample_color_raw, Counts, GridRef, OCC_SHIFT,
     SIGMA_EPS,
 };
 use crate::math::sh::sh_basis;
 use rayon::prelude::*;
+use std::sync::atomic::AtomicU32;
 
 /// How rays map into the grid and when they stop.
 #[derive(Clone, Copy, Debug)]
@@ -90,10 +92,11 @@ pub fn render(g: &GridRef, rays: &[f32], mp: &MarchParams) -> (Vec<f32>, Counts)
     (out.into_iter().flat_map(|o| o.0).collect(), counts)
 }
 
-/// Gradient outputs of one training pass.
+/// Gradient outputs of one training pass, and the per-vertex touched flags.
 pub struct TrainGrads<'a> {
     pub density: &'a mut [f32],
     pub sh: &'a mut [f32],
+    pub touched: &'a mut [u32],
 }
 
 /// Twin of `plenoxel_train.comp`: returns per-ray squared error and the sample counts, adds
@@ -109,6 +112,7 @@ pub fn train(
     let n = rays.len() / 6;
     let gd = atomic::as_atomic(grads.density);
     let gs = atomic::as_atomic(grads.sh);
+    let touched = atomic::as_atomic_u32(grads.touched);
     let out: Vec<(f32, Counts)> = (0..n)
         .into_par_iter()
         .map(|r| {
@@ -143,7 +147,7 @@ pub fn train(
             let Some(m) = &m else {
                 return (loss, counts);
             };
-            let mut scatter = CellAccumulator::new(gd, gs, &y);
+            let mut scatter = CellAccumulator::new(gd, gs, touched, &y);
             let mut accum = [0f32; 3];
             let mut t_acc = 1.0f32;
             let mut k = 0;
@@ -178,8 +182,9 @@ pub fn train(
 
 /// Per-cell gradient accumulator of the train twin (the kernel's `flush`).
 struct CellAccumulator<'a> {
-    gd: &'a [std::sync::atomic::AtomicU32],
-    gs: &'a [std::sync::atomic::AtomicU32],
+    gd: &'a [AtomicU32],
+    gs: &'a [AtomicU32],
+    touched: &'a [AtomicU32],
     y: &'a [f32; 9],
     cell: [i32; 3],
     lk: [i32; 8],
@@ -189,13 +194,15 @@ struct CellAccumulator<'a> {
 
 impl<'a> CellAccumulator<'a> {
     fn new(
-        gd: &'a [std::sync::atomic::AtomicU32],
-        gs: &'a [std::sync::atomic::AtomicU32],
+        gd: &'a [AtomicU32],
+        gs: &'a [AtomicU32],
+        touched: &'a [AtomicU32],
         y: &'a [f32; 9],
     ) -> Self {
         CellAccumulator {
             gd,
             gs,
+            touched,
             y,
             cell: [-1; 3],
             lk: [-1; 8],
@@ -228,23 +235,25 @@ impl<'a> CellAccumulator<'a> {
     fn flush(&mut self) {
         for i in 0..8 {
             let l = self.lk[i];
-            if l >= 0 {
-                if self.sigma[i] != 0.0 {
-                    atomic::add(&self.gd[l as usize], self.sigma[i]);
-                }
-                for ch in 0..3 {
-                    let gc = self.color[i][ch];
-                    if gc == 0.0 {
-                        continue;
-                    }
-                    let row = l as usize * 27 + ch * 9;
-                    for k in 0..9 {
-                        atomic::add(&self.gs[row + k], gc * self.y[k]);
-                    }
-                }
-            }
+            let (gsig, gcol) = (self.sigma[i], self.color[i]);
             self.sigma[i] = 0.0;
             self.color[i] = [0.0; 3];
+            if l < 0 || (gsig == 0.0 && gcol == [0.0; 3]) {
+                continue;
+            }
+            touch(self.touched, l as usize);
+            if gsig != 0.0 {
+                atomic::add(&self.gd[l as usize], gsig);
+            }
+            for ch in 0..3 {
+                if gcol[ch] == 0.0 {
+                    continue;
+                }
+                let row = l as usize * 27 + ch * 9;
+                for k in 0..9 {
+                    atomic::add(&self.gs[row + k], gcol[ch] * self.y[k]);
+                }
+            }
         }
     }
 }

@@ -1,33 +1,59 @@
-//! Twin of `glsl/rmsprop.comp`.
+//! Twins of `glsl/lib/rmsprop.glsl` (one scalar) and `glsl/rmsprop_sparse.comp` (σ and 27 SH of
+//! every touched vertex, then the flag cleared).
 
+use crate::grid::SH_DIM;
 use rayon::prelude::*;
 
-/// RMSProp on touched entries (g ≠ 0), clearing the gradient: r ← (r == 0 ? g² : βr + (1 − β)g²);
-/// θ ← θ − lr·g/(√r + ε); g ← 0.
-pub fn rmsprop(
-    param: &mut [f32],
-    grad: &mut [f32],
-    state: &mut [f32],
-    lr: f32,
-    beta: f32,
-    eps: f32,
-) {
-    param
+/// Hyper-parameters of one RMSProp step.
+#[derive(Clone, Copy, Debug)]
+pub struct RmsProp {
+    pub lr_sigma: f32,
+    pub lr_sh: f32,
+    pub beta: f32,
+    pub eps: f32,
+}
+
+/// r ← (r == 0 ? g² : βr + (1 − β)g²); θ ← θ − lr·g/(√r + ε); g ← 0.
+pub fn rmsprop_one(p: &mut f32, g: &mut f32, r: &mut f32, lr: f32, beta: f32, eps: f32) {
+    let g2 = *g * *g;
+    let rn = if *r == 0.0 {
+        g2
+    } else {
+        beta * *r + (1.0 - beta) * g2
+    };
+    *r = rn;
+    *p -= lr * *g / (rn.sqrt() + eps);
+    *g = 0.0;
+}
+
+/// Parameters, gradients and RMS state of the stage-1 grid.
+pub struct Stage1Params<'a> {
+    pub density: &'a mut [f32],
+    pub sh: &'a mut [f32],
+    pub grad_density: &'a mut [f32],
+    pub grad_sh: &'a mut [f32],
+    pub state_density: &'a mut [f32],
+    pub state_sh: &'a mut [f32],
+}
+
+/// Update every vertex whose flag is set, and clear the flags.
+pub fn rmsprop_sparse(p: Stage1Params, touched: &mut [u32], h: &RmsProp) {
+    p.density
         .par_iter_mut()
-        .zip(grad.par_iter_mut())
-        .zip(state.par_iter_mut())
-        .for_each(|((p, g), r)| {
-            if *g == 0.0 {
+        .zip(p.grad_density.par_iter_mut())
+        .zip(p.state_density.par_iter_mut())
+        .zip(p.sh.par_chunks_mut(SH_DIM))
+        .zip(p.grad_sh.par_chunks_mut(SH_DIM))
+        .zip(p.state_sh.par_chunks_mut(SH_DIM))
+        .zip(touched.par_iter_mut())
+        .for_each(|((((((d, gd), sd), sh), gs), ss), t)| {
+            if *t == 0 {
                 return;
             }
-            let g2 = *g * *g;
-            let rn = if *r == 0.0 {
-                g2
-            } else {
-                beta * *r + (1.0 - beta) * g2
-            };
-            *r = rn;
-            *p -= lr * *g / (rn.sqrt() + eps);
-            *g = 0.0;
+            rmsprop_one(d, gd, sd, h.lr_sigma, h.beta, h.eps);
+            for k in 0..SH_DIM {
+                rmsprop_one(&mut sh[k], &mut gs[k], &mut ss[k], h.lr_sh, h.beta, h.eps);
+            }
+            *t = 0;
         });
 }

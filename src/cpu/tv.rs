@@ -39,8 +39,9 @@ fn forward_diffs(
     [d[0], d[1], d[2], tv]
 }
 
-/// grad += ∂(scale·Σ_chunk TV)/∂data, per allocated vertex and channel.
-pub fn tv(links: &[i32], data: &[f32], grad: &mut [f32], c: &TvChunk) {
+/// grad += ∂(scale·Σ_chunk TV)/∂data, per allocated vertex and channel; every vertex written is
+/// flagged in `touched`.
+pub fn tv(links: &[i32], data: &[f32], grad: &mut [f32], touched: &mut [u32], c: &TvChunk) {
     let n = c.channels as usize;
     let (ry, rz) = (c.res[1] as usize, c.res[2] as usize);
     let slots = links.len();
@@ -52,8 +53,18 @@ pub fn tv(links: &[i32], data: &[f32], grad: &mut [f32], c: &TvChunk) {
         .into_par_iter()
         .filter_map(|s| {
             let l = links[s];
-            (l >= 0).then(|| {
-                let v = [s / (ry * rz), (s / rz) % ry, s % rz];
+            if l < 0 {
+                return None;
+            }
+            let v = [s / (ry * rz), (s / rz) % ry, s % rz];
+            let has_term = |a: usize| {
+                let stride = [ry * rz, rz, 1][a];
+                v[a] > 0 && (start..end).contains(&(s - stride)) && links[s - stride] >= 0
+            };
+            if s >= end && !(0..3).any(has_term) {
+                return None;
+            }
+            Some({
                 let g: Vec<f32> = (0..n)
                     .map(|ch| {
                         let mut g = 0.0f32;
@@ -81,6 +92,7 @@ pub fn tv(links: &[i32], data: &[f32], grad: &mut [f32], c: &TvChunk) {
         })
         .collect();
     for (l, g) in updates {
+        touched[l] = 1;
         for (ch, gv) in g.into_iter().enumerate() {
             grad[l * n + ch] += c.scale * gv;
         }

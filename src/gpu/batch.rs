@@ -103,11 +103,14 @@ impl Gpu {
 
 impl Batch {
     fn barrier(&self) {
-        let all = vk::AccessFlags::SHADER_READ
+        let all = vk::AccessFlags::INDIRECT_COMMAND_READ
+            | vk::AccessFlags::SHADER_READ
             | vk::AccessFlags::SHADER_WRITE
             | vk::AccessFlags::TRANSFER_READ
             | vk::AccessFlags::TRANSFER_WRITE;
-        let stages = vk::PipelineStageFlags::COMPUTE_SHADER | vk::PipelineStageFlags::TRANSFER;
+        let stages = vk::PipelineStageFlags::COMPUTE_SHADER
+            | vk::PipelineStageFlags::TRANSFER
+            | vk::PipelineStageFlags::DRAW_INDIRECT;
         let mb = [vk::MemoryBarrier::default()
             .src_access_mask(vk::AccessFlags::SHADER_WRITE | vk::AccessFlags::TRANSFER_WRITE)
             .dst_access_mask(all)];
@@ -131,7 +134,34 @@ impl Batch {
         push: &P,
         groups: [u32; 3],
     ) -> Result<()> {
-        let bytes: &[u8] = bytemuck::bytes_of(push);
+        if groups.contains(&0) {
+            return Ok(());
+        }
+        self.record(k, bytemuck::bytes_of(push), |dev, cmd| unsafe {
+            dev.cmd_dispatch(cmd, groups[0], groups[1], groups[2])
+        })
+    }
+
+    /// Record `k` with its workgroup counts read on the device from the first three u32 of
+    /// `args` (written by an earlier kernel of the batch).
+    pub fn dispatch_indirect<P: Pod>(
+        &mut self,
+        k: &'static KernelInfo,
+        push: &P,
+        args: &GpuBuffer,
+    ) -> Result<()> {
+        let buf = args.handle();
+        self.record(k, bytemuck::bytes_of(push), |dev, cmd| unsafe {
+            dev.cmd_dispatch_indirect(cmd, buf, 0)
+        })
+    }
+
+    fn record(
+        &mut self,
+        k: &'static KernelInfo,
+        bytes: &[u8],
+        dispatch: impl FnOnce(&ash::Device, vk::CommandBuffer),
+    ) -> Result<()> {
         ensure!(
             bytes.len() == k.push_size as usize,
             "kernel {}: push constants of {} bytes, the kernel expects {}",
@@ -139,9 +169,6 @@ impl Batch {
             bytes.len(),
             k.push_size
         );
-        if groups.contains(&0) {
-            return Ok(());
-        }
         let (pipeline, layout) = self.gpu.pipeline(k)?;
         let dev = &self.gpu.inner.device;
         let slot = self.timed.len() as u32;
@@ -159,7 +186,9 @@ impl Batch {
             if !bytes.is_empty() {
                 dev.cmd_push_constants(self.cmd, layout, vk::ShaderStageFlags::COMPUTE, 0, bytes);
             }
-            dev.cmd_dispatch(self.cmd, groups[0], groups[1], groups[2]);
+        }
+        dispatch(dev, self.cmd);
+        unsafe {
             if let Some(q) = timed {
                 dev.cmd_write_timestamp(
                     self.cmd,
@@ -184,18 +213,33 @@ impl Batch {
 
     /// Record zero-filling the whole buffer.
     pub fn fill_zero(&mut self, buf: &GpuBuffer) {
+        self.fill_zero_range(buf, 0, vk::WHOLE_SIZE);
+    }
+
+    /// Record zero-filling `bytes` bytes (a multiple of 4, or `vk::WHOLE_SIZE`) from `offset`.
+    pub fn fill_zero_range(&mut self, buf: &GpuBuffer, offset: u64, bytes: u64) {
         unsafe {
             self.gpu
                 .inner
                 .device
-                .cmd_fill_buffer(self.cmd, buf.handle(), 0, vk::WHOLE_SIZE, 0)
+                .cmd_fill_buffer(self.cmd, buf.handle(), offset, bytes, 0)
         };
         self.barrier();
     }
 
-    /// Record a copy of `bytes` bytes from the start of `src` to the start of `dst`.
-    pub fn copy(&mut self, src: &GpuBuffer, dst: &GpuBuffer, bytes: u64) {
-        let region = [vk::BufferCopy::default().size(bytes)];
+    /// Record a copy of `bytes` bytes from `src` at `src_offset` to `dst` at `dst_offset`.
+    pub fn copy_region(
+        &mut self,
+        src: &GpuBuffer,
+        src_offset: u64,
+        dst: &GpuBuffer,
+        dst_offset: u64,
+        bytes: u64,
+    ) {
+        let region = [vk::BufferCopy::default()
+            .src_offset(src_offset)
+            .dst_offset(dst_offset)
+            .size(bytes)];
         unsafe {
             self.gpu
                 .inner

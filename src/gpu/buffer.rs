@@ -23,6 +23,7 @@ impl GpuBuffer {
     pub(super) fn new(gpu: &Gpu, size: u64, location: MemoryLocation, name: &str) -> Result<Self> {
         let inner = &gpu.inner;
         let usage = vk::BufferUsageFlags::STORAGE_BUFFER
+            | vk::BufferUsageFlags::INDIRECT_BUFFER
             | vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS
             | vk::BufferUsageFlags::TRANSFER_SRC
             | vk::BufferUsageFlags::TRANSFER_DST;
@@ -121,31 +122,39 @@ impl GpuBuffer {
         )?;
         staging.write(bytes)?;
         let mut b = self.gpu.batch()?;
-        b.copy(&staging, self, bytes.len() as u64);
+        b.copy_region(&staging, 0, self, 0, bytes.len() as u64);
         b.submit()?;
         Ok(())
     }
 
     /// Read the whole buffer as `T`s (the device must be done with it).
     pub fn download<T: Pod>(&self) -> Result<Vec<T>> {
-        let n = self.size as usize / std::mem::size_of::<T>();
-        let mut out = vec![T::zeroed(); n];
+        self.download_range(0, self.size as usize / std::mem::size_of::<T>())
+    }
+
+    /// Read `count` `T`s starting at element `first` (the device must be done with them).
+    pub fn download_range<T: Pod>(&self, first: usize, count: usize) -> Result<Vec<T>> {
+        let elem = std::mem::size_of::<T>();
+        let (offset, bytes) = ((first * elem) as u64, (count * elem) as u64);
+        anyhow::ensure!(
+            offset + bytes <= self.size,
+            "read of {bytes} bytes at {offset} from a {}-byte buffer",
+            self.size
+        );
+        let mut out = vec![T::zeroed(); count];
         let dst: &mut [u8] = bytemuck::cast_slice_mut(&mut out);
         if dst.is_empty() {
             return Ok(out);
         }
         if let Some(p) = self.mapped() {
-            unsafe { std::ptr::copy_nonoverlapping(p, dst.as_mut_ptr(), dst.len()) };
+            unsafe {
+                std::ptr::copy_nonoverlapping(p.add(offset as usize), dst.as_mut_ptr(), dst.len())
+            };
             return Ok(out);
         }
-        let staging = GpuBuffer::new(
-            &self.gpu,
-            self.size,
-            MemoryLocation::GpuToCpu,
-            "staging-down",
-        )?;
+        let staging = GpuBuffer::new(&self.gpu, bytes, MemoryLocation::GpuToCpu, "staging-down")?;
         let mut b = self.gpu.batch()?;
-        b.copy(self, &staging, self.size);
+        b.copy_region(self, offset, &staging, 0, bytes);
         b.submit()?;
         let p = staging
             .mapped()

@@ -2,7 +2,7 @@
 
 use super::{march_params, Gradients, Plenoxels, StepParams, StepStats};
 use crate::cpu::plenoxel::{self as twin, TrainGrads};
-use crate::cpu::{rmsprop, tv, TvChunk};
+use crate::cpu::{rmsprop_sparse, tv, RmsProp, Stage1Params, TvChunk};
 use crate::grid::{Grid, SH_DIM};
 use crate::math::plenoxel::{Counts, GridRef};
 use anyhow::{ensure, Result};
@@ -15,6 +15,7 @@ pub struct CpuPlenoxels {
     grad_sh: Vec<f32>,
     state_density: Vec<f32>,
     state_sh: Vec<f32>,
+    touched: Vec<u32>,
 }
 
 impl CpuPlenoxels {
@@ -31,6 +32,7 @@ impl CpuPlenoxels {
             grad_sh: Vec::new(),
             state_density: Vec::new(),
             state_sh: Vec::new(),
+            touched: Vec::new(),
         };
         b.load(grid, None).expect("a fresh state always fits");
         b
@@ -81,6 +83,7 @@ impl Plenoxels for CpuPlenoxels {
             TrainGrads {
                 density: &mut self.grad_density,
                 sh: &mut self.grad_sh,
+                touched: &mut self.touched,
             },
         );
         if let Some(t) = p.tv {
@@ -91,34 +94,39 @@ impl Plenoxels for CpuPlenoxels {
                 channels,
                 scale: lambda / t.count.max(1) as f32,
             };
+            let g = &self.grid;
+            let touched = &mut self.touched;
             tv(
-                &self.grid.links,
-                &self.grid.density,
+                &g.links,
+                &g.density,
                 &mut self.grad_density,
+                touched,
                 &chunk(1, t.lambda_sigma),
             );
             tv(
-                &self.grid.links,
-                &self.grid.sh,
+                &g.links,
+                &g.sh,
                 &mut self.grad_sh,
+                touched,
                 &chunk(SH_DIM as u32, t.lambda_sh),
             );
         }
-        rmsprop(
-            &mut self.grid.density,
-            &mut self.grad_density,
-            &mut self.state_density,
-            p.lr_sigma,
-            p.beta,
-            p.eps,
-        );
-        rmsprop(
-            &mut self.grid.sh,
-            &mut self.grad_sh,
-            &mut self.state_sh,
-            p.lr_sh,
-            p.beta,
-            p.eps,
+        rmsprop_sparse(
+            Stage1Params {
+                density: &mut self.grid.density,
+                sh: &mut self.grid.sh,
+                grad_density: &mut self.grad_density,
+                grad_sh: &mut self.grad_sh,
+                state_density: &mut self.state_density,
+                state_sh: &mut self.state_sh,
+            },
+            &mut self.touched,
+            &RmsProp {
+                lr_sigma: p.lr_sigma,
+                lr_sh: p.lr_sh,
+                beta: p.beta,
+                eps: p.eps,
+            },
         );
         let mse = loss.iter().map(|&l| l as f64).sum::<f64>() / (3 * n) as f64;
         Ok(StepStats {
@@ -139,6 +147,7 @@ impl Plenoxels for CpuPlenoxels {
         let mp = march_params(&self.grid, stop_thresh);
         let mut density = vec![0.0; self.grid.allocated()];
         let mut sh = vec![0.0; self.grid.allocated() * SH_DIM];
+        let mut touched = vec![0; self.grid.allocated()];
         let (ray_loss, counts) = twin::train(
             &self.view(),
             rays,
@@ -148,6 +157,7 @@ impl Plenoxels for CpuPlenoxels {
             TrainGrads {
                 density: &mut density,
                 sh: &mut sh,
+                touched: &mut touched,
             },
         );
         Ok(Gradients {
@@ -189,6 +199,7 @@ impl Plenoxels for CpuPlenoxels {
         self.grad_sh = vec![0.0; n * SH_DIM];
         self.state_density = sd;
         self.state_sh = ss;
+        self.touched = vec![0; n];
         self.grid = grid;
         self.refresh_occupancy();
         Ok(())

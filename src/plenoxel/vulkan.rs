@@ -2,6 +2,7 @@
 //! training step is one batch (occupancy → train → TV → RMSProp) and one submission.
 
 use super::{march_params, Gradients, Plenoxels, StepParams, StepStats};
+use crate::cpu::step::{STEP_FLAGS, STEP_N, STEP_STATS};
 use crate::gpu::{Batch, Gpu, GpuBuffer};
 use crate::grid::{Grid, SH_DIM};
 use crate::kernels;
@@ -20,7 +21,10 @@ pub struct VulkanPlenoxels {
     grad_sh: GpuBuffer,
     state_density: GpuBuffer,
     state_sh: GpuBuffer,
-    stats: GpuBuffer,
+    /// Step record (glsl/lib/step.glsl): touched count, sample counters, n, flags, list.
+    step: GpuBuffer,
+    /// Indirect dispatch arguments of rmsprop_sparse.
+    args: GpuBuffer,
     rays: Option<(usize, GpuBuffer, GpuBuffer, GpuBuffer)>,
 }
 
@@ -38,7 +42,12 @@ impl VulkanPlenoxels {
             grad_sh: gpu.zeros::<f32>(n * SH_DIM)?,
             state_density: gpu.zeros::<f32>(n)?,
             state_sh: gpu.zeros::<f32>(n * SH_DIM)?,
-            stats: gpu.zeros::<u32>(3)?,
+            step: {
+                let mut init = vec![0u32; STEP_FLAGS + 2 * n];
+                init[STEP_N] = n as u32;
+                gpu.upload(&init)?
+            },
+            args: gpu.zeros::<u32>(3)?,
             rays: None,
             meta: Grid {
                 links: Vec::new(),
@@ -84,34 +93,44 @@ impl VulkanPlenoxels {
     }
 
     fn read_stats(&self) -> Result<Counts> {
-        let v: Vec<u32> = self.stats.download()?;
+        let v: Vec<u32> = self.step.download_range(STEP_STATS, 3)?;
         Ok([v[0], v[1], v[2]])
     }
 
-    fn record_rmsprop(
-        &self,
-        b: &mut Batch,
-        param: &GpuBuffer,
-        grad: &GpuBuffer,
-        state: &GpuBuffer,
-        lr: f32,
-        p: &StepParams,
-    ) -> Result<()> {
-        let n = (param.size() / 4) as u32;
-        b.dispatch_1d(
-            &kernels::rmsprop::INFO,
-            &kernels::rmsprop::Push {
-                param: param.address(),
-                grad: grad.address(),
-                state: state.address(),
-                n,
-                lr,
+    /// Record clearing the step's touched count and sample counters.
+    fn record_step_reset(&self, b: &mut Batch) {
+        b.fill_zero_range(&self.step, 0, 4 * STEP_N as u64);
+    }
+
+    /// Record the sparse RMSProp step over the vertices touched this step.
+    fn record_rmsprop(&self, b: &mut Batch, p: &StepParams) -> Result<()> {
+        b.dispatch(
+            &kernels::optim_args::INFO,
+            &kernels::optim_args::Push {
+                step: self.step.address(),
+                args: self.args.address(),
+            },
+            [1, 1, 1],
+        )?;
+        b.dispatch_indirect(
+            &kernels::rmsprop_sparse::INFO,
+            &kernels::rmsprop_sparse::Push {
+                density: self.density.address(),
+                sh: self.sh.address(),
+                grad_density: self.grad_density.address(),
+                grad_sh: self.grad_sh.address(),
+                state_density: self.state_density.address(),
+                state_sh: self.state_sh.address(),
+                step: self.step.address(),
+                lr_sigma: p.lr_sigma,
+                lr_sh: p.lr_sh,
                 beta: p.beta,
                 eps: p.eps,
             },
-            n,
+            &self.args,
         )
     }
+
     /// Upload a batch and record occupancy + the fused train kernel (gradients += data term).
     fn record_train(&mut self, rays: &[f32], targets: &[f32], stop_thresh: f32) -> Result<Batch> {
         let n = rays.len() / 6;
@@ -126,7 +145,7 @@ impl VulkanPlenoxels {
         r.2.write(targets)?;
         let (ray_buf, target_buf, loss_buf) = (r.1.address(), r.2.address(), r.3.address());
         let mut b = self.gpu.batch()?;
-        b.fill_zero(&self.stats);
+        self.record_step_reset(&mut b);
         self.record_occupancy(&mut b)?;
         b.dispatch_1d(
             &kernels::plenoxel_train::INFO,
@@ -140,7 +159,7 @@ impl VulkanPlenoxels {
                 grad_density: self.grad_density.address(),
                 grad_sh: self.grad_sh.address(),
                 ray_loss: loss_buf,
-                stats: self.stats.address(),
+                step: self.step.address(),
                 res: self.meta.res,
                 scale: mp.scale,
                 offset: mp.offset,
@@ -186,6 +205,7 @@ impl Plenoxels for VulkanPlenoxels {
                         links: self.links.address(),
                         data: data.address(),
                         grad: grad.address(),
+                        step: self.step.address(),
                         res: self.meta.res,
                         start: t.start,
                         count: t.count,
@@ -197,15 +217,7 @@ impl Plenoxels for VulkanPlenoxels {
                 )?;
             }
         }
-        self.record_rmsprop(
-            &mut b,
-            &self.density,
-            &self.grad_density,
-            &self.state_density,
-            p.lr_sigma,
-            p,
-        )?;
-        self.record_rmsprop(&mut b, &self.sh, &self.grad_sh, &self.state_sh, p.lr_sh, p)?;
+        self.record_rmsprop(&mut b, p)?;
         let times = b.submit()?;
         let loss = self.ray_loss(n)?;
         let mse = loss.iter().map(|&l| l as f64).sum::<f64>() / (3 * n) as f64;
@@ -225,9 +237,15 @@ impl Plenoxels for VulkanPlenoxels {
             sh: self.grad_sh.download()?,
             counts: self.read_stats()?,
         };
+        // Leave no gradient or touched flag behind for the next step.
         let mut b = self.gpu.batch()?;
         b.fill_zero(&self.grad_density);
         b.fill_zero(&self.grad_sh);
+        b.fill_zero_range(
+            &self.step,
+            4 * STEP_FLAGS as u64,
+            4 * self.allocated() as u64,
+        );
         b.submit()?;
         Ok(g)
     }
@@ -241,7 +259,7 @@ impl Plenoxels for VulkanPlenoxels {
         };
         self.rays.as_ref().expect("allocated").1.write(rays)?;
         let mut b = self.gpu.batch()?;
-        b.fill_zero(&self.stats);
+        self.record_step_reset(&mut b);
         self.record_occupancy(&mut b)?;
         b.dispatch_1d(
             &kernels::plenoxel_fwd::INFO,
@@ -252,7 +270,7 @@ impl Plenoxels for VulkanPlenoxels {
                 occ: self.occ.address(),
                 rays: ray_buf,
                 rgb: out_buf,
-                stats: self.stats.address(),
+                step: self.step.address(),
                 res: self.meta.res,
                 scale: mp.scale,
                 offset: mp.offset,

@@ -40,7 +40,9 @@ impl Progress {
     pub fn step(&mut self, pos: u64, mse: f64, rays_per_s: Option<f64>) {
         let ema = self.ema_mse.map_or(mse, |e| 0.95 * e + 0.05 * mse);
         self.ema_mse = Some(ema);
-        let rate = rays_per_s.map_or("warming up".to_string(), |r| format!("{:.0}k rays/s", r / 1e3));
+        let rate = rays_per_s.map_or("warming up".to_string(), |r| {
+            format!("{:.0}k rays/s", r / 1e3)
+        });
         let msg = format!("loss {mse:.5} PSNR {:.2} dB {rate}", -10.0 * ema.log10());
         self.bar.set_position(pos);
         self.bar.set_message(msg.clone());

@@ -47,10 +47,19 @@ pub fn render_split(
             .sum::<f64>()
             / rgb.len() as f64;
         psnrs.push(psnr(mse));
-        let bytes: Vec<u8> = rgb.iter().map(|&v| (v.clamp(0.0, 1.0) * 255.0).round() as u8).collect();
+        let bytes: Vec<u8> = rgb
+            .iter()
+            .map(|&v| (v.clamp(0.0, 1.0) * 255.0).round() as u8)
+            .collect();
         let path = out.join(format!("r_{i}.png"));
-        image::save_buffer(&path, &bytes, split.width(), split.height(), image::ColorType::Rgb8)
-            .with_context(|| format!("writing {} (view {})", path.display(), frame.file.display()))?;
+        image::save_buffer(
+            &path,
+            &bytes,
+            split.width(),
+            split.height(),
+            image::ColorType::Rgb8,
+        )
+        .with_context(|| format!("writing {} (view {})", path.display(), frame.file.display()))?;
     }
     let mean_psnr = psnrs.iter().sum::<f64>() / psnrs.len().max(1) as f64;
     Ok(RenderedSplit {

@@ -93,7 +93,10 @@ fn upsample_step(
 fn check_finite(grid: &Grid, step: u32) -> Result<()> {
     for (name, v) in [("density", &grid.density), ("sh", &grid.sh)] {
         if let Some(i) = v.iter().position(|x| !x.is_finite()) {
-            bail!("non-finite {name} value {} at vertex row {i} after step {step}", v[i]);
+            bail!(
+                "non-finite {name} value {} at vertex row {i} after step {step}",
+                v[i]
+            );
         }
     }
     Ok(())
@@ -121,7 +124,8 @@ pub fn resume(backend: &mut dyn Plenoxels, path: &Path) -> Result<(u32, Stage1Co
     }
     let step = ck.meta["step"]
         .as_u64()
-        .with_context(|| format!("{}: metadata has no step", path.display()))? as u32;
+        .with_context(|| format!("{}: metadata has no step", path.display()))?
+        as u32;
     let cfg: Stage1Config = serde_json::from_value(ck.meta["config"].clone())
         .with_context(|| format!("{}: metadata has no valid config", path.display()))?;
     let state = |name: &str| {
@@ -146,7 +150,8 @@ pub fn train(
     start_step: u32,
     show_progress: bool,
 ) -> Result<(Stage1Report, RenderedSplit)> {
-    std::fs::create_dir_all(out).with_context(|| format!("creating run directory {}", out.display()))?;
+    std::fs::create_dir_all(out)
+        .with_context(|| format!("creating run directory {}", out.display()))?;
     let mut report = Stage1Report::default();
     let mut progress = Progress::new(cfg.iters as u64, start_step as u64, show_progress);
     let mut timed_rays = 0u64;
@@ -157,7 +162,9 @@ pub fn train(
     for step in start_step..cfg.iters {
         if let Some((_, r)) = cfg.upsample.iter().find(|(s, _)| *s == step) {
             let t = Instant::now();
-            progress.message(&format!("upsampling to {r}³ (pruning by training-ray weight)"));
+            progress.message(&format!(
+                "upsampling to {r}³ (pruning by training-ray weight)"
+            ));
             upsample_step(backend, data, cfg, *r)?;
             report.upsample_seconds += t.elapsed().as_secs_f64();
         }
@@ -227,11 +234,21 @@ pub fn train(
     report.checkpoint_seconds += t.elapsed().as_secs_f64();
 
     let t = Instant::now();
-    let rendered = render_split(backend, data, &data.test, cfg.stop_thresh, &out.join("test"))?;
+    let rendered = render_split(
+        backend,
+        data,
+        &data.test,
+        cfg.stop_thresh,
+        &out.join("test"),
+    )?;
     report.render_seconds = t.elapsed().as_secs_f64();
     let grid = backend.grid()?;
     report.steps = cfg.iters;
-    report.train_rays_per_s = if timed_secs > 0.0 { timed_rays as f64 / timed_secs } else { 0.0 };
+    report.train_rays_per_s = if timed_secs > 0.0 {
+        timed_rays as f64 / timed_secs
+    } else {
+        0.0
+    };
     report.final_mse = mse;
     report.test_psnr = rendered.mean_psnr;
     report.samples_per_ray = sample_totals.map(|s| s as f64 / rays_total.max(1) as f64);
