@@ -1,1 +1,3 @@
 //! Benchmarks behind `alphasurf bench …`: they print figures (and a JSON line with --json).
+
+pub mod cubic;

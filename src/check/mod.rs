@@ -3,6 +3,7 @@
 
 use crate::gpu::Gpu;
 
+pub mod cubic_solve;
 mod fill_pattern;
 
 /// Result of comparing one kernel on the Vulkan device with its CPU twin.
@@ -28,7 +29,10 @@ pub struct CheckRow {
 pub type CheckFn = fn(&Gpu, u64) -> anyhow::Result<CheckRow>;
 
 /// Every registered parity check, in table order. Later kernels add themselves here.
-pub const CHECKS: &[(&str, CheckFn)] = &[("fill_pattern", fill_pattern::check)];
+pub const CHECKS: &[(&str, CheckFn)] = &[
+    ("fill_pattern", fill_pattern::check),
+    ("cubic_solve", cubic_solve::check),
+];
 
 /// Elementwise |a − b| ≤ abs + rel·|b| test with running maxima.
 #[derive(Debug, Default, Clone, Copy)]

@@ -33,6 +33,22 @@ pub enum Command {
     /// Run every GPU kernel against its CPU twin on random and adversarial inputs; one row per
     /// kernel; exit code 1 on any mismatch.
     CheckKernels(check_kernels::CheckKernelsArgs),
+    /// Benchmarks and numerical stress suites.
+    Bench(BenchArgs),
+}
+
+/// `alphasurf bench <kind>`.
+#[derive(clap::Args, Debug)]
+pub struct BenchArgs {
+    #[command(subcommand)]
+    pub kind: BenchKind,
+}
+
+/// The benchmarks.
+#[derive(Subcommand, Debug)]
+pub enum BenchKind {
+    /// Cell cubic solver stress suite against an f64 oracle and the paper's Vieta baseline.
+    Cubic(crate::bench::cubic::CubicBenchArgs),
 }
 
 /// Entry point of the binary: parse, run, map errors to a message and exit code 1.
@@ -74,6 +90,12 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             let gpu = gpu_used.insert(open_gpu(&cli)?);
             exit(check_kernels::run(gpu, args)?)
         }
+        Command::Bench(b) => match &b.kind {
+            BenchKind::Cubic(args) => {
+                let gpu = gpu_used.insert(open_gpu(&cli)?);
+                exit(crate::bench::cubic::run(gpu, args)?)
+            }
+        },
     };
     if cli.profile {
         use std::io::Write;
