@@ -20,16 +20,19 @@ void main() {
     uint i = flat_id();
     if (i >= pc.n) return;
     uint base = 16u * i;
-    float c[8];
-    for (uint k = 0u; k < 8u; ++k) c[k] = pc.cases.v[base + k];
+    float c[8] = float[8](pc.cases.v[base], pc.cases.v[base + 1u], pc.cases.v[base + 2u],
+                          pc.cases.v[base + 3u], pc.cases.v[base + 4u], pc.cases.v[base + 5u],
+                          pc.cases.v[base + 6u], pc.cases.v[base + 7u]);
     vec3 o = vec3(pc.cases.v[base + 8u], pc.cases.v[base + 9u], pc.cases.v[base + 10u]);
     vec3 d = vec3(pc.cases.v[base + 11u], pc.cases.v[base + 12u], pc.cases.v[base + 13u]);
     float L = pc.cases.v[base + 14u];
     float tau = pc.cases.v[base + 15u];
     Crossings x = cubic_solve(cubic_cell(c, o, d), cubic_level_ends(c, o, d, L, tau), L);
     pc.count.v[i] = x.n;
-    for (uint k = 0u; k < 3u; ++k) {
-        pc.s.v[3u * i + k] = k < x.n ? x.s[k] : 0.0;
-        pc.rising.v[3u * i + k] = (x.rising >> k) & 1u;
-    }
+    pc.s.v[3u * i] = x.s.x;
+    pc.s.v[3u * i + 1u] = x.s.y;
+    pc.s.v[3u * i + 2u] = x.s.z;
+    pc.rising.v[3u * i] = x.rising & 1u;
+    pc.rising.v[3u * i + 1u] = (x.rising >> 1) & 1u;
+    pc.rising.v[3u * i + 2u] = (x.rising >> 2) & 1u;
 }

@@ -14,6 +14,8 @@
 const float CUBIC_MERGE_EPS = 1e-6;
 const uint CUBIC_MAX_ITERS = 32u;
 const float CUBIC_STEP_TOL = 2.4e-7;
+const float CUBIC_SNAP = 1e-6;
+const float CUBIC_MAX_L = 1e12;
 
 // Up to three crossings: s[i] for i < n, bit i of `rising` set when f - tau goes from < 0 to > 0.
 struct Crossings {
@@ -77,10 +79,21 @@ float cubic_trilerp_level(float c[8], vec3 o, float tau) {
     return cubic_lerp(cubic_lerp(m00, m01, o.y), cubic_lerp(m10, m11, o.y), o.x);
 }
 
-// Exit point o + L d, clamped to the cell.
+// Exit point o + L d, clamped to the cell; the coordinate nearest a face is snapped onto it when
+// within CUBIC_SNAP (undoes rounding; the level through that face is then decided by the same
+// corner values as in the next cell).
 vec3 cubic_exit_point(vec3 o, vec3 d, float L) {
-    precise vec3 q = fma(vec3(L), d, o);
-    return clamp(q, 0.0, 1.0);
+    precise vec3 p = fma(vec3(L), d, o);
+    vec3 q = clamp(p, 0.0, 1.0);
+    precise vec3 dq = min(q, 1.0 - q);
+    if (dq.x <= dq.y && dq.x <= dq.z) {
+        if (dq.x <= CUBIC_SNAP) q.x = q.x > 0.5 ? 1.0 : 0.0;
+    } else if (dq.y <= dq.z) {
+        if (dq.y <= CUBIC_SNAP) q.y = q.y > 0.5 ? 1.0 : 0.0;
+    } else {
+        if (dq.z <= CUBIC_SNAP) q.z = q.z > 0.5 ? 1.0 : 0.0;
+    }
+    return q;
 }
 
 // (f(0), f(L)) = (C0 - tau, delta(exit) - tau).
@@ -152,11 +165,12 @@ struct CubicWalk {
     Crossings res;
 };
 
-void cubic_emit(inout CubicWalk w, float s, bool rising) {
-    uint i = w.res.n;
-    if (i == 0u) w.res.s.x = s; else if (i == 1u) w.res.s.y = s; else w.res.s.z = s;
-    if (rising) w.res.rising |= 1u << i;
-    w.res.n = i + 1u;
+// Append (s, rising) to x (no dynamic vector indexing: it would spill on SIMD-per-lane drivers).
+void cubic_push(inout Crossings x, float s, bool rising) {
+    uint i = x.n;
+    if (i == 0u) x.s.x = s; else if (i == 1u) x.s.y = s; else x.s.z = s;
+    if (rising) x.rising |= 1u << i;
+    x.n = i + 1u;
 }
 
 void cubic_piece(inout CubicWalk w, vec4 c, float tol, float b0, float v0, float b1, float v1) {
@@ -169,36 +183,36 @@ void cubic_piece(inout CubicWalk w, vec4 c, float tol, float b0, float v0, float
     }
     float sg = v1 > 0.0 ? 1.0 : -1.0;
     if (w.pending) {
-        if (sg != w.ps) cubic_emit(w, w.zpos, v1 > 0.0);
+        if (sg != w.ps) cubic_push(w.res, w.zpos, v1 > 0.0);
         w.pending = false;
     } else if (sg != w.ps) {
         float s = cubic_refine(c, b0, b1, v0, v1, tol);
-        cubic_emit(w, s, v1 > 0.0);
+        cubic_push(w.res, s, v1 > 0.0);
     }
     w.ps = sg;
 }
 
-// Cluster merge (alternating directions: a cluster changes the sign iff its count is odd) and the
-// half-open clamp s < L.
+// Cluster merge and the half-open clamp s < L. Crossings alternate in direction, so a cluster
+// (neighbours closer than eps) changes the sign iff its count is odd; it then keeps its first.
+// With at most three crossings: 0 is kept unless it opens an even cluster {0,1}; 1 only when
+// alone; 2 unless it joins 1.
 Crossings cubic_merge(Crossings x, float L) {
     float eps = CUBIC_MERGE_EPS * max(L, 1.0);
+    precise float g01 = x.s.y - x.s.x;
+    precise float g12 = x.s.z - x.s.y;
+    bool gap01 = x.n >= 2u && g01 < eps;
+    bool gap12 = x.n >= 3u && g12 < eps;
+    bool keep0 = x.n >= 1u && !(gap01 && !gap12);
+    bool keep1 = x.n >= 2u && !gap01 && !gap12;
+    bool keep2 = x.n >= 3u && !gap12;
+    float below = uintBitsToFloat(floatBitsToUint(L) - 1u);
     Crossings o;
     o.n = 0u;
     o.s = vec3(0.0);
     o.rising = 0u;
-    uint i = 0u;
-    while (i < x.n) {
-        uint j = i + 1u;
-        while (j < x.n && x.s[j] - x.s[j - 1u] < eps) ++j;
-        if (((j - i) & 1u) == 1u) {
-            float s = x.s[i];
-            if (s >= L) s = uintBitsToFloat(floatBitsToUint(L) - 1u);
-            if (o.n == 0u) o.s.x = s; else if (o.n == 1u) o.s.y = s; else o.s.z = s;
-            if ((x.rising & (1u << i)) != 0u) o.rising |= 1u << o.n;
-            o.n += 1u;
-        }
-        i = j;
-    }
+    if (keep0) cubic_push(o, min(x.s.x, below), (x.rising & 1u) != 0u);
+    if (keep1) cubic_push(o, min(x.s.y, below), (x.rising & 2u) != 0u);
+    if (keep2) cubic_push(o, min(x.s.z, below), (x.rising & 4u) != 0u);
     return o;
 }
 
@@ -209,9 +223,11 @@ Crossings cubic_solve(vec3 c123, vec2 ends, float L) {
     none.n = 0u;
     none.s = vec3(0.0);
     none.rising = 0u;
-    if (!(L > 0.0)) return none;
+    if (!(L > 0.0 && L < CUBIC_MAX_L)) return none;
+    // Zero, NaN or overflowed inputs: no crossings (a NaN or Inf makes the sum non-finite).
+    precise float sum = abs(c0) + abs(ends.y) + abs(c123.x) + abs(c123.y) + abs(c123.z);
+    if (!(sum > 0.0 && sum < 3.4028235e38)) return none;
     float m = max(max(max(abs(c0), abs(ends.y)), abs(c123.x)), max(abs(c123.y), abs(c123.z)));
-    if (!(m > 0.0) || isinf(m)) return none;
     float sc = cubic_pow2_scale(m);
     precise vec4 c = vec4(c0 * sc, c123.x * sc, c123.y * sc, c123.z * sc);
     // Critical points: roots of A s^2 + 2B s + C, A = 3 C3, B = C2, C = C1 (stable formula,

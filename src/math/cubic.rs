@@ -35,6 +35,14 @@ pub struct Crossings {
 }
 
 impl Crossings {
+    /// Append a crossing (at most three).
+    pub fn push(&mut self, s: f32, rising: bool) {
+        let i = self.n as usize;
+        self.s[i] = s;
+        self.rising[i] = rising;
+        self.n += 1;
+    }
+
     /// The first `n` crossings as (s, rising).
     pub fn iter(&self) -> impl Iterator<Item = (f32, bool)> + '_ {
         (0..self.n as usize).map(|i| (self.s[i], self.rising[i]))
@@ -88,9 +96,28 @@ pub fn trilerp_level(corners: &[f32; 8], p: [f32; 3], tau: f32) -> f32 {
     lerp(lerp(m00, m01, oy), lerp(m10, m11, oy), ox)
 }
 
-/// Exit point o′ + L·d, clamped to the cell.
+/// A coordinate of the exit point within this of a cell face is put on the face.
+pub const SNAP: f32 = 1e-6;
+/// Segments longer than this (voxel) have no crossings (keeps every intermediate finite).
+pub const MAX_L: f32 = 1e12;
+
+/// Exit point o′ + L·d, clamped to the cell; its coordinate nearest a face is snapped onto the face
+/// when within [`SNAP`] (a chord leaves through a face, so this only undoes rounding, and the level
+/// through that face is then decided by the same corner values as in the next cell).
 pub fn exit_point(o: [f32; 3], d: [f32; 3], l: f32) -> [f32; 3] {
-    [0, 1, 2].map(|k| l.mul_add(d[k], o[k]).clamp(0.0, 1.0))
+    let mut q = [0, 1, 2].map(|k| l.mul_add(d[k], o[k]).clamp(0.0, 1.0));
+    let dq = q.map(|v| v.min(1.0 - v));
+    let k = if dq[0] <= dq[1] && dq[0] <= dq[2] {
+        0
+    } else if dq[1] <= dq[2] {
+        1
+    } else {
+        2
+    };
+    if dq[k] <= SNAP {
+        q[k] = if q[k] > 0.5 { 1.0 } else { 0.0 };
+    }
+    q
 }
 
 /// The level's end values [f(0), f(L)] = [C0 − τ, δ(exit) − τ], both as trilerps of the corners
@@ -176,13 +203,6 @@ struct Walk {
 }
 
 impl Walk {
-    fn emit(&mut self, s: f32, rising: bool) {
-        let i = self.out.n as usize;
-        self.out.s[i] = s;
-        self.out.rising[i] = rising;
-        self.out.n += 1;
-    }
-
     /// Piece (b0, b1), monotone, with f(b0) = v0 (already walked) and f(b1) = v1.
     fn piece(&mut self, c: &[f32; 4], tol: f32, b0: f32, v0: f32, b1: f32, v1: f32) {
         if v1 == 0.0 {
@@ -195,12 +215,12 @@ impl Walk {
         let sg = if v1 > 0.0 { 1.0 } else { -1.0 };
         if self.pending {
             if sg != self.ps {
-                self.emit(self.zpos, v1 > 0.0);
+                self.out.push(self.zpos, v1 > 0.0);
             }
             self.pending = false;
         } else if sg != self.ps {
             let s = refine_root(c, b0, b1, v0, v1, tol);
-            self.emit(s, v1 > 0.0);
+            self.out.push(s, v1 > 0.0);
         }
         self.ps = sg;
     }
@@ -212,17 +232,20 @@ impl Walk {
 /// holds one root, found by [`refine_root`] on the original cubic. A zero at s = 0 is a crossing in
 /// the direction f takes after it (the entering cell owns it); a zero at s = L is left to the next
 /// cell; crossings closer than `MERGE_EPS·max(1, L)` are clustered and a cluster keeps its first
-/// crossing only when it changes the sign (odd count). Never NaN/Inf for finite input.
+/// crossing only when it changes the sign (odd count). Never NaN/Inf: coefficients that are
+/// non-finite (overflow in their formation) or L outside (0, [`MAX_L`]) give no crossings.
 pub fn solve_crossings(cc: CellCubic, ends: [f32; 2], l: f32) -> Crossings {
     let [c0, cl] = ends;
     let none = Crossings::default();
-    if !(l > 0.0) {
+    if !(l > 0.0 && l < MAX_L) {
+        return none;
+    }
+    // Zero, NaN or overflowed inputs: no crossings (a NaN or Inf makes the sum non-finite).
+    let sum = c0.abs() + cl.abs() + cc.c1.abs() + cc.c2.abs() + cc.c3.abs();
+    if !(sum > 0.0 && sum < f32::MAX) {
         return none;
     }
     let m = c0.abs().max(cl.abs()).max(cc.c1.abs()).max(cc.c2.abs()).max(cc.c3.abs());
-    if !(m > 0.0) || m.is_infinite() {
-        return none;
-    }
     let sc = pow2_scale(m);
     let c = [c0 * sc, cc.c1 * sc, cc.c2 * sc, cc.c3 * sc];
     // Critical points: roots of A s² + 2B s + C with A = 3C3, B = C2, C = C1.
@@ -273,30 +296,25 @@ pub fn solve_crossings(cc: CellCubic, ends: [f32; 2], l: f32) -> Crossings {
     merge(walk.out, l)
 }
 
-/// Largest f32 below `l` (> 0).
-#[inline(always)]
-fn below(l: f32) -> f32 {
-    f32::from_bits(l.to_bits() - 1)
-}
-
-/// Cluster merge (crossings alternate in direction, so a cluster changes the sign iff its count is
-/// odd) and the half-open clamp s < L.
+/// Cluster merge and the half-open clamp s < L. Crossings alternate in direction, so a cluster
+/// (neighbours closer than `MERGE_EPS·max(1, L)`) changes the sign iff its count is odd; it then
+/// keeps its first. With at most three crossings: 0 is kept unless it opens an even cluster {0,1};
+/// 1 only when alone; 2 unless it joins 1.
 fn merge(x: Crossings, l: f32) -> Crossings {
     let eps = MERGE_EPS * l.max(1.0);
+    let gap01 = x.n >= 2 && x.s[1] - x.s[0] < eps;
+    let gap12 = x.n >= 3 && x.s[2] - x.s[1] < eps;
+    let keep = [
+        x.n >= 1 && !(gap01 && !gap12),
+        x.n >= 2 && !gap01 && !gap12,
+        x.n >= 3 && !gap12,
+    ];
+    let below = f32::from_bits(l.to_bits() - 1);
     let mut out = Crossings::default();
-    let mut i = 0usize;
-    while i < x.n as usize {
-        let mut j = i + 1;
-        while j < x.n as usize && x.s[j] - x.s[j - 1] < eps {
-            j += 1;
+    for k in 0..3 {
+        if keep[k] {
+            out.push(x.s[k].min(below), x.rising[k]);
         }
-        if (j - i) % 2 == 1 {
-            let k = out.n as usize;
-            out.s[k] = if x.s[i] >= l { below(l) } else { x.s[i] };
-            out.rising[k] = x.rising[i];
-            out.n += 1;
-        }
-        i = j;
     }
     out
 }
