@@ -15,6 +15,8 @@ const float CUBIC_MERGE_EPS = 1e-6;
 const uint CUBIC_MAX_ITERS = 32u;
 const float CUBIC_STEP_TOL = 2.4e-7;
 const float CUBIC_SNAP = 1e-6;
+const float CUBIC_CRIT_SNAP = 2.3841858e-7; // 2^-22: f at a critical point within this of its
+                                             // magnitude is rounding noise, taken as 0
 const float CUBIC_MAX_L = 1e12;
 
 // Up to three crossings: s[i] for i < n, bit i of `rising` set when f - tau goes from < 0 to > 0.
@@ -112,6 +114,14 @@ float cubic_eval_deriv(vec4 c, float s) {
     return r;
 }
 
+// f at a critical point, snapped to 0 within its rounding noise: the sign walk then decides a
+// tangent touch (no crossing) or a triple root (one crossing) from the neighbouring values.
+float cubic_crit_value(vec4 c, float s) {
+    float v = cubic_eval(c, s);
+    precise float mag = fma(fma(fma(abs(c.w), s, abs(c.z)), s, abs(c.y)), s, abs(c.x));
+    return abs(v) <= CUBIC_CRIT_SNAP * mag ? 0.0 : v;
+}
+
 // Power of two bringing m (> 0, finite) into [0.5, 1), clamped to a normal float.
 float cubic_pow2_scale(float m) {
     int e = int((floatBitsToUint(m) >> 23) & 0xffu);
@@ -202,7 +212,7 @@ Crossings cubic_merge(Crossings x, float L) {
     precise float g12 = x.s.z - x.s.y;
     bool gap01 = x.n >= 2u && g01 < eps;
     bool gap12 = x.n >= 3u && g12 < eps;
-    bool keep0 = x.n >= 1u && !(gap01 && !gap12);
+    bool keep0 = x.n >= 1u && (!gap01 || gap12);
     bool keep1 = x.n >= 2u && !gap01 && !gap12;
     bool keep2 = x.n >= 3u && !gap12;
     float below = uintBitsToFloat(floatBitsToUint(L) - 1u);
@@ -253,8 +263,8 @@ Crossings cubic_solve(vec3 c123, vec2 ends, float L) {
     float b1 = min(r1, r2);
     float b2 = max(r1, r2);
     float v0 = c.x;
-    float v1 = cubic_eval(c, b1);
-    float v2 = cubic_eval(c, b2);
+    float v1 = cubic_crit_value(c, b1);
+    float v2 = cubic_crit_value(c, b2);
     precise float v3 = ends.y * sc;
     // Fast exit: every boundary value strictly on one side.
     if ((v0 > 0.0 && v1 > 0.0 && v2 > 0.0 && v3 > 0.0) || (v0 < 0.0 && v1 < 0.0 && v2 < 0.0 && v3 < 0.0))

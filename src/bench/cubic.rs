@@ -210,8 +210,9 @@ fn fit_corners(base: &[f64; 8], o: [f32; 3], d: [f32; 3], target: [f64; 4]) -> O
         r.swap(col, piv);
         for row in col + 1..4 {
             let f = g[row][col] / g[col][col];
-            for k in col..4 {
-                g[row][k] -= f * g[col][k];
+            let pivot_row = g[col];
+            for (v, p) in g[row].iter_mut().zip(pivot_row).skip(col) {
+                *v -= f * p;
             }
             r[row] -= f * r[col];
         }
@@ -256,7 +257,13 @@ fn try_case(class: CaseClass, rng: &mut Pcg64) -> Option<CubicCase> {
             let w = rand_corners(rng, 1.0);
             let corners = to_f32(&w, 0.0);
             let tau = tau_between(rng, &corners);
-            Some(CubicCase { corners, o, d, l, tau })
+            Some(CubicCase {
+                corners,
+                o,
+                d,
+                l,
+                tau,
+            })
         }
         CaseClass::Tangent | CaseClass::Triple => {
             let d = f32_dir(rand_dir(rng));
@@ -276,12 +283,7 @@ fn try_case(class: CaseClass, rng: &mut Pcg64) -> Option<CubicCase> {
                 if alpha.abs() + beta.abs() < 0.05 * mx {
                     return None;
                 }
-                let mut t = [
-                    beta * r * r,
-                    alpha * r * r - 2.0 * r * beta,
-                    cb[2],
-                    alpha,
-                ];
+                let mut t = [beta * r * r, alpha * r * r - 2.0 * r * beta, cb[2], alpha];
                 if rng.random_range(0..4) != 0 {
                     let mag = t.iter().fold(0.0f64, |m, c| m.max(c.abs()));
                     let eps = mag * 10f64.powf(rng.random_range(-9.0..-1.0));
@@ -293,7 +295,12 @@ fn try_case(class: CaseClass, rng: &mut Pcg64) -> Option<CubicCase> {
                 if alpha.abs() < 0.1 * mx || alpha.abs() < 1e-3 {
                     return None;
                 }
-                [-alpha * r * r * r, 3.0 * alpha * r * r, -3.0 * alpha * r, alpha]
+                [
+                    -alpha * r * r * r,
+                    3.0 * alpha * r * r,
+                    -3.0 * alpha * r,
+                    alpha,
+                ]
             };
             let w = fit_corners(&base, o, d, target)?;
             if w.iter().any(|v| v.abs() > 50.0) {
@@ -311,7 +318,13 @@ fn try_case(class: CaseClass, rng: &mut Pcg64) -> Option<CubicCase> {
         CaseClass::RootAt0 => {
             // Entry on a cell edge along axis k; the other two coordinates fixed at 0/1.
             let k = rng.random_range(0..3);
-            let fixed: [f32; 3] = [0, 1, 2].map(|j| if j == k { 0.0 } else { rng.random_range(0..2) as f32 });
+            let fixed: [f32; 3] = [0, 1, 2].map(|j| {
+                if j == k {
+                    0.0
+                } else {
+                    rng.random_range(0..2) as f32
+                }
+            });
             let mut d = rand_dir(rng);
             for j in 0..3 {
                 if j != k {
@@ -345,7 +358,13 @@ fn try_case(class: CaseClass, rng: &mut Pcg64) -> Option<CubicCase> {
                     *c = tau;
                 }
             }
-            Some(CubicCase { corners, o, d, l, tau })
+            Some(CubicCase {
+                corners,
+                o,
+                d,
+                l,
+                tau,
+            })
         }
         CaseClass::RootAtL => {
             if rng.random() {
@@ -357,8 +376,8 @@ fn try_case(class: CaseClass, rng: &mut Pcg64) -> Option<CubicCase> {
                 let e = (k + 1 + rng.random_range(0..2)) % 3; // edge coordinate (fixed 0/1)
                 let ev = rng.random_range(0..2) as f32;
                 let mut o = [0.0f32; 3];
-                for j in 0..3 {
-                    o[j] = if j == k {
+                for (j, oj) in o.iter_mut().enumerate() {
+                    *oj = if j == k {
                         if plus {
                             0.0
                         } else {
@@ -394,7 +413,12 @@ fn try_case(class: CaseClass, rng: &mut Pcg64) -> Option<CubicCase> {
                 let base = rand_corners(rng, 1.0);
                 let cb = cubic_of(&base, o, d);
                 let lf = l as f64;
-                let t = [-(cb[1] * lf + cb[2] * lf * lf + cb[3] * lf * lf * lf), cb[1], cb[2], cb[3]];
+                let t = [
+                    -(cb[1] * lf + cb[2] * lf * lf + cb[3] * lf * lf * lf),
+                    cb[1],
+                    cb[2],
+                    cb[3],
+                ];
                 let w = fit_corners(&base, o, d, t)?;
                 let tau: f32 = rng.random_range(-1.0..1.0);
                 Some(CubicCase {
@@ -428,7 +452,13 @@ fn try_case(class: CaseClass, rng: &mut Pcg64) -> Option<CubicCase> {
                 let m = 10f64.powf(rng.random_range(-6.0..0.0)) as f32;
                 (if rng.random() { m } else { -m }).clamp(lo, hi)
             };
-            Some(CubicCase { corners, o, d, l, tau })
+            Some(CubicCase {
+                corners,
+                o,
+                d,
+                l,
+                tau,
+            })
         }
         CaseClass::NearConstant => {
             let d = f32_dir(rand_dir(rng));
@@ -437,14 +467,21 @@ fn try_case(class: CaseClass, rng: &mut Pcg64) -> Option<CubicCase> {
             let tau = (if rng.random() { t } else { -t }) as f32;
             let eta = t * 10f64.powf(rng.random_range(-7.0..-2.0));
             let corners = to_f32(&rand_corners(rng, eta), tau);
-            Some(CubicCase { corners, o, d, l, tau })
+            Some(CubicCase {
+                corners,
+                o,
+                d,
+                l,
+                tau,
+            })
         }
     }
 }
 
 /// `n` cases of `class`, deterministic in `seed`.
 pub fn gen_cases(class: CaseClass, n: usize, seed: u64) -> Vec<CubicCase> {
-    let mut rng = Pcg64::seed_from_u64(seed ^ (0x9e37_79b9_7f4a_7c15u64.wrapping_mul(class as u64 + 1)));
+    let mut rng =
+        Pcg64::seed_from_u64(seed ^ (0x9e37_79b9_7f4a_7c15u64.wrapping_mul(class as u64 + 1)));
     (0..n).map(|_| gen_case(class, &mut rng)).collect()
 }
 
@@ -639,12 +676,14 @@ pub fn run(gpu: &Gpu, args: &CubicBenchArgs) -> Result<bool> {
         .par_iter()
         .flat_map(|&c| gen_cases(c, n, args.seed))
         .collect();
-    let ranges: Vec<std::ops::Range<usize>> = (0..classes.len()).map(|k| k * n..(k + 1) * n).collect();
+    let ranges: Vec<std::ops::Range<usize>> =
+        (0..classes.len()).map(|k| k * n..(k + 1) * n).collect();
     let oracle: Vec<OracleCase> = all.par_iter().map(OracleCase::new).collect();
 
     // Vulkan: a warm-up pass (lavapipe compiles at the first dispatch), then the timed pass with
     // one dispatch per class.
-    crate::check::cubic_solve::run_gpu(gpu, &all[..n.min(1024)], &[0..n.min(1024)])?;
+    let warm = n.min(1024);
+    crate::check::cubic_solve::run_gpu(gpu, &all[..warm], std::slice::from_ref(&(0..warm)))?;
     let (gout, gns) = crate::check::cubic_solve::run_gpu(gpu, &all, &ranges)?;
 
     let mut rows = Vec::new();
@@ -706,7 +745,11 @@ pub fn run(gpu: &Gpu, args: &CubicBenchArgs) -> Result<bool> {
         }
         s
     };
-    let (tg, tc, tb) = (total(&|r| &r.gpu), total(&|r| &r.cpu), total(&|r| &r.baseline));
+    let (tg, tc, tb) = (
+        total(&|r| &r.gpu),
+        total(&|r| &r.cpu),
+        total(&|r| &r.baseline),
+    );
     let all_n = (n * classes.len()) as f64;
     let gpu_rate = all_n / (gns.iter().sum::<f64>() * 1e-9);
     let messages = gpu.validation_messages();
@@ -725,7 +768,19 @@ pub fn run(gpu: &Gpu, args: &CubicBenchArgs) -> Result<bool> {
     );
     println!(
         "{:<14} {:<8} {:>8} {:>7} {:>7} {:>9} {:>9} {:>7} {:>9} {:>6} {:>9} {:>6} {:>10}",
-        "class", "solver", "signif", "missed", "spur", "miss rate", "spur rate", "tangent", "band m/s", "face", "max|Δs|", "NaN", "solves/s"
+        "class",
+        "solver",
+        "signif",
+        "missed",
+        "spur",
+        "miss rate",
+        "spur rate",
+        "tangent",
+        "band m/s",
+        "face",
+        "max|Δs|",
+        "NaN",
+        "solves/s"
     );
     for r in &rows {
         let line = |name: &str, s: &Score, rate: f64| {
@@ -758,9 +813,21 @@ pub fn run(gpu: &Gpu, args: &CubicBenchArgs) -> Result<bool> {
             if r.pass { "pass" } else { "FAIL" }
         );
     }
-    let cpu_rate = all_n / rows.iter().map(|r| n as f64 / r.cpu_solves_per_s).sum::<f64>();
-    let cpu1_rate = all_n / rows.iter().map(|r| n as f64 / r.cpu1_solves_per_s).sum::<f64>();
-    let base_rate = all_n / rows.iter().map(|r| n as f64 / r.baseline1_solves_per_s).sum::<f64>();
+    let cpu_rate = all_n
+        / rows
+            .iter()
+            .map(|r| n as f64 / r.cpu_solves_per_s)
+            .sum::<f64>();
+    let cpu1_rate = all_n
+        / rows
+            .iter()
+            .map(|r| n as f64 / r.cpu1_solves_per_s)
+            .sum::<f64>();
+    let base_rate = all_n
+        / rows
+            .iter()
+            .map(|r| n as f64 / r.baseline1_solves_per_s)
+            .sum::<f64>();
     println!(
         "overall: vulkan {gpu_rate:.3e} solves/s (device time), cpu {cpu_rate:.3e}/s ({} threads), cpu 1-thread {cpu1_rate:.3e}/s, vieta64 1-thread {base_rate:.3e}/s",
         rayon::current_num_threads()

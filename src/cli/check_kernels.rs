@@ -48,7 +48,14 @@ pub fn run(gpu: &Gpu, args: &CheckKernelsArgs) -> Result<bool> {
         println!("validation: {m}");
     }
     let pass = !rows.is_empty() && rows.iter().all(|r| r.pass) && messages.is_empty();
-    println!("{}", if pass { "all kernels match their CPU twins" } else { "PARITY FAILURES" });
+    println!(
+        "{}",
+        if pass {
+            "all kernels match their CPU twins"
+        } else {
+            "PARITY FAILURES"
+        }
+    );
     if args.json {
         println!(
             "{}",

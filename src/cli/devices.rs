@@ -8,7 +8,11 @@ fn mib(b: u64) -> String {
 }
 
 fn describe(d: &DeviceInfo, default: Option<usize>) -> String {
-    let mark = if Some(d.index) == default { " (default)" } else { "" };
+    let mark = if Some(d.index) == default {
+        " (default)"
+    } else {
+        ""
+    };
     let usable = match d.missing_requirements() {
         None => "usable".to_string(),
         Some(m) => format!("NOT usable: lacks {m}"),

@@ -148,7 +148,12 @@ impl Batch {
         let timed = self.queries.filter(|_| slot < MAX_TIMED);
         unsafe {
             if let Some(q) = timed {
-                dev.cmd_write_timestamp(self.cmd, vk::PipelineStageFlags::COMPUTE_SHADER, q, 2 * slot);
+                dev.cmd_write_timestamp(
+                    self.cmd,
+                    vk::PipelineStageFlags::COMPUTE_SHADER,
+                    q,
+                    2 * slot,
+                );
             }
             dev.cmd_bind_pipeline(self.cmd, vk::PipelineBindPoint::COMPUTE, pipeline);
             if !bytes.is_empty() {
@@ -236,7 +241,12 @@ impl Batch {
             let period = inner.info.timestamp_period_ns.unwrap_or(1.0) as f64;
             let mut raw = vec![0u64; 2 * self.timed.len()];
             unsafe {
-                dev.get_query_pool_results(q, 0, &mut raw, vk::QueryResultFlags::TYPE_64 | vk::QueryResultFlags::WAIT)
+                dev.get_query_pool_results(
+                    q,
+                    0,
+                    &mut raw,
+                    vk::QueryResultFlags::TYPE_64 | vk::QueryResultFlags::WAIT,
+                )
             }
             .context("reading timestamp queries")?;
             for (i, name) in self.timed.iter().enumerate() {

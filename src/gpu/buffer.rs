@@ -38,20 +38,23 @@ impl GpuBuffer {
         }
         .with_context(|| format!("creating a {size}-byte buffer ({name})"))?;
         let requirements = unsafe { inner.device.get_buffer_memory_requirements(buffer) };
-        let allocation = inner.allocator.lock().unwrap().allocate(&AllocationCreateDesc {
-            name,
-            requirements,
-            location,
-            linear: true,
-            allocation_scheme: AllocationScheme::GpuAllocatorManaged,
-        });
+        let allocation = inner
+            .allocator
+            .lock()
+            .unwrap()
+            .allocate(&AllocationCreateDesc {
+                name,
+                requirements,
+                location,
+                linear: true,
+                allocation_scheme: AllocationScheme::GpuAllocatorManaged,
+            });
         let allocation = match allocation {
             Ok(a) => a,
             Err(e) => {
                 unsafe { inner.device.destroy_buffer(buffer, None) };
-                return Err(e).with_context(|| {
-                    format!("allocating {size} bytes of device memory ({name})")
-                });
+                return Err(e)
+                    .with_context(|| format!("allocating {size} bytes of device memory ({name})"));
             }
         };
         unsafe {
@@ -111,7 +114,12 @@ impl GpuBuffer {
             unsafe { std::ptr::copy_nonoverlapping(bytes.as_ptr(), p, bytes.len()) };
             return Ok(());
         }
-        let staging = GpuBuffer::new(&self.gpu, bytes.len() as u64, MemoryLocation::CpuToGpu, "staging-up")?;
+        let staging = GpuBuffer::new(
+            &self.gpu,
+            bytes.len() as u64,
+            MemoryLocation::CpuToGpu,
+            "staging-up",
+        )?;
         staging.write(bytes)?;
         let mut b = self.gpu.batch()?;
         b.copy(&staging, self, bytes.len() as u64);
@@ -128,11 +136,18 @@ impl GpuBuffer {
             unsafe { std::ptr::copy_nonoverlapping(p, dst.as_mut_ptr(), dst.len()) };
             return Ok(out);
         }
-        let staging = GpuBuffer::new(&self.gpu, self.size, MemoryLocation::GpuToCpu, "staging-down")?;
+        let staging = GpuBuffer::new(
+            &self.gpu,
+            self.size,
+            MemoryLocation::GpuToCpu,
+            "staging-down",
+        )?;
         let mut b = self.gpu.batch()?;
         b.copy(self, &staging, self.size);
         b.submit()?;
-        let p = staging.mapped().context("staging buffer is not host-visible")?;
+        let p = staging
+            .mapped()
+            .context("staging buffer is not host-visible")?;
         unsafe { std::ptr::copy_nonoverlapping(p, dst.as_mut_ptr(), dst.len()) };
         Ok(out)
     }

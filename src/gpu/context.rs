@@ -81,7 +81,10 @@ impl Gpu {
                     )
                 })?;
                 if let Some(m) = info.missing_requirements() {
-                    bail!("device {i} ({}) lacks {m}, which every kernel needs", info.name);
+                    bail!(
+                        "device {i} ({}) lacks {m}, which every kernel needs",
+                        info.name
+                    );
                 }
                 i
             }
@@ -91,7 +94,11 @@ impl Gpu {
                      scalarBlockLayout (Vulkan 1.2); devices: {}",
                     infos
                         .iter()
-                        .map(|d| format!("{} ({})", d.name, d.missing_requirements().unwrap_or_default()))
+                        .map(|d| format!(
+                            "{} ({})",
+                            d.name,
+                            d.missing_requirements().unwrap_or_default()
+                        ))
                         .collect::<Vec<_>>()
                         .join("; ")
                 )
@@ -182,7 +189,10 @@ impl Gpu {
     }
 
     /// Pipeline of `k`, created on first use.
-    pub(super) fn pipeline(&self, k: &'static KernelInfo) -> Result<(vk::Pipeline, vk::PipelineLayout)> {
+    pub(super) fn pipeline(
+        &self,
+        k: &'static KernelInfo,
+    ) -> Result<(vk::Pipeline, vk::PipelineLayout)> {
         let mut map = self.inner.pipelines.lock().unwrap();
         if let Some(p) = map.get(k.name) {
             return Ok((p.pipeline, p.layout));
@@ -227,11 +237,10 @@ impl Gpu {
         let ci = [vk::ComputePipelineCreateInfo::default()
             .stage(stage)
             .layout(layout)];
-        let result =
-            unsafe { dev.create_compute_pipelines(vk::PipelineCache::null(), &ci, None) };
+        let result = unsafe { dev.create_compute_pipelines(vk::PipelineCache::null(), &ci, None) };
         unsafe { dev.destroy_shader_module(module, None) };
-        let pipeline = result
-            .map_err(|(_, e)| anyhow!("creating the pipeline of {}: {e}", k.name))?[0];
+        let pipeline =
+            result.map_err(|(_, e)| anyhow!("creating the pipeline of {}: {e}", k.name))?[0];
         map.insert(k.name, Pipeline { pipeline, layout });
         Ok((pipeline, layout))
     }

@@ -33,7 +33,8 @@ unsafe extern "system" fn on_message(
     user: *mut c_void,
 ) -> vk::Bool32 {
     if severity.intersects(
-        vk::DebugUtilsMessageSeverityFlagsEXT::WARNING | vk::DebugUtilsMessageSeverityFlagsEXT::ERROR,
+        vk::DebugUtilsMessageSeverityFlagsEXT::WARNING
+            | vk::DebugUtilsMessageSeverityFlagsEXT::ERROR,
     ) && !data.is_null()
         && !user.is_null()
     {
@@ -68,7 +69,9 @@ impl Instance {
         let exts = [ash::ext::debug_utils::NAME.as_ptr()];
         let mut info = vk::InstanceCreateInfo::default().application_info(&app);
         if use_validation {
-            info = info.enabled_layer_names(&layers).enabled_extension_names(&exts);
+            info = info
+                .enabled_layer_names(&layers)
+                .enabled_extension_names(&exts);
         }
         let instance = unsafe { entry.create_instance(&info, None) }
             .context("vkCreateInstance failed (is a Vulkan 1.2 driver installed?)")?;

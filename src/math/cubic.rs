@@ -96,6 +96,12 @@ pub fn trilerp_level(corners: &[f32; 8], p: [f32; 3], tau: f32) -> f32 {
     lerp(lerp(m00, m01, oy), lerp(m10, m11, oy), ox)
 }
 
+/// A value of f at a critical point within `CRIT_SNAP · Σ|C_k|·s^k` of zero (its f32 rounding
+/// noise) is taken as exactly zero: the sign walk then decides from the neighbouring values, so a
+/// tangent touch is no crossing and a triple root one crossing, instead of rounding-noise pairs.
+/// A crossing above the stress suite's floor cannot lie that close to a critical value.
+pub const CRIT_SNAP: f32 = 2.384_185_8e-7; // 2^-22
+
 /// A coordinate of the exit point within this of a cell face is put on the face.
 pub const SNAP: f32 = 1e-6;
 /// Segments longer than this (voxel) have no crossings (keeps every intermediate finite).
@@ -141,6 +147,22 @@ pub fn eval(c: &[f32; 4], s: f32) -> f32 {
 #[inline(always)]
 pub fn eval_deriv(c: &[f32; 4], s: f32) -> f32 {
     (3.0 * c[3]).mul_add(s, 2.0 * c[2]).mul_add(s, c[1])
+}
+
+/// f at a critical point, snapped to 0 within its rounding noise (see [`CRIT_SNAP`]).
+#[inline(always)]
+fn crit_value(c: &[f32; 4], s: f32) -> f32 {
+    let v = eval(c, s);
+    let mag = c[3]
+        .abs()
+        .mul_add(s, c[2].abs())
+        .mul_add(s, c[1].abs())
+        .mul_add(s, c[0].abs());
+    if v.abs() <= CRIT_SNAP * mag {
+        0.0
+    } else {
+        v
+    }
 }
 
 /// Power of two that brings `m` (> 0, finite) into [0.5, 1), clamped to a normal f32.
@@ -245,7 +267,12 @@ pub fn solve_crossings(cc: CellCubic, ends: [f32; 2], l: f32) -> Crossings {
     if !(sum > 0.0 && sum < f32::MAX) {
         return none;
     }
-    let m = c0.abs().max(cl.abs()).max(cc.c1.abs()).max(cc.c2.abs()).max(cc.c3.abs());
+    let m = c0
+        .abs()
+        .max(cl.abs())
+        .max(cc.c1.abs())
+        .max(cc.c2.abs())
+        .max(cc.c3.abs());
     let sc = pow2_scale(m);
     let c = [c0 * sc, cc.c1 * sc, cc.c2 * sc, cc.c3 * sc];
     // Critical points: roots of A s² + 2B s + C with A = 3C3, B = C2, C = C1.
@@ -269,11 +296,12 @@ pub fn solve_crossings(cc: CellCubic, ends: [f32; 2], l: f32) -> Crossings {
     let b1 = r1.min(r2);
     let b2 = r1.max(r2);
     let v0 = c[0];
-    let v1 = eval(&c, b1);
-    let v2 = eval(&c, b2);
+    let v1 = crit_value(&c, b1);
+    let v2 = crit_value(&c, b2);
     let v3 = cl * sc;
     // Fast exit: every boundary value strictly on one side.
-    if (v0 > 0.0 && v1 > 0.0 && v2 > 0.0 && v3 > 0.0) || (v0 < 0.0 && v1 < 0.0 && v2 < 0.0 && v3 < 0.0)
+    if (v0 > 0.0 && v1 > 0.0 && v2 > 0.0 && v3 > 0.0)
+        || (v0 < 0.0 && v1 < 0.0 && v2 < 0.0 && v3 < 0.0)
     {
         return none;
     }
@@ -305,21 +333,23 @@ fn merge(x: Crossings, l: f32) -> Crossings {
     let gap01 = x.n >= 2 && x.s[1] - x.s[0] < eps;
     let gap12 = x.n >= 3 && x.s[2] - x.s[1] < eps;
     let keep = [
-        x.n >= 1 && !(gap01 && !gap12),
+        x.n >= 1 && (!gap01 || gap12),
         x.n >= 2 && !gap01 && !gap12,
         x.n >= 3 && !gap12,
     ];
     let below = f32::from_bits(l.to_bits() - 1);
     let mut out = Crossings::default();
-    for k in 0..3 {
-        if keep[k] {
-            out.push(x.s[k].min(below), x.rising[k]);
-        }
+    for (k, _) in keep.iter().enumerate().filter(|(_, &kp)| kp) {
+        out.push(x.s[k].min(below), x.rising[k]);
     }
     out
 }
 
 /// Convenience: coefficients and crossings for one (cell, ray, level).
 pub fn crossings(corners: &[f32; 8], o: [f32; 3], d: [f32; 3], l: f32, tau: f32) -> Crossings {
-    solve_crossings(cell_cubic(corners, o, d), level_ends(corners, o, d, l, tau), l)
+    solve_crossings(
+        cell_cubic(corners, o, d),
+        level_ends(corners, o, d, l, tau),
+        l,
+    )
 }

@@ -77,7 +77,7 @@ fn bisect(c: &[f64; 4], mut lo: f64, mut hi: f64, flo: f64) -> f64 {
 
 /// Crossings of the cubic `c` on [0, l) with the semantics of `math::cubic::solve_crossings`.
 pub fn oracle_solve(c: &[f64; 4], l: f64) -> Vec<OracleCrossing> {
-    if !(l > 0.0) || c.iter().all(|&x| x == 0.0) {
+    if l.is_nan() || l <= 0.0 || c.iter().all(|&x| x == 0.0) {
         return Vec::new();
     }
     // Critical points of f: roots of A s² + 2B s + C (stable quadratic formula).

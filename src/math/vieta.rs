@@ -94,7 +94,13 @@ pub fn vieta_roots(f0: f64, f1: f64, f2: f64, f3: f64) -> Vec<f64> {
 }
 
 /// The baseline on one case.
-pub fn vieta_crossings(corners: &[f32; 8], o: [f32; 3], d: [f32; 3], l: f32, tau: f32) -> VietaResult {
+pub fn vieta_crossings(
+    corners: &[f32; 8],
+    o: [f32; 3],
+    d: [f32; 3],
+    l: f32,
+    tau: f32,
+) -> VietaResult {
     let f = paper_coefs(corners, o, d);
     let f0 = f[0] - tau as f64;
     let roots = vieta_roots(f0, f[1], f[2], f[3]);
