@@ -10,6 +10,7 @@
 //   cubic_solve(C123, ends, L) -> sign-change crossings of f on [0, L), sorted, merged
 #ifndef CUBIC_GLSL
 #define CUBIC_GLSL
+#extension GL_EXT_control_flow_attributes : require
 
 const float CUBIC_MERGE_EPS = 1e-6;
 const uint CUBIC_MAX_ITERS = 32u;
@@ -168,11 +169,18 @@ float cubic_refine(vec4 c, float lo, float hi, float flo, float fhi, float tol) 
 }
 
 // Sign walk over the monotone pieces (see solve_crossings in the twin).
+// Brackets are only recorded during the walk and refined afterwards in one loop with a single
+// call site, so that lanes whose roots lie in different pieces iterate together.
 struct CubicWalk {
     float ps;      // sign of the last nonzero boundary value (0 before any)
     bool pending;  // a zero boundary value awaits the next nonzero value
     float zpos;    // first zero of the pending run
-    Crossings res;
+    Crossings res; // crossings so far; those in `need` still hold a placeholder s
+    uint need;     // bit k: crossing k comes from bracket (count of lower bits set)
+    uint nb;       // brackets recorded
+    vec4 br0;      // brackets as (lo, hi, f(lo), f(hi))
+    vec4 br1;
+    vec4 br2;
 };
 
 // Append (s, rising) to x (no dynamic vector indexing: it would spill on SIMD-per-lane drivers).
@@ -183,7 +191,7 @@ void cubic_push(inout Crossings x, float s, bool rising) {
     x.n = i + 1u;
 }
 
-void cubic_piece(inout CubicWalk w, vec4 c, float tol, float b0, float v0, float b1, float v1) {
+void cubic_piece(inout CubicWalk w, float b0, float v0, float b1, float v1) {
     if (v1 == 0.0) {
         if (!w.pending) {
             w.pending = true;
@@ -196,8 +204,11 @@ void cubic_piece(inout CubicWalk w, vec4 c, float tol, float b0, float v0, float
         if (sg != w.ps) cubic_push(w.res, w.zpos, v1 > 0.0);
         w.pending = false;
     } else if (sg != w.ps) {
-        float s = cubic_refine(c, b0, b1, v0, v1, tol);
-        cubic_push(w.res, s, v1 > 0.0);
+        w.need |= 1u << w.res.n;
+        vec4 br = vec4(b0, b1, v0, v1);
+        if (w.nb == 0u) w.br0 = br; else if (w.nb == 1u) w.br1 = br; else w.br2 = br;
+        w.nb += 1u;
+        cubic_push(w.res, 0.0, v1 > 0.0);
     }
     w.ps = sg;
 }
@@ -274,10 +285,25 @@ Crossings cubic_solve(vec3 c123, vec2 ends, float L) {
     wk.pending = v0 == 0.0;
     wk.zpos = 0.0;
     wk.res = none;
+    wk.need = 0u;
+    wk.nb = 0u;
+    wk.br0 = vec4(0.0);
+    wk.br1 = vec4(0.0);
+    wk.br2 = vec4(0.0);
+    cubic_piece(wk, 0.0, v0, b1, v1);
+    cubic_piece(wk, b1, v1, b2, v2);
+    cubic_piece(wk, b2, v2, L, v3);
     float tol = CUBIC_STEP_TOL * max(L, 1.0);
-    cubic_piece(wk, c, tol, 0.0, v0, b1, v1);
-    cubic_piece(wk, c, tol, b1, v1, b2, v2);
-    cubic_piece(wk, c, tol, b2, v2, L, v3);
+    vec3 r = vec3(0.0);
+    [[dont_unroll]] for (uint j = 0u; j < wk.nb; ++j) {
+        vec4 br = j == 0u ? wk.br0 : (j == 1u ? wk.br1 : wk.br2);
+        float x = cubic_refine(c, br.x, br.y, br.z, br.w, tol);
+        if (j == 0u) r.x = x; else if (j == 1u) r.y = x; else r.z = x;
+    }
+    uint j = 0u;
+    if ((wk.need & 1u) != 0u) { wk.res.s.x = r.x; j = 1u; }
+    if ((wk.need & 2u) != 0u) { wk.res.s.y = j == 0u ? r.x : r.y; j += 1u; }
+    if ((wk.need & 4u) != 0u) wk.res.s.z = j == 0u ? r.x : (j == 1u ? r.y : r.z);
     return cubic_merge(wk.res, L);
 }
 

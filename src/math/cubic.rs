@@ -213,7 +213,9 @@ pub fn refine_root(c: &[f32; 4], mut lo: f32, mut hi: f32, flo: f32, fhi: f32, t
     x
 }
 
-/// Running state of the sign walk over the monotone pieces.
+/// Running state of the sign walk over the monotone pieces. Brackets are recorded and refined
+/// afterwards in one loop (the GLSL does so to keep one call site for lanes whose roots lie in
+/// different pieces).
 struct Walk {
     /// Sign of the last nonzero boundary value (0 before any).
     ps: f32,
@@ -221,12 +223,18 @@ struct Walk {
     pending: bool,
     /// Position of the first zero of the pending run.
     zpos: f32,
+    /// Crossings so far; those in `need` still hold a placeholder s.
     out: Crossings,
+    /// Bit k: crossing k comes from the next unrefined bracket.
+    need: u32,
+    /// Brackets (lo, hi, f(lo), f(hi)), `nb` of them.
+    br: [[f32; 4]; 3],
+    nb: usize,
 }
 
 impl Walk {
     /// Piece (b0, b1), monotone, with f(b0) = v0 (already walked) and f(b1) = v1.
-    fn piece(&mut self, c: &[f32; 4], tol: f32, b0: f32, v0: f32, b1: f32, v1: f32) {
+    fn piece(&mut self, b0: f32, v0: f32, b1: f32, v1: f32) {
         if v1 == 0.0 {
             if !self.pending {
                 self.pending = true;
@@ -241,8 +249,10 @@ impl Walk {
             }
             self.pending = false;
         } else if sg != self.ps {
-            let s = refine_root(c, b0, b1, v0, v1, tol);
-            self.out.push(s, v1 > 0.0);
+            self.need |= 1 << self.out.n;
+            self.br[self.nb] = [b0, b1, v0, v1];
+            self.nb += 1;
+            self.out.push(0.0, v1 > 0.0);
         }
         self.ps = sg;
     }
@@ -316,11 +326,25 @@ pub fn solve_crossings(cc: CellCubic, ends: [f32; 2], l: f32) -> Crossings {
         pending: v0 == 0.0,
         zpos: 0.0,
         out: none,
+        need: 0,
+        br: [[0.0; 4]; 3],
+        nb: 0,
     };
+    walk.piece(0.0, v0, b1, v1);
+    walk.piece(b1, v1, b2, v2);
+    walk.piece(b2, v2, l, v3);
     let tol = STEP_TOL * l.max(1.0);
-    walk.piece(&c, tol, 0.0, v0, b1, v1);
-    walk.piece(&c, tol, b1, v1, b2, v2);
-    walk.piece(&c, tol, b2, v2, l, v3);
+    let mut r = [0.0f32; 3];
+    for (x, b) in r.iter_mut().zip(&walk.br).take(walk.nb) {
+        *x = refine_root(&c, b[0], b[1], b[2], b[3], tol);
+    }
+    let mut j = 0;
+    for k in 0..3 {
+        if walk.need & (1 << k) != 0 {
+            walk.out.s[k] = r[j];
+            j += 1;
+        }
+    }
     merge(walk.out, l)
 }
 
