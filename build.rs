@@ -27,7 +27,10 @@ fn main() {
         .filter(|p| p.extension().is_some_and(|x| x == "comp"))
         .collect();
     kernels.sort();
-    for entry in std::fs::read_dir(&lib_dir).expect("glsl/lib/ directory").flatten() {
+    for entry in std::fs::read_dir(&lib_dir)
+        .expect("glsl/lib/ directory")
+        .flatten()
+    {
         println!("cargo:rerun-if-changed={}", entry.path().display());
     }
 
@@ -91,7 +94,10 @@ fn main() {
         for f in &failures {
             eprintln!("{f}");
         }
-        panic!("{} GLSL kernel(s) failed to compile (errors above)", failures.len());
+        panic!(
+            "{} GLSL kernel(s) failed to compile (errors above)",
+            failures.len()
+        );
     }
     out.push_str("\n/// Every kernel, in file-name order.\npub const ALL: &[&KernelInfo] = &[\n");
     for n in &names {

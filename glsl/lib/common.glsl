@@ -10,7 +10,9 @@ layout(buffer_reference, scalar, buffer_reference_align = 4) buffer U32Buf { uin
 layout(buffer_reference, scalar, buffer_reference_align = 4) buffer I32Buf { int v[]; };
 
 // Flat invocation index for 1-D work split over a 2-D dispatch grid (each dimension is limited to
-// 65535 workgroups); the host side is `gpu::Batch::dispatch_1d`.
-uint flat_id() {
-    return gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * gl_NumWorkGroups.x * gl_WorkGroupSize.x;
-}
+// 65535 workgroups); the host side is `gpu::Batch::dispatch_1d`, which fills rows of exactly
+// DISPATCH_ROW_GROUPS workgroups whenever it needs more than one row. A macro, not a function:
+// glslang fixes gl_WorkGroupSize where a function body is compiled, and this file is included
+// before the kernel's `layout(local_size_x = …)`, where it would still read 1.
+const uint DISPATCH_ROW_GROUPS = 32768u;
+#define flat_id() (gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * (DISPATCH_ROW_GROUPS * gl_WorkGroupSize.x))

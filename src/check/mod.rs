@@ -4,7 +4,11 @@
 use crate::gpu::Gpu;
 
 pub mod cubic_solve;
-mod fill_pattern;
+pub mod dda_walk;
+pub mod fill_pattern;
+pub mod plenoxel;
+pub mod sh_eval;
+pub mod trilerp_eval;
 
 /// Result of comparing one kernel on the Vulkan device with its CPU twin.
 #[derive(Debug, Clone, serde::Serialize)]
@@ -31,6 +35,15 @@ pub type CheckFn = fn(&Gpu, u64) -> anyhow::Result<CheckRow>;
 /// Every registered parity check, in table order. Later kernels add themselves here.
 pub const CHECKS: &[(&str, CheckFn)] = &[
     ("fill_pattern", fill_pattern::check),
+    ("dda_walk", dda_walk::check),
+    ("trilerp_eval", trilerp_eval::check),
+    ("sh_eval", sh_eval::check),
+    ("occupancy", plenoxel::check_occupancy),
+    ("plenoxel_fwd", plenoxel::check_fwd),
+    ("plenoxel_train", plenoxel::check_train),
+    ("plenoxel_weights", plenoxel::check_weights),
+    ("rmsprop", plenoxel::check_rmsprop),
+    ("tv", plenoxel::check_tv),
     ("cubic_solve", cubic_solve::check),
 ];
 

@@ -3,6 +3,8 @@
 
 mod check_kernels;
 mod devices;
+pub mod inspect;
+pub mod make_scene;
 
 use crate::gpu::{Gpu, GpuOptions};
 use clap::{Parser, Subcommand};
@@ -33,7 +35,11 @@ pub enum Command {
     /// Run every GPU kernel against its CPU twin on random and adversarial inputs; one row per
     /// kernel; exit code 1 on any mismatch.
     CheckKernels(check_kernels::CheckKernelsArgs),
-    /// Benchmarks and numerical stress suites.
+    /// Write a built-in procedural scene (NeRF-synthetic format + exact ground truth).
+    MakeScene(make_scene::MakeSceneArgs),
+    /// Summarise a NeRF-synthetic dataset: splits, cameras, object bounds, warnings.
+    Inspect(inspect::InspectArgs),
+    /// Benchmarks: figures on the Vulkan device and the CPU twin, parity verdict, `--json` line.
     Bench(BenchArgs),
 }
 
@@ -44,9 +50,11 @@ pub struct BenchArgs {
     pub kind: BenchKind,
 }
 
-/// The benchmarks.
+/// Which benchmark.
 #[derive(Subcommand, Debug)]
 pub enum BenchKind {
+    /// DDA cell walk: cells visited per second for random rays through a 256³ grid, and parity.
+    Dda(crate::bench::dda::DdaBenchArgs),
     /// Cell cubic solver stress suite against an f64 oracle and the paper's Vieta baseline.
     Cubic(crate::bench::cubic::CubicBenchArgs),
 }
@@ -90,7 +98,19 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             let gpu = gpu_used.insert(open_gpu(&cli)?);
             exit(check_kernels::run(gpu, args)?)
         }
+        Command::MakeScene(a) => {
+            make_scene::run(a)?;
+            ExitCode::SUCCESS
+        }
+        Command::Inspect(a) => {
+            inspect::run(a)?;
+            ExitCode::SUCCESS
+        }
         Command::Bench(b) => match &b.kind {
+            BenchKind::Dda(args) => {
+                let gpu = gpu_used.insert(open_gpu(&cli)?);
+                exit(crate::bench::dda::run(gpu, args)?)
+            }
             BenchKind::Cubic(args) => {
                 let gpu = gpu_used.insert(open_gpu(&cli)?);
                 exit(crate::bench::cubic::run(gpu, args)?)

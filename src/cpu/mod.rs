@@ -1,6 +1,19 @@
 //! CPU twins of the GLSL kernels: one function per kernel, same inputs and outputs, same
 //! formulation, run with rayon. They validate the GPU kernels and serve as the CPU backend.
 
+pub mod atomic;
 pub mod cubic_solve;
+mod dda_walk;
 mod fill_pattern;
+pub mod plenoxel;
+mod rmsprop;
+mod sh_eval;
+mod trilerp_eval;
+mod tv;
+
+pub use dda_walk::dda_walk;
 pub use fill_pattern::fill_pattern;
+pub use rmsprop::rmsprop;
+pub use sh_eval::sh_eval;
+pub use trilerp_eval::trilerp_eval;
+pub use tv::{tv, TvChunk};

@@ -13,7 +13,7 @@ use bytemuck::Pod;
 /// Dispatches timed per batch; later ones in the same batch run untimed.
 const MAX_TIMED: u32 = 1024;
 /// Workgroups along x in `dispatch_1d` before wrapping to y (each dimension allows ≥ 65535).
-const MAX_GROUPS_X: u32 = 32768;
+const MAX_GROUPS_X: u32 = 32768; // = DISPATCH_ROW_GROUPS in glsl/lib/common.glsl
 
 /// Device time of each timed dispatch of a submitted batch.
 #[derive(Debug, Clone, Default)]

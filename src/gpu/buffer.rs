@@ -22,7 +22,6 @@ pub struct GpuBuffer {
 impl GpuBuffer {
     pub(super) fn new(gpu: &Gpu, size: u64, location: MemoryLocation, name: &str) -> Result<Self> {
         let inner = &gpu.inner;
-        let size = size.max(4);
         let usage = vk::BufferUsageFlags::STORAGE_BUFFER
             | vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS
             | vk::BufferUsageFlags::TRANSFER_SRC
@@ -30,7 +29,7 @@ impl GpuBuffer {
         let buffer = unsafe {
             inner.device.create_buffer(
                 &vk::BufferCreateInfo::default()
-                    .size(size)
+                    .size(size.max(4))
                     .usage(usage)
                     .sharing_mode(vk::SharingMode::EXCLUSIVE),
                 None,
@@ -82,7 +81,7 @@ impl GpuBuffer {
         self.address
     }
 
-    /// Size in bytes.
+    /// Size in bytes, as requested (the allocation holds at least 4).
     pub fn size(&self) -> u64 {
         self.size
     }
@@ -132,6 +131,9 @@ impl GpuBuffer {
         let n = self.size as usize / std::mem::size_of::<T>();
         let mut out = vec![T::zeroed(); n];
         let dst: &mut [u8] = bytemuck::cast_slice_mut(&mut out);
+        if dst.is_empty() {
+            return Ok(out);
+        }
         if let Some(p) = self.mapped() {
             unsafe { std::ptr::copy_nonoverlapping(p, dst.as_mut_ptr(), dst.len()) };
             return Ok(out);

@@ -1,0 +1,199 @@
+// plenoxel.glsl — the stage-1 ray march shared by plenoxel_fwd, plenoxel_train and plenoxel_weights
+// (method.md §2): ray → grid units, slab clip to [−0.5, N − 0.5]³, samples every 0.5 voxel at
+// t_k = t0 + 0.5·k, each clamped to [0, N − 1] with cell = min(floor, N − 2); σ and SH are
+// trilinear (unallocated corners = 0); a sample with σ ≤ 1e-8 is skipped (ReLU).
+// Empty-space skipping: an occupancy volume with one u32 per block of 2^OCC_SHIFT cells per axis
+// (written by occupancy.comp); a sample in an empty block jumps to the first lattice sample past the
+// block, which skips only samples whose σ is ≤ 1e-8 anyway, so results are unchanged.
+// Rust twin: src/math/plenoxel.rs (same arithmetic; `precise` stops contraction into FMAs).
+// Kernels that need only the constants and occ_dims define PLENOXEL_CONSTANTS_ONLY first.
+// Include AFTER the kernel's push-constant block `pc`, which must have the members links (I32Buf),
+// density, sh (F32Buf), occ (U32Buf) and res (uvec3). (Buffer references are read from `pc`
+// directly: a struct holding them in a local variable makes glslang emit invalid SPIR-V — a
+// Function-storage pointer without AliasedPointer/RestrictPointer.)
+#ifndef PLENOXEL_GLSL
+#define PLENOXEL_GLSL
+
+#extension GL_KHR_shader_subgroup_arithmetic : require
+#extension GL_KHR_shader_subgroup_basic : require
+#include "trilerp.glsl"
+#include "sh.glsl"
+#include "dda.glsl"
+
+const float SIGMA_EPS = 1e-8;
+const float STEP = 0.5;
+// Skips stop this far (voxels) before the block exit, so rounding never skips a live sample.
+const float SKIP_MARGIN = 1e-3;
+// Occupancy blocks are 8³ cells.
+const uint OCC_SHIFT = 3u;
+
+struct March {
+    vec3 o;      // origin, grid units
+    vec3 d;      // unit direction, grid units
+    float t0;    // first sample
+    float t_end; // box exit
+    float delta; // world length of one 0.5-voxel step
+};
+
+// Sets up the march of the scene-space ray (ro, rd) with grid = p·scale + offset. False: no hit.
+bool march_init(vec3 ro, vec3 rd, vec3 scale, vec3 offset, uvec3 res, out March m) {
+    precise vec3 og = ro * scale + offset;
+    precise vec3 dg = rd * scale;
+    precise float len = sqrt(dg.x * dg.x + dg.y * dg.y + dg.z * dg.z);
+    precise vec3 dn = dg / len;
+    m.o = og;
+    m.d = dn;
+    m.delta = STEP / len;
+    vec2 box = ray_box(og, dn, vec3(-0.5), vec3(res) - vec3(0.5), 0.0);
+    m.t0 = box.x;
+    m.t_end = box.y;
+    return box.x < box.y;
+}
+
+float march_t(March m, uint k) {
+    precise float t = m.t0 + STEP * float(k);
+    return t;
+}
+
+// Cell and local position of the sample at t.
+void march_cell(March m, float t, uvec3 res, out ivec3 l, out vec3 p) {
+    precise vec3 pos = m.o + m.d * t;
+    pos = clamp(pos, vec3(0.0), vec3(res - uvec3(1)));
+    l = min(ivec3(floor(pos)), ivec3(res) - ivec3(2));
+    precise vec3 q = pos - vec3(l);
+    p = q;
+}
+
+// Blocks per axis of the occupancy volume.
+uvec3 occ_dims(uvec3 res) {
+    uint b = 1u << OCC_SHIFT;
+    return (res - uvec3(1) + uvec3(b - 1u)) >> OCC_SHIFT;
+}
+
+#ifndef PLENOXEL_CONSTANTS_ONLY
+// If the sample in cell l lies in an empty block, the index of the first sample to look at next
+// (> k); otherwise k.
+uint march_skip(March m, uint k, ivec3 l) {
+    uvec3 b = uvec3(l) >> OCC_SHIFT;
+    uvec3 nb = occ_dims(pc.res);
+    if (pc.occ.v[(b.x * nb.y + b.y) * nb.z + b.z] != 0u) return k;
+    float bs = float(1u << OCC_SHIFT);
+    vec3 lo = vec3(b) * bs;
+    vec3 hi = min(lo + vec3(bs), vec3(pc.res - uvec3(1)));
+    float t_exit = 3.402823466e38;
+    for (int a = 0; a < 3; a++) {
+        if (m.d[a] != 0.0) {
+            precise float ta = ((m.d[a] > 0.0 ? hi[a] : lo[a]) - m.o[a]) / m.d[a];
+            t_exit = min(t_exit, ta);
+        }
+    }
+    precise float steps = (t_exit - SKIP_MARGIN - m.t0) / STEP;
+    float next = ceil(steps);
+    if (!(next < 4.0e9)) return 0xffffffffu;
+    return max(k + 1u, uint(max(next, 0.0)));
+}
+
+// Links of the 8 corners of cell l (order 4a + 2b + c).
+void cell_links(ivec3 l, out int lk[8]) {
+    uint ny = pc.res.y, nz = pc.res.z;
+    uint base = (uint(l.x) * ny + uint(l.y)) * nz + uint(l.z);
+    lk[0] = pc.links.v[base];
+    lk[1] = pc.links.v[base + 1u];
+    lk[2] = pc.links.v[base + nz];
+    lk[3] = pc.links.v[base + nz + 1u];
+    uint bx = base + ny * nz;
+    lk[4] = pc.links.v[bx];
+    lk[5] = pc.links.v[bx + 1u];
+    lk[6] = pc.links.v[bx + nz];
+    lk[7] = pc.links.v[bx + nz + 1u];
+}
+
+// σ at trilinear weights w (unallocated corners count 0).
+float sample_sigma(int lk[8], float w[8]) {
+    precise float s = 0.0;
+    for (int i = 0; i < 8; i++) {
+        if (lk[i] >= 0) s += w[i] * pc.density.v[lk[i]];
+    }
+    return s;
+}
+
+// Pre-ReLU colour Σ_k Y_k·sh_k + 0.5 per channel, SH trilerped with weights w.
+vec3 sample_color_raw(int lk[8], float w[8], float y[9]) {
+    float c[27];
+    for (int k = 0; k < 27; k++) c[k] = 0.0;
+    for (int i = 0; i < 8; i++) {
+        if (lk[i] < 0) continue;
+        uint row = uint(lk[i]) * 27u;
+        for (int k = 0; k < 27; k++) {
+            precise float acc = c[k] + w[i] * pc.sh.v[row + uint(k)];
+            c[k] = acc;
+        }
+    }
+    vec3 raw;
+    for (int ch = 0; ch < 3; ch++) {
+        precise float acc = 0.5;
+        for (int k = 0; k < 9; k++) {
+            precise float a2 = acc + y[k] * c[ch * 9 + k];
+            acc = a2;
+        }
+        raw[ch] = acc;
+    }
+    return raw;
+}
+
+// α = 1 − exp(−σΔ).
+float sample_alpha(float sigma, float delta) {
+    precise float a = 1.0 - exp(-sigma * delta);
+    return a;
+}
+
+// One shaded sample: its cell, corner links, trilinear weights and σ.
+struct Sample {
+    ivec3 l;
+    int lk[8];
+    float w[8];
+    float sigma;
+};
+
+// Advances the march from sample index k to the next sample with σ > SIGMA_EPS and returns true,
+// or returns false at the box exit. counts.y += samples evaluated with σ ≤ SIGMA_EPS, counts.z +=
+// samples jumped over by the occupancy volume.
+bool march_next(March m, inout uint k, inout uvec3 counts, out Sample s) {
+    while (true) {
+        float t = march_t(m, k);
+        if (!(t < m.t_end)) return false;
+        vec3 p;
+        march_cell(m, t, pc.res, s.l, p);
+        uint next = march_skip(m, k, s.l);
+        if (next != k) {
+            if (!(march_t(m, next) < m.t_end)) {
+                counts.z += uint(ceil((m.t_end - t) / STEP));
+                return false;
+            }
+            counts.z += next - k;
+            k = next;
+            continue;
+        }
+        k++;
+        cell_links(s.l, s.lk);
+        trilerp_weights(p, s.w);
+        s.sigma = sample_sigma(s.lk, s.w);
+        if (s.sigma > SIGMA_EPS) return true;
+        counts.y++;
+    }
+    return false;
+}
+
+#endif
+
+// stats[0..3] += (shaded, empty, skipped), reduced over the subgroup first: one atomic per subgroup.
+void add_stats(U32Buf stats, uvec3 counts) {
+    uvec3 s = subgroupAdd(counts);
+    if (subgroupElect()) {
+        atomicAdd(stats.v[0], s.x);
+        atomicAdd(stats.v[1], s.y);
+        atomicAdd(stats.v[2], s.z);
+    }
+}
+
+#endif

@@ -1,0 +1,49 @@
+// sh.glsl — real spherical harmonics of degree 2 (9 basis functions) on a unit direction, and the
+// SH colour max(0, Σ_k Y_k·sh_k + 0.5) per channel (method.md §1; no sigmoid, no upper clamp).
+// Coefficients per vertex: 27 floats [R0..R8, G0..G8, B0..B8]. Rust twin: src/math/sh.rs.
+#ifndef SH_GLSL
+#define SH_GLSL
+
+const float SH_C0 = 0.28209479;
+const float SH_C1 = 0.48860251;
+const float SH_C2 = 1.09254843;
+const float SH_C3 = 0.31539157;
+const float SH_C4 = 0.54627422;
+
+// The 9 basis values Y_0..Y_8 at the unit direction d (x, y, z).
+void sh_basis(vec3 d, out float y[9]) {
+    precise float xx = d.x * d.x;
+    precise float yy = d.y * d.y;
+    precise float zz = d.z * d.z;
+    precise float y4 = SH_C2 * (d.x * d.y);
+    precise float y5 = -SH_C2 * (d.y * d.z);
+    precise float y6 = SH_C3 * ((2.0 * zz - xx) - yy);
+    precise float y7 = -SH_C2 * (d.x * d.z);
+    precise float y8 = SH_C4 * (xx - yy);
+    y[0] = SH_C0;
+    y[1] = -SH_C1 * d.y;
+    y[2] = SH_C1 * d.z;
+    y[3] = -SH_C1 * d.x;
+    y[4] = y4;
+    y[5] = y5;
+    y[6] = y6;
+    y[7] = y7;
+    y[8] = y8;
+}
+
+// Σ_k y_k·c_k (FMA chain in k order).
+float sh_dot(float y[9], float c[9]) {
+    precise float acc = y[0] * c[0];
+    for (int k = 1; k < 9; k++) {
+        acc = fma(y[k], c[k], acc);
+    }
+    return acc;
+}
+
+// max(0, Σ_k y_k·c_k + 0.5): one colour channel.
+float sh_channel(float y[9], float c[9]) {
+    precise float v = sh_dot(y, c) + 0.5;
+    return max(v, 0.0);
+}
+
+#endif

@@ -1,0 +1,132 @@
+#version 460
+// plenoxel_train — one stage-1 training pass over a batch of rays: forward march, fused MSE
+// gradient dL/dC = grad_scale·(C − target) (grad_scale = 2/(3B)), then a second march that
+// scatters dL/dσ and dL/dSH to the 8 corners of each sample's cell (method.md §2; svox2's
+// backward). Consecutive samples in the same cell are summed in registers and flushed with one
+// float atomic per corner and parameter when the cell changes (SH needs only 3 accumulators per
+// corner: the basis Y_k is constant along a ray).
+// Thread mapping: one invocation per ray.
+// Inputs: grid, occupancy, rays (6 floats), targets (3 floats), scale/offset, stop threshold.
+// Outputs: grad_density, grad_sh (+= by float atomics), ray_loss[r] = Σ_channels (C − target)²,
+// stats as in plenoxel_fwd. CPU twin: cpu::plenoxel::train.
+#extension GL_EXT_shader_atomic_float : require
+#include "common.glsl"
+layout(local_size_x = 64) in;
+
+layout(push_constant, scalar) uniform Push {
+    I32Buf links;
+    F32Buf density;
+    F32Buf sh;
+    U32Buf occ;
+    F32Buf rays;
+    F32Buf targets;
+    F32Buf grad_density;
+    F32Buf grad_sh;
+    F32Buf ray_loss;
+    U32Buf stats;
+    uvec3 res;
+    vec3 scale;
+    vec3 offset;
+    uint n_rays;
+    float stop_thresh;
+    float grad_scale;
+} pc;
+
+#include "plenoxel.glsl"
+
+// Adds the per-cell accumulators to the gradients (one atomic per corner and parameter) and
+// clears them.
+void flush(float y[9], int cur_lk[8], inout float acc_sigma[8], inout vec3 acc_color[8]) {
+    for (int i = 0; i < 8; i++) {
+        int l = cur_lk[i];
+        float gs = acc_sigma[i];
+        vec3 gc = acc_color[i];
+        acc_sigma[i] = 0.0;
+        acc_color[i] = vec3(0.0);
+        if (l < 0) continue;
+        if (gs != 0.0) atomicAdd(pc.grad_density.v[l], gs);
+        for (int ch = 0; ch < 3; ch++) {
+            if (gc[ch] == 0.0) continue;
+            uint row = uint(l) * 27u + uint(ch) * 9u;
+            for (int k = 0; k < 9; k++) atomicAdd(pc.grad_sh.v[row + uint(k)], gc[ch] * y[k]);
+        }
+    }
+}
+
+void main() {
+    uint r = flat_id();
+    if (r >= pc.n_rays) return;
+    vec3 ro = vec3(pc.rays.v[6u * r], pc.rays.v[6u * r + 1u], pc.rays.v[6u * r + 2u]);
+    vec3 rd = vec3(pc.rays.v[6u * r + 3u], pc.rays.v[6u * r + 4u], pc.rays.v[6u * r + 5u]);
+    vec3 target = vec3(pc.targets.v[3u * r], pc.targets.v[3u * r + 1u], pc.targets.v[3u * r + 2u]);
+    float y[9];
+    sh_basis(rd, y);
+    March m;
+    bool hit = march_init(ro, rd, pc.scale, pc.offset, pc.res, m);
+    uvec3 counts = uvec3(0);
+
+    // Forward: C and the final transmittance.
+    vec3 color = vec3(0.0);
+    float T = 1.0;
+    uint k = 0u;
+    Sample s;
+    while (hit && march_next(m, k, counts, s)) {
+        counts.x++;
+        float alpha = sample_alpha(s.sigma, m.delta);
+        vec3 c = max(sample_color_raw(s.lk, s.w, y), vec3(0.0));
+        precise float wt = T * alpha;
+        precise vec3 acc = color + wt * c;
+        color = acc;
+        precise float tn = T * (1.0 - alpha);
+        T = tn;
+        if (T < pc.stop_thresh) break;
+    }
+    precise vec3 total = color + vec3(T);
+    precise vec3 diff = total - target;
+    pc.ray_loss.v[r] = dot(diff, diff);
+    add_stats(pc.stats, counts);
+    vec3 g_c = pc.grad_scale * diff;
+
+    // Backward: the same samples again, in the same order.
+    // Per-cell gradient accumulators, flushed when the sample's cell changes.
+    int cur_lk[8];
+    float acc_sigma[8];
+    vec3 acc_color[8];
+    for (int i = 0; i < 8; i++) {
+        cur_lk[i] = -1;
+        acc_sigma[i] = 0.0;
+        acc_color[i] = vec3(0.0);
+    }
+    ivec3 cur_cell = ivec3(-1);
+    vec3 accum = vec3(0.0);
+    T = 1.0;
+    k = 0u;
+    while (hit && march_next(m, k, counts, s)) {
+        float alpha = sample_alpha(s.sigma, m.delta);
+        vec3 raw = sample_color_raw(s.lk, s.w, y);
+        vec3 c = max(raw, vec3(0.0));
+        precise float wt = T * alpha;
+        precise vec3 acc = accum + wt * c;
+        accum = acc;
+        precise float tn = T * (1.0 - alpha);
+        // dL/dσ = Δ·g·(T_next·c − (C − C_≤i)); dL/dc = g·w, zero where the ReLU clamps.
+        precise vec3 rest = total - accum;
+        precise vec3 dsig3 = g_c * (tn * c - rest);
+        precise float d_sigma = m.delta * (dsig3.x + dsig3.y + dsig3.z);
+        vec3 d_color = mix(vec3(0.0), g_c * wt, greaterThan(raw, vec3(0.0)));
+        if (s.l != cur_cell) {
+            flush(y, cur_lk, acc_sigma, acc_color);
+            cur_cell = s.l;
+            cur_lk = s.lk;
+        }
+        for (int i = 0; i < 8; i++) {
+            precise float as = acc_sigma[i] + s.w[i] * d_sigma;
+            acc_sigma[i] = as;
+            precise vec3 ac = acc_color[i] + s.w[i] * d_color;
+            acc_color[i] = ac;
+        }
+        T = tn;
+        if (T < pc.stop_thresh) break;
+    }
+    flush(y, cur_lk, acc_sigma, acc_color);
+}

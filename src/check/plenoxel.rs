@@ -1,0 +1,303 @@
+//! Parity of the stage-1 kernels (occupancy, plenoxel_fwd, plenoxel_train, plenoxel_weights,
+//! rmsprop, tv) with their CPU twins, on a small random grid with unallocated regions, empty
+//! blocks and a dense blob, and on random plus adversarial rays (axis-aligned, starting inside
+//! the box, grazing, missing).
+
+use super::{CheckRow, Compare};
+use crate::cpu::plenoxel as twin;
+use crate::cpu::{rmsprop, tv, TvChunk};
+use crate::gpu::Gpu;
+use crate::grid::{Grid, SH_DIM};
+use crate::kernels;
+use crate::plenoxel::{CpuPlenoxels, Plenoxels, VulkanPlenoxels};
+use anyhow::Result;
+use rand::{Rng, SeedableRng};
+use rand_pcg::Pcg64;
+
+/// Stop threshold of the checks: the trainer's default.
+const STOP: f32 = 1e-4;
+
+/// A random test grid (res³, blob of density plus noise, some vertices unallocated, random SH),
+/// `n_rays` rays (6 floats) and targets (3 floats).
+pub fn test_scene(seed: u64, res: u32, n_rays: usize) -> (Grid, Vec<f32>, Vec<f32>) {
+    let mut rng = Pcg64::seed_from_u64(seed);
+    let mut g = Grid::sphere(res, [0.0; 3], [1.0; 3], 0.95, 0.0);
+    let c: [f32; 3] = std::array::from_fn(|_| rng.random_range(-0.3..0.3));
+    for s in 0..g.slots() {
+        let l = g.links[s];
+        if l < 0 {
+            continue;
+        }
+        let v = g.vertex(s);
+        let w = g.grid_to_world(v.map(|x| x as f32));
+        let r2: f32 = (0..3).map(|i| (w[i] - c[i]).powi(2)).sum();
+        // A blob of radius ~0.35; outside it σ ≤ 0 so whole occupancy blocks are empty.
+        g.density[l as usize] = 60.0 * (-r2 / 0.06).exp() - 3.0 + rng.random_range(-1.0..1.0);
+        for k in 0..SH_DIM {
+            g.sh[l as usize * SH_DIM + k] = rng.random_range(-0.4..0.4);
+        }
+    }
+    // Punch holes: unallocate a few vertices inside the blob.
+    let keep: Vec<bool> = (0..g.slots()).map(|_| rng.random::<f32>() > 0.03).collect();
+    g.retain(&keep);
+    let mut rays = Vec::with_capacity(6 * n_rays);
+    for r in 0..n_rays {
+        let (o, d): ([f32; 3], [f32; 3]) = match r % 10 {
+            // Axis-aligned through the blob.
+            0 => {
+                let a = r / 10 % 3;
+                let mut o = [
+                    rng.random_range(-0.4..0.4),
+                    rng.random_range(-0.4..0.4),
+                    rng.random_range(-0.4..0.4),
+                ];
+                o[a] = -2.0;
+                let mut d = [0.0; 3];
+                d[a] = 1.0;
+                (o, d)
+            }
+            // Starting inside the box.
+            1 => {
+                let o = std::array::from_fn(|_| rng.random_range(-0.5..0.5));
+                (
+                    o,
+                    unit(std::array::from_fn(|_| rng.random_range(-1.0..1.0))),
+                )
+            }
+            // Missing the box entirely.
+            2 => ([3.0, 3.0, 3.0], unit([1.0, 0.2, 0.1])),
+            // From a sphere of radius 2.5 at random points of the box.
+            _ => {
+                let o = unit(std::array::from_fn(|_| rng.random_range(-1.0..1.0))).map(|x| 2.5 * x);
+                let at: [f32; 3] = std::array::from_fn(|_| rng.random_range(-0.7..0.7));
+                (o, unit(std::array::from_fn(|i| at[i] - o[i])))
+            }
+        };
+        rays.extend_from_slice(&o);
+        rays.extend_from_slice(&d);
+    }
+    let targets = (0..3 * n_rays)
+        .map(|_| rng.random_range(0.0..1.0))
+        .collect();
+    (g, rays, targets)
+}
+
+fn unit(v: [f32; 3]) -> [f32; 3] {
+    let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+    v.map(|x| x / l)
+}
+
+/// Relative L2 distance ‖a − b‖/‖b‖ in f64.
+pub fn rel_l2(a: &[f32], b: &[f32]) -> f64 {
+    let num: f64 = a
+        .iter()
+        .zip(b)
+        .map(|(&x, &y)| (x as f64 - y as f64).powi(2))
+        .sum();
+    let den: f64 = b.iter().map(|&y| (y as f64).powi(2)).sum();
+    (num / den.max(1e-300)).sqrt()
+}
+
+fn counts_note(g: [u32; 3], c: [u32; 3]) -> String {
+    format!("samples shaded/empty/skipped gpu {g:?} cpu {c:?}")
+}
+
+pub fn check_occupancy(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
+    let (g, _, _) = test_scene(seed, 40, 0);
+    let want = twin::occupancy(&g.links, &g.density, g.res);
+    let links = gpu.upload(&g.links)?;
+    let density = gpu.upload(&g.density)?;
+    let occ = gpu.zeros::<u32>(want.len())?;
+    gpu.run_1d(
+        &kernels::occupancy::INFO,
+        &kernels::occupancy::Push {
+            links: links.address(),
+            density: density.address(),
+            occ: occ.address(),
+            res: g.res,
+            ..Default::default()
+        },
+        want.len() as u32,
+    )?;
+    let got: Vec<u32> = occ.download()?;
+    let mut cmp = Compare::new(0.0, 0.0);
+    for (i, (&a, &b)) in got.iter().zip(&want).enumerate() {
+        cmp.value(a as f64, b as f64, || format!("block {i}"));
+    }
+    let empty = want.iter().filter(|&&o| o == 0).count();
+    Ok(cmp.row(
+        "occupancy",
+        want.len(),
+        format!("exact; {empty} of {} blocks empty", want.len()),
+    ))
+}
+
+pub fn check_fwd(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
+    let (g, rays, _) = test_scene(seed, 40, 4000);
+    let (want, wc) = CpuPlenoxels::new(g.clone()).render(&rays, STOP)?;
+    let (got, gc) = VulkanPlenoxels::new(gpu, g)?.render(&rays, STOP)?;
+    let mut cmp = Compare::new(2e-5, 2e-4);
+    for (i, (&a, &b)) in got.iter().zip(&want).enumerate() {
+        cmp.value(a as f64, b as f64, || {
+            format!("ray {} channel {}", i / 3, i % 3)
+        });
+    }
+    // Sample counts may differ only where exp() rounding flips an early-termination test.
+    let close = (0..3).all(|i| (gc[i] as f64 - wc[i] as f64).abs() <= 1e-3 * wc[i] as f64 + 2.0);
+    if !close {
+        cmp.failures += 1;
+        cmp.first_failure.get_or_insert_with(|| counts_note(gc, wc));
+    }
+    Ok(cmp.row("plenoxel_fwd", rays.len() / 6, counts_note(gc, wc)))
+}
+
+pub fn check_train(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
+    let (g, rays, targets) = test_scene(seed, 40, 4000);
+    let want = CpuPlenoxels::new(g.clone()).gradients(&rays, &targets, STOP)?;
+    let got = VulkanPlenoxels::new(gpu, g)?.gradients(&rays, &targets, STOP)?;
+    // Per-ray losses elementwise; atomically accumulated gradients by aggregate measures, and
+    // elementwise against the largest magnitude (summation order differs run to run).
+    let mut cmp = Compare::new(1e-5, 1e-3);
+    for (i, (&a, &b)) in got.ray_loss.iter().zip(&want.ray_loss).enumerate() {
+        cmp.value(a as f64, b as f64, || format!("ray {i} loss"));
+    }
+    let mut worst = 0.0f64;
+    for (name, a, b) in [
+        ("dσ", &got.density, &want.density),
+        ("dSH", &got.sh, &want.sh),
+    ] {
+        let e = rel_l2(a, b);
+        worst = worst.max(e);
+        let scale = b.iter().fold(0f32, |m, &x| m.max(x.abs())) as f64;
+        let bad = a
+            .iter()
+            .zip(b.iter())
+            .filter(|(&x, &y)| (x as f64 - y as f64).abs() > 1e-4 * scale + 1e-3 * (y as f64).abs())
+            .count();
+        if e > 1e-4 || bad > b.len() / 1000 {
+            cmp.failures += 1;
+            cmp.first_failure
+                .get_or_insert_with(|| format!("{name}: rel L2 {e:.2e}, {bad} elements off"));
+        }
+    }
+    let note = format!(
+        "grad rel L2 {worst:.1e} (≤ 1e-4; elementwise |Δ| ≤ 1e-4·max|g| + 1e-3·|g| for all but 0.1%); {}",
+        counts_note(got.counts, want.counts)
+    );
+    Ok(cmp.row("plenoxel_train", rays.len() / 6, note))
+}
+
+pub fn check_weights(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
+    let (g, rays, _) = test_scene(seed, 40, 4000);
+    let want = CpuPlenoxels::new(g.clone()).max_weights(&rays, 0.2)?;
+    let got = VulkanPlenoxels::new(gpu, g)?.max_weights(&rays, 0.2)?;
+    let mut cmp = Compare::new(1e-6, 1e-4);
+    for (i, (&a, &b)) in got.iter().zip(&want).enumerate() {
+        cmp.value(a as f64, b as f64, || format!("vertex {i}"));
+    }
+    Ok(cmp.row("plenoxel_weights", rays.len() / 6, "T-stop 0.2".into()))
+}
+
+pub fn check_rmsprop(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
+    let mut rng = Pcg64::seed_from_u64(seed);
+    let n = 100_000;
+    let mut param: Vec<f32> = (0..n).map(|_| rng.random_range(-5.0..5.0)).collect();
+    // A third untouched (g = 0), a third with fresh state (r = 0), tiny and huge gradients.
+    let mut grad: Vec<f32> = (0..n)
+        .map(|i| match i % 3 {
+            0 => 0.0,
+            _ => rng.random_range(-1.0..1.0f32) * 10f32.powi(rng.random_range(-8..4)),
+        })
+        .collect();
+    let mut state: Vec<f32> = (0..n)
+        .map(|i| {
+            if i % 5 == 0 {
+                0.0
+            } else {
+                rng.random_range(0.0..2.0)
+            }
+        })
+        .collect();
+    let (pb, gb, sb) = (gpu.upload(&param)?, gpu.upload(&grad)?, gpu.upload(&state)?);
+    let (lr, beta, eps) = (0.3, 0.95, 1e-8);
+    gpu.run_1d(
+        &kernels::rmsprop::INFO,
+        &kernels::rmsprop::Push {
+            param: pb.address(),
+            grad: gb.address(),
+            state: sb.address(),
+            n: n as u32,
+            lr,
+            beta,
+            eps,
+        },
+        n as u32,
+    )?;
+    rmsprop(&mut param, &mut grad, &mut state, lr, beta, eps);
+    let mut cmp = Compare::new(1e-6, 1e-5);
+    for (what, got, want) in [
+        ("param", pb.download::<f32>()?, &param),
+        ("grad", gb.download::<f32>()?, &grad),
+        ("state", sb.download::<f32>()?, &state),
+    ] {
+        for (i, (&a, &b)) in got.iter().zip(want.iter()).enumerate() {
+            cmp.value(a as f64, b as f64, || format!("{what}[{i}]"));
+        }
+    }
+    Ok(cmp.row(
+        "rmsprop",
+        n,
+        "untouched entries, fresh state, 1e-8..1e4 gradients".into(),
+    ))
+}
+
+pub fn check_tv(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
+    let (g, _, _) = test_scene(seed, 40, 0);
+    let mut cmp = Compare::new(1e-6, 1e-4);
+    let links = gpu.upload(&g.links)?;
+    let slots = g.slots() as u32;
+    let mut cases = 0;
+    for (data, channels) in [(&g.density, 1u32), (&g.sh, SH_DIM as u32)] {
+        // A chunk in the middle and one running off the end of the slot range.
+        for (start, count) in [(slots / 3, slots / 10), (slots - slots / 20, slots / 10)] {
+            let c = TvChunk {
+                res: g.res,
+                start,
+                count,
+                channels,
+                scale: 0.7,
+            };
+            let mut want = vec![0.0f32; data.len()];
+            tv(&g.links, data, &mut want, &c);
+            let db = gpu.upload(data)?;
+            let gb = gpu.zeros::<f32>(data.len())?;
+            gpu.run_1d(
+                &kernels::tv::INFO,
+                &kernels::tv::Push {
+                    links: links.address(),
+                    data: db.address(),
+                    grad: gb.address(),
+                    res: g.res,
+                    start,
+                    count,
+                    channels,
+                    scale: 0.7,
+                    ..Default::default()
+                },
+                (count + g.res[1] * g.res[2]) * channels,
+            )?;
+            let got: Vec<f32> = gb.download()?;
+            for (i, (&a, &b)) in got.iter().zip(&want).enumerate() {
+                cmp.value(a as f64, b as f64, || {
+                    format!("{channels}-channel element {i}")
+                });
+            }
+            cases += count as usize;
+        }
+    }
+    Ok(cmp.row(
+        "tv",
+        cases,
+        "σ and SH, chunk inside and past the end".into(),
+    ))
+}

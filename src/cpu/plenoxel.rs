@@ -1,0 +1,279 @@
+//! Twins of the stage-1 kernels `occupancy`, `plenoxel_fwd`, `plenoxel_train` and
+//! `plenoxel_weights`: one rayon task per ray (per block for occupancy), the same march
+//! (`math::plenoxel`) and the same gradient formulation; scatters use CAS float atomics.
+
+use super::atomic;
+use crate::math::plenoxel::{
+    march_init, march_next, occ_dims, sample_alpha, sample_color_raw, Counts, GridRef, OCC_SHIFT,
+    SIGMA_EPS,
+};
+use crate::math::sh::sh_basis;
+use rayon::prelude::*;
+
+/// How rays map into the grid and when they stop.
+#[derive(Clone, Copy, Debug)]
+pub struct MarchParams {
+    /// grid = p·scale + offset (per axis).
+    pub scale: [f32; 3],
+    pub offset: [f32; 3],
+    /// Stop once transmittance falls below this.
+    pub stop_thresh: f32,
+}
+
+fn ray(rays: &[f32], r: usize) -> ([f32; 3], [f32; 3]) {
+    let v = &rays[6 * r..6 * r + 6];
+    ([v[0], v[1], v[2]], [v[3], v[4], v[5]])
+}
+
+fn sum_counts(a: Counts, b: Counts) -> Counts {
+    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
+}
+
+/// Twin of `occupancy.comp`.
+pub fn occupancy(links: &[i32], density: &[f32], res: [u32; 3]) -> Vec<u32> {
+    let nb = occ_dims(res);
+    let n = (nb[0] * nb[1] * nb[2]) as usize;
+    (0..n)
+        .into_par_iter()
+        .map(|id| {
+            let id = id as u32;
+            let b = [id / (nb[1] * nb[2]), (id / nb[2]) % nb[1], id % nb[2]];
+            let lo = b.map(|x| x << OCC_SHIFT);
+            let hi: [u32; 3] = std::array::from_fn(|i| (lo[i] + (1 << OCC_SHIFT)).min(res[i] - 1));
+            for x in lo[0]..=hi[0] {
+                for y in lo[1]..=hi[1] {
+                    let base = (x * res[1] + y) * res[2];
+                    for z in lo[2]..=hi[2] {
+                        let l = links[(base + z) as usize];
+                        if l >= 0 && density[l as usize] > 0.5 * SIGMA_EPS {
+                            return 1;
+                        }
+                    }
+                }
+            }
+            0
+        })
+        .collect()
+}
+
+/// Twin of `plenoxel_fwd.comp`: rgb per ray (white background) and the summed sample counts.
+pub fn render(g: &GridRef, rays: &[f32], mp: &MarchParams) -> (Vec<f32>, Counts) {
+    let n = rays.len() / 6;
+    let out: Vec<([f32; 3], Counts)> = (0..n)
+        .into_par_iter()
+        .map(|r| {
+            let (ro, rd) = ray(rays, r);
+            let mut color = [0f32; 3];
+            let mut t_acc = 1.0f32;
+            let mut counts = [0u32; 3];
+            if let Some(m) = march_init(ro, rd, mp.scale, mp.offset, g.res) {
+                let y = sh_basis(rd);
+                let mut k = 0;
+                while let Some(s) = march_next(g, &m, &mut k, &mut counts) {
+                    counts[0] += 1;
+                    let alpha = sample_alpha(s.sigma, m.delta);
+                    let c = sample_color_raw(g, &s.lk, &s.w, &y).map(|x| x.max(0.0));
+                    let wt = t_acc * alpha;
+                    for ch in 0..3 {
+                        color[ch] += wt * c[ch];
+                    }
+                    t_acc *= 1.0 - alpha;
+                    if t_acc < mp.stop_thresh {
+                        break;
+                    }
+                }
+            }
+            (color.map(|c| c + t_acc), counts)
+        })
+        .collect();
+    let counts = out.iter().map(|o| o.1).fold([0; 3], sum_counts);
+    (out.into_iter().flat_map(|o| o.0).collect(), counts)
+}
+
+/// Gradient outputs of one training pass.
+pub struct TrainGrads<'a> {
+    pub density: &'a mut [f32],
+    pub sh: &'a mut [f32],
+}
+
+/// Twin of `plenoxel_train.comp`: returns per-ray squared error and the sample counts, adds
+/// dL/dσ and dL/dSH (dL/dC = grad_scale·(C − target)) into `grads`.
+pub fn train(
+    g: &GridRef,
+    rays: &[f32],
+    targets: &[f32],
+    mp: &MarchParams,
+    grad_scale: f32,
+    grads: TrainGrads,
+) -> (Vec<f32>, Counts) {
+    let n = rays.len() / 6;
+    let gd = atomic::as_atomic(grads.density);
+    let gs = atomic::as_atomic(grads.sh);
+    let out: Vec<(f32, Counts)> = (0..n)
+        .into_par_iter()
+        .map(|r| {
+            let (ro, rd) = ray(rays, r);
+            let target = [targets[3 * r], targets[3 * r + 1], targets[3 * r + 2]];
+            let y = sh_basis(rd);
+            let m = march_init(ro, rd, mp.scale, mp.offset, g.res);
+            let mut counts = [0u32; 3];
+            let mut color = [0f32; 3];
+            let mut t_acc = 1.0f32;
+            if let Some(m) = &m {
+                let mut k = 0;
+                while let Some(s) = march_next(g, m, &mut k, &mut counts) {
+                    counts[0] += 1;
+                    let alpha = sample_alpha(s.sigma, m.delta);
+                    let c = sample_color_raw(g, &s.lk, &s.w, &y).map(|x| x.max(0.0));
+                    let wt = t_acc * alpha;
+                    for ch in 0..3 {
+                        color[ch] += wt * c[ch];
+                    }
+                    t_acc *= 1.0 - alpha;
+                    if t_acc < mp.stop_thresh {
+                        break;
+                    }
+                }
+            }
+            let total: [f32; 3] = color.map(|c| c + t_acc);
+            let diff: [f32; 3] = std::array::from_fn(|ch| total[ch] - target[ch]);
+            let loss = diff[0] * diff[0] + diff[1] * diff[1] + diff[2] * diff[2];
+            let g_c = diff.map(|d| grad_scale * d);
+
+            let Some(m) = &m else {
+                return (loss, counts);
+            };
+            let mut scatter = CellAccumulator::new(gd, gs, &y);
+            let mut accum = [0f32; 3];
+            let mut t_acc = 1.0f32;
+            let mut k = 0;
+            let mut ignored = [0u32; 3];
+            while let Some(s) = march_next(g, m, &mut k, &mut ignored) {
+                let alpha = sample_alpha(s.sigma, m.delta);
+                let raw = sample_color_raw(g, &s.lk, &s.w, &y);
+                let c = raw.map(|x| x.max(0.0));
+                let wt = t_acc * alpha;
+                for ch in 0..3 {
+                    accum[ch] += wt * c[ch];
+                }
+                let tn = t_acc * (1.0 - alpha);
+                let dsig3: [f32; 3] =
+                    std::array::from_fn(|ch| g_c[ch] * (tn * c[ch] - (total[ch] - accum[ch])));
+                let d_sigma = m.delta * (dsig3[0] + dsig3[1] + dsig3[2]);
+                let d_color: [f32; 3] =
+                    std::array::from_fn(|ch| if raw[ch] > 0.0 { g_c[ch] * wt } else { 0.0 });
+                scatter.add(s.l, &s.lk, &s.w, d_sigma, d_color);
+                t_acc = tn;
+                if t_acc < mp.stop_thresh {
+                    break;
+                }
+            }
+            scatter.flush();
+            (loss, counts)
+        })
+        .collect();
+    let counts = out.iter().map(|o| o.1).fold([0; 3], sum_counts);
+    (out.into_iter().map(|o| o.0).collect(), counts)
+}
+
+/// Per-cell gradient accumulator of the train twin (the kernel's `flush`).
+struct CellAccumulator<'a> {
+    gd: &'a [std::sync::atomic::AtomicU32],
+    gs: &'a [std::sync::atomic::AtomicU32],
+    y: &'a [f32; 9],
+    cell: [i32; 3],
+    lk: [i32; 8],
+    sigma: [f32; 8],
+    color: [[f32; 3]; 8],
+}
+
+impl<'a> CellAccumulator<'a> {
+    fn new(
+        gd: &'a [std::sync::atomic::AtomicU32],
+        gs: &'a [std::sync::atomic::AtomicU32],
+        y: &'a [f32; 9],
+    ) -> Self {
+        CellAccumulator {
+            gd,
+            gs,
+            y,
+            cell: [-1; 3],
+            lk: [-1; 8],
+            sigma: [0.0; 8],
+            color: [[0.0; 3]; 8],
+        }
+    }
+
+    fn add(
+        &mut self,
+        cell: [i32; 3],
+        lk: &[i32; 8],
+        w: &[f32; 8],
+        d_sigma: f32,
+        d_color: [f32; 3],
+    ) {
+        if cell != self.cell {
+            self.flush();
+            self.cell = cell;
+            self.lk = *lk;
+        }
+        for i in 0..8 {
+            self.sigma[i] += w[i] * d_sigma;
+            for ch in 0..3 {
+                self.color[i][ch] += w[i] * d_color[ch];
+            }
+        }
+    }
+
+    fn flush(&mut self) {
+        for i in 0..8 {
+            let l = self.lk[i];
+            if l >= 0 {
+                if self.sigma[i] != 0.0 {
+                    atomic::add(&self.gd[l as usize], self.sigma[i]);
+                }
+                for ch in 0..3 {
+                    let gc = self.color[i][ch];
+                    if gc == 0.0 {
+                        continue;
+                    }
+                    let row = l as usize * 27 + ch * 9;
+                    for k in 0..9 {
+                        atomic::add(&self.gs[row + k], gc * self.y[k]);
+                    }
+                }
+            }
+            self.sigma[i] = 0.0;
+            self.color[i] = [0.0; 3];
+        }
+    }
+}
+
+/// Twin of `plenoxel_weights.comp`: per allocated vertex, the max over samples of w·w_trilinear.
+pub fn max_weights(g: &GridRef, rays: &[f32], mp: &MarchParams) -> Vec<f32> {
+    let mut out = vec![0f32; g.density.len()];
+    let mw = atomic::as_atomic(&mut out);
+    (0..rays.len() / 6).into_par_iter().for_each(|r| {
+        let (ro, rd) = ray(rays, r);
+        let Some(m) = march_init(ro, rd, mp.scale, mp.offset, g.res) else {
+            return;
+        };
+        let mut t_acc = 1.0f32;
+        let mut k = 0;
+        let mut counts = [0u32; 3];
+        while let Some(s) = march_next(g, &m, &mut k, &mut counts) {
+            let alpha = sample_alpha(s.sigma, m.delta);
+            let wt = t_acc * alpha;
+            for i in 0..8 {
+                if s.lk[i] >= 0 {
+                    atomic::max_nonneg(&mw[s.lk[i] as usize], wt * s.w[i]);
+                }
+            }
+            t_acc *= 1.0 - alpha;
+            if t_acc < mp.stop_thresh {
+                break;
+            }
+        }
+    });
+    out
+}

@@ -1,0 +1,88 @@
+//! Twin of `glsl/tv.comp`: gradient of TV on a contiguous chunk of vertex slots, gathered per
+//! owned element (see the kernel for the formulation).
+
+use rayon::prelude::*;
+
+/// Which slots and how much: TV over slots [start, start + count), loss = scale·Σ TV.
+#[derive(Clone, Copy, Debug)]
+pub struct TvChunk {
+    pub res: [u32; 3],
+    pub start: u32,
+    pub count: u32,
+    pub channels: u32,
+    pub scale: f32,
+}
+
+fn forward_diffs(
+    links: &[i32],
+    data: &[f32],
+    c: &TvChunk,
+    s: usize,
+    l: i32,
+    ch: usize,
+) -> [f32; 4] {
+    let (ry, rz) = (c.res[1] as usize, c.res[2] as usize);
+    let v = [s / (ry * rz), (s / rz) % ry, s % rz];
+    let n = c.channels as usize;
+    let v0 = data[l as usize * n + ch];
+    let mut d = [0f32; 3];
+    for a in 0..3 {
+        let stride = [ry * rz, rz, 1][a];
+        if v[a] + 1 < c.res[a] as usize {
+            let nl = links[s + stride];
+            if nl >= 0 {
+                d[a] = data[nl as usize * n + ch] - v0;
+            }
+        }
+    }
+    let tv = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2] + 1e-9).sqrt();
+    [d[0], d[1], d[2], tv]
+}
+
+/// grad += ∂(scale·Σ_chunk TV)/∂data, per allocated vertex and channel.
+pub fn tv(links: &[i32], data: &[f32], grad: &mut [f32], c: &TvChunk) {
+    let n = c.channels as usize;
+    let (ry, rz) = (c.res[1] as usize, c.res[2] as usize);
+    let slots = links.len();
+    let start = c.start as usize;
+    let end = start + c.count as usize;
+    let span_end = (end + ry * rz).min(slots);
+    // Each allocated slot owns its n gradient entries; compute them, then add.
+    let updates: Vec<(usize, Vec<f32>)> = (start.min(slots)..span_end)
+        .into_par_iter()
+        .filter_map(|s| {
+            let l = links[s];
+            (l >= 0).then(|| {
+                let v = [s / (ry * rz), (s / rz) % ry, s % rz];
+                let g: Vec<f32> = (0..n)
+                    .map(|ch| {
+                        let mut g = 0.0f32;
+                        if s < end {
+                            let own = forward_diffs(links, data, c, s, l, ch);
+                            g -= (own[0] + own[1] + own[2]) / own[3];
+                        }
+                        for a in 0..3 {
+                            let stride = [ry * rz, rz, 1][a];
+                            if v[a] == 0 {
+                                continue;
+                            }
+                            let u = s - stride;
+                            if u < start || u >= end || links[u] < 0 {
+                                continue;
+                            }
+                            let tu = forward_diffs(links, data, c, u, links[u], ch);
+                            g += tu[a] / tu[3];
+                        }
+                        g
+                    })
+                    .collect();
+                (l as usize, g)
+            })
+        })
+        .collect();
+    for (l, g) in updates {
+        for (ch, gv) in g.into_iter().enumerate() {
+            grad[l * n + ch] += c.scale * gv;
+        }
+    }
+}

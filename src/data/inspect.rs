@@ -1,0 +1,246 @@
+//! `alphasurf inspect`: a summary of a loaded dataset — views per split, resolution, focal length,
+//! bounds of the camera centres, object bounds estimated by carving a visual hull from the
+//! training alpha masks, and warnings (no alpha channel, cameras not looking at the box, objects
+//! reaching outside the box).
+
+use super::camera::ray_box;
+use super::dataset::{Dataset, Split};
+use glam::{Mat4, Vec3, Vec4};
+use rayon::prelude::*;
+use std::fmt::Write as _;
+
+/// Cells per axis of the carving grid over the scene box.
+pub const HULL_RES: usize = 64;
+
+/// Summary of one split.
+#[derive(Clone, Debug)]
+pub struct SplitSummary {
+    /// Split name.
+    pub name: String,
+    /// Number of views.
+    pub views: usize,
+    /// Image size.
+    pub width: u32,
+    /// Image size.
+    pub height: u32,
+    /// Focal length (x, y) of the first view, pixels.
+    pub focal: (f32, f32),
+    /// Camera centres, min and max per axis (Blender units).
+    pub centre_min: Vec3,
+    /// See `centre_min`.
+    pub centre_max: Vec3,
+    /// Smallest and largest distance of a camera centre from the origin.
+    pub distance: (f32, f32),
+}
+
+/// The result of [`inspect`].
+#[derive(Clone, Debug)]
+pub struct Inspection {
+    /// Per split.
+    pub splits: Vec<SplitSummary>,
+    /// The scene box in Blender units.
+    pub box_min: Vec3,
+    /// See `box_min`.
+    pub box_max: Vec3,
+    /// Visual-hull bounds of the object (Blender units), if the masks allow an estimate.
+    pub object_bounds: Option<(Vec3, Vec3)>,
+    /// Human-readable warnings.
+    pub warnings: Vec<String>,
+}
+
+/// Summarises a dataset.
+pub fn inspect(ds: &Dataset) -> Inspection {
+    let (box_min, box_max) = ds.scene.blender_bounds();
+    let mut warnings = Vec::new();
+    let mut splits = Vec::new();
+    for s in ds.splits() {
+        splits.push(summarise(s));
+        let no_alpha = s.frames.iter().filter(|f| !f.image.had_alpha).count();
+        if no_alpha > 0 {
+            warnings.push(format!(
+                "{}: {no_alpha} of {} images have no alpha channel (no masks; treated as opaque)",
+                s.name,
+                s.frames.len()
+            ));
+        }
+        let off: Vec<usize> = s
+            .frames
+            .iter()
+            .enumerate()
+            .filter(|(_, f)| {
+                let (o, d) = f.camera.ray_at(f.camera.cx, f.camera.cy);
+                ray_box(o, d, box_min, box_max).is_none()
+            })
+            .map(|(i, _)| i)
+            .collect();
+        if !off.is_empty() {
+            warnings.push(format!(
+                "{}: {} cameras do not look at the scene box (their optical axis misses it), e.g. view {}",
+                s.name,
+                off.len(),
+                off[0]
+            ));
+        }
+    }
+    let object_bounds = visual_hull_bounds(&ds.train, box_min, box_max);
+    match object_bounds {
+        None => warnings.push(
+            "no object bounds: the training masks carve away the whole box (or there is no alpha)"
+                .into(),
+        ),
+        Some((lo, hi)) => {
+            let cell = (box_max - box_min) / HULL_RES as f32;
+            if lo.cmple(box_min + cell).any() || hi.cmpge(box_max - cell).any() {
+                warnings.push(
+                    "the estimated object reaches the scene box boundary: it may not fit in the grid (adjust the scale)"
+                        .into(),
+                );
+            }
+        }
+    }
+    Inspection {
+        splits,
+        box_min,
+        box_max,
+        object_bounds,
+        warnings,
+    }
+}
+
+fn summarise(s: &Split) -> SplitSummary {
+    let mut lo = Vec3::splat(f32::INFINITY);
+    let mut hi = Vec3::splat(f32::NEG_INFINITY);
+    let (mut dmin, mut dmax) = (f32::INFINITY, 0f32);
+    for f in &s.frames {
+        let c = f.camera.centre();
+        lo = lo.min(c);
+        hi = hi.max(c);
+        dmin = dmin.min(c.length());
+        dmax = dmax.max(c.length());
+    }
+    let c0 = &s.frames[0].camera;
+    SplitSummary {
+        name: s.name.clone(),
+        views: s.frames.len(),
+        width: s.width(),
+        height: s.height(),
+        focal: (c0.fx, c0.fy),
+        centre_min: lo,
+        centre_max: hi,
+        distance: (dmin, dmax),
+    }
+}
+
+/// Carves a `HULL_RES`³ grid over the box with the training masks (alpha > 0): a cell is removed
+/// when some view sees its whole projected footprint inside the image with no covered pixel. The
+/// result is conservative (a superset of the object). Returns the bounds of the kept cells.
+pub fn visual_hull_bounds(split: &Split, box_min: Vec3, box_max: Vec3) -> Option<(Vec3, Vec3)> {
+    if split.frames.iter().all(|f| !f.image.had_alpha) {
+        return None;
+    }
+    let n = HULL_RES;
+    let cell = (box_max - box_min) / n as f32;
+    let mut keep = vec![true; n * n * n];
+    for f in &split.frames {
+        let (w, h) = (f.image.width as usize, f.image.height as usize);
+        // Summed-area table of the mask alpha > 0.
+        let mut sat = vec![0u32; (w + 1) * (h + 1)];
+        for y in 0..h {
+            let mut row = 0u32;
+            for x in 0..w {
+                row += (f.image.data[4 * (y * w + x) + 3] > 0) as u32;
+                sat[(y + 1) * (w + 1) + x + 1] = sat[y * (w + 1) + x + 1] + row;
+            }
+        }
+        let cam = f.camera;
+        let w2c: Mat4 = cam.c2w.inverse();
+        keep.par_iter_mut().enumerate().for_each(|(i, k)| {
+            if !*k {
+                return;
+            }
+            let (ix, iy, iz) = (i % n, (i / n) % n, i / (n * n));
+            let lo = box_min + cell * Vec3::new(ix as f32, iy as f32, iz as f32);
+            let (mut x0, mut y0, mut x1, mut y1) = (f32::MAX, f32::MAX, f32::MIN, f32::MIN);
+            for c in 0..8 {
+                let p =
+                    lo + cell * Vec3::new((c & 1) as f32, ((c >> 1) & 1) as f32, (c >> 2) as f32);
+                let q = w2c * Vec4::new(p.x, p.y, p.z, 1.0);
+                let depth = -q.z;
+                if depth <= 1e-3 {
+                    return;
+                }
+                let px = cam.cx + cam.fx * q.x / depth;
+                let py = cam.cy - cam.fy * q.y / depth;
+                x0 = x0.min(px);
+                y0 = y0.min(py);
+                x1 = x1.max(px);
+                y1 = y1.max(py);
+            }
+            if x0 < 0.0 || y0 < 0.0 || x1 > w as f32 || y1 > h as f32 {
+                return; // not wholly in view: cannot carve
+            }
+            let (a, b) = (x0.floor() as usize, y0.floor() as usize);
+            let (c, d) = ((x1.ceil() as usize).min(w), (y1.ceil() as usize).min(h));
+            let covered = sat[d * (w + 1) + c] + sat[b * (w + 1) + a]
+                - sat[b * (w + 1) + c]
+                - sat[d * (w + 1) + a];
+            if covered == 0 {
+                *k = false;
+            }
+        });
+    }
+    let mut lo = Vec3::splat(f32::INFINITY);
+    let mut hi = Vec3::splat(f32::NEG_INFINITY);
+    for (i, _) in keep.iter().enumerate().filter(|(_, k)| **k) {
+        let idx = Vec3::new((i % n) as f32, ((i / n) % n) as f32, (i / (n * n)) as f32);
+        lo = lo.min(box_min + cell * idx);
+        hi = hi.max(box_min + cell * (idx + Vec3::ONE));
+    }
+    lo.x.is_finite().then_some((lo, hi))
+}
+
+impl std::fmt::Display for Inspection {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let v = |v: Vec3| format!("[{:.3}, {:.3}, {:.3}]", v.x, v.y, v.z);
+        let mut s = String::new();
+        for sp in &self.splits {
+            let _ = writeln!(
+                s,
+                "{:<5} {:>4} views  {}x{}  focal {:.2}/{:.2} px  camera centres {} .. {}  distance {:.3}..{:.3}",
+                sp.name,
+                sp.views,
+                sp.width,
+                sp.height,
+                sp.focal.0,
+                sp.focal.1,
+                v(sp.centre_min),
+                v(sp.centre_max),
+                sp.distance.0,
+                sp.distance.1
+            );
+        }
+        let _ = writeln!(
+            s,
+            "scene box (Blender units): {} .. {}",
+            v(self.box_min),
+            v(self.box_max)
+        );
+        match self.object_bounds {
+            Some((lo, hi)) => {
+                let _ = writeln!(
+                    s,
+                    "object bounds (visual hull, {HULL_RES}^3): {} .. {}",
+                    v(lo),
+                    v(hi)
+                );
+            }
+            None => {
+                let _ = writeln!(s, "object bounds: unknown");
+            }
+        }
+        for w in &self.warnings {
+            let _ = writeln!(s, "warning: {w}");
+        }
+        f.write_str(&s)
+    }
+}

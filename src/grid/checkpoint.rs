@@ -1,0 +1,110 @@
+//! Training checkpoints: the grid (svox2 arrays at the top level, so svox2 and
+//! [`super::npz::load_svox2`] read it as a plain checkpoint), named optimiser-state arrays
+//! (`optim_<name>`, float32 1-D) and a JSON metadata blob (`alphasurf_meta`, uint8 UTF-8 bytes:
+//! step, stage, config — opaque here) in one npz, written atomically (see [`super::npz::write_atomic`]).
+//! Loading validates the grid as an svox2 import does, and the optimiser arrays for finiteness;
+//! their lengths are the caller's to check.
+
+use std::path::Path;
+
+use anyhow::{bail, ensure, Context, Result};
+
+use super::npz::{self, Data, NpzReader};
+use super::Grid;
+
+/// Name of the metadata array.
+pub const META: &str = "alphasurf_meta";
+/// Prefix of the optimiser-state arrays.
+pub const OPTIM_PREFIX: &str = "optim_";
+
+/// A loaded checkpoint.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Checkpoint {
+    pub grid: Grid,
+    /// Optimiser state by name, in file order.
+    pub optim: Vec<(String, Vec<f32>)>,
+    pub meta: serde_json::Value,
+}
+
+fn check_name(name: &str) -> Result<()> {
+    ensure!(
+        !name.is_empty() && name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_'),
+        "optimiser array name '{name}' must be non-empty [A-Za-z0-9_]"
+    );
+    Ok(())
+}
+
+/// Write a checkpoint atomically to `path`. Refuses (leaving any previous checkpoint intact) an
+/// invalid or non-finite grid, non-finite optimiser state, or bad/duplicate names.
+pub fn save(
+    path: &Path,
+    grid: &Grid,
+    optim: &[(String, Vec<f32>)],
+    meta: &serde_json::Value,
+) -> Result<()> {
+    write(path, grid, optim, meta).with_context(|| format!("saving checkpoint {}", path.display()))
+}
+
+fn write(
+    path: &Path,
+    grid: &Grid,
+    optim: &[(String, Vec<f32>)],
+    meta: &serde_json::Value,
+) -> Result<()> {
+    for (i, (name, v)) in optim.iter().enumerate() {
+        check_name(name)?;
+        ensure!(
+            optim[..i].iter().all(|(n, _)| n != name),
+            "optimiser array '{name}' given twice"
+        );
+        if let Some(j) = v.iter().position(|x| !x.is_finite()) {
+            bail!("optimiser array '{name}': non-finite value {} at {j}", v[j]);
+        }
+    }
+    let meta = serde_json::to_vec(meta)?;
+    npz::write_atomic(path, |w| {
+        npz::write_grid(w, grid)?;
+        for (name, v) in optim {
+            w.array(&format!("{OPTIM_PREFIX}{name}"), &[v.len() as u64], v)?;
+        }
+        w.array(META, &[meta.len() as u64], &meta)
+    })
+}
+
+/// Load and validate a checkpoint written by [`save`].
+pub fn load(path: &Path) -> Result<Checkpoint> {
+    let mut r = NpzReader::open(path)?;
+    read(&mut r).with_context(|| format!("loading checkpoint {}", path.display()))
+}
+
+fn read(r: &mut NpzReader) -> Result<Checkpoint> {
+    ensure!(
+        r.contains(META),
+        "no '{META}' array: not an alphasurf checkpoint (an svox2 ckpt.npz is imported with \
+         npz::load_svox2)"
+    );
+    let grid = npz::read_grid(r)?;
+    let meta = match r.read(META)?.data {
+        Data::U8(bytes) => serde_json::from_slice(&bytes)
+            .with_context(|| format!("array '{META}' is not valid JSON"))?,
+        d => bail!("array '{META}' has dtype {}, expected uint8", d.kind()),
+    };
+    let mut optim = Vec::new();
+    for array in r.names() {
+        let Some(name) = array.strip_prefix(OPTIM_PREFIX) else {
+            continue;
+        };
+        let a = r.read(&array)?;
+        ensure!(
+            a.shape.len() == 1,
+            "array '{array}' has shape {:?}, expected 1-D",
+            a.shape
+        );
+        let v = a.into_f32(&array)?;
+        if let Some(j) = v.iter().position(|x| !x.is_finite()) {
+            bail!("array '{array}': non-finite value {} at {j}", v[j]);
+        }
+        optim.push((name.to_owned(), v));
+    }
+    Ok(Checkpoint { grid, optim, meta })
+}

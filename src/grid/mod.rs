@@ -1,0 +1,211 @@
+//! Sparse voxel grid (svox2 layout): an index volume `links` (one i32 per vertex; ≥ 0 is a row in
+//! the compact per-vertex arrays, < 0 is empty) plus structure-of-arrays data: density σ and 27 SH
+//! coefficients per vertex ([R0..R8, G0..G8, B0..B8]). Vertex (x, y, z) of an X×Y×Z grid sits at
+//! `links[(x·Y + y)·Z + z]`. World→grid: g = ((p − c)/(2r) + 0.5)·N − 0.5 per axis.
+
+pub mod checkpoint;
+pub mod npz;
+mod resample;
+
+pub use resample::{dilate, upsample};
+
+/// Coefficients per vertex: 3 channels × 9 degree-2 SH basis functions.
+pub const SH_DIM: usize = 27;
+
+/// The Plenoxels density + SH grid.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Grid {
+    /// Vertices per axis.
+    pub res: [u32; 3],
+    /// Scene-space centre of the box.
+    pub center: [f32; 3],
+    /// Scene-space half-extent of the box per axis.
+    pub radius: [f32; 3],
+    /// Row of each vertex in the compact arrays, or < 0 when unallocated.
+    pub links: Vec<i32>,
+    /// σ per allocated vertex.
+    pub density: Vec<f32>,
+    /// 27 SH coefficients per allocated vertex.
+    pub sh: Vec<f32>,
+}
+
+impl Grid {
+    /// Total number of vertex slots in `links`.
+    pub fn slots(&self) -> usize {
+        self.res.iter().map(|&r| r as usize).product()
+    }
+
+    /// Number of allocated vertices.
+    pub fn allocated(&self) -> usize {
+        self.density.len()
+    }
+
+    /// Index into `links` of vertex (x, y, z).
+    pub fn slot(&self, x: u32, y: u32, z: u32) -> usize {
+        ((x as usize * self.res[1] as usize) + y as usize) * self.res[2] as usize + z as usize
+    }
+
+    /// Vertex coordinates of a `links` index.
+    pub fn vertex(&self, slot: usize) -> [u32; 3] {
+        let z = slot % self.res[2] as usize;
+        let xy = slot / self.res[2] as usize;
+        [
+            (xy / self.res[1] as usize) as u32,
+            (xy % self.res[1] as usize) as u32,
+            z as u32,
+        ]
+    }
+
+    /// Scene position → continuous grid coordinates.
+    pub fn world_to_grid(&self, p: [f32; 3]) -> [f32; 3] {
+        std::array::from_fn(|i| {
+            ((p[i] - self.center[i]) / (2.0 * self.radius[i]) + 0.5) * self.res[i] as f32 - 0.5
+        })
+    }
+
+    /// Continuous grid coordinates → scene position.
+    pub fn grid_to_world(&self, g: [f32; 3]) -> [f32; 3] {
+        std::array::from_fn(|i| {
+            ((g[i] + 0.5) / self.res[i] as f32 - 0.5) * 2.0 * self.radius[i] + self.center[i]
+        })
+    }
+
+    /// A grid of `res`³ vertices over the box (center, radius) with every vertex whose scene
+    /// position lies inside the sphere of `sphere_radius` (relative to the box's half-extent)
+    /// allocated with σ = `sigma` and SH = 0, as in svox2's sphere-bounded initialisation.
+    pub fn sphere(
+        res: u32,
+        center: [f32; 3],
+        radius: [f32; 3],
+        sphere_radius: f32,
+        sigma: f32,
+    ) -> Grid {
+        let mut g = Grid {
+            res: [res; 3],
+            center,
+            radius,
+            links: Vec::new(),
+            density: Vec::new(),
+            sh: Vec::new(),
+        };
+        let mut links = vec![-1i32; g.slots()];
+        let mut n = 0i32;
+        for (slot, link) in links.iter_mut().enumerate() {
+            let v = g.vertex(slot);
+            let w = g.grid_to_world([v[0] as f32, v[1] as f32, v[2] as f32]);
+            let r2: f32 = (0..3)
+                .map(|i| ((w[i] - center[i]) / radius[i]).powi(2))
+                .sum();
+            if r2 <= sphere_radius * sphere_radius {
+                *link = n;
+                n += 1;
+            }
+        }
+        g.links = links;
+        g.density = vec![sigma; n as usize];
+        g.sh = vec![0.0; n as usize * SH_DIM];
+        g
+    }
+
+    /// Keep only the vertices where `keep[slot]` is true, compacting the arrays in slot order.
+    pub fn retain(&mut self, keep: &[bool]) {
+        let mut density = Vec::new();
+        let mut sh = Vec::new();
+        for (slot, link) in self.links.iter_mut().enumerate() {
+            if *link >= 0 && keep[slot] {
+                let row = *link as usize;
+                *link = density.len() as i32;
+                density.push(self.density[row]);
+                sh.extend_from_slice(&self.sh[row * SH_DIM..(row + 1) * SH_DIM]);
+            } else {
+                *link = -1;
+            }
+        }
+        self.density = density;
+        self.sh = sh;
+    }
+
+    /// Bytes per allocated vertex: data (σ + SH) plus, when `with_optimizer`, RMSProp's running
+    /// mean of squared gradients and the gradient accumulators (one float each per parameter); the
+    /// `links` volume is amortised over the allocated vertices.
+    pub fn bytes_per_vertex(&self, with_optimizer: bool) -> f64 {
+        let params = (1 + SH_DIM) as f64;
+        let per_param = if with_optimizer { 3.0 } else { 1.0 };
+        let links = 4.0 * self.slots() as f64 / self.allocated().max(1) as f64;
+        4.0 * params * per_param + links
+    }
+
+    /// Check the invariants a loaded grid must satisfy; the error says which one fails.
+    pub fn validate(&self) -> Result<(), String> {
+        if self.res.contains(&0) {
+            return Err(format!("resolution {:?} has a zero axis", self.res));
+        }
+        if self.links.len() != self.slots() {
+            return Err(format!(
+                "links has {} entries, resolution {:?} needs {}",
+                self.links.len(),
+                self.res,
+                self.slots()
+            ));
+        }
+        if self.sh.len() != self.density.len() * SH_DIM {
+            return Err(format!(
+                "{} SH values for {} vertices (need {} each)",
+                self.sh.len(),
+                self.density.len(),
+                SH_DIM
+            ));
+        }
+        let n = self.density.len() as i64;
+        if let Some(bad) = self.links.iter().find(|&&l| l as i64 >= n) {
+            return Err(format!("link {bad} points past the {n} allocated vertices"));
+        }
+        if self.radius.iter().any(|&r| !(r.is_finite() && r > 0.0))
+            || self.center.iter().any(|c| !c.is_finite())
+        {
+            return Err(format!(
+                "centre {:?} / radius {:?} not finite and positive",
+                self.center, self.radius
+            ));
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn world_grid_roundtrip_and_box_corners() {
+        let g = Grid::sphere(64, [0.1, -0.2, 0.0], [1.0, 1.0, 1.5], 1.0, 0.1);
+        let p = [0.3, 0.4, -0.5];
+        let back = g.grid_to_world(g.world_to_grid(p));
+        for i in 0..3 {
+            assert!((back[i] - p[i]).abs() < 1e-5);
+        }
+        // The box face c − r maps to −0.5, c + r to N − 0.5.
+        let lo = g.world_to_grid([0.1 - 1.0, -0.2 - 1.0, -1.5]);
+        assert!(lo.iter().all(|&x| (x + 0.5).abs() < 1e-5), "{lo:?}");
+    }
+
+    #[test]
+    fn sphere_init_and_retain() {
+        let mut g = Grid::sphere(16, [0.0; 3], [1.0; 3], 1.0, 0.1);
+        let n = g.allocated();
+        // Sphere volume fraction π/6 of the box, roughly.
+        let frac = n as f64 / g.slots() as f64;
+        assert!((frac - std::f64::consts::PI / 6.0).abs() < 0.08, "{frac}");
+        assert!(g.validate().is_ok());
+        let keep: Vec<bool> = (0..g.slots()).map(|s| g.vertex(s)[0] < 8).collect();
+        g.retain(&keep);
+        assert!(g.validate().is_ok());
+        assert!(g.allocated() < n && g.allocated() > 0);
+        for s in 0..g.slots() {
+            assert_eq!(
+                g.links[s] >= 0,
+                keep[s] && g.vertex(s)[0] < 8 && g.links[s] >= 0
+            );
+        }
+    }
+}

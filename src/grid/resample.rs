@@ -1,0 +1,176 @@
+//! Grid resampling (trilinear, svox2's vertex placement) and 26-neighbourhood mask dilation.
+
+use super::{Grid, SH_DIM};
+use rayon::prelude::*;
+
+/// Dilate a vertex mask over the 26-neighbourhood, `times` times.
+pub fn dilate(res: [u32; 3], mask: &[bool], times: usize) -> Vec<bool> {
+    let [rx, ry, rz] = res.map(|r| r as i64);
+    let mut cur = mask.to_vec();
+    for _ in 0..times {
+        let prev = cur;
+        cur = (0..prev.len())
+            .into_par_iter()
+            .map(|s| {
+                let z = s as i64 % rz;
+                let y = (s as i64 / rz) % ry;
+                let x = s as i64 / (rz * ry);
+                for dx in -1..=1 {
+                    for dy in -1..=1 {
+                        for dz in -1..=1 {
+                            let (a, b, c) = (x + dx, y + dy, z + dz);
+                            if a >= 0
+                                && a < rx
+                                && b >= 0
+                                && b < ry
+                                && c >= 0
+                                && c < rz
+                                && prev[((a * ry + b) * rz + c) as usize]
+                            {
+                                return true;
+                            }
+                        }
+                    }
+                }
+                false
+            })
+            .collect();
+    }
+    cur
+}
+
+/// Trilinear sample of all per-vertex channels of `g` at continuous grid coordinates `p`
+/// (clamped into the grid; unallocated corners count as 0). Writes σ then the 27 SH values.
+fn sample(g: &Grid, p: [f32; 3], out: &mut [f32; 1 + SH_DIM]) {
+    let mut base = [0u32; 3];
+    let mut frac = [0f32; 3];
+    for i in 0..3 {
+        let hi = (g.res[i] - 1) as f32;
+        let q = p[i].clamp(0.0, hi);
+        let l = (q.floor() as u32).min(g.res[i].saturating_sub(2));
+        base[i] = l;
+        frac[i] = q - l as f32;
+    }
+    out.fill(0.0);
+    for corner in 0..8u32 {
+        let (a, b, c) = (corner >> 2 & 1, corner >> 1 & 1, corner & 1);
+        let v = [base[0] + a, base[1] + b, base[2] + c];
+        if v.iter().zip(&g.res).any(|(&x, &r)| x >= r) {
+            continue;
+        }
+        let link = g.links[g.slot(v[0], v[1], v[2])];
+        if link < 0 {
+            continue;
+        }
+        let w = [a, b, c]
+            .iter()
+            .zip(&frac)
+            .map(|(&bit, &f)| if bit == 1 { f } else { 1.0 - f })
+            .product::<f32>();
+        let row = link as usize;
+        out[0] += w * g.density[row];
+        for k in 0..SH_DIM {
+            out[1 + k] += w * g.sh[row * SH_DIM + k];
+        }
+    }
+}
+
+/// Resample `g` to `new_res`³ vertices: new vertex j sits at old coordinate
+/// linspace(f − 0.5, N_old − f − 0.5, N_new)[j] with f = ½·N_old/N_new (svox2), values are
+/// trilinear. Only vertices where `keep_old` (a mask over the old slots, e.g. pruned by render
+/// weight and dilated) has a kept vertex among the 8 surrounding old vertices are allocated.
+pub fn upsample(g: &Grid, new_res: u32, keep_old: &[bool]) -> Grid {
+    let res = [new_res; 3];
+    let coord = |axis: usize, j: u32| -> f32 {
+        let n_old = g.res[axis] as f32;
+        let f = 0.5 * n_old / new_res as f32;
+        let (lo, hi) = (f - 0.5, n_old - f - 0.5);
+        if new_res == 1 {
+            lo
+        } else {
+            lo + (hi - lo) * j as f32 / (new_res - 1) as f32
+        }
+    };
+    let mut out = Grid {
+        res,
+        center: g.center,
+        radius: g.radius,
+        links: vec![-1; (new_res as usize).pow(3)],
+        density: Vec::new(),
+        sh: Vec::new(),
+    };
+    let slots = out.slots();
+    let rows: Vec<Option<[f32; 1 + SH_DIM]>> = (0..slots)
+        .into_par_iter()
+        .map(|s| {
+            let v = out.vertex(s);
+            let p = [coord(0, v[0]), coord(1, v[1]), coord(2, v[2])];
+            // Any kept old vertex among the 8 around p?
+            let kept = (0..8u32).any(|corner| {
+                let o: [u32; 3] = std::array::from_fn(|i| {
+                    let l = (p[i].clamp(0.0, (g.res[i] - 1) as f32).floor() as u32)
+                        .min(g.res[i].saturating_sub(2));
+                    (l + (corner >> (2 - i) & 1)).min(g.res[i] - 1)
+                });
+                keep_old[g.slot(o[0], o[1], o[2])]
+            });
+            kept.then(|| {
+                let mut vals = [0f32; 1 + SH_DIM];
+                sample(g, p, &mut vals);
+                vals
+            })
+        })
+        .collect();
+    for (s, row) in rows.into_iter().enumerate() {
+        if let Some(vals) = row {
+            out.links[s] = out.density.len() as i32;
+            out.density.push(vals[0]);
+            out.sh.extend_from_slice(&vals[1..]);
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn dilation_grows_a_point_to_a_cube() {
+        let res = [7, 7, 7];
+        let mut m = vec![false; 343];
+        m[(3 * 7 + 3) * 7 + 3] = true;
+        let d = dilate(res, &m, 2);
+        assert_eq!(d.iter().filter(|&&b| b).count(), 125);
+    }
+
+    #[test]
+    fn upsampling_a_linear_field_is_exact() {
+        // σ = x + 2y − z in old grid coordinates is reproduced at the new vertex positions.
+        let mut g = Grid::sphere(8, [0.0; 3], [1.0; 3], 10.0, 0.0);
+        for s in 0..g.slots() {
+            let v = g.vertex(s);
+            let row = g.links[s] as usize;
+            g.density[row] = v[0] as f32 + 2.0 * v[1] as f32 - v[2] as f32;
+            g.sh[row * SH_DIM + 5] = v[1] as f32;
+        }
+        let keep = vec![true; g.slots()];
+        let up = upsample(&g, 16, &keep);
+        assert_eq!(up.allocated(), 16 * 16 * 16);
+        let f = 0.5 * 8.0 / 16.0;
+        let step = (8.0 - 2.0 * f) / 15.0;
+        for s in 0..up.slots() {
+            let v = up.vertex(s);
+            let p = v.map(|j| f - 0.5 + step * j as f32);
+            if p.iter().any(|&x| !(0.0..=7.0).contains(&x)) {
+                continue; // outside the old vertices values are clamped, not extrapolated
+            }
+            let want = p[0] + 2.0 * p[1] - p[2];
+            let row = up.links[s] as usize;
+            assert!((up.density[row] - want).abs() < 1e-4, "{v:?}");
+            assert!((up.sh[row * SH_DIM + 5] - p[1]).abs() < 1e-4);
+        }
+        // Round trip of the world box: the new grid covers the same scene box.
+        assert_eq!(up.center, g.center);
+    }
+}

@@ -1,0 +1,200 @@
+//! The stage-1 ray march: the twin of `glsl/lib/plenoxel.glsl`, operation for operation (no FMA
+//! contraction on either side), so the CPU kernels in `cpu::plenoxel` visit the same samples.
+
+use super::dda::ray_box;
+use super::trilerp::trilerp_weights;
+
+/// Samples with trilerped σ at or below this are skipped (ReLU).
+pub const SIGMA_EPS: f32 = 1e-8;
+/// March step in voxels.
+pub const STEP: f32 = 0.5;
+/// Skips stop this far (voxels) before the block exit.
+pub const SKIP_MARGIN: f32 = 1e-3;
+/// Occupancy blocks are 2^OCC_SHIFT cells per axis.
+pub const OCC_SHIFT: u32 = 3;
+
+/// Borrowed view of a sparse grid and its occupancy volume.
+#[derive(Clone, Copy)]
+pub struct GridRef<'a> {
+    pub res: [u32; 3],
+    pub links: &'a [i32],
+    pub density: &'a [f32],
+    pub sh: &'a [f32],
+    pub occ: &'a [u32],
+}
+
+/// A ray in grid units with its lattice of samples.
+#[derive(Clone, Copy, Debug)]
+pub struct March {
+    pub o: [f32; 3],
+    pub d: [f32; 3],
+    pub t0: f32,
+    pub t_end: f32,
+    /// World length of one 0.5-voxel step.
+    pub delta: f32,
+}
+
+/// Set up the march of scene ray (ro, rd) with grid = p·scale + offset; `None` if it misses.
+pub fn march_init(
+    ro: [f32; 3],
+    rd: [f32; 3],
+    scale: [f32; 3],
+    offset: [f32; 3],
+    res: [u32; 3],
+) -> Option<March> {
+    let og: [f32; 3] = std::array::from_fn(|i| ro[i] * scale[i] + offset[i]);
+    let dg: [f32; 3] = std::array::from_fn(|i| rd[i] * scale[i]);
+    let len = (dg[0] * dg[0] + dg[1] * dg[1] + dg[2] * dg[2]).sqrt();
+    let dn = dg.map(|x| x / len);
+    let hi = res.map(|r| r as f32 - 0.5);
+    let [t0, t_end] = ray_box(og, dn, [-0.5; 3], hi, 0.0);
+    (t0 < t_end).then_some(March {
+        o: og,
+        d: dn,
+        t0,
+        t_end,
+        delta: STEP / len,
+    })
+}
+
+/// t of sample k.
+pub fn march_t(m: &March, k: u32) -> f32 {
+    m.t0 + STEP * k as f32
+}
+
+/// Cell and local position of the sample at t.
+pub fn march_cell(m: &March, t: f32, res: [u32; 3]) -> ([i32; 3], [f32; 3]) {
+    let mut l = [0i32; 3];
+    let mut p = [0f32; 3];
+    for i in 0..3 {
+        let pos = (m.o[i] + m.d[i] * t).clamp(0.0, (res[i] - 1) as f32);
+        l[i] = (pos.floor() as i32).min(res[i] as i32 - 2);
+        p[i] = pos - l[i] as f32;
+    }
+    (l, p)
+}
+
+/// Blocks per axis of the occupancy volume.
+pub fn occ_dims(res: [u32; 3]) -> [u32; 3] {
+    let b = 1u32 << OCC_SHIFT;
+    res.map(|r| (r - 1 + b - 1) >> OCC_SHIFT)
+}
+
+/// Next sample index to look at when the sample in cell l lies in an empty block, else k.
+pub fn march_skip(g: &GridRef, m: &March, k: u32, l: [i32; 3]) -> u32 {
+    let b = l.map(|x| (x as u32) >> OCC_SHIFT);
+    let nb = occ_dims(g.res);
+    if g.occ[((b[0] * nb[1] + b[1]) * nb[2] + b[2]) as usize] != 0 {
+        return k;
+    }
+    let bs = (1u32 << OCC_SHIFT) as f32;
+    let mut t_exit = f32::MAX;
+    for a in 0..3 {
+        if m.d[a] != 0.0 {
+            let lo = b[a] as f32 * bs;
+            let hi = (lo + bs).min((g.res[a] - 1) as f32);
+            let ta = (if m.d[a] > 0.0 { hi } else { lo } - m.o[a]) / m.d[a];
+            t_exit = t_exit.min(ta);
+        }
+    }
+    let next = ((t_exit - SKIP_MARGIN - m.t0) / STEP).ceil();
+    if !(next < 4.0e9) {
+        return u32::MAX;
+    }
+    (k + 1).max(next.max(0.0) as u32)
+}
+
+/// Links of the 8 corners of cell l (order 4a + 2b + c).
+pub fn cell_links(g: &GridRef, l: [i32; 3]) -> [i32; 8] {
+    let (ny, nz) = (g.res[1] as usize, g.res[2] as usize);
+    let base = (l[0] as usize * ny + l[1] as usize) * nz + l[2] as usize;
+    let bx = base + ny * nz;
+    [
+        g.links[base],
+        g.links[base + 1],
+        g.links[base + nz],
+        g.links[base + nz + 1],
+        g.links[bx],
+        g.links[bx + 1],
+        g.links[bx + nz],
+        g.links[bx + nz + 1],
+    ]
+}
+
+/// σ at trilinear weights w (unallocated corners count 0).
+pub fn sample_sigma(g: &GridRef, lk: &[i32; 8], w: &[f32; 8]) -> f32 {
+    let mut s = 0.0f32;
+    for i in 0..8 {
+        if lk[i] >= 0 {
+            s += w[i] * g.density[lk[i] as usize];
+        }
+    }
+    s
+}
+
+/// Pre-ReLU colour Σ_k Y_k·sh_k + 0.5 per channel.
+pub fn sample_color_raw(g: &GridRef, lk: &[i32; 8], w: &[f32; 8], y: &[f32; 9]) -> [f32; 3] {
+    let mut c = [0f32; 27];
+    for i in 0..8 {
+        if lk[i] < 0 {
+            continue;
+        }
+        let row = &g.sh[lk[i] as usize * 27..lk[i] as usize * 27 + 27];
+        for k in 0..27 {
+            c[k] += w[i] * row[k];
+        }
+    }
+    std::array::from_fn(|ch| {
+        let mut acc = 0.5f32;
+        for k in 0..9 {
+            acc += y[k] * c[ch * 9 + k];
+        }
+        acc
+    })
+}
+
+/// α = 1 − exp(−σΔ).
+pub fn sample_alpha(sigma: f32, delta: f32) -> f32 {
+    1.0 - (-sigma * delta).exp()
+}
+
+/// One shaded sample.
+#[derive(Clone, Copy, Debug)]
+pub struct Sample {
+    pub l: [i32; 3],
+    pub lk: [i32; 8],
+    pub w: [f32; 8],
+    pub sigma: f32,
+}
+
+/// Sample counters of one or more rays: shaded, evaluated at σ ≤ ε, skipped by occupancy.
+pub type Counts = [u32; 3];
+
+/// Advance from sample k to the next sample with σ > SIGMA_EPS (twin of `march_next`).
+pub fn march_next(g: &GridRef, m: &March, k: &mut u32, counts: &mut Counts) -> Option<Sample> {
+    loop {
+        let t = march_t(m, *k);
+        if !(t < m.t_end) {
+            return None;
+        }
+        let (l, p) = march_cell(m, t, g.res);
+        let next = march_skip(g, m, *k, l);
+        if next != *k {
+            if !(march_t(m, next) < m.t_end) {
+                counts[2] += ((m.t_end - t) / STEP).ceil() as u32;
+                return None;
+            }
+            counts[2] += next - *k;
+            *k = next;
+            continue;
+        }
+        *k += 1;
+        let lk = cell_links(g, l);
+        let w = trilerp_weights(p);
+        let sigma = sample_sigma(g, &lk, &w);
+        if sigma > SIGMA_EPS {
+            return Some(Sample { l, lk, w, sigma });
+        }
+        counts[1] += 1;
+    }
+}

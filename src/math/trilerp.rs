@@ -1,0 +1,53 @@
+//! Trilinear interpolation of a cell's 8 corner values, its analytic gradient and the trilinear
+//! weights: the twin of `glsl/lib/trilerp.glsl` (same FMA nesting: z, then y, then x).
+//! Corner order i = 4a + 2b + c (a = x bit, b = y bit, c = z bit), the paper's 000..111.
+
+/// `a + t·(b − a)` as one FMA.
+#[inline]
+pub fn lerp_fma(a: f32, b: f32, t: f32) -> f32 {
+    t.mul_add(b - a, a)
+}
+
+/// Trilinearly interpolated value at `p` ∈ [0,1]³.
+pub fn trilerp(c: &[f32; 8], p: [f32; 3]) -> f32 {
+    let m00 = lerp_fma(c[0], c[1], p[2]);
+    let m01 = lerp_fma(c[2], c[3], p[2]);
+    let m10 = lerp_fma(c[4], c[5], p[2]);
+    let m11 = lerp_fma(c[6], c[7], p[2]);
+    let n0 = lerp_fma(m00, m01, p[1]);
+    let n1 = lerp_fma(m10, m11, p[1]);
+    lerp_fma(n0, n1, p[0])
+}
+
+/// Value and gradient `∂/∂p` at `p`.
+pub fn trilerp_grad(c: &[f32; 8], p: [f32; 3]) -> (f32, [f32; 3]) {
+    let m00 = lerp_fma(c[0], c[1], p[2]);
+    let m01 = lerp_fma(c[2], c[3], p[2]);
+    let m10 = lerp_fma(c[4], c[5], p[2]);
+    let m11 = lerp_fma(c[6], c[7], p[2]);
+    let n0 = lerp_fma(m00, m01, p[1]);
+    let n1 = lerp_fma(m10, m11, p[1]);
+    let v = lerp_fma(n0, n1, p[0]);
+    let gx = n1 - n0;
+    let gy = lerp_fma(m01 - m00, m11 - m10, p[0]);
+    let e0 = lerp_fma(c[1] - c[0], c[3] - c[2], p[1]);
+    let e1 = lerp_fma(c[5] - c[4], c[7] - c[6], p[1]);
+    let gz = lerp_fma(e0, e1, p[0]);
+    (v, [gx, gy, gz])
+}
+
+/// The 8 weights `w_i(p)` with `trilerp(c, p) = Σ w_i c_i` (they sum to 1).
+pub fn trilerp_weights(p: [f32; 3]) -> [f32; 8] {
+    let q = [1.0 - p[0], 1.0 - p[1], 1.0 - p[2]];
+    let xy = [q[0] * q[1], q[0] * p[1], p[0] * q[1], p[0] * p[1]];
+    [
+        xy[0] * q[2],
+        xy[0] * p[2],
+        xy[1] * q[2],
+        xy[1] * p[2],
+        xy[2] * q[2],
+        xy[2] * p[2],
+        xy[3] * q[2],
+        xy[3] * p[2],
+    ]
+}

@@ -1,0 +1,85 @@
+//! Stage-1 (Plenoxels) compute backends: one interface, a Vulkan implementation running the GLSL
+//! kernels (one submission per training step) and a CPU implementation running their twins.
+
+mod cpu;
+mod vulkan;
+
+pub use cpu::CpuPlenoxels;
+pub use vulkan::VulkanPlenoxels;
+
+use crate::cpu::plenoxel::MarchParams;
+use crate::grid::Grid;
+use crate::math::plenoxel::Counts;
+use anyhow::Result;
+
+/// TV regularisation of one step: a contiguous chunk of vertex slots and the two weights.
+#[derive(Clone, Copy, Debug)]
+pub struct TvParams {
+    pub start: u32,
+    pub count: u32,
+    pub lambda_sigma: f32,
+    pub lambda_sh: f32,
+}
+
+/// Everything one training step needs besides the rays.
+#[derive(Clone, Copy, Debug)]
+pub struct StepParams {
+    pub lr_sigma: f32,
+    pub lr_sh: f32,
+    pub beta: f32,
+    pub eps: f32,
+    pub stop_thresh: f32,
+    pub tv: Option<TvParams>,
+}
+
+/// What a step reports back.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct StepStats {
+    /// Mean squared error over the batch's rays and channels.
+    pub mse: f64,
+    /// Samples shaded, evaluated at σ ≤ ε, skipped by the occupancy volume.
+    pub counts: Counts,
+    /// Device time of the step's kernels in ns (0 on the CPU backend).
+    pub device_ns: f64,
+}
+
+/// Output of `Plenoxels::gradients`.
+#[derive(Clone, Debug, Default)]
+pub struct Gradients {
+    pub ray_loss: Vec<f32>,
+    pub density: Vec<f32>,
+    pub sh: Vec<f32>,
+    pub counts: Counts,
+}
+
+/// A stage-1 compute backend holding the grid and its optimiser state.
+pub trait Plenoxels {
+    /// Backend name for logs ("vulkan" or "cpu").
+    fn name(&self) -> &'static str;
+    /// One optimisation step on a batch: `rays` 6 floats per ray, `targets` 3 per ray.
+    fn step(&mut self, rays: &[f32], targets: &[f32], p: &StepParams) -> Result<StepStats>;
+    /// The data-term gradients of a batch without updating anything: per-ray squared error,
+    /// dL/dσ and dL/dSH (L = mean squared error over rays and channels), and the sample counts.
+    fn gradients(&mut self, rays: &[f32], targets: &[f32], stop_thresh: f32) -> Result<Gradients>;
+    /// Render rays (white background): 3 floats per ray, and the sample counts.
+    fn render(&mut self, rays: &[f32], stop_thresh: f32) -> Result<(Vec<f32>, Counts)>;
+    /// Max over rays and samples of w·w_trilinear per allocated vertex (pruning weights).
+    fn max_weights(&mut self, rays: &[f32], stop_thresh: f32) -> Result<Vec<f32>>;
+    /// The current grid.
+    fn grid(&self) -> Result<Grid>;
+    /// RMSProp running averages (σ, SH).
+    fn optimizer_state(&self) -> Result<(Vec<f32>, Vec<f32>)>;
+    /// Replace grid and optimiser state (after resampling, or when resuming).
+    fn load(&mut self, grid: Grid, state: Option<(Vec<f32>, Vec<f32>)>) -> Result<()>;
+}
+
+/// Ray → grid mapping of a grid: grid = p·scale + offset.
+pub fn march_params(g: &Grid, stop_thresh: f32) -> MarchParams {
+    MarchParams {
+        scale: std::array::from_fn(|i| g.res[i] as f32 / (2.0 * g.radius[i])),
+        offset: std::array::from_fn(|i| {
+            (0.5 - g.center[i] / (2.0 * g.radius[i])) * g.res[i] as f32 - 0.5
+        }),
+        stop_thresh,
+    }
+}

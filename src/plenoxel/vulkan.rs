@@ -1,0 +1,334 @@
+//! The Vulkan stage-1 backend: grid, gradients and optimiser state live in device buffers; a
+//! training step is one batch (occupancy → train → TV → RMSProp) and one submission.
+
+use super::{march_params, Gradients, Plenoxels, StepParams, StepStats};
+use crate::gpu::{Batch, Gpu, GpuBuffer};
+use crate::grid::{Grid, SH_DIM};
+use crate::kernels;
+use crate::math::plenoxel::{occ_dims, Counts};
+use anyhow::{ensure, Result};
+
+/// Device-resident stage-1 state.
+pub struct VulkanPlenoxels {
+    gpu: Gpu,
+    meta: Grid,
+    links: GpuBuffer,
+    density: GpuBuffer,
+    sh: GpuBuffer,
+    occ: GpuBuffer,
+    grad_density: GpuBuffer,
+    grad_sh: GpuBuffer,
+    state_density: GpuBuffer,
+    state_sh: GpuBuffer,
+    stats: GpuBuffer,
+    rays: Option<(usize, GpuBuffer, GpuBuffer, GpuBuffer)>,
+}
+
+impl VulkanPlenoxels {
+    pub fn new(gpu: &Gpu, grid: Grid) -> Result<Self> {
+        let n = grid.allocated();
+        let nb = occ_dims(grid.res);
+        let b = VulkanPlenoxels {
+            gpu: gpu.clone(),
+            links: gpu.upload(&grid.links)?,
+            density: gpu.upload(&grid.density)?,
+            sh: gpu.upload(&grid.sh)?,
+            occ: gpu.zeros::<u32>((nb[0] * nb[1] * nb[2]) as usize)?,
+            grad_density: gpu.zeros::<f32>(n)?,
+            grad_sh: gpu.zeros::<f32>(n * SH_DIM)?,
+            state_density: gpu.zeros::<f32>(n)?,
+            state_sh: gpu.zeros::<f32>(n * SH_DIM)?,
+            stats: gpu.zeros::<u32>(3)?,
+            rays: None,
+            meta: Grid {
+                links: Vec::new(),
+                density: Vec::new(),
+                sh: Vec::new(),
+                ..grid
+            },
+        };
+        Ok(b)
+    }
+
+    fn allocated(&self) -> usize {
+        (self.density.size() / 4) as usize
+    }
+
+    /// Ray, target and per-ray output buffers holding at least `n` rays.
+    fn ray_buffers(&mut self, n: usize) -> Result<&(usize, GpuBuffer, GpuBuffer, GpuBuffer)> {
+        if self.rays.as_ref().is_none_or(|r| r.0 < n) {
+            let cap = n.next_power_of_two();
+            self.rays = Some((
+                cap,
+                self.gpu.zeros::<f32>(6 * cap)?,
+                self.gpu.zeros::<f32>(3 * cap)?,
+                self.gpu.zeros::<f32>(3 * cap)?,
+            ));
+        }
+        Ok(self.rays.as_ref().expect("just set"))
+    }
+
+    fn record_occupancy(&self, b: &mut Batch) -> Result<()> {
+        let nb = occ_dims(self.meta.res);
+        b.dispatch_1d(
+            &kernels::occupancy::INFO,
+            &kernels::occupancy::Push {
+                links: self.links.address(),
+                density: self.density.address(),
+                occ: self.occ.address(),
+                res: self.meta.res,
+                ..Default::default()
+            },
+            nb[0] * nb[1] * nb[2],
+        )
+    }
+
+    fn read_stats(&self) -> Result<Counts> {
+        let v: Vec<u32> = self.stats.download()?;
+        Ok([v[0], v[1], v[2]])
+    }
+
+    fn record_rmsprop(
+        &self,
+        b: &mut Batch,
+        param: &GpuBuffer,
+        grad: &GpuBuffer,
+        state: &GpuBuffer,
+        lr: f32,
+        p: &StepParams,
+    ) -> Result<()> {
+        let n = (param.size() / 4) as u32;
+        b.dispatch_1d(
+            &kernels::rmsprop::INFO,
+            &kernels::rmsprop::Push {
+                param: param.address(),
+                grad: grad.address(),
+                state: state.address(),
+                n,
+                lr,
+                beta: p.beta,
+                eps: p.eps,
+            },
+            n,
+        )
+    }
+    /// Upload a batch and record occupancy + the fused train kernel (gradients += data term).
+    fn record_train(&mut self, rays: &[f32], targets: &[f32], stop_thresh: f32) -> Result<Batch> {
+        let n = rays.len() / 6;
+        ensure!(
+            n > 0 && targets.len() == 3 * n,
+            "batch of {n} rays with {} targets",
+            targets.len() / 3
+        );
+        let mp = march_params(&self.meta, stop_thresh);
+        let r = self.ray_buffers(n)?;
+        r.1.write(rays)?;
+        r.2.write(targets)?;
+        let (ray_buf, target_buf, loss_buf) = (r.1.address(), r.2.address(), r.3.address());
+        let mut b = self.gpu.batch()?;
+        b.fill_zero(&self.stats);
+        self.record_occupancy(&mut b)?;
+        b.dispatch_1d(
+            &kernels::plenoxel_train::INFO,
+            &kernels::plenoxel_train::Push {
+                links: self.links.address(),
+                density: self.density.address(),
+                sh: self.sh.address(),
+                occ: self.occ.address(),
+                rays: ray_buf,
+                targets: target_buf,
+                grad_density: self.grad_density.address(),
+                grad_sh: self.grad_sh.address(),
+                ray_loss: loss_buf,
+                stats: self.stats.address(),
+                res: self.meta.res,
+                scale: mp.scale,
+                offset: mp.offset,
+                n_rays: n as u32,
+                stop_thresh,
+                grad_scale: 2.0 / (3.0 * n as f32),
+            },
+            n as u32,
+        )?;
+        Ok(b)
+    }
+
+    /// Per-ray squared error of the last training pass over `n` rays.
+    fn ray_loss(&self, n: usize) -> Result<Vec<f32>> {
+        let mut loss: Vec<f32> = self
+            .rays
+            .as_ref()
+            .expect("allocated by record_train")
+            .3
+            .download()?;
+        loss.truncate(n);
+        Ok(loss)
+    }
+}
+
+impl Plenoxels for VulkanPlenoxels {
+    fn name(&self) -> &'static str {
+        "vulkan"
+    }
+
+    fn step(&mut self, rays: &[f32], targets: &[f32], p: &StepParams) -> Result<StepStats> {
+        let n = rays.len() / 6;
+        let mut b = self.record_train(rays, targets, p.stop_thresh)?;
+        if let Some(t) = p.tv {
+            let span = t.count + self.meta.res[1] * self.meta.res[2];
+            for (data, grad, channels, lambda) in [
+                (&self.density, &self.grad_density, 1u32, t.lambda_sigma),
+                (&self.sh, &self.grad_sh, SH_DIM as u32, t.lambda_sh),
+            ] {
+                b.dispatch_1d(
+                    &kernels::tv::INFO,
+                    &kernels::tv::Push {
+                        links: self.links.address(),
+                        data: data.address(),
+                        grad: grad.address(),
+                        res: self.meta.res,
+                        start: t.start,
+                        count: t.count,
+                        channels,
+                        scale: lambda / t.count.max(1) as f32,
+                        ..Default::default()
+                    },
+                    span * channels,
+                )?;
+            }
+        }
+        self.record_rmsprop(
+            &mut b,
+            &self.density,
+            &self.grad_density,
+            &self.state_density,
+            p.lr_sigma,
+            p,
+        )?;
+        self.record_rmsprop(&mut b, &self.sh, &self.grad_sh, &self.state_sh, p.lr_sh, p)?;
+        let times = b.submit()?;
+        let loss = self.ray_loss(n)?;
+        let mse = loss.iter().map(|&l| l as f64).sum::<f64>() / (3 * n) as f64;
+        Ok(StepStats {
+            mse,
+            counts: self.read_stats()?,
+            device_ns: times.total_ns(),
+        })
+    }
+
+    fn gradients(&mut self, rays: &[f32], targets: &[f32], stop_thresh: f32) -> Result<Gradients> {
+        let n = rays.len() / 6;
+        self.record_train(rays, targets, stop_thresh)?.submit()?;
+        let g = Gradients {
+            ray_loss: self.ray_loss(n)?,
+            density: self.grad_density.download()?,
+            sh: self.grad_sh.download()?,
+            counts: self.read_stats()?,
+        };
+        let mut b = self.gpu.batch()?;
+        b.fill_zero(&self.grad_density);
+        b.fill_zero(&self.grad_sh);
+        b.submit()?;
+        Ok(g)
+    }
+
+    fn render(&mut self, rays: &[f32], stop_thresh: f32) -> Result<(Vec<f32>, Counts)> {
+        let n = rays.len() / 6;
+        let mp = march_params(&self.meta, stop_thresh);
+        let (ray_buf, out_buf) = {
+            let r = self.ray_buffers(n.max(1))?;
+            (r.1.address(), r.3.address())
+        };
+        self.rays.as_ref().expect("allocated").1.write(rays)?;
+        let mut b = self.gpu.batch()?;
+        b.fill_zero(&self.stats);
+        self.record_occupancy(&mut b)?;
+        b.dispatch_1d(
+            &kernels::plenoxel_fwd::INFO,
+            &kernels::plenoxel_fwd::Push {
+                links: self.links.address(),
+                density: self.density.address(),
+                sh: self.sh.address(),
+                occ: self.occ.address(),
+                rays: ray_buf,
+                rgb: out_buf,
+                stats: self.stats.address(),
+                res: self.meta.res,
+                scale: mp.scale,
+                offset: mp.offset,
+                n_rays: n as u32,
+                stop_thresh,
+                ..Default::default()
+            },
+            n as u32,
+        )?;
+        b.submit()?;
+        let mut rgb: Vec<f32> = self.rays.as_ref().expect("allocated").3.download()?;
+        rgb.truncate(3 * n);
+        Ok((rgb, self.read_stats()?))
+    }
+
+    fn max_weights(&mut self, rays: &[f32], stop_thresh: f32) -> Result<Vec<f32>> {
+        let n = rays.len() / 6;
+        let mp = march_params(&self.meta, stop_thresh);
+        let ray_buf = self.ray_buffers(n.max(1))?.1.address();
+        self.rays.as_ref().expect("allocated").1.write(rays)?;
+        let out = self.gpu.zeros::<u32>(self.allocated())?;
+        let mut b = self.gpu.batch()?;
+        self.record_occupancy(&mut b)?;
+        b.dispatch_1d(
+            &kernels::plenoxel_weights::INFO,
+            &kernels::plenoxel_weights::Push {
+                links: self.links.address(),
+                density: self.density.address(),
+                sh: self.sh.address(),
+                occ: self.occ.address(),
+                rays: ray_buf,
+                max_weight: out.address(),
+                res: self.meta.res,
+                scale: mp.scale,
+                offset: mp.offset,
+                n_rays: n as u32,
+                stop_thresh,
+                ..Default::default()
+            },
+            n as u32,
+        )?;
+        b.submit()?;
+        Ok(out
+            .download::<u32>()?
+            .into_iter()
+            .map(f32::from_bits)
+            .collect())
+    }
+
+    fn grid(&self) -> Result<Grid> {
+        Ok(Grid {
+            links: self.links.download()?,
+            density: self.density.download()?,
+            sh: self.sh.download()?,
+            ..self.meta.clone()
+        })
+    }
+
+    fn optimizer_state(&self) -> Result<(Vec<f32>, Vec<f32>)> {
+        Ok((self.state_density.download()?, self.state_sh.download()?))
+    }
+
+    fn load(&mut self, grid: Grid, state: Option<(Vec<f32>, Vec<f32>)>) -> Result<()> {
+        let n = grid.allocated();
+        if let Some((sd, ss)) = &state {
+            ensure!(
+                sd.len() == n && ss.len() == n * SH_DIM,
+                "optimizer state does not match the grid"
+            );
+        }
+        let fresh = VulkanPlenoxels::new(&self.gpu, grid)?;
+        if let Some((sd, ss)) = state {
+            fresh.state_density.write(&sd)?;
+            fresh.state_sh.write(&ss)?;
+        }
+        *self = fresh;
+        Ok(())
+    }
+}

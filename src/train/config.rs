@@ -1,0 +1,138 @@
+//! Stage-1 configuration and its presets: `paper` (the svox2 synthetic schedule) and `fast` (a
+//! schedule sized for a 2-core CPU running lavapipe). Both go through the same trainer.
+
+use super::schedule::DelayedExp;
+use serde::{Deserialize, Serialize};
+
+/// Everything that shapes a stage-1 run; stored in checkpoints and metrics.json.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Stage1Config {
+    pub preset: String,
+    /// Grid resolution at the start.
+    pub res: u32,
+    /// (step, new resolution): upsample with weight pruning at these steps.
+    pub upsample: Vec<(u32, u32)>,
+    pub iters: u32,
+    /// Rays per batch.
+    pub batch: u32,
+    pub lr_sigma: DelayedExp,
+    pub lr_sh: DelayedExp,
+    pub tv_sigma: f32,
+    pub tv_sh: f32,
+    /// Fraction of the vertex slots in each step's TV chunk.
+    pub tv_fraction: f32,
+    /// Switch TV off after the first upsample (the paper set-up).
+    pub tv_until_upsample: bool,
+    /// σ of the initial sphere-bounded grid.
+    pub init_sigma: f32,
+    /// Early ray termination: stop when transmittance falls below this.
+    pub stop_thresh: f32,
+    /// Keep vertices whose max training-ray weight reaches this when upsampling.
+    pub prune_weight: f32,
+    /// Transmittance stop of the pruning-weight render.
+    pub prune_stop_thresh: f32,
+    /// Use every k-th pixel (per axis) of the training views for the pruning-weight render.
+    pub prune_pixel_stride: u32,
+    pub beta: f32,
+    pub eps: f32,
+    /// Write a checkpoint every this many steps (and at the end).
+    pub checkpoint_every: u32,
+    pub seed: u64,
+}
+
+impl Stage1Config {
+    /// svox2's synthetic schedule: 256³ → 512³ at 38.4k steps, 128k steps of 5000 rays.
+    pub fn paper() -> Self {
+        Stage1Config {
+            preset: "paper".into(),
+            res: 256,
+            upsample: vec![(38_400, 512)],
+            iters: 128_000,
+            batch: 5000,
+            lr_sigma: DelayedExp {
+                init: 30.0,
+                last: 0.05,
+                max_steps: 250_000,
+                delay_steps: 15_000,
+                delay_mult: 0.01,
+            },
+            lr_sh: DelayedExp {
+                init: 1e-2,
+                last: 5e-6,
+                max_steps: 250_000,
+                delay_steps: 0,
+                delay_mult: 1.0,
+            },
+            tv_sigma: 1e-5,
+            tv_sh: 1e-3,
+            tv_fraction: 0.01,
+            tv_until_upsample: true,
+            init_sigma: 0.1,
+            stop_thresh: 1e-7,
+            prune_weight: 5e-4,
+            prune_stop_thresh: 0.2,
+            prune_pixel_stride: 1,
+            beta: 0.95,
+            eps: 1e-8,
+            checkpoint_every: 5000,
+            seed: 0,
+        }
+    }
+
+    /// A CPU-sized schedule: 64³ → 128³, a few thousand steps, faster decays.
+    pub fn fast() -> Self {
+        Stage1Config {
+            preset: "fast".into(),
+            res: 64,
+            upsample: vec![(1000, 128)],
+            iters: 3000,
+            batch: 4096,
+            lr_sigma: DelayedExp {
+                init: 30.0,
+                last: 0.5,
+                max_steps: 3000,
+                delay_steps: 300,
+                delay_mult: 0.01,
+            },
+            lr_sh: DelayedExp {
+                init: 1e-2,
+                last: 1e-3,
+                max_steps: 3000,
+                delay_steps: 0,
+                delay_mult: 1.0,
+            },
+            tv_sigma: 1e-5,
+            tv_sh: 1e-3,
+            tv_fraction: 0.01,
+            tv_until_upsample: false,
+            init_sigma: 0.1,
+            stop_thresh: 1e-4,
+            prune_weight: 5e-4,
+            prune_stop_thresh: 0.2,
+            prune_pixel_stride: 2,
+            beta: 0.95,
+            eps: 1e-8,
+            checkpoint_every: 500,
+            seed: 0,
+        }
+    }
+
+    /// A preset by name.
+    pub fn preset(name: &str) -> anyhow::Result<Self> {
+        match name {
+            "paper" => Ok(Self::paper()),
+            "fast" => Ok(Self::fast()),
+            other => anyhow::bail!("unknown preset {other:?} (expected fast or paper)"),
+        }
+    }
+
+    /// Resolution in force at step `t`.
+    pub fn res_at(&self, t: u32) -> u32 {
+        self.upsample
+            .iter()
+            .filter(|(s, _)| *s <= t)
+            .map(|(_, r)| *r)
+            .last()
+            .unwrap_or(self.res)
+    }
+}

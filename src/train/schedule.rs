@@ -1,0 +1,64 @@
+//! Learning-rate schedules: svox2's delayed exponential (method.md §2).
+
+use serde::{Deserialize, Serialize};
+
+/// lr(t) = D(t)·exp((1 − u)·ln lr₀ + u·ln lr₁), u = clip(t/T_max, 0, 1);
+/// D(t) = m + (1 − m)·sin(½π·clip(t/t_delay, 0, 1)) when t_delay > 0, else 1.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DelayedExp {
+    pub init: f32,
+    pub last: f32,
+    pub max_steps: u32,
+    pub delay_steps: u32,
+    pub delay_mult: f32,
+}
+
+impl DelayedExp {
+    /// A constant rate.
+    pub fn constant(lr: f32) -> Self {
+        DelayedExp {
+            init: lr,
+            last: lr,
+            max_steps: 1,
+            delay_steps: 0,
+            delay_mult: 1.0,
+        }
+    }
+
+    /// The rate at step `t`.
+    pub fn at(&self, t: u32) -> f32 {
+        let u = (t as f64 / self.max_steps.max(1) as f64).clamp(0.0, 1.0);
+        let base = ((1.0 - u) * (self.init as f64).ln() + u * (self.last as f64).ln()).exp();
+        let delay = if self.delay_steps > 0 {
+            let v = (t as f64 / self.delay_steps as f64).clamp(0.0, 1.0);
+            let m = self.delay_mult as f64;
+            m + (1.0 - m) * (0.5 * std::f64::consts::PI * v).sin()
+        } else {
+            1.0
+        };
+        (delay * base) as f32
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn delayed_exponential_endpoints() {
+        let s = DelayedExp {
+            init: 30.0,
+            last: 0.05,
+            max_steps: 250_000,
+            delay_steps: 15_000,
+            delay_mult: 0.01,
+        };
+        assert!((s.at(0) - 0.3).abs() < 1e-6, "delayed start = m·lr₀");
+        assert!((s.at(250_000) - 0.05).abs() < 1e-6);
+        assert!((s.at(1_000_000) - 0.05).abs() < 1e-6);
+        // Past the delay the rate is the plain exponential.
+        let plain = (30f64.ln() * 0.9 + 0.05f64.ln() * 0.1).exp();
+        assert!((s.at(25_000) as f64 - plain).abs() < 1e-4 * plain);
+        assert_eq!(DelayedExp::constant(1e-3).at(12345), 1e-3);
+    }
+}

@@ -1,0 +1,246 @@
+//! The stage-1 (Plenoxels) training loop: batches of training rays, one backend step each,
+//! upsampling with weight pruning on schedule, periodic atomic checkpoints (resumable), NaN/Inf
+//! detection, and the end-of-run test renders, PSNR and metrics.json.
+
+use super::config::Stage1Config;
+use super::progress::Progress;
+use super::render::{render_split, RenderedSplit};
+use crate::data::{Dataset, RaySampler, Split};
+use crate::grid::{checkpoint, dilate, upsample, Grid};
+use crate::plenoxel::{Plenoxels, StepParams, TvParams};
+use anyhow::{bail, Context, Result};
+use rand::{Rng, SeedableRng};
+use rand_pcg::Pcg64;
+use serde_json::json;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// File name of the stage-1 checkpoint inside a run directory.
+pub const CHECKPOINT: &str = "plenoxels.npz";
+
+/// Wall time per phase and throughput of a finished run.
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct Stage1Report {
+    pub steps: u32,
+    pub train_seconds: f64,
+    pub upsample_seconds: f64,
+    pub checkpoint_seconds: f64,
+    pub render_seconds: f64,
+    /// Training rays per second over the steps after the first 10 (warm-up: pipeline compiles).
+    pub train_rays_per_s: f64,
+    pub final_mse: f64,
+    pub test_psnr: f64,
+    /// Samples per training ray: shaded, evaluated at σ ≤ ε, skipped by the occupancy volume.
+    pub samples_per_ray: [f64; 3],
+    pub allocated_vertices: usize,
+    pub bytes_per_vertex: f64,
+}
+
+/// Seeded per step, so a resumed run draws the same batches as an uninterrupted one.
+fn step_rng(seed: u64, step: u32) -> Pcg64 {
+    Pcg64::seed_from_u64(seed ^ (step as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15))
+}
+
+/// Rays (6 floats each) of every `stride`-th pixel per axis of every view of a split.
+fn strided_rays(data: &Dataset, split: &Split, stride: u32) -> Vec<f32> {
+    let mut rays = Vec::new();
+    for f in &split.frames {
+        for y in (0..split.height()).step_by(stride as usize) {
+            for x in (0..split.width()).step_by(stride as usize) {
+                let (o, d) = f.camera.pixel_ray(x, y);
+                rays.extend_from_slice(&data.scene.to_scaled(o).to_array());
+                rays.extend_from_slice(&d.to_array());
+            }
+        }
+    }
+    rays
+}
+
+/// Prune by training-ray weight, dilate twice, resample to `new_res` (optimiser state resets).
+fn upsample_step(
+    backend: &mut dyn Plenoxels,
+    data: &Dataset,
+    cfg: &Stage1Config,
+    new_res: u32,
+) -> Result<()> {
+    let grid = backend.grid()?;
+    let rays = strided_rays(data, &data.train, cfg.prune_pixel_stride);
+    let mut weights = vec![0f32; grid.allocated()];
+    for chunk in rays.chunks(6 * 262_144) {
+        let w = backend.max_weights(chunk, cfg.prune_stop_thresh)?;
+        for (a, b) in weights.iter_mut().zip(w) {
+            *a = a.max(b);
+        }
+    }
+    let keep: Vec<bool> = grid
+        .links
+        .iter()
+        .map(|&l| l >= 0 && weights[l as usize] >= cfg.prune_weight)
+        .collect();
+    let keep = dilate(grid.res, &keep, 2);
+    let next = upsample(&grid, new_res, &keep);
+    if next.allocated() == 0 {
+        bail!(
+            "upsampling to {new_res}³ kept no vertex (no training-ray weight reached {}); \
+             the scene may be empty or training diverged",
+            cfg.prune_weight
+        );
+    }
+    backend.load(next, None)
+}
+
+/// Check grid and optimiser state for NaN/Inf; the error names the first offender.
+fn check_finite(grid: &Grid, step: u32) -> Result<()> {
+    for (name, v) in [("density", &grid.density), ("sh", &grid.sh)] {
+        if let Some(i) = v.iter().position(|x| !x.is_finite()) {
+            bail!("non-finite {name} value {} at vertex row {i} after step {step}", v[i]);
+        }
+    }
+    Ok(())
+}
+
+/// Write the checkpoint of `step` atomically.
+fn save(backend: &dyn Plenoxels, cfg: &Stage1Config, out: &Path, step: u32) -> Result<()> {
+    let grid = backend.grid()?;
+    check_finite(&grid, step)?;
+    let (sd, ss) = backend.optimizer_state()?;
+    let meta = json!({ "stage": "plenoxels", "step": step, "config": cfg });
+    checkpoint::save(
+        &out.join(CHECKPOINT),
+        &grid,
+        &[("rms_density".into(), sd), ("rms_sh".into(), ss)],
+        &meta,
+    )
+}
+
+/// Restore grid, optimiser state and step from a run's checkpoint; returns the next step.
+pub fn resume(backend: &mut dyn Plenoxels, path: &Path) -> Result<(u32, Stage1Config)> {
+    let ck = checkpoint::load(path)?;
+    if ck.meta["stage"] != "plenoxels" {
+        bail!("{} is not a stage-1 (plenoxels) checkpoint", path.display());
+    }
+    let step = ck.meta["step"]
+        .as_u64()
+        .with_context(|| format!("{}: metadata has no step", path.display()))? as u32;
+    let cfg: Stage1Config = serde_json::from_value(ck.meta["config"].clone())
+        .with_context(|| format!("{}: metadata has no valid config", path.display()))?;
+    let state = |name: &str| {
+        ck.optim
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, v)| v.clone())
+            .with_context(|| format!("{}: no optimiser array {name}", path.display()))
+    };
+    let state = (state("rms_density")?, state("rms_sh")?);
+    backend.load(ck.grid, Some(state))?;
+    Ok((step, cfg))
+}
+
+/// Train stage 1 from `start_step` (0, or the step after a resumed checkpoint) to `cfg.iters`,
+/// then render the test split into `out/test/` and write `out/metrics.json`.
+pub fn train(
+    backend: &mut dyn Plenoxels,
+    data: &Dataset,
+    cfg: &Stage1Config,
+    out: &Path,
+    start_step: u32,
+    show_progress: bool,
+) -> Result<(Stage1Report, RenderedSplit)> {
+    std::fs::create_dir_all(out).with_context(|| format!("creating run directory {}", out.display()))?;
+    let mut report = Stage1Report::default();
+    let mut progress = Progress::new(cfg.iters as u64, start_step as u64, show_progress);
+    let mut timed_rays = 0u64;
+    let mut timed_secs = 0.0f64;
+    let mut sample_totals = [0u64; 3];
+    let mut rays_total = 0u64;
+    let mut mse = f64::NAN;
+    for step in start_step..cfg.iters {
+        if let Some((_, r)) = cfg.upsample.iter().find(|(s, _)| *s == step) {
+            let t = Instant::now();
+            progress.message(&format!("upsampling to {r}³ (pruning by training-ray weight)"));
+            upsample_step(backend, data, cfg, *r)?;
+            report.upsample_seconds += t.elapsed().as_secs_f64();
+        }
+        let t = Instant::now();
+        let mut rng = step_rng(cfg.seed, step);
+        let batch = RaySampler::new(&data.train, rng.random()).next_batch(
+            &data.train,
+            &data.scene,
+            cfg.batch as usize,
+        );
+        let mut rays = Vec::with_capacity(6 * batch.len());
+        for (o, d) in batch.origins.iter().zip(&batch.dirs) {
+            rays.extend_from_slice(o);
+            rays.extend_from_slice(d);
+        }
+        let targets: Vec<f32> = batch.rgb.iter().flatten().copied().collect();
+        let tv_on = !(cfg.tv_until_upsample && cfg.upsample.iter().any(|(s, _)| *s <= step));
+        let slots = cfg.res_at(step).pow(3);
+        let count = ((slots as f32 * cfg.tv_fraction) as u32).max(1);
+        let tv = (tv_on && (cfg.tv_sigma > 0.0 || cfg.tv_sh > 0.0)).then(|| TvParams {
+            start: rng.random_range(0..=slots - count),
+            count,
+            lambda_sigma: cfg.tv_sigma,
+            lambda_sh: cfg.tv_sh,
+        });
+        let stats = backend.step(
+            &rays,
+            &targets,
+            &StepParams {
+                lr_sigma: cfg.lr_sigma.at(step),
+                lr_sh: cfg.lr_sh.at(step),
+                beta: cfg.beta,
+                eps: cfg.eps,
+                stop_thresh: cfg.stop_thresh,
+                tv,
+            },
+        )?;
+        if !stats.mse.is_finite() {
+            bail!(
+                "non-finite loss at step {step} ({}); the last good checkpoint is {}",
+                stats.mse,
+                out.join(CHECKPOINT).display()
+            );
+        }
+        mse = stats.mse;
+        let secs = t.elapsed().as_secs_f64();
+        if step >= start_step + 10 {
+            timed_rays += batch.len() as u64;
+            timed_secs += secs;
+        }
+        rays_total += batch.len() as u64;
+        for i in 0..3 {
+            sample_totals[i] += stats.counts[i] as u64;
+        }
+        let rays_per_s = (timed_secs > 0.0).then(|| timed_rays as f64 / timed_secs);
+        progress.step(step as u64 + 1, mse, rays_per_s);
+        report.train_seconds += secs;
+        if (step + 1) % cfg.checkpoint_every == 0 && step + 1 < cfg.iters {
+            let t = Instant::now();
+            save(backend, cfg, out, step + 1)?;
+            report.checkpoint_seconds += t.elapsed().as_secs_f64();
+        }
+    }
+    progress.finish();
+    let t = Instant::now();
+    save(backend, cfg, out, cfg.iters)?;
+    report.checkpoint_seconds += t.elapsed().as_secs_f64();
+
+    let t = Instant::now();
+    let rendered = render_split(backend, data, &data.test, cfg.stop_thresh, &out.join("test"))?;
+    report.render_seconds = t.elapsed().as_secs_f64();
+    let grid = backend.grid()?;
+    report.steps = cfg.iters;
+    report.train_rays_per_s = if timed_secs > 0.0 { timed_rays as f64 / timed_secs } else { 0.0 };
+    report.final_mse = mse;
+    report.test_psnr = rendered.mean_psnr;
+    report.samples_per_ray = sample_totals.map(|s| s as f64 / rays_total.max(1) as f64);
+    report.allocated_vertices = grid.allocated();
+    report.bytes_per_vertex = grid.bytes_per_vertex(true);
+    Ok((report, rendered))
+}
+
+/// The run directory's checkpoint path.
+pub fn checkpoint_path(run: &Path) -> PathBuf {
+    run.join(CHECKPOINT)
+}

@@ -1,0 +1,225 @@
+//! Stage-1 backward against central finite differences of an independent f64 forward renderer,
+//! on a scene kept away from the discontinuities (σ well above the ReLU threshold, colours well
+//! inside the ReLU, no early termination).
+
+use alphasurf::grid::{Grid, SH_DIM};
+use alphasurf::plenoxel::{CpuPlenoxels, Plenoxels};
+use rand::{Rng, SeedableRng};
+use rand_pcg::Pcg64;
+
+/// Independent f64 volume renderer of one ray (method.md §2), same sample lattice.
+fn render_f64(g: &Grid, density: &[f64], sh: &[f64], ro: [f64; 3], rd: [f64; 3]) -> [f64; 3] {
+    let n = g.res.map(|r| r as f64);
+    let scale: [f64; 3] = std::array::from_fn(|i| n[i] / (2.0 * g.radius[i] as f64));
+    let offset: [f64; 3] = std::array::from_fn(|i| {
+        (0.5 - g.center[i] as f64 / (2.0 * g.radius[i] as f64)) * n[i] - 0.5
+    });
+    let o: [f64; 3] = std::array::from_fn(|i| ro[i] * scale[i] + offset[i]);
+    let dg: [f64; 3] = std::array::from_fn(|i| rd[i] * scale[i]);
+    let len = dg.iter().map(|x| x * x).sum::<f64>().sqrt();
+    let d = dg.map(|x| x / len);
+    let delta = 0.5 / len;
+    let (mut t0, mut t1) = (0.0f64, f64::MAX);
+    for a in 0..3 {
+        let (lo, hi) = (-0.5, n[a] - 0.5);
+        if d[a] == 0.0 {
+            assert!(o[a] > lo && o[a] < hi);
+            continue;
+        }
+        let (ta, tb) = ((lo - o[a]) / d[a], (hi - o[a]) / d[a]);
+        t0 = t0.max(ta.min(tb));
+        t1 = t1.min(ta.max(tb));
+    }
+    let (x, y, z) = (rd[0], rd[1], rd[2]);
+    let basis = [
+        0.28209479,
+        -0.48860251 * y,
+        0.48860251 * z,
+        -0.48860251 * x,
+        1.09254843 * x * y,
+        -1.09254843 * y * z,
+        0.31539157 * (2.0 * z * z - x * x - y * y),
+        -1.09254843 * x * z,
+        0.54627422 * (x * x - y * y),
+    ];
+    let mut color = [0.0f64; 3];
+    let mut trans = 1.0f64;
+    let mut k = 0;
+    loop {
+        let t = t0 + 0.5 * k as f64;
+        if t >= t1 {
+            break;
+        }
+        k += 1;
+        let pos: [f64; 3] = std::array::from_fn(|i| (o[i] + d[i] * t).clamp(0.0, n[i] - 1.0));
+        let l: [u32; 3] = std::array::from_fn(|i| (pos[i].floor() as u32).min(g.res[i] - 2));
+        let p: [f64; 3] = std::array::from_fn(|i| pos[i] - l[i] as f64);
+        let mut sigma = 0.0;
+        let mut c = [0.0f64; SH_DIM];
+        for corner in 0..8u32 {
+            let bits = [corner >> 2 & 1, corner >> 1 & 1, corner & 1];
+            let w: f64 = (0..3)
+                .map(|i| if bits[i] == 1 { p[i] } else { 1.0 - p[i] })
+                .product();
+            let link = g.links[g.slot(l[0] + bits[0], l[1] + bits[1], l[2] + bits[2])];
+            if link < 0 {
+                continue;
+            }
+            sigma += w * density[link as usize];
+            for q in 0..SH_DIM {
+                c[q] += w * sh[link as usize * SH_DIM + q];
+            }
+        }
+        assert!(sigma > 1e-3, "test scene must stay away from the σ ReLU");
+        let alpha = 1.0 - (-sigma * delta).exp();
+        for ch in 0..3 {
+            let raw: f64 = 0.5 + (0..9).map(|q| basis[q] * c[ch * 9 + q]).sum::<f64>();
+            assert!(raw > 1e-3, "test scene must stay away from the colour ReLU");
+            color[ch] += trans * alpha * raw;
+        }
+        trans *= 1.0 - alpha;
+    }
+    color.map(|c| c + trans)
+}
+
+#[test]
+fn cpu_backward_matches_f64_finite_differences() {
+    let mut rng = Pcg64::seed_from_u64(11);
+    let mut g = Grid::sphere(6, [0.0; 3], [1.0; 3], 10.0, 0.0);
+    for v in g.density.iter_mut() {
+        *v = rng.random_range(1.0..4.0);
+    }
+    for v in g.sh.iter_mut() {
+        *v = rng.random_range(-0.1..0.1);
+    }
+    let n_rays = 12;
+    let mut rays = Vec::new();
+    for _ in 0..n_rays {
+        let o: [f32; 3] = [
+            rng.random_range(-0.5..0.5),
+            rng.random_range(-0.5..0.5),
+            -3.0,
+        ];
+        let at: [f32; 3] = [
+            rng.random_range(-0.3..0.3),
+            rng.random_range(-0.3..0.3),
+            0.0,
+        ];
+        let d: [f32; 3] = std::array::from_fn(|i| at[i] - o[i]);
+        let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+        rays.extend_from_slice(&o);
+        rays.extend(d.map(|x| x / l));
+    }
+    let targets: Vec<f32> = (0..3 * n_rays)
+        .map(|_| rng.random_range(0.2..0.8))
+        .collect();
+    // No early termination (stop threshold 0), so the loss is smooth in every parameter.
+    let grads = CpuPlenoxels::new(g.clone())
+        .gradients(&rays, &targets, 0.0)
+        .unwrap();
+
+    let loss = |density: &[f64], sh: &[f64]| -> f64 {
+        let mut total = 0.0;
+        for r in 0..n_rays {
+            let ro = std::array::from_fn(|i| rays[6 * r + i] as f64);
+            let rd = std::array::from_fn(|i| rays[6 * r + 3 + i] as f64);
+            let c = render_f64(&g, density, sh, ro, rd);
+            for ch in 0..3 {
+                total += (c[ch] - targets[3 * r + ch] as f64).powi(2);
+            }
+        }
+        total / (3 * n_rays) as f64
+    };
+    let d64: Vec<f64> = g.density.iter().map(|&x| x as f64).collect();
+    let s64: Vec<f64> = g.sh.iter().map(|&x| x as f64).collect();
+    let h = 1e-6;
+    let fd = |which: usize, i: usize| -> f64 {
+        let (mut dp, mut sp) = (d64.clone(), s64.clone());
+        let (mut dm, mut sm) = (d64.clone(), s64.clone());
+        if which == 0 {
+            dp[i] += h;
+            dm[i] -= h;
+        } else {
+            sp[i] += h;
+            sm[i] -= h;
+        }
+        (loss(&dp, &sp) - loss(&dm, &sm)) / (2.0 * h)
+    };
+    for (which, analytic) in [(0usize, &grads.density), (1, &grads.sh)] {
+        let numeric: Vec<f64> = (0..analytic.len()).map(|i| fd(which, i)).collect();
+        let num: f64 = analytic
+            .iter()
+            .zip(&numeric)
+            .map(|(&a, &n)| (a as f64 - n).powi(2))
+            .sum();
+        let den: f64 = numeric.iter().map(|n| n * n).sum();
+        let rel = (num / den).sqrt();
+        let name = ["dL/dσ", "dL/dSH"][which];
+        assert!(den > 0.0, "{name}: no gradient at all");
+        assert!(
+            rel <= 1e-3,
+            "{name}: relative L2 {rel:.3e} against f64 finite differences"
+        );
+    }
+}
+
+#[test]
+fn tv_gradient_matches_finite_differences() {
+    use alphasurf::cpu::{tv, TvChunk};
+    let mut rng = Pcg64::seed_from_u64(5);
+    let mut g = Grid::sphere(7, [0.0; 3], [1.0; 3], 1.2, 0.0);
+    for v in g.sh.iter_mut() {
+        *v = rng.random_range(-1.0..1.0);
+    }
+    let c = TvChunk {
+        res: g.res,
+        start: 60,
+        count: 150,
+        channels: SH_DIM as u32,
+        scale: 0.01,
+    };
+    let mut grad = vec![0.0f32; g.sh.len()];
+    tv(&g.links, &g.sh, &mut grad, &c);
+    // Independent f64 TV: forward differences, missing neighbour = equal, mean-free scale.
+    let loss = |data: &[f64]| -> f64 {
+        let mut total = 0.0;
+        for s in c.start as usize..(c.start + c.count) as usize {
+            let l = g.links[s];
+            if l < 0 {
+                continue;
+            }
+            let v = g.vertex(s);
+            for ch in 0..SH_DIM {
+                let v0 = data[l as usize * SH_DIM + ch];
+                let mut sq = 1e-9;
+                for a in 0..3 {
+                    let mut nv = v;
+                    nv[a] += 1;
+                    if nv[a] >= g.res[a] {
+                        continue;
+                    }
+                    let nl = g.links[g.slot(nv[0], nv[1], nv[2])];
+                    if nl >= 0 {
+                        sq += (data[nl as usize * SH_DIM + ch] - v0).powi(2);
+                    }
+                }
+                total += sq.sqrt();
+            }
+        }
+        total * c.scale as f64
+    };
+    let base: Vec<f64> = g.sh.iter().map(|&x| x as f64).collect();
+    let h = 1e-6;
+    let (mut num, mut den) = (0.0f64, 0.0f64);
+    for i in 0..g.sh.len() {
+        let mut p = base.clone();
+        p[i] += h;
+        let mut m = base.clone();
+        m[i] -= h;
+        let fd = (loss(&p) - loss(&m)) / (2.0 * h);
+        num += (grad[i] as f64 - fd).powi(2);
+        den += fd * fd;
+    }
+    let rel = (num / den).sqrt();
+    assert!(den > 0.0 && rel < 1e-3, "TV gradient relative L2 {rel:.3e}");
+}
