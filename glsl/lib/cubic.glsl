@@ -21,7 +21,7 @@ const float CUBIC_CRIT_SNAP = 2.3841858e-7; // 2^-22: f at a critical point with
 const float CUBIC_MAX_L = 1e12;
 
 // Up to three crossings: s[i] for i < n, bit i of `rising` set when f - tau goes from < 0 to > 0.
-struct Crossings {
+struct CubicCrossings {
     uint n;
     vec3 s;
     uint rising;
@@ -175,7 +175,7 @@ struct CubicWalk {
     float ps;      // sign of the last nonzero boundary value (0 before any)
     bool pending;  // a zero boundary value awaits the next nonzero value
     float zpos;    // first zero of the pending run
-    Crossings res; // crossings so far; those in `need` still hold a placeholder s
+    CubicCrossings res; // crossings so far; those in `need` still hold a placeholder s
     uint need;     // bit k: crossing k comes from bracket (count of lower bits set)
     uint nb;       // brackets recorded
     vec4 br0;      // brackets as (lo, hi, f(lo), f(hi))
@@ -184,7 +184,7 @@ struct CubicWalk {
 };
 
 // Append (s, rising) to x (no dynamic vector indexing: it would spill on SIMD-per-lane drivers).
-void cubic_push(inout Crossings x, float s, bool rising) {
+void cubic_push(inout CubicCrossings x, float s, bool rising) {
     uint i = x.n;
     if (i == 0u) x.s.x = s; else if (i == 1u) x.s.y = s; else x.s.z = s;
     if (rising) x.rising |= 1u << i;
@@ -213,11 +213,11 @@ void cubic_piece(inout CubicWalk w, float b0, float v0, float b1, float v1) {
     w.ps = sg;
 }
 
-// Cluster merge and the half-open clamp s < L. Crossings alternate in direction, so a cluster
+// Cluster merge and the half-open clamp s < L. CubicCrossings alternate in direction, so a cluster
 // (neighbours closer than eps) changes the sign iff its count is odd; it then keeps its first.
 // With at most three crossings: 0 is kept unless it opens an even cluster {0,1}; 1 only when
 // alone; 2 unless it joins 1.
-Crossings cubic_merge(Crossings x, float L) {
+CubicCrossings cubic_merge(CubicCrossings x, float L) {
     float eps = CUBIC_MERGE_EPS * max(L, 1.0);
     precise float g01 = x.s.y - x.s.x;
     precise float g12 = x.s.z - x.s.y;
@@ -227,7 +227,7 @@ Crossings cubic_merge(Crossings x, float L) {
     bool keep1 = x.n >= 2u && !gap01 && !gap12;
     bool keep2 = x.n >= 3u && !gap12;
     float below = uintBitsToFloat(floatBitsToUint(L) - 1u);
-    Crossings o;
+    CubicCrossings o;
     o.n = 0u;
     o.s = vec3(0.0);
     o.rising = 0u;
@@ -237,10 +237,10 @@ Crossings cubic_merge(Crossings x, float L) {
     return o;
 }
 
-// Crossings of C3 s^3 + C2 s^2 + C1 s + C0' on [0, L); c123 = (C1, C2, C3); ends = (f(0), f(L)).
-Crossings cubic_solve(vec3 c123, vec2 ends, float L) {
+// CubicCrossings of C3 s^3 + C2 s^2 + C1 s + C0' on [0, L); c123 = (C1, C2, C3); ends = (f(0), f(L)).
+CubicCrossings cubic_solve(vec3 c123, vec2 ends, float L) {
     float c0 = ends.x;
-    Crossings none;
+    CubicCrossings none;
     none.n = 0u;
     none.s = vec3(0.0);
     none.rising = 0u;
