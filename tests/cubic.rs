@@ -218,11 +218,14 @@ fn triple_root_gives_one_net_rising_crossing() {
     let l = 3f32.sqrt();
     let x = crossings(&corners, [0.0; 3], d, l, 0.0);
     let root = 0.5 / dv;
-    assert!(x.n % 2 == 1, "a triple root changes the sign: {x:?}");
-    for k in 0..x.n as usize {
-        assert_eq!(x.rising[k], k % 2 == 0, "alternating, first rising: {x:?}");
-        assert!((x.s[k] - root).abs() < 1e-2, "near the triple root: {x:?}");
-    }
+    // The critical values sit within rounding of 0 and are snapped: one rising crossing at the
+    // first critical point (a triple root in f32 is only located to ~(ε)^(1/3) voxel).
+    let (s, rising) = one(&x);
+    assert!(rising, "{x:?}");
+    assert!(
+        (s - root).abs() < 1e-2,
+        "near the triple root {root}: {x:?}"
+    );
     let o = oracle_crossings(&corners, [0.0; 3], d, l, 0.0);
     assert!(o.len() % 2 == 1 && o[0].rising, "oracle: {o:?}");
 }
@@ -246,6 +249,25 @@ fn root_exactly_at_entry_is_owned_by_the_entering_cell() {
     // A level that only touches the entry and stays on one side after it is still a crossing at 0
     // (the cell cannot see the previous cell's side), in the direction f leaves.
     assert_eq!(oracle_crossings(&corners, o, d, 0.5, tau).len(), 1);
+}
+
+#[test]
+fn root_exactly_at_exit_belongs_to_the_next_cell() {
+    // Axis-aligned ray along +x leaving through the edge x = 1, y = 0 whose corners are at the
+    // level (τ = 0): f(L) = 0 exactly, so the crossing is not this cell's.
+    let corners = [-0.5f32, -0.25, 0.5, 0.75, 0.0, 0.0, 0.5, 0.25];
+    let (o, d) = ([0.0, 0.0, 0.3], [1.0, 0.0, 0.0]);
+    let [f0, fl] = level_ends(&corners, o, d, 1.0, 0.0);
+    assert!(f0 < 0.0);
+    assert_eq!(fl, 0.0);
+    let x = crossings(&corners, o, d, 1.0, 0.0);
+    assert_eq!(x.n, 0, "{x:?}");
+    assert!(oracle_crossings(&corners, o, d, 1.0, 0.0).is_empty());
+    // Raising the level a little moves the crossing inside: then it is this cell's.
+    let x = crossings(&corners, o, d, 1.0, -0.01);
+    let (s, rising) = one(&x);
+    // δ = −0.425·(1 − x) along y = 0, z = 0.3.
+    assert!(rising && (s - (1.0 - 0.01 / 0.425)).abs() < 1e-5, "{x:?}");
 }
 
 #[test]
