@@ -69,7 +69,7 @@ pub fn run_gpu(
     Ok((out, ns))
 }
 
-/// Compare two crossing sets: Ok(()) when counts and directions agree (then s is compared).
+/// Whether two crossing sets agree in count and directions (then their s are compared).
 fn same_shape(a: &Crossings, b: &Crossings) -> bool {
     a.n == b.n && (0..a.n as usize).all(|k| a.rising[k] == b.rising[k])
 }

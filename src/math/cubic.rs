@@ -260,8 +260,9 @@ impl Walk {
 
 /// Sign-change crossings of f(s) = C3s³ + C2s² + C1s + C0′ on [0, L) (method.md §5), with
 /// `ends` = [f(0), f(L)] from [`level_ends`]: [0, L] is split at the real roots of f′ into
-/// monotone pieces (values at the critical points by Horner); a piece whose end values have opposite signs
-/// holds one root, found by [`refine_root`] on the original cubic. A zero at s = 0 is a crossing in
+/// monotone pieces (values at the critical points by Horner, snapped to 0 within rounding); a
+/// piece whose end values have opposite signs holds one root, found by [`refine_root`] on the
+/// original cubic. A zero at s = 0 is a crossing in
 /// the direction f takes after it (the entering cell owns it); a zero at s = L is left to the next
 /// cell; crossings closer than `MERGE_EPS·max(1, L)` are clustered and a cluster keeps its first
 /// crossing only when it changes the sign (odd count). Never NaN/Inf: coefficients that are
