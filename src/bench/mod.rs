@@ -1,3 +1,4 @@
 //! Benchmarks behind `alphasurf bench …`: they print figures (and a JSON line with --json).
 
+pub mod cubic;
 pub mod dda;

@@ -3,6 +3,7 @@
 
 use crate::gpu::Gpu;
 
+pub mod cubic_solve;
 pub mod dda_walk;
 pub mod fill_pattern;
 pub mod plenoxel;
@@ -44,6 +45,7 @@ pub const CHECKS: &[(&str, CheckFn)] = &[
     ("optim_args", plenoxel::check_optim_args),
     ("rmsprop_sparse", plenoxel::check_rmsprop),
     ("tv", plenoxel::check_tv),
+    ("cubic_solve", cubic_solve::check),
 ];
 
 /// Elementwise |a − b| ≤ abs + rel·|b| test with running maxima.

@@ -61,6 +61,8 @@ pub struct BenchArgs {
 pub enum BenchKind {
     /// DDA cell walk: cells visited per second for random rays through a 256³ grid, and parity.
     Dda(crate::bench::dda::DdaBenchArgs),
+    /// Cell cubic solver stress suite against an f64 oracle and the paper's Vieta baseline.
+    Cubic(crate::bench::cubic::CubicBenchArgs),
 }
 
 /// Entry point of the binary: parse, run, map errors to a message and exit code 1.
@@ -130,6 +132,10 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             BenchKind::Dda(args) => {
                 let gpu = gpu_used.insert(open_gpu(&cli)?);
                 exit(crate::bench::dda::run(gpu, args)?)
+            }
+            BenchKind::Cubic(args) => {
+                let gpu = gpu_used.insert(open_gpu(&cli)?);
+                exit(crate::bench::cubic::run(gpu, args)?)
             }
         },
     };

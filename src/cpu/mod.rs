@@ -2,6 +2,7 @@
 //! formulation, run with rayon. They validate the GPU kernels and serve as the CPU backend.
 
 pub mod atomic;
+pub mod cubic_solve;
 mod dda_walk;
 mod fill_pattern;
 pub mod plenoxel;
