@@ -130,9 +130,7 @@ impl Stage1Config {
     pub fn res_at(&self, t: u32) -> u32 {
         self.upsample
             .iter()
-            .filter(|(s, _)| *s <= t)
-            .map(|(_, r)| *r)
-            .last()
-            .unwrap_or(self.res)
+            .rfind(|(s, _)| *s <= t)
+            .map_or(self.res, |(_, r)| *r)
     }
 }
