@@ -13,6 +13,8 @@
 #include "common.glsl"
 layout(local_size_x = 64) in;
 
+const uint REPLAY = 32u;
+
 layout(push_constant, scalar) uniform Push {
     I32Buf links;
     F32Buf density;
@@ -72,7 +74,11 @@ void main() {
     float T = 1.0;
     uint k = 0u;
     Sample s;
+    uint replay[REPLAY];
+    uint shaded = 0u;
     while (hit && march_next(m, k, counts, s)) {
+        if (shaded < REPLAY) replay[shaded] = k - 1u;
+        shaded++;
         counts.x++;
         float alpha = sample_alpha(s.sigma, m.delta);
         vec3 c = max(sample_color_raw(s.lk, s.w, y), vec3(0.0));
@@ -103,7 +109,13 @@ void main() {
     vec3 accum = vec3(0.0);
     T = 1.0;
     k = 0u;
-    while (hit && march_next(m, k, counts, s)) {
+    for (uint j = 0u; hit; j++) {
+        if (shaded <= REPLAY) {
+            if (j == shaded) break;
+            sample_at(m, replay[j], s);
+        } else if (!march_next(m, k, counts, s)) {
+            break;
+        }
         float alpha = sample_alpha(s.sigma, m.delta);
         vec3 raw = sample_color_raw(s.lk, s.w, y);
         vec3 c = max(raw, vec3(0.0));

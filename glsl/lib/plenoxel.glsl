@@ -153,6 +153,20 @@ struct Sample {
     float sigma;
 };
 
+// Corner links, trilinear weights and σ of a sample in cell l at local position p.
+void sample_fill(vec3 p, inout Sample s) {
+    cell_links(s.l, s.lk);
+    trilerp_weights(p, s.w);
+    s.sigma = sample_sigma(s.lk, s.w);
+}
+
+// The sample of index k (a replay of one that march_next returned).
+void sample_at(March m, uint k, out Sample s) {
+    vec3 p;
+    march_cell(m, march_t(m, k), pc.res, s.l, p);
+    sample_fill(p, s);
+}
+
 // Advances the march from sample index k to the next sample with σ > SIGMA_EPS and returns true,
 // or returns false at the box exit. counts.y += samples evaluated with σ ≤ SIGMA_EPS, counts.z +=
 // samples jumped over by the occupancy volume.
@@ -173,9 +187,7 @@ bool march_next(March m, inout uint k, inout uvec3 counts, out Sample s) {
             continue;
         }
         k++;
-        cell_links(s.l, s.lk);
-        trilerp_weights(p, s.w);
-        s.sigma = sample_sigma(s.lk, s.w);
+        sample_fill(p, s);
         if (s.sigma > SIGMA_EPS) return true;
         counts.y++;
     }

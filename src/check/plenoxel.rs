@@ -18,7 +18,8 @@ use rand_pcg::Pcg64;
 /// Stop threshold of the checks: the trainer's default.
 const STOP: f32 = 1e-4;
 
-/// A random test grid (res³, blob of density plus noise, some vertices unallocated, random SH),
+/// A random test grid (res³, blob of density plus noise, a slab of thin fog, some vertices
+/// unallocated, random SH),
 /// `n_rays` rays (6 floats) and targets (3 floats).
 pub fn test_scene(seed: u64, res: u32, n_rays: usize) -> (Grid, Vec<f32>, Vec<f32>) {
     let mut rng = Pcg64::seed_from_u64(seed);
@@ -33,7 +34,12 @@ pub fn test_scene(seed: u64, res: u32, n_rays: usize) -> (Grid, Vec<f32>, Vec<f3
         let w = g.grid_to_world(v.map(|x| x as f32));
         let r2: f32 = (0..3).map(|i| (w[i] - c[i]).powi(2)).sum();
         // A blob of radius ~0.35; outside it σ ≤ 0 so whole occupancy blocks are empty.
-        g.density[l as usize] = 60.0 * (-r2 / 0.06).exp() - 3.0 + rng.random_range(-1.0..1.0);
+        g.density[l as usize] = if w[2] < -0.3 {
+            // Thin fog: rays through it shade more samples than plenoxel_train replays.
+            0.5 + rng.random_range(-0.1..0.1)
+        } else {
+            60.0 * (-r2 / 0.06).exp() - 3.0 + rng.random_range(-1.0..1.0)
+        };
         for k in 0..SH_DIM {
             g.sh[l as usize * SH_DIM + k] = rng.random_range(-0.4..0.4);
         }
@@ -67,6 +73,19 @@ pub fn test_scene(seed: u64, res: u32, n_rays: usize) -> (Grid, Vec<f32>, Vec<f3
             }
             // Missing the box entirely.
             2 => ([3.0, 3.0, 3.0], unit([1.0, 0.2, 0.1])),
+            // Along the fog slab.
+            3 => (
+                [
+                    -2.0,
+                    rng.random_range(-0.5..0.5),
+                    rng.random_range(-0.8..-0.4),
+                ],
+                unit([
+                    1.0,
+                    rng.random_range(-0.2..0.2),
+                    rng.random_range(-0.05..0.05),
+                ]),
+            ),
             // From a sphere of radius 2.5 at random points of the box.
             _ => {
                 let o = unit(std::array::from_fn(|_| rng.random_range(-1.0..1.0))).map(|x| 2.5 * x);

@@ -5,12 +5,15 @@
 use super::atomic;
 use super::step::touch;
 use crate::math::plenoxel::{
-    march_init, march_next, occ_dims, sample_alpha, sample_color_raw, Counts, GridRef, OCC_SHIFT,
-    SIGMA_EPS,
+    march_init, march_next, occ_dims, sample_alpha, sample_at, sample_color_raw, Counts, GridRef,
+    OCC_SHIFT, SIGMA_EPS,
 };
 use crate::math::sh::sh_basis;
 use rayon::prelude::*;
 use std::sync::atomic::AtomicU32;
+
+/// Shaded samples whose indices the forward pass records for the backward replay (plenoxel_train).
+const REPLAY: usize = 32;
 
 /// How rays map into the grid and when they stop.
 #[derive(Clone, Copy, Debug)]
@@ -123,9 +126,15 @@ pub fn train(
             let mut counts = [0u32; 3];
             let mut color = [0f32; 3];
             let mut t_acc = 1.0f32;
+            let mut replay = [0u32; REPLAY];
+            let mut shaded = 0usize;
             if let Some(m) = &m {
                 let mut k = 0;
                 while let Some(s) = march_next(g, m, &mut k, &mut counts) {
+                    if shaded < REPLAY {
+                        replay[shaded] = k - 1;
+                    }
+                    shaded += 1;
                     counts[0] += 1;
                     let alpha = sample_alpha(s.sigma, m.delta);
                     let c = sample_color_raw(g, &s.lk, &s.w, &y).map(|x| x.max(0.0));
@@ -152,7 +161,18 @@ pub fn train(
             let mut t_acc = 1.0f32;
             let mut k = 0;
             let mut ignored = [0u32; 3];
-            while let Some(s) = march_next(g, m, &mut k, &mut ignored) {
+            for j in 0.. {
+                let s = if shaded <= REPLAY {
+                    if j == shaded {
+                        break;
+                    }
+                    sample_at(g, m, replay[j])
+                } else {
+                    match march_next(g, m, &mut k, &mut ignored) {
+                        Some(s) => s,
+                        None => break,
+                    }
+                };
                 let alpha = sample_alpha(s.sigma, m.delta);
                 let raw = sample_color_raw(g, &s.lk, &s.w, &y);
                 let c = raw.map(|x| x.max(0.0));

@@ -170,6 +170,20 @@ pub struct Sample {
 /// Sample counters of one or more rays: shaded, evaluated at σ ≤ ε, skipped by occupancy.
 pub type Counts = [u32; 3];
 
+/// Corner links, trilinear weights and σ of the sample in cell l at local position p.
+fn sample_fill(g: &GridRef, l: [i32; 3], p: [f32; 3]) -> Sample {
+    let lk = cell_links(g, l);
+    let w = trilerp_weights(p);
+    let sigma = sample_sigma(g, &lk, &w);
+    Sample { l, lk, w, sigma }
+}
+
+/// The sample of index k (a replay of one that `march_next` returned).
+pub fn sample_at(g: &GridRef, m: &March, k: u32) -> Sample {
+    let (l, p) = march_cell(m, march_t(m, k), g.res);
+    sample_fill(g, l, p)
+}
+
 /// Advance from sample k to the next sample with σ > SIGMA_EPS (twin of `march_next`).
 pub fn march_next(g: &GridRef, m: &March, k: &mut u32, counts: &mut Counts) -> Option<Sample> {
     loop {
@@ -189,11 +203,9 @@ pub fn march_next(g: &GridRef, m: &March, k: &mut u32, counts: &mut Counts) -> O
             continue;
         }
         *k += 1;
-        let lk = cell_links(g, l);
-        let w = trilerp_weights(p);
-        let sigma = sample_sigma(g, &lk, &w);
-        if sigma > SIGMA_EPS {
-            return Some(Sample { l, lk, w, sigma });
+        let s = sample_fill(g, l, p);
+        if s.sigma > SIGMA_EPS {
+            return Some(s);
         }
         counts[1] += 1;
     }
