@@ -45,6 +45,10 @@ pub enum Command {
     Train(train::TrainArgs),
     /// Render a split of a trained run to PNG and print per-view and mean PSNR.
     Render(train::RenderArgs),
+    /// Export a run's stage-1 grid as an svox2 `ckpt.npz`.
+    Export(train::ExportArgs),
+    /// Import an svox2 `ckpt.npz` as a stage-1 run directory (then `render`, or stage 2).
+    Import(train::ImportArgs),
     /// Benchmarks: figures on the Vulkan device and the CPU twin, parity verdict, `--json` line.
     Bench(BenchArgs),
 }
@@ -126,6 +130,14 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
                 train::Backend::Cpu => None,
             };
             train::run_render(a, gpu)?;
+            ExitCode::SUCCESS
+        }
+        Command::Export(a) => {
+            train::run_export(a)?;
+            ExitCode::SUCCESS
+        }
+        Command::Import(a) => {
+            train::run_import(a)?;
             ExitCode::SUCCESS
         }
         Command::Bench(b) => match &b.kind {

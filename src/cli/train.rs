@@ -270,3 +270,74 @@ pub fn run_render(args: &RenderArgs, gpu: Option<&Gpu>) -> Result<()> {
     );
     Ok(())
 }
+
+/// Arguments of `export`.
+#[derive(clap::Args, Debug)]
+pub struct ExportArgs {
+    /// A run directory written by `train` (or `import`).
+    #[arg(long)]
+    pub run: PathBuf,
+    /// Output svox2 checkpoint (`ckpt.npz`: links, density_data, sh_data, radius, center).
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+/// Arguments of `import`.
+#[derive(clap::Args, Debug)]
+pub struct ImportArgs {
+    /// An svox2 `ckpt.npz` (float16 or float32 data).
+    #[arg(long)]
+    pub ckpt: PathBuf,
+    /// The dataset it was trained on (recorded for `render`).
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Run directory to create.
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+/// Run `export`: the run's stage-1 grid as an svox2 checkpoint (written atomically).
+pub fn run_export(args: &ExportArgs) -> Result<()> {
+    let ck = crate::grid::checkpoint::load(&stage1::checkpoint_path(&args.run))?;
+    crate::grid::npz::save_svox2(&ck.grid, &args.out)?;
+    println!(
+        "exported {}³ grid ({} vertices) to {}",
+        ck.grid.res[0],
+        ck.grid.allocated(),
+        args.out.display()
+    );
+    Ok(())
+}
+
+/// Run `import`: an svox2 checkpoint becomes a finished stage-1 run directory.
+pub fn run_import(args: &ImportArgs) -> Result<()> {
+    let grid = crate::grid::npz::load_svox2(&args.ckpt)?;
+    let mut cfg = Stage1Config::paper();
+    cfg.preset = "imported".into();
+    cfg.res = grid.res[0];
+    cfg.upsample.clear();
+    cfg.iters = 0;
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating run directory {}", args.out.display()))?;
+    let meta = json!({ "stage": "plenoxels", "step": 0, "config": cfg, "imported_from": args.ckpt });
+    let n = grid.allocated();
+    crate::grid::checkpoint::save(
+        &stage1::checkpoint_path(&args.out),
+        &grid,
+        &[
+            ("rms_density".into(), vec![0.0; n]),
+            ("rms_sh".into(), vec![0.0; n * crate::grid::SH_DIM]),
+        ],
+        &meta,
+    )?;
+    let run_info = json!({ "data": std::fs::canonicalize(&args.data)
+        .with_context(|| format!("dataset {}", args.data.display()))?, "downscale": 1 });
+    write_json(&args.out.join("run.json"), &run_info)?;
+    println!(
+        "imported {} ({:?} grid, {n} vertices) into {}",
+        args.ckpt.display(),
+        grid.res,
+        args.out.display()
+    );
+    Ok(())
+}
