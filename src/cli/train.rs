@@ -58,6 +58,9 @@ pub struct TrainArgs {
     /// Box-downscale the images by this factor.
     #[arg(long, default_value_t = 1)]
     pub downscale: u32,
+    /// Write a checkpoint every N steps (overrides the preset).
+    #[arg(long)]
+    pub checkpoint_every: Option<u32>,
     /// Continue from the run directory's checkpoint (its configuration wins).
     #[arg(long)]
     pub resume: bool,
@@ -117,6 +120,12 @@ fn config(args: &TrainArgs) -> Result<Stage1Config> {
         cfg.upsample
             .iter_mut()
             .for_each(|u| u.1 = (u.1 as u64 * r as u64 / last as u64) as u32);
+    }
+    if let Some(c) = args.checkpoint_every {
+        if c == 0 {
+            bail!("--checkpoint-every must be at least 1");
+        }
+        cfg.checkpoint_every = c;
     }
     if let Some(b) = args.batch {
         if b == 0 {
@@ -319,7 +328,8 @@ pub fn run_import(args: &ImportArgs) -> Result<()> {
     cfg.iters = 0;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating run directory {}", args.out.display()))?;
-    let meta = json!({ "stage": "plenoxels", "step": 0, "config": cfg, "imported_from": args.ckpt });
+    let meta =
+        json!({ "stage": "plenoxels", "step": 0, "config": cfg, "imported_from": args.ckpt });
     let n = grid.allocated();
     crate::grid::checkpoint::save(
         &stage1::checkpoint_path(&args.out),
