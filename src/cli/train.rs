@@ -225,6 +225,7 @@ pub fn run_train(args: &TrainArgs, gpu: Option<&Gpu>) -> Result<()> {
         "test_psnr": report.test_psnr,
         "test_psnr_per_view": rendered.psnr,
         "samples_per_ray": { "shaded": report.samples_per_ray[0], "empty": report.samples_per_ray[1], "skipped": report.samples_per_ray[2] },
+        "atomic_adds_per_ray": report.samples_per_ray[3],
         "allocated_vertices": report.allocated_vertices,
         "bytes_per_vertex": report.bytes_per_vertex,
         "peak_rss_bytes": peak_rss_bytes(),

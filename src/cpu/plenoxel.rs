@@ -31,7 +31,7 @@ fn ray(rays: &[f32], r: usize) -> ([f32; 3], [f32; 3]) {
 }
 
 fn sum_counts(a: Counts, b: Counts) -> Counts {
-    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
+    std::array::from_fn(|i| a[i] + b[i])
 }
 
 /// Twin of `occupancy.comp`.
@@ -70,7 +70,7 @@ pub fn render(g: &GridRef, rays: &[f32], mp: &MarchParams) -> (Vec<f32>, Counts)
             let (ro, rd) = ray(rays, r);
             let mut color = [0f32; 3];
             let mut t_acc = 1.0f32;
-            let mut counts = [0u32; 3];
+            let mut counts = [0u32; 4];
             if let Some(m) = march_init(ro, rd, mp.scale, mp.offset, g.res) {
                 let y = sh_basis(rd);
                 let mut k = 0;
@@ -91,7 +91,7 @@ pub fn render(g: &GridRef, rays: &[f32], mp: &MarchParams) -> (Vec<f32>, Counts)
             (color.map(|c| c + t_acc), counts)
         })
         .collect();
-    let counts = out.iter().map(|o| o.1).fold([0; 3], sum_counts);
+    let counts = out.iter().map(|o| o.1).fold([0; 4], sum_counts);
     (out.into_iter().flat_map(|o| o.0).collect(), counts)
 }
 
@@ -123,7 +123,7 @@ pub fn train(
             let target = [targets[3 * r], targets[3 * r + 1], targets[3 * r + 2]];
             let y = sh_basis(rd);
             let m = march_init(ro, rd, mp.scale, mp.offset, g.res);
-            let mut counts = [0u32; 3];
+            let mut counts = [0u32; 4];
             let mut color = [0f32; 3];
             let mut t_acc = 1.0f32;
             let mut replay = [0u32; REPLAY];
@@ -160,7 +160,7 @@ pub fn train(
             let mut accum = [0f32; 3];
             let mut t_acc = 1.0f32;
             let mut k = 0;
-            let mut ignored = [0u32; 3];
+            let mut ignored = [0u32; 4];
             for j in 0.. {
                 let s = if shaded <= REPLAY {
                     if j == shaded {
@@ -186,17 +186,17 @@ pub fn train(
                 let d_sigma = m.delta * (dsig3[0] + dsig3[1] + dsig3[2]);
                 let d_color: [f32; 3] =
                     std::array::from_fn(|ch| if raw[ch] > 0.0 { g_c[ch] * wt } else { 0.0 });
-                scatter.add(s.l, &s.lk, &s.w, d_sigma, d_color);
+                counts[3] += scatter.add(s.l, &s.lk, &s.w, d_sigma, d_color);
                 t_acc = tn;
                 if t_acc < mp.stop_thresh {
                     break;
                 }
             }
-            scatter.flush();
+            counts[3] += scatter.flush();
             (loss, counts)
         })
         .collect();
-    let counts = out.iter().map(|o| o.1).fold([0; 3], sum_counts);
+    let counts = out.iter().map(|o| o.1).fold([0; 4], sum_counts);
     (out.into_iter().map(|o| o.0).collect(), counts)
 }
 
@@ -238,9 +238,10 @@ impl<'a> CellAccumulator<'a> {
         w: &[f32; 8],
         d_sigma: f32,
         d_color: [f32; 3],
-    ) {
+    ) -> u32 {
+        let mut adds = 0;
         if cell != self.cell {
-            self.flush();
+            adds = self.flush();
             self.cell = cell;
             self.lk = *lk;
         }
@@ -250,9 +251,12 @@ impl<'a> CellAccumulator<'a> {
                 self.color[i][ch] += w[i] * d_color[ch];
             }
         }
+        adds
     }
 
-    fn flush(&mut self) {
+    /// Add the accumulators to the gradients; returns the number of atomic adds.
+    fn flush(&mut self) -> u32 {
+        let mut adds = 0;
         for i in 0..8 {
             let l = self.lk[i];
             let (gsig, gcol) = (self.sigma[i], self.color[i]);
@@ -264,6 +268,7 @@ impl<'a> CellAccumulator<'a> {
             touch(self.touched, l as usize);
             if gsig != 0.0 {
                 atomic::add(&self.gd[l as usize], gsig);
+                adds += 1;
             }
             for ch in 0..3 {
                 if gcol[ch] == 0.0 {
@@ -273,8 +278,10 @@ impl<'a> CellAccumulator<'a> {
                 for k in 0..9 {
                     atomic::add(&self.gs[row + k], gcol[ch] * self.y[k]);
                 }
+                adds += 9;
             }
         }
+        adds
     }
 }
 
@@ -289,7 +296,7 @@ pub fn max_weights(g: &GridRef, rays: &[f32], mp: &MarchParams) -> Vec<f32> {
         };
         let mut t_acc = 1.0f32;
         let mut k = 0;
-        let mut counts = [0u32; 3];
+        let mut counts = [0u32; 4];
         while let Some(s) = march_next(g, &m, &mut k, &mut counts) {
             let alpha = sample_alpha(s.sigma, m.delta);
             let wt = t_acc * alpha;
