@@ -67,6 +67,9 @@ pub enum BenchKind {
     Dda(crate::bench::dda::DdaBenchArgs),
     /// Cell cubic solver stress suite against an f64 oracle and the paper's Vieta baseline.
     Cubic(crate::bench::cubic::CubicBenchArgs),
+    /// Stage-1 training throughput on both backends (rays/s, device time per kernel, samples
+    /// per ray shaded/empty/skipped, atomic adds per ray) from the same partly trained grid.
+    Plenoxels(crate::bench::plenoxels::PlenoxelsBenchArgs),
 }
 
 /// Entry point of the binary: parse, run, map errors to a message and exit code 1.
@@ -141,6 +144,11 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             ExitCode::SUCCESS
         }
         Command::Bench(b) => match &b.kind {
+            BenchKind::Plenoxels(args) => {
+                let gpu = gpu_used.insert(open_gpu(&cli)?);
+                crate::bench::plenoxels::run(gpu, args)?;
+                ExitCode::SUCCESS
+            }
             BenchKind::Dda(args) => {
                 let gpu = gpu_used.insert(open_gpu(&cli)?);
                 exit(crate::bench::dda::run(gpu, args)?)

@@ -200,6 +200,11 @@ pub fn run_train(args: &TrainArgs, gpu: Option<&Gpu>) -> Result<()> {
     for (i, p) in rendered.psnr.iter().enumerate() {
         println!("test view {i:>3}: PSNR {p:.2} dB");
     }
+    let spr = report.samples_per_ray;
+    println!(
+        "per training ray: {:.1} samples shaded, {:.1} evaluated empty, {:.1} skipped by the occupancy volume; {:.1} gradient atomic adds",
+        spr[0], spr[1], spr[2], spr[3]
+    );
     println!(
         "stage 1 done: test PSNR {:.2} dB, {:.0} training rays/s, {} vertices ({:.0} B each with optimiser state), {:.1} s",
         report.test_psnr,
