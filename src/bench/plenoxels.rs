@@ -91,12 +91,18 @@ fn time_steps(
 /// Run the benchmark and print it.
 pub fn run(gpu: &Gpu, args: &PlenoxelsBenchArgs) -> Result<()> {
     ensure!((16..=512).contains(&args.res), "--res must be in 16..=512");
-    ensure!(args.steps >= 1 && args.batch >= 1, "--steps and --batch must be at least 1");
+    ensure!(
+        args.steps >= 1 && args.batch >= 1,
+        "--steps and --batch must be at least 1"
+    );
     let dir = tempfile_dir()?;
     let scene_dir = dir.join("scene");
     let mut opts = GenerateOptions::new(SceneKind::Thin);
     (opts.res, opts.views, opts.spp_side, opts.gt_spacing) = (128, 40, 2, 0.05);
-    eprintln!("bench plenoxels: generating the thin scene (128², 40 views) in {}", dir.display());
+    eprintln!(
+        "bench plenoxels: generating the thin scene (128², 40 views) in {}",
+        dir.display()
+    );
     generate(&scene_dir, &opts)?;
     let data = Dataset::load(&scene_dir, &LoadOptions::default())?;
 
@@ -107,7 +113,10 @@ pub fn run(gpu: &Gpu, args: &PlenoxelsBenchArgs) -> Result<()> {
     cfg.checkpoint_every = u32::MAX;
     let grid0 = crate::grid::Grid::sphere(cfg.res, [0.0; 3], [1.0; 3], 1.0, cfg.init_sigma);
     let mut vk = VulkanPlenoxels::new(gpu, grid0)?;
-    eprintln!("bench plenoxels: {} warm-up steps to reach a {}³ grid", cfg.iters, args.res);
+    eprintln!(
+        "bench plenoxels: {} warm-up steps to reach a {}³ grid",
+        cfg.iters, args.res
+    );
     stage1::train(&mut vk, &data, &cfg, &dir.join("warm"), 0, false)?;
     let grid = vk.grid()?;
 
@@ -119,7 +128,10 @@ pub fn run(gpu: &Gpu, args: &PlenoxelsBenchArgs) -> Result<()> {
         .totals()
         .into_iter()
         .map(|(k, n, ns)| {
-            let prev = before.iter().find(|b| b.0 == k).map_or((0, 0.0), |b| (b.1, b.2));
+            let prev = before
+                .iter()
+                .find(|b| b.0 == k)
+                .map_or((0, 0.0), |b| (b.1, b.2));
             (k.to_string(), n - prev.0, ns - prev.1)
         })
         .filter(|(_, n, _)| *n > 0)

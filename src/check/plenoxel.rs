@@ -431,7 +431,7 @@ pub fn check_tv(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
                     scale: 0.7,
                     ..Default::default()
                 },
-                (count + g.res[1] * g.res[2]) * channels,
+                count + g.res[1] * g.res[2],
             )?;
             let got: Vec<f32> = gb.download()?;
             for (i, (&a, &b)) in got.iter().zip(&want).enumerate() {

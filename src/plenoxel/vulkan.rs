@@ -213,7 +213,7 @@ impl Plenoxels for VulkanPlenoxels {
                         scale: lambda / t.count.max(1) as f32,
                         ..Default::default()
                     },
-                    span * channels,
+                    span,
                 )?;
             }
         }
