@@ -6,7 +6,7 @@ use super::atomic;
 use super::step::touch;
 use crate::math::plenoxel::{
     march_init, march_next, occ_dims, sample_alpha, sample_at, sample_color_raw, Counts, GridRef,
-    OCC_SHIFT, SIGMA_EPS,
+    March, OCC_SHIFT, SIGMA_EPS,
 };
 use crate::math::sh::sh_basis;
 use rayon::prelude::*;
@@ -61,6 +61,39 @@ pub fn occupancy(links: &[i32], density: &[f32], res: [u32; 3]) -> Vec<u32> {
         .collect()
 }
 
+/// The forward march of one ray (both kernels' first loop): accumulated colour (background not
+/// yet added) and final transmittance; the indices of the first REPLAY shaded samples go to
+/// `replay`, and the number of shaded samples to `counts[0]`.
+fn forward(
+    g: &GridRef,
+    m: &March,
+    y: &[f32; 9],
+    stop_thresh: f32,
+    counts: &mut Counts,
+    replay: &mut [u32; REPLAY],
+) -> ([f32; 3], f32) {
+    let mut color = [0f32; 3];
+    let mut t_acc = 1.0f32;
+    let mut k = 0;
+    while let Some(s) = march_next(g, m, &mut k, counts) {
+        if (counts[0] as usize) < REPLAY {
+            replay[counts[0] as usize] = k - 1;
+        }
+        counts[0] += 1;
+        let alpha = sample_alpha(s.sigma, m.delta);
+        let c = sample_color_raw(g, &s.lk, &s.w, y).map(|x| x.max(0.0));
+        let wt = t_acc * alpha;
+        for ch in 0..3 {
+            color[ch] += wt * c[ch];
+        }
+        t_acc *= 1.0 - alpha;
+        if t_acc < stop_thresh {
+            break;
+        }
+    }
+    (color, t_acc)
+}
+
 /// Twin of `plenoxel_fwd.comp`: rgb per ray (white background) and the summed sample counts.
 pub fn render(g: &GridRef, rays: &[f32], mp: &MarchParams) -> (Vec<f32>, Counts) {
     let n = rays.len() / 6;
@@ -68,26 +101,18 @@ pub fn render(g: &GridRef, rays: &[f32], mp: &MarchParams) -> (Vec<f32>, Counts)
         .into_par_iter()
         .map(|r| {
             let (ro, rd) = ray(rays, r);
-            let mut color = [0f32; 3];
-            let mut t_acc = 1.0f32;
             let mut counts = [0u32; 4];
-            if let Some(m) = march_init(ro, rd, mp.scale, mp.offset, g.res) {
-                let y = sh_basis(rd);
-                let mut k = 0;
-                while let Some(s) = march_next(g, &m, &mut k, &mut counts) {
-                    counts[0] += 1;
-                    let alpha = sample_alpha(s.sigma, m.delta);
-                    let c = sample_color_raw(g, &s.lk, &s.w, &y).map(|x| x.max(0.0));
-                    let wt = t_acc * alpha;
-                    for ch in 0..3 {
-                        color[ch] += wt * c[ch];
-                    }
-                    t_acc *= 1.0 - alpha;
-                    if t_acc < mp.stop_thresh {
-                        break;
-                    }
-                }
-            }
+            let (color, t_acc) = match march_init(ro, rd, mp.scale, mp.offset, g.res) {
+                Some(m) => forward(
+                    g,
+                    &m,
+                    &sh_basis(rd),
+                    mp.stop_thresh,
+                    &mut counts,
+                    &mut [0; REPLAY],
+                ),
+                None => ([0.0; 3], 1.0),
+            };
             (color.map(|c| c + t_acc), counts)
         })
         .collect();
@@ -124,30 +149,12 @@ pub fn train(
             let y = sh_basis(rd);
             let m = march_init(ro, rd, mp.scale, mp.offset, g.res);
             let mut counts = [0u32; 4];
-            let mut color = [0f32; 3];
-            let mut t_acc = 1.0f32;
             let mut replay = [0u32; REPLAY];
-            let mut shaded = 0usize;
-            if let Some(m) = &m {
-                let mut k = 0;
-                while let Some(s) = march_next(g, m, &mut k, &mut counts) {
-                    if shaded < REPLAY {
-                        replay[shaded] = k - 1;
-                    }
-                    shaded += 1;
-                    counts[0] += 1;
-                    let alpha = sample_alpha(s.sigma, m.delta);
-                    let c = sample_color_raw(g, &s.lk, &s.w, &y).map(|x| x.max(0.0));
-                    let wt = t_acc * alpha;
-                    for ch in 0..3 {
-                        color[ch] += wt * c[ch];
-                    }
-                    t_acc *= 1.0 - alpha;
-                    if t_acc < mp.stop_thresh {
-                        break;
-                    }
-                }
-            }
+            let (color, t_acc) = match &m {
+                Some(m) => forward(g, m, &y, mp.stop_thresh, &mut counts, &mut replay),
+                None => ([0.0; 3], 1.0),
+            };
+            let shaded = counts[0] as usize;
             let total: [f32; 3] = color.map(|c| c + t_acc);
             let diff: [f32; 3] = std::array::from_fn(|ch| total[ch] - target[ch]);
             let loss = diff[0] * diff[0] + diff[1] * diff[1] + diff[2] * diff[2];
