@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # The main job on a fresh machine: set up, build, generate the built-in thin scene (if not there
-# yet) and train stage 1 (Plenoxels, preset fast) on the Vulkan device (lavapipe without a GPU).
+# yet) and train stage 1 (Plenoxels, preset fast): on a GPU through Vulkan, on a machine without one
+# with the CPU twins (faster than lavapipe there; `--backend vulkan` forces lavapipe).
 # Writes runs/thin/ (dataset) and runs/thin-plenoxels/ (checkpoint, test renders, metrics.json).
 # Extra arguments go to `alphasurf train` (e.g. --backend cpu, --iters 500).
 set -euo pipefail

@@ -92,6 +92,33 @@ fn open_gpu(cli: &Cli) -> anyhow::Result<Gpu> {
     })
 }
 
+/// The Vulkan device a training/rendering command should use, or `None` for the CPU backend.
+/// `auto` takes the Vulkan device unless it is a CPU implementation (lavapipe) or missing.
+fn backend_gpu<'a>(
+    kind: train::Backend,
+    cli: &Cli,
+    slot: &'a mut Option<Gpu>,
+) -> anyhow::Result<Option<&'a Gpu>> {
+    match kind {
+        train::Backend::Cpu => Ok(None),
+        train::Backend::Vulkan => Ok(Some(slot.insert(open_gpu(cli)?))),
+        train::Backend::Auto => match open_gpu(cli) {
+            Ok(gpu) if gpu.info().kind != "cpu" => Ok(Some(slot.insert(gpu))),
+            Ok(gpu) => {
+                eprintln!(
+                    "backend auto: {} is a CPU implementation of Vulkan; using the CPU backend,                      which is faster there (--backend vulkan forces the device)",
+                    gpu.info().name
+                );
+                Ok(None)
+            }
+            Err(e) => {
+                eprintln!("backend auto: no usable Vulkan device ({e:#}); using the CPU backend");
+                Ok(None)
+            }
+        },
+    }
+}
+
 fn exit(pass: bool) -> ExitCode {
     if pass {
         ExitCode::SUCCESS
@@ -120,18 +147,12 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             ExitCode::SUCCESS
         }
         Command::Train(a) => {
-            let gpu = match a.backend {
-                train::Backend::Vulkan => Some(&*gpu_used.insert(open_gpu(&cli)?)),
-                train::Backend::Cpu => None,
-            };
+            let gpu = backend_gpu(a.backend, &cli, &mut gpu_used)?;
             train::run_train(a, gpu)?;
             ExitCode::SUCCESS
         }
         Command::Render(a) => {
-            let gpu = match a.backend {
-                train::Backend::Vulkan => Some(&*gpu_used.insert(open_gpu(&cli)?)),
-                train::Backend::Cpu => None,
-            };
+            let gpu = backend_gpu(a.backend, &cli, &mut gpu_used)?;
             train::run_render(a, gpu)?;
             ExitCode::SUCCESS
         }
