@@ -1,0 +1,76 @@
+//! Nearest-neighbour queries over 3-D point clouds through `kiddo`'s immutable k-d tree (f64
+//! coordinates, exact queries, squared Euclidean metric), parallel over query points with rayon.
+
+use anyhow::{ensure, Result};
+use kiddo::{ImmutableKdTree, SquaredEuclidean};
+use rayon::prelude::*;
+
+/// A k-d tree over a point cloud; items are indices into the cloud it was built from.
+pub struct PointIndex {
+    tree: ImmutableKdTree<f64, 3>,
+    len: usize,
+}
+
+/// f32 point → f64 tree coordinates (exact).
+pub fn to_f64(p: &[f32; 3]) -> [f64; 3] {
+    [p[0] as f64, p[1] as f64, p[2] as f64]
+}
+
+impl PointIndex {
+    /// Build the tree over `points` (non-empty, at most u32::MAX points).
+    pub fn new(points: &[[f32; 3]]) -> Result<PointIndex> {
+        ensure!(!points.is_empty(), "k-d tree over an empty point cloud");
+        ensure!(
+            points.len() < u32::MAX as usize,
+            "{} points: the k-d tree indexes at most 2^32 − 1",
+            points.len()
+        );
+        let coords: Vec<[f64; 3]> = points.par_iter().map(to_f64).collect();
+        let tree = ImmutableKdTree::new_from_slice(&coords)
+            .map_err(|e| anyhow::anyhow!("building the k-d tree: {e:?}"))?;
+        Ok(PointIndex {
+            tree,
+            len: points.len(),
+        })
+    }
+
+    /// Number of indexed points.
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    /// Whether the index is empty (never: construction refuses empty clouds).
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// Euclidean distance from `q` to its nearest indexed point, and that point's index.
+    pub fn nearest(&self, q: &[f64; 3]) -> (f64, usize) {
+        let r = self
+            .tree
+            .query(q)
+            .nearest_one::<SquaredEuclidean<f64>>()
+            .execute();
+        (r.distance.sqrt(), r.item as usize)
+    }
+
+    /// Nearest-neighbour distance of every query point (rayon).
+    pub fn nearest_distances(&self, queries: &[[f32; 3]]) -> Vec<f64> {
+        queries
+            .par_iter()
+            .map(|q| self.nearest(&to_f64(q)).0)
+            .collect()
+    }
+
+    /// Indices of the indexed points within distance `radius` of `q` (inclusive), unsorted.
+    pub fn within(&self, q: &[f64; 3], radius: f64) -> Vec<usize> {
+        self.tree
+            .query(q)
+            .within::<SquaredEuclidean<f64>>(radius * radius)
+            .unsorted()
+            .execute()
+            .into_iter()
+            .map(|r| r.item as usize)
+            .collect()
+    }
+}
