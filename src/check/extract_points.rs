@@ -62,15 +62,14 @@ fn near_tangent(p: &ExtractPoint, rays_per_axis: u32) -> bool {
     p.grad[axis].abs() < 1e-3 * SCALE
 }
 
+/// A point whose slot is on one side only, and that side ("gpu" or "cpu").
+pub type OnlyOne = (ExtractPoint, &'static str);
+/// The (gpu, cpu) points of one slot.
+pub type Pair = (ExtractPoint, ExtractPoint);
+
 /// Merge two key-sorted lists: the points whose slot is on one side only ("gpu"/"cpu"), and the
 /// (gpu, cpu) pairs sharing a slot.
-pub fn match_slots(
-    g: &[ExtractPoint],
-    c: &[ExtractPoint],
-) -> (
-    Vec<(ExtractPoint, &'static str)>,
-    Vec<(ExtractPoint, ExtractPoint)>,
-) {
+pub fn match_slots(g: &[ExtractPoint], c: &[ExtractPoint]) -> (Vec<OnlyOne>, Vec<Pair>) {
     let (mut only, mut pairs) = (Vec::new(), Vec::new());
     let (mut i, mut j) = (0, 0);
     while i < g.len() || j < c.len() {

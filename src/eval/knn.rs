@@ -74,3 +74,32 @@ impl PointIndex {
             .collect()
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+
+    #[test]
+    fn within_and_nearest_match_brute_force() {
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(5);
+        let pts: Vec<[f32; 3]> = (0..1200)
+            .map(|_| [0; 3].map(|_| rng.random_range(-0.5f32..0.5)))
+            .collect();
+        let index = PointIndex::new(&pts).unwrap();
+        let d = |a: &[f32; 3], b: &[f32; 3]| {
+            (0..3)
+                .map(|k| (a[k] as f64 - b[k] as f64).powi(2))
+                .sum::<f64>()
+                .sqrt()
+        };
+        for q in pts.iter().take(200) {
+            let mut got = index.within(&to_f64(q), 0.05);
+            got.sort_unstable();
+            let want: Vec<usize> = (0..pts.len()).filter(|&j| d(q, &pts[j]) <= 0.05).collect();
+            assert_eq!(got, want);
+            let (dist, i) = index.nearest(&to_f64(&q.map(|x| x + 0.001)));
+            assert!((dist - d(&q.map(|x| x + 0.001), &pts[i])).abs() < 1e-12);
+        }
+    }
+}
