@@ -149,7 +149,7 @@ pub fn run(args: &ExtractArgs, gpu: Option<&Gpu>) -> Result<()> {
         ExtractBackend::Cpu => "cpu".to_string(),
     };
     println!(
-        "{} rays/axis², {}: {} raw points in {:.1} ms (kernel {:.1} ms device)",
+        "{}² rays per axis and cell on {}: {} raw points in {:.1} ms (kernel {:.1} ms device)",
         args.rays_per_axis, backend_name, kstats.points, kstats.wall_ms, kstats.device_ms
     );
     for (l, n) in args.levels.iter().zip(&tstats.per_level) {
