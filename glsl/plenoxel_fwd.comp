@@ -34,7 +34,7 @@ void main() {
     vec3 rd = vec3(pc.rays.v[6u * r + 3u], pc.rays.v[6u * r + 4u], pc.rays.v[6u * r + 5u]);
     vec3 color = vec3(0.0);
     float T = 1.0;
-    uvec3 counts = uvec3(0);
+    uvec4 counts = uvec4(0);
     March m;
     if (march_init(ro, rd, pc.scale, pc.offset, pc.res, m)) {
         float y[9];

@@ -39,7 +39,8 @@ layout(push_constant, scalar) uniform Push {
 
 // Adds the per-cell accumulators to the gradients (one atomic per corner and parameter) and
 // clears them.
-void flush(float y[9], int cur_lk[8], inout float acc_sigma[8], inout vec3 acc_color[8]) {
+uint flush(float y[9], int cur_lk[8], inout float acc_sigma[8], inout vec3 acc_color[8]) {
+    uint adds = 0u;
     for (int i = 0; i < 8; i++) {
         int l = cur_lk[i];
         float gs = acc_sigma[i];
@@ -48,13 +49,18 @@ void flush(float y[9], int cur_lk[8], inout float acc_sigma[8], inout vec3 acc_c
         acc_color[i] = vec3(0.0);
         if (l < 0 || (gs == 0.0 && gc == vec3(0.0))) continue;
         touch(uint(l));
-        if (gs != 0.0) atomicAdd(pc.grad_density.v[l], gs);
+        if (gs != 0.0) {
+            atomicAdd(pc.grad_density.v[l], gs);
+            adds++;
+        }
         for (int ch = 0; ch < 3; ch++) {
             if (gc[ch] == 0.0) continue;
             uint row = uint(l) * 27u + uint(ch) * 9u;
             for (int k = 0; k < 9; k++) atomicAdd(pc.grad_sh.v[row + uint(k)], gc[ch] * y[k]);
+            adds += 9u;
         }
     }
+    return adds;
 }
 
 void main() {
@@ -67,7 +73,7 @@ void main() {
     sh_basis(rd, y);
     March m;
     bool hit = march_init(ro, rd, pc.scale, pc.offset, pc.res, m);
-    uvec3 counts = uvec3(0);
+    uvec4 counts = uvec4(0);
 
     // Forward: C and the final transmittance.
     vec3 color = vec3(0.0);
@@ -92,7 +98,6 @@ void main() {
     precise vec3 total = color + vec3(T);
     precise vec3 diff = total - target;
     pc.ray_loss.v[r] = dot(diff, diff);
-    add_stats(counts);
     vec3 g_c = pc.grad_scale * diff;
 
     // Backward: the same samples again, in the same order.
@@ -109,11 +114,12 @@ void main() {
     vec3 accum = vec3(0.0);
     T = 1.0;
     k = 0u;
+    uvec4 replayed = uvec4(0); // the forward pass already counted these samples
     for (uint j = 0u; hit; j++) {
         if (shaded <= REPLAY) {
             if (j == shaded) break;
             sample_at(m, replay[j], s);
-        } else if (!march_next(m, k, counts, s)) {
+        } else if (!march_next(m, k, replayed, s)) {
             break;
         }
         float alpha = sample_alpha(s.sigma, m.delta);
@@ -129,7 +135,7 @@ void main() {
         precise float d_sigma = m.delta * (dsig3.x + dsig3.y + dsig3.z);
         vec3 d_color = mix(vec3(0.0), g_c * wt, greaterThan(raw, vec3(0.0)));
         if (s.l != cur_cell) {
-            flush(y, cur_lk, acc_sigma, acc_color);
+            counts.w += flush(y, cur_lk, acc_sigma, acc_color);
             cur_cell = s.l;
             cur_lk = s.lk;
         }
@@ -142,5 +148,6 @@ void main() {
         T = tn;
         if (T < pc.stop_thresh) break;
     }
-    flush(y, cur_lk, acc_sigma, acc_color);
+    counts.w += flush(y, cur_lk, acc_sigma, acc_color);
+    add_stats(counts);
 }

@@ -3,10 +3,11 @@
 // [start, start + count) (method.md §2): for each allocated slot u in the chunk and channel c,
 // TV_u = √(Δx² + Δy² + Δz² + 1e-9) with forward differences to u + e_x, e_y, e_z (a neighbour that
 // is outside the grid or unallocated counts as equal: Δ = 0); loss = scale·Σ TV_u.
-// Gathered, not scattered: each invocation owns one (slot v, channel) and adds to grad[v] the
-// derivative of TV_v and of the TVs of its backward neighbours v − e_a that lie in the chunk, so
-// no atomics are needed. Slots range over [start, start + count + Y·Z) to reach those neighbours.
-// Thread mapping: flat id = (slot − start)·channels + c.
+// Gathered, not scattered: each invocation owns one slot v (all its channels) and adds to grad[v]
+// the derivative of TV_v and of the TVs of its backward neighbours v − e_a that lie in the chunk,
+// so no atomics are needed; the neighbour links are read once for all channels. Slots range over
+// [start, start + count + Y·Z) to reach those neighbours.
+// Thread mapping: flat id = slot − start.
 // Inputs: links, data (channels floats per allocated vertex), res, chunk, scale (λ/count).
 // Output: grad += (plain read-modify-write; one owner per element) for vertices with a TV term;
 // each is touched (step.glsl). CPU twin: cpu::tv.
@@ -42,50 +43,67 @@ uvec3 slot_vertex(uint s) {
     return uvec3(s / (pc.res.y * pc.res.z), (s / pc.res.z) % pc.res.y, s % pc.res.z);
 }
 
-// Forward differences of slot s (allocated, link l) in channel c, and their TV norm.
-vec4 tv_of(uint s, int l, uint c) {
-    uvec3 v = slot_vertex(s);
+// TV norm of forward differences d.
+float tv_norm(vec3 d) {
+    precise float tv = sqrt(d.x * d.x + d.y * d.y + d.z * d.z + 1e-9);
+    return tv;
+}
+
+// Forward differences in channel c of a vertex with value link l and forward neighbour links n.
+vec3 diffs(int l, int n[3], uint c) {
     float v0 = value(l, c);
     vec3 d;
     for (uint a = 0u; a < 3u; a++) {
-        int n = forward_link(v, s, a);
-        d[a] = n >= 0 ? value(n, c) - v0 : 0.0;
+        d[a] = n[a] >= 0 ? value(n[a], c) - v0 : 0.0;
     }
-    precise float tv = sqrt(d.x * d.x + d.y * d.y + d.z * d.z + 1e-9);
-    return vec4(d, tv);
+    return d;
 }
 
 void main() {
-    uint id = flat_id();
     uint span = pc.count + pc.res.y * pc.res.z;
-    if (id >= span * pc.channels) return;
-    uint s = pc.start + id / pc.channels;
-    uint c = id % pc.channels;
+    uint id = flat_id();
+    if (id >= span) return;
+    uint s = pc.start + id;
     uint slots = pc.res.x * pc.res.y * pc.res.z;
     if (s >= slots) return;
     int l = pc.links.v[s];
     if (l < 0) return;
     uint end = pc.start + pc.count;
-    precise float g = 0.0;
-    bool contributed = s < end;
-    if (s < end) {
-        vec4 own = tv_of(s, l, c);
-        g -= (own.x + own.y + own.z) / own.w;
-    }
     uvec3 v = slot_vertex(s);
+    // The links every channel needs, read once: own forward neighbours when s is in the chunk, and
+    // for each backward neighbour u = s − e_a in the chunk, u's link and forward neighbours.
+    bool own = s < end;
+    int own_n[3];
+    for (uint a = 0u; a < 3u; a++) own_n[a] = own ? forward_link(v, s, a) : -1;
+    int lu[3];
+    int un[3][3];
+    bool contributed = own;
     for (uint a = 0u; a < 3u; a++) {
+        lu[a] = -1;
         uint stride = a == 0u ? pc.res.y * pc.res.z : (a == 1u ? pc.res.z : 1u);
-        if (v[a] == 0u) continue;
+        if (v[a] == 0u || s - stride < pc.start || s - stride >= end) continue;
         uint u = s - stride;
-        if (u < pc.start || u >= end) continue;
-        int lu = pc.links.v[u];
-        if (lu < 0) continue;
-        vec4 tu = tv_of(u, lu, c);
-        g += tu[a] / tu.w;
+        lu[a] = pc.links.v[u];
+        if (lu[a] < 0) continue;
         contributed = true;
+        uvec3 vu = v;
+        vu[a] -= 1u;
+        for (uint b = 0u; b < 3u; b++) un[a][b] = forward_link(vu, u, b);
     }
     if (!contributed) return;
-    uint i = uint(l) * pc.channels + c;
-    pc.grad.v[i] = pc.grad.v[i] + pc.scale * g;
-    if (c == 0u) touch(uint(l));
+    for (uint c = 0u; c < pc.channels; c++) {
+        precise float g = 0.0;
+        if (own) {
+            vec3 d = diffs(l, own_n, c);
+            g -= (d.x + d.y + d.z) / tv_norm(d);
+        }
+        for (uint a = 0u; a < 3u; a++) {
+            if (lu[a] < 0) continue;
+            vec3 d = diffs(lu[a], un[a], c);
+            g += d[a] / tv_norm(d);
+        }
+        uint i = uint(l) * pc.channels + c;
+        pc.grad.v[i] = pc.grad.v[i] + pc.scale * g;
+    }
+    touch(uint(l));
 }

@@ -170,7 +170,7 @@ void sample_at(March m, uint k, out Sample s) {
 // Advances the march from sample index k to the next sample with σ > SIGMA_EPS and returns true,
 // or returns false at the box exit. counts.y += samples evaluated with σ ≤ SIGMA_EPS, counts.z +=
 // samples jumped over by the occupancy volume.
-bool march_next(March m, inout uint k, inout uvec3 counts, out Sample s) {
+bool march_next(March m, inout uint k, inout uvec4 counts, out Sample s) {
     while (true) {
         float t = march_t(m, k);
         if (!(t < m.t_end)) return false;

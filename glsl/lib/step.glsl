@@ -1,9 +1,9 @@
 // step.glsl — the per-step record shared by the training kernels: sample counters, and the
 // "touched vertices" that let the optimiser visit only the vertices that received a gradient this
 // step (method.md §2; svox2's sparse updates).
-// Step buffer (u32) layout: [0] touched count, [1..4) sample counters (shaded, empty, skipped),
-// [4] vertex count n, [STEP_FLAGS, STEP_FLAGS + n) touched flags, then the touched list (n).
-// The host zeroes [0, 4) each step; rmsprop_sparse clears the flags it visits.
+// Step buffer (u32) layout: [0] touched count, [1..5) counters (samples shaded, samples empty,
+// samples skipped, gradient atomic adds), [5] vertex count n, [STEP_FLAGS, STEP_FLAGS + n) touched flags, then the touched list (n).
+// The host zeroes [0, 5) each step; rmsprop_sparse clears the flags it visits.
 // Include after a push block `pc` with member `step` (U32Buf). Rust twin: src/cpu/step.rs.
 #ifndef STEP_GLSL
 #define STEP_GLSL
@@ -13,7 +13,7 @@
 
 const uint STEP_COUNT = 0u;
 const uint STEP_STATS = 1u;
-const uint STEP_N = 4u;
+const uint STEP_N = 5u;
 const uint STEP_FLAGS = 8u;
 
 // Mark vertex v touched (once per step: the first marker appends it to the list).
@@ -24,14 +24,12 @@ void touch(uint v) {
     pc.step.v[STEP_FLAGS + pc.step.v[STEP_N] + i] = v;
 }
 
-// The sample counters += (shaded, empty, skipped), reduced over the subgroup first: one atomic per
-// subgroup and counter.
-void add_stats(uvec3 counts) {
-    uvec3 s = subgroupAdd(counts);
+// The counters += (shaded, empty, skipped, atomic adds), reduced over the subgroup first: one
+// atomic per subgroup and counter.
+void add_stats(uvec4 counts) {
+    uvec4 s = subgroupAdd(counts);
     if (subgroupElect()) {
-        atomicAdd(pc.step.v[STEP_STATS], s.x);
-        atomicAdd(pc.step.v[STEP_STATS + 1u], s.y);
-        atomicAdd(pc.step.v[STEP_STATS + 2u], s.z);
+        for (uint i = 0u; i < 4u; i++) atomicAdd(pc.step.v[STEP_STATS + i], s[i]);
     }
 }
 

@@ -2,3 +2,4 @@
 
 pub mod cubic;
 pub mod dda;
+pub mod plenoxels;

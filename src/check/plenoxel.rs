@@ -10,6 +10,7 @@ use crate::cpu::{rmsprop_sparse, tv, RmsProp, Stage1Params, TvChunk};
 use crate::gpu::{Gpu, GpuBuffer};
 use crate::grid::{Grid, SH_DIM};
 use crate::kernels;
+use crate::math::plenoxel::Counts;
 use crate::plenoxel::{CpuPlenoxels, Plenoxels, VulkanPlenoxels};
 use anyhow::Result;
 use rand::{Rng, SeedableRng};
@@ -118,8 +119,8 @@ pub fn rel_l2(a: &[f32], b: &[f32]) -> f64 {
     (num / den.max(1e-300)).sqrt()
 }
 
-fn counts_note(g: [u32; 3], c: [u32; 3]) -> String {
-    format!("samples shaded/empty/skipped gpu {g:?} cpu {c:?}")
+fn counts_note(g: Counts, c: Counts) -> String {
+    format!("samples shaded/empty/skipped, atomic adds: gpu {g:?} cpu {c:?}")
 }
 
 pub fn check_occupancy(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
@@ -163,7 +164,7 @@ pub fn check_fwd(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
         });
     }
     // Sample counts may differ only where exp() rounding flips an early-termination test.
-    let close = (0..3).all(|i| (gc[i] as f64 - wc[i] as f64).abs() <= 1e-3 * wc[i] as f64 + 2.0);
+    let close = (0..4).all(|i| (gc[i] as f64 - wc[i] as f64).abs() <= 1e-3 * wc[i] as f64 + 2.0);
     if !close {
         cmp.failures += 1;
         cmp.first_failure.get_or_insert_with(|| counts_note(gc, wc));
@@ -180,6 +181,11 @@ pub fn check_train(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
     let mut cmp = Compare::new(1e-5, 1e-3);
     for (i, (&a, &b)) in got.ray_loss.iter().zip(&want.ray_loss).enumerate() {
         cmp.value(a as f64, b as f64, || format!("ray {i} loss"));
+    }
+    let (gc, wc) = (got.counts, want.counts);
+    if !(0..4).all(|i| (gc[i] as f64 - wc[i] as f64).abs() <= 1e-3 * wc[i] as f64 + 2.0) {
+        cmp.failures += 1;
+        cmp.first_failure.get_or_insert_with(|| counts_note(gc, wc));
     }
     let mut worst = 0.0f64;
     for (name, a, b) in [
@@ -425,7 +431,7 @@ pub fn check_tv(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
                     scale: 0.7,
                     ..Default::default()
                 },
-                (count + g.res[1] * g.res[2]) * channels,
+                count + g.res[1] * g.res[2],
             )?;
             let got: Vec<f32> = gb.download()?;
             for (i, (&a, &b)) in got.iter().zip(&want).enumerate() {

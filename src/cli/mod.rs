@@ -52,6 +52,10 @@ pub enum Command {
     Extract(extract::ExtractArgs),
     /// Chamfer distance, precision, recall and F1 of a point cloud against ground truth.
     Eval(eval::EvalArgs),
+    /// Export a run's stage-1 grid as an svox2 `ckpt.npz`.
+    Export(train::ExportArgs),
+    /// Import an svox2 `ckpt.npz` as a stage-1 run directory (then `render`, or stage 2).
+    Import(train::ImportArgs),
     /// Benchmarks: figures on the Vulkan device and the CPU twin, parity verdict, `--json` line.
     Bench(BenchArgs),
 }
@@ -70,6 +74,9 @@ pub enum BenchKind {
     Dda(crate::bench::dda::DdaBenchArgs),
     /// Cell cubic solver stress suite against an f64 oracle and the paper's Vieta baseline.
     Cubic(crate::bench::cubic::CubicBenchArgs),
+    /// Stage-1 training throughput on both backends (rays/s, device time per kernel, samples
+    /// per ray shaded/empty/skipped, atomic adds per ray) from the same partly trained grid.
+    Plenoxels(crate::bench::plenoxels::PlenoxelsBenchArgs),
 }
 
 /// Entry point of the binary: parse, run, map errors to a message and exit code 1.
@@ -147,7 +154,20 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             eval::run(a)?;
             ExitCode::SUCCESS
         }
+        Command::Export(a) => {
+            train::run_export(a)?;
+            ExitCode::SUCCESS
+        }
+        Command::Import(a) => {
+            train::run_import(a)?;
+            ExitCode::SUCCESS
+        }
         Command::Bench(b) => match &b.kind {
+            BenchKind::Plenoxels(args) => {
+                let gpu = gpu_used.insert(open_gpu(&cli)?);
+                crate::bench::plenoxels::run(gpu, args)?;
+                ExitCode::SUCCESS
+            }
             BenchKind::Dda(args) => {
                 let gpu = gpu_used.insert(open_gpu(&cli)?);
                 exit(crate::bench::dda::run(gpu, args)?)

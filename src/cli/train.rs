@@ -58,6 +58,9 @@ pub struct TrainArgs {
     /// Box-downscale the images by this factor.
     #[arg(long, default_value_t = 1)]
     pub downscale: u32,
+    /// Write a checkpoint every N steps (overrides the preset).
+    #[arg(long)]
+    pub checkpoint_every: Option<u32>,
     /// Continue from the run directory's checkpoint (its configuration wins).
     #[arg(long)]
     pub resume: bool,
@@ -117,6 +120,12 @@ fn config(args: &TrainArgs) -> Result<Stage1Config> {
         cfg.upsample
             .iter_mut()
             .for_each(|u| u.1 = (u.1 as u64 * r as u64 / last as u64) as u32);
+    }
+    if let Some(c) = args.checkpoint_every {
+        if c == 0 {
+            bail!("--checkpoint-every must be at least 1");
+        }
+        cfg.checkpoint_every = c;
     }
     if let Some(b) = args.batch {
         if b == 0 {
@@ -191,6 +200,11 @@ pub fn run_train(args: &TrainArgs, gpu: Option<&Gpu>) -> Result<()> {
     for (i, p) in rendered.psnr.iter().enumerate() {
         println!("test view {i:>3}: PSNR {p:.2} dB");
     }
+    let spr = report.samples_per_ray;
+    println!(
+        "per training ray: {:.1} samples shaded, {:.1} evaluated empty, {:.1} skipped by the occupancy volume; {:.1} gradient atomic adds",
+        spr[0], spr[1], spr[2], spr[3]
+    );
     println!(
         "stage 1 done: test PSNR {:.2} dB, {:.0} training rays/s, {} vertices ({:.0} B each with optimiser state), {:.1} s",
         report.test_psnr,
@@ -216,6 +230,7 @@ pub fn run_train(args: &TrainArgs, gpu: Option<&Gpu>) -> Result<()> {
         "test_psnr": report.test_psnr,
         "test_psnr_per_view": rendered.psnr,
         "samples_per_ray": { "shaded": report.samples_per_ray[0], "empty": report.samples_per_ray[1], "skipped": report.samples_per_ray[2] },
+        "atomic_adds_per_ray": report.samples_per_ray[3],
         "allocated_vertices": report.allocated_vertices,
         "bytes_per_vertex": report.bytes_per_vertex,
         "peak_rss_bytes": peak_rss_bytes(),
@@ -266,6 +281,78 @@ pub fn run_render(args: &RenderArgs, gpu: Option<&Gpu>) -> Result<()> {
         "mean PSNR {:.2} dB over {} views -> {}",
         r.mean_psnr,
         r.psnr.len(),
+        args.out.display()
+    );
+    Ok(())
+}
+
+/// Arguments of `export`.
+#[derive(clap::Args, Debug)]
+pub struct ExportArgs {
+    /// A run directory written by `train` (or `import`).
+    #[arg(long)]
+    pub run: PathBuf,
+    /// Output svox2 checkpoint (`ckpt.npz`: links, density_data, sh_data, radius, center).
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+/// Arguments of `import`.
+#[derive(clap::Args, Debug)]
+pub struct ImportArgs {
+    /// An svox2 `ckpt.npz` (float16 or float32 data).
+    #[arg(long)]
+    pub ckpt: PathBuf,
+    /// The dataset it was trained on (recorded for `render`).
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Run directory to create.
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+/// Run `export`: the run's stage-1 grid as an svox2 checkpoint (written atomically).
+pub fn run_export(args: &ExportArgs) -> Result<()> {
+    let ck = crate::grid::checkpoint::load(&stage1::checkpoint_path(&args.run))?;
+    crate::grid::npz::save_svox2(&ck.grid, &args.out)?;
+    println!(
+        "exported {}³ grid ({} vertices) to {}",
+        ck.grid.res[0],
+        ck.grid.allocated(),
+        args.out.display()
+    );
+    Ok(())
+}
+
+/// Run `import`: an svox2 checkpoint becomes a finished stage-1 run directory.
+pub fn run_import(args: &ImportArgs) -> Result<()> {
+    let grid = crate::grid::npz::load_svox2(&args.ckpt)?;
+    let mut cfg = Stage1Config::paper();
+    cfg.preset = "imported".into();
+    cfg.res = grid.res[0];
+    cfg.upsample.clear();
+    cfg.iters = 0;
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating run directory {}", args.out.display()))?;
+    let meta =
+        json!({ "stage": "plenoxels", "step": 0, "config": cfg, "imported_from": args.ckpt });
+    let n = grid.allocated();
+    crate::grid::checkpoint::save(
+        &stage1::checkpoint_path(&args.out),
+        &grid,
+        &[
+            ("rms_density".into(), vec![0.0; n]),
+            ("rms_sh".into(), vec![0.0; n * crate::grid::SH_DIM]),
+        ],
+        &meta,
+    )?;
+    let run_info = json!({ "data": std::fs::canonicalize(&args.data)
+        .with_context(|| format!("dataset {}", args.data.display()))?, "downscale": 1 });
+    write_json(&args.out.join("run.json"), &run_info)?;
+    println!(
+        "imported {} ({:?} grid, {n} vertices) into {}",
+        args.ckpt.display(),
+        grid.res,
         args.out.display()
     );
     Ok(())

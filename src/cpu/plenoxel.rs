@@ -6,7 +6,7 @@ use super::atomic;
 use super::step::touch;
 use crate::math::plenoxel::{
     march_init, march_next, occ_dims, sample_alpha, sample_at, sample_color_raw, Counts, GridRef,
-    OCC_SHIFT, SIGMA_EPS,
+    March, OCC_SHIFT, SIGMA_EPS,
 };
 use crate::math::sh::sh_basis;
 use rayon::prelude::*;
@@ -31,7 +31,7 @@ fn ray(rays: &[f32], r: usize) -> ([f32; 3], [f32; 3]) {
 }
 
 fn sum_counts(a: Counts, b: Counts) -> Counts {
-    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
+    std::array::from_fn(|i| a[i] + b[i])
 }
 
 /// Twin of `occupancy.comp`.
@@ -61,6 +61,39 @@ pub fn occupancy(links: &[i32], density: &[f32], res: [u32; 3]) -> Vec<u32> {
         .collect()
 }
 
+/// The forward march of one ray (both kernels' first loop): accumulated colour (background not
+/// yet added) and final transmittance; the indices of the first REPLAY shaded samples go to
+/// `replay`, and the number of shaded samples to `counts[0]`.
+fn forward(
+    g: &GridRef,
+    m: &March,
+    y: &[f32; 9],
+    stop_thresh: f32,
+    counts: &mut Counts,
+    replay: &mut [u32; REPLAY],
+) -> ([f32; 3], f32) {
+    let mut color = [0f32; 3];
+    let mut t_acc = 1.0f32;
+    let mut k = 0;
+    while let Some(s) = march_next(g, m, &mut k, counts) {
+        if (counts[0] as usize) < REPLAY {
+            replay[counts[0] as usize] = k - 1;
+        }
+        counts[0] += 1;
+        let alpha = sample_alpha(s.sigma, m.delta);
+        let c = sample_color_raw(g, &s.lk, &s.w, y).map(|x| x.max(0.0));
+        let wt = t_acc * alpha;
+        for ch in 0..3 {
+            color[ch] += wt * c[ch];
+        }
+        t_acc *= 1.0 - alpha;
+        if t_acc < stop_thresh {
+            break;
+        }
+    }
+    (color, t_acc)
+}
+
 /// Twin of `plenoxel_fwd.comp`: rgb per ray (white background) and the summed sample counts.
 pub fn render(g: &GridRef, rays: &[f32], mp: &MarchParams) -> (Vec<f32>, Counts) {
     let n = rays.len() / 6;
@@ -68,30 +101,22 @@ pub fn render(g: &GridRef, rays: &[f32], mp: &MarchParams) -> (Vec<f32>, Counts)
         .into_par_iter()
         .map(|r| {
             let (ro, rd) = ray(rays, r);
-            let mut color = [0f32; 3];
-            let mut t_acc = 1.0f32;
-            let mut counts = [0u32; 3];
-            if let Some(m) = march_init(ro, rd, mp.scale, mp.offset, g.res) {
-                let y = sh_basis(rd);
-                let mut k = 0;
-                while let Some(s) = march_next(g, &m, &mut k, &mut counts) {
-                    counts[0] += 1;
-                    let alpha = sample_alpha(s.sigma, m.delta);
-                    let c = sample_color_raw(g, &s.lk, &s.w, &y).map(|x| x.max(0.0));
-                    let wt = t_acc * alpha;
-                    for ch in 0..3 {
-                        color[ch] += wt * c[ch];
-                    }
-                    t_acc *= 1.0 - alpha;
-                    if t_acc < mp.stop_thresh {
-                        break;
-                    }
-                }
-            }
+            let mut counts = [0u32; 4];
+            let (color, t_acc) = match march_init(ro, rd, mp.scale, mp.offset, g.res) {
+                Some(m) => forward(
+                    g,
+                    &m,
+                    &sh_basis(rd),
+                    mp.stop_thresh,
+                    &mut counts,
+                    &mut [0; REPLAY],
+                ),
+                None => ([0.0; 3], 1.0),
+            };
             (color.map(|c| c + t_acc), counts)
         })
         .collect();
-    let counts = out.iter().map(|o| o.1).fold([0; 3], sum_counts);
+    let counts = out.iter().map(|o| o.1).fold([0; 4], sum_counts);
     (out.into_iter().flat_map(|o| o.0).collect(), counts)
 }
 
@@ -123,31 +148,13 @@ pub fn train(
             let target = [targets[3 * r], targets[3 * r + 1], targets[3 * r + 2]];
             let y = sh_basis(rd);
             let m = march_init(ro, rd, mp.scale, mp.offset, g.res);
-            let mut counts = [0u32; 3];
-            let mut color = [0f32; 3];
-            let mut t_acc = 1.0f32;
+            let mut counts = [0u32; 4];
             let mut replay = [0u32; REPLAY];
-            let mut shaded = 0usize;
-            if let Some(m) = &m {
-                let mut k = 0;
-                while let Some(s) = march_next(g, m, &mut k, &mut counts) {
-                    if shaded < REPLAY {
-                        replay[shaded] = k - 1;
-                    }
-                    shaded += 1;
-                    counts[0] += 1;
-                    let alpha = sample_alpha(s.sigma, m.delta);
-                    let c = sample_color_raw(g, &s.lk, &s.w, &y).map(|x| x.max(0.0));
-                    let wt = t_acc * alpha;
-                    for ch in 0..3 {
-                        color[ch] += wt * c[ch];
-                    }
-                    t_acc *= 1.0 - alpha;
-                    if t_acc < mp.stop_thresh {
-                        break;
-                    }
-                }
-            }
+            let (color, t_acc) = match &m {
+                Some(m) => forward(g, m, &y, mp.stop_thresh, &mut counts, &mut replay),
+                None => ([0.0; 3], 1.0),
+            };
+            let shaded = counts[0] as usize;
             let total: [f32; 3] = color.map(|c| c + t_acc);
             let diff: [f32; 3] = std::array::from_fn(|ch| total[ch] - target[ch]);
             let loss = diff[0] * diff[0] + diff[1] * diff[1] + diff[2] * diff[2];
@@ -160,7 +167,7 @@ pub fn train(
             let mut accum = [0f32; 3];
             let mut t_acc = 1.0f32;
             let mut k = 0;
-            let mut ignored = [0u32; 3];
+            let mut ignored = [0u32; 4];
             for j in 0.. {
                 let s = if shaded <= REPLAY {
                     if j == shaded {
@@ -186,17 +193,17 @@ pub fn train(
                 let d_sigma = m.delta * (dsig3[0] + dsig3[1] + dsig3[2]);
                 let d_color: [f32; 3] =
                     std::array::from_fn(|ch| if raw[ch] > 0.0 { g_c[ch] * wt } else { 0.0 });
-                scatter.add(s.l, &s.lk, &s.w, d_sigma, d_color);
+                counts[3] += scatter.add(s.l, &s.lk, &s.w, d_sigma, d_color);
                 t_acc = tn;
                 if t_acc < mp.stop_thresh {
                     break;
                 }
             }
-            scatter.flush();
+            counts[3] += scatter.flush();
             (loss, counts)
         })
         .collect();
-    let counts = out.iter().map(|o| o.1).fold([0; 3], sum_counts);
+    let counts = out.iter().map(|o| o.1).fold([0; 4], sum_counts);
     (out.into_iter().map(|o| o.0).collect(), counts)
 }
 
@@ -238,9 +245,10 @@ impl<'a> CellAccumulator<'a> {
         w: &[f32; 8],
         d_sigma: f32,
         d_color: [f32; 3],
-    ) {
+    ) -> u32 {
+        let mut adds = 0;
         if cell != self.cell {
-            self.flush();
+            adds = self.flush();
             self.cell = cell;
             self.lk = *lk;
         }
@@ -250,9 +258,12 @@ impl<'a> CellAccumulator<'a> {
                 self.color[i][ch] += w[i] * d_color[ch];
             }
         }
+        adds
     }
 
-    fn flush(&mut self) {
+    /// Add the accumulators to the gradients; returns the number of atomic adds.
+    fn flush(&mut self) -> u32 {
+        let mut adds = 0;
         for i in 0..8 {
             let l = self.lk[i];
             let (gsig, gcol) = (self.sigma[i], self.color[i]);
@@ -264,6 +275,7 @@ impl<'a> CellAccumulator<'a> {
             touch(self.touched, l as usize);
             if gsig != 0.0 {
                 atomic::add(&self.gd[l as usize], gsig);
+                adds += 1;
             }
             for ch in 0..3 {
                 if gcol[ch] == 0.0 {
@@ -273,8 +285,10 @@ impl<'a> CellAccumulator<'a> {
                 for k in 0..9 {
                     atomic::add(&self.gs[row + k], gcol[ch] * self.y[k]);
                 }
+                adds += 9;
             }
         }
+        adds
     }
 }
 
@@ -289,7 +303,7 @@ pub fn max_weights(g: &GridRef, rays: &[f32], mp: &MarchParams) -> Vec<f32> {
         };
         let mut t_acc = 1.0f32;
         let mut k = 0;
-        let mut counts = [0u32; 3];
+        let mut counts = [0u32; 4];
         while let Some(s) = march_next(g, &m, &mut k, &mut counts) {
             let alpha = sample_alpha(s.sigma, m.delta);
             let wt = t_acc * alpha;

@@ -3,11 +3,11 @@
 
 use std::sync::atomic::{AtomicU32, Ordering};
 
-/// Step-buffer layout (u32 indices), as in step.glsl: touched count, sample counters, vertex
-/// count, then the flags (n) and the touched list (n).
+/// Step-buffer layout (u32 indices), as in step.glsl: touched count, 4 counters (samples shaded,
+/// empty, skipped; gradient atomic adds), vertex count, then the flags (n) and the list (n).
 pub const STEP_COUNT: usize = 0;
 pub const STEP_STATS: usize = 1;
-pub const STEP_N: usize = 4;
+pub const STEP_N: usize = 5;
 pub const STEP_FLAGS: usize = 8;
 
 /// Mark vertex v touched.

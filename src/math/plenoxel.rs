@@ -167,8 +167,9 @@ pub struct Sample {
     pub sigma: f32,
 }
 
-/// Sample counters of one or more rays: shaded, evaluated at σ ≤ ε, skipped by occupancy.
-pub type Counts = [u32; 3];
+/// Counters of one or more rays: samples shaded, evaluated at σ ≤ ε, skipped by occupancy, and
+/// (training) gradient atomic adds.
+pub type Counts = [u32; 4];
 
 /// Corner links, trilinear weights and σ of the sample in cell l at local position p.
 fn sample_fill(g: &GridRef, l: [i32; 3], p: [f32; 3]) -> Sample {

@@ -37,7 +37,7 @@ pub struct StepParams {
 pub struct StepStats {
     /// Mean squared error over the batch's rays and channels.
     pub mse: f64,
-    /// Samples shaded, evaluated at σ ≤ ε, skipped by the occupancy volume.
+    /// Samples shaded, evaluated at σ ≤ ε, skipped by the occupancy volume; gradient atomic adds.
     pub counts: Counts,
     /// Device time of the step's kernels in ns (0 on the CPU backend).
     pub device_ns: f64,

@@ -93,8 +93,8 @@ impl VulkanPlenoxels {
     }
 
     fn read_stats(&self) -> Result<Counts> {
-        let v: Vec<u32> = self.step.download_range(STEP_STATS, 3)?;
-        Ok([v[0], v[1], v[2]])
+        let v: Vec<u32> = self.step.download_range(STEP_STATS, 4)?;
+        Ok([v[0], v[1], v[2], v[3]])
     }
 
     /// Record clearing the step's touched count and sample counters.
@@ -213,7 +213,7 @@ impl Plenoxels for VulkanPlenoxels {
                         scale: lambda / t.count.max(1) as f32,
                         ..Default::default()
                     },
-                    span * channels,
+                    span,
                 )?;
             }
         }

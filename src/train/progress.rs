@@ -7,6 +7,7 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 pub struct Progress {
     bar: ProgressBar,
     total: u64,
+    /// Whether the user wants progress at all (bar on a terminal, else a line every 10 %).
     visible: bool,
     ema_mse: Option<f64>,
     next_log: u64,
@@ -14,8 +15,7 @@ pub struct Progress {
 
 impl Progress {
     pub fn new(total: u64, start: u64, show: bool) -> Self {
-        let visible = show && console_is_terminal();
-        let bar = if visible {
+        let bar = if show && console_is_terminal() {
             ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::stderr())
         } else {
             ProgressBar::hidden()
@@ -54,7 +54,12 @@ impl Progress {
 
     /// A one-off line (e.g. "upsampling").
     pub fn message(&self, text: &str) {
-        if self.visible {
+        if !self.visible {
+            return;
+        }
+        if self.bar.is_hidden() {
+            eprintln!("{text}");
+        } else {
             self.bar.println(text);
         }
     }

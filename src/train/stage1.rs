@@ -30,8 +30,9 @@ pub struct Stage1Report {
     pub train_rays_per_s: f64,
     pub final_mse: f64,
     pub test_psnr: f64,
-    /// Samples per training ray: shaded, evaluated at σ ≤ ε, skipped by the occupancy volume.
-    pub samples_per_ray: [f64; 3],
+    /// Per training ray: samples shaded, evaluated at σ ≤ ε, skipped by the occupancy volume;
+    /// gradient atomic adds.
+    pub samples_per_ray: [f64; 4],
     pub allocated_vertices: usize,
     pub bytes_per_vertex: f64,
 }
@@ -156,7 +157,7 @@ pub fn train(
     let mut progress = Progress::new(cfg.iters as u64, start_step as u64, show_progress);
     let mut timed_rays = 0u64;
     let mut timed_secs = 0.0f64;
-    let mut sample_totals = [0u64; 3];
+    let mut sample_totals = [0u64; 4];
     let mut rays_total = 0u64;
     let mut mse = f64::NAN;
     for step in start_step..cfg.iters {
@@ -216,7 +217,7 @@ pub fn train(
             timed_secs += secs;
         }
         rays_total += batch.len() as u64;
-        for i in 0..3 {
+        for i in 0..4 {
             sample_totals[i] += stats.counts[i] as u64;
         }
         let rays_per_s = (timed_secs > 0.0).then(|| timed_rays as f64 / timed_secs);

@@ -1,0 +1,192 @@
+//! `alphasurf bench plenoxels`: stage-1 training throughput on both backends from the same
+//! partly trained grid. A built-in thin scene is generated (small images, so this stays quick),
+//! a short fast-preset run on the Vulkan backend brings the grid to `--res`³ with realistic
+//! sparsity, then each backend trains the same `--steps` batches from that state. Reported:
+//! training rays/s (forward + backward + TV + optimiser, wall time, after one warm-up step), their
+//! ratio, device time per kernel (timestamp queries), samples per ray shaded / evaluated empty /
+//! skipped by the occupancy volume, and gradient atomic adds per ray.
+
+use crate::data::{Dataset, LoadOptions, RaySampler};
+use crate::gpu::Gpu;
+use crate::plenoxel::{CpuPlenoxels, Plenoxels, StepParams, VulkanPlenoxels};
+use crate::scene::{generate, GenerateOptions, SceneKind};
+use crate::train::{stage1, Stage1Config};
+use anyhow::{ensure, Result};
+use serde_json::json;
+use std::time::Instant;
+
+/// Arguments of `bench plenoxels`.
+#[derive(clap::Args, Debug)]
+pub struct PlenoxelsBenchArgs {
+    /// Print one JSON object with the figures as the last stdout line.
+    #[arg(long)]
+    pub json: bool,
+    /// Grid resolution of the timed steps.
+    #[arg(long, default_value_t = 128)]
+    pub res: u32,
+    /// Fast-preset steps that prepare the grid before timing.
+    #[arg(long, default_value_t = 300)]
+    pub warm_steps: u32,
+    /// Timed steps per backend.
+    #[arg(long, default_value_t = 20)]
+    pub steps: u32,
+    /// Rays per batch.
+    #[arg(long, default_value_t = 4096)]
+    pub batch: u32,
+}
+
+/// One backend's figures.
+#[derive(Debug, Default, serde::Serialize)]
+struct Figures {
+    rays_per_s: f64,
+    mean_mse: f64,
+    /// shaded, empty, skipped samples and atomic adds, per ray.
+    per_ray: [f64; 4],
+}
+
+fn time_steps(
+    backend: &mut dyn Plenoxels,
+    data: &Dataset,
+    cfg: &Stage1Config,
+    args: &PlenoxelsBenchArgs,
+) -> Result<Figures> {
+    let mut f = Figures::default();
+    let mut secs = 0.0;
+    let mut sampler = RaySampler::new(&data.train, 7);
+    for step in 0..=args.steps {
+        let b = sampler.next_batch(&data.train, &data.scene, args.batch as usize);
+        let rays: Vec<f32> = b
+            .origins
+            .iter()
+            .zip(&b.dirs)
+            .flat_map(|(o, d)| o.iter().chain(d).copied())
+            .collect();
+        let targets: Vec<f32> = b.rgb.iter().flatten().copied().collect();
+        let t = Instant::now();
+        let s = backend.step(
+            &rays,
+            &targets,
+            &StepParams {
+                lr_sigma: cfg.lr_sigma.at(cfg.iters),
+                lr_sh: cfg.lr_sh.at(cfg.iters),
+                beta: cfg.beta,
+                eps: cfg.eps,
+                stop_thresh: cfg.stop_thresh,
+                tv: None,
+            },
+        )?;
+        if step == 0 {
+            continue; // warm-up: first-dispatch compilation on lavapipe
+        }
+        secs += t.elapsed().as_secs_f64();
+        f.mean_mse += s.mse / args.steps as f64;
+        for i in 0..4 {
+            f.per_ray[i] += s.counts[i] as f64 / (args.batch * args.steps) as f64;
+        }
+    }
+    f.rays_per_s = (args.batch * args.steps) as f64 / secs;
+    Ok(f)
+}
+
+/// Run the benchmark and print it.
+pub fn run(gpu: &Gpu, args: &PlenoxelsBenchArgs) -> Result<()> {
+    ensure!((16..=512).contains(&args.res), "--res must be in 16..=512");
+    ensure!(
+        args.steps >= 1 && args.batch >= 1,
+        "--steps and --batch must be at least 1"
+    );
+    let dir = tempfile_dir()?;
+    let scene_dir = dir.join("scene");
+    let mut opts = GenerateOptions::new(SceneKind::Thin);
+    (opts.res, opts.views, opts.spp_side, opts.gt_spacing) = (128, 40, 2, 0.05);
+    eprintln!(
+        "bench plenoxels: generating the thin scene (128², 40 views) in {}",
+        dir.display()
+    );
+    generate(&scene_dir, &opts)?;
+    let data = Dataset::load(&scene_dir, &LoadOptions::default())?;
+
+    let mut cfg = Stage1Config::fast();
+    cfg.res = args.res / 2;
+    cfg.upsample = vec![(args.warm_steps / 3, args.res)];
+    cfg.iters = args.warm_steps;
+    cfg.checkpoint_every = u32::MAX;
+    let grid0 = crate::grid::Grid::sphere(cfg.res, [0.0; 3], [1.0; 3], 1.0, cfg.init_sigma);
+    let mut vk = VulkanPlenoxels::new(gpu, grid0)?;
+    eprintln!(
+        "bench plenoxels: {} warm-up steps to reach a {}³ grid",
+        cfg.iters, args.res
+    );
+    stage1::train(&mut vk, &data, &cfg, &dir.join("warm"), 0, false)?;
+    let grid = vk.grid()?;
+
+    let before: Vec<(&str, u64, f64)> = gpu.profile().totals();
+    let mut vk = VulkanPlenoxels::new(gpu, grid.clone())?;
+    let fv = time_steps(&mut vk, &data, &cfg, args)?;
+    let kernels: Vec<(String, f64)> = gpu
+        .profile()
+        .totals()
+        .into_iter()
+        .map(|(k, n, ns)| {
+            let prev = before
+                .iter()
+                .find(|b| b.0 == k)
+                .map_or((0, 0.0), |b| (b.1, b.2));
+            (k.to_string(), n - prev.0, ns - prev.1)
+        })
+        .filter(|(_, n, _)| *n > 0)
+        .map(|(k, _, ns)| (k, ns / 1e6 / (args.steps + 1) as f64))
+        .collect();
+    let mut cpu = CpuPlenoxels::new(grid.clone());
+    let fc = time_steps(&mut cpu, &data, &cfg, args)?;
+    let _ = std::fs::remove_dir_all(&dir);
+
+    println!(
+        "stage-1 training at {}³ ({} allocated vertices), {} steps of {} rays, thin scene",
+        args.res,
+        grid.allocated(),
+        args.steps,
+        args.batch
+    );
+    println!(
+        "{:<8} {:>12} {:>10} {:>9} {:>9} {:>9} {:>12}",
+        "backend", "rays/s", "mse", "shaded", "empty", "skipped", "atomics/ray"
+    );
+    for (name, f) in [("vulkan", &fv), ("cpu", &fc)] {
+        println!(
+            "{name:<8} {:>12.0} {:>10.5} {:>9.2} {:>9.2} {:>9.2} {:>12.1}",
+            f.rays_per_s, f.mean_mse, f.per_ray[0], f.per_ray[1], f.per_ray[2], f.per_ray[3]
+        );
+    }
+    let ratio = fv.rays_per_s / fc.rays_per_s;
+    println!("vulkan / cpu: {ratio:.2}×");
+    println!("device ms per step (Vulkan):");
+    for (k, ms) in &kernels {
+        println!("  {k:<18} {ms:>9.3}");
+    }
+    if args.json {
+        println!(
+            "{}",
+            json!({
+                "bench": "plenoxels",
+                "device": gpu.info().name,
+                "res": args.res,
+                "allocated_vertices": grid.allocated(),
+                "batch": args.batch,
+                "steps": args.steps,
+                "vulkan": fv,
+                "cpu": fc,
+                "ratio_vulkan_over_cpu": ratio,
+                "device_ms_per_step": kernels.iter().map(|(k, ms)| (k.clone(), json!(ms))).collect::<serde_json::Map<_, _>>(),
+            })
+        );
+    }
+    Ok(())
+}
+
+/// A fresh scratch directory under the system temp dir.
+fn tempfile_dir() -> Result<std::path::PathBuf> {
+    let dir = std::env::temp_dir().join(format!("alphasurf-bench-{}", std::process::id()));
+    std::fs::create_dir_all(&dir)?;
+    Ok(dir)
+}

@@ -1,0 +1,197 @@
+//! End to end at a small size: make-scene → train (Vulkan and CPU backends) → render → export →
+//! import, and a run killed with SIGKILL that resumes from its last checkpoint.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_alphasurf"))
+}
+
+fn run_ok(cmd: &mut Command) -> String {
+    let out = cmd.output().expect("spawn alphasurf");
+    let text = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(
+        out.status.success(),
+        "{cmd:?} failed:\n{text}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    text
+}
+
+fn scene(dir: &Path) -> PathBuf {
+    let data = dir.join("scene");
+    run_ok(
+        bin()
+            .args([
+                "make-scene",
+                "--kind",
+                "solid",
+                "--res",
+                "32",
+                "--views",
+                "12",
+            ])
+            .args(["--spp", "1", "--gt-spacing", "0.05", "--out"])
+            .arg(&data),
+    );
+    data
+}
+
+fn metrics(run: &Path) -> serde_json::Value {
+    let text = std::fs::read_to_string(run.join("metrics.json")).expect("metrics.json");
+    serde_json::from_str(&text).expect("valid metrics.json")
+}
+
+fn train(data: &Path, out: &Path, backend: &str, extra: &[&str]) -> String {
+    run_ok(
+        bin()
+            .args(["train", "--data"])
+            .arg(data)
+            .arg("--out")
+            .arg(out)
+            .args([
+                "--backend",
+                backend,
+                "--res",
+                "32",
+                "--batch",
+                "2048",
+                "--quiet",
+            ])
+            .args(extra),
+    )
+}
+
+#[test]
+fn train_render_export_import_on_both_backends() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = scene(dir.path());
+    let (rv, rc) = (dir.path().join("vk"), dir.path().join("cpu"));
+    train(&data, &rv, "vulkan", &["--iters", "60"]);
+    train(&data, &rc, "cpu", &["--iters", "60"]);
+    let (mv, mc) = (metrics(&rv), metrics(&rc));
+    let (pv, pc) = (
+        mv["test_psnr"].as_f64().unwrap(),
+        mc["test_psnr"].as_f64().unwrap(),
+    );
+    // The white background alone scores well below this on the solid scene.
+    assert!(pv > 15.0, "Vulkan test PSNR {pv}");
+    assert!(
+        (pv - pc).abs() <= 0.2,
+        "backends differ: vulkan {pv:.3} dB, cpu {pc:.3} dB"
+    );
+    for key in ["train_rays_per_s", "peak_rss_bytes", "bytes_per_vertex"] {
+        assert!(
+            mv[key].as_f64().is_some_and(|v| v > 0.0),
+            "metrics.json lacks {key}"
+        );
+    }
+    assert_eq!(mv["config"]["iters"], 60);
+    assert!(rv.join("test/r_0.png").exists());
+
+    // render reproduces the training run's test PSNR.
+    let out = run_ok(
+        bin()
+            .args(["render", "--run"])
+            .arg(&rv)
+            .arg("--out")
+            .arg(dir.path().join("r")),
+    );
+    let mean: f64 = out
+        .lines()
+        .find_map(|l| l.strip_prefix("mean PSNR "))
+        .and_then(|l| l.split_whitespace().next())
+        .and_then(|v| v.parse().ok())
+        .expect("mean PSNR line");
+    assert!((mean - pv).abs() < 0.01, "render {mean} vs train {pv}");
+
+    // export → import round trip renders the same.
+    let ck = dir.path().join("ckpt.npz");
+    run_ok(
+        bin()
+            .args(["export", "--run"])
+            .arg(&rv)
+            .arg("--out")
+            .arg(&ck),
+    );
+    let imported = dir.path().join("imported");
+    run_ok(
+        bin()
+            .args(["import", "--ckpt"])
+            .arg(&ck)
+            .arg("--data")
+            .arg(&data)
+            .arg("--out")
+            .arg(&imported),
+    );
+    let out = run_ok(
+        bin()
+            .args(["render", "--run"])
+            .arg(&imported)
+            .arg("--out")
+            .arg(dir.path().join("r2")),
+    );
+    assert!(out.contains(&format!("mean PSNR {mean:.2}")), "{out}");
+}
+
+#[test]
+fn sigkill_loses_at_most_the_steps_since_the_last_checkpoint() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = scene(dir.path());
+    let run = dir.path().join("run");
+    let mut child = bin()
+        .args(["train", "--data"])
+        .arg(&data)
+        .arg("--out")
+        .arg(&run)
+        .args([
+            "--backend",
+            "cpu",
+            "--res",
+            "32",
+            "--batch",
+            "1024",
+            "--quiet",
+        ])
+        .args(["--iters", "100000", "--checkpoint-every", "5"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let ckpt = run.join("plenoxels.npz");
+    let start = Instant::now();
+    while !ckpt.exists() {
+        assert!(
+            start.elapsed() < Duration::from_secs(120),
+            "no checkpoint after 120 s"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    // Let a few more checkpoints go by, then kill without warning (possibly mid-write).
+    std::thread::sleep(Duration::from_millis(1500));
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let ck = alphasurf::grid::checkpoint::load(&ckpt).expect("checkpoint intact after SIGKILL");
+    let step = ck.meta["step"].as_u64().unwrap();
+    assert!(step >= 5 && step % 5 == 0, "checkpoint at step {step}");
+    // Resume with a schedule that ends soon after the checkpoint.
+    let mut cfg = ck.meta["config"].clone();
+    cfg["iters"] = serde_json::json!(step + 10);
+    let meta = serde_json::json!({ "stage": "plenoxels", "step": step, "config": cfg });
+    alphasurf::grid::checkpoint::save(&ckpt, &ck.grid, &ck.optim, &meta).unwrap();
+    let out = run_ok(
+        bin()
+            .args(["train", "--data"])
+            .arg(&data)
+            .arg("--out")
+            .arg(&run)
+            .args(["--backend", "cpu", "--resume", "--quiet"]),
+    );
+    assert!(out.contains("stage 1 done"), "{out}");
+    let m = metrics(&run);
+    assert_eq!(m["config"]["iters"].as_u64().unwrap(), step + 10);
+    let done = alphasurf::grid::checkpoint::load(&ckpt).unwrap();
+    assert_eq!(done.meta["step"].as_u64().unwrap(), step + 10);
+}
