@@ -10,6 +10,7 @@ pub mod check;
 pub mod cli;
 pub mod cpu;
 pub mod data;
+pub mod eval;
 pub mod gpu;
 pub mod grid;
 pub mod io;

@@ -5,6 +5,7 @@ use crate::gpu::Gpu;
 
 pub mod cubic_solve;
 pub mod dda_walk;
+pub mod extract_points;
 pub mod fill_pattern;
 pub mod plenoxel;
 pub mod sh_eval;
@@ -46,6 +47,7 @@ pub const CHECKS: &[(&str, CheckFn)] = &[
     ("rmsprop_sparse", plenoxel::check_rmsprop),
     ("tv", plenoxel::check_tv),
     ("cubic_solve", cubic_solve::check),
+    ("extract_points", extract_points::check),
 ];
 
 /// Elementwise |a − b| ≤ abs + rel·|b| test with running maxima.

@@ -3,6 +3,8 @@
 
 mod check_kernels;
 mod devices;
+pub mod eval;
+pub mod extract;
 pub mod inspect;
 pub mod make_scene;
 mod train;
@@ -45,6 +47,11 @@ pub enum Command {
     Train(train::TrainArgs),
     /// Render a split of a trained run to PNG and print per-view and mean PSNR.
     Render(train::RenderArgs),
+    /// Extract the level-set surfaces of a trained grid as a point cloud (binary PLY in Blender
+    /// units with level, alpha and normals); for a stage-1 grid, the Plenoxels baseline σ = τ.
+    Extract(extract::ExtractArgs),
+    /// Chamfer distance, precision, recall and F1 of a point cloud against ground truth.
+    Eval(eval::EvalArgs),
     /// Export a run's stage-1 grid as an svox2 `ckpt.npz`.
     Export(train::ExportArgs),
     /// Import an svox2 `ckpt.npz` as a stage-1 run directory (then `render`, or stage 2).
@@ -154,6 +161,18 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Render(a) => {
             let gpu = backend_gpu(a.backend, &cli, &mut gpu_used)?;
             train::run_render(a, gpu)?;
+            ExitCode::SUCCESS
+        }
+        Command::Extract(a) => {
+            let gpu = match a.backend {
+                train::Backend::Vulkan => Some(&*gpu_used.insert(open_gpu(&cli)?)),
+                train::Backend::Cpu => None,
+            };
+            extract::run(a, gpu)?;
+            ExitCode::SUCCESS
+        }
+        Command::Eval(a) => {
+            eval::run(a)?;
             ExitCode::SUCCESS
         }
         Command::Export(a) => {

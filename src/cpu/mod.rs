@@ -4,6 +4,7 @@
 pub mod atomic;
 pub mod cubic_solve;
 mod dda_walk;
+pub mod extract_points;
 mod fill_pattern;
 pub mod plenoxel;
 mod rmsprop;

@@ -1,0 +1,103 @@
+//! Chamfer distance and F-score between a predicted and a ground-truth point cloud, the Blender
+//! variant of the DTU python protocol (method.md §4): d2s = distance of each predicted point to
+//! its nearest GT point, s2d = of each GT point to its nearest predicted point; mean d2s and mean
+//! s2d over the distances < `max_dist`; Chamfer = their mean. Precision = fraction of predicted
+//! points with d2s < `threshold`, recall = fraction of GT points with s2d < `threshold`,
+//! F1 = 2PR / (P + R) (0 when both are 0). Means are summed in point order (deterministic).
+
+use super::knn::PointIndex;
+use anyhow::Result;
+
+/// Protocol parameters.
+#[derive(Clone, Copy, Debug, serde::Serialize)]
+pub struct EvalOptions {
+    /// Distances at or above this are left out of the Chamfer means (Blender units; paper 1.5).
+    pub max_dist: f64,
+    /// Precision/recall threshold (paper 0.01).
+    pub threshold: f64,
+}
+
+impl Default for EvalOptions {
+    fn default() -> Self {
+        EvalOptions {
+            max_dist: 1.5,
+            threshold: 0.01,
+        }
+    }
+}
+
+/// The metrics of one evaluation. A mean over no distances is NaN (serialised as null).
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Metrics {
+    pub n_pred: usize,
+    pub n_gt: usize,
+    /// Mean d2s over d2s < max_dist.
+    pub mean_d2s: f64,
+    /// Mean s2d over s2d < max_dist.
+    pub mean_s2d: f64,
+    /// (mean_d2s + mean_s2d) / 2.
+    pub chamfer: f64,
+    pub precision: f64,
+    pub recall: f64,
+    pub f1: f64,
+    /// How many predicted / GT distances entered the means.
+    pub d2s_used: usize,
+    pub s2d_used: usize,
+    pub max_dist: f64,
+    pub threshold: f64,
+}
+
+/// Mean of the values < `max`, and how many there were.
+fn mean_below(d: &[f64], max: f64) -> (f64, usize) {
+    let (mut sum, mut n) = (0.0, 0usize);
+    for &x in d {
+        if x < max {
+            sum += x;
+            n += 1;
+        }
+    }
+    (if n == 0 { f64::NAN } else { sum / n as f64 }, n)
+}
+
+/// Fraction of the values < `t`.
+fn fraction_below(d: &[f64], t: f64) -> f64 {
+    d.iter().filter(|&&x| x < t).count() as f64 / d.len().max(1) as f64
+}
+
+/// The metrics from the two distance arrays (d2s: one per predicted point, s2d: one per GT point).
+pub fn from_distances(d2s: &[f64], s2d: &[f64], opts: &EvalOptions) -> Metrics {
+    let (mean_d2s, d2s_used) = mean_below(d2s, opts.max_dist);
+    let (mean_s2d, s2d_used) = mean_below(s2d, opts.max_dist);
+    let precision = fraction_below(d2s, opts.threshold);
+    let recall = fraction_below(s2d, opts.threshold);
+    let f1 = if precision + recall > 0.0 {
+        2.0 * precision * recall / (precision + recall)
+    } else {
+        0.0
+    };
+    Metrics {
+        n_pred: d2s.len(),
+        n_gt: s2d.len(),
+        mean_d2s,
+        mean_s2d,
+        chamfer: 0.5 * (mean_d2s + mean_s2d),
+        precision,
+        recall,
+        f1,
+        d2s_used,
+        s2d_used,
+        max_dist: opts.max_dist,
+        threshold: opts.threshold,
+    }
+}
+
+/// Nearest-neighbour distances both ways through k-d trees (parallel queries), then the metrics.
+/// Both clouds must be non-empty.
+pub fn evaluate(pred: &[[f32; 3]], gt: &[[f32; 3]], opts: &EvalOptions) -> Result<Metrics> {
+    anyhow::ensure!(!pred.is_empty(), "the predicted point cloud is empty");
+    anyhow::ensure!(!gt.is_empty(), "the ground-truth point cloud is empty");
+    let (gt_index, pred_index) = rayon::join(|| PointIndex::new(gt), || PointIndex::new(pred));
+    let d2s = gt_index?.nearest_distances(pred);
+    let s2d = pred_index?.nearest_distances(gt);
+    Ok(from_distances(&d2s, &s2d, opts))
+}
