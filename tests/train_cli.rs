@@ -175,7 +175,10 @@ fn sigkill_loses_at_most_the_steps_since_the_last_checkpoint() {
     child.wait().unwrap();
     let ck = alphasurf::grid::checkpoint::load(&ckpt).expect("checkpoint intact after SIGKILL");
     let step = ck.meta["step"].as_u64().unwrap();
-    assert!(step >= 5 && step.is_multiple_of(5), "checkpoint at step {step}");
+    assert!(
+        step >= 5 && step.is_multiple_of(5),
+        "checkpoint at step {step}"
+    );
     // Resume with a schedule that ends soon after the checkpoint.
     let mut cfg = ck.meta["config"].clone();
     cfg["iters"] = serde_json::json!(step + 10);

@@ -37,7 +37,7 @@ pub struct ExtractArgs {
     /// R: R² virtual rays per axis and cell (origins on the lattice 0, 1/(R−1), …, 1).
     #[arg(long, default_value_t = 5)]
     pub rays_per_axis: u32,
-    #[arg(long, value_enum, default_value = "vulkan")]
+    #[arg(long, value_enum, default_value = "auto")]
     pub backend: Backend,
     /// Thinning radius in Blender units (per level, then on the union); 0 keeps every point.
     #[arg(long, default_value_t = 0.001)]
@@ -116,10 +116,9 @@ pub fn run(args: &ExtractArgs, gpu: Option<&Gpu>) -> Result<()> {
         rays_per_axis: args.rays_per_axis,
         min_opacity: args.min_alpha,
     };
-    let backend = match (args.backend, gpu) {
-        (Backend::Vulkan, Some(g)) => ExtractBackend::Vulkan(g),
-        (Backend::Vulkan, None) => anyhow::bail!("--backend vulkan needs a device"),
-        (Backend::Cpu, _) => ExtractBackend::Cpu,
+    let backend = match gpu {
+        Some(g) => ExtractBackend::Vulkan(g),
+        None => ExtractBackend::Cpu,
     };
     let (points, kstats) = extract_sorted(backend, &inp, args.capacity)?;
     if kstats.retries > 0 {

@@ -164,10 +164,7 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             ExitCode::SUCCESS
         }
         Command::Extract(a) => {
-            let gpu = match a.backend {
-                train::Backend::Vulkan => Some(&*gpu_used.insert(open_gpu(&cli)?)),
-                train::Backend::Cpu => None,
-            };
+            let gpu = backend_gpu(a.backend, &cli, &mut gpu_used)?;
             extract::run(a, gpu)?;
             ExitCode::SUCCESS
         }
