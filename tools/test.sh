@@ -10,4 +10,4 @@ if [ -n "${CI:-}" ] && [ -z "${VK_DRIVER_FILES:-}" ]; then
 fi
 cargo build --release --locked
 ./target/release/alphasurf devices
-cargo test --release --locked -- --test-threads 2
+cargo test --release --locked --tests -- --test-threads 2
