@@ -198,3 +198,38 @@ fn sigkill_loses_at_most_the_steps_since_the_last_checkpoint() {
     let done = alphasurf::grid::checkpoint::load(&ckpt).unwrap();
     assert_eq!(done.meta["step"].as_u64().unwrap(), step + 10);
 }
+
+#[test]
+fn non_finite_training_state_stops_the_run_and_keeps_the_last_checkpoint() {
+    use alphasurf::data::{Dataset, LoadOptions};
+    use alphasurf::plenoxel::{CpuPlenoxels, Plenoxels};
+    use alphasurf::train::{stage1, Stage1Config};
+    let dir = tempfile::tempdir().unwrap();
+    let data = Dataset::load(&scene(dir.path()), &LoadOptions::default()).unwrap();
+    let mut cfg = Stage1Config::fast();
+    (
+        cfg.res,
+        cfg.upsample,
+        cfg.iters,
+        cfg.batch,
+        cfg.checkpoint_every,
+    ) = (16, vec![], 4, 512, 2);
+    let run = dir.path().join("run");
+    let grid = alphasurf::grid::Grid::sphere(16, [0.0; 3], [1.0; 3], 1.0, cfg.init_sigma);
+    let mut b = CpuPlenoxels::new(grid);
+    stage1::train(&mut b, &data, &cfg, &run, 0, false).unwrap();
+    let good = std::fs::read(stage1::checkpoint_path(&run)).unwrap();
+    // Poison the grid: every σ becomes NaN, so the next step's loss is NaN.
+    let mut poisoned = b.grid().unwrap();
+    poisoned.density.iter_mut().for_each(|v| *v = f32::NAN);
+    b.load(poisoned, None).unwrap();
+    cfg.iters = 8;
+    let err = stage1::train(&mut b, &data, &cfg, &run, 4, false).unwrap_err();
+    let msg = format!("{err:#}");
+    assert!(msg.contains("non-finite"), "{msg}");
+    assert_eq!(
+        std::fs::read(stage1::checkpoint_path(&run)).unwrap(),
+        good,
+        "checkpoint overwritten"
+    );
+}
