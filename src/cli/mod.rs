@@ -96,6 +96,7 @@ fn open_gpu(cli: &Cli) -> anyhow::Result<Gpu> {
     Gpu::new(&GpuOptions {
         device: cli.device,
         validation: std::env::var_os("ALPHASURF_VALIDATION").is_some(),
+        force_staging: false,
     })
 }
 
