@@ -143,3 +143,20 @@ fn staging_path_round_trips_like_a_discrete_gpu() {
     drop(buf);
     assert_eq!(gpu.live_buffers(), 0);
 }
+
+#[test]
+fn batches_recorded_on_several_threads_at_once() {
+    // Each batch owns its command pool, so concurrent recording is legal (validation checks it).
+    let gpu = test_gpu();
+    std::thread::scope(|s| {
+        for t in 0..4u64 {
+            s.spawn(move || {
+                for i in 0..10 {
+                    let row = fill_pattern::check_n(gpu, t * 100 + i, 10_000).unwrap();
+                    assert!(row.pass, "{row:?}");
+                }
+            });
+        }
+    });
+    assert_validation_clean();
+}

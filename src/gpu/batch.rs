@@ -42,6 +42,9 @@ impl BatchTimes {
 pub struct Batch {
     gpu: Gpu,
     cmd: vk::CommandBuffer,
+    /// The batch's own command pool: Vulkan pools need external synchronisation for recording,
+    /// so one pool per batch lets batches be recorded on several threads at once.
+    pool: vk::CommandPool,
     queries: Option<vk::QueryPool>,
     timed: Vec<&'static str>,
     submitted: bool,
@@ -51,17 +54,29 @@ impl Gpu {
     /// Start recording a batch.
     pub fn batch(&self) -> Result<Batch> {
         let dev = &self.inner.device;
-        let cmd = {
-            let pool = self.inner.pool.lock().unwrap();
-            unsafe {
-                dev.allocate_command_buffers(
-                    &vk::CommandBufferAllocateInfo::default()
-                        .command_pool(*pool)
-                        .level(vk::CommandBufferLevel::PRIMARY)
-                        .command_buffer_count(1),
-                )
+        let pool = unsafe {
+            dev.create_command_pool(
+                &vk::CommandPoolCreateInfo::default()
+                    .queue_family_index(self.inner.info.queue_family.expect("checked at start"))
+                    .flags(vk::CommandPoolCreateFlags::TRANSIENT),
+                None,
+            )
+        }
+        .context("creating a command pool")?;
+        let cmd = unsafe {
+            dev.allocate_command_buffers(
+                &vk::CommandBufferAllocateInfo::default()
+                    .command_pool(pool)
+                    .level(vk::CommandBufferLevel::PRIMARY)
+                    .command_buffer_count(1),
+            )
+        };
+        let cmd = match cmd {
+            Ok(c) => c[0],
+            Err(e) => {
+                unsafe { dev.destroy_command_pool(pool, None) };
+                return Err(e).context("allocating a command buffer");
             }
-            .context("allocating a command buffer")?[0]
         };
         unsafe {
             dev.begin_command_buffer(
@@ -87,6 +102,7 @@ impl Gpu {
         Ok(Batch {
             gpu: self.clone(),
             cmd,
+            pool,
             queries,
             timed: Vec::new(),
             submitted: false,
@@ -314,8 +330,8 @@ impl Drop for Batch {
             if let Some(q) = self.queries {
                 inner.device.destroy_query_pool(q, None);
             }
-            let pool = inner.pool.lock().unwrap();
-            inner.device.free_command_buffers(*pool, &[self.cmd]);
+            // Destroying the pool frees its command buffer.
+            inner.device.destroy_command_pool(self.pool, None);
         }
     }
 }

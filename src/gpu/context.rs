@@ -1,4 +1,4 @@
-//! The Vulkan context: logical device, compute queue, allocator, command pool, and the compute
+//! The Vulkan context: logical device, compute queue, allocator, and the compute
 //! pipelines built lazily from the kernel table (push constants only; buffers by device address).
 
 use super::device::{self, DeviceInfo};
@@ -35,7 +35,6 @@ pub(super) struct Inner {
     pub info: DeviceInfo,
     pub device: ash::Device,
     pub queue: Mutex<vk::Queue>,
-    pub pool: Mutex<vk::CommandPool>,
     pub allocator: ManuallyDrop<Mutex<Allocator>>,
     pub pipelines: Mutex<HashMap<&'static str, Pipeline>>,
     pub live_buffers: AtomicUsize,
@@ -135,14 +134,6 @@ impl Gpu {
         let device = unsafe { instance.instance.create_device(pd, &ci, None) }
             .with_context(|| format!("vkCreateDevice failed on {}", info.name))?;
         let queue = unsafe { device.get_device_queue(qf, 0) };
-        let pool = unsafe {
-            device.create_command_pool(
-                &vk::CommandPoolCreateInfo::default()
-                    .queue_family_index(qf)
-                    .flags(vk::CommandPoolCreateFlags::TRANSIENT),
-                None,
-            )
-        }?;
         let allocator = Allocator::new(&AllocatorCreateDesc {
             instance: instance.instance.clone(),
             device: device.clone(),
@@ -158,7 +149,6 @@ impl Gpu {
                 info,
                 device,
                 queue: Mutex::new(queue),
-                pool: Mutex::new(pool),
                 allocator: ManuallyDrop::new(Mutex::new(allocator)),
                 pipelines: Mutex::new(HashMap::new()),
                 live_buffers: AtomicUsize::new(0),
@@ -259,8 +249,6 @@ impl Drop for Inner {
                 self.device.destroy_pipeline(p.pipeline, None);
                 self.device.destroy_pipeline_layout(p.layout, None);
             }
-            self.device
-                .destroy_command_pool(*self.pool.get_mut().unwrap(), None);
             // The allocator frees its memory blocks; it must go before the device.
             ManuallyDrop::drop(&mut self.allocator);
             self.device.destroy_device(None);
