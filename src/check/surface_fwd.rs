@@ -22,8 +22,6 @@ use rand_pcg::Pcg64;
 
 /// Grid vertices per axis of the test scene.
 pub const RES: u32 = 24;
-/// Scene half-extent: grid = p·16 + 11.5, so scene points k/32 map to exact grid coordinates.
-pub const RADIUS: f32 = 0.75;
 /// Largest fraction of rays whose hit counts may differ (excused as near-degenerate).
 pub const EXCUSED_CAP_FRAC: f64 = 0.005;
 
@@ -69,41 +67,48 @@ impl SurfaceScene {
     }
 }
 
-/// A random test scene on `n`³ vertices over [−RADIUS, RADIUS]³ (scale n/(2·RADIUS)).
+/// A random test scene on `n`³ vertices over [−n/32, n/32]³: grid = p·16 + (n/2 − 0.5), so grid
+/// points k/2 map to exactly representable scene points and back. δ (positive inside, scene
+/// units): the union of a sphere and a box plus a wave and noise.
 pub fn test_scene(seed: u64, n: u32) -> SurfaceScene {
     let mut rng = Pcg64::seed_from_u64(seed);
-    let scale = n as f32 / (2.0 * RADIUS);
+    let half = n as f32 / 32.0;
     let offset = 0.5 * n as f32 - 0.5;
-    let c: [f32; 3] = std::array::from_fn(|_| rng.random_range(-0.1..0.1));
-    let radius = rng.random_range(0.3..0.4f32);
-    let bc: [f32; 3] = std::array::from_fn(|_| rng.random_range(-0.2..0.2));
-    let bh: [f32; 3] = std::array::from_fn(|_| rng.random_range(0.1..0.35));
-    let k: [f32; 3] = std::array::from_fn(|_| rng.random_range(-12.0..12.0));
+    // Geometry in box-relative units u = p / half ∈ [−1, 1].
+    let c: [f32; 3] = std::array::from_fn(|_| rng.random_range(-0.15..0.15));
+    let radius = rng.random_range(0.4..0.55f32);
+    let bc: [f32; 3] = std::array::from_fn(|_| rng.random_range(-0.25..0.25));
+    let bh: [f32; 3] = std::array::from_fn(|_| rng.random_range(0.15..0.45));
+    let k: [f32; 3] = std::array::from_fn(|_| rng.random_range(-9.0..9.0));
     let mut scene = SurfaceScene {
         n,
         links: vec![-1; (n * n * n) as usize],
         delta: Vec::new(),
         opacity: Vec::new(),
         sh: Vec::new(),
-        levels: vec![-0.05, -0.02, 0.0, 0.025, 0.06],
-        scale: [scale; 3],
+        levels: [-0.07, -0.03, 0.0, 0.035, 0.08].map(|x| x * half).to_vec(),
+        scale: [16.0; 3],
         offset: [offset; 3],
     };
     for slot in 0..scene.links.len() {
         if rng.random::<f32>() < 0.03 {
             continue;
         }
-        let v = [slot / (n * n) as usize, (slot / n as usize) % n as usize, slot % n as usize];
-        let p = scene.grid_to_scene(v.map(|x| x as f32));
-        let ds = radius - (0..3).map(|i| (p[i] - c[i]).powi(2)).sum::<f32>().sqrt();
+        let v = [
+            slot / (n * n) as usize,
+            (slot / n as usize) % n as usize,
+            slot % n as usize,
+        ];
+        let u = scene.grid_to_scene(v.map(|x| x as f32)).map(|x| x / half);
+        let ds = radius - (0..3).map(|i| (u[i] - c[i]).powi(2)).sum::<f32>().sqrt();
         let db = -(0..3)
-            .map(|i| (p[i] - bc[i]).abs() - bh[i])
+            .map(|i| (u[i] - bc[i]).abs() - bh[i])
             .fold(f32::MIN, f32::max);
-        let wave = 0.03 * (k[0] * p[0] + k[1] * p[1] + k[2] * p[2]).sin();
+        let wave = 0.04 * (k[0] * u[0] + k[1] * u[1] + k[2] * u[2]).sin();
         scene.links[slot] = scene.delta.len() as i32;
         scene
             .delta
-            .push(ds.max(db) + wave + rng.random_range(-0.01..0.01));
+            .push(half * (ds.max(db) + wave + rng.random_range(-0.015..0.015)));
         scene.opacity.push(rng.random_range(-1.0..3.0));
         scene
             .sh
@@ -208,11 +213,17 @@ pub fn render_gpu(
         "at most {SURF_MAX_LEVELS} levels, got {}",
         p.levels.len()
     );
-    ensure!(rays.len() % 6 == 0, "rays must be 6 floats each");
+    ensure!(rays.len().is_multiple_of(6), "rays must be 6 floats each");
     let n_rays = rays.len() / 6;
     let mut levels = p.levels.clone();
     levels.resize(SURF_MAX_LEVELS, 0.0);
-    let one = |v: &[f32]| if v.is_empty() { vec![0.0f32] } else { v.to_vec() };
+    let one = |v: &[f32]| {
+        if v.is_empty() {
+            vec![0.0f32]
+        } else {
+            v.to_vec()
+        }
+    };
     let links = gpu.upload(g.links)?;
     let delta = gpu.upload(&one(g.delta))?;
     let opacity = gpu.upload(&one(g.opacity))?;
@@ -246,7 +257,11 @@ pub fn render_gpu(
     let mut res: Vec<SurfOut> = out.download()?;
     res.truncate(n_rays);
     let s: Vec<u32> = stats.download()?;
-    Ok((res, std::array::from_fn(|i| s[i]), times.kernel_ns("surface_fwd")))
+    Ok((
+        res,
+        std::array::from_fn(|i| s[i]),
+        times.kernel_ns("surface_fwd"),
+    ))
 }
 
 /// The parity row.
@@ -275,7 +290,8 @@ pub fn check(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
                 format!("a {a} ray {i} transmittance")
             });
         }
-        let close = (0..5).all(|i| (gc[i] as f64 - wc[i] as f64).abs() <= 5e-3 * wc[i] as f64 + 4.0);
+        let close =
+            (0..5).all(|i| (gc[i] as f64 - wc[i] as f64).abs() <= 5e-3 * wc[i] as f64 + 4.0);
         if !close {
             cmp.failures += 1;
             cmp.first_failure

@@ -165,7 +165,7 @@ pub fn render(
         "at most {SURF_MAX_LEVELS} levels, got {}",
         p.levels.len()
     );
-    ensure!(rays.len() % 6 == 0, "rays must be 6 floats each");
+    ensure!(rays.len().is_multiple_of(6), "rays must be 6 floats each");
     let out: Vec<(SurfOut, SurfCounts)> = rays
         .par_chunks_exact(6)
         .map(|r| render_ray(g, [r[0], r[1], r[2]], [r[3], r[4], r[5]], p))

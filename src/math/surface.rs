@@ -142,7 +142,8 @@ mod tests {
         assert_eq!(surf_gamma(5.0, 4), 1.0);
         assert_eq!(surf_gamma(5.0, 5), 0.0);
         assert!((surf_gamma(2.5, 2) - 0.5).abs() < 1e-6);
-        assert!((surf_gamma(2.25, 2) - 0.5 * (1.0 - (0.25f32 * 3.141_592_7).cos())).abs() < 1e-7);
+        // cos(π/4) = √½: γ = ½(1 − √½).
+        assert!((surf_gamma(2.25, 2) - 0.5 * (1.0 - 0.5f32.sqrt())).abs() < 1e-6);
         assert_eq!(surf_alpha(-3.0), 0.0);
     }
 
