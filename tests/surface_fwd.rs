@@ -565,19 +565,35 @@ fn gpu_parity_row() {
     assert!(msgs.is_empty(), "validation messages: {msgs:#?}");
 }
 
-/// Unused-output sanity: a ray that misses is white with T = 1 and no hits.
+/// Rays that miss (outside the box, zero or NaN direction) are white with T = 1 and no hits, on
+/// both backends; more than 8 levels or a link past the vertex rows is an error, not a panic.
 #[test]
-fn missing_ray_is_background() {
+fn missing_rays_and_bad_input() {
     let sc = test_scene(3, 8);
-    let rays = [5.0f32, 5.0, 5.0, 1.0, 0.0, 0.0];
-    let (o, counts) = render(&sc.grid(), &rays, &sc.params(5.0, 1e-4)).unwrap();
-    assert_eq!(
-        o[0],
-        SurfOut {
-            rgb: [1.0; 3],
-            transmittance: 1.0,
-            hits: 0
-        }
-    );
+    let rays = [
+        [5.0f32, 5.0, 5.0, 1.0, 0.0, 0.0],
+        [0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        [0.0, 0.0, 0.0, f32::NAN, 1.0, 0.0],
+        [f32::INFINITY, 0.0, 0.0, -1.0, 0.0, 0.0],
+    ]
+    .concat();
+    let p = sc.params(5.0, 1e-4);
+    let (o, counts) = render(&sc.grid(), &rays, &p).unwrap();
+    let _guard = gpu_lock();
+    let (og, gc, _) = render_gpu(test_gpu(), &sc.grid(), &rays, &p).unwrap();
+    let white = SurfOut {
+        rgb: [1.0; 3],
+        transmittance: 1.0,
+        hits: 0,
+    };
+    assert!(o.iter().chain(&og).all(|x| *x == white), "{o:?} {og:?}");
     assert_eq!(counts, [0; 5]);
+    assert_eq!(gc, [0; 5]);
+    let mut q = sc.params(5.0, 1e-4);
+    q.levels = vec![0.0; 9];
+    assert!(render(&sc.grid(), &rays, &q).is_err());
+    assert!(render_gpu(test_gpu(), &sc.grid(), &rays, &q).is_err());
+    let mut bad = sc.clone();
+    bad.links[0] = bad.delta.len() as i32;
+    assert!(render(&bad.grid(), &rays, &p).is_err());
 }
