@@ -67,7 +67,6 @@ void main() {
     uint j = 0u;
     uvec4 cnt = uvec4(0u); // cells, solves, culled, hits
     uint cut = 0u;
-    uvec2 solves = uvec2(0u);
     bool done = false;
     Dda w = dda_init(og, dn, int(n), 0.0);
     ivec3 l;
@@ -87,11 +86,16 @@ void main() {
         if (min(min(min(lk[0], lk[1]), min(lk[2], lk[3])), min(min(lk[4], lk[5]), min(lk[6], lk[7]))) < 0) continue;
         float c[8];
         for (int i = 0; i < 8; i++) c[i] = pc.delta.v[lk[i]];
+        uint mask = surf_level_mask(c, lv, nl);
+        uint ns = uint(bitCount(mask));
+        cnt.y += ns;
+        cnt.z += nl - ns;
+        if (mask == 0u) continue;
         vec3 q0 = surf_local(og, dn, t0, l);
         vec3 q1 = surf_local(og, dn, t1, l);
         precise float L = t1 - t0;
         float hs[SURF_MAX_CELL_HITS];
-        uint nh = surf_cell_hits(c, q0, q1, dn, L, lv, nl, hs, solves);
+        uint nh = surf_cell_hits(c, q0, q1, dn, L, lv, mask, hs);
         for (uint h = 0u; h < nh; h++) {
             if (float(j) >= pc.a) {
                 cut++;
@@ -136,8 +140,6 @@ void main() {
             }
         }
     }
-    cnt.y = solves.x;
-    cnt.z = solves.y;
     SurfOut o;
     precise vec3 outc = color + vec3(T);
     o.rgb = outc;

@@ -60,23 +60,30 @@ void surf_insert(inout float hs[SURF_MAX_CELL_HITS], inout uint n, float s) {
     n++;
 }
 
-// Front-face (rising) crossings of every level in one cell, sorted by s ∈ [0, L): corners c
-// (paper order), entry/exit points q0/q1, unit direction d, levels lv[0..nl). A level outside
-// [min c, max c] is skipped (counts.y++), every other one is solved (counts.x++).
-uint surf_cell_hits(float c[8], vec3 q0, vec3 q1, vec3 d, float L, float lv[SURF_MAX_LEVELS],
-                    uint nl, out float hs[SURF_MAX_CELL_HITS], inout uvec2 counts) {
+// Min/max culling: bit i set when level lv[i] (i < nl) lies within [min c, max c]; only those
+// levels can cross the cell.
+uint surf_level_mask(float c[8], float lv[SURF_MAX_LEVELS], uint nl) {
     float cmin = min(min(min(c[0], c[1]), min(c[2], c[3])), min(min(c[4], c[5]), min(c[6], c[7])));
     float cmax = max(max(max(c[0], c[1]), max(c[2], c[3])), max(max(c[4], c[5]), max(c[6], c[7])));
+    uint m = 0u;
+    [[unroll]] for (uint i = 0u; i < SURF_MAX_LEVELS; i++) {
+        if (i < nl && cmin <= lv[i] && lv[i] <= cmax) m |= 1u << i;
+    }
+    return m;
+}
+
+// Front-face (rising) crossings in one cell of the levels in `mask` (from surf_level_mask), sorted
+// by s ∈ [0, L): corners c (paper order), entry/exit points q0/q1, unit direction d. The cubic's
+// C1..C3 are formed once; each level solves with its own exact end values.
+uint surf_cell_hits(float c[8], vec3 q0, vec3 q1, vec3 d, float L, float lv[SURF_MAX_LEVELS],
+                    uint mask, out float hs[SURF_MAX_CELL_HITS]) {
     vec3 cc = cubic_cell(c, q0, d);
     uint n = 0u;
     for (uint i = 0u; i < SURF_MAX_CELL_HITS; i++) hs[i] = 0.0;
-    for (uint i = 0u; i < nl; i++) {
+    while (mask != 0u) {
+        uint i = uint(findLSB(mask));
+        mask &= mask - 1u;
         float tau = lv[i];
-        if (!(cmin <= tau && tau <= cmax)) {
-            counts.y++;
-            continue;
-        }
-        counts.x++;
         vec2 ends = vec2(cubic_trilerp_level(c, q0, tau), cubic_trilerp_level(c, q1, tau));
         CubicCrossings x = cubic_solve(cc, ends, L);
         if (x.n > 0u && (x.rising & 1u) != 0u) surf_insert(hs, n, x.s.x);

@@ -4,7 +4,8 @@
 use crate::math::dda::{dda_cell_index, dda_init, ray_unit};
 use crate::math::sh::sh_basis;
 use crate::math::surface::{
-    surf_alpha, surf_cell_hits, surf_gamma, surf_local, surf_ray, SurfOut, SURF_MAX_LEVELS,
+    surf_alpha, surf_cell_hits, surf_gamma, surf_level_mask, surf_local, surf_ray, SurfOut,
+    SURF_MAX_LEVELS,
 };
 use crate::math::trilerp::trilerp_weights;
 use anyhow::{ensure, Result};
@@ -82,7 +83,6 @@ pub fn render_ray(
     let mut t_acc = 1.0f32;
     let mut j = 0u32;
     let mut cnt: SurfCounts = [0; 5];
-    let mut solves = [0u32; 2];
     'walk: for piece in dda_init(og, dn, g.n as i32, 0.0) {
         cnt[0] += 1;
         let l = piece.cell;
@@ -101,10 +101,16 @@ pub fn render_ray(
             continue;
         }
         let c = lk.map(|k| g.delta[k as usize]);
+        let mask = surf_level_mask(&c, levels);
+        cnt[1] += mask.count_ones();
+        cnt[2] += levels.len() as u32 - mask.count_ones();
+        if mask == 0 {
+            continue;
+        }
         let q0 = surf_local(og, dn, piece.t0, l);
         let q1 = surf_local(og, dn, piece.t1, l);
         let len = piece.t1 - piece.t0;
-        let hits = surf_cell_hits(&c, q0, q1, dn, len, levels, &mut solves);
+        let hits = surf_cell_hits(&c, q0, q1, dn, len, levels, mask);
         for &s in hits.as_slice() {
             if j as f32 >= p.a {
                 cnt[4] += 1;
@@ -140,8 +146,6 @@ pub fn render_ray(
             }
         }
     }
-    cnt[1] = solves[0];
-    cnt[2] = solves[1];
     (
         SurfOut {
             rgb: color.map(|c| c + t_acc),

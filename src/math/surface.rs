@@ -71,18 +71,9 @@ impl CellHits {
     }
 }
 
-/// Front-face (rising) crossings of every level in one cell, sorted by s ∈ [0, L): corners `c`
-/// (paper order), entry/exit points, unit direction `d`. A level outside [min c, max c] is skipped
-/// (`counts[1] += 1`), every other one is solved (`counts[0] += 1`).
-pub fn surf_cell_hits(
-    c: &[f32; 8],
-    q0: [f32; 3],
-    q1: [f32; 3],
-    d: [f32; 3],
-    l: f32,
-    levels: &[f32],
-    counts: &mut [u32; 2],
-) -> CellHits {
+/// Min/max culling: bit i set when `levels[i]` (at most [`SURF_MAX_LEVELS`]) lies within
+/// [min c, max c]; only those levels can cross the cell.
+pub fn surf_level_mask(c: &[f32; 8], levels: &[f32]) -> u32 {
     let cmin = c[0]
         .min(c[1])
         .min(c[2].min(c[3]))
@@ -91,17 +82,35 @@ pub fn surf_cell_hits(
         .max(c[1])
         .max(c[2].max(c[3]))
         .max(c[4].max(c[5]).max(c[6].max(c[7])));
+    levels
+        .iter()
+        .take(SURF_MAX_LEVELS)
+        .enumerate()
+        .filter(|(_, &tau)| cmin <= tau && tau <= cmax)
+        .fold(0, |m, (i, _)| m | 1 << i)
+}
+
+/// Front-face (rising) crossings in one cell of the levels in `mask` (from [`surf_level_mask`]),
+/// sorted by s ∈ [0, L): corners `c` (paper order), entry/exit points, unit direction `d`. C1..C3
+/// are formed once; each level solves with its own exact end values.
+pub fn surf_cell_hits(
+    c: &[f32; 8],
+    q0: [f32; 3],
+    q1: [f32; 3],
+    d: [f32; 3],
+    l: f32,
+    levels: &[f32],
+    mut mask: u32,
+) -> CellHits {
     let cc = cell_cubic(c, q0, d);
     let mut out = CellHits {
         n: 0,
         s: [0.0; SURF_MAX_CELL_HITS],
     };
-    for &tau in levels.iter().take(SURF_MAX_LEVELS) {
-        if !(cmin <= tau && tau <= cmax) {
-            counts[1] += 1;
-            continue;
-        }
-        counts[0] += 1;
+    while mask != 0 {
+        let i = mask.trailing_zeros() as usize;
+        mask &= mask - 1;
+        let tau = levels[i];
         let ends = [trilerp_level(c, q0, tau), trilerp_level(c, q1, tau)];
         let x = solve_crossings(cc, ends, l);
         for (s, rising) in x.iter() {
@@ -153,7 +162,8 @@ mod tests {
         // along −x the same crossings fall (no hits).
         let c = [0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 1.0];
         let levels = [0.7, 0.2, 0.5, 2.0];
-        let mut counts = [0; 2];
+        let mask = surf_level_mask(&c, &levels);
+        assert_eq!(mask, 0b0111);
         let h = surf_cell_hits(
             &c,
             [0.0, 0.5, 0.5],
@@ -161,9 +171,8 @@ mod tests {
             [1.0, 0.0, 0.0],
             1.0,
             &levels,
-            &mut counts,
+            mask,
         );
-        assert_eq!(counts, [3, 1]);
         assert_eq!(h.n, 3);
         for (s, want) in h.as_slice().iter().zip([0.2, 0.5, 0.7]) {
             assert!((s - want).abs() < 1e-6, "{s} {want}");
@@ -175,7 +184,7 @@ mod tests {
             [-1.0, 0.0, 0.0],
             1.0,
             &levels,
-            &mut counts,
+            mask,
         );
         assert_eq!(h.n, 0);
     }
