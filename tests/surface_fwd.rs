@@ -356,43 +356,66 @@ fn ref_render(sc: &SurfaceScene, rays: &[f32], a: f32, stop: f32) -> Vec<RefRay>
 
 // ---------------------------------------------------------------------------------------------
 
-/// The f32 twin against the f64 reference on the random test scene with random and adversarial
-/// rays: rgb within 1e-3, transmittance within 1e-3 and hit counts exact, except rays the
-/// reference flags as near-degenerate (counted, capped at 2 %).
+/// Both f32 backends (CPU twin, Vulkan) against the f64 reference on the random test scene with
+/// random and adversarial rays: rgb and transmittance within 1e-3 and hit counts exact, except
+/// rays the reference flags as near-degenerate (counted, capped at 2 %). The last pass puts three
+/// levels on vertex values of δ (crossings through vertices, culling ties) and 8 levels in all.
 #[test]
-fn twin_matches_f64_reference() {
-    for (seed, a, stop) in [(11u64, 3.5f32, 1e-4f32), (12, 100.0, 1e-3), (13, 1.5, 0.0)] {
-        let sc = test_scene(seed, 16);
-        let rays = test_rays(&sc, seed, 1200);
-        let (got, counts) = render(&sc.grid(), &rays, &sc.params(a, stop)).unwrap();
-        let want = ref_render(&sc, &rays, a, stop);
-        let mut flagged = 0;
-        let mut worst = 0.0f64;
-        let mut hits = 0;
-        for (i, (g, w)) in got.iter().zip(&want).enumerate() {
-            hits += w.hits;
-            if w.degenerate {
-                flagged += 1;
-                continue;
-            }
-            assert_eq!(g.hits, w.hits, "seed {seed} ray {i}: hits {g:?} vs {w:?}");
-            for ch in 0..3 {
-                let d = (g.rgb[ch] as f64 - w.rgb[ch]).abs();
-                worst = worst.max(d);
-                assert!(d <= 1e-3, "seed {seed} ray {i} ch {ch}: {g:?} vs {w:?}");
-            }
-            assert!((g.transmittance as f64 - w.transmittance).abs() <= 1e-3);
+fn backends_match_f64_reference() {
+    let _guard = gpu_lock();
+    let mut total = [0usize; 3];
+    for (seed, a, stop, on_vertices) in [
+        (11u64, 3.5f32, 1e-4f32, false),
+        (12, 100.0, 1e-3, false),
+        (13, 1.5, 0.0, false),
+        (14, 100.0, 1e-4, true),
+    ] {
+        let mut sc = test_scene(seed, 16);
+        if on_vertices {
+            let k = sc.delta.len();
+            sc.levels
+                .extend([k / 3, k / 2, 2 * k / 3].map(|i| sc.delta[i]));
         }
-        let n = got.len();
-        eprintln!(
-            "seed {seed} a {a}: {n} rays, {hits} reference hits, {flagged} flagged, max |Δrgb| {worst:.2e}, counters {counts:?}"
-        );
+        let rays = test_rays(&sc, seed, 1200);
+        let p = sc.params(a, stop);
+        let (cpu, counts) = render(&sc.grid(), &rays, &p).unwrap();
+        let (gpu, _, _) = render_gpu(test_gpu(), &sc.grid(), &rays, &p).unwrap();
+        let want = ref_render(&sc, &rays, a, stop);
+        let n = want.len();
+        let hits: u32 = want.iter().map(|w| w.hits).sum();
+        let multi = want.iter().filter(|w| w.hits >= 2).count();
+        let flagged = want.iter().filter(|w| w.degenerate).count();
+        for (backend, got) in [("cpu", &cpu), ("gpu", &gpu)] {
+            let mut worst = 0.0f64;
+            for (i, (g, w)) in got.iter().zip(&want).enumerate() {
+                if w.degenerate {
+                    continue;
+                }
+                let what = || format!("{backend} seed {seed} ray {i}: {g:?} vs {w:?}");
+                assert_eq!(g.hits, w.hits, "{}", what());
+                for ch in 0..3 {
+                    let d = (g.rgb[ch] as f64 - w.rgb[ch]).abs();
+                    worst = worst.max(d);
+                    assert!(d <= 1e-3, "{}", what());
+                }
+                let dt = (g.transmittance as f64 - w.transmittance).abs();
+                assert!(dt <= 1e-3, "{}", what());
+            }
+            eprintln!(
+                "{backend} seed {seed} a {a} levels {}: {n} rays, {hits} reference hits ({multi} rays with ≥ 2), {flagged} flagged, max |Δrgb| {worst:.2e}, twin counters {counts:?}",
+                sc.levels.len()
+            );
+        }
         assert!(hits as usize > n / 2, "the scene must produce hits");
         assert!(
             flagged * 50 <= n,
             "{flagged} of {n} rays flagged near-degenerate (cap 2 %)"
         );
+        total[0] += n;
+        total[1] += flagged;
+        total[2] += hits as usize;
     }
+    eprintln!("total: {total:?} (rays, flagged, reference hits)");
 }
 
 /// δ = (x − c)·h with one level 0: every ray whose clipped segment crosses the plane x = c moving
