@@ -96,6 +96,7 @@ fn open_gpu(cli: &Cli) -> anyhow::Result<Gpu> {
     Gpu::new(&GpuOptions {
         device: cli.device,
         validation: std::env::var_os("ALPHASURF_VALIDATION").is_some(),
+        force_staging: false,
     })
 }
 
@@ -113,7 +114,8 @@ fn backend_gpu<'a>(
             Ok(gpu) if gpu.info().kind != "cpu" => Ok(Some(slot.insert(gpu))),
             Ok(gpu) => {
                 eprintln!(
-                    "backend auto: {} is a CPU implementation of Vulkan; using the CPU backend,                      which is faster there (--backend vulkan forces the device)",
+                    "backend auto: {} is a CPU implementation of Vulkan; using the CPU backend, \
+                     which is faster there (--backend vulkan forces the device)",
                     gpu.info().name
                 );
                 Ok(None)

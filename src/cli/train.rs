@@ -156,7 +156,23 @@ pub fn run_train(args: &TrainArgs, gpu: Option<&Gpu>) -> Result<()> {
         }
         let probe = crate::grid::checkpoint::load(&ckpt)?;
         let mut b = make_backend(gpu, probe.grid)?;
-        let (step, cfg) = stage1::resume(b.as_mut(), &ckpt)?;
+        let (step, mut cfg) = stage1::resume(b.as_mut(), &ckpt)?;
+        if args.res.is_some() || args.batch.is_some() || args.preset != "fast" {
+            eprintln!(
+                "--resume: the checkpoint's configuration wins; --res/--batch/--preset ignored"
+            );
+        }
+        if let Some(n) = args.iters {
+            cfg.iters = n; // extend (or shorten) the run; the schedules keep their lengths
+        }
+        if step >= cfg.iters {
+            println!(
+                "{} is already at step {step} of {}: nothing to train (pass --iters to extend)",
+                ckpt.display(),
+                cfg.iters
+            );
+            return Ok(());
+        }
         eprintln!(
             "resuming {} at step {step} of {}",
             ckpt.display(),

@@ -15,6 +15,8 @@ pub struct GpuBuffer {
     gpu: Gpu,
     buffer: vk::Buffer,
     allocation: Option<Allocation>,
+    /// Device memory is reached through staging when not host-visible (or when forced).
+    device_local: bool,
     size: u64,
     address: u64,
 }
@@ -72,6 +74,7 @@ impl GpuBuffer {
             gpu: gpu.clone(),
             buffer,
             allocation: Some(allocation),
+            device_local: location == MemoryLocation::GpuOnly,
             size,
             address,
         })
@@ -92,6 +95,9 @@ impl GpuBuffer {
     }
 
     fn mapped(&self) -> Option<*mut u8> {
+        if self.device_local && self.gpu.inner.force_staging {
+            return None;
+        }
         self.allocation
             .as_ref()
             .and_then(|a| a.mapped_ptr())

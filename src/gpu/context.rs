@@ -20,6 +20,9 @@ pub struct GpuOptions {
     pub device: Option<usize>,
     /// Enable the Khronos validation layer when installed (messages are collected).
     pub validation: bool,
+    /// Move data through staging buffers even where device memory is host-visible, as on a
+    /// discrete GPU (lets the staging path be tested on lavapipe).
+    pub force_staging: bool,
 }
 
 pub(super) struct Pipeline {
@@ -37,6 +40,7 @@ pub(super) struct Inner {
     pub pipelines: Mutex<HashMap<&'static str, Pipeline>>,
     pub live_buffers: AtomicUsize,
     pub profile: Profile,
+    pub force_staging: bool,
 }
 
 /// A Vulkan compute device ready to run alphasurf kernels. Cheap to clone (shared handle).
@@ -159,6 +163,7 @@ impl Gpu {
                 pipelines: Mutex::new(HashMap::new()),
                 live_buffers: AtomicUsize::new(0),
                 profile: Profile::default(),
+                force_staging: opts.force_staging,
             }),
         })
     }

@@ -29,6 +29,7 @@ pub fn test_gpu() -> &'static Gpu {
         let gpu = Gpu::new(&GpuOptions {
             device,
             validation: true,
+            force_staging: false,
         })
         .unwrap_or_else(|e| panic!("tests need a Vulkan device (lavapipe in CI): {e:#}"));
         if std::env::var_os("CI").is_some() {

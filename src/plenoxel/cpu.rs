@@ -43,14 +43,44 @@ impl CpuPlenoxels {
     }
 
     fn view(&self) -> GridRef<'_> {
-        GridRef {
-            res: self.grid.res,
-            links: &self.grid.links,
-            density: &self.grid.density,
-            sh: &self.grid.sh,
-            occ: &self.occ,
-        }
+        grid_ref(&self.grid, &self.occ)
     }
+}
+
+fn grid_ref<'a>(grid: &'a Grid, occ: &'a [u32]) -> GridRef<'a> {
+    GridRef {
+        res: grid.res,
+        links: &grid.links,
+        density: &grid.density,
+        sh: &grid.sh,
+        occ,
+    }
+}
+
+/// The data term (MSE) pass shared by `step` and `gradients`: per-ray squared error and counters.
+fn data_term(
+    grid: &Grid,
+    occ: &[u32],
+    rays: &[f32],
+    targets: &[f32],
+    stop_thresh: f32,
+    grads: TrainGrads,
+) -> Result<(Vec<f32>, Counts)> {
+    let n = rays.len() / 6;
+    ensure!(
+        n > 0 && targets.len() == 3 * n,
+        "batch of {n} rays with {} targets",
+        targets.len() / 3
+    );
+    let mp = march_params(grid, stop_thresh);
+    Ok(twin::train(
+        &grid_ref(grid, occ),
+        rays,
+        targets,
+        &mp,
+        2.0 / (3.0 * n as f32),
+        grads,
+    ))
 }
 
 impl Plenoxels for CpuPlenoxels {
@@ -59,33 +89,14 @@ impl Plenoxels for CpuPlenoxels {
     }
 
     fn step(&mut self, rays: &[f32], targets: &[f32], p: &StepParams) -> Result<StepStats> {
-        let n = rays.len() / 6;
-        ensure!(
-            n > 0 && targets.len() == 3 * n,
-            "batch of {n} rays with {} targets",
-            targets.len() / 3
-        );
         self.refresh_occupancy();
-        let mp = march_params(&self.grid, p.stop_thresh);
-        let view = GridRef {
-            res: self.grid.res,
-            links: &self.grid.links,
-            density: &self.grid.density,
-            sh: &self.grid.sh,
-            occ: &self.occ,
+        let grads = TrainGrads {
+            density: &mut self.grad_density,
+            sh: &mut self.grad_sh,
+            touched: &mut self.touched,
         };
-        let (loss, counts) = twin::train(
-            &view,
-            rays,
-            targets,
-            &mp,
-            2.0 / (3.0 * n as f32),
-            TrainGrads {
-                density: &mut self.grad_density,
-                sh: &mut self.grad_sh,
-                touched: &mut self.touched,
-            },
-        );
+        let (loss, counts) = data_term(&self.grid, &self.occ, rays, targets, p.stop_thresh, grads)?;
+        let n = loss.len();
         if let Some(t) = p.tv {
             let chunk = |channels: u32, lambda: f32| TvChunk {
                 res: self.grid.res,
@@ -137,29 +148,16 @@ impl Plenoxels for CpuPlenoxels {
     }
 
     fn gradients(&mut self, rays: &[f32], targets: &[f32], stop_thresh: f32) -> Result<Gradients> {
-        let n = rays.len() / 6;
-        ensure!(
-            n > 0 && targets.len() == 3 * n,
-            "batch of {n} rays with {} targets",
-            targets.len() / 3
-        );
         self.refresh_occupancy();
-        let mp = march_params(&self.grid, stop_thresh);
-        let mut density = vec![0.0; self.grid.allocated()];
-        let mut sh = vec![0.0; self.grid.allocated() * SH_DIM];
-        let mut touched = vec![0; self.grid.allocated()];
-        let (ray_loss, counts) = twin::train(
-            &self.view(),
-            rays,
-            targets,
-            &mp,
-            2.0 / (3.0 * n as f32),
-            TrainGrads {
-                density: &mut density,
-                sh: &mut sh,
-                touched: &mut touched,
-            },
-        );
+        let n = self.grid.allocated();
+        let (mut density, mut sh, mut touched) = (vec![0.0; n], vec![0.0; n * SH_DIM], vec![0; n]);
+        let grads = TrainGrads {
+            density: &mut density,
+            sh: &mut sh,
+            touched: &mut touched,
+        };
+        let (ray_loss, counts) =
+            data_term(&self.grid, &self.occ, rays, targets, stop_thresh, grads)?;
         Ok(Gradients {
             ray_loss,
             density,

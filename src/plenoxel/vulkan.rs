@@ -25,14 +25,25 @@ pub struct VulkanPlenoxels {
     step: GpuBuffer,
     /// Indirect dispatch arguments of rmsprop_sparse.
     args: GpuBuffer,
-    rays: Option<(usize, GpuBuffer, GpuBuffer, GpuBuffer)>,
+    rays: Option<RayBuffers>,
+}
+
+/// Per-batch buffers, grown to the next power of two when a batch does not fit.
+struct RayBuffers {
+    capacity: usize,
+    /// 6 floats per ray.
+    rays: GpuBuffer,
+    /// 3 floats per ray.
+    targets: GpuBuffer,
+    /// Per-ray output: rgb (3 floats) for render, the squared error (1 float) for training.
+    out: GpuBuffer,
 }
 
 impl VulkanPlenoxels {
     pub fn new(gpu: &Gpu, grid: Grid) -> Result<Self> {
         let n = grid.allocated();
         let nb = occ_dims(grid.res);
-        let b = VulkanPlenoxels {
+        Ok(VulkanPlenoxels {
             gpu: gpu.clone(),
             links: gpu.upload(&grid.links)?,
             density: gpu.upload(&grid.density)?,
@@ -55,8 +66,7 @@ impl VulkanPlenoxels {
                 sh: Vec::new(),
                 ..grid
             },
-        };
-        Ok(b)
+        })
     }
 
     fn allocated(&self) -> usize {
@@ -64,15 +74,15 @@ impl VulkanPlenoxels {
     }
 
     /// Ray, target and per-ray output buffers holding at least `n` rays.
-    fn ray_buffers(&mut self, n: usize) -> Result<&(usize, GpuBuffer, GpuBuffer, GpuBuffer)> {
-        if self.rays.as_ref().is_none_or(|r| r.0 < n) {
+    fn ray_buffers(&mut self, n: usize) -> Result<&RayBuffers> {
+        if self.rays.as_ref().is_none_or(|r| r.capacity < n) {
             let cap = n.next_power_of_two();
-            self.rays = Some((
-                cap,
-                self.gpu.zeros::<f32>(6 * cap)?,
-                self.gpu.zeros::<f32>(3 * cap)?,
-                self.gpu.zeros::<f32>(3 * cap)?,
-            ));
+            self.rays = Some(RayBuffers {
+                capacity: cap,
+                rays: self.gpu.zeros::<f32>(6 * cap)?,
+                targets: self.gpu.zeros::<f32>(3 * cap)?,
+                out: self.gpu.zeros::<f32>(3 * cap)?,
+            });
         }
         Ok(self.rays.as_ref().expect("just set"))
     }
@@ -141,9 +151,10 @@ impl VulkanPlenoxels {
         );
         let mp = march_params(&self.meta, stop_thresh);
         let r = self.ray_buffers(n)?;
-        r.1.write(rays)?;
-        r.2.write(targets)?;
-        let (ray_buf, target_buf, loss_buf) = (r.1.address(), r.2.address(), r.3.address());
+        r.rays.write(rays)?;
+        r.targets.write(targets)?;
+        let (ray_buf, target_buf, loss_buf) =
+            (r.rays.address(), r.targets.address(), r.out.address());
         let mut b = self.gpu.batch()?;
         self.record_step_reset(&mut b);
         self.record_occupancy(&mut b)?;
@@ -178,7 +189,7 @@ impl VulkanPlenoxels {
             .rays
             .as_ref()
             .expect("allocated by record_train")
-            .3
+            .out
             .download()?;
         loss.truncate(n);
         Ok(loss)
@@ -255,9 +266,9 @@ impl Plenoxels for VulkanPlenoxels {
         let mp = march_params(&self.meta, stop_thresh);
         let (ray_buf, out_buf) = {
             let r = self.ray_buffers(n.max(1))?;
-            (r.1.address(), r.3.address())
+            (r.rays.address(), r.out.address())
         };
-        self.rays.as_ref().expect("allocated").1.write(rays)?;
+        self.rays.as_ref().expect("allocated").rays.write(rays)?;
         let mut b = self.gpu.batch()?;
         self.record_step_reset(&mut b);
         self.record_occupancy(&mut b)?;
@@ -281,7 +292,7 @@ impl Plenoxels for VulkanPlenoxels {
             n as u32,
         )?;
         b.submit()?;
-        let mut rgb: Vec<f32> = self.rays.as_ref().expect("allocated").3.download()?;
+        let mut rgb: Vec<f32> = self.rays.as_ref().expect("allocated").out.download()?;
         rgb.truncate(3 * n);
         Ok((rgb, self.read_stats()?))
     }
@@ -289,8 +300,8 @@ impl Plenoxels for VulkanPlenoxels {
     fn max_weights(&mut self, rays: &[f32], stop_thresh: f32) -> Result<Vec<f32>> {
         let n = rays.len() / 6;
         let mp = march_params(&self.meta, stop_thresh);
-        let ray_buf = self.ray_buffers(n.max(1))?.1.address();
-        self.rays.as_ref().expect("allocated").1.write(rays)?;
+        let ray_buf = self.ray_buffers(n.max(1))?.rays.address();
+        self.rays.as_ref().expect("allocated").rays.write(rays)?;
         let out = self.gpu.zeros::<u32>(self.allocated())?;
         let mut b = self.gpu.batch()?;
         self.record_occupancy(&mut b)?;
