@@ -71,26 +71,37 @@ void main() {
     Dda w = dda_init(og, dn, int(n), 0.0);
     ivec3 l;
     float t0, t1;
-    while (!done && dda_next(w, l, t0, t1)) {
-        cnt.x++;
-        uint base = dda_cell_index(l, n);
-        int lk[8];
-        lk[0] = pc.links.v[base];
-        lk[1] = pc.links.v[base + 1u];
-        lk[2] = pc.links.v[base + nz];
-        lk[3] = pc.links.v[base + nz + 1u];
-        lk[4] = pc.links.v[base + nyz];
-        lk[5] = pc.links.v[base + nyz + 1u];
-        lk[6] = pc.links.v[base + nyz + nz];
-        lk[7] = pc.links.v[base + nyz + nz + 1u];
-        if (min(min(min(lk[0], lk[1]), min(lk[2], lk[3])), min(min(lk[4], lk[5]), min(lk[6], lk[7]))) < 0) continue;
-        float c[8];
-        for (int i = 0; i < 8; i++) c[i] = pc.delta.v[lk[i]];
-        uint mask = surf_level_mask(c, lv, nl);
-        uint ns = uint(bitCount(mask));
-        cnt.y += ns;
-        cnt.z += nl - ns;
-        if (mask == 0u) continue;
+    int lk[8];
+    float c[8];
+    uint mask = 0u;
+    while (!done) {
+        // Walk on to the next cell where some level can cross (all corners allocated, min/max
+        // culling passed) before solving: lanes then reach the cubic solver together instead of
+        // one solving while the others idle through empty cells.
+        bool found = false;
+        while (dda_next(w, l, t0, t1)) {
+            cnt.x++;
+            uint base = dda_cell_index(l, n);
+            lk[0] = pc.links.v[base];
+            lk[1] = pc.links.v[base + 1u];
+            lk[2] = pc.links.v[base + nz];
+            lk[3] = pc.links.v[base + nz + 1u];
+            lk[4] = pc.links.v[base + nyz];
+            lk[5] = pc.links.v[base + nyz + 1u];
+            lk[6] = pc.links.v[base + nyz + nz];
+            lk[7] = pc.links.v[base + nyz + nz + 1u];
+            if (min(min(min(lk[0], lk[1]), min(lk[2], lk[3])), min(min(lk[4], lk[5]), min(lk[6], lk[7]))) < 0) continue;
+            for (int i = 0; i < 8; i++) c[i] = pc.delta.v[lk[i]];
+            mask = surf_level_mask(c, lv, nl);
+            uint ns = uint(bitCount(mask));
+            cnt.y += ns;
+            cnt.z += nl - ns;
+            if (mask != 0u) {
+                found = true;
+                break;
+            }
+        }
+        if (!found) break;
         vec3 q0 = surf_local(og, dn, t0, l);
         vec3 q1 = surf_local(og, dn, t1, l);
         precise float L = t1 - t0;
