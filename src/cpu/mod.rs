@@ -10,6 +10,7 @@ pub mod plenoxel;
 mod rmsprop;
 mod sh_eval;
 pub mod step;
+pub mod surface_fwd;
 mod trilerp_eval;
 mod tv;
 

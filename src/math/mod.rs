@@ -5,5 +5,6 @@ pub mod cubic_oracle;
 pub mod dda;
 pub mod plenoxel;
 pub mod sh;
+pub mod surface;
 pub mod trilerp;
 pub mod vieta;

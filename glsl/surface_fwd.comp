@@ -1,0 +1,161 @@
+#version 460
+// surface_fwd — stage-2 (αSurf) forward rendering of a batch of rays (method.md §3.2).
+// Thread mapping: one invocation per ray.
+// Per ray: grid = p·scale + offset (direction normalised in grid space, so s is in voxels); DDA
+// walk over the cells of [0, n−1]³ front to back from t = 0; a cell with an unallocated corner is
+// skipped; cubic coefficients once per cell; per level τ_i (min/max culling) the crossings of
+// δ − τ_i on [0, L); only rising (front-face) crossings are hits, sorted by s within the cell; at
+// hit j: α = 1 − exp(−max(σα, 0)), colour max(0, SH + 0.5) (trilerped at the hit, basis on the unit
+// scene direction), α̃ = α·γ_a(j); C = Σ w_j c_j + T·1. The ray stops at the first hit with j ≥ a
+// (γ = 0, not shaded, counted as cut) or once T < stop_thresh.
+// Inputs: links (n³ i32, < 0 unallocated), per allocated vertex delta, opacity (raw σα) and sh
+// (27), levels[n_levels ≤ 8], rays (6 floats: scene origin, direction), a, stop_thresh.
+// Outputs: out[r] = (rgb, transmittance, hits composited); stats (u32) += cells visited, cubic
+// solves, solves skipped by min/max culling, hits composited, hits cut by truncation
+// (subgroup-reduced atomics).
+// CPU twin: cpu::surface_fwd::render (src/cpu/surface_fwd.rs).
+#include "common.glsl"
+#include "surface.glsl"
+#extension GL_KHR_shader_subgroup_arithmetic : require
+#extension GL_KHR_shader_subgroup_basic : require
+layout(local_size_x = 64) in;
+
+layout(push_constant, scalar) uniform Push {
+    I32Buf links;
+    F32Buf delta;
+    F32Buf opacity;
+    F32Buf sh;
+    F32Buf levels;
+    F32Buf rays;
+    SurfOutBuf out_rays;
+    U32Buf stats;
+    vec3 scale;
+    vec3 offset;
+    uint n;
+    uint n_rays;
+    uint n_levels;
+    float a;
+    float stop_thresh;
+} pc;
+
+void add_surf_stats(uvec4 c, uint cut) {
+    uvec4 s = subgroupAdd(c);
+    uint sc = subgroupAdd(cut);
+    if (subgroupElect()) {
+        for (uint i = 0u; i < 4u; i++) atomicAdd(pc.stats.v[i], s[i]);
+        atomicAdd(pc.stats.v[4], sc);
+    }
+}
+
+void main() {
+    uint r = flat_id();
+    if (r >= pc.n_rays) return;
+    vec3 ro = vec3(pc.rays.v[6u * r], pc.rays.v[6u * r + 1u], pc.rays.v[6u * r + 2u]);
+    vec3 rd = vec3(pc.rays.v[6u * r + 3u], pc.rays.v[6u * r + 4u], pc.rays.v[6u * r + 5u]);
+    uint nl = min(pc.n_levels, SURF_MAX_LEVELS);
+    float lv[SURF_MAX_LEVELS];
+    for (uint i = 0u; i < SURF_MAX_LEVELS; i++) lv[i] = i < nl ? pc.levels.v[i] : 0.0;
+    vec3 og, dn;
+    surf_ray(ro, rd, pc.scale, pc.offset, og, dn);
+    float y[9];
+    sh_basis(ray_unit(rd), y);
+    uint n = pc.n;
+    uint nz = n;
+    uint nyz = n * n;
+    vec3 color = vec3(0.0);
+    float T = 1.0;
+    uint j = 0u;
+    uvec4 cnt = uvec4(0u); // cells, solves, culled, hits
+    uint cut = 0u;
+    bool done = false;
+    Dda w = dda_init(og, dn, int(n), 0.0);
+    ivec3 l;
+    float t0, t1;
+    int lk[8];
+    float c[8];
+    uint mask = 0u;
+    while (!done) {
+        // Walk on to the next cell where some level can cross (all corners allocated, min/max
+        // culling passed) before solving: lanes then reach the cubic solver together instead of
+        // one solving while the others idle through empty cells.
+        bool found = false;
+        while (dda_next(w, l, t0, t1)) {
+            cnt.x++;
+            uint base = dda_cell_index(l, n);
+            lk[0] = pc.links.v[base];
+            lk[1] = pc.links.v[base + 1u];
+            lk[2] = pc.links.v[base + nz];
+            lk[3] = pc.links.v[base + nz + 1u];
+            lk[4] = pc.links.v[base + nyz];
+            lk[5] = pc.links.v[base + nyz + 1u];
+            lk[6] = pc.links.v[base + nyz + nz];
+            lk[7] = pc.links.v[base + nyz + nz + 1u];
+            if (min(min(min(lk[0], lk[1]), min(lk[2], lk[3])), min(min(lk[4], lk[5]), min(lk[6], lk[7]))) < 0) continue;
+            for (int i = 0; i < 8; i++) c[i] = pc.delta.v[lk[i]];
+            mask = surf_level_mask(c, lv, nl);
+            uint ns = uint(bitCount(mask));
+            cnt.y += ns;
+            cnt.z += nl - ns;
+            if (mask != 0u) {
+                found = true;
+                break;
+            }
+        }
+        if (!found) break;
+        vec3 q0 = surf_local(og, dn, t0, l);
+        vec3 q1 = surf_local(og, dn, t1, l);
+        precise float L = t1 - t0;
+        float hs[SURF_MAX_CELL_HITS];
+        uint nh = surf_cell_hits(c, q0, q1, dn, L, lv, mask, hs);
+        for (uint h = 0u; h < nh; h++) {
+            if (float(j) >= pc.a) {
+                cut++;
+                done = true;
+                break;
+            }
+            precise vec3 p = clamp(q0 + hs[h] * dn, 0.0, 1.0);
+            float wt[8];
+            trilerp_weights(p, wt);
+            precise float sa = 0.0;
+            for (int i = 0; i < 8; i++) sa += wt[i] * pc.opacity.v[lk[i]];
+            float alpha = surf_alpha(sa);
+            precise float at = alpha * surf_gamma(pc.a, j);
+            float sh[27];
+            for (int k = 0; k < 27; k++) sh[k] = 0.0;
+            for (int i = 0; i < 8; i++) {
+                uint row = uint(lk[i]) * 27u;
+                for (int k = 0; k < 27; k++) {
+                    precise float acc = sh[k] + wt[i] * pc.sh.v[row + uint(k)];
+                    sh[k] = acc;
+                }
+            }
+            vec3 col;
+            for (int ch = 0; ch < 3; ch++) {
+                precise float acc = 0.5;
+                for (int k = 0; k < 9; k++) {
+                    precise float a2 = acc + y[k] * sh[ch * 9 + k];
+                    acc = a2;
+                }
+                col[ch] = max(acc, 0.0);
+            }
+            precise float wj = T * at;
+            precise vec3 acc = color + wj * col;
+            color = acc;
+            precise float tn = T * (1.0 - at);
+            T = tn;
+            j++;
+            cnt.w++;
+            if (T < pc.stop_thresh) {
+                done = true;
+                break;
+            }
+        }
+    }
+    SurfOut o;
+    precise vec3 outc = color + vec3(T);
+    o.rgb = outc;
+    o.transmittance = T;
+    o.hits = j;
+    pc.out_rays.v[r] = o;
+    add_surf_stats(cnt, cut);
+}

@@ -1,0 +1,181 @@
+//! Twin of `glsl/surface_fwd.comp`: stage-2 (αSurf) forward rendering, one rayon task per ray,
+//! the same DDA walk (`math::dda`), per-cell hits (`math::surface`) and compositing arithmetic.
+
+use crate::math::dda::{dda_cell_index, dda_init, ray_unit};
+use crate::math::sh::sh_basis;
+use crate::math::surface::{
+    surf_alpha, surf_cell_hits, surf_gamma, surf_level_mask, surf_local, surf_ray, SurfOut,
+    SURF_MAX_LEVELS,
+};
+use crate::math::trilerp::trilerp_weights;
+use anyhow::{ensure, Result};
+use rayon::prelude::*;
+
+/// Counters summed over rays: cells visited, cubic solves, solves skipped by min/max culling,
+/// hits composited, hits cut off by truncation (the kernel's `stats` buffer).
+pub type SurfCounts = [u32; 5];
+
+/// Borrowed stage-2 grid: `n`³ vertices (x-major links, < 0 unallocated) and per allocated vertex
+/// δ, raw opacity σα and 27 SH coefficients.
+#[derive(Clone, Copy, Debug)]
+pub struct SurfaceGridRef<'a> {
+    pub n: u32,
+    pub links: &'a [i32],
+    pub delta: &'a [f32],
+    pub opacity: &'a [f32],
+    pub sh: &'a [f32],
+}
+
+impl SurfaceGridRef<'_> {
+    /// Checks the array sizes against each other (user input never panics in the kernels).
+    pub fn validate(&self) -> Result<()> {
+        let n = self.n as usize;
+        ensure!(self.n >= 2, "surface grid needs n ≥ 2, got {}", self.n);
+        ensure!(
+            self.links.len() == n * n * n,
+            "links has {} entries, want {}",
+            self.links.len(),
+            n * n * n
+        );
+        let rows = self.delta.len();
+        ensure!(
+            self.opacity.len() == rows && self.sh.len() == 27 * rows,
+            "per-vertex arrays disagree: {} δ, {} σα, {} SH",
+            rows,
+            self.opacity.len(),
+            self.sh.len()
+        );
+        ensure!(
+            self.links.iter().all(|&l| l < rows as i32),
+            "a link points past the {rows} vertex rows"
+        );
+        Ok(())
+    }
+}
+
+/// How rays map into the grid, the levels, truncation and early termination.
+#[derive(Clone, Debug)]
+pub struct SurfaceParams {
+    /// grid = p·scale + offset (per axis).
+    pub scale: [f32; 3],
+    pub offset: [f32; 3],
+    /// Level values τ_i (at most [`SURF_MAX_LEVELS`]).
+    pub levels: Vec<f32>,
+    /// Truncation parameter a: hits j ≥ a get γ = 0 (the ray stops there).
+    pub a: f32,
+    /// Stop once transmittance falls below this.
+    pub stop_thresh: f32,
+}
+
+/// One ray: its output and counters.
+pub fn render_ray(
+    g: &SurfaceGridRef,
+    ro: [f32; 3],
+    rd: [f32; 3],
+    p: &SurfaceParams,
+) -> (SurfOut, SurfCounts) {
+    let levels = &p.levels[..p.levels.len().min(SURF_MAX_LEVELS)];
+    let (og, dn) = surf_ray(ro, rd, p.scale, p.offset);
+    let y = sh_basis(ray_unit(rd));
+    let n = g.n as usize;
+    let (nz, nyz) = (n, n * n);
+    let mut color = [0f32; 3];
+    let mut t_acc = 1.0f32;
+    let mut j = 0u32;
+    let mut cnt: SurfCounts = [0; 5];
+    'walk: for piece in dda_init(og, dn, g.n as i32, 0.0) {
+        cnt[0] += 1;
+        let l = piece.cell;
+        let base = dda_cell_index(l, g.n) as usize;
+        let lk = [
+            g.links[base],
+            g.links[base + 1],
+            g.links[base + nz],
+            g.links[base + nz + 1],
+            g.links[base + nyz],
+            g.links[base + nyz + 1],
+            g.links[base + nyz + nz],
+            g.links[base + nyz + nz + 1],
+        ];
+        if lk.iter().any(|&k| k < 0) {
+            continue;
+        }
+        let c = lk.map(|k| g.delta[k as usize]);
+        let mask = surf_level_mask(&c, levels);
+        cnt[1] += mask.count_ones();
+        cnt[2] += levels.len() as u32 - mask.count_ones();
+        if mask == 0 {
+            continue;
+        }
+        let q0 = surf_local(og, dn, piece.t0, l);
+        let q1 = surf_local(og, dn, piece.t1, l);
+        let len = piece.t1 - piece.t0;
+        let hits = surf_cell_hits(&c, q0, q1, dn, len, levels, mask);
+        for &s in hits.as_slice() {
+            if j as f32 >= p.a {
+                cnt[4] += 1;
+                break 'walk;
+            }
+            let pos = std::array::from_fn(|k| (q0[k] + s * dn[k]).clamp(0.0, 1.0));
+            let wt = trilerp_weights(pos);
+            let mut sa = 0.0f32;
+            for i in 0..8 {
+                sa += wt[i] * g.opacity[lk[i] as usize];
+            }
+            let at = surf_alpha(sa) * surf_gamma(p.a, j);
+            let mut sh = [0f32; 27];
+            for i in 0..8 {
+                let row = &g.sh[lk[i] as usize * 27..lk[i] as usize * 27 + 27];
+                for k in 0..27 {
+                    sh[k] += wt[i] * row[k];
+                }
+            }
+            let wj = t_acc * at;
+            for ch in 0..3 {
+                let mut acc = 0.5f32;
+                for k in 0..9 {
+                    acc += y[k] * sh[ch * 9 + k];
+                }
+                color[ch] += wj * acc.max(0.0);
+            }
+            t_acc *= 1.0 - at;
+            j += 1;
+            cnt[3] += 1;
+            if t_acc < p.stop_thresh {
+                break 'walk;
+            }
+        }
+    }
+    (
+        SurfOut {
+            rgb: color.map(|c| c + t_acc),
+            transmittance: t_acc,
+            hits: j,
+        },
+        cnt,
+    )
+}
+
+/// Twin of `surface_fwd.comp`: one output per ray (`rays`: 6 floats each, scene origin and
+/// direction) and the summed counters.
+pub fn render(
+    g: &SurfaceGridRef,
+    rays: &[f32],
+    p: &SurfaceParams,
+) -> Result<(Vec<SurfOut>, SurfCounts)> {
+    g.validate()?;
+    ensure!(
+        p.levels.len() <= SURF_MAX_LEVELS,
+        "at most {SURF_MAX_LEVELS} levels, got {}",
+        p.levels.len()
+    );
+    ensure!(rays.len().is_multiple_of(6), "rays must be 6 floats each");
+    let out: Vec<(SurfOut, SurfCounts)> = rays
+        .par_chunks_exact(6)
+        .map(|r| render_ray(g, [r[0], r[1], r[2]], [r[3], r[4], r[5]], p))
+        .collect();
+    let counts = out.iter().fold([0u32; 5], |a, (_, c)| {
+        std::array::from_fn(|i| a[i].wrapping_add(c[i]))
+    });
+    Ok((out.into_iter().map(|o| o.0).collect(), counts))
+}
