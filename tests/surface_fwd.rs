@@ -13,15 +13,6 @@ use alphasurf::gpu::test_gpu;
 use alphasurf::math::surface::SurfOut;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
-use std::sync::{Mutex, MutexGuard};
-
-/// Serialises this file's device work: recording batches from several test threads at once on
-/// the shared context trips the validation layer's threading check (one command pool).
-static GPU_LOCK: Mutex<()> = Mutex::new(());
-
-fn gpu_lock() -> MutexGuard<'static, ()> {
-    GPU_LOCK.lock().unwrap_or_else(|e| e.into_inner())
-}
 
 // ---------------------------------------------------------------------------------------------
 // The float64 reference.
@@ -362,7 +353,6 @@ fn ref_render(sc: &SurfaceScene, rays: &[f32], a: f32, stop: f32) -> Vec<RefRay>
 /// levels on vertex values of δ (crossings through vertices, culling ties) and 8 levels in all.
 #[test]
 fn backends_match_f64_reference() {
-    let _guard = gpu_lock();
     let mut total = [0usize; 3];
     for (seed, a, stop, on_vertices) in [
         (11u64, 3.5f32, 1e-4f32, false),
@@ -426,7 +416,6 @@ fn backends_match_f64_reference() {
 /// box's entry face: counted) and 15 = N − 1 (on the outer exit face: dropped, half-open).
 #[test]
 fn planar_field_one_hit_at_the_right_depth() {
-    let _guard = gpu_lock();
     let n = 16u32;
     let nu = n as usize;
     let h = 1.0 / 16.0;
@@ -563,7 +552,6 @@ fn truncated_compositing() {
     let mut rays = sc.grid_to_scene(g).to_vec();
     rays.extend(d.map(|x| x / l));
     let alpha = 1.0 - (-(sigma as f64)).exp();
-    let _guard = gpu_lock();
     for a in [1.0f32, 5.0, 2.5, 3.25, 0.5, 8.0] {
         let p = sc.params(a, 0.0);
         let (cpu, counts) = render(&sc.grid(), &rays, &p).unwrap();
@@ -603,7 +591,6 @@ fn truncated_compositing() {
 /// The parity row passes on two seeds, with no validation messages.
 #[test]
 fn gpu_parity_row() {
-    let _guard = gpu_lock();
     let gpu = test_gpu();
     for seed in [1u64, 2] {
         let row = check(gpu, seed).unwrap();
@@ -628,7 +615,6 @@ fn missing_rays_and_bad_input() {
     .concat();
     let p = sc.params(5.0, 1e-4);
     let (o, counts) = render(&sc.grid(), &rays, &p).unwrap();
-    let _guard = gpu_lock();
     let (og, gc, _) = render_gpu(test_gpu(), &sc.grid(), &rays, &p).unwrap();
     let white = SurfOut {
         rgb: [1.0; 3],
