@@ -141,6 +141,22 @@ impl VulkanPlenoxels {
         )
     }
 
+    /// Upload rays (and targets), start a batch and record the step reset and the occupancy
+    /// refresh every march kernel needs first. Returns the batch and the device addresses of the
+    /// rays, targets and per-ray output.
+    fn begin(&mut self, rays: &[f32], targets: Option<&[f32]>) -> Result<(Batch, [u64; 3])> {
+        let r = self.ray_buffers((rays.len() / 6).max(1))?;
+        r.rays.write(rays)?;
+        if let Some(t) = targets {
+            r.targets.write(t)?;
+        }
+        let addrs = [r.rays.address(), r.targets.address(), r.out.address()];
+        let mut b = self.gpu.batch()?;
+        self.record_step_reset(&mut b);
+        self.record_occupancy(&mut b)?;
+        Ok((b, addrs))
+    }
+
     /// Upload a batch and record occupancy + the fused train kernel (gradients += data term).
     fn record_train(&mut self, rays: &[f32], targets: &[f32], stop_thresh: f32) -> Result<Batch> {
         let n = rays.len() / 6;
@@ -150,14 +166,7 @@ impl VulkanPlenoxels {
             targets.len() / 3
         );
         let mp = march_params(&self.meta, stop_thresh);
-        let r = self.ray_buffers(n)?;
-        r.rays.write(rays)?;
-        r.targets.write(targets)?;
-        let (ray_buf, target_buf, loss_buf) =
-            (r.rays.address(), r.targets.address(), r.out.address());
-        let mut b = self.gpu.batch()?;
-        self.record_step_reset(&mut b);
-        self.record_occupancy(&mut b)?;
+        let (mut b, [ray_buf, target_buf, loss_buf]) = self.begin(rays, Some(targets))?;
         b.dispatch_1d(
             &kernels::plenoxel_train::INFO,
             &kernels::plenoxel_train::Push {
@@ -264,14 +273,7 @@ impl Plenoxels for VulkanPlenoxels {
     fn render(&mut self, rays: &[f32], stop_thresh: f32) -> Result<(Vec<f32>, Counts)> {
         let n = rays.len() / 6;
         let mp = march_params(&self.meta, stop_thresh);
-        let (ray_buf, out_buf) = {
-            let r = self.ray_buffers(n.max(1))?;
-            (r.rays.address(), r.out.address())
-        };
-        self.rays.as_ref().expect("allocated").rays.write(rays)?;
-        let mut b = self.gpu.batch()?;
-        self.record_step_reset(&mut b);
-        self.record_occupancy(&mut b)?;
+        let (mut b, [ray_buf, _, out_buf]) = self.begin(rays, None)?;
         b.dispatch_1d(
             &kernels::plenoxel_fwd::INFO,
             &kernels::plenoxel_fwd::Push {
@@ -300,11 +302,8 @@ impl Plenoxels for VulkanPlenoxels {
     fn max_weights(&mut self, rays: &[f32], stop_thresh: f32) -> Result<Vec<f32>> {
         let n = rays.len() / 6;
         let mp = march_params(&self.meta, stop_thresh);
-        let ray_buf = self.ray_buffers(n.max(1))?.rays.address();
-        self.rays.as_ref().expect("allocated").rays.write(rays)?;
         let out = self.gpu.zeros::<u32>(self.allocated())?;
-        let mut b = self.gpu.batch()?;
-        self.record_occupancy(&mut b)?;
+        let (mut b, [ray_buf, _, _]) = self.begin(rays, None)?;
         b.dispatch_1d(
             &kernels::plenoxel_weights::INFO,
             &kernels::plenoxel_weights::Push {
