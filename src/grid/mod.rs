@@ -6,6 +6,7 @@
 pub mod checkpoint;
 pub mod npz;
 mod resample;
+pub mod surface;
 
 pub use resample::{dilate, upsample};
 
