@@ -55,13 +55,7 @@ fn time_steps(
     let mut sampler = RaySampler::new(&data.train, 7);
     for step in 0..=args.steps {
         let b = sampler.next_batch(&data.train, &data.scene, args.batch as usize);
-        let rays: Vec<f32> = b
-            .origins
-            .iter()
-            .zip(&b.dirs)
-            .flat_map(|(o, d)| o.iter().chain(d).copied())
-            .collect();
-        let targets: Vec<f32> = b.rgb.iter().flatten().copied().collect();
+        let (rays, targets) = (b.flat_rays(), b.flat_targets());
         let t = Instant::now();
         let s = backend.step(
             &rays,

@@ -12,11 +12,11 @@
 //! capped at [`EXCUSED_CAP_FRAC`] of the rays. The summed counters must agree within 0.5 % + 4.
 
 use super::{CheckRow, Compare};
-use crate::cpu::surface_fwd::{render, SurfCounts, SurfaceGridRef, SurfaceParams};
+use crate::cpu::surface_fwd::{render, validate_inputs, SurfCounts, SurfaceGridRef, SurfaceParams};
 use crate::gpu::Gpu;
 use crate::kernels::surface_fwd::{Push, INFO};
 use crate::math::surface::{SurfOut, SURF_MAX_LEVELS};
-use anyhow::{ensure, Result};
+use anyhow::Result;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
 
@@ -207,13 +207,7 @@ pub fn render_gpu(
     rays: &[f32],
     p: &SurfaceParams,
 ) -> Result<(Vec<SurfOut>, SurfCounts, f64)> {
-    g.validate()?;
-    ensure!(
-        p.levels.len() <= SURF_MAX_LEVELS,
-        "at most {SURF_MAX_LEVELS} levels, got {}",
-        p.levels.len()
-    );
-    ensure!(rays.len().is_multiple_of(6), "rays must be 6 floats each");
+    validate_inputs(g, rays, p)?;
     let n_rays = rays.len() / 6;
     let mut levels = p.levels.clone();
     levels.resize(SURF_MAX_LEVELS, 0.0);

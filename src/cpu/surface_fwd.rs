@@ -156,13 +156,8 @@ pub fn render_ray(
     )
 }
 
-/// Twin of `surface_fwd.comp`: one output per ray (`rays`: 6 floats each, scene origin and
-/// direction) and the summed counters.
-pub fn render(
-    g: &SurfaceGridRef,
-    rays: &[f32],
-    p: &SurfaceParams,
-) -> Result<(Vec<SurfOut>, SurfCounts)> {
+/// Checks shared by both surface renderers: grid arrays, level count, ray layout.
+pub fn validate_inputs(g: &SurfaceGridRef, rays: &[f32], p: &SurfaceParams) -> Result<()> {
     g.validate()?;
     ensure!(
         p.levels.len() <= SURF_MAX_LEVELS,
@@ -170,6 +165,17 @@ pub fn render(
         p.levels.len()
     );
     ensure!(rays.len().is_multiple_of(6), "rays must be 6 floats each");
+    Ok(())
+}
+
+/// Twin of `surface_fwd.comp`: one output per ray (`rays`: 6 floats each, scene origin and
+/// direction) and the summed counters.
+pub fn render(
+    g: &SurfaceGridRef,
+    rays: &[f32],
+    p: &SurfaceParams,
+) -> Result<(Vec<SurfOut>, SurfCounts)> {
+    validate_inputs(g, rays, p)?;
     let out: Vec<(SurfOut, SurfCounts)> = rays
         .par_chunks_exact(6)
         .map(|r| render_ray(g, [r[0], r[1], r[2]], [r[3], r[4], r[5]], p))

@@ -26,6 +26,20 @@ impl RayBatch {
         self.origins.len()
     }
 
+    /// The rays as the kernels take them: 6 floats each (origin, unit direction).
+    pub fn flat_rays(&self) -> Vec<f32> {
+        self.origins
+            .iter()
+            .zip(&self.dirs)
+            .flat_map(|(o, d)| o.iter().chain(d).copied())
+            .collect()
+    }
+
+    /// The target colours, 3 floats per ray.
+    pub fn flat_targets(&self) -> Vec<f32> {
+        self.rgb.iter().flatten().copied().collect()
+    }
+
     /// Whether the batch is empty.
     pub fn is_empty(&self) -> bool {
         self.origins.is_empty()

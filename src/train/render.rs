@@ -31,11 +31,7 @@ pub fn render_split(
     let mut psnrs = Vec::new();
     for (i, frame) in split.frames.iter().enumerate() {
         let b = view_rays(split, &data.scene, i);
-        let mut rays = Vec::with_capacity(6 * b.len());
-        for (o, d) in b.origins.iter().zip(&b.dirs) {
-            rays.extend_from_slice(o);
-            rays.extend_from_slice(d);
-        }
+        let rays = b.flat_rays();
         let mut rgb = Vec::with_capacity(3 * b.len());
         for chunk in rays.chunks(6 * 131_072) {
             rgb.extend(backend.render(chunk, stop_thresh)?.0);

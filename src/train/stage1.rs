@@ -176,12 +176,7 @@ pub fn train(
             &data.scene,
             cfg.batch as usize,
         );
-        let mut rays = Vec::with_capacity(6 * batch.len());
-        for (o, d) in batch.origins.iter().zip(&batch.dirs) {
-            rays.extend_from_slice(o);
-            rays.extend_from_slice(d);
-        }
-        let targets: Vec<f32> = batch.rgb.iter().flatten().copied().collect();
+        let (rays, targets) = (batch.flat_rays(), batch.flat_targets());
         let tv_on = !(cfg.tv_until_upsample && cfg.upsample.iter().any(|(s, _)| *s <= step));
         let slots = cfg.res_at(step).pow(3);
         let count = ((slots as f32 * cfg.tv_fraction) as u32).max(1);
