@@ -18,4 +18,5 @@ pub mod kernels;
 pub mod math;
 pub mod plenoxel;
 pub mod scene;
+pub mod surface;
 pub mod train;
