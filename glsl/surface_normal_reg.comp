@@ -1,35 +1,43 @@
 #version 460
 // surface_normal_reg — gradient and value of the stage-2 normal regularisers Ln1 and Ln2, fused
-// (method.md §3.4). A cell is named by the slot of its lower corner vertex; it is VALID when it
-// lies inside the grid, its 8 corners are allocated and its normal is not tiny. Its normal is
+// (method.md §3.4). A cell is named by its lower corner vertex (allocated, row r, slot
+// row_slot[r]); it is VALID when it lies inside the grid, its 8 corners are allocated and its
+// normal is not tiny. Its normal is
 // n = (Σ_{b,c} δ_1bc − Σ_{b,c} δ_0bc, likewise for y and z)/4 (corner k = 4·x + 2·y + z bit)
 // and N = n/|n|; a cell with all corners allocated but |n|² ≤ 1e-12 is skipped (and counted).
 // For each valid cell c of the chunk and each valid forward neighbour c′ = c + e_x, e_y, e_z:
 // term ‖N_c − N_c′‖₁ (Ln1, weight λ1; sign() is 0 at 0) and ‖N_c − N_c′‖₂² (Ln2, weight λ2),
 // the cell's terms divided by its number k_c of valid forward neighbours;
 // loss = Σ_c (λ1·Σ L1 + λ2·Σ L2)/k_c / M, M = number of chunk cells with k_c ≥ 1 (a mean over
-// the cells that have a term). The chunk is cell slots (start + i) mod slots for
-// i < min(count, slots): this kernel wraps, so the caller may draw start anywhere in [0, slots).
+// the cells that have a term). The chunk is the cells of the vertex rows (start + i) mod rows
+// for i < min(count, rows): this kernel wraps, so the caller may draw start anywhere in
+// [0, rows). Rows, not slots: at 128³ about 5 % of the slots are allocated, and an invocation
+// per slot cost more than all the cells' work on lavapipe (measured); with rows in slot order
+// (as SurfaceGrid::from_density allocates them) a row chunk is a contiguous run of cell slots.
 // Two passes over the same dispatch (push `pass`): pass 0 counts counts[0] += M and
 // counts[1] += skipped tiny-normal cells; pass 1 reads M and scatters the gradients.
-// Thread mapping: flat id = i, one cell each (early exit for unallocated slots).
-// Inputs: links, delta, res, start, count, lambda1, lambda2; counts (host-zeroed before pass 0).
+// Thread mapping: flat id = i, one cell (row) each.
+// Inputs: links, row_slot (slot of each allocated row: cpu::surface_reg::row_slots), delta,
+// res, rows, start, count, lambda1, lambda2; counts (host-zeroed before pass 0).
 // Outputs (pass 1): grad += ∂loss/∂δ by float atomic adds (20 per cell: its 8 corners, 4 more
 // per neighbour), every corner of c and of its valid neighbours touched (step.glsl);
 // loss[0] += loss (float atomic add per subgroup; host-zeroed).
 // CPU twin: cpu::surface_normal_reg.
 #include "common.glsl"
 #extension GL_EXT_shader_atomic_float : require
+#extension GL_EXT_control_flow_attributes : require
 layout(local_size_x = 64) in;
 
 layout(push_constant, scalar) uniform Push {
     I32Buf links;
+    U32Buf row_slot;
     F32Buf delta;
     F32Buf grad;
     U32Buf step;
     F32Buf loss;
     U32Buf counts;
     uvec3 res;
+    uint rows;
     uint start;
     uint count;
     uint pass;
@@ -53,10 +61,10 @@ uvec3 slot_vertex(uint s) {
 // 1 = tiny normal, 2 = valid. Fills the corner links l and the normal n.
 uint cell_normal(uint s, uvec3 v, out int l[8], out vec3 n) {
     n = vec3(0.0);
-    for (uint k = 0u; k < 8u; k++) l[k] = -1;
+    [[unroll]] for (uint k = 0u; k < 8u; k++) l[k] = -1;
     if (any(greaterThanEqual(v + 1u, pc.res))) return 0u;
     float d[8];
-    for (uint k = 0u; k < 8u; k++) {
+    [[unroll]] for (uint k = 0u; k < 8u; k++) {
         uint cs = s + ((k >> 2u) & 1u) * axis_stride(0u) + ((k >> 1u) & 1u) * pc.res.z + (k & 1u);
         l[k] = pc.links.v[cs];
         if (l[k] < 0) return 0u;
@@ -101,10 +109,8 @@ float sign0(float x) {
 float cell_term(uint id, out uint has, out uint tiny) {
     has = 0u;
     tiny = 0u;
-    uint slots = pc.res.x * pc.res.y * pc.res.z;
-    if (id >= min(pc.count, slots)) return 0.0;
-    uint s = (pc.start % slots + id) % slots;
-    if (pc.links.v[s] < 0) return 0.0;
+    if (id >= min(pc.count, pc.rows)) return 0.0;
+    uint s = pc.row_slot.v[(pc.start % pc.rows + id) % pc.rows];
     uvec3 v = slot_vertex(s);
     int lc[8];
     vec3 nc;
@@ -115,7 +121,7 @@ float cell_term(uint id, out uint has, out uint tiny) {
     vec3 nn[3];
     bool ok[3];
     uint k = 0u;
-    for (uint a = 0u; a < 3u; a++) {
+    [[unroll]] for (uint a = 0u; a < 3u; a++) {
         uvec3 va = v;
         va[a] += 1u;
         ok[a] = cell_normal(s + axis_stride(a), va, ln[a], nn[a]) == 2u;
@@ -129,9 +135,9 @@ float cell_term(uint id, out uint has, out uint tiny) {
     vec3 n_c = nc / rc;
     precise vec3 gc = vec3(0.0);
     float g[8];
-    for (uint kk = 0u; kk < 8u; kk++) g[kk] = 0.0;
+    [[unroll]] for (uint kk = 0u; kk < 8u; kk++) g[kk] = 0.0;
     precise float lsum = 0.0;
-    for (uint a = 0u; a < 3u; a++) {
+    [[unroll]] for (uint a = 0u; a < 3u; a++) {
         if (!ok[a]) continue;
         float r = norm3(nn[a]);
         vec3 n_n = nn[a] / r;
@@ -144,7 +150,7 @@ float cell_term(uint id, out uint has, out uint tiny) {
         gc += gn;
         vec3 gnn = unnormalise_grad(nn[a], -gn);
         uint bit = 4u >> a;
-        for (uint kk = 0u; kk < 8u; kk++) {
+        [[unroll]] for (uint kk = 0u; kk < 8u; kk++) {
             float gk = corner_grad(kk, gnn);
             if ((kk & bit) == 0u) {
                 g[kk | bit] += gk;
@@ -155,7 +161,7 @@ float cell_term(uint id, out uint has, out uint tiny) {
         }
     }
     vec3 gnc = unnormalise_grad(nc, gc);
-    for (uint kk = 0u; kk < 8u; kk++) {
+    [[unroll]] for (uint kk = 0u; kk < 8u; kk++) {
         precise float gk = g[kk] + corner_grad(kk, gnc);
         atomicAdd(pc.grad.v[uint(lc[kk])], gk);
         touch(uint(lc[kk]));

@@ -6,8 +6,8 @@
 
 use alphasurf::check::surface_reg::{empty_step, gpu_normal_reg, RegGrid};
 use alphasurf::cpu::surface_reg::{
-    delta_tv_chunk, opacity_tv_chunk, surface_normal_reg, surface_opacity_reg, tv_loss,
-    NormalChunk, OpacityChunk,
+    delta_tv_chunk, opacity_tv_chunk, row_slots, surface_normal_reg, surface_opacity_reg, tv_loss,
+    NormalChunk, NormalRegStats, OpacityChunk,
 };
 use alphasurf::cpu::{surface_rmsprop_sparse, tv, Stage2Params, SurfaceRmsProp};
 use alphasurf::kernels;
@@ -266,7 +266,7 @@ fn opacity_reg_fd_and_adversarial() {
 /// neighbour of Σ (λ1‖ΔN‖₁ + λ2‖ΔN‖₂²)/k_c).
 fn normal_reg_f64(g: &RegGrid, x: &[f64], c: &NormalChunk) -> f64 {
     let r = g.res[0] as usize;
-    let slots = g.links.len();
+    let rs = row_slots(&g.links, g.allocated());
     let normal = |v: [usize; 3]| -> Option<[f64; 3]> {
         if v.iter().any(|&i| i + 1 >= r) {
             return None;
@@ -279,23 +279,17 @@ fn normal_reg_f64(g: &RegGrid, x: &[f64], c: &NormalChunk) -> f64 {
                 return None;
             }
             for a in 0..3 {
-                n[a] += if b[a] == 1 {
-                    x[l as usize]
-                } else {
-                    -x[l as usize]
-                } / 4.0;
+                n[a] += if b[a] == 1 { x[l as usize] } else { -x[l as usize] } / 4.0;
             }
         }
         let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
         (len * len > 1e-12).then(|| n.map(|v| v / len))
     };
+    let rows = c.rows as usize;
     let (mut sum, mut cells) = (0.0, 0usize);
-    for i in 0..(c.count as usize).min(slots) {
-        let s = (c.start as usize % slots + i) % slots;
+    for i in 0..(c.count as usize).min(rows) {
+        let s = rs[(c.start as usize % rows + i) % rows] as usize;
         let v = [s / (r * r), (s / r) % r, s % r];
-        if g.links[s] < 0 {
-            continue;
-        }
         let Some(nc) = normal(v) else { continue };
         let mut terms = Vec::new();
         for a in 0..3 {
@@ -317,24 +311,39 @@ fn normal_reg_f64(g: &RegGrid, x: &[f64], c: &NormalChunk) -> f64 {
     sum / cells.max(1) as f64
 }
 
+/// A chunk of g's rows.
+fn chunk(g: &RegGrid, start: u32, count: u32, lambda1: f32, lambda2: f32) -> NormalChunk {
+    NormalChunk {
+        res: g.res,
+        rows: g.allocated() as u32,
+        start,
+        count,
+        lambda1,
+        lambda2,
+    }
+}
+
+/// The CPU twin on g from zero gradients: (grad, touched, stats).
+fn run_normal(g: &RegGrid, c: &NormalChunk) -> (Vec<f32>, Vec<u32>, NormalRegStats) {
+    let rs = row_slots(&g.links, g.allocated());
+    let (mut grad, mut touched) = (vec![0f32; g.allocated()], vec![0u32; g.allocated()]);
+    let st = surface_normal_reg(&g.links, &rs, &g.delta, &mut grad, &mut touched, c);
+    (grad, touched, st)
+}
+
 fn normal_fd_case(g: &RegGrid, c: &NormalChunk, what: &str) {
     let x: Vec<f64> = g.delta.iter().map(|&d| d as f64).collect();
     let want = fd(&x, 1e-5, |x| normal_reg_f64(g, x, c));
-    let mut grad = vec![0f32; g.allocated()];
-    let mut touched = vec![0u32; g.allocated()];
-    let st = surface_normal_reg(&g.links, &g.delta, &mut grad, &mut touched, c);
+    let (grad, touched, st) = run_normal(g, c);
     let got: Vec<f64> = grad.iter().map(|&v| v as f64).collect();
     let e = rel_l2(&got, &want);
     assert!(e <= 1e-3, "{what}: Ln gradient vs FD rel L2 {e:e}");
     let v = normal_reg_f64(g, &x, c);
-    assert!(
-        (st.loss - v).abs() <= 1e-5 * v,
-        "{what}: loss {} vs {v}",
-        st.loss
-    );
+    assert!((st.loss - v).abs() <= 1e-5 * v, "{what}: loss {} vs {v}", st.loss);
     assert!(st.cells > 0, "{what}: no cell has a term");
+    let wmax = want.iter().fold(0f64, |m, v| m.max(v.abs()));
     for (i, (&t, &w)) in touched.iter().zip(&want).enumerate() {
-        if w.abs() > 1e-9 * want.iter().fold(0f64, |m, v| m.max(v.abs())) {
+        if w.abs() > 1e-9 * wmax {
             assert_eq!(t, 1, "{what}: vertex {i} has a gradient but is not touched");
         }
     }
@@ -342,33 +351,15 @@ fn normal_fd_case(g: &RegGrid, c: &NormalChunk, what: &str) {
 
 #[test]
 fn normal_reg_fd() {
-    // Full 6³ grid, whole chunk, L1 + L2.
+    // Full 6³ grid, whole chunk: L1 + L2, L2 only, L1 only.
     let g = small_grid(4, 6, |_| false);
-    let r3 = 6 * 6 * 6;
-    let mut c = NormalChunk {
-        res: g.res,
-        start: 0,
-        count: r3,
-        lambda1: 1e-2,
-        lambda2: 1e-3,
-    };
-    normal_fd_case(&g, &c, "full grid, L1+L2");
-    // L2 only, L1 only.
-    c.lambda1 = 0.0;
-    normal_fd_case(&g, &c, "L2 only");
-    c.lambda1 = 1e-2;
-    c.lambda2 = 0.0;
-    normal_fd_case(&g, &c, "L1 only");
-    // Holes (unallocated neighbours), a chunk wrapping past the end.
+    normal_fd_case(&g, &chunk(&g, 0, 216, 1e-2, 1e-3), "full grid, L1+L2");
+    normal_fd_case(&g, &chunk(&g, 0, 216, 0.0, 1e-3), "L2 only");
+    normal_fd_case(&g, &chunk(&g, 0, 216, 1e-2, 0.0), "L1 only");
+    // Holes (unallocated neighbours), grid faces, a chunk wrapping past the last row.
     let h = small_grid(5, 7, |v| (v[0] * 5 + v[1] * 3 + v[2]) % 13 == 0);
-    let c = NormalChunk {
-        res: h.res,
-        start: 7 * 7 * 7 - 40,
-        count: 150,
-        lambda1: 1e-2,
-        lambda2: 1e-3,
-    };
-    normal_fd_case(&h, &c, "holes, wrapping chunk");
+    let rows = h.allocated() as u32;
+    normal_fd_case(&h, &chunk(&h, rows - 40, 150, 1e-2, 1e-3), "holes, wrapping");
 }
 
 #[test]
@@ -376,96 +367,64 @@ fn normal_reg_adversarial() {
     // Constant δ: every cell's normal is zero → all skipped and counted, nothing changes.
     let mut g = small_grid(6, 5, |_| false);
     g.delta.iter_mut().for_each(|d| *d = 0.7);
-    let c = NormalChunk {
-        res: g.res,
-        start: 0,
-        count: 125,
-        lambda1: 1.0,
-        lambda2: 1.0,
-    };
+    let rs = row_slots(&g.links, g.allocated());
     let mut grad = vec![0.25f32; g.allocated()];
     let mut touched = vec![0u32; g.allocated()];
-    let st = surface_normal_reg(&g.links, &g.delta, &mut grad, &mut touched, &c);
+    let c = chunk(&g, 0, 125, 1.0, 1.0);
+    let st = surface_normal_reg(&g.links, &rs, &g.delta, &mut grad, &mut touched, &c);
     assert_eq!((st.loss, st.cells, st.tiny), (0.0, 0, 64));
     assert!(grad.iter().all(|&v| v == 0.25) && touched.iter().all(|&t| t == 0));
     // A single cell (2³ grid): no forward neighbour inside the grid → no term.
     let g2 = small_grid(7, 2, |_| false);
-    let c2 = NormalChunk {
-        res: g2.res,
-        count: 8,
-        ..c
-    };
-    let (mut gr, mut t2) = (vec![0f32; 8], vec![0u32; 8]);
-    let st = surface_normal_reg(&g2.links, &g2.delta, &mut gr, &mut t2, &c2);
+    let (gr, t2, st) = run_normal(&g2, &chunk(&g2, 3, 8, 1.0, 1.0));
     assert_eq!((st.loss, st.cells, st.tiny), (0.0, 0, 0));
     assert!(gr.iter().all(|&v| v == 0.0) && t2.iter().all(|&t| t == 0));
+    // An empty grid (no rows) and an empty chunk.
+    let empty = RegGrid {
+        res: [3; 3],
+        links: vec![-1; 27],
+        delta: vec![],
+        opacity: vec![],
+    };
+    assert_eq!(run_normal(&empty, &chunk(&empty, 5, 10, 1.0, 1.0)).2, Default::default());
+    assert_eq!(run_normal(&g, &chunk(&g, 5, 0, 1.0, 1.0)).2, Default::default());
     // Identical normals (δ linear) with L1: sign(0) = 0 → zero gradient, but touched.
     let mut lin = small_grid(8, 4, |_| false);
     for s in 0..64 {
         let v = [s / 16, (s / 4) % 4, s % 4];
         lin.delta[lin.links[s] as usize] = (v[0] + 2 * v[1] + 4 * v[2]) as f32;
     }
-    let c3 = NormalChunk {
-        res: lin.res,
-        count: 64,
-        lambda2: 0.0,
-        ..c
-    };
-    let (mut gr, mut t3) = (vec![0f32; 64], vec![0u32; 64]);
-    let st = surface_normal_reg(&lin.links, &lin.delta, &mut gr, &mut t3, &c3);
+    let (gr, t3, st) = run_normal(&lin, &chunk(&lin, 0, 64, 1.0, 0.0));
     assert_eq!((st.loss, st.cells), (0.0, 26));
     assert!(gr.iter().all(|&v| v == 0.0), "{gr:?}");
-    // A whole chunk starting anywhere (wrapping) covers every cell once: same result.
+    assert!(t3.iter().all(|&t| t == 1));
+    // A whole chunk starting anywhere (wrapping, count > rows) covers every cell once.
     let g4 = small_grid(9, 6, |v| (v[0] * 5 + v[1] * 3 + v[2]) % 13 == 0);
-    let base = NormalChunk {
-        res: g4.res,
-        start: 0,
-        count: 216,
-        lambda1: 1e-2,
-        lambda2: 1e-3,
-    };
-    let run = |c: &NormalChunk| {
-        let (mut gr, mut t) = (vec![0f32; g4.allocated()], vec![0u32; g4.allocated()]);
-        let st = surface_normal_reg(&g4.links, &g4.delta, &mut gr, &mut t, c);
-        (gr, t, st)
-    };
-    let (ga, ta, sa) = run(&base);
-    let (gb, tb, sb) = run(&NormalChunk {
-        start: 100,
-        count: 500,
-        ..base
-    });
+    let rows = g4.allocated() as u32;
+    let (ga, ta, sa) = run_normal(&g4, &chunk(&g4, 0, rows, 1e-2, 1e-3));
+    let (gb, tb, sb) = run_normal(&g4, &chunk(&g4, 100, 3 * rows, 1e-2, 1e-3));
     assert!(sa.cells > 20, "{sa:?}");
     assert_eq!((ta, sa.cells, sa.tiny), (tb, sb.cells, sb.tiny));
     let a64: Vec<f64> = ga.iter().map(|&v| v as f64).collect();
     let b64: Vec<f64> = gb.iter().map(|&v| v as f64).collect();
     let e = rel_l2(&b64, &a64);
     assert!(e <= 1e-5, "whole chunk from 0 vs from 100: rel L2 {e:e}");
-    // And the device agrees on an edge-heavy chunk (the grid's last x slab, wrapping).
+    // And the device agrees on a chunk wrapping past the last row (the grid's x = max slab).
     let gpu = alphasurf::gpu::test_gpu();
-    let cw = NormalChunk {
-        start: 216 - 30,
-        count: 60,
-        ..base
-    };
-    let (mut want, mut want_t) = (vec![0f32; g4.allocated()], vec![0u32; g4.allocated()]);
-    let st = surface_normal_reg(&g4.links, &g4.delta, &mut want, &mut want_t, &cw);
+    let cw = chunk(&g4, rows - 30, 60, 1e-2, 1e-3);
+    let (want, want_t, st) = run_normal(&g4, &cw);
     let out = gpu_normal_reg(gpu, &g4, &vec![0f32; g4.allocated()], &cw).unwrap();
-    let (got, got_t, loss, counts) = (out.grad, out.touched, out.loss, out.counts);
-    assert_eq!(got_t, want_t);
-    assert_eq!(counts, [st.cells, st.tiny]);
-    let (g64, w64): (Vec<f64>, Vec<f64>) = got
+    assert_eq!(out.touched, want_t);
+    assert_eq!(out.counts, [st.cells, st.tiny]);
+    let (g64, w64): (Vec<f64>, Vec<f64>) = out
+        .grad
         .iter()
         .zip(&want)
         .map(|(&a, &b)| (a as f64, b as f64))
         .unzip();
     assert!(rel_l2(&g64, &w64) <= 1e-5);
-    assert!((loss as f64 - st.loss).abs() <= 1e-5 * st.loss);
-    assert!(
-        gpu.validation_messages().is_empty(),
-        "{:?}",
-        gpu.validation_messages()
-    );
+    assert!((out.loss as f64 - st.loss).abs() <= 1e-5 * st.loss);
+    assert!(gpu.validation_messages().is_empty(), "{:?}", gpu.validation_messages());
 }
 
 #[test]

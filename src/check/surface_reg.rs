@@ -7,7 +7,7 @@
 use super::{CheckRow, Compare};
 use crate::cpu::step::{optim_args, STEP_COUNT, STEP_FLAGS, STEP_N};
 use crate::cpu::surface_reg::{
-    surface_normal_reg, surface_opacity_reg, NormalChunk, NormalRegStats, OpacityChunk,
+    row_slots, surface_normal_reg, surface_opacity_reg, NormalChunk, NormalRegStats, OpacityChunk,
 };
 use crate::cpu::{surface_rmsprop_sparse, Stage2Params, SurfaceRmsProp};
 use crate::gpu::{Gpu, GpuBuffer};
@@ -108,29 +108,33 @@ pub struct GpuRegOut {
 pub fn gpu_normal_reg(gpu: &Gpu, g: &RegGrid, grad0: &[f32], c: &NormalChunk) -> Result<GpuRegOut> {
     let n = g.allocated();
     let links = gpu.upload(&g.links)?;
+    let row_slot = gpu.upload(&row_slots(&g.links, n))?;
     let delta = gpu.upload(&g.delta)?;
     let grad = gpu.upload(grad0)?;
     let step = gpu.upload(&empty_step(n))?;
     let loss = gpu.zeros::<f32>(1)?;
     let counts = gpu.zeros::<u32>(2)?;
-    let threads = c.count.min(g.slots());
+    let threads = c.count.min(c.rows);
     let mut b = gpu.batch()?;
     for pass in 0..2 {
         b.dispatch_1d(
             &kernels::surface_normal_reg::INFO,
             &kernels::surface_normal_reg::Push {
                 links: links.address(),
+                row_slot: row_slot.address(),
                 delta: delta.address(),
                 grad: grad.address(),
                 step: step.address(),
                 loss: loss.address(),
                 counts: counts.address(),
                 res: c.res,
+                rows: c.rows,
                 start: c.start,
                 count: c.count,
                 pass,
                 lambda1: c.lambda1,
                 lambda2: c.lambda2,
+                ..Default::default()
             },
             threads,
         )?;
@@ -238,26 +242,24 @@ pub fn check_opacity_reg(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
 pub fn check_normal_reg(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
     let g = reg_grid(seed, 24, 0.2);
     let n = g.allocated();
-    let slots = g.slots();
+    let rows = n as u32;
+    let rs = row_slots(&g.links, n);
     let mut rng = Pcg64::seed_from_u64(seed ^ 0xa11);
     let grad0 = random_vec(&mut rng, n, 1e-4);
     let mut cmp = Compare::new(0.0, 0.0);
     let (mut worst_l2, mut worst_loss, mut notes) = (0f64, 0f64, Vec::new());
-    let cases = [
-        (0, slots),
-        (slots / 3, slots / 4),
-        (slots - slots / 10, slots / 3),
-    ];
+    let cases = [(0, rows), (rows / 3, rows / 4), (rows - rows / 10, rows / 3)];
     for &(start, count) in &cases {
         let c = NormalChunk {
             res: g.res,
+            rows,
             start,
             count,
             lambda1: 1e-2,
             lambda2: 1e-3,
         };
         let (mut want, mut want_t) = (grad0.clone(), vec![0u32; n]);
-        let st: NormalRegStats = surface_normal_reg(&g.links, &g.delta, &mut want, &mut want_t, &c);
+        let st: NormalRegStats = surface_normal_reg(&g.links, &rs, &g.delta, &mut want, &mut want_t, &c);
         let out = gpu_normal_reg(gpu, &g, &grad0, &c)?;
         let (got, got_t, got_loss, counts) = (out.grad, out.touched, out.loss, out.counts);
         // Atomic sums in another order: elementwise |Δ| ≤ 1e-6·max|added gradient| + 1e-4·|cpu|.

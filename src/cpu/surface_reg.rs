@@ -46,11 +46,12 @@ pub fn surface_opacity_reg(
     loss
 }
 
-/// Ln1 + Ln2 over a chunk of cell slots: (start + i) mod slots for i < min(count, slots); a cell
-/// is named by its lower corner's slot (x-major, like `links`).
+/// Ln1 + Ln2 over the cells of a chunk of allocated vertex rows: (start + i) mod rows for
+/// i < min(count, rows); a cell is named by its lower corner vertex (row r, slot row_slot[r]).
 #[derive(Clone, Copy, Debug)]
 pub struct NormalChunk {
     pub res: [u32; 3],
+    pub rows: u32,
     pub start: u32,
     pub count: u32,
     pub lambda1: f32,
@@ -151,12 +152,15 @@ fn sign0(x: f32) -> f32 {
 /// neighbours (links, normal) per axis; Err(true) for a tiny normal, Err(false) otherwise.
 type CellPairs = (usize, [i32; 8], [f32; 3], [Option<([i32; 8], [f32; 3])>; 3]);
 
-fn cell_pairs(links: &[i32], delta: &[f32], c: &NormalChunk, i: usize) -> Result<CellPairs, bool> {
-    let slots = links.len();
-    let s = (c.start as usize % slots + i) % slots;
-    if links[s] < 0 {
-        return Err(false);
-    }
+fn cell_pairs(
+    links: &[i32],
+    row_slot: &[u32],
+    delta: &[f32],
+    c: &NormalChunk,
+    i: usize,
+) -> Result<CellPairs, bool> {
+    let rows = c.rows as usize;
+    let s = row_slot[(c.start as usize % rows + i) % rows] as usize;
     let v = slot_vertex(c.res, s);
     let (lc, nc) = match cell_normal(links, delta, c.res, s, v) {
         Cell::Valid(l, n) => (l, n),
@@ -179,16 +183,19 @@ fn cell_pairs(links: &[i32], delta: &[f32], c: &NormalChunk, i: usize) -> Result
 /// touched. Two passes like the kernel: count the cells with a term, then scatter.
 pub fn surface_normal_reg(
     links: &[i32],
+    row_slot: &[u32],
     delta: &[f32],
     grad: &mut [f32],
     touched: &mut [u32],
     c: &NormalChunk,
 ) -> NormalRegStats {
-    let slots = links.len();
-    let n = (c.count as usize).min(slots);
+    let n = (c.count as usize).min(c.rows as usize);
+    if n == 0 {
+        return NormalRegStats::default();
+    }
     let (cells, tiny) = (0..n)
         .into_par_iter()
-        .map(|i| match cell_pairs(links, delta, c, i) {
+        .map(|i| match cell_pairs(links, row_slot, delta, c, i) {
             Ok((_, _, _, nb)) => (nb.iter().any(Option::is_some) as u32, 0u32),
             Err(t) => (0, t as u32),
         })
@@ -198,7 +205,7 @@ pub fn surface_normal_reg(
     let loss: f64 = (0..n)
         .into_par_iter()
         .map(|i| {
-            let Ok((_, lc, nc, nb)) = cell_pairs(links, delta, c, i) else {
+            let Ok((_, lc, nc, nb)) = cell_pairs(links, row_slot, delta, c, i) else {
                 return 0.0;
             };
             let k = nb.iter().filter(|x| x.is_some()).count() as u32;
@@ -246,6 +253,17 @@ pub fn surface_normal_reg(
         })
         .sum();
     NormalRegStats { loss, cells, tiny }
+}
+
+/// The slot of each allocated vertex row (the inverse of `links`), for [`surface_normal_reg`].
+pub fn row_slots(links: &[i32], rows: usize) -> Vec<u32> {
+    let mut out = vec![0u32; rows];
+    for (s, &l) in links.iter().enumerate() {
+        if l >= 0 {
+            out[l as usize] = s as u32;
+        }
+    }
+    out
 }
 
 /// The [`TvChunk`] of Lδ (method.md §3.4): TV on δ (1 channel) over all slots, forward
