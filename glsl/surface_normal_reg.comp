@@ -1,28 +1,27 @@
 #version 460
 // surface_normal_reg — gradient and value of the stage-2 normal regularisers Ln1 and Ln2, fused
-// (method.md §3.4). A cell is named by its lower corner vertex (allocated, row r, slot
-// row_slot[r]); it is VALID when it lies inside the grid, its 8 corners are allocated and its
-// normal is not tiny. Its normal is
-// n = (Σ_{b,c} δ_1bc − Σ_{b,c} δ_0bc, likewise for y and z)/4 (corner k = 4·x + 2·y + z bit)
-// and N = n/|n|; a cell with all corners allocated but |n|² ≤ 1e-12 is skipped (and counted).
-// For each valid cell c of the chunk and each valid forward neighbour c′ = c + e_x, e_y, e_z:
-// term ‖N_c − N_c′‖₁ (Ln1, weight λ1; sign() is 0 at 0) and ‖N_c − N_c′‖₂² (Ln2, weight λ2),
-// the cell's terms divided by its number k_c of valid forward neighbours;
-// loss = Σ_c (λ1·Σ L1 + λ2·Σ L2)/k_c / M, M = number of chunk cells with k_c ≥ 1 (a mean over
-// the cells that have a term). The chunk is the cells of the vertex rows (start + i) mod rows
-// for i < min(count, rows): this kernel wraps, so the caller may draw start anywhere in
-// [0, rows). Rows, not slots: at 128³ about 5 % of the slots are allocated, and an invocation
-// per slot cost more than all the cells' work on lavapipe (measured); with rows in slot order
-// (as SurfaceGrid::from_density allocates them) a row chunk is a contiguous run of cell slots.
-// Two passes over the same dispatch (push `pass`): pass 0 counts counts[0] += M and
-// counts[1] += skipped tiny-normal cells; pass 1 reads M and scatters the gradients.
+// (method.md §3.4). A cell is named by its lower corner vertex (allocated: row r, slot
+// row_slot[r]); it EXISTS when it lies inside the grid and its 8 corners are allocated. Its
+// normal is n = (Σ_{b,c} δ_1bc − Σ_{b,c} δ_0bc, likewise for y and z)/4 (corner k = 4·x + 2·y + z
+// bit) and N = n/|n|. For each existing cell c of the chunk and each existing forward neighbour
+// c′ = c + e_x, e_y, e_z (k_c of them): term ‖N_c − N_c′‖₁ (Ln1, weight λ1; sign() is 0 at 0)
+// and ‖N_c − N_c′‖₂² (Ln2, weight λ2), divided by k_c; a pair where either |n|² ≤ 1e-12 (no
+// direction) is skipped and counted. loss = Σ_c Σ_pairs (λ1·L1 + λ2·L2)/k_c / M, with M = `cells`
+// = the number of chunk cells with k_c ≥ 1: a mean over the cells that have neighbours. M and
+// k_c depend on the allocation only, so the host computes M per chunk from a prefix count made
+// once per grid (cpu::surface_reg::NormalPrefix) and a single pass suffices.
+// The chunk is the cells of the vertex rows (start + i) mod rows for i < min(count, rows): this
+// kernel wraps, so the caller may draw start anywhere in [0, rows). Rows, not slots: at 128³
+// about 5 % of the slots are allocated, and an invocation per slot cost more than all the
+// cells' work on lavapipe (measured); with rows in slot order (as SurfaceGrid::from_density
+// allocates them) a row chunk is a contiguous run of cell slots.
 // Thread mapping: flat id = i, one cell (row) each.
-// Inputs: links, row_slot (slot of each allocated row: cpu::surface_reg::row_slots), delta,
-// res, rows, start, count, lambda1, lambda2; counts (host-zeroed before pass 0).
-// Outputs (pass 1): grad += ∂loss/∂δ by float atomic adds (20 per cell: its 8 corners, 4 more
-// per neighbour), every corner of c and of its valid neighbours touched (step.glsl);
-// loss[0] += loss (float atomic add per subgroup; host-zeroed).
-// CPU twin: cpu::surface_normal_reg.
+// Inputs: links, row_slot (slot of each allocated row), delta, res, rows, start, count, cells,
+// lambda1, lambda2.
+// Outputs: grad += ∂loss/∂δ by float atomic adds (per cell with a kept pair: 8 for its corners,
+// 4 more per kept neighbour), those corners touched (step.glsl); loss[0] += loss and
+// skipped[0] += skipped pairs (atomic adds, one per subgroup; the host zeroes both).
+// CPU twin: cpu::surface_reg::surface_normal_reg.
 #include "common.glsl"
 #extension GL_EXT_shader_atomic_float : require
 #extension GL_EXT_control_flow_attributes : require
@@ -35,12 +34,12 @@ layout(push_constant, scalar) uniform Push {
     F32Buf grad;
     U32Buf step;
     F32Buf loss;
-    U32Buf counts;
+    U32Buf skipped;
     uvec3 res;
     uint rows;
     uint start;
     uint count;
-    uint pass;
+    uint cells;
     float lambda1;
     float lambda2;
 } pc;
@@ -58,7 +57,7 @@ uvec3 slot_vertex(uint s) {
 }
 
 // Cell with lower corner slot s at vertex v: 0 = outside the grid or a corner unallocated,
-// 1 = tiny normal, 2 = valid. Fills the corner links l and the normal n.
+// 1 = tiny normal, 2 = a direction. Fills the corner links l and the normal n.
 uint cell_normal(uint s, uvec3 v, out int l[8], out vec3 n) {
     n = vec3(0.0);
     [[unroll]] for (uint k = 0u; k < 8u; k++) l[k] = -1;
@@ -104,19 +103,17 @@ float sign0(float x) {
     return x > 0.0 ? 1.0 : (x < 0.0 ? -1.0 : 0.0);
 }
 
-// The work of cell id: has = 1 when it has a valid forward neighbour, tiny = 1 when its normal
-// is tiny; in pass 1 also its gradients; returns its loss share.
-float cell_term(uint id, out uint has, out uint tiny) {
-    has = 0u;
-    tiny = 0u;
+// The work of chunk cell id: adds its gradients, returns its loss share; skipped = its pairs
+// dropped for a tiny normal.
+float cell_term(uint id, out uint skipped) {
+    skipped = 0u;
     if (id >= min(pc.count, pc.rows)) return 0.0;
     uint s = pc.row_slot.v[(pc.start % pc.rows + id) % pc.rows];
     uvec3 v = slot_vertex(s);
     int lc[8];
     vec3 nc;
     uint st = cell_normal(s, v, lc, nc);
-    if (st == 1u) tiny = 1u;
-    if (st != 2u) return 0.0;
+    if (st == 0u) return 0.0;
     int ln[3][8];
     vec3 nn[3];
     bool ok[3];
@@ -124,13 +121,13 @@ float cell_term(uint id, out uint has, out uint tiny) {
     [[unroll]] for (uint a = 0u; a < 3u; a++) {
         uvec3 va = v;
         va[a] += 1u;
-        ok[a] = cell_normal(s + axis_stride(a), va, ln[a], nn[a]) == 2u;
-        if (ok[a]) k++;
+        uint sn = cell_normal(s + axis_stride(a), va, ln[a], nn[a]);
+        if (sn != 0u) k++;
+        ok[a] = sn == 2u && st == 2u;
+        if (sn != 0u && !ok[a]) skipped++;
     }
-    if (k == 0u) return 0.0;
-    has = 1u;
-    if (pc.pass == 0u) return 0.0;
-    float w = 1.0 / (float(k) * float(pc.counts.v[0]));
+    if (!(ok[0] || ok[1] || ok[2])) return 0.0;
+    float w = 1.0 / (float(k) * float(pc.cells));
     float rc = norm3(nc);
     vec3 n_c = nc / rc;
     precise vec3 gc = vec3(0.0);
@@ -171,16 +168,12 @@ float cell_term(uint id, out uint has, out uint tiny) {
 }
 
 void main() {
-    uint has, tiny;
-    float l = cell_term(flat_id(), has, tiny);
-    if (pc.pass == 0u) {
-        uvec2 c = subgroupAdd(uvec2(has, tiny));
-        if (subgroupElect()) {
-            if (c.x != 0u) atomicAdd(pc.counts.v[0], c.x);
-            if (c.y != 0u) atomicAdd(pc.counts.v[1], c.y);
-        }
-    } else {
-        float s = subgroupAdd(l);
-        if (subgroupElect() && s != 0.0) atomicAdd(pc.loss.v[0], s);
+    uint skipped;
+    float l = cell_term(flat_id(), skipped);
+    uint sk = subgroupAdd(skipped);
+    float sl = subgroupAdd(l);
+    if (subgroupElect()) {
+        if (sk != 0u) atomicAdd(pc.skipped.v[0], sk);
+        if (sl != 0.0) atomicAdd(pc.loss.v[0], sl);
     }
 }

@@ -7,7 +7,7 @@
 use alphasurf::check::surface_reg::{empty_step, gpu_normal_reg, RegGrid};
 use alphasurf::cpu::surface_reg::{
     delta_tv_chunk, opacity_tv_chunk, row_slots, surface_normal_reg, surface_opacity_reg, tv_loss,
-    NormalChunk, NormalRegStats, OpacityChunk,
+    NormalChunk, NormalPrefix, NormalRegStats, OpacityChunk,
 };
 use alphasurf::cpu::{surface_rmsprop_sparse, tv, Stage2Params, SurfaceRmsProp};
 use alphasurf::kernels;
@@ -262,12 +262,13 @@ fn opacity_reg_fd_and_adversarial() {
     assert!((l1 - l_ref).abs() <= 1e-6 * l_ref.abs());
 }
 
-/// f64 Ln1 + Ln2 of the kernel's definition (mean over the chunk's cells with a valid forward
-/// neighbour of Σ (λ1‖ΔN‖₁ + λ2‖ΔN‖₂²)/k_c).
+/// f64 Ln1 + Ln2 of the kernel's definition: mean over the chunk's cells with an existing
+/// forward neighbour of Σ_pairs (λ1‖ΔN‖₁ + λ2‖ΔN‖₂²)/k_c, pairs with a tiny normal dropped.
 fn normal_reg_f64(g: &RegGrid, x: &[f64], c: &NormalChunk) -> f64 {
     let r = g.res[0] as usize;
     let rs = row_slots(&g.links, g.allocated());
-    let normal = |v: [usize; 3]| -> Option<[f64; 3]> {
+    // None: missing; Some(None): tiny; Some(Some(N)).
+    let normal = |v: [usize; 3]| -> Option<Option<[f64; 3]>> {
         if v.iter().any(|&i| i + 1 >= r) {
             return None;
         }
@@ -279,11 +280,15 @@ fn normal_reg_f64(g: &RegGrid, x: &[f64], c: &NormalChunk) -> f64 {
                 return None;
             }
             for a in 0..3 {
-                n[a] += if b[a] == 1 { x[l as usize] } else { -x[l as usize] } / 4.0;
+                n[a] += if b[a] == 1 {
+                    x[l as usize]
+                } else {
+                    -x[l as usize]
+                } / 4.0;
             }
         }
         let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
-        (len * len > 1e-12).then(|| n.map(|v| v / len))
+        Some((len * len > 1e-12).then(|| n.map(|v| v / len)))
     };
     let rows = c.rows as usize;
     let (mut sum, mut cells) = (0.0, 0usize);
@@ -291,36 +296,33 @@ fn normal_reg_f64(g: &RegGrid, x: &[f64], c: &NormalChunk) -> f64 {
         let s = rs[(c.start as usize % rows + i) % rows] as usize;
         let v = [s / (r * r), (s / r) % r, s % r];
         let Some(nc) = normal(v) else { continue };
-        let mut terms = Vec::new();
-        for a in 0..3 {
-            let mut va = v;
-            va[a] += 1;
-            if let Some(nn) = normal(va) {
-                let d: Vec<f64> = (0..3).map(|j| nc[j] - nn[j]).collect();
-                terms.push(
-                    c.lambda1 as f64 * d.iter().map(|v| v.abs()).sum::<f64>()
-                        + c.lambda2 as f64 * d.iter().map(|v| v * v).sum::<f64>(),
-                );
-            }
+        let nbs: Vec<Option<[f64; 3]>> = (0..3)
+            .filter_map(|a| {
+                let mut va = v;
+                va[a] += 1;
+                normal(va)
+            })
+            .collect();
+        if nbs.is_empty() {
+            continue;
         }
-        if !terms.is_empty() {
-            cells += 1;
-            sum += terms.iter().sum::<f64>() / terms.len() as f64;
+        cells += 1;
+        let Some(nc) = nc else { continue };
+        for nn in nbs.iter().flatten() {
+            let d: Vec<f64> = (0..3).map(|j| nc[j] - nn[j]).collect();
+            sum += (c.lambda1 as f64 * d.iter().map(|v| v.abs()).sum::<f64>()
+                + c.lambda2 as f64 * d.iter().map(|v| v * v).sum::<f64>())
+                / nbs.len() as f64;
         }
     }
+    assert_eq!(cells as u32, c.cells, "NormalPrefix's M");
     sum / cells.max(1) as f64
 }
 
 /// A chunk of g's rows.
 fn chunk(g: &RegGrid, start: u32, count: u32, lambda1: f32, lambda2: f32) -> NormalChunk {
-    NormalChunk {
-        res: g.res,
-        rows: g.allocated() as u32,
-        start,
-        count,
-        lambda1,
-        lambda2,
-    }
+    let rs = row_slots(&g.links, g.allocated());
+    NormalPrefix::new(&g.links, &rs, g.res).chunk(start, count, lambda1, lambda2)
 }
 
 /// The CPU twin on g from zero gradients: (grad, touched, stats).
@@ -339,8 +341,12 @@ fn normal_fd_case(g: &RegGrid, c: &NormalChunk, what: &str) {
     let e = rel_l2(&got, &want);
     assert!(e <= 1e-3, "{what}: Ln gradient vs FD rel L2 {e:e}");
     let v = normal_reg_f64(g, &x, c);
-    assert!((st.loss - v).abs() <= 1e-5 * v, "{what}: loss {} vs {v}", st.loss);
-    assert!(st.cells > 0, "{what}: no cell has a term");
+    assert!(
+        (st.loss - v).abs() <= 1e-5 * v,
+        "{what}: loss {} vs {v}",
+        st.loss
+    );
+    assert!(c.cells > 0, "{what}: no cell has a term");
     let wmax = want.iter().fold(0f64, |m, v| m.max(v.abs()));
     for (i, (&t, &w)) in touched.iter().zip(&want).enumerate() {
         if w.abs() > 1e-9 * wmax {
@@ -359,25 +365,48 @@ fn normal_reg_fd() {
     // Holes (unallocated neighbours), grid faces, a chunk wrapping past the last row.
     let h = small_grid(5, 7, |v| (v[0] * 5 + v[1] * 3 + v[2]) % 13 == 0);
     let rows = h.allocated() as u32;
-    normal_fd_case(&h, &chunk(&h, rows - 40, 150, 1e-2, 1e-3), "holes, wrapping");
+    normal_fd_case(
+        &h,
+        &chunk(&h, rows - 40, 150, 1e-2, 1e-3),
+        "holes, wrapping",
+    );
 }
 
 #[test]
 fn normal_reg_adversarial() {
-    // Constant δ: every cell's normal is zero → all skipped and counted, nothing changes.
+    // Constant δ: every normal is zero → every pair skipped and counted, nothing changes.
     let mut g = small_grid(6, 5, |_| false);
     g.delta.iter_mut().for_each(|d| *d = 0.7);
     let rs = row_slots(&g.links, g.allocated());
     let mut grad = vec![0.25f32; g.allocated()];
     let mut touched = vec![0u32; g.allocated()];
     let c = chunk(&g, 0, 125, 1.0, 1.0);
+    // 4³ cells, all but (3, 3, 3) with a forward neighbour; 3·4·4·3 pairs.
+    assert_eq!(c.cells, 63);
     let st = surface_normal_reg(&g.links, &rs, &g.delta, &mut grad, &mut touched, &c);
-    assert_eq!((st.loss, st.cells, st.tiny), (0.0, 0, 64));
+    assert_eq!((st.loss, st.skipped), (0.0, 144));
     assert!(grad.iter().all(|&v| v == 0.25) && touched.iter().all(|&t| t == 0));
+    // One flat cell among sloped ones: its pairs are skipped, the others still count in k_c.
+    let mut f = small_grid(10, 5, |_| false);
+    for x in 0..2 {
+        for y in 0..2 {
+            for z in 0..2 {
+                f.delta[f.links[(x * 5 + y) * 5 + z] as usize] = 0.5;
+            }
+        }
+    }
+    let cf = chunk(&f, 0, 125, 1e-2, 1e-3);
+    let (_, _, st) = run_normal(&f, &cf);
+    assert_eq!(
+        st.skipped, 3,
+        "the flat cell (0, 0, 0) has 3 neighbours, no backward ones"
+    );
     // A single cell (2³ grid): no forward neighbour inside the grid → no term.
     let g2 = small_grid(7, 2, |_| false);
-    let (gr, t2, st) = run_normal(&g2, &chunk(&g2, 3, 8, 1.0, 1.0));
-    assert_eq!((st.loss, st.cells, st.tiny), (0.0, 0, 0));
+    let c2 = chunk(&g2, 3, 8, 1.0, 1.0);
+    assert_eq!(c2.cells, 0);
+    let (gr, t2, st) = run_normal(&g2, &c2);
+    assert_eq!((st.loss, st.skipped), (0.0, 0));
     assert!(gr.iter().all(|&v| v == 0.0) && t2.iter().all(|&t| t == 0));
     // An empty grid (no rows) and an empty chunk.
     let empty = RegGrid {
@@ -386,36 +415,51 @@ fn normal_reg_adversarial() {
         delta: vec![],
         opacity: vec![],
     };
-    assert_eq!(run_normal(&empty, &chunk(&empty, 5, 10, 1.0, 1.0)).2, Default::default());
-    assert_eq!(run_normal(&g, &chunk(&g, 5, 0, 1.0, 1.0)).2, Default::default());
+    let ce = chunk(&empty, 5, 10, 1.0, 1.0);
+    assert_eq!((ce.rows, ce.cells), (0, 0));
+    assert_eq!(run_normal(&empty, &ce).2, Default::default());
+    assert_eq!(
+        run_normal(&g, &chunk(&g, 5, 0, 1.0, 1.0)).2,
+        Default::default()
+    );
     // Identical normals (δ linear) with L1: sign(0) = 0 → zero gradient, but touched.
     let mut lin = small_grid(8, 4, |_| false);
     for s in 0..64 {
         let v = [s / 16, (s / 4) % 4, s % 4];
         lin.delta[lin.links[s] as usize] = (v[0] + 2 * v[1] + 4 * v[2]) as f32;
     }
-    let (gr, t3, st) = run_normal(&lin, &chunk(&lin, 0, 64, 1.0, 0.0));
-    assert_eq!((st.loss, st.cells), (0.0, 26));
+    let cl = chunk(&lin, 0, 64, 1.0, 0.0);
+    assert_eq!(cl.cells, 26);
+    let (gr, t3, st) = run_normal(&lin, &cl);
+    assert_eq!(st.loss, 0.0);
     assert!(gr.iter().all(|&v| v == 0.0), "{gr:?}");
     assert!(t3.iter().all(|&t| t == 1));
     // A whole chunk starting anywhere (wrapping, count > rows) covers every cell once.
     let g4 = small_grid(9, 6, |v| (v[0] * 5 + v[1] * 3 + v[2]) % 13 == 0);
     let rows = g4.allocated() as u32;
-    let (ga, ta, sa) = run_normal(&g4, &chunk(&g4, 0, rows, 1e-2, 1e-3));
-    let (gb, tb, sb) = run_normal(&g4, &chunk(&g4, 100, 3 * rows, 1e-2, 1e-3));
-    assert!(sa.cells > 20, "{sa:?}");
-    assert_eq!((ta, sa.cells, sa.tiny), (tb, sb.cells, sb.tiny));
+    let ca = chunk(&g4, 0, rows, 1e-2, 1e-3);
+    let cb = chunk(&g4, 100, 3 * rows, 1e-2, 1e-3);
+    assert!(ca.cells > 20 && ca.cells == cb.cells, "{ca:?} {cb:?}");
+    let (ga, ta, _) = run_normal(&g4, &ca);
+    let (gb, tb, _) = run_normal(&g4, &cb);
+    assert_eq!(ta, tb);
     let a64: Vec<f64> = ga.iter().map(|&v| v as f64).collect();
     let b64: Vec<f64> = gb.iter().map(|&v| v as f64).collect();
     let e = rel_l2(&b64, &a64);
     assert!(e <= 1e-5, "whole chunk from 0 vs from 100: rel L2 {e:e}");
-    // And the device agrees on a chunk wrapping past the last row (the grid's x = max slab).
-    let gpu = alphasurf::gpu::test_gpu();
+    // A wrapping chunk's M is the sum of its two pieces'.
     let cw = chunk(&g4, rows - 30, 60, 1e-2, 1e-3);
+    let (p1, p2) = (
+        chunk(&g4, rows - 30, 30, 0.0, 0.0),
+        chunk(&g4, 0, 30, 0.0, 0.0),
+    );
+    assert_eq!(cw.cells, p1.cells + p2.cells);
+    // And the device agrees on it (the grid's x = max slab, unallocated neighbours).
+    let gpu = alphasurf::gpu::test_gpu();
     let (want, want_t, st) = run_normal(&g4, &cw);
     let out = gpu_normal_reg(gpu, &g4, &vec![0f32; g4.allocated()], &cw).unwrap();
     assert_eq!(out.touched, want_t);
-    assert_eq!(out.counts, [st.cells, st.tiny]);
+    assert_eq!(out.skipped, st.skipped);
     let (g64, w64): (Vec<f64>, Vec<f64>) = out
         .grad
         .iter()
@@ -424,7 +468,11 @@ fn normal_reg_adversarial() {
         .unzip();
     assert!(rel_l2(&g64, &w64) <= 1e-5);
     assert!((out.loss as f64 - st.loss).abs() <= 1e-5 * st.loss);
-    assert!(gpu.validation_messages().is_empty(), "{:?}", gpu.validation_messages());
+    assert!(
+        gpu.validation_messages().is_empty(),
+        "{:?}",
+        gpu.validation_messages()
+    );
 }
 
 #[test]

@@ -7,7 +7,8 @@
 use super::{CheckRow, Compare};
 use crate::cpu::step::{optim_args, STEP_COUNT, STEP_FLAGS, STEP_N};
 use crate::cpu::surface_reg::{
-    row_slots, surface_normal_reg, surface_opacity_reg, NormalChunk, NormalRegStats, OpacityChunk,
+    row_slots, surface_normal_reg, surface_opacity_reg, NormalChunk, NormalPrefix, NormalRegStats,
+    OpacityChunk,
 };
 use crate::cpu::{surface_rmsprop_sparse, Stage2Params, SurfaceRmsProp};
 use crate::gpu::{Gpu, GpuBuffer};
@@ -98,13 +99,13 @@ pub struct GpuRegOut {
     pub touched: Vec<u32>,
     /// loss[0].
     pub loss: f32,
-    /// counts[0..2] (surface_normal_reg only; zero otherwise).
-    pub counts: [u32; 2],
+    /// skipped[0] (surface_normal_reg only; zero otherwise).
+    pub skipped: u32,
     /// Device time of the kernel's dispatches, ns.
     pub ns: f64,
 }
 
-/// Run surface_normal_reg (both passes) on the device.
+/// Run surface_normal_reg on the device.
 pub fn gpu_normal_reg(gpu: &Gpu, g: &RegGrid, grad0: &[f32], c: &NormalChunk) -> Result<GpuRegOut> {
     let n = g.allocated();
     let links = gpu.upload(&g.links)?;
@@ -113,39 +114,33 @@ pub fn gpu_normal_reg(gpu: &Gpu, g: &RegGrid, grad0: &[f32], c: &NormalChunk) ->
     let grad = gpu.upload(grad0)?;
     let step = gpu.upload(&empty_step(n))?;
     let loss = gpu.zeros::<f32>(1)?;
-    let counts = gpu.zeros::<u32>(2)?;
-    let threads = c.count.min(c.rows);
-    let mut b = gpu.batch()?;
-    for pass in 0..2 {
-        b.dispatch_1d(
-            &kernels::surface_normal_reg::INFO,
-            &kernels::surface_normal_reg::Push {
-                links: links.address(),
-                row_slot: row_slot.address(),
-                delta: delta.address(),
-                grad: grad.address(),
-                step: step.address(),
-                loss: loss.address(),
-                counts: counts.address(),
-                res: c.res,
-                rows: c.rows,
-                start: c.start,
-                count: c.count,
-                pass,
-                lambda1: c.lambda1,
-                lambda2: c.lambda2,
-                ..Default::default()
-            },
-            threads,
-        )?;
-    }
-    let t = b.submit()?;
-    let cnt: Vec<u32> = counts.download()?;
+    let skipped = gpu.zeros::<u32>(1)?;
+    let t = gpu.run_1d(
+        &kernels::surface_normal_reg::INFO,
+        &kernels::surface_normal_reg::Push {
+            links: links.address(),
+            row_slot: row_slot.address(),
+            delta: delta.address(),
+            grad: grad.address(),
+            step: step.address(),
+            loss: loss.address(),
+            skipped: skipped.address(),
+            res: c.res,
+            rows: c.rows,
+            start: c.start,
+            count: c.count,
+            cells: c.cells,
+            lambda1: c.lambda1,
+            lambda2: c.lambda2,
+            ..Default::default()
+        },
+        c.count.min(c.rows),
+    )?;
     Ok(GpuRegOut {
         grad: grad.download()?,
         touched: step.download_range(STEP_FLAGS, n)?,
         loss: loss.download::<f32>()?[0],
-        counts: [cnt[0], cnt[1]],
+        skipped: skipped.download::<u32>()?[0],
         ns: t.kernel_ns("surface_normal_reg"),
     })
 }
@@ -180,7 +175,7 @@ pub fn gpu_opacity_reg(
         grad: grad.download()?,
         touched: step.download_range(STEP_FLAGS, n)?,
         loss: loss.download::<f32>()?[0],
-        counts: [0; 2],
+        skipped: 0,
         ns: t.kernel_ns("surface_opacity_reg"),
     })
 }
@@ -244,24 +239,23 @@ pub fn check_normal_reg(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
     let n = g.allocated();
     let rows = n as u32;
     let rs = row_slots(&g.links, n);
+    let prefix = NormalPrefix::new(&g.links, &rs, g.res);
     let mut rng = Pcg64::seed_from_u64(seed ^ 0xa11);
     let grad0 = random_vec(&mut rng, n, 1e-4);
     let mut cmp = Compare::new(0.0, 0.0);
     let (mut worst_l2, mut worst_loss, mut notes) = (0f64, 0f64, Vec::new());
-    let cases = [(0, rows), (rows / 3, rows / 4), (rows - rows / 10, rows / 3)];
+    let cases = [
+        (0, rows),
+        (rows / 3, rows / 4),
+        (rows - rows / 10, rows / 3),
+    ];
     for &(start, count) in &cases {
-        let c = NormalChunk {
-            res: g.res,
-            rows,
-            start,
-            count,
-            lambda1: 1e-2,
-            lambda2: 1e-3,
-        };
+        let c = prefix.chunk(start, count, 1e-2, 1e-3);
         let (mut want, mut want_t) = (grad0.clone(), vec![0u32; n]);
-        let st: NormalRegStats = surface_normal_reg(&g.links, &rs, &g.delta, &mut want, &mut want_t, &c);
+        let st: NormalRegStats =
+            surface_normal_reg(&g.links, &rs, &g.delta, &mut want, &mut want_t, &c);
         let out = gpu_normal_reg(gpu, &g, &grad0, &c)?;
-        let (got, got_t, got_loss, counts) = (out.grad, out.touched, out.loss, out.counts);
+        let (got, got_t, got_loss) = (out.grad, out.touched, out.loss);
         // Atomic sums in another order: elementwise |Δ| ≤ 1e-6·max|added gradient| + 1e-4·|cpu|.
         let scale = want
             .iter()
@@ -279,17 +273,15 @@ pub fn check_normal_reg(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
         }
         let l2 = (num / den.max(1e-300)).sqrt();
         worst_l2 = worst_l2.max(l2);
-        for (a, b) in [(counts[0], st.cells), (counts[1], st.tiny)] {
-            e.value(a as f64, b as f64, || {
-                format!("chunk {start}+{count} counts")
-            });
-        }
+        e.value(out.skipped as f64, st.skipped as f64, || {
+            format!("chunk {start}+{count} skipped pairs")
+        });
         let fd = got_t.iter().zip(&want_t).filter(|(a, b)| a != b).count();
         e.value(fd as f64, 0.0, || "touched flags differing".into());
         worst_loss = worst_loss.max((got_loss as f64 - st.loss).abs() / st.loss.abs().max(1e-30));
         notes.push(format!(
-            "chunk {start}+{count}: {} cells, {} tiny",
-            st.cells, st.tiny
+            "chunk {start}+{count}: {} cells, {} skipped pairs",
+            c.cells, st.skipped
         ));
         // Merge into the row's comparison.
         cmp.compared += e.compared;
@@ -306,7 +298,7 @@ pub fn check_normal_reg(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
         cases.len(),
         format!(
             "aggregate rel L2 of the added gradient {worst_l2:.1e} (≤ 1e-5 required); loss rel {worst_loss:.1e} (≤ 1e-5; \
-             terms are non-negative); counts and touched flags exact; {}",
+             terms are non-negative); skipped pairs and touched flags exact; {}",
             notes.join("; ")
         ),
     );

@@ -8,6 +8,7 @@ use super::atomic::{add, as_atomic, as_atomic_u32};
 use super::step::touch;
 use super::TvChunk;
 use rayon::prelude::*;
+use std::sync::atomic::AtomicU32;
 
 /// Lα over a chunk of allocated vertex rows: rows (start + i) mod rows for i < min(count, rows)
 /// (the kernel wraps; `rows` is the allocated vertex count).
@@ -48,12 +49,15 @@ pub fn surface_opacity_reg(
 
 /// Ln1 + Ln2 over the cells of a chunk of allocated vertex rows: (start + i) mod rows for
 /// i < min(count, rows); a cell is named by its lower corner vertex (row r, slot row_slot[r]).
+/// `cells` is the mean's denominator M (cells of the chunk with an existing forward neighbour):
+/// make chunks with [`NormalPrefix::chunk`].
 #[derive(Clone, Copy, Debug)]
 pub struct NormalChunk {
     pub res: [u32; 3],
     pub rows: u32,
     pub start: u32,
     pub count: u32,
+    pub cells: u32,
     pub lambda1: f32,
     pub lambda2: f32,
 }
@@ -63,20 +67,19 @@ pub struct NormalChunk {
 pub struct NormalRegStats {
     /// The loss (f64 sum of the per-cell f32 terms).
     pub loss: f64,
-    /// Cells of the chunk with at least one valid forward neighbour (the mean's denominator).
-    pub cells: u32,
-    /// Cells of the chunk with all corners allocated but |n|² ≤ [`TINY_NORMAL2`] (skipped).
-    pub tiny: u32,
+    /// Pairs skipped because a normal was tiny (|n|² ≤ [`TINY_NORMAL2`]).
+    pub skipped: u32,
 }
 
-/// Cells whose unnormalised normal has |n|² at most this are skipped (no direction).
+/// Pairs where a cell's unnormalised normal has |n|² at most this are skipped (no direction).
 pub const TINY_NORMAL2: f32 = 1e-12;
 
-/// A cell's state: outside the grid or a corner unallocated, tiny normal, or valid.
+/// A cell's state: missing (outside the grid or a corner unallocated), tiny normal, or a
+/// direction.
 #[derive(Clone, Copy, PartialEq)]
 enum Cell {
     Missing,
-    Tiny,
+    Tiny([i32; 8]),
     Valid([i32; 8], [f32; 3]),
 }
 
@@ -89,32 +92,103 @@ fn axis_stride(res: [u32; 3], a: usize) -> usize {
     [(res[1] * res[2]) as usize, res[2] as usize, 1][a]
 }
 
-/// Twin of the kernel's `cell_normal`: the corner links and normal n of the cell at slot s,
-/// vertex v.
-fn cell_normal(links: &[i32], delta: &[f32], res: [u32; 3], s: usize, v: [usize; 3]) -> Cell {
+/// The corner links of the cell at slot s, vertex v, if it exists.
+fn cell_links(links: &[i32], res: [u32; 3], s: usize, v: [usize; 3]) -> Option<[i32; 8]> {
     if (0..3).any(|a| v[a] + 1 >= res[a] as usize) {
-        return Cell::Missing;
+        return None;
     }
     let mut l = [0i32; 8];
-    let mut d = [0f32; 8];
-    for k in 0..8 {
+    for (k, lk) in l.iter_mut().enumerate() {
         let cs =
             s + ((k >> 2) & 1) * axis_stride(res, 0) + ((k >> 1) & 1) * res[2] as usize + (k & 1);
-        l[k] = links[cs];
-        if l[k] < 0 {
-            return Cell::Missing;
+        *lk = links[cs];
+        if *lk < 0 {
+            return None;
         }
-        d[k] = delta[l[k] as usize];
     }
+    Some(l)
+}
+
+/// Twin of the kernel's `cell_normal`.
+fn cell_normal(links: &[i32], delta: &[f32], res: [u32; 3], s: usize, v: [usize; 3]) -> Cell {
+    let Some(l) = cell_links(links, res, s, v) else {
+        return Cell::Missing;
+    };
+    let d = l.map(|x| delta[x as usize]);
     let mx = ((d[4] + d[5]) + (d[6] + d[7])) - ((d[0] + d[1]) + (d[2] + d[3]));
     let my = ((d[2] + d[3]) + (d[6] + d[7])) - ((d[0] + d[1]) + (d[4] + d[5]));
     let mz = ((d[1] + d[3]) + (d[5] + d[7])) - ((d[0] + d[2]) + (d[4] + d[6]));
     let n = [mx * 0.25, my * 0.25, mz * 0.25];
     let n2 = (n[0] * n[0] + n[1] * n[1]) + n[2] * n[2];
     if n2 <= TINY_NORMAL2 {
-        Cell::Tiny
+        Cell::Tiny(l)
     } else {
         Cell::Valid(l, n)
+    }
+}
+
+/// Number of existing forward neighbours of the cell of row slot s (0 if it does not exist).
+fn existing_neighbours(links: &[i32], res: [u32; 3], s: usize) -> u32 {
+    let v = slot_vertex(res, s);
+    if cell_links(links, res, s, v).is_none() {
+        return 0;
+    }
+    (0..3)
+        .filter(|&a| {
+            let mut va = v;
+            va[a] += 1;
+            cell_links(links, res, s + axis_stride(res, a), va).is_some()
+        })
+        .count() as u32
+}
+
+/// Per-grid prefix count of the rows whose cell has an existing forward neighbour; gives the
+/// denominator M of any row chunk. Depends on the allocation only: build it once per grid.
+pub struct NormalPrefix {
+    res: [u32; 3],
+    /// prefix[r] = number of such rows below r (rows + 1 entries).
+    prefix: Vec<u32>,
+}
+
+impl NormalPrefix {
+    pub fn new(links: &[i32], row_slot: &[u32], res: [u32; 3]) -> NormalPrefix {
+        let has: Vec<u32> = row_slot
+            .par_iter()
+            .map(|&s| (existing_neighbours(links, res, s as usize) > 0) as u32)
+            .collect();
+        let mut prefix = Vec::with_capacity(has.len() + 1);
+        prefix.push(0);
+        for h in has {
+            prefix.push(prefix.last().copied().unwrap_or(0) + h);
+        }
+        NormalPrefix { res, prefix }
+    }
+
+    /// The number of allocated rows.
+    pub fn rows(&self) -> u32 {
+        (self.prefix.len() - 1) as u32
+    }
+
+    /// The chunk of rows (start + i) mod rows, i < min(count, rows), with its M.
+    pub fn chunk(&self, start: u32, count: u32, lambda1: f32, lambda2: f32) -> NormalChunk {
+        let rows = self.rows();
+        let n = count.min(rows);
+        let s0 = if rows == 0 { 0 } else { start % rows };
+        let p = |r: u32| self.prefix[r as usize];
+        let cells = if s0 + n <= rows {
+            p(s0 + n) - p(s0)
+        } else {
+            (p(rows) - p(s0)) + p(s0 + n - rows)
+        };
+        NormalChunk {
+            res: self.res,
+            rows,
+            start,
+            count,
+            cells,
+            lambda1,
+            lambda2,
+        }
     }
 }
 
@@ -148,39 +222,89 @@ fn sign0(x: f32) -> f32 {
     }
 }
 
-/// The cell at chunk position i: its slot, corner links, normal, and the valid forward
-/// neighbours (links, normal) per axis; Err(true) for a tiny normal, Err(false) otherwise.
-type CellPairs = (usize, [i32; 8], [f32; 3], [Option<([i32; 8], [f32; 3])>; 3]);
-
-fn cell_pairs(
+/// Twin of the kernel's `cell_term` for chunk cell i: adds its gradients, returns its loss share
+/// and skipped pairs.
+fn cell_term(
     links: &[i32],
     row_slot: &[u32],
     delta: &[f32],
     c: &NormalChunk,
     i: usize,
-) -> Result<CellPairs, bool> {
+    grad: &[AtomicU32],
+    flags: &[AtomicU32],
+) -> (f64, u32) {
     let rows = c.rows as usize;
     let s = row_slot[(c.start as usize % rows + i) % rows] as usize;
     let v = slot_vertex(c.res, s);
-    let (lc, nc) = match cell_normal(links, delta, c.res, s, v) {
-        Cell::Valid(l, n) => (l, n),
-        Cell::Tiny => return Err(true),
-        Cell::Missing => return Err(false),
-    };
-    let nb = std::array::from_fn(|a| {
+    let own = cell_normal(links, delta, c.res, s, v);
+    if own == Cell::Missing {
+        return (0.0, 0);
+    }
+    let mut k = 0u32;
+    let mut skipped = 0u32;
+    let nb: [Option<([i32; 8], [f32; 3])>; 3] = std::array::from_fn(|a| {
         let mut va = v;
         va[a] += 1;
-        match cell_normal(links, delta, c.res, s + axis_stride(c.res, a), va) {
-            Cell::Valid(l, n) => Some((l, n)),
-            _ => None,
+        let cn = cell_normal(links, delta, c.res, s + axis_stride(c.res, a), va);
+        if cn != Cell::Missing {
+            k += 1;
+        }
+        match (cn, own) {
+            (Cell::Valid(l, n), Cell::Valid(..)) => Some((l, n)),
+            (Cell::Missing, _) => None,
+            _ => {
+                skipped += 1;
+                None
+            }
         }
     });
-    Ok((s, lc, nc, nb))
+    let Cell::Valid(lc, nc) = own else {
+        return (0.0, skipped);
+    };
+    if nb.iter().all(Option::is_none) {
+        return (0.0, skipped);
+    }
+    let w = 1.0 / (k as f32 * c.cells as f32);
+    let rc = norm3(nc);
+    let n_c = nc.map(|x| x / rc);
+    let mut gc = [0f32; 3];
+    let mut g = [0f32; 8];
+    let mut lsum = 0f32;
+    for (a, nb) in nb.iter().enumerate() {
+        let Some((ln, nn)) = nb else { continue };
+        let r = norm3(*nn);
+        let n_n = nn.map(|x| x / r);
+        let d: [f32; 3] = std::array::from_fn(|j| n_c[j] - n_n[j]);
+        let l1 = (d[0].abs() + d[1].abs()) + d[2].abs();
+        let l2 = (d[0] * d[0] + d[1] * d[1]) + d[2] * d[2];
+        lsum += c.lambda1 * l1 + c.lambda2 * l2;
+        let gn: [f32; 3] =
+            std::array::from_fn(|j| w * (c.lambda1 * sign0(d[j]) + (2.0 * c.lambda2) * d[j]));
+        for j in 0..3 {
+            gc[j] += gn[j];
+        }
+        let gnn = unnormalise_grad(*nn, gn.map(|x| -x));
+        let bit = 4usize >> a;
+        for kk in 0..8 {
+            let gk = corner_grad(kk, gnn);
+            if kk & bit == 0 {
+                g[kk | bit] += gk;
+            } else {
+                add(&grad[ln[kk] as usize], gk);
+                touch(flags, ln[kk] as usize);
+            }
+        }
+    }
+    let gnc = unnormalise_grad(nc, gc);
+    for kk in 0..8 {
+        add(&grad[lc[kk] as usize], g[kk] + corner_grad(kk, gnc));
+        touch(flags, lc[kk] as usize);
+    }
+    ((w * lsum) as f64, skipped)
 }
 
 /// Ln1 + Ln2 (see `glsl/surface_normal_reg.comp` for the definition): grad += ∂loss/∂δ by atomic
-/// adds (as the kernel), the corners of every contributing cell and of its valid neighbours
-/// touched. Two passes like the kernel: count the cells with a term, then scatter.
+/// adds (as the kernel), the corners of the cells of every kept pair touched.
 pub fn surface_normal_reg(
     links: &[i32],
     row_slot: &[u32],
@@ -190,69 +314,13 @@ pub fn surface_normal_reg(
     c: &NormalChunk,
 ) -> NormalRegStats {
     let n = (c.count as usize).min(c.rows as usize);
-    if n == 0 {
-        return NormalRegStats::default();
-    }
-    let (cells, tiny) = (0..n)
-        .into_par_iter()
-        .map(|i| match cell_pairs(links, row_slot, delta, c, i) {
-            Ok((_, _, _, nb)) => (nb.iter().any(Option::is_some) as u32, 0u32),
-            Err(t) => (0, t as u32),
-        })
-        .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
     let grad = as_atomic(grad);
     let flags = as_atomic_u32(touched);
-    let loss: f64 = (0..n)
+    let (loss, skipped) = (0..n)
         .into_par_iter()
-        .map(|i| {
-            let Ok((_, lc, nc, nb)) = cell_pairs(links, row_slot, delta, c, i) else {
-                return 0.0;
-            };
-            let k = nb.iter().filter(|x| x.is_some()).count() as u32;
-            if k == 0 {
-                return 0.0;
-            }
-            let w = 1.0 / (k as f32 * cells as f32);
-            let rc = norm3(nc);
-            let n_c = nc.map(|x| x / rc);
-            let mut gc = [0f32; 3];
-            let mut g = [0f32; 8];
-            let mut lsum = 0f32;
-            for (a, nb) in nb.iter().enumerate() {
-                let Some((ln, nn)) = nb else { continue };
-                let r = norm3(*nn);
-                let n_n = nn.map(|x| x / r);
-                let d: [f32; 3] = std::array::from_fn(|j| n_c[j] - n_n[j]);
-                let l1 = (d[0].abs() + d[1].abs()) + d[2].abs();
-                let l2 = (d[0] * d[0] + d[1] * d[1]) + d[2] * d[2];
-                lsum += c.lambda1 * l1 + c.lambda2 * l2;
-                let gn: [f32; 3] = std::array::from_fn(|j| {
-                    w * (c.lambda1 * sign0(d[j]) + (2.0 * c.lambda2) * d[j])
-                });
-                for j in 0..3 {
-                    gc[j] += gn[j];
-                }
-                let gnn = unnormalise_grad(*nn, gn.map(|x| -x));
-                let bit = 4usize >> a;
-                for kk in 0..8 {
-                    let gk = corner_grad(kk, gnn);
-                    if kk & bit == 0 {
-                        g[kk | bit] += gk;
-                    } else {
-                        add(&grad[ln[kk] as usize], gk);
-                        touch(flags, ln[kk] as usize);
-                    }
-                }
-            }
-            let gnc = unnormalise_grad(nc, gc);
-            for kk in 0..8 {
-                add(&grad[lc[kk] as usize], g[kk] + corner_grad(kk, gnc));
-                touch(flags, lc[kk] as usize);
-            }
-            (w * lsum) as f64
-        })
-        .sum();
-    NormalRegStats { loss, cells, tiny }
+        .map(|i| cell_term(links, row_slot, delta, c, i, grad, flags))
+        .reduce(|| (0.0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+    NormalRegStats { loss, skipped }
 }
 
 /// The slot of each allocated vertex row (the inverse of `links`), for [`surface_normal_reg`].
