@@ -9,6 +9,7 @@ pub mod extract_points;
 pub mod fill_pattern;
 pub mod plenoxel;
 pub mod sh_eval;
+pub mod surface_blocks;
 pub mod surface_fwd;
 pub mod trilerp_eval;
 
@@ -49,6 +50,7 @@ pub const CHECKS: &[(&str, CheckFn)] = &[
     ("tv", plenoxel::check_tv),
     ("cubic_solve", cubic_solve::check),
     ("extract_points", extract_points::check),
+    ("surface_blocks", surface_blocks::check),
     ("surface_fwd", surface_fwd::check),
 ];
 

@@ -4,6 +4,7 @@ use super::{
     batch_loss, surface_params, SurfaceBackend, SurfaceState, SurfaceStepParams, SurfaceStepStats,
 };
 use crate::cpu::rmsprop_one;
+use crate::cpu::surface_blocks::build_blocks;
 use crate::cpu::surface_fwd::{render, SurfCounts};
 use crate::cpu::surface_train::{train, SurfaceGrads};
 use crate::cpu::{tv, TvChunk};
@@ -146,7 +147,8 @@ impl SurfaceBackend for CpuSurface {
 
     fn render(&mut self, rays: &[f32], a: f32, stop_thresh: f32) -> Result<(Vec<f32>, SurfCounts)> {
         let sp = surface_params(&self.grid, a, stop_thresh);
-        let (out, counts) = render(&self.grid.as_ref(), rays, &sp)?;
+        let blocks = build_blocks(&self.grid.as_ref(), &sp.levels, 0.0)?;
+        let (out, counts) = render(&self.grid.as_ref(), rays, &sp, Some(&blocks))?;
         Ok((out.iter().flat_map(|o| o.rgb).collect(), counts))
     }
 
