@@ -55,11 +55,16 @@ void surf_block_box(ivec3 l, int n, out vec3 lo, out vec3 hi) {
     hi = vec3(min(b0 + SURF_BLOCK, ivec3(n - 1)));
 }
 
+// Start of a block's δ range scan (the largest float): bmin = SURF_BLOCK_BIG and
+// bmax = −SURF_BLOCK_BIG, an empty range (bmin > bmax) that stays so without allocated vertices.
+const float SURF_BLOCK_BIG = 3.402823466e38;
+
 // Block level mask from the block's δ range: bit i (i < nl) set iff
-// bmin − margin ≤ lv[i] ≤ bmax + margin; 0 when the block has no allocated vertex.
-uint surf_block_mask(bool has, float bmin, float bmax, float margin, float lv[8], uint nl) {
+// bmin − margin ≤ lv[i] ≤ bmax + margin; 0 for an empty range (no allocated vertex).
+uint surf_block_mask(float bmin, float bmax, float margin, float lv[8], uint nl) {
     precise float lo = bmin - margin;
     precise float hi = bmax + margin;
+    bool has = bmin <= bmax;
     uint m = 0u;
     for (uint i = 0u; i < 8u; i++) {
         if (has && i < nl && lo <= lv[i] && lv[i] <= hi) m |= 1u << i;

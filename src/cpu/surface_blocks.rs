@@ -4,8 +4,9 @@
 
 use super::surface_fwd::SurfaceGridRef;
 use crate::math::surface::SURF_MAX_LEVELS;
-use crate::math::surface_blocks::SURF_BLOCK_SHIFT;
-use crate::math::surface_blocks::{surf_block_box, surf_block_mask, surf_blocks_per_axis};
+use crate::math::surface_blocks::{
+    surf_block_box, surf_block_mask, surf_blocks_per_axis, SURF_BLOCK_BIG, SURF_BLOCK_SHIFT,
+};
 use anyhow::{ensure, Result};
 use rayon::prelude::*;
 
@@ -31,7 +32,7 @@ pub fn build_blocks(g: &SurfaceGridRef, levels: &[f32], margin: f32) -> Result<V
             let l = [b / (nb * nb), (b / nb) % nb, b % nb].map(|x| (x as i32) << SURF_BLOCK_SHIFT);
             let (lo, hi) = surf_block_box(l, n as i32);
             let (v0, v1) = (lo.map(|x| x as u32), hi.map(|x| x as u32));
-            let mut range: Option<(f32, f32)> = None;
+            let (mut bmin, mut bmax) = (SURF_BLOCK_BIG, -SURF_BLOCK_BIG);
             for x in v0[0]..=v1[0] {
                 for y in v0[1]..=v1[1] {
                     let row = ((x * n + y) * n) as usize;
@@ -41,14 +42,12 @@ pub fn build_blocks(g: &SurfaceGridRef, levels: &[f32], margin: f32) -> Result<V
                             continue;
                         }
                         let d = g.delta[k as usize];
-                        range = Some(match range {
-                            Some((a, b)) => (a.min(d), b.max(d)),
-                            None => (d, d),
-                        });
+                        bmin = bmin.min(d);
+                        bmax = bmax.max(d);
                     }
                 }
             }
-            surf_block_mask(range, margin, levels)
+            surf_block_mask(bmin, bmax, margin, levels)
         })
         .collect())
 }

@@ -50,19 +50,21 @@ pub fn surf_block_box(l: [i32; 3], n: i32) -> ([f32; 3], [f32; 3]) {
     )
 }
 
-/// Block level mask from the block's δ range (`None`: no allocated vertex, mask 0): bit i set iff
-/// `bmin − margin ≤ levels[i] ≤ bmax + margin` (at most 8 levels).
-pub fn surf_block_mask(range: Option<(f32, f32)>, margin: f32, levels: &[f32]) -> u32 {
-    let Some((bmin, bmax)) = range else {
-        return 0;
-    };
+/// Start of a block's δ range scan: `bmin = SURF_BLOCK_BIG`, `bmax = −SURF_BLOCK_BIG` (an empty
+/// range, `bmin > bmax`, stays so when the block has no allocated vertex).
+pub const SURF_BLOCK_BIG: f32 = f32::MAX;
+
+/// Block level mask from the block's δ range: bit i set iff
+/// `bmin − margin ≤ levels[i] ≤ bmax + margin` (at most 8 levels); 0 for an empty range.
+pub fn surf_block_mask(bmin: f32, bmax: f32, margin: f32, levels: &[f32]) -> u32 {
     let lo = bmin - margin;
     let hi = bmax + margin;
+    let has = bmin <= bmax;
     levels
         .iter()
         .take(8)
         .enumerate()
-        .filter(|(_, &tau)| lo <= tau && tau <= hi)
+        .filter(|(_, &tau)| has && lo <= tau && tau <= hi)
         .fold(0, |m, (i, _)| m | 1 << i)
 }
 
@@ -134,9 +136,12 @@ mod tests {
             ([16.0, 16.0, 16.0], [19.0, 19.0, 19.0])
         );
         assert_eq!(surf_block_index([17, 3, 9], 3), 19);
-        assert_eq!(surf_block_mask(None, 1.0, &[0.0]), 0);
         assert_eq!(
-            surf_block_mask(Some((-1.0, 2.0)), 0.5, &[-1.5, -1.6, 2.5, 2.6, 0.0]),
+            surf_block_mask(SURF_BLOCK_BIG, -SURF_BLOCK_BIG, 1.0, &[0.0]),
+            0
+        );
+        assert_eq!(
+            surf_block_mask(-1.0, 2.0, 0.5, &[-1.5, -1.6, 2.5, 2.6, 0.0]),
             0b10101
         );
     }
