@@ -94,7 +94,7 @@ void main() {
         while (dda_next(w, l, t0, t1)) {
             if (pc.block_skip != 0u) {
                 uint bi = surf_block_index(l, nb);
-                if (pc.blocks.v[bi] == 0u && surf_block_skip(w, og, dn, int(n), l, t0, bi, skipped)) {
+                if (pc.blocks.v[bi] == 0u && surf_block_skip(w, dn, int(n), l, bi, skipped)) {
                     skips++;
                     continue;
                 }

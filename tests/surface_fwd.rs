@@ -7,6 +7,7 @@
 //! its midpoint), and each level's crossings in a cell from dense sampling of the trilinear field
 //! (plus its extrema, located by bisection on the analytic derivative) and bisection in f64.
 
+use alphasurf::check::surface_blocks::check as blocks_check;
 use alphasurf::check::surface_fwd::{check, render_gpu, test_rays, test_scene, SurfaceScene};
 use alphasurf::cpu::surface_blocks::build_blocks;
 use alphasurf::cpu::surface_fwd::render;
@@ -850,14 +851,16 @@ fn truncated_compositing() {
     }
 }
 
-/// The parity row passes on two seeds, with no validation messages.
+/// The parity rows (surface_fwd, surface_blocks) pass on two seeds, with no validation messages.
 #[test]
 fn gpu_parity_row() {
     let gpu = test_gpu();
     for seed in [1u64, 2] {
-        let row = check(gpu, seed).unwrap();
-        eprintln!("{row:?}");
-        assert!(row.pass, "{row:?}");
+        for row in [check(gpu, seed), blocks_check(gpu, seed)] {
+            let row = row.unwrap();
+            eprintln!("{row:?}");
+            assert!(row.pass, "{row:?}");
+        }
     }
     let msgs = gpu.validation_messages();
     assert!(msgs.is_empty(), "validation messages: {msgs:#?}");

@@ -13,17 +13,18 @@
 //     uint skipped = SURF_NO_BLOCK;
 //     while (dda_next(w, l, t0, t1)) {
 //         uint bi = surf_block_index(l, nb);
-//         if (<block mask of bi> == 0u && surf_block_skip(w, og, dn, int(n), l, t0, bi, skipped))
+//         if (<block mask of bi> == 0u && surf_block_skip(w, dn, int(n), l, bi, skipped))
 //             continue;   // w now restarts at the block's exit
 //         ... the cell as before ...
 //     }
-// og, dn: the same origin and direction the walk was started with (dda_init(og, dn, n, ·)).
-// Exactness: the block exit t_exit = ray_box(og, dn, block box, t0).y is the far-plane crossing
-// (k − o)·(1/d) with dda.glsl's own formula, hence bit-identical to the t at which the continuous
-// walk leaves the block; dda_init(og, dn, n, t_exit) settles the cell with those same crossings
-// and recomputes t_next with the same formula, so the pieces (cell, t0, t1) after the block are
-// exactly the ones the continuous walk would produce. Should rounding ever settle the restart back
-// inside the skipped block, `skipped` makes the walk go through it cell by cell (never a loop).
+// dn: the direction the walk was started with (dda_init(og, dn, n, ·)).
+// Exactness: the block exit t_exit (surf_block_exit) is the far-plane crossing (k − o)·(1/d) with
+// dda.glsl's own formula, hence bit-identical to the t at which the continuous walk leaves the
+// block; the restart (surf_dda_restart, = dda_init(og, dn, n, t_exit)) settles the cell with
+// those same crossings and recomputes t_next with the same formula, so the pieces (cell, t0, t1)
+// after the block are exactly the ones the continuous walk would produce (tested piece by piece
+// in src/math/surface_blocks.rs). Should rounding ever settle the restart back inside the skipped
+// block, `skipped` makes the walk go through it cell by cell (never a loop).
 // The masks must describe the current δ: rebuild them after every δ update (or use a margin that
 // bounds the drift since they were built).
 #ifndef SURFACE_BLOCKS_GLSL
@@ -72,17 +73,52 @@ uint surf_block_mask(float bmin, float bmax, float margin, float lv[8], uint nl)
     return m;
 }
 
-// Called when the walk w (started as dda_init(og, dn, n, ·)) has just produced the piece of cell l
-// entered at t0, whose block bi has mask 0: unless bi is the block skipped last, restarts w at the
-// block's exit, records bi in `skipped` and returns true (the caller drops the cell and continues
-// with dda_next); returns false (walk the cell as usual) when bi == skipped.
-bool surf_block_skip(inout Dda w, vec3 og, vec3 dn, int n, ivec3 l, float t0, uint bi,
-                     inout uint skipped) {
-    if (bi == skipped) return false;
+// t at which walk w leaves the block holding cell l: min over moving axes of the block's far-plane
+// crossing (k − o)·(1/d) (o, 1/d as stored in w) — bit-identical to ray_box(og, dn, block box,
+// ·).y, since for 1/d > 0 the far crossing is the larger of the two (rounding is monotone), and a
+// still axis lies inside the box (no constraint).
+float surf_block_exit(Dda w, ivec3 l, int n) {
     vec3 lo, hi;
     surf_block_box(l, n, lo, hi);
-    float t_exit = ray_box(og, dn, lo, hi, t0).y;
-    w = dda_init(og, dn, n, t_exit);
+    float t = DDA_BIG;
+    for (int a = 0; a < 3; a++) {
+        if (w.step[a] == 0) continue;
+        precise float tf = ((w.step[a] > 0 ? hi[a] : lo[a]) - w.o[a]) * w.inv[a];
+        t = min(t, tf);
+    }
+    return t;
+}
+
+// Restarts walk w (started as dda_init(og, dn, n, ·)) at t ≥ its current entry t: the state
+// dda_init(og, dn, n, t) returns (same cell estimate and settling, same t_next formula), without
+// redoing the grid clip (w keeps o, 1/d, step and t_end; t lies past the grid entry).
+void surf_dda_restart(inout Dda w, vec3 dn, int n, float t) {
+    vec3 d = dda_flush(dn);
+    ivec3 up = max(w.step, ivec3(0));
+    precise vec3 p = w.o + t * d;
+    ivec3 c = ivec3(floor(clamp(p, vec3(-1.0), vec3(float(n)))));
+    precise vec3 tn = (vec3(c + up) - w.o) * w.inv;
+    c += ivec3(lessThanEqual(tn, vec3(t))) * w.step;
+    precise vec3 tp = (vec3(c + 1 - up) - w.o) * w.inv;
+    c -= ivec3(greaterThan(tp, vec3(t))) * w.step;
+    w.cell = clamp(c, ivec3(0), ivec3(n - 2));
+    precise vec3 tx = (vec3(w.cell + up) - w.o) * w.inv;
+    w.t_next = mix(tx, vec3(DDA_BIG), equal(d, vec3(0.0)));
+    w.t = t;
+    if (!(t < w.t_end)) {  // past the grid: the walk ends at the next dda_next
+        w.t_next = vec3(DDA_BIG);
+        w.t = -DDA_BIG;
+        w.t_end = -DDA_BIG;
+    }
+}
+
+// Called when the walk w (started as dda_init(og, dn, n, ·)) has just produced the piece of cell l
+// whose block bi has mask 0: unless bi is the block skipped last, restarts w at the block's exit,
+// records bi in `skipped` and returns true (the caller drops the cell and continues with
+// dda_next); returns false (walk the cell as usual) when bi == skipped.
+bool surf_block_skip(inout Dda w, vec3 dn, int n, ivec3 l, uint bi, inout uint skipped) {
+    if (bi == skipped) return false;
+    surf_dda_restart(w, dn, n, surf_block_exit(w, l, n));
     skipped = bi;
     return true;
 }

@@ -1,6 +1,6 @@
 //! Parity of `glsl/surface_blocks.comp` (block level masks for the stage-2 walk's empty-space
 //! skipping) with `cpu::surface_blocks::build_blocks`: exact equality of every mask, on random
-//! test scenes at sizes that are and are not 8k+1 vertices (n = 24, 17, 9, 2), with 3 % and 60 %
+//! test scenes at sizes that are and are not 8k+1 vertices (n = 40, 24, 17, 9, 2), with 3 % and 60 %
 //! of the vertices unallocated (whole blocks without an allocated vertex included), 5 and 8
 //! levels, margins 0 and 0.05.
 
@@ -53,7 +53,7 @@ pub fn check(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
     let mut rng = Pcg64::seed_from_u64(seed ^ 0xb10c_5eed);
     let mut cases = 0;
     let mut live = 0;
-    for (k, n) in [24u32, 17, 9, 2].into_iter().enumerate() {
+    for (k, n) in [40u32, 24, 17, 9, 2].into_iter().enumerate() {
         for holes in [0.0f32, 0.6] {
             let mut sc = test_scene(seed + k as u64, n);
             if holes > 0.0 {

@@ -254,7 +254,6 @@ pub fn render_gpu(
             a: p.a,
             stop_thresh: p.stop_thresh,
             block_skip: u32::from(blocks.is_some()),
-            ..Default::default()
         },
         n_rays as u32,
     )?;

@@ -97,16 +97,7 @@ pub fn render_ray(
         if let Some(blocks) = blocks {
             let bi = surf_block_index(piece.cell, nb);
             if blocks[bi as usize] == 0
-                && surf_block_skip(
-                    &mut w,
-                    og,
-                    dn,
-                    g.n as i32,
-                    piece.cell,
-                    piece.t0,
-                    bi,
-                    &mut skipped,
-                )
+                && surf_block_skip(&mut w, dn, g.n as i32, piece.cell, bi, &mut skipped)
             {
                 cnt[5] += 1;
                 continue;

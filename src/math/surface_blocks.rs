@@ -13,8 +13,7 @@
 //! let mut skipped = SURF_NO_BLOCK;
 //! while let Some(piece) = dda_next(&mut w) {
 //!     let bi = surf_block_index(piece.cell, nb);
-//!     if blocks[bi as usize] == 0
-//!         && surf_block_skip(&mut w, og, dn, n, piece.cell, piece.t0, bi, &mut skipped)
+//!     if blocks[bi as usize] == 0 && surf_block_skip(&mut w, dn, n, piece.cell, bi, &mut skipped)
 //!     {
 //!         continue; // w restarts at the block's exit
 //!     }
@@ -22,7 +21,7 @@
 //! }
 //! ```
 
-use super::dda::{dda_init, ray_box, Dda};
+use super::dda::{dda_flush, Dda, DDA_BIG};
 
 /// Block edge in cells, and its log2.
 pub const SURF_BLOCK: i32 = 8;
@@ -68,27 +67,65 @@ pub fn surf_block_mask(bmin: f32, bmax: f32, margin: f32, levels: &[f32]) -> u32
         .fold(0, |m, (i, _)| m | 1 << i)
 }
 
+/// t at which walk `w` leaves the block holding cell `l`: min over moving axes of the block's
+/// far-plane crossing `(k − o)·(1/d)` (o, 1/d as stored in `w`), bit-identical to
+/// `ray_box(og, dn, block box, ·)[1]` (see the GLSL).
+pub fn surf_block_exit(w: &Dda, l: [i32; 3], n: i32) -> f32 {
+    let (lo, hi) = surf_block_box(l, n);
+    let mut t = DDA_BIG;
+    for a in 0..3 {
+        if w.step[a] == 0 {
+            continue;
+        }
+        let k = if w.step[a] > 0 { hi[a] } else { lo[a] };
+        t = t.min((k - w.o[a]) * w.inv[a]);
+    }
+    t
+}
+
+/// Restarts walk `w` (started as `dda_init(og, dn, n, ·)`) at `t` ≥ its current entry t: the
+/// state `dda_init(og, dn, n, t)` returns, without redoing the grid clip.
+#[allow(clippy::neg_cmp_op_on_partial_ord)] // `!(a < b)` is true on NaN, as in the GLSL
+pub fn surf_dda_restart(w: &mut Dda, dn: [f32; 3], n: i32, t: f32) {
+    let d = dda_flush(dn);
+    for a in 0..3 {
+        let up = w.step[a].max(0);
+        let p = w.o[a] + t * d[a];
+        let mut c = p.clamp(-1.0, n as f32).floor() as i32;
+        let tn = ((c + up) as f32 - w.o[a]) * w.inv[a];
+        c += i32::from(tn <= t) * w.step[a];
+        let tp = ((c + 1 - up) as f32 - w.o[a]) * w.inv[a];
+        c -= i32::from(tp > t) * w.step[a];
+        w.cell[a] = c.clamp(0, n - 2);
+        let tx = ((w.cell[a] + up) as f32 - w.o[a]) * w.inv[a];
+        w.t_next[a] = if d[a] != 0.0 { tx } else { DDA_BIG };
+    }
+    w.t = t;
+    if !(t < w.t_end) {
+        // Past the grid: the walk ends at the next dda_next.
+        w.t_next = [DDA_BIG; 3];
+        w.t = -DDA_BIG;
+        w.t_end = -DDA_BIG;
+    }
+}
+
 /// Called when the walk `w` (started as `dda_init(og, dn, n, ·)`) has just produced the piece of
-/// cell `l` entered at `t0`, whose block `bi` has mask 0: unless `bi` is the block skipped last,
-/// restarts `w` at the block's exit, records `bi` in `skipped` and returns true (drop the cell and
-/// continue with `dda_next`); returns false (walk the cell as usual) when `bi == *skipped`.
-#[allow(clippy::too_many_arguments)]
+/// cell `l` whose block `bi` has mask 0: unless `bi` is the block skipped last, restarts `w` at
+/// the block's exit, records `bi` in `skipped` and returns true (drop the cell and continue with
+/// `dda_next`); returns false (walk the cell as usual) when `bi == *skipped`.
 pub fn surf_block_skip(
     w: &mut Dda,
-    og: [f32; 3],
     dn: [f32; 3],
     n: i32,
     l: [i32; 3],
-    t0: f32,
     bi: u32,
     skipped: &mut u32,
 ) -> bool {
     if bi == *skipped {
         return false;
     }
-    let (lo, hi) = surf_block_box(l, n);
-    let t_exit = ray_box(og, dn, lo, hi, t0)[1];
-    *w = dda_init(og, dn, n, t_exit);
+    let t = surf_block_exit(w, l, n);
+    surf_dda_restart(w, dn, n, t);
     *skipped = bi;
     true
 }
@@ -96,7 +133,7 @@ pub fn surf_block_skip(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::math::dda::{dda_next, ray_unit, DdaPiece};
+    use crate::math::dda::{dda_init, dda_next, ray_box, ray_unit, DdaPiece};
     use rand::{Rng, SeedableRng};
     use rand_pcg::Pcg64;
 
@@ -109,11 +146,19 @@ mod tests {
         let mut skips = 0;
         while let Some(p) = dda_next(&mut w) {
             let bi = surf_block_index(p.cell, nb);
-            if blocks[bi as usize] == 0
-                && surf_block_skip(&mut w, og, dn, n, p.cell, p.t0, bi, &mut skipped)
-            {
-                skips += 1;
-                continue;
+            if blocks[bi as usize] == 0 {
+                // The cheap exit and restart are the slab test and dda_init, bit for bit.
+                let (lo, hi) = surf_block_box(p.cell, n);
+                let t_exit = ray_box(og, dn, lo, hi, p.t0)[1];
+                assert_eq!(surf_block_exit(&w, p.cell, n).to_bits(), t_exit.to_bits());
+                let mut r = w;
+                surf_dda_restart(&mut r, dn, n, t_exit);
+                let want = dda_init(og, dn, n, t_exit);
+                assert_eq!(format!("{r:?}"), format!("{want:?}"), "restart at {t_exit}");
+                if surf_block_skip(&mut w, dn, n, p.cell, bi, &mut skipped) {
+                    skips += 1;
+                    continue;
+                }
             }
             out.push(p);
         }
