@@ -8,14 +8,19 @@
 // hit j: α = 1 − exp(−max(σα, 0)), colour max(0, SH + 0.5) (trilerped at the hit, basis on the unit
 // scene direction), α̃ = α·γ_a(j); C = Σ w_j c_j + T·1. The ray stops at the first hit with j ≥ a
 // (γ = 0, not shaded, counted as cut) or once T < stop_thresh.
+// Block skipping (block_skip ≠ 0): a cell whose 8³-cell block has level mask 0 in `blocks` (kernel
+// surface_blocks) is not read; the walk restarts at the block's exit (surf_block_skip in
+// glsl/lib/surface_blocks.glsl: the same pieces as the continuous walk, so the same hits).
 // Inputs: links (n³ i32, < 0 unallocated), per allocated vertex delta, opacity (raw σα) and sh
-// (27), levels[n_levels ≤ 8], rays (6 floats: scene origin, direction), a, stop_thresh.
-// Outputs: out[r] = (rgb, transmittance, hits composited); stats (u32) += cells visited, cubic
-// solves, solves skipped by min/max culling, hits composited, hits cut by truncation
-// (subgroup-reduced atomics).
+// (27), levels[n_levels ≤ 8], rays (6 floats: scene origin, direction), a, stop_thresh, blocks
+// (nb³ u32 level masks, read only when block_skip ≠ 0).
+// Outputs: out[r] = (rgb, transmittance, hits composited); stats (6 u32) += cells visited (links
+// read), cubic solves, solves skipped by min/max culling, hits composited, hits cut by
+// truncation, blocks skipped (subgroup-reduced atomics).
 // CPU twin: cpu::surface_fwd::render (src/cpu/surface_fwd.rs).
 #include "common.glsl"
 #include "surface.glsl"
+#include "surface_blocks.glsl"
 #extension GL_KHR_shader_subgroup_arithmetic : require
 #extension GL_KHR_shader_subgroup_basic : require
 layout(local_size_x = 64) in;
@@ -29,6 +34,7 @@ layout(push_constant, scalar) uniform Push {
     F32Buf rays;
     SurfOutBuf out_rays;
     U32Buf stats;
+    U32Buf blocks;
     vec3 scale;
     vec3 offset;
     uint n;
@@ -36,14 +42,17 @@ layout(push_constant, scalar) uniform Push {
     uint n_levels;
     float a;
     float stop_thresh;
+    uint block_skip;
 } pc;
 
-void add_surf_stats(uvec4 c, uint cut) {
+void add_surf_stats(uvec4 c, uint cut, uint skips) {
     uvec4 s = subgroupAdd(c);
     uint sc = subgroupAdd(cut);
+    uint sk = subgroupAdd(skips);
     if (subgroupElect()) {
         for (uint i = 0u; i < 4u; i++) atomicAdd(pc.stats.v[i], s[i]);
         atomicAdd(pc.stats.v[4], sc);
+        atomicAdd(pc.stats.v[5], sk);
     }
 }
 
@@ -67,6 +76,9 @@ void main() {
     uint j = 0u;
     uvec4 cnt = uvec4(0u); // cells, solves, culled, hits
     uint cut = 0u;
+    uint skips = 0u;
+    uint nb = surf_blocks_per_axis(n);
+    uint skipped = SURF_NO_BLOCK;
     bool done = false;
     Dda w = dda_init(og, dn, int(n), 0.0);
     ivec3 l;
@@ -80,6 +92,13 @@ void main() {
         // one solving while the others idle through empty cells.
         bool found = false;
         while (dda_next(w, l, t0, t1)) {
+            if (pc.block_skip != 0u) {
+                uint bi = surf_block_index(l, nb);
+                if (pc.blocks.v[bi] == 0u && surf_block_skip(w, dn, int(n), l, bi, skipped)) {
+                    skips++;
+                    continue;
+                }
+            }
             cnt.x++;
             uint base = dda_cell_index(l, n);
             lk[0] = pc.links.v[base];
@@ -157,5 +176,5 @@ void main() {
     o.transmittance = T;
     o.hits = j;
     pc.out_rays.v[r] = o;
-    add_surf_stats(cnt, cut);
+    add_surf_stats(cnt, cut, skips);
 }

@@ -7,7 +7,9 @@
 //! its midpoint), and each level's crossings in a cell from dense sampling of the trilinear field
 //! (plus its extrema, located by bisection on the analytic derivative) and bisection in f64.
 
+use alphasurf::check::surface_blocks::check as blocks_check;
 use alphasurf::check::surface_fwd::{check, render_gpu, test_rays, test_scene, SurfaceScene};
+use alphasurf::cpu::surface_blocks::build_blocks;
 use alphasurf::cpu::surface_fwd::render;
 use alphasurf::gpu::test_gpu;
 use alphasurf::math::surface::SurfOut;
@@ -353,14 +355,15 @@ fn ref_render(sc: &SurfaceScene, rays: &[f32], a: f32, stop: f32) -> Vec<RefRay>
 /// levels on vertex values of δ (crossings through vertices, culling ties) and 8 levels in all.
 #[test]
 fn backends_match_f64_reference() {
-    let mut total = [0usize; 3];
-    for (seed, a, stop, on_vertices) in [
-        (11u64, 3.5f32, 1e-4f32, false),
-        (12, 100.0, 1e-3, false),
-        (13, 1.5, 0.0, false),
-        (14, 100.0, 1e-4, true),
+    let mut total = [0usize; 4];
+    for (seed, a, stop, on_vertices, n) in [
+        (11u64, 3.5f32, 1e-4f32, false, 16u32),
+        (12, 100.0, 1e-3, false, 16),
+        (13, 1.5, 0.0, false, 16),
+        (14, 100.0, 1e-4, true, 16),
+        (15, 100.0, 1e-4, false, 40),
     ] {
-        let mut sc = test_scene(seed, 16);
+        let mut sc = test_scene(seed, n);
         if on_vertices {
             let k = sc.delta.len();
             sc.levels
@@ -368,8 +371,9 @@ fn backends_match_f64_reference() {
         }
         let rays = test_rays(&sc, seed, 1200);
         let p = sc.params(a, stop);
-        let (cpu, counts) = render(&sc.grid(), &rays, &p).unwrap();
-        let (gpu, _, _) = render_gpu(test_gpu(), &sc.grid(), &rays, &p).unwrap();
+        let blocks = build_blocks(&sc.grid(), &sc.levels, 0.0).unwrap();
+        let (cpu, counts) = render(&sc.grid(), &rays, &p, Some(&blocks)).unwrap();
+        let (gpu, _, _) = render_gpu(test_gpu(), &sc.grid(), &rays, &p, Some(&blocks)).unwrap();
         let want = ref_render(&sc, &rays, a, stop);
         let n = want.len();
         let hits: u32 = want.iter().map(|w| w.hits).sum();
@@ -404,8 +408,265 @@ fn backends_match_f64_reference() {
         total[0] += n;
         total[1] += flagged;
         total[2] += hits as usize;
+        total[3] += counts[5] as usize;
     }
-    eprintln!("total: {total:?} (rays, flagged, reference hits)");
+    eprintln!("total: {total:?} (rays, flagged, reference hits, blocks skipped)");
+    assert!(total[3] > 1000, "the reference rays must skip blocks");
+}
+
+// ---------------------------------------------------------------------------------------------
+// Block skipping (math::surface_blocks).
+
+/// Rays (grid origin, unit direction) aimed at the block structure of an `n`³ grid: along block
+/// faces and edges, diagonals through block corners, starting inside a dead block of `blocks`,
+/// in a block face plane and at a grazing angle to one, starting on a block corner.
+fn block_rays(n: u32, blocks: &[u32], seed: u64, count: usize) -> Vec<([f32; 3], [f32; 3])> {
+    let mut rng = Pcg64::seed_from_u64(seed);
+    let nb = n.div_ceil(8) as usize;
+    let nf = n as f32;
+    let bf = |rng: &mut Pcg64| (rng.random_range(0..=nb) * 8).min(n as usize - 1) as f32;
+    let unit = |d: [f32; 3]| {
+        let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+        d.map(|x| x / l)
+    };
+    let dead: Vec<usize> = (0..blocks.len()).filter(|&b| blocks[b] == 0).collect();
+    (0..count)
+        .map(|r| match r % 7 {
+            0 => {
+                let a = rng.random_range(0..3);
+                let mut g = [bf(&mut rng), bf(&mut rng), bf(&mut rng)];
+                if r % 14 == 7 {
+                    g[(a + 1) % 3] = rng.random_range(0.0..nf - 1.0);
+                }
+                let mut d = [0.0; 3];
+                d[a] = if rng.random() { 1.0 } else { -1.0 };
+                g[a] = if d[a] > 0.0 { -2.0 } else { nf + 1.0 };
+                (g, d)
+            }
+            1 => {
+                let v = [bf(&mut rng), bf(&mut rng), bf(&mut rng)];
+                let d = unit([1.0f32, 1.0, 1.0].map(|s| if rng.random() { s } else { -s }));
+                let back = rng.random_range(0.0..2.0 * nf);
+                (std::array::from_fn(|i| v[i] - back * d[i]), d)
+            }
+            2 => {
+                let b = if dead.is_empty() {
+                    0
+                } else {
+                    dead[rng.random_range(0..dead.len())]
+                };
+                let bc = [b / (nb * nb), (b / nb) % nb, b % nb];
+                let g = bc.map(|k| (8.0 * k as f32 + rng.random_range(0.0..8.0f32)).min(nf - 1.0));
+                (
+                    g,
+                    unit(std::array::from_fn(|_| rng.random_range(-1.0..1.0))),
+                )
+            }
+            3 => {
+                let a = rng.random_range(0..3);
+                let mut g: [f32; 3] = std::array::from_fn(|_| rng.random_range(-3.0..-1.0));
+                g[a] = bf(&mut rng);
+                let mut d: [f32; 3] = std::array::from_fn(|_| rng.random_range(0.2..1.0));
+                d[a] = 0.0;
+                (g, unit(d))
+            }
+            4 => {
+                // Grazing: nearly parallel to a block face plane, crossing it far along.
+                let a = rng.random_range(0..3);
+                let mut g: [f32; 3] = std::array::from_fn(|_| rng.random_range(-3.0..-1.0));
+                g[a] = bf(&mut rng) + rng.random_range(-0.01..0.01);
+                let mut d: [f32; 3] = std::array::from_fn(|_| rng.random_range(0.2..1.0));
+                d[a] = rng.random_range(-1e-3..1e-3);
+                (g, unit(d))
+            }
+            5 => (
+                [bf(&mut rng), bf(&mut rng), bf(&mut rng)],
+                unit(std::array::from_fn(|_| rng.random_range(-1.0..1.0))),
+            ),
+            _ => {
+                let o = unit(std::array::from_fn(|_| rng.random_range(-1.0..1.0)))
+                    .map(|x| 2.0 * nf * x + 0.5 * nf);
+                let at: [f32; 3] = std::array::from_fn(|_| rng.random_range(0.0..nf - 1.0));
+                (o, unit(std::array::from_fn(|i| at[i] - o[i])))
+            }
+        })
+        .collect()
+}
+
+/// Skipping blocks never changes a result: on random scenes (n = 40 and 33, all vertices or 60 %
+/// allocated) with random, adversarial and block-aimed rays, both backends give bit-identical
+/// outputs without blocks, with all-live masks and with the scene's masks; all-live masks also
+/// give identical counters, the scene's masks the same solves, hits and cuts with fewer cells.
+#[test]
+fn block_skipping_is_exact_and_saves_cells() {
+    let gpu = test_gpu();
+    for (seed, n, holes) in [(21u64, 40u32, 0.0f32), (22, 33, 0.05)] {
+        let mut sc = test_scene(seed, n);
+        let mut rng = Pcg64::seed_from_u64(seed);
+        for l in sc.links.iter_mut() {
+            if rng.random::<f32>() < holes {
+                *l = -1;
+            }
+        }
+        let blocks = build_blocks(&sc.grid(), &sc.levels, 0.0).unwrap();
+        let live = vec![u32::MAX; blocks.len()];
+        let mut rays = test_rays(&sc, seed, 1500);
+        for (g, d) in block_rays(n, &blocks, seed, 1500) {
+            rays.extend_from_slice(&sc.grid_to_scene(g));
+            rays.extend_from_slice(&d);
+        }
+        let dead = blocks.iter().filter(|&&m| m == 0).count();
+        for (a, stop) in [(100.0f32, 1e-4f32), (2.5, 1e-3)] {
+            let p = sc.params(a, stop);
+            let (base, bc) = render(&sc.grid(), &rays, &p, None).unwrap();
+            let (all, ac) = render(&sc.grid(), &rays, &p, Some(&live)).unwrap();
+            let (skip, sk) = render(&sc.grid(), &rays, &p, Some(&blocks)).unwrap();
+            let (gbase, gbc, _) = render_gpu(gpu, &sc.grid(), &rays, &p, None).unwrap();
+            let (gall, gac, _) = render_gpu(gpu, &sc.grid(), &rays, &p, Some(&live)).unwrap();
+            let (gskip, gsk, _) = render_gpu(gpu, &sc.grid(), &rays, &p, Some(&blocks)).unwrap();
+            eprintln!(
+                "n {n} holes {holes} a {a}: {dead} of {} blocks dead; counters cpu {bc:?} → {sk:?}, gpu {gbc:?} → {gsk:?}",
+                blocks.len()
+            );
+            for (what, b, x, y) in [("cpu", &base, &all, &skip), ("gpu", &gbase, &gall, &gskip)] {
+                for (i, ((b, x), y)) in b.iter().zip(x).zip(y).enumerate() {
+                    let r = &rays[6 * i..6 * i + 6];
+                    assert_eq!(b, x, "{what} all-live n {n} ray {i} {r:?}");
+                    assert_eq!(b, y, "{what} skipping n {n} ray {i} {r:?}");
+                }
+            }
+            for (b, x, y) in [(bc, ac, sk), (gbc, gac, gsk)] {
+                assert_eq!(b, x);
+                assert_eq!([b[1], b[3], b[4]], [y[1], y[3], y[4]]);
+                assert!(y[0] * 3 < b[0] * 2, "cells {} → {}", b[0], y[0]);
+                assert!(y[5] > 1000, "{} blocks skipped", y[5]);
+            }
+            assert!(bc[3] > 500, "the scene must produce hits");
+        }
+    }
+    let msgs = gpu.validation_messages();
+    assert!(msgs.is_empty(), "validation messages: {msgs:#?}");
+}
+
+/// A planar field δ = (x − c)·h with level 0 on the only allocated vertices, [8, 16]×[9, 15]², so
+/// exactly one block (1, 1, 1) of the 4³ is live: with skipping, each ray crossing the plane inside
+/// that patch moving in +x has exactly one hit at the analytic point (SH encodes the position:
+/// rgb = 0.5 + (x, y, z)/N), every other ray none, and the output is bit-identical to the walk
+/// without blocks, on both backends.
+#[test]
+fn planar_field_one_live_block() {
+    let n = 33u32;
+    let nu = n as usize;
+    let h = 1.0 / 16.0;
+    let c = 12.3f32;
+    let y0 = 0.282_094_79f32;
+    let mut sc = test_scene(1, n);
+    sc.links = vec![-1; nu * nu * nu];
+    sc.delta.clear();
+    sc.opacity.clear();
+    sc.sh.clear();
+    sc.levels = vec![0.0];
+    for slot in 0..nu * nu * nu {
+        let v = [slot / (nu * nu), (slot / nu) % nu, slot % nu];
+        if !((8..=16).contains(&v[0]) && (9..=15).contains(&v[1]) && (9..=15).contains(&v[2])) {
+            continue;
+        }
+        let v = v.map(|x| x as f32);
+        sc.links[slot] = sc.delta.len() as i32;
+        sc.delta.push((v[0] - c) * h);
+        sc.opacity.push(40.0);
+        let mut sh = [0f32; 27];
+        sh[0] = v[0] / (n as f32 * y0);
+        sh[9] = v[1] / (n as f32 * y0);
+        sh[18] = v[2] / (n as f32 * y0);
+        sc.sh.extend_from_slice(&sh);
+    }
+    let blocks = build_blocks(&sc.grid(), &sc.levels, 0.0).unwrap();
+    let live: Vec<usize> = (0..blocks.len()).filter(|&b| blocks[b] != 0).collect();
+    assert_eq!(live, vec![(4 + 1) * 4 + 1], "{blocks:?}");
+    let mut rng = Pcg64::seed_from_u64(9);
+    let mut rays = Vec::new();
+    for r in 0..3000 {
+        let (g, at): ([f32; 3], [f32; 3]) = if r % 3 == 0 {
+            (
+                std::array::from_fn(|_| rng.random_range(-4.0..37.0)),
+                std::array::from_fn(|_| rng.random_range(0.0..32.0)),
+            )
+        } else {
+            // Towards the patch, from anywhere around or inside the box.
+            let at = [c, rng.random_range(8.5..15.5), rng.random_range(8.5..15.5)];
+            (std::array::from_fn(|_| rng.random_range(-4.0..37.0)), at)
+        };
+        let d: [f32; 3] = std::array::from_fn(|k| at[k] - g[k]);
+        let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+        rays.extend_from_slice(&sc.grid_to_scene(g));
+        rays.extend_from_slice(&d.map(|x| x / l));
+    }
+    for (g, d) in block_rays(n, &blocks, 9, 1000) {
+        rays.extend_from_slice(&sc.grid_to_scene(g));
+        rays.extend_from_slice(&d);
+    }
+    let p = sc.params(5.0, 0.0);
+    let (cpu0, c0) = render(&sc.grid(), &rays, &p, None).unwrap();
+    let (cpu, cc) = render(&sc.grid(), &rays, &p, Some(&blocks)).unwrap();
+    let (gpu0, _, _) = render_gpu(test_gpu(), &sc.grid(), &rays, &p, None).unwrap();
+    let (gpu, gc, _) = render_gpu(test_gpu(), &sc.grid(), &rays, &p, Some(&blocks)).unwrap();
+    assert_eq!(cpu0, cpu);
+    assert_eq!(gpu0, gpu);
+    eprintln!("counters without blocks {c0:?}, with: cpu {cc:?} gpu {gc:?}");
+    assert!(cc[0] * 4 < c0[0], "cells {} → {}", c0[0], cc[0]);
+    let mut hits = 0;
+    for (backend, out) in [("cpu", &cpu), ("gpu", &gpu)] {
+        for (i, o) in out.iter().enumerate() {
+            let r = &rays[6 * i..6 * i + 6];
+            let og: [f64; 3] =
+                std::array::from_fn(|k| r[k] as f64 * sc.scale[k] as f64 + sc.offset[k] as f64);
+            let d: [f64; 3] = std::array::from_fn(|k| r[3 + k] as f64);
+            let (mut t_lo, mut t_hi) = (0.0f64, f64::INFINITY);
+            for k in 0..3 {
+                if d[k] == 0.0 {
+                    if og[k] < 0.0 || og[k] > 32.0 {
+                        t_hi = -1.0;
+                    }
+                    continue;
+                }
+                let (ta, tb) = ((0.0 - og[k]) / d[k], (32.0 - og[k]) / d[k]);
+                t_lo = t_lo.max(ta.min(tb));
+                t_hi = t_hi.min(ta.max(tb));
+            }
+            let tp = (c as f64 - og[0]) / d[0];
+            let y = og[1] + tp * d[1];
+            let z = og[2] + tp * d[2];
+            // Crossings within 1e-4 of the patch's edges or of the ray's start are ambiguous, and
+            // rays nearly parallel to the plane ill-conditioned (the f32 ray moves the crossing).
+            let near = [y - 9.0, y - 15.0, z - 9.0, z - 15.0, tp - t_lo]
+                .iter()
+                .any(|e| e.abs() < 1e-4);
+            if near || d[0].abs() < 0.05 {
+                continue;
+            }
+            let hit = d[0] > 0.0
+                && t_lo < t_hi
+                && tp >= t_lo
+                && tp < t_hi
+                && (9.0..15.0).contains(&y)
+                && (9.0..15.0).contains(&z);
+            let what = || format!("{backend} ray {i}: {o:?}, t {t_lo} {tp} {t_hi}, y {y} z {z}");
+            assert_eq!(o.hits, hit as u32, "{}", what());
+            if hit {
+                hits += 1;
+                let [gx, gy, gz] = o.rgb.map(|v| (v as f64 - 0.5) * n as f64);
+                assert!(
+                    (gx - c as f64).abs() < 2e-4 && (gy - y).abs() < 2e-4 && (gz - z).abs() < 2e-4,
+                    "{}: hit at x {gx} y {gy} z {gz}",
+                    what()
+                );
+            } else {
+                assert_eq!(o.rgb, [1.0; 3], "{}", what());
+            }
+        }
+    }
+    assert!(hits > 1000, "only {hits} hits");
 }
 
 /// δ = (x − c)·h with one level 0: every ray whose clipped segment crosses the plane x = c moving
@@ -465,8 +726,9 @@ fn planar_field_one_hit_at_the_right_depth() {
             rays.extend_from_slice(&d.map(|x| x / l));
         }
         let p = sc.params(5.0, 0.0);
-        let (cpu, _) = render(&sc.grid(), &rays, &p).unwrap();
-        let (gpu, _, _) = render_gpu(test_gpu(), &sc.grid(), &rays, &p).unwrap();
+        let blocks = build_blocks(&sc.grid(), &sc.levels, 0.0).unwrap();
+        let (cpu, _) = render(&sc.grid(), &rays, &p, Some(&blocks)).unwrap();
+        let (gpu, _, _) = render_gpu(test_gpu(), &sc.grid(), &rays, &p, Some(&blocks)).unwrap();
         for (backend, out) in [("cpu", &cpu), ("gpu", &gpu)] {
             for (i, o) in out.iter().enumerate() {
                 let r = &rays[6 * i..6 * i + 6];
@@ -554,8 +816,9 @@ fn truncated_compositing() {
     let alpha = 1.0 - (-(sigma as f64)).exp();
     for a in [1.0f32, 5.0, 2.5, 3.25, 0.5, 8.0] {
         let p = sc.params(a, 0.0);
-        let (cpu, counts) = render(&sc.grid(), &rays, &p).unwrap();
-        let (gpu, gc, _) = render_gpu(test_gpu(), &sc.grid(), &rays, &p).unwrap();
+        let blocks = build_blocks(&sc.grid(), &sc.levels, 0.0).unwrap();
+        let (cpu, counts) = render(&sc.grid(), &rays, &p, Some(&blocks)).unwrap();
+        let (gpu, gc, _) = render_gpu(test_gpu(), &sc.grid(), &rays, &p, Some(&blocks)).unwrap();
         // Expected, in f64.
         let (mut col, mut t, mut used) = ([0.0f64; 3], 1.0f64, 0u32);
         for (j, &x) in planes.iter().enumerate() {
@@ -588,14 +851,16 @@ fn truncated_compositing() {
     }
 }
 
-/// The parity row passes on two seeds, with no validation messages.
+/// The parity rows (surface_fwd, surface_blocks) pass on two seeds, with no validation messages.
 #[test]
 fn gpu_parity_row() {
     let gpu = test_gpu();
     for seed in [1u64, 2] {
-        let row = check(gpu, seed).unwrap();
-        eprintln!("{row:?}");
-        assert!(row.pass, "{row:?}");
+        for row in [check(gpu, seed), blocks_check(gpu, seed)] {
+            let row = row.unwrap();
+            eprintln!("{row:?}");
+            assert!(row.pass, "{row:?}");
+        }
     }
     let msgs = gpu.validation_messages();
     assert!(msgs.is_empty(), "validation messages: {msgs:#?}");
@@ -614,21 +879,28 @@ fn missing_rays_and_bad_input() {
     ]
     .concat();
     let p = sc.params(5.0, 1e-4);
-    let (o, counts) = render(&sc.grid(), &rays, &p).unwrap();
-    let (og, gc, _) = render_gpu(test_gpu(), &sc.grid(), &rays, &p).unwrap();
+    let blocks = build_blocks(&sc.grid(), &sc.levels, 0.0).unwrap();
+    let (o, counts) = render(&sc.grid(), &rays, &p, Some(&blocks)).unwrap();
+    let (og, gc, _) = render_gpu(test_gpu(), &sc.grid(), &rays, &p, Some(&blocks)).unwrap();
     let white = SurfOut {
         rgb: [1.0; 3],
         transmittance: 1.0,
         hits: 0,
     };
     assert!(o.iter().chain(&og).all(|x| *x == white), "{o:?} {og:?}");
-    assert_eq!(counts, [0; 5]);
-    assert_eq!(gc, [0; 5]);
+    assert_eq!(counts, [0; 6]);
+    assert_eq!(gc, [0; 6]);
     let mut q = sc.params(5.0, 1e-4);
     q.levels = vec![0.0; 9];
-    assert!(render(&sc.grid(), &rays, &q).is_err());
-    assert!(render_gpu(test_gpu(), &sc.grid(), &rays, &q).is_err());
+    assert!(render(&sc.grid(), &rays, &q, None).is_err());
+    assert!(render_gpu(test_gpu(), &sc.grid(), &rays, &q, None).is_err());
     let mut bad = sc.clone();
     bad.links[0] = bad.delta.len() as i32;
-    assert!(render(&bad.grid(), &rays, &p).is_err());
+    assert!(render(&bad.grid(), &rays, &p, None).is_err());
+    assert!(build_blocks(&bad.grid(), &sc.levels, 0.0).is_err());
+    // Block masks of the wrong count, too many levels or a negative margin: errors.
+    assert!(render(&sc.grid(), &rays, &p, Some(&blocks[1..])).is_err());
+    assert!(render_gpu(test_gpu(), &sc.grid(), &rays, &p, Some(&[0; 2])).is_err());
+    assert!(build_blocks(&sc.grid(), &[0.0; 9], 0.0).is_err());
+    assert!(build_blocks(&sc.grid(), &sc.levels, -1.0).is_err());
 }

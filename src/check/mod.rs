@@ -9,6 +9,7 @@ pub mod extract_points;
 pub mod fill_pattern;
 pub mod plenoxel;
 pub mod sh_eval;
+pub mod surface_blocks;
 pub mod surface_fwd;
 pub mod surface_reg;
 pub mod trilerp_eval;
@@ -50,6 +51,7 @@ pub const CHECKS: &[(&str, CheckFn)] = &[
     ("tv", plenoxel::check_tv),
     ("cubic_solve", cubic_solve::check),
     ("extract_points", extract_points::check),
+    ("surface_blocks", surface_blocks::check),
     ("surface_fwd", surface_fwd::check),
     ("surface_opacity_reg", surface_reg::check_opacity_reg),
     ("surface_normal_reg", surface_reg::check_normal_reg),

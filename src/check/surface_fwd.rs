@@ -3,7 +3,8 @@
 //! and noise, in scene units), σα random in [−1, 3], random SH, 3 % of the vertices unallocated,
 //! 5 levels; random rays plus adversarial ones (axis-aligned along grid faces and edges, diagonals
 //! through vertices, starting inside or on a vertex, in a coordinate plane, missing). Two passes:
-//! a = 3.5 with stop 1e-4 (truncation and fractional γ), and a = 100 with stop 1e-3.
+//! a = 3.5 with stop 1e-4 (truncation and fractional γ) skipping with the scene's block masks, and
+//! a = 100 with stop 1e-3 skipping with random block masks (exercising the walk's restarts).
 //!
 //! Per ray the hit counts must agree exactly, and then rgb and transmittance within
 //! |Δ| ≤ 1e-4 + 1e-4·|cpu|. A ray whose hit count differs is excused (a near-tangent or
@@ -12,7 +13,10 @@
 //! capped at [`EXCUSED_CAP_FRAC`] of the rays. The summed counters must agree within 0.5 % + 4.
 
 use super::{CheckRow, Compare};
-use crate::cpu::surface_fwd::{render, validate_inputs, SurfCounts, SurfaceGridRef, SurfaceParams};
+use crate::cpu::surface_blocks::build_blocks;
+use crate::cpu::surface_fwd::{
+    render, validate_blocks, validate_inputs, SurfCounts, SurfaceGridRef, SurfaceParams,
+};
 use crate::gpu::Gpu;
 use crate::kernels::surface_fwd::{Push, INFO};
 use crate::math::surface::{SurfOut, SURF_MAX_LEVELS};
@@ -201,13 +205,16 @@ pub fn test_rays(scene: &SurfaceScene, seed: u64, n_rays: usize) -> Vec<f32> {
 }
 
 /// Runs `surface_fwd` on the device: per-ray outputs, summed counters and the device time (ns).
+/// `blocks`: block level masks to skip with (`block_skip` = 1), or `None` (every cell walked).
 pub fn render_gpu(
     gpu: &Gpu,
     g: &SurfaceGridRef,
     rays: &[f32],
     p: &SurfaceParams,
+    blocks: Option<&[u32]>,
 ) -> Result<(Vec<SurfOut>, SurfCounts, f64)> {
     validate_inputs(g, rays, p)?;
+    validate_blocks(g, blocks)?;
     let n_rays = rays.len() / 6;
     let mut levels = p.levels.clone();
     levels.resize(SURF_MAX_LEVELS, 0.0);
@@ -225,7 +232,8 @@ pub fn render_gpu(
     let lv = gpu.upload(&levels)?;
     let rb = gpu.upload(&one(rays))?;
     let out = gpu.zeros::<SurfOut>(n_rays.max(1))?;
-    let stats = gpu.zeros::<u32>(5)?;
+    let bb = gpu.upload(blocks.unwrap_or(&[0]))?;
+    let stats = gpu.zeros::<u32>(6)?;
     let times = gpu.run_1d(
         &INFO,
         &Push {
@@ -237,6 +245,7 @@ pub fn render_gpu(
             rays: rb.address(),
             out_rays: out.address(),
             stats: stats.address(),
+            blocks: bb.address(),
             scale: p.scale,
             offset: p.offset,
             n: g.n,
@@ -244,7 +253,7 @@ pub fn render_gpu(
             n_levels: p.levels.len() as u32,
             a: p.a,
             stop_thresh: p.stop_thresh,
-            ..Default::default()
+            block_skip: u32::from(blocks.is_some()),
         },
         n_rays as u32,
     )?;
@@ -266,10 +275,18 @@ pub fn check(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
     let mut cmp = Compare::new(1e-4, 1e-4);
     let mut excused = 0usize;
     let mut notes = Vec::new();
-    for (a, stop) in [(3.5f32, 1e-4f32), (100.0, 1e-3)] {
+    // Block masks of the scene (exact skipping), and random ones (~60 % dead: not the scene's,
+    // they drop hits, but both backends must skip alike).
+    let real = build_blocks(&scene.grid(), &scene.levels, 0.0)?;
+    let mut rng = Pcg64::seed_from_u64(seed ^ 0xb10c);
+    let random: Vec<u32> = real
+        .iter()
+        .map(|_| u32::from(rng.random::<f32>() < 0.4))
+        .collect();
+    for (a, stop, blocks) in [(3.5f32, 1e-4f32, &real), (100.0, 1e-3, &random)] {
         let p = scene.params(a, stop);
-        let (want, wc) = render(&scene.grid(), &rays, &p)?;
-        let (got, gc, _) = render_gpu(gpu, &scene.grid(), &rays, &p)?;
+        let (want, wc) = render(&scene.grid(), &rays, &p, Some(blocks))?;
+        let (got, gc, _) = render_gpu(gpu, &scene.grid(), &rays, &p, Some(blocks))?;
         for (i, (g, w)) in got.iter().zip(&want).enumerate() {
             if g.hits != w.hits {
                 excused += 1;
@@ -285,7 +302,7 @@ pub fn check(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
             });
         }
         let close =
-            (0..5).all(|i| (gc[i] as f64 - wc[i] as f64).abs() <= 5e-3 * wc[i] as f64 + 4.0);
+            (0..6).all(|i| (gc[i] as f64 - wc[i] as f64).abs() <= 5e-3 * wc[i] as f64 + 4.0);
         if !close {
             cmp.failures += 1;
             cmp.first_failure
@@ -303,7 +320,7 @@ pub fn check(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
         "surface_fwd",
         2 * n_rays,
         format!(
-            "hits exact, {excused} rays excused (cap {cap}, 0.5 %); cells/solves/culled/hits/cut {}",
+            "hits exact, {excused} rays excused (cap {cap}, 0.5 %); scene blocks, then random blocks; cells/solves/culled/hits/cut/skips {}",
             notes.join("; ")
         ),
     ))

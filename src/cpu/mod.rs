@@ -10,6 +10,7 @@ pub mod plenoxel;
 mod rmsprop;
 mod sh_eval;
 pub mod step;
+pub mod surface_blocks;
 pub mod surface_fwd;
 pub mod surface_reg;
 pub mod surface_train;

@@ -1,19 +1,24 @@
 //! Twin of `glsl/surface_fwd.comp`: stage-2 (αSurf) forward rendering, one rayon task per ray,
-//! the same DDA walk (`math::dda`), per-cell hits (`math::surface`) and compositing arithmetic.
+//! the same DDA walk (`math::dda`) with the same block skipping (`math::surface_blocks`), per-cell
+//! hits (`math::surface`) and compositing arithmetic.
 
-use crate::math::dda::{dda_cell_index, dda_init, ray_unit};
+use crate::math::dda::{dda_cell_index, dda_init, dda_next, ray_unit};
 use crate::math::sh::sh_basis;
 use crate::math::surface::{
     surf_alpha, surf_cell_hits, surf_gamma, surf_level_mask, surf_local, surf_ray, SurfOut,
     SURF_MAX_LEVELS,
 };
+use crate::math::surface_blocks::{
+    surf_block_index, surf_block_skip, surf_blocks_per_axis, SURF_NO_BLOCK,
+};
 use crate::math::trilerp::trilerp_weights;
 use anyhow::{ensure, Result};
 use rayon::prelude::*;
 
-/// Counters summed over rays: cells visited, cubic solves, solves skipped by min/max culling,
-/// hits composited, hits cut off by truncation (the kernel's `stats` buffer).
-pub type SurfCounts = [u32; 5];
+/// Counters summed over rays: cells visited (links read), cubic solves, solves skipped by min/max
+/// culling, hits composited, hits cut off by truncation, blocks skipped (the kernel's `stats`
+/// buffer).
+pub type SurfCounts = [u32; 6];
 
 /// Borrowed stage-2 grid: `n`³ vertices (x-major links, < 0 unallocated) and per allocated vertex
 /// δ, raw opacity σα and 27 SH coefficients.
@@ -67,12 +72,14 @@ pub struct SurfaceParams {
     pub stop_thresh: f32,
 }
 
-/// One ray: its output and counters.
+/// One ray: its output and counters. `blocks`: the block level masks of `g` for `p.levels`
+/// (`cpu::surface_blocks::build_blocks`), skipping blocks with mask 0; `None` walks every cell.
 pub fn render_ray(
     g: &SurfaceGridRef,
     ro: [f32; 3],
     rd: [f32; 3],
     p: &SurfaceParams,
+    blocks: Option<&[u32]>,
 ) -> (SurfOut, SurfCounts) {
     let levels = &p.levels[..p.levels.len().min(SURF_MAX_LEVELS)];
     let (og, dn) = surf_ray(ro, rd, p.scale, p.offset);
@@ -82,8 +89,20 @@ pub fn render_ray(
     let mut color = [0f32; 3];
     let mut t_acc = 1.0f32;
     let mut j = 0u32;
-    let mut cnt: SurfCounts = [0; 5];
-    'walk: for piece in dda_init(og, dn, g.n as i32, 0.0) {
+    let mut cnt: SurfCounts = [0; 6];
+    let nb = surf_blocks_per_axis(g.n);
+    let mut skipped = SURF_NO_BLOCK;
+    let mut w = dda_init(og, dn, g.n as i32, 0.0);
+    'walk: while let Some(piece) = dda_next(&mut w) {
+        if let Some(blocks) = blocks {
+            let bi = surf_block_index(piece.cell, nb);
+            if blocks[bi as usize] == 0
+                && surf_block_skip(&mut w, dn, g.n as i32, piece.cell, bi, &mut skipped)
+            {
+                cnt[5] += 1;
+                continue;
+            }
+        }
         cnt[0] += 1;
         let l = piece.cell;
         let base = dda_cell_index(l, g.n) as usize;
@@ -156,6 +175,20 @@ pub fn render_ray(
     )
 }
 
+/// The block-mask count must match the grid (`nb`³, `math::surface_blocks`).
+pub fn validate_blocks(g: &SurfaceGridRef, blocks: Option<&[u32]>) -> Result<()> {
+    if let Some(b) = blocks {
+        let nb = surf_blocks_per_axis(g.n) as usize;
+        ensure!(
+            b.len() == nb * nb * nb,
+            "{} block masks, want {nb}³ for n = {}",
+            b.len(),
+            g.n
+        );
+    }
+    Ok(())
+}
+
 /// Checks shared by both surface renderers: grid arrays, level count, ray layout.
 pub fn validate_inputs(g: &SurfaceGridRef, rays: &[f32], p: &SurfaceParams) -> Result<()> {
     g.validate()?;
@@ -169,18 +202,20 @@ pub fn validate_inputs(g: &SurfaceGridRef, rays: &[f32], p: &SurfaceParams) -> R
 }
 
 /// Twin of `surface_fwd.comp`: one output per ray (`rays`: 6 floats each, scene origin and
-/// direction) and the summed counters.
+/// direction) and the summed counters. `blocks` as in [`render_ray`] (`None`: `block_skip` = 0).
 pub fn render(
     g: &SurfaceGridRef,
     rays: &[f32],
     p: &SurfaceParams,
+    blocks: Option<&[u32]>,
 ) -> Result<(Vec<SurfOut>, SurfCounts)> {
     validate_inputs(g, rays, p)?;
+    validate_blocks(g, blocks)?;
     let out: Vec<(SurfOut, SurfCounts)> = rays
         .par_chunks_exact(6)
-        .map(|r| render_ray(g, [r[0], r[1], r[2]], [r[3], r[4], r[5]], p))
+        .map(|r| render_ray(g, [r[0], r[1], r[2]], [r[3], r[4], r[5]], p, blocks))
         .collect();
-    let counts = out.iter().fold([0u32; 5], |a, (_, c)| {
+    let counts = out.iter().fold([0u32; 6], |a, (_, c)| {
         std::array::from_fn(|i| a[i].wrapping_add(c[i]))
     });
     Ok((out.into_iter().map(|o| o.0).collect(), counts))

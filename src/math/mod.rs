@@ -6,5 +6,6 @@ pub mod dda;
 pub mod plenoxel;
 pub mod sh;
 pub mod surface;
+pub mod surface_blocks;
 pub mod trilerp;
 pub mod vieta;

@@ -3,6 +3,7 @@
 use super::{
     batch_loss, surface_params, SurfaceBackend, SurfaceState, SurfaceStepParams, SurfaceStepStats,
 };
+use crate::cpu::surface_blocks::build_blocks;
 use crate::cpu::surface_fwd::{render, SurfCounts};
 use crate::cpu::surface_reg::{row_slots, surface_normal_reg, surface_opacity_reg, NormalPrefix};
 use crate::cpu::surface_train::{train, SurfaceGrads};
@@ -139,7 +140,8 @@ impl SurfaceBackend for CpuSurface {
 
     fn render(&mut self, rays: &[f32], a: f32, stop_thresh: f32) -> Result<(Vec<f32>, SurfCounts)> {
         let sp = surface_params(&self.grid, a, stop_thresh);
-        let (out, counts) = render(&self.grid.as_ref(), rays, &sp)?;
+        let blocks = build_blocks(&self.grid.as_ref(), &sp.levels, 0.0)?;
+        let (out, counts) = render(&self.grid.as_ref(), rays, &sp, Some(&blocks))?;
         Ok((out.iter().flat_map(|o| o.rgb).collect(), counts))
     }
 

@@ -1,0 +1,126 @@
+// surface_blocks.glsl — coarse empty-space skipping for the stage-2 (αSurf) cell walk
+// (method.md §3.2, §5). Rust twin: src/math/surface_blocks.rs (same operations in the same order).
+//
+// A block is 8³ cells: block b (per axis) covers the cells [8b, 8b+8) ∩ [0, n−2], i.e. the vertex
+// range [8b, min(8b+8, n−1)]; there are nb = ceil((n−1)/8) blocks per axis, indexed x-major
+// (bx·nb + by)·nb + bz. Its level mask (kernel surface_blocks) has bit i set iff τ_i lies within
+// [bmin − margin, bmax + margin], bmin/bmax the min/max of δ over the block's ALLOCATED vertices;
+// a block without any allocated vertex gets mask 0. A cell the walk can solve has all 8 corners
+// allocated and inside its block's vertex range, so its min/max culling range lies within the
+// block's: a block with mask 0 holds no hit (margin ≥ 0; min/max are exact, no rounding).
+//
+// Skipping in a walk loop (surface_fwd.comp is the reference use):
+//     uint skipped = SURF_NO_BLOCK;
+//     while (dda_next(w, l, t0, t1)) {
+//         uint bi = surf_block_index(l, nb);
+//         if (<block mask of bi> == 0u && surf_block_skip(w, dn, int(n), l, bi, skipped))
+//             continue;   // w now restarts at the block's exit
+//         ... the cell as before ...
+//     }
+// dn: the direction the walk was started with (dda_init(og, dn, n, ·)).
+// Exactness: the block exit t_exit (surf_block_exit) is the far-plane crossing (k − o)·(1/d) with
+// dda.glsl's own formula, hence bit-identical to the t at which the continuous walk leaves the
+// block; the restart (surf_dda_restart, = dda_init(og, dn, n, t_exit)) settles the cell with
+// those same crossings and recomputes t_next with the same formula, so the pieces (cell, t0, t1)
+// after the block are exactly the ones the continuous walk would produce (tested piece by piece
+// in src/math/surface_blocks.rs). Should rounding ever settle the restart back inside the skipped
+// block, `skipped` makes the walk go through it cell by cell (never a loop).
+// The masks must describe the current δ: rebuild them after every δ update (or use a margin that
+// bounds the drift since they were built).
+#ifndef SURFACE_BLOCKS_GLSL
+#define SURFACE_BLOCKS_GLSL
+
+#include "dda.glsl"
+
+// Block edge in cells, and its log2.
+const int SURF_BLOCK = 8;
+const int SURF_BLOCK_SHIFT = 3;
+// "No block skipped yet" (an index no block has).
+const uint SURF_NO_BLOCK = 0xffffffffu;
+
+// Blocks per axis of an n³-vertex grid (n ≥ 2): ceil((n − 1)/8).
+uint surf_blocks_per_axis(uint n) {
+    return (n + uint(SURF_BLOCK - 2)) >> SURF_BLOCK_SHIFT;
+}
+
+// Linear index of the block holding cell l.
+uint surf_block_index(ivec3 l, uint nb) {
+    uvec3 b = uvec3(l >> SURF_BLOCK_SHIFT);
+    return (b.x * nb + b.y) * nb + b.z;
+}
+
+// Vertex box [lo, hi] of the block holding cell l (grid of n³ vertices).
+void surf_block_box(ivec3 l, int n, out vec3 lo, out vec3 hi) {
+    ivec3 b0 = (l >> SURF_BLOCK_SHIFT) << SURF_BLOCK_SHIFT;
+    lo = vec3(b0);
+    hi = vec3(min(b0 + SURF_BLOCK, ivec3(n - 1)));
+}
+
+// Start of a block's δ range scan (the largest float): bmin = SURF_BLOCK_BIG and
+// bmax = −SURF_BLOCK_BIG, an empty range (bmin > bmax) that stays so without allocated vertices.
+const float SURF_BLOCK_BIG = 3.402823466e38;
+
+// Block level mask from the block's δ range: bit i (i < nl) set iff
+// bmin − margin ≤ lv[i] ≤ bmax + margin; 0 for an empty range (no allocated vertex).
+uint surf_block_mask(float bmin, float bmax, float margin, float lv[8], uint nl) {
+    precise float lo = bmin - margin;
+    precise float hi = bmax + margin;
+    bool has = bmin <= bmax;
+    uint m = 0u;
+    for (uint i = 0u; i < 8u; i++) {
+        if (has && i < nl && lo <= lv[i] && lv[i] <= hi) m |= 1u << i;
+    }
+    return m;
+}
+
+// t at which walk w leaves the block holding cell l: min over moving axes of the block's far-plane
+// crossing (k − o)·(1/d) (o, 1/d as stored in w) — bit-identical to ray_box(og, dn, block box,
+// ·).y, since for 1/d > 0 the far crossing is the larger of the two (rounding is monotone), and a
+// still axis lies inside the box (no constraint).
+float surf_block_exit(Dda w, ivec3 l, int n) {
+    vec3 lo, hi;
+    surf_block_box(l, n, lo, hi);
+    float t = DDA_BIG;
+    for (int a = 0; a < 3; a++) {
+        if (w.step[a] == 0) continue;
+        precise float tf = ((w.step[a] > 0 ? hi[a] : lo[a]) - w.o[a]) * w.inv[a];
+        t = min(t, tf);
+    }
+    return t;
+}
+
+// Restarts walk w (started as dda_init(og, dn, n, ·)) at t ≥ its current entry t: the state
+// dda_init(og, dn, n, t) returns (same cell estimate and settling, same t_next formula), without
+// redoing the grid clip (w keeps o, 1/d, step and t_end; t lies past the grid entry).
+void surf_dda_restart(inout Dda w, vec3 dn, int n, float t) {
+    vec3 d = dda_flush(dn);
+    ivec3 up = max(w.step, ivec3(0));
+    precise vec3 p = w.o + t * d;
+    ivec3 c = ivec3(floor(clamp(p, vec3(-1.0), vec3(float(n)))));
+    precise vec3 tn = (vec3(c + up) - w.o) * w.inv;
+    c += ivec3(lessThanEqual(tn, vec3(t))) * w.step;
+    precise vec3 tp = (vec3(c + 1 - up) - w.o) * w.inv;
+    c -= ivec3(greaterThan(tp, vec3(t))) * w.step;
+    w.cell = clamp(c, ivec3(0), ivec3(n - 2));
+    precise vec3 tx = (vec3(w.cell + up) - w.o) * w.inv;
+    w.t_next = mix(tx, vec3(DDA_BIG), equal(d, vec3(0.0)));
+    w.t = t;
+    if (!(t < w.t_end)) {  // past the grid: the walk ends at the next dda_next
+        w.t_next = vec3(DDA_BIG);
+        w.t = -DDA_BIG;
+        w.t_end = -DDA_BIG;
+    }
+}
+
+// Called when the walk w (started as dda_init(og, dn, n, ·)) has just produced the piece of cell l
+// whose block bi has mask 0: unless bi is the block skipped last, restarts w at the block's exit,
+// records bi in `skipped` and returns true (the caller drops the cell and continues with
+// dda_next); returns false (walk the cell as usual) when bi == skipped.
+bool surf_block_skip(inout Dda w, vec3 dn, int n, ivec3 l, uint bi, inout uint skipped) {
+    if (bi == skipped) return false;
+    surf_dda_restart(w, dn, n, surf_block_exit(w, l, n));
+    skipped = bi;
+    return true;
+}
+
+#endif

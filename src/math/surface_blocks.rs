@@ -1,0 +1,259 @@
+//! Coarse empty-space skipping for the stage-2 (αSurf) cell walk: the twin of
+//! `glsl/lib/surface_blocks.glsl` (same operations in the same order; that file has the
+//! conventions and the exactness argument).
+//!
+//! A block is 8³ cells: block b (per axis) covers cells [8b, 8b+8) ∩ [0, n−2], i.e. the vertex
+//! range [8b, min(8b+8, n−1)]; `nb = ceil((n−1)/8)` blocks per axis, x-major. A block's level mask
+//! has bit i set iff τ_i ∈ [bmin − margin, bmax + margin] over its allocated vertices (0 if none):
+//! a block with mask 0 holds no hit, and the walk jumps over it with [`surf_block_skip`].
+//!
+//! Use in a walk loop (as in `cpu::surface_fwd::render_ray`):
+//! ```text
+//! let mut w = dda_init(og, dn, n, 0.0);
+//! let mut skipped = SURF_NO_BLOCK;
+//! while let Some(piece) = dda_next(&mut w) {
+//!     let bi = surf_block_index(piece.cell, nb);
+//!     if blocks[bi as usize] == 0 && surf_block_skip(&mut w, dn, n, piece.cell, bi, &mut skipped)
+//!     {
+//!         continue; // w restarts at the block's exit
+//!     }
+//!     // ... the cell as before ...
+//! }
+//! ```
+
+use super::dda::{dda_flush, Dda, DDA_BIG};
+
+/// Block edge in cells, and its log2.
+pub const SURF_BLOCK: i32 = 8;
+pub const SURF_BLOCK_SHIFT: i32 = 3;
+/// "No block skipped yet" (an index no block has).
+pub const SURF_NO_BLOCK: u32 = u32::MAX;
+
+/// Blocks per axis of an `n`³-vertex grid (n ≥ 2): ceil((n − 1)/8).
+pub fn surf_blocks_per_axis(n: u32) -> u32 {
+    (n + (SURF_BLOCK - 2) as u32) >> SURF_BLOCK_SHIFT
+}
+
+/// Linear index of the block holding cell `l`.
+pub fn surf_block_index(l: [i32; 3], nb: u32) -> u32 {
+    let b = l.map(|x| (x >> SURF_BLOCK_SHIFT) as u32);
+    (b[0] * nb + b[1]) * nb + b[2]
+}
+
+/// Vertex box `(lo, hi)` of the block holding cell `l` (grid of `n`³ vertices).
+pub fn surf_block_box(l: [i32; 3], n: i32) -> ([f32; 3], [f32; 3]) {
+    let b0 = l.map(|x| (x >> SURF_BLOCK_SHIFT) << SURF_BLOCK_SHIFT);
+    (
+        b0.map(|x| x as f32),
+        b0.map(|x| (x + SURF_BLOCK).min(n - 1) as f32),
+    )
+}
+
+/// Start of a block's δ range scan: `bmin = SURF_BLOCK_BIG`, `bmax = −SURF_BLOCK_BIG` (an empty
+/// range, `bmin > bmax`, stays so when the block has no allocated vertex).
+pub const SURF_BLOCK_BIG: f32 = f32::MAX;
+
+/// Block level mask from the block's δ range: bit i set iff
+/// `bmin − margin ≤ levels[i] ≤ bmax + margin` (at most 8 levels); 0 for an empty range.
+pub fn surf_block_mask(bmin: f32, bmax: f32, margin: f32, levels: &[f32]) -> u32 {
+    let lo = bmin - margin;
+    let hi = bmax + margin;
+    let has = bmin <= bmax;
+    levels
+        .iter()
+        .take(8)
+        .enumerate()
+        .filter(|(_, &tau)| has && lo <= tau && tau <= hi)
+        .fold(0, |m, (i, _)| m | 1 << i)
+}
+
+/// t at which walk `w` leaves the block holding cell `l`: min over moving axes of the block's
+/// far-plane crossing `(k − o)·(1/d)` (o, 1/d as stored in `w`), bit-identical to
+/// `ray_box(og, dn, block box, ·)[1]` (see the GLSL).
+pub fn surf_block_exit(w: &Dda, l: [i32; 3], n: i32) -> f32 {
+    let (lo, hi) = surf_block_box(l, n);
+    let mut t = DDA_BIG;
+    for a in 0..3 {
+        if w.step[a] == 0 {
+            continue;
+        }
+        let k = if w.step[a] > 0 { hi[a] } else { lo[a] };
+        t = t.min((k - w.o[a]) * w.inv[a]);
+    }
+    t
+}
+
+/// Restarts walk `w` (started as `dda_init(og, dn, n, ·)`) at `t` ≥ its current entry t: the
+/// state `dda_init(og, dn, n, t)` returns, without redoing the grid clip.
+#[allow(clippy::neg_cmp_op_on_partial_ord)] // `!(a < b)` is true on NaN, as in the GLSL
+pub fn surf_dda_restart(w: &mut Dda, dn: [f32; 3], n: i32, t: f32) {
+    let d = dda_flush(dn);
+    for a in 0..3 {
+        let up = w.step[a].max(0);
+        let p = w.o[a] + t * d[a];
+        let mut c = p.clamp(-1.0, n as f32).floor() as i32;
+        let tn = ((c + up) as f32 - w.o[a]) * w.inv[a];
+        c += i32::from(tn <= t) * w.step[a];
+        let tp = ((c + 1 - up) as f32 - w.o[a]) * w.inv[a];
+        c -= i32::from(tp > t) * w.step[a];
+        w.cell[a] = c.clamp(0, n - 2);
+        let tx = ((w.cell[a] + up) as f32 - w.o[a]) * w.inv[a];
+        w.t_next[a] = if d[a] != 0.0 { tx } else { DDA_BIG };
+    }
+    w.t = t;
+    if !(t < w.t_end) {
+        // Past the grid: the walk ends at the next dda_next.
+        w.t_next = [DDA_BIG; 3];
+        w.t = -DDA_BIG;
+        w.t_end = -DDA_BIG;
+    }
+}
+
+/// Called when the walk `w` (started as `dda_init(og, dn, n, ·)`) has just produced the piece of
+/// cell `l` whose block `bi` has mask 0: unless `bi` is the block skipped last, restarts `w` at
+/// the block's exit, records `bi` in `skipped` and returns true (drop the cell and continue with
+/// `dda_next`); returns false (walk the cell as usual) when `bi == *skipped`.
+pub fn surf_block_skip(
+    w: &mut Dda,
+    dn: [f32; 3],
+    n: i32,
+    l: [i32; 3],
+    bi: u32,
+    skipped: &mut u32,
+) -> bool {
+    if bi == *skipped {
+        return false;
+    }
+    let t = surf_block_exit(w, l, n);
+    surf_dda_restart(w, dn, n, t);
+    *skipped = bi;
+    true
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::math::dda::{dda_init, dda_next, ray_box, ray_unit, DdaPiece};
+    use rand::{Rng, SeedableRng};
+    use rand_pcg::Pcg64;
+
+    /// The skipping walk's pieces, and the number of skips.
+    fn skip_walk(og: [f32; 3], dn: [f32; 3], n: i32, blocks: &[u32]) -> (Vec<DdaPiece>, usize) {
+        let nb = surf_blocks_per_axis(n as u32);
+        let mut w = dda_init(og, dn, n, 0.0);
+        let mut skipped = SURF_NO_BLOCK;
+        let mut out = Vec::new();
+        let mut skips = 0;
+        while let Some(p) = dda_next(&mut w) {
+            let bi = surf_block_index(p.cell, nb);
+            if blocks[bi as usize] == 0 {
+                // The cheap exit and restart are the slab test and dda_init, bit for bit.
+                let (lo, hi) = surf_block_box(p.cell, n);
+                let t_exit = ray_box(og, dn, lo, hi, p.t0)[1];
+                assert_eq!(surf_block_exit(&w, p.cell, n).to_bits(), t_exit.to_bits());
+                let mut r = w;
+                surf_dda_restart(&mut r, dn, n, t_exit);
+                let want = dda_init(og, dn, n, t_exit);
+                assert_eq!(format!("{r:?}"), format!("{want:?}"), "restart at {t_exit}");
+                if surf_block_skip(&mut w, dn, n, p.cell, bi, &mut skipped) {
+                    skips += 1;
+                    continue;
+                }
+            }
+            out.push(p);
+        }
+        (out, skips)
+    }
+
+    #[test]
+    fn sizes_and_boxes() {
+        assert_eq!(surf_blocks_per_axis(2), 1);
+        assert_eq!(surf_blocks_per_axis(9), 1);
+        assert_eq!(surf_blocks_per_axis(10), 2);
+        assert_eq!(surf_blocks_per_axis(129), 16);
+        assert_eq!(surf_blocks_per_axis(128), 16);
+        assert_eq!(
+            surf_block_box([9, 0, 15], 20),
+            ([8.0, 0.0, 8.0], [16.0, 8.0, 16.0])
+        );
+        assert_eq!(
+            surf_block_box([17, 16, 18], 20),
+            ([16.0, 16.0, 16.0], [19.0, 19.0, 19.0])
+        );
+        assert_eq!(surf_block_index([17, 3, 9], 3), 19);
+        assert_eq!(
+            surf_block_mask(SURF_BLOCK_BIG, -SURF_BLOCK_BIG, 1.0, &[0.0]),
+            0
+        );
+        assert_eq!(
+            surf_block_mask(-1.0, 2.0, 0.5, &[-1.5, -1.6, 2.5, 2.6, 0.0]),
+            0b10101
+        );
+    }
+
+    /// Random dead-block patterns (not derived from any field) and adversarial rays: the skipping
+    /// walk yields exactly the continuous walk's pieces in live blocks, bit for bit.
+    #[test]
+    fn skipping_walk_reproduces_the_live_pieces() {
+        let mut rng = Pcg64::seed_from_u64(3);
+        let mut total_skips = 0;
+        for case in 0..4000 {
+            let n = [2, 9, 10, 17, 20, 33, 40][case % 7];
+            let nb = surf_blocks_per_axis(n as u32) as usize;
+            let p_dead = [0.3, 0.7, 0.95][case % 3];
+            let blocks: Vec<u32> = (0..nb * nb * nb)
+                .map(|_| u32::from(rng.random::<f64>() >= p_dead))
+                .collect();
+            let nf = n as f32;
+            let bf = |rng: &mut Pcg64| (rng.random_range(0..=nb) * 8).min(n as usize - 1) as f32;
+            let (og, d): ([f32; 3], [f32; 3]) = match case % 6 {
+                // Axis-aligned along block faces / edges.
+                0 => {
+                    let a = rng.random_range(0..3);
+                    let mut g = [bf(&mut rng), bf(&mut rng), rng.random_range(0.0..nf - 1.0)];
+                    g[a] = -2.0;
+                    let mut d = [0.0; 3];
+                    d[a] = 1.0;
+                    (g, d)
+                }
+                // Diagonals through block corners.
+                1 => {
+                    let v = [bf(&mut rng), bf(&mut rng), bf(&mut rng)];
+                    let d = [1.0f32, -1.0, 1.0].map(|s| if rng.random() { s } else { -s });
+                    (std::array::from_fn(|i| v[i] - 30.0 * d[i]), d)
+                }
+                // Starting inside a (possibly dead) block, random direction.
+                2 => (
+                    std::array::from_fn(|_| rng.random_range(0.0..nf - 1.0)),
+                    std::array::from_fn(|_| rng.random_range(-1.0..1.0)),
+                ),
+                // Grazing a block face: in the plane x = 8k, tilted in y and z.
+                3 => {
+                    let mut g = [bf(&mut rng), -1.0, rng.random_range(0.0..nf - 1.0)];
+                    g[1] = -1.5;
+                    (g, [0.0, 1.0, rng.random_range(-0.3..0.3)])
+                }
+                // Starting on a block corner.
+                4 => (
+                    [bf(&mut rng), bf(&mut rng), bf(&mut rng)],
+                    std::array::from_fn(|_| rng.random_range(-1.0..1.0)),
+                ),
+                // From far away.
+                _ => {
+                    let o: [f32; 3] =
+                        std::array::from_fn(|_| rng.random_range(-3.0 * nf..4.0 * nf));
+                    let at: [f32; 3] = std::array::from_fn(|_| rng.random_range(0.0..nf - 1.0));
+                    (o, std::array::from_fn(|i| at[i] - o[i]))
+                }
+            };
+            let dn = ray_unit(d);
+            let want: Vec<DdaPiece> = dda_init(og, dn, n, 0.0)
+                .filter(|p| blocks[surf_block_index(p.cell, nb as u32) as usize] != 0)
+                .collect();
+            let (got, skips) = skip_walk(og, dn, n, &blocks);
+            assert_eq!(got, want, "case {case}: n {n} og {og:?} dn {dn:?}");
+            total_skips += skips;
+        }
+        assert!(total_skips > 5000, "only {total_skips} skips");
+    }
+}
