@@ -17,5 +17,6 @@ pub mod io;
 pub mod kernels;
 pub mod math;
 pub mod plenoxel;
+pub mod report;
 pub mod scene;
 pub mod train;
