@@ -173,6 +173,8 @@ pub fn side_by_side(images: &[(String, RgbImage)], scale: u32) -> Canvas {
     for (caption, img) in images {
         c.text_centred(x + img.width() as i64 / 2, 4, caption, scale, BLACK);
         c.blit(img, x, caption_h);
+        let (w, h) = (img.width() as i64, img.height() as i64);
+        c.rect(x - 1, caption_h - 1, w + 2, h + 2, LIGHT_GREY);
         x += img.width() as i64 + gap;
     }
     c

@@ -2,7 +2,7 @@
 //! predicted point to the ground truth). Points are drawn far to near as small squares, so the
 //! nearest point shows at each pixel.
 
-use super::canvas::{Canvas, WHITE};
+use super::canvas::{Canvas, Colour, WHITE};
 use super::colormap::{colour_bar, scaled};
 use image::RgbImage;
 
@@ -70,14 +70,12 @@ impl Projection {
     }
 }
 
-/// Draw `points` coloured by `values` on the scale [lo, hi] (clamped) as `size`-pixel squares on
-/// white, far to near.
+/// Draw `points` as `size`-pixel squares on white, far to near, point i in `colour_of(i)`.
 pub fn render(
     points: &[[f32; 3]],
-    values: &[f64],
     proj: &Projection,
-    (lo, hi): (f64, f64),
     size: u32,
+    colour_of: impl Fn(usize) -> Colour,
 ) -> RgbImage {
     let mut c = Canvas::new(proj.w, proj.h, WHITE);
     let mut order: Vec<(f64, f64, f64, usize)> = points
@@ -92,16 +90,27 @@ pub fn render(
     order.sort_by(|a, b| a.2.total_cmp(&b.2));
     let s = size.max(1) as i64;
     for (x, y, _, i) in order {
-        let col = scaled(values.get(i).copied().unwrap_or(f64::NAN), lo, hi);
-        c.fill_rect(x.round() as i64 - s / 2, y.round() as i64 - s / 2, s, s, col);
+        c.fill_rect(x.round() as i64 - s / 2, y.round() as i64 - s / 2, s, s, colour_of(i));
     }
     c.img
+}
+
+/// One panel of [`error_figure`]: a title, the points, and a value per point (coloured on the
+/// shared scale) or `None` (drawn in dark grey, e.g. the ground truth).
+pub type Panel<'a> = (String, &'a [[f32; 3]], Option<&'a [f64]>);
+
+/// Colour of point `i` in a panel.
+fn panel_colour(values: Option<&[f64]>, vmax: f64, i: usize) -> Colour {
+    match values {
+        Some(v) => scaled(v.get(i).copied().unwrap_or(f64::NAN), 0.0, vmax),
+        None => [70, 70, 70],
+    }
 }
 
 /// Panels of clouds side by side (one view, fitted to `frame_points`, e.g. the ground truth)
 /// with a shared colour bar for [0, vmax] underneath, labelled `bar_title`.
 pub fn error_figure(
-    panels: &[(String, &[[f32; 3]], &[f64])],
+    panels: &[Panel],
     frame_points: &[[f32; 3]],
     (azimuth, elevation): (f64, f64),
     panel_px: u32,
@@ -111,16 +120,15 @@ pub fn error_figure(
     let proj = Projection::fit(frame_points, azimuth, elevation, panel_px, panel_px);
     let images: Vec<(String, RgbImage)> = panels
         .iter()
-        .map(|(t, p, v)| (t.clone(), render(p, v, &proj, (0.0, vmax), 2)))
+        .map(|(t, p, v)| {
+            let img = render(p, &proj, 2, |i| panel_colour(*v, vmax, i));
+            (t.clone(), img)
+        })
         .collect();
     let strip = super::canvas::side_by_side(&images, 2);
     let bar_h = 70i64;
     let mut c = Canvas::new(strip.img.width(), strip.img.height() + bar_h as u32, WHITE);
     c.blit(&strip.img, 0, 0);
-    for (i, (_, _)) in images.iter().enumerate() {
-        let x = 8 + i as i64 * (panel_px as i64 + 8);
-        c.rect(x - 1, Canvas::text_height(2) + 7, panel_px as i64 + 2, panel_px as i64 + 2, [200; 3]);
-    }
     let w = (c.width() / 2).clamp(120, 600);
     let x = (c.width() - w) / 2 + Canvas::text_width(bar_title, 2) / 2;
     colour_bar(
@@ -164,7 +172,7 @@ mod tests {
         let pts = [[0.0, 1.0, 0.0], [0.0, -1.0, 0.0], [1.0, 0.0, 1.0], [-1.0, 0.0, -1.0]];
         let vals = [1.0, 0.0, 0.5, 0.5];
         let p = Projection::fit(&pts, -90.0, 0.0, 64, 64);
-        let img = render(&pts, &vals, &p, (0.0, 1.0), 1);
+        let img = render(&pts, &p, 1, |i| scaled(vals[i], 0.0, 1.0));
         let (x, y, _) = p.project(pts[1]);
         assert_eq!(img.get_pixel(x.round() as u32, y.round() as u32).0, turbo(0.0));
         assert_eq!(img.pixels().filter(|q| q.0 == turbo(0.5)).count(), 2);
@@ -181,7 +189,7 @@ mod tests {
             .collect();
         let vals: Vec<f64> = (0..500).map(|i| i as f64 / 25000.0).collect();
         let c = error_figure(
-            &[("A".into(), &pts, &vals), ("B".into(), &pts, &vals)],
+            &[("A".into(), &pts, None), ("B".into(), &pts, Some(&vals))],
             &pts,
             (-90.0, 0.0),
             120,

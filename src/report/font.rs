@@ -1,5 +1,5 @@
 //! A 5×7 bitmap font for plot labels: digits, Latin letters (lower case drawn as upper case) and
-//! the punctuation plots need (`. , - + / ( ) : = % _ ³ × σ α ?`). Unknown characters draw as a
+//! the punctuation plots need (`. , - + / ( ) : = % _ ³ × σ τ α ?`). Unknown characters draw as a
 //! box. Each glyph is 7 rows of 5 bits, most significant bit on the left.
 
 /// Glyph width and height in font pixels; characters advance by `GLYPH_W + 1`.
@@ -61,6 +61,7 @@ pub fn glyph(c: char) -> [u8; 7] {
         '×' => [0, 0x11, 0x0A, 0x04, 0x0A, 0x11, 0],
         'σ' => [0, 0, 0x0F, 0x12, 0x11, 0x11, 0x0E],
         'α' => [0, 0, 0x0D, 0x12, 0x12, 0x12, 0x0D],
+        'τ' => [0, 0, 0x1F, 0x04, 0x04, 0x05, 0x02],
         '?' => [0x0E, 0x11, 0x01, 0x02, 0x04, 0, 0x04],
         _ => [0x1F, 0x11, 0x11, 0x11, 0x11, 0x11, 0x1F],
     }
@@ -72,7 +73,7 @@ mod tests {
 
     #[test]
     fn glyphs_fit_five_columns_and_are_distinct() {
-        let chars = "0123456789ABCDEFGHIJKLMNOPQRSTUVWXYZ.,-+/():=%_³×σα?";
+        let chars = "0123456789ABCDEFGHIJKLMNOPQRSTUVWXYZ.,-+/():=%_³×στα?";
         let mut seen = std::collections::HashSet::new();
         for c in chars.chars() {
             let g = glyph(c);

@@ -2,7 +2,7 @@
 //! title, axis labels and a legend. Non-finite points (and non-positive ones on a log axis) are
 //! skipped; a line breaks there.
 
-use super::canvas::{Canvas, Colour, BLACK, GREY, LIGHT_GREY, WHITE};
+use super::canvas::{Canvas, Colour, BLACK, LIGHT_GREY, WHITE};
 
 /// How a series is drawn.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -19,6 +19,8 @@ pub struct Series {
     pub points: Vec<(f64, f64)>,
     pub colour: Colour,
     pub style: Style,
+    /// Text drawn next to each marker (empty: none; else one per point).
+    pub point_labels: Vec<String>,
 }
 
 /// One axis.
@@ -63,14 +65,14 @@ pub fn nice_ticks(lo: f64, hi: f64, n: usize) -> Vec<f64> {
     (first..=last).map(|k| k as f64 * step).collect()
 }
 
-/// A compact label for a tick value: plain decimals for 0.01 ≤ |v| < 10⁵, else `1.5E-3` style.
+/// A compact label for a tick value: plain decimals for 0.001 ≤ |v| < 10⁵, else `1.5E-4` style.
 pub fn fmt_tick(v: f64) -> String {
     if v == 0.0 {
         return "0".into();
     }
     let a = v.abs();
-    if (0.01..1e5).contains(&a) {
-        let s = format!("{v:.4}");
+    if (0.001..1e5).contains(&a) {
+        let s = format!("{v:.6}");
         let s = s.trim_end_matches('0').trim_end_matches('.');
         s.to_string()
     } else {
@@ -143,7 +145,9 @@ impl Scale {
 pub fn draw(c: &mut Canvas, (x, y, w, h): (i64, i64, i64, i64), plot: &Plot, series: &[Series]) {
     let s = 2u32; // font scale
     let th = Canvas::text_height(s);
-    let (left, right, top, bottom) = (18 + th + 6 * 12, 16, th + 16, 2 * th + 26);
+    let (left, right, top) = (18 + th + 6 * 12, 16, th + 16);
+    let legend = legend_rows(series, w - left - right, s);
+    let bottom = 2 * th + 26 + legend.len() as i64 * (th + 8) + if legend.is_empty() { 0 } else { 6 };
     let (px, py, pw, ph) = (x + left, y + top, w - left - right, h - top - bottom);
     if pw < 10 || ph < 10 {
         return;
@@ -185,7 +189,7 @@ pub fn draw(c: &mut Canvas, (x, y, w, h): (i64, i64, i64, i64), plot: &Plot, ser
     c.rect(px, py, pw, ph, BLACK);
     // Texts.
     c.text_centred(px + pw / 2, y + 6, &plot.title, s, BLACK);
-    c.text_centred(px + pw / 2, y + h - th - 6, &plot.x.label, s, BLACK);
+    c.text_centred(px + pw / 2, py + ph + th + 20, &plot.x.label, s, BLACK);
     c.text_vertical(x + 6, py + ph / 2, &plot.y.label, s, BLACK);
     // Series, clipped to the plot area by drawing into a sub-canvas.
     let mut area = Canvas {
@@ -202,38 +206,60 @@ pub fn draw(c: &mut Canvas, (x, y, w, h): (i64, i64, i64, i64), plot: &Plot, ser
             }
         }
         if se.style != Style::Line {
-            for p in pts.iter().flatten() {
+            for (i, p) in pts.iter().enumerate() {
+                let Some(p) = p else { continue };
                 let (mx, my) = ((p.0 - px as f64).round() as i64, (p.1 - py as f64).round() as i64);
                 area.fill_rect(mx - 4, my - 4, 9, 9, BLACK);
                 area.fill_rect(mx - 3, my - 3, 7, 7, se.colour);
+                if let Some(t) = se.point_labels.get(i) {
+                    let tw = Canvas::text_width(t, 1);
+                    // Right of the marker, or left of it near the right edge.
+                    let tx = if mx + 8 + tw < pw { mx + 8 } else { mx - 8 - tw };
+                    area.text(tx, my - 3, t, 1, BLACK);
+                }
             }
         }
     }
     c.blit(&area.img, px, py);
     c.rect(px, py, pw, ph, BLACK);
-    // Legend (top right, inside the plot area).
-    let labelled: Vec<&Series> = series.iter().filter(|s| !s.label.is_empty()).collect();
-    if !labelled.is_empty() {
-        let lw = labelled
-            .iter()
-            .map(|se| Canvas::text_width(&se.label, s))
-            .max()
-            .unwrap_or(0)
-            + 40;
-        let lh = labelled.len() as i64 * (th + 6) + 8;
-        let (lx, ly) = (px + pw - lw - 8, py + 8);
-        c.fill_rect(lx, ly, lw, lh, WHITE);
-        c.rect(lx, ly, lw, lh, GREY);
-        for (i, se) in labelled.iter().enumerate() {
-            let yy = ly + 6 + i as i64 * (th + 6);
+    // Legend, under the x-axis label (never over the data).
+    for (i, row) in legend.iter().enumerate() {
+        let yy = py + ph + 2 * th + 30 + i as i64 * (th + 8);
+        let mut xx = px;
+        for se in row {
             if se.style == Style::Markers {
-                c.fill_rect(lx + 12, yy + th / 2 - 3, 7, 7, se.colour);
+                c.fill_rect(xx + 8, yy + th / 2 - 4, 9, 9, BLACK);
+                c.fill_rect(xx + 9, yy + th / 2 - 3, 7, 7, se.colour);
             } else {
-                c.fill_rect(lx + 6, yy + th / 2 - 1, 22, 3, se.colour);
+                c.fill_rect(xx + 2, yy + th / 2 - 1, 22, 3, se.colour);
             }
-            c.text(lx + 34, yy, &se.label, s, BLACK);
+            c.text(xx + 30, yy, &se.label, s, BLACK);
+            xx += legend_entry_width(se, s);
         }
     }
+}
+
+/// Width of one legend entry: swatch, label, gap.
+fn legend_entry_width(se: &Series, scale: u32) -> i64 {
+    30 + Canvas::text_width(&se.label, scale) + 24
+}
+
+/// The labelled series laid out in rows that fit `width`.
+fn legend_rows(series: &[Series], width: i64, scale: u32) -> Vec<Vec<&Series>> {
+    let mut rows: Vec<Vec<&Series>> = Vec::new();
+    let mut used = 0;
+    for se in series.iter().filter(|s| !s.label.is_empty()) {
+        let w = legend_entry_width(se, scale);
+        match rows.last_mut() {
+            Some(r) if used + w <= width => r.push(se),
+            _ => {
+                rows.push(vec![se]);
+                used = 0;
+            }
+        }
+        used += w;
+    }
+    rows
 }
 
 /// One plot as its own `w`×`h` canvas.
@@ -261,7 +287,9 @@ mod tests {
         assert_eq!(fmt_tick(0.0), "0");
         assert_eq!(fmt_tick(20.0), "20");
         assert_eq!(fmt_tick(0.25), "0.25");
-        assert_eq!(fmt_tick(1e-3), "1E-3");
+        assert_eq!(fmt_tick(1e-3), "0.001");
+        assert_eq!(fmt_tick(0.005), "0.005");
+        assert_eq!(fmt_tick(1e-4), "1E-4");
         assert_eq!(fmt_tick(2.5e-4), "2.5E-4");
         assert_eq!(fmt_tick(1e6), "1E6");
     }
@@ -286,12 +314,14 @@ mod tests {
                 points: (0..50).map(|i| (i as f64, (i as f64).sin())).collect(),
                 colour: red,
                 style: Style::Line,
+                point_labels: vec![],
             },
             Series {
                 label: String::new(),
                 points: vec![(10.0, f64::NAN), (f64::INFINITY, 0.0)],
                 colour: [0, 0, 255],
                 style: Style::Markers,
+                point_labels: vec!["P".into()],
             },
         ];
         let plot = Plot {
