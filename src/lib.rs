@@ -19,4 +19,5 @@ pub mod math;
 pub mod plenoxel;
 pub mod report;
 pub mod scene;
+pub mod surface;
 pub mod train;

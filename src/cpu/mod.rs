@@ -11,6 +11,7 @@ mod rmsprop;
 mod sh_eval;
 pub mod step;
 pub mod surface_fwd;
+pub mod surface_train;
 mod trilerp_eval;
 mod tv;
 

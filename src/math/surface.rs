@@ -52,22 +52,31 @@ pub fn surf_local(og: [f32; 3], dn: [f32; 3], t: f32, l: [i32; 3]) -> [f32; 3] {
 pub struct CellHits {
     pub n: usize,
     pub s: [f32; SURF_MAX_CELL_HITS],
+    /// Level index of each hit.
+    pub level: [u32; SURF_MAX_CELL_HITS],
 }
 
 impl CellHits {
-    fn insert(&mut self, s: f32) {
+    fn insert(&mut self, s: f32, level: u32) {
         let mut i = self.n;
         while i > 0 && self.s[i - 1] > s {
             self.s[i] = self.s[i - 1];
+            self.level[i] = self.level[i - 1];
             i -= 1;
         }
         self.s[i] = s;
+        self.level[i] = level;
         self.n += 1;
     }
 
     /// The hits in order.
     pub fn as_slice(&self) -> &[f32] {
         &self.s[..self.n]
+    }
+
+    /// The level index of each hit, in the same order.
+    pub fn levels(&self) -> &[u32] {
+        &self.level[..self.n]
     }
 }
 
@@ -106,6 +115,7 @@ pub fn surf_cell_hits(
     let mut out = CellHits {
         n: 0,
         s: [0.0; SURF_MAX_CELL_HITS],
+        level: [0; SURF_MAX_CELL_HITS],
     };
     while mask != 0 {
         let i = mask.trailing_zeros() as usize;
@@ -115,7 +125,7 @@ pub fn surf_cell_hits(
         let x = solve_crossings(cc, ends, l);
         for (s, rising) in x.iter() {
             if rising {
-                out.insert(s);
+                out.insert(s, i as u32);
             }
         }
     }

@@ -1,0 +1,503 @@
+//! Twin of `glsl/surface_train.comp`: the stage-2 (αSurf) training pass, forward and backward fused
+//! per ray (method.md §3.2–3.4). One rayon task per ray; gradients scatter with CAS float atomics.
+//!
+//! Forward: the walk of `surface_fwd` (same DDA, per-cell hits, compositing), recording the ≤ a
+//! composited hits (a ≤ [`SURF_MAX_HITS`]). Backward, per ray, over the recorded hits:
+//! - colour: C = Σ w_j c_j + T_J·1; with S_J = 1 and S_j = α̃_j c_j + (1 − α̃_j) S_{j+1} (the colour
+//!   seen from hit j on), ∂C/∂α̃_j = T_j (c_j − S_{j+1}): no division by 1 − α̃.
+//! - entropy LH = −Σ p_j ln p_j, p = w/W: ∂LH/∂w_j = −(ln p_j + LH)/W (0 where w_j = 0), carried
+//!   to the α̃ by the same recurrence as a colour channel without background ("gradient to α̃ only").
+//! - Lc = Σ_j |t_j − t_mode| over the composited hits, t in scene units, t_mode the depth of the
+//!   largest weight: ∂/∂t_j = ±λc, to the hit depth.
+//! - α̃ = γ_j·(1 − e^{−max(σα, 0)}) ⇒ ∂α̃/∂σα = γ_j e^{−σα} (σα > 0); colour c = max(0, raw).
+//! - δ through the hit position: ∂s/∂δ_i = −w_i(p)/f′(s), f′(s) = ∇δ(p)·d; ∂L/∂s collects the
+//!   spatial derivatives along d of σα and raw colour at p, and Lc. Hits with
+//!   |f′| ≤ FPRIME_GUARD·(max δ − min δ over the cell) give δ no gradient and are counted.
+//!
+//! Each loss term is a per-ray sum; the caller's weights (`grad_scale` for the squared error,
+//! `lambda_h`, `lambda_c`) carry the batch normalisation.
+
+use super::atomic;
+use super::step::touch;
+use super::surface_fwd::{validate_inputs, SurfaceGridRef, SurfaceParams};
+use crate::math::dda::{dda_cell_index, dda_init, ray_unit};
+use crate::math::sh::sh_basis;
+use crate::math::surface::{
+    surf_alpha, surf_cell_hits, surf_gamma, surf_level_mask, surf_local, surf_ray, SURF_MAX_LEVELS,
+};
+use crate::math::trilerp::trilerp_weights;
+use anyhow::{ensure, Result};
+use rayon::prelude::*;
+use std::sync::atomic::AtomicU32;
+
+/// Composited hits recorded per ray: the truncation parameter a may not exceed this.
+pub const SURF_MAX_HITS: usize = 8;
+/// Relative guard on the implicit derivative's denominator f′(s).
+pub const FPRIME_GUARD: f32 = 1e-3;
+
+/// Counters summed over rays: cells visited, cubic solves, solves skipped by min/max culling,
+/// hits composited, hits cut off by truncation, hits whose δ gradient was dropped by the f′ guard,
+/// gradient atomic adds.
+pub type TrainCounts = [u32; 7];
+
+/// Loss weights of the fused per-ray terms (per-ray coefficients: the batch mean is the caller's).
+#[derive(Clone, Copy, Debug)]
+pub struct SurfaceLoss {
+    /// dL/dC = grad_scale·(C − target) (2/(3B) for the mean squared error).
+    pub grad_scale: f32,
+    /// Weight of the entropy of the ray's normalised hit weights.
+    pub lambda_h: f32,
+    /// Weight of Σ |t_j − t_mode|.
+    pub lambda_c: f32,
+}
+
+/// Gradient outputs of one training pass, and the per-vertex touched flags.
+pub struct SurfaceGrads<'a> {
+    pub delta: &'a mut [f32],
+    pub opacity: &'a mut [f32],
+    pub sh: &'a mut [f32],
+    pub touched: &'a mut [u32],
+}
+
+/// One composited hit: its cell, corner links, level, and where the ray meets it.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Hit {
+    pub lk: [i32; 8],
+    /// Corner δ values (paper order).
+    pub c: [f32; 8],
+    /// Entry point of the cell's piece (local coordinates) and its t.
+    pub q0: [f32; 3],
+    pub t0: f32,
+    /// Distance from the entry point to the hit, and the piece's length (voxels).
+    pub s: f32,
+    pub len: f32,
+    /// Which level.
+    pub level: u32,
+}
+
+/// A ray's forward result: recorded hits, colour before the background, final transmittance.
+#[derive(Clone, Copy, Debug)]
+pub struct Trace {
+    pub hits: [Hit; SURF_MAX_HITS],
+    pub n: usize,
+    /// Unit grid-space direction.
+    pub dn: [f32; 3],
+    /// 1/|rd∘scale|: voxels → scene units along the ray.
+    pub inv_len: f32,
+}
+
+/// Hit position in its cell.
+pub fn hit_point(h: &Hit, dn: [f32; 3]) -> [f32; 3] {
+    std::array::from_fn(|k| (h.q0[k] + h.s * dn[k]).clamp(0.0, 1.0))
+}
+
+/// The forward walk of one ray (the kernel's first loop): the composited hits in order, with the
+/// counters; the same stopping rules as `surface_fwd`.
+pub fn trace_ray(
+    g: &SurfaceGridRef,
+    ro: [f32; 3],
+    rd: [f32; 3],
+    p: &SurfaceParams,
+    cnt: &mut TrainCounts,
+) -> Trace {
+    let levels = &p.levels[..p.levels.len().min(SURF_MAX_LEVELS)];
+    let (og, dn) = surf_ray(ro, rd, p.scale, p.offset);
+    let dg: [f32; 3] = std::array::from_fn(|i| rd[i] * p.scale[i]);
+    let len = (dg[0] * dg[0] + dg[1] * dg[1] + dg[2] * dg[2]).sqrt();
+    let mut tr = Trace {
+        hits: [Hit::default(); SURF_MAX_HITS],
+        n: 0,
+        dn,
+        inv_len: if len > 0.0 { 1.0 / len } else { 0.0 },
+    };
+    let n = g.n as usize;
+    let (nz, nyz) = (n, n * n);
+    let mut t_acc = 1.0f32;
+    'walk: for piece in dda_init(og, dn, g.n as i32, 0.0) {
+        cnt[0] += 1;
+        let l = piece.cell;
+        let base = dda_cell_index(l, g.n) as usize;
+        let lk = [
+            g.links[base],
+            g.links[base + 1],
+            g.links[base + nz],
+            g.links[base + nz + 1],
+            g.links[base + nyz],
+            g.links[base + nyz + 1],
+            g.links[base + nyz + nz],
+            g.links[base + nyz + nz + 1],
+        ];
+        if lk.iter().any(|&k| k < 0) {
+            continue;
+        }
+        let c = lk.map(|k| g.delta[k as usize]);
+        let mask = surf_level_mask(&c, levels);
+        cnt[1] += mask.count_ones();
+        cnt[2] += levels.len() as u32 - mask.count_ones();
+        if mask == 0 {
+            continue;
+        }
+        let q0 = surf_local(og, dn, piece.t0, l);
+        let q1 = surf_local(og, dn, piece.t1, l);
+        let hits = surf_cell_hits(&c, q0, q1, dn, piece.t1 - piece.t0, levels, mask);
+        for (&s, &lv) in hits.as_slice().iter().zip(hits.levels()) {
+            let j = tr.n;
+            if j as f32 >= p.a {
+                cnt[4] += 1;
+                break 'walk;
+            }
+            let h = Hit {
+                lk,
+                c,
+                q0,
+                t0: piece.t0,
+                s,
+                len: piece.t1 - piece.t0,
+                level: lv,
+            };
+            let wt = trilerp_weights(hit_point(&h, dn));
+            let mut sa = 0.0f32;
+            for i in 0..8 {
+                sa += wt[i] * g.opacity[lk[i] as usize];
+            }
+            let at = surf_alpha(sa) * surf_gamma(p.a, j as u32);
+            tr.hits[j] = h;
+            tr.n += 1;
+            cnt[3] += 1;
+            t_acc *= 1.0 - at;
+            if t_acc < p.stop_thresh {
+                break 'walk;
+            }
+        }
+    }
+    tr
+}
+
+/// Per-hit shading quantities of the backward pass.
+struct Shade {
+    wt: [f32; 8],
+    /// ∂w_i/∂s.
+    dwds: [f32; 8],
+    sa: f32,
+    /// e^{−max(σα, 0)} = 1 − α.
+    e: f32,
+    gamma: f32,
+    at: f32,
+    raw: [f32; 3],
+}
+
+fn shade(g: &SurfaceGridRef, h: &Hit, dn: [f32; 3], y: &[f32; 9], a: f32, j: usize) -> Shade {
+    let p = hit_point(h, dn);
+    let wt = trilerp_weights(p);
+    let q = [1.0 - p[0], 1.0 - p[1], 1.0 - p[2]];
+    let dwds = std::array::from_fn(|i| {
+        let (bx, by, bz) = (i >> 2 & 1, i >> 1 & 1, i & 1);
+        let fx = if bx == 1 { p[0] } else { q[0] };
+        let fy = if by == 1 { p[1] } else { q[1] };
+        let fz = if bz == 1 { p[2] } else { q[2] };
+        let sx = if bx == 1 { 1.0 } else { -1.0 };
+        let sy = if by == 1 { 1.0 } else { -1.0 };
+        let sz = if bz == 1 { 1.0 } else { -1.0 };
+        sx * fy * fz * dn[0] + fx * sy * fz * dn[1] + fx * fy * sz * dn[2]
+    });
+    let mut sa = 0.0f32;
+    for i in 0..8 {
+        sa += wt[i] * g.opacity[h.lk[i] as usize];
+    }
+    let e = (-sa.max(0.0)).exp();
+    let gamma = surf_gamma(a, j as u32);
+    let at = surf_alpha(sa) * gamma;
+    let mut raw = [0.5f32; 3];
+    for i in 0..8 {
+        let row = &g.sh[h.lk[i] as usize * 27..h.lk[i] as usize * 27 + 27];
+        for ch in 0..3 {
+            let mut v = 0.0f32;
+            for k in 0..9 {
+                v += y[k] * row[ch * 9 + k];
+            }
+            raw[ch] += wt[i] * v;
+        }
+    }
+    Shade {
+        wt,
+        dwds,
+        sa,
+        e,
+        gamma,
+        at,
+        raw,
+    }
+}
+
+/// Per-ray output of the backward pass: squared error, entropy and Lc terms (unweighted).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct RayLoss {
+    pub sq_err: f32,
+    pub entropy: f32,
+    pub consistency: f32,
+}
+
+/// Twin of `surface_train.comp`: per-ray losses and the summed counters; dL/dδ, dL/dσα and
+/// dL/dSH are added into `grads` and every vertex receiving a gradient is flagged.
+pub fn train(
+    g: &SurfaceGridRef,
+    rays: &[f32],
+    targets: &[f32],
+    p: &SurfaceParams,
+    loss: &SurfaceLoss,
+    grads: SurfaceGrads,
+) -> Result<(Vec<RayLoss>, TrainCounts)> {
+    validate_inputs(g, rays, p)?;
+    ensure!(
+        p.a <= SURF_MAX_HITS as f32,
+        "truncation parameter a = {} exceeds the {SURF_MAX_HITS} hits a ray records",
+        p.a
+    );
+    ensure!(
+        targets.len() * 2 == rays.len(),
+        "{} targets for {} rays",
+        targets.len() / 3,
+        rays.len() / 6
+    );
+    let rows = g.delta.len();
+    ensure!(
+        grads.delta.len() == rows
+            && grads.opacity.len() == rows
+            && grads.sh.len() == 27 * rows
+            && grads.touched.len() == rows,
+        "gradient arrays do not match the {rows} vertex rows"
+    );
+    let out = Scatter {
+        delta: atomic::as_atomic(grads.delta),
+        opacity: atomic::as_atomic(grads.opacity),
+        sh: atomic::as_atomic(grads.sh),
+        touched: atomic::as_atomic_u32(grads.touched),
+    };
+    let res: Vec<(RayLoss, TrainCounts)> = rays
+        .par_chunks_exact(6)
+        .zip(targets.par_chunks_exact(3))
+        .map(|(r, t)| {
+            train_ray(
+                g,
+                [r[0], r[1], r[2]],
+                [r[3], r[4], r[5]],
+                [t[0], t[1], t[2]],
+                p,
+                loss,
+                &out,
+            )
+        })
+        .collect();
+    let counts = res.iter().fold([0u32; 7], |a, (_, c)| {
+        std::array::from_fn(|i| a[i].wrapping_add(c[i]))
+    });
+    Ok((res.into_iter().map(|o| o.0).collect(), counts))
+}
+
+/// The gradient arrays as atomics.
+struct Scatter<'a> {
+    delta: &'a [AtomicU32],
+    opacity: &'a [AtomicU32],
+    sh: &'a [AtomicU32],
+    touched: &'a [AtomicU32],
+}
+
+/// Per-hit gradients: ∂L/∂α̃ (before the chain to σα), ∂L/∂raw colour, and ∂L/∂t from Lc.
+pub struct HitGrads {
+    pub d_at: f32,
+    pub d_raw: [f32; 3],
+    pub d_t: f32,
+}
+
+/// The loss of one traced ray and the per-hit gradients with respect to α̃_j, raw colour and
+/// depth (the part of the backward pass that does not touch the grid).
+fn ray_backward(
+    tr: &Trace,
+    sh: &[Shade],
+    target: [f32; 3],
+    loss: &SurfaceLoss,
+) -> (RayLoss, [HitGrads; SURF_MAX_HITS]) {
+    let n = tr.n;
+    let mut t = [1.0f32; SURF_MAX_HITS + 1];
+    let mut w = [0.0f32; SURF_MAX_HITS];
+    let mut color = [0.0f32; 3];
+    for j in 0..n {
+        w[j] = t[j] * sh[j].at;
+        for ch in 0..3 {
+            color[ch] += w[j] * sh[j].raw[ch].max(0.0);
+        }
+        t[j + 1] = t[j] * (1.0 - sh[j].at);
+    }
+    let total: [f32; 3] = color.map(|c| c + t[n]);
+    let diff: [f32; 3] = std::array::from_fn(|ch| total[ch] - target[ch]);
+    let mut out = RayLoss {
+        sq_err: diff[0] * diff[0] + diff[1] * diff[1] + diff[2] * diff[2],
+        ..Default::default()
+    };
+    let d_c = diff.map(|d| loss.grad_scale * d);
+
+    // Entropy of the normalised weights and ∂(λH·LH)/∂w_j.
+    let mut e = [0.0f32; SURF_MAX_HITS];
+    let wsum: f32 = w[..n].iter().sum();
+    if loss.lambda_h != 0.0 && wsum > 1e-8 {
+        let mut h = 0.0f32;
+        for &wj in &w[..n] {
+            if wj > 0.0 {
+                let pj = wj / wsum;
+                h -= pj * pj.ln();
+            }
+        }
+        out.entropy = h;
+        for j in 0..n {
+            if w[j] > 0.0 {
+                e[j] = -loss.lambda_h * ((w[j] / wsum).ln() + h) / wsum;
+            }
+        }
+    }
+    // Lc: depths in scene units, mode = first largest weight.
+    let mut d_t = [0.0f32; SURF_MAX_HITS];
+    if loss.lambda_c != 0.0 && n > 1 {
+        let mut m = 0;
+        for j in 1..n {
+            if w[j] > w[m] {
+                m = j;
+            }
+        }
+        let depth = |j: usize| (tr.hits[j].t0 + tr.hits[j].s) * tr.inv_len;
+        let tm = depth(m);
+        for j in 0..n {
+            if j == m {
+                continue;
+            }
+            let dj = depth(j) - tm;
+            out.consistency += dj.abs();
+            let sg = if dj > 0.0 {
+                1.0
+            } else if dj < 0.0 {
+                -1.0
+            } else {
+                0.0
+            };
+            d_t[j] += loss.lambda_c * sg;
+            d_t[m] -= loss.lambda_c * sg;
+        }
+    }
+    // Reverse pass: colour and entropy seen from behind each hit.
+    let mut grads: [HitGrads; SURF_MAX_HITS] = std::array::from_fn(|_| HitGrads {
+        d_at: 0.0,
+        d_raw: [0.0; 3],
+        d_t: 0.0,
+    });
+    let mut s_c = [1.0f32; 3];
+    let mut s_e = 0.0f32;
+    for j in (0..n).rev() {
+        let at = sh[j].at;
+        let c = sh[j].raw.map(|r| r.max(0.0));
+        let mut d_at = t[j] * (e[j] - s_e);
+        for ch in 0..3 {
+            d_at += d_c[ch] * t[j] * (c[ch] - s_c[ch]);
+        }
+        grads[j] = HitGrads {
+            d_at,
+            d_raw: std::array::from_fn(|ch| {
+                if sh[j].raw[ch] > 0.0 {
+                    d_c[ch] * w[j]
+                } else {
+                    0.0
+                }
+            }),
+            d_t: d_t[j],
+        };
+        for ch in 0..3 {
+            s_c[ch] = at * c[ch] + (1.0 - at) * s_c[ch];
+        }
+        s_e = at * e[j] + (1.0 - at) * s_e;
+    }
+    (out, grads)
+}
+
+fn train_ray(
+    g: &SurfaceGridRef,
+    ro: [f32; 3],
+    rd: [f32; 3],
+    target: [f32; 3],
+    p: &SurfaceParams,
+    loss: &SurfaceLoss,
+    out: &Scatter,
+) -> (RayLoss, TrainCounts) {
+    let mut cnt: TrainCounts = [0; 7];
+    let tr = trace_ray(g, ro, rd, p, &mut cnt);
+    let y = sh_basis(ray_unit(rd));
+    let shades: Vec<Shade> = (0..tr.n)
+        .map(|j| shade(g, &tr.hits[j], tr.dn, &y, p.a, j))
+        .collect();
+    let (rl, hg) = ray_backward(&tr, &shades, target, loss);
+    for j in 0..tr.n {
+        let (h, s, gr) = (&tr.hits[j], &shades[j], &hg[j]);
+        let d_sa = if s.sa > 0.0 {
+            gr.d_at * s.gamma * s.e
+        } else {
+            0.0
+        };
+        // ∂L/∂s: opacity and colour move with the hit point, and the depth (Lc).
+        let mut dsa_ds = 0.0f32;
+        let mut f1 = 0.0f32;
+        let mut draw_ds = [0.0f32; 3];
+        for i in 0..8 {
+            let row = h.lk[i] as usize;
+            dsa_ds += s.dwds[i] * g.opacity[row];
+            f1 += s.dwds[i] * h.c[i];
+            for ch in 0..3 {
+                let mut v = 0.0f32;
+                for k in 0..9 {
+                    v += y[k] * g.sh[row * 27 + ch * 9 + k];
+                }
+                draw_ds[ch] += s.dwds[i] * v;
+            }
+        }
+        let mut dl_ds = d_sa * dsa_ds + gr.d_t * tr.inv_len;
+        for ch in 0..3 {
+            dl_ds += gr.d_raw[ch] * draw_ds[ch];
+        }
+        let cmin = h.c.iter().copied().fold(f32::INFINITY, f32::min);
+        let cmax = h.c.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+        let guarded = f1.abs() <= FPRIME_GUARD * (cmax - cmin);
+        if guarded {
+            cnt[5] += 1;
+        }
+        let d_delta_scale = if guarded || dl_ds == 0.0 {
+            0.0
+        } else {
+            -dl_ds / f1
+        };
+        for i in 0..8 {
+            let row = h.lk[i] as usize;
+            let wi = s.wt[i];
+            let dd = wi * d_delta_scale;
+            let dsa = wi * d_sa;
+            let dcol = gr.d_raw.map(|d| wi * d);
+            if dd == 0.0 && dsa == 0.0 && dcol == [0.0; 3] {
+                continue;
+            }
+            touch(out.touched, row);
+            if dd != 0.0 {
+                atomic::add(&out.delta[row], dd);
+                cnt[6] += 1;
+            }
+            if dsa != 0.0 {
+                atomic::add(&out.opacity[row], dsa);
+                cnt[6] += 1;
+            }
+            for ch in 0..3 {
+                if dcol[ch] == 0.0 {
+                    continue;
+                }
+                for k in 0..9 {
+                    atomic::add(&out.sh[row * 27 + ch * 9 + k], dcol[ch] * y[k]);
+                }
+                cnt[6] += 9;
+            }
+        }
+    }
+    (rl, cnt)
+}

@@ -1,0 +1,104 @@
+//! Stage-2 (αSurf) compute backends: one interface, a CPU implementation running the kernels'
+//! twins and a Vulkan implementation running the GLSL kernels (one submission per step).
+
+mod cpu;
+
+pub use cpu::CpuSurface;
+
+use crate::cpu::surface_fwd::{SurfCounts, SurfaceParams};
+use crate::cpu::surface_train::{SurfaceLoss, TrainCounts};
+use crate::grid::surface::SurfaceGrid;
+use anyhow::Result;
+
+/// The per-vertex regularisers of one step (method.md §3.4); `None` switches a term off. Chunks
+/// are contiguous ranges, [start, start + count), of vertex slots (TV, normals) or rows (Lα).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct SurfaceRegs {
+    /// Lδ: TV on δ over every allocated vertex, forward differences scaled by N/256; weight.
+    pub delta_tv: Option<f32>,
+    /// TVα on σα: slot chunk and weight.
+    pub opacity_tv: Option<(u32, u32, f32)>,
+    /// Lα = λ Σ log σα (σα > 0): row chunk and weight.
+    pub opacity_log: Option<(u32, u32, f32)>,
+    /// Ln1, Ln2 on cell normals: cell-slot chunk and the two weights.
+    pub normals: Option<(u32, u32, f32, f32)>,
+}
+
+/// Everything one stage-2 step needs besides the rays.
+#[derive(Clone, Copy, Debug)]
+pub struct SurfaceStepParams {
+    pub lr_delta: f32,
+    pub lr_opacity: f32,
+    pub lr_sh: f32,
+    pub beta: f32,
+    pub eps: f32,
+    /// Truncation parameter a (≤ 8).
+    pub a: f32,
+    pub stop_thresh: f32,
+    /// Per-ray entropy and depth-consistency weights (the batch mean is applied by the backend).
+    pub lambda_h: f32,
+    pub lambda_c: f32,
+    pub regs: SurfaceRegs,
+}
+
+/// What a step reports back.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct SurfaceStepStats {
+    /// Mean squared error over the batch's rays and channels.
+    pub mse: f64,
+    /// Means over rays of the entropy and depth-consistency terms (unweighted).
+    pub entropy: f64,
+    pub consistency: f64,
+    /// Counters of the training pass (see `cpu::surface_train::TrainCounts`).
+    pub counts: TrainCounts,
+    /// Device time of the step's kernels in ns (0 on the CPU backend).
+    pub device_ns: f64,
+}
+
+/// The optimiser's running averages: δ, σα, SH.
+pub type SurfaceState = [Vec<f32>; 3];
+
+/// A stage-2 compute backend holding the surface grid and its optimiser state.
+pub trait SurfaceBackend {
+    /// Backend name for logs ("vulkan" or "cpu").
+    fn name(&self) -> &'static str;
+    /// One optimisation step on a batch: `rays` 6 floats per ray, `targets` 3 per ray.
+    fn step(
+        &mut self,
+        rays: &[f32],
+        targets: &[f32],
+        p: &SurfaceStepParams,
+    ) -> Result<SurfaceStepStats>;
+    /// Render rays (white background): 3 floats per ray, and the counters of `surface_fwd`.
+    fn render(&mut self, rays: &[f32], a: f32, stop_thresh: f32) -> Result<(Vec<f32>, SurfCounts)>;
+    /// The current grid.
+    fn grid(&self) -> Result<SurfaceGrid>;
+    /// RMSProp running averages.
+    fn optimizer_state(&self) -> Result<SurfaceState>;
+    /// Replace grid and optimiser state (after pruning, or when resuming).
+    fn load(&mut self, grid: SurfaceGrid, state: Option<SurfaceState>) -> Result<()>;
+}
+
+/// Ray → grid mapping and rendering parameters of a surface grid.
+pub fn surface_params(g: &SurfaceGrid, a: f32, stop_thresh: f32) -> SurfaceParams {
+    SurfaceParams {
+        scale: std::array::from_fn(|i| g.res[i] as f32 / (2.0 * g.radius[i])),
+        offset: std::array::from_fn(|i| {
+            (0.5 - g.center[i] / (2.0 * g.radius[i])) * g.res[i] as f32 - 0.5
+        }),
+        levels: g.levels.clone(),
+        a,
+        stop_thresh,
+    }
+}
+
+/// The weights of a batch of `n` rays: dL/dC = 2(C − c)/(3n) for the mean squared error; the
+/// entropy and consistency terms are means over rays too.
+pub fn batch_loss(n: usize, p: &SurfaceStepParams) -> SurfaceLoss {
+    let n = n.max(1) as f32;
+    SurfaceLoss {
+        grad_scale: 2.0 / (3.0 * n),
+        lambda_h: p.lambda_h / n,
+        lambda_c: p.lambda_c / n,
+    }
+}
