@@ -38,7 +38,11 @@ fn run_ok(cmd: &mut Command) -> String {
 /// A decodable PNG of at least `min` pixels per side with more than `colours` distinct colours.
 fn assert_png(path: &Path, min: u32, colours: usize) {
     let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    assert!(bytes.starts_with(b"\x89PNG\r\n\x1a\n"), "{} is not a PNG", path.display());
+    assert!(
+        bytes.starts_with(b"\x89PNG\r\n\x1a\n"),
+        "{} is not a PNG",
+        path.display()
+    );
     let img = image::load_from_memory_with_format(&bytes, image::ImageFormat::Png)
         .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
         .to_rgb8();
@@ -71,7 +75,15 @@ fn demo_fast_writes_table_report_and_figures() {
     let out = dir.path().join("demo");
     let stdout = run_ok(
         bin()
-            .args(["demo", "--fast", "--scene", "thin", "--backend", "cpu", "--out"])
+            .args([
+                "demo",
+                "--fast",
+                "--scene",
+                "thin",
+                "--backend",
+                "cpu",
+                "--out",
+            ])
             .arg(&out)
             .args(TINY_SCENE)
             .args(["--grid-res", "32", "--iters", "60", "--surface-iters", "30"]),
@@ -108,7 +120,7 @@ fn demo_fast_writes_table_report_and_figures() {
     let chamfer = best["chamfer_e2"].as_f64().expect("best Chamfer");
     assert!(chamfer > 0.0 && chamfer.is_finite());
     assert!(results["stage1"]["test_psnr"].as_f64().unwrap() > 10.0);
-    STAGE2.check(&stdout, &report, rows);
+    check_stage2(&stdout, &report, rows);
 
     // Renderings and colour-mapped clouds have many colours; line plots have white, black, grid
     // grey and one colour per series.
@@ -118,10 +130,14 @@ fn demo_fast_writes_table_report_and_figures() {
         ("curves.png", 300, 3),
         ("chamfer_levels.png", 300, 3),
     ] {
-        assert!(report.contains(&format!("![{name}]({name})")), "report lacks {name}");
+        assert!(
+            report.contains(&format!("![{name}]({name})")),
+            "report lacks {name}"
+        );
         assert_png(&out.join(name), min, colours);
     }
     assert!(out.join("plenoxels/train_log.csv").exists());
+    assert!(out.join("alphasurf/train_log.csv").exists());
 }
 
 #[test]
@@ -143,7 +159,9 @@ fn bench_time_vs_error_writes_csv_png_and_json() {
         .filter(|r| r["method"] == "plenoxels_best")
         .collect();
     assert_eq!(plen.len(), 2, "{rows:?}");
-    for r in &plen {
+    let surf: Vec<_> = rows.iter().filter(|r| r["method"] == "alphasurf").collect();
+    assert_eq!(surf.len(), 2, "{rows:?}");
+    for r in plen.iter().chain(&surf) {
         assert!(r["wall_s"].as_f64().unwrap() > 0.0);
         assert!(r["train_rays_per_s"].as_f64().unwrap() > 0.0);
         assert!(r["chamfer_e2"].as_f64().unwrap() > 0.0);
@@ -156,15 +174,29 @@ fn bench_time_vs_error_writes_csv_png_and_json() {
     assert_png(&out.join("time_vs_error.png"), 300, 3);
 }
 
-/// What the tests expect of stage 2 in this build.
-struct Stage2Expectation;
-const STAGE2: Stage2Expectation = Stage2Expectation;
-
-impl Stage2Expectation {
-    /// Stage 2 is not on this branch yet: the demo must say so visibly and show no αSurf row.
-    fn check(&self, stdout: &str, report: &str, rows: &[serde_json::Value]) {
-        assert!(stdout.contains("stage 2 (αSurf) did not run"), "{stdout}");
-        assert!(report.contains("Stage 2 (αSurf) did not run"));
-        assert!(!rows.iter().any(|r| r["kind"] == "alphasurf"));
-    }
+/// Stage 2 ran: an αSurf row in the table and the results, its point cloud evaluated.
+fn check_stage2(stdout: &str, report: &str, rows: &[serde_json::Value]) {
+    let line = stdout
+        .lines()
+        .find(|l| l.starts_with("αSurf "))
+        .unwrap_or_else(|| panic!("no αSurf row in:\n{stdout}"));
+    assert!(line.contains(" dB") && line.ends_with(" s"), "{line}");
+    assert!(
+        stdout.contains("αSurf Chamfer vs best Plenoxels level:"),
+        "{stdout}"
+    );
+    assert!(!report.contains("did not run"));
+    let surf = rows
+        .iter()
+        .find(|r| r["kind"] == "alphasurf")
+        .expect("αSurf row in results.json");
+    assert!(surf["error"].is_null(), "{surf}");
+    assert!(
+        surf["chamfer_e2"].as_f64().is_some_and(|c| c > 0.0),
+        "{surf}"
+    );
+    assert!(
+        surf["test_psnr"].as_f64().is_some_and(|p| p > 10.0),
+        "{surf}"
+    );
 }

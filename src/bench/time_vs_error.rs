@@ -32,15 +32,21 @@ impl SweepPoint {
     pub fn parse(s: &str) -> Result<SweepPoint, String> {
         let f: Vec<&str> = s.trim().split(':').collect();
         let [b, r, i] = f[..] else {
-            return Err(format!("{s:?}: expected BACKEND:RES:ITERS, e.g. cpu:128:3000"));
+            return Err(format!(
+                "{s:?}: expected BACKEND:RES:ITERS, e.g. cpu:128:3000"
+            ));
         };
         let backend = match b {
             "cpu" => "cpu",
             "vulkan" => "vulkan",
             _ => return Err(format!("{s:?}: backend must be cpu or vulkan")),
         };
-        let res: u32 = r.parse().map_err(|_| format!("{s:?}: bad resolution {r:?}"))?;
-        let iters: u32 = i.parse().map_err(|_| format!("{s:?}: bad step count {i:?}"))?;
+        let res: u32 = r
+            .parse()
+            .map_err(|_| format!("{s:?}: bad resolution {r:?}"))?;
+        let iters: u32 = i
+            .parse()
+            .map_err(|_| format!("{s:?}: bad step count {i:?}"))?;
         if !(8..=1024).contains(&res) || iters == 0 {
             return Err(format!("{s:?}: resolution must be 8..=1024 and steps ≥ 1"));
         }
@@ -190,7 +196,16 @@ fn short(e: &str) -> String {
 fn table(rows: &[BenchRow]) -> String {
     let mut s = format!(
         "{:<7} {:>4} {:>6}  {:<15} {:>5} {:>9} {:>9} {:>14} {:>7} {:>9}\n",
-        "backend", "res", "steps", "method", "level", "wall s", "rays/s", "Chamfer ×10⁻²", "F1", "PSNR dB"
+        "backend",
+        "res",
+        "steps",
+        "method",
+        "level",
+        "wall s",
+        "rays/s",
+        "Chamfer ×10⁻²",
+        "F1",
+        "PSNR dB"
     );
     let f = |v: Option<f64>, p: usize| {
         v.filter(|x| x.is_finite())
@@ -203,7 +218,11 @@ fn table(rows: &[BenchRow]) -> String {
             r.backend,
             r.res,
             r.iters,
-            if r.method == "alphasurf" { "αSurf" } else { "Plen (best σ)" },
+            if r.method == "alphasurf" {
+                "αSurf"
+            } else {
+                "Plen (best σ)"
+            },
             r.level.map_or("—".to_string(), |l| l.to_string()),
             f(Some(r.wall_s), 1),
             f(r.train_rays_per_s, 0),
@@ -221,7 +240,10 @@ fn table(rows: &[BenchRow]) -> String {
 /// Chamfer against wall time, one series per (method, backend), each point labelled RES/STEPS.
 pub fn plot_png(rows: &[BenchRow], path: &Path) -> Result<()> {
     let mut series = Vec::new();
-    for (method, label) in [("plenoxels_best", "PLENOXELS (BEST σ)"), ("alphasurf", "αSURF")] {
+    for (method, label) in [
+        ("plenoxels_best", "PLENOXELS (BEST σ)"),
+        ("alphasurf", "αSURF"),
+    ] {
         for backend in ["cpu", "vulkan"] {
             let pts: Vec<&BenchRow> = rows
                 .iter()
@@ -232,10 +254,16 @@ pub fn plot_png(rows: &[BenchRow], path: &Path) -> Result<()> {
             }
             series.push(Series {
                 label: format!("{label} {}", backend.to_uppercase()),
-                points: pts.iter().map(|r| (r.wall_s, r.chamfer_e2.unwrap())).collect(),
+                points: pts
+                    .iter()
+                    .map(|r| (r.wall_s, r.chamfer_e2.unwrap()))
+                    .collect(),
                 colour: PALETTE[series.len() % PALETTE.len()],
                 style: Style::Markers,
-                point_labels: pts.iter().map(|r| format!("{}³/{}", r.res, r.iters)).collect(),
+                point_labels: pts
+                    .iter()
+                    .map(|r| format!("{}³/{}", r.res, r.iters))
+                    .collect(),
             });
         }
     }
@@ -398,7 +426,14 @@ mod tests {
             }
         );
         assert_eq!(SweepPoint::parse(" vulkan:64:5").unwrap().backend, "vulkan");
-        for bad in ["cpu:128", "gpu:64:10", "cpu:x:10", "cpu:4:10", "cpu:64:0", ""] {
+        for bad in [
+            "cpu:128",
+            "gpu:64:10",
+            "cpu:x:10",
+            "cpu:4:10",
+            "cpu:64:0",
+            "",
+        ] {
             assert!(SweepPoint::parse(bad).is_err(), "{bad}");
         }
     }
@@ -421,7 +456,11 @@ mod tests {
         assert_eq!(lines.len(), 3);
         let n = lines[0].split(',').count();
         assert!(lines.iter().all(|l| l.split(',').count() == n), "{text}");
-        assert!(lines[1].contains(",30,1.50,,0.5000,0.9000,"), "{}", lines[1]);
+        assert!(
+            lines[1].contains(",30,1.50,,0.5000,0.9000,"),
+            "{}",
+            lines[1]
+        );
         assert!(lines[2].ends_with("bad; ;thing;"), "{}", lines[2]);
     }
 }

@@ -165,9 +165,15 @@ pub fn load_rgb_on_white(path: &Path) -> Result<RgbImage> {
 pub fn side_by_side(images: &[(String, RgbImage)], scale: u32) -> Canvas {
     let gap = 8i64;
     let caption_h = Canvas::text_height(scale) + 8;
-    let w: i64 = images.iter().map(|(_, i)| i.width() as i64).sum::<i64>()
-        + gap * (images.len() as i64 + 1);
-    let h = images.iter().map(|(_, i)| i.height() as i64).max().unwrap_or(0) + caption_h + gap;
+    let w: i64 =
+        images.iter().map(|(_, i)| i.width() as i64).sum::<i64>() + gap * (images.len() as i64 + 1);
+    let h = images
+        .iter()
+        .map(|(_, i)| i.height() as i64)
+        .max()
+        .unwrap_or(0)
+        + caption_h
+        + gap;
     let mut c = Canvas::new(w.max(1) as u32, h.max(1) as u32, WHITE);
     let mut x = gap;
     for (caption, img) in images {
@@ -201,7 +207,10 @@ mod tests {
             .filter(|&x| (0..20).any(|y| t.img.get_pixel(x, y).0 == BLACK))
             .collect();
         assert_eq!(*cols.first().unwrap(), 1);
-        assert_eq!(*cols.last().unwrap() as i64, Canvas::text_width("E1.5E-2", 1));
+        assert_eq!(
+            *cols.last().unwrap() as i64,
+            Canvas::text_width("E1.5E-2", 1)
+        );
         assert_eq!(Canvas::text_width("ab", 2), 22);
     }
 

@@ -70,12 +70,13 @@ impl Projection {
     }
 }
 
-/// Draw `points` as `size`-pixel squares on white, far to near, point i in `colour_of(i)`.
+/// Draw `points` as `size`-pixel squares on white, far to near, point i in `colour_of(i, t)`
+/// where t ∈ [0, 1] is its depth (0 = farthest point, 1 = nearest).
 pub fn render(
     points: &[[f32; 3]],
     proj: &Projection,
     size: u32,
-    colour_of: impl Fn(usize) -> Colour,
+    colour_of: impl Fn(usize, f64) -> Colour,
 ) -> RgbImage {
     let mut c = Canvas::new(proj.w, proj.h, WHITE);
     let mut order: Vec<(f64, f64, f64, usize)> = points
@@ -88,22 +89,38 @@ pub fn render(
         .filter(|(x, y, d, _)| x.is_finite() && y.is_finite() && d.is_finite())
         .collect();
     order.sort_by(|a, b| a.2.total_cmp(&b.2));
+    let (near, far) = (
+        order.last().map_or(0.0, |o| o.2),
+        order.first().map_or(0.0, |o| o.2),
+    );
     let s = size.max(1) as i64;
-    for (x, y, _, i) in order {
-        c.fill_rect(x.round() as i64 - s / 2, y.round() as i64 - s / 2, s, s, colour_of(i));
+    for (x, y, d, i) in order {
+        let t = if near > far {
+            (d - far) / (near - far)
+        } else {
+            1.0
+        };
+        let col = colour_of(i, t);
+        c.fill_rect(
+            x.round() as i64 - s / 2,
+            y.round() as i64 - s / 2,
+            s,
+            s,
+            col,
+        );
     }
     c.img
 }
 
 /// One panel of [`error_figure`]: a title, the points, and a value per point (coloured on the
-/// shared scale) or `None` (drawn in dark grey, e.g. the ground truth).
+/// shared scale) or `None` (drawn in greys by depth, near = dark, e.g. the ground truth).
 pub type Panel<'a> = (String, &'a [[f32; 3]], Option<&'a [f64]>);
 
-/// Colour of point `i` in a panel.
-fn panel_colour(values: Option<&[f64]>, vmax: f64, i: usize) -> Colour {
+/// Colour of point `i` (depth `t`, 1 = nearest) in a panel.
+fn panel_colour(values: Option<&[f64]>, vmax: f64, i: usize, t: f64) -> Colour {
     match values {
         Some(v) => scaled(v.get(i).copied().unwrap_or(f64::NAN), 0.0, vmax),
-        None => [70, 70, 70],
+        None => [(190.0 - 150.0 * t.clamp(0.0, 1.0)).round() as u8; 3],
     }
 }
 
@@ -121,7 +138,7 @@ pub fn error_figure(
     let images: Vec<(String, RgbImage)> = panels
         .iter()
         .map(|(t, p, v)| {
-            let img = render(p, &proj, 2, |i| panel_colour(*v, vmax, i));
+            let img = render(p, &proj, 2, |i, t| panel_colour(*v, vmax, i, t));
             (t.clone(), img)
         })
         .collect();
@@ -169,14 +186,31 @@ mod tests {
     #[test]
     fn nearest_point_wins_and_colours_follow_values() {
         // Two points at the same pixel: the nearer one (y = -1, seen from -y) must show.
-        let pts = [[0.0, 1.0, 0.0], [0.0, -1.0, 0.0], [1.0, 0.0, 1.0], [-1.0, 0.0, -1.0]];
+        let pts = [
+            [0.0, 1.0, 0.0],
+            [0.0, -1.0, 0.0],
+            [1.0, 0.0, 1.0],
+            [-1.0, 0.0, -1.0],
+        ];
         let vals = [1.0, 0.0, 0.5, 0.5];
         let p = Projection::fit(&pts, -90.0, 0.0, 64, 64);
-        let img = render(&pts, &p, 1, |i| scaled(vals[i], 0.0, 1.0));
+        let img = render(&pts, &p, 1, |i, _| scaled(vals[i], 0.0, 1.0));
         let (x, y, _) = p.project(pts[1]);
-        assert_eq!(img.get_pixel(x.round() as u32, y.round() as u32).0, turbo(0.0));
+        assert_eq!(
+            img.get_pixel(x.round() as u32, y.round() as u32).0,
+            turbo(0.0)
+        );
         assert_eq!(img.pixels().filter(|q| q.0 == turbo(0.5)).count(), 2);
         assert_eq!(img.pixels().filter(|q| q.0 == turbo(1.0)).count(), 0);
+        // Depth shading: the nearest point gets t = 1, the farthest t = 0.
+        let depth = render(&pts, &p, 1, |_, t| [(t * 255.0).round() as u8; 3]);
+        let (x, y, _) = p.project(pts[1]);
+        assert_eq!(
+            depth.get_pixel(x.round() as u32, y.round() as u32).0,
+            [255; 3]
+        );
+        assert_eq!(panel_colour(None, 1.0, 0, 1.0), [40; 3]);
+        assert_eq!(panel_colour(Some(&[0.5]), 1.0, 0, 1.0), turbo(0.5));
     }
 
     #[test]

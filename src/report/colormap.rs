@@ -85,7 +85,7 @@ mod tests {
         assert_eq!(turbo(f64::NAN), turbo(0.0));
         assert_eq!(scaled(5.0, 0.0, 10.0), turbo(0.5));
         assert_eq!(scaled(1.0, 1.0, 1.0), turbo(0.0)); // degenerate range: no NaN, no panic
-        // Neighbouring values get neighbouring colours (no jumps).
+                                                       // Neighbouring values get neighbouring colours (no jumps).
         for i in 0..1000 {
             let (a, b) = (turbo(i as f64 / 1000.0), turbo((i + 1) as f64 / 1000.0));
             for k in 0..3 {
@@ -100,7 +100,18 @@ mod tests {
     #[test]
     fn colour_bar_draws_the_map_and_labels() {
         let mut c = Canvas::new(300, 60, [255; 3]);
-        colour_bar(&mut c, 80, 10, 200, 12, (0.0, 2.0), 3, "ERR", |v| format!("{v:.1}"), 1);
+        colour_bar(
+            &mut c,
+            80,
+            10,
+            200,
+            12,
+            (0.0, 2.0),
+            3,
+            "ERR",
+            |v| format!("{v:.1}"),
+            1,
+        );
         assert_eq!(c.img.get_pixel(80, 15).0, turbo(0.0));
         assert_eq!(c.img.get_pixel(279, 15).0, turbo(1.0));
         // Tick labels under the bar.

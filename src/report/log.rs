@@ -19,7 +19,10 @@ pub struct LogRow {
 
 /// Parse the text of a training log; the columns are found by name, so extra columns are fine.
 pub fn parse(text: &str) -> Result<Vec<LogRow>> {
-    let mut lines = text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty());
+    let mut lines = text
+        .lines()
+        .enumerate()
+        .filter(|(_, l)| !l.trim().is_empty());
     let (_, header) = lines.next().context("empty training log")?;
     let cols: Vec<&str> = header.split(',').map(str::trim).collect();
     let col = |name: &str| {
@@ -27,19 +30,33 @@ pub fn parse(text: &str) -> Result<Vec<LogRow>> {
             .position(|c| *c == name)
             .with_context(|| format!("training log header {header:?} has no column {name}"))
     };
-    let (ci, cm, cp, ce) = (col("step")?, col("mse")?, col("psnr_batch")?, col("elapsed_s")?);
+    let (ci, cm, cp, ce) = (
+        col("step")?,
+        col("mse")?,
+        col("psnr_batch")?,
+        col("elapsed_s")?,
+    );
     let mut rows = Vec::new();
     for (n, line) in lines {
         let f: Vec<&str> = line.split(',').map(str::trim).collect();
         if f.len() != cols.len() {
-            bail!("training log line {}: {} fields, header has {}", n + 1, f.len(), cols.len());
+            bail!(
+                "training log line {}: {} fields, header has {}",
+                n + 1,
+                f.len(),
+                cols.len()
+            );
         }
         let num = |i: usize| -> Result<f64> {
             f[i].parse::<f64>()
                 .with_context(|| format!("training log line {}: {:?} is not a number", n + 1, f[i]))
         };
         let step = num(ci)?;
-        ensure!(step >= 0.0 && step.fract() == 0.0, "training log line {}: bad step {step}", n + 1);
+        ensure!(
+            step >= 0.0 && step.fract() == 0.0,
+            "training log line {}: bad step {step}",
+            n + 1
+        );
         rows.push(LogRow {
             step: step as u32,
             mse: num(cm)?,
@@ -75,7 +92,8 @@ mod tests {
 
     #[test]
     fn parses_by_column_name_and_rejects_garbage() {
-        let rows = parse("step,mse,psnr_batch,elapsed_s\n1,1e-2,20.0,0.5\n2,5e-3,23.01,1.0\n").unwrap();
+        let rows =
+            parse("step,mse,psnr_batch,elapsed_s\n1,1e-2,20.0,0.5\n2,5e-3,23.01,1.0\n").unwrap();
         assert_eq!(rows.len(), 2);
         assert_eq!(rows[1].step, 2);
         assert_eq!(rows[0].mse, 1e-2);

@@ -147,7 +147,8 @@ pub fn draw(c: &mut Canvas, (x, y, w, h): (i64, i64, i64, i64), plot: &Plot, ser
     let th = Canvas::text_height(s);
     let (left, right, top) = (18 + th + 6 * 12, 16, th + 16);
     let legend = legend_rows(series, w - left - right, s);
-    let bottom = 2 * th + 26 + legend.len() as i64 * (th + 8) + if legend.is_empty() { 0 } else { 6 };
+    let bottom =
+        2 * th + 26 + legend.len() as i64 * (th + 8) + if legend.is_empty() { 0 } else { 6 };
     let (px, py, pw, ph) = (x + left, y + top, w - left - right, h - top - bottom);
     if pw < 10 || ph < 10 {
         return;
@@ -201,20 +202,34 @@ pub fn draw(c: &mut Canvas, (x, y, w, h): (i64, i64, i64, i64), plot: &Plot, ser
         if se.style != Style::Markers {
             for pair in pts.windows(2) {
                 if let (Some(a), Some(b)) = (pair[0], pair[1]) {
-                    area.line(a.0 - px as f64, a.1 - py as f64, b.0 - px as f64, b.1 - py as f64, 2, se.colour);
+                    area.line(
+                        a.0 - px as f64,
+                        a.1 - py as f64,
+                        b.0 - px as f64,
+                        b.1 - py as f64,
+                        2,
+                        se.colour,
+                    );
                 }
             }
         }
         if se.style != Style::Line {
             for (i, p) in pts.iter().enumerate() {
                 let Some(p) = p else { continue };
-                let (mx, my) = ((p.0 - px as f64).round() as i64, (p.1 - py as f64).round() as i64);
+                let (mx, my) = (
+                    (p.0 - px as f64).round() as i64,
+                    (p.1 - py as f64).round() as i64,
+                );
                 area.fill_rect(mx - 4, my - 4, 9, 9, BLACK);
                 area.fill_rect(mx - 3, my - 3, 7, 7, se.colour);
                 if let Some(t) = se.point_labels.get(i) {
                     let tw = Canvas::text_width(t, 1);
                     // Right of the marker, or left of it near the right edge.
-                    let tx = if mx + 8 + tw < pw { mx + 8 } else { mx - 8 - tw };
+                    let tx = if mx + 8 + tw < pw {
+                        mx + 8
+                    } else {
+                        mx - 8 - tw
+                    };
                     area.text(tx, my - 3, t, 1, BLACK);
                 }
             }
@@ -275,7 +290,10 @@ mod tests {
 
     #[test]
     fn nice_ticks_are_round_and_cover_the_range() {
-        assert_eq!(nice_ticks(0.0, 1.0, 5), vec![0.0, 0.2, 0.4, 0.6000000000000001, 0.8, 1.0]);
+        assert_eq!(
+            nice_ticks(0.0, 1.0, 5),
+            vec![0.0, 0.2, 0.4, 0.6000000000000001, 0.8, 1.0]
+        );
         let t = nice_ticks(13.0, 87.0, 5);
         assert_eq!(t, vec![20.0, 40.0, 60.0, 80.0]);
         assert_eq!(nice_ticks(3.0, 3.0, 5), vec![3.0]);
@@ -326,12 +344,21 @@ mod tests {
         ];
         let plot = Plot {
             title: "T".into(),
-            x: Axis { label: "X".into(), log: false },
-            y: Axis { label: "Y".into(), log: false },
+            x: Axis {
+                label: "X".into(),
+                log: false,
+            },
+            y: Axis {
+                label: "Y".into(),
+                log: false,
+            },
         };
         let c = single(400, 300, &plot, &series);
         let reds = c.img.pixels().filter(|p| p.0 == red).count();
         assert!(reds > 200, "only {reds} red pixels");
-        assert!(!c.img.pixels().any(|p| p.0 == [0, 0, 255]), "non-finite point drawn");
+        assert!(
+            !c.img.pixels().any(|p| p.0 == [0, 0, 255]),
+            "non-finite point drawn"
+        );
     }
 }

@@ -230,12 +230,7 @@ pub fn stage2(
 
 /// αSurf's row: extract (α ≥ 0.1) and evaluate the stage-2 run.
 pub fn alphasurf_row(inv: &Invoker, s1: &TrainedRun, s2: &TrainedRun, gt: &Path) -> Row {
-    let row = Row::new(
-        "αSurf".into(),
-        "alphasurf",
-        None,
-        s2.dir.join("points.ply"),
-    );
+    let row = Row::new("αSurf".into(), "alphasurf", None, s2.dir.join("points.ply"));
     extract_eval(inv, s2, gt, row, s1.wall_s + s2.wall_s)
 }
 
@@ -315,7 +310,11 @@ pub fn run(args: &DemoArgs, cli: &Cli) -> Result<()> {
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
     let inv = Invoker::new(args.backend, cli)?;
     let progress = std::io::stderr().is_terminal();
-    let (data, s1_dir, s2_dir) = (out.join("scene"), out.join("plenoxels"), out.join("alphasurf"));
+    let (data, s1_dir, s2_dir) = (
+        out.join("scene"),
+        out.join("plenoxels"),
+        out.join("alphasurf"),
+    );
     let gt = data.join("gt_points.ply");
     let size = args.size.scene(args.fast);
     let n = 6;
@@ -340,7 +339,9 @@ pub fn run(args: &DemoArgs, cli: &Cli) -> Result<()> {
         &format!(
             "stage 1: train --stage plenoxels --preset fast{}{} on {} → {}",
             tsize.res.map_or(String::new(), |r| format!(" --res {r}")),
-            tsize.iters.map_or(String::new(), |i| format!(" --iters {i}")),
+            tsize
+                .iters
+                .map_or(String::new(), |i| format!(" --iters {i}")),
             inv.backend,
             s1_dir.display()
         ),
@@ -374,9 +375,7 @@ pub fn run(args: &DemoArgs, cli: &Cli) -> Result<()> {
         progress,
     );
     if let Err(e) = &s2 {
-        eprintln!(
-            "demo: STAGE 2 FAILED — the table shows the Plenoxels rows only.\n  {e:#}"
-        );
+        eprintln!("demo: STAGE 2 FAILED — the table shows the Plenoxels rows only.\n  {e:#}");
     }
 
     phase(5, n, "αSurf: extract (α ≥ 0.1) + eval");
@@ -390,7 +389,11 @@ pub fn run(args: &DemoArgs, cli: &Cli) -> Result<()> {
     rows.extend(best.clone());
     rows.extend(surf);
 
-    phase(6, n, &format!("report → {}", out.join("report.md").display()));
+    phase(
+        6,
+        n,
+        &format!("report → {}", out.join("report.md").display()),
+    );
     let rep = report::Inputs {
         scene,
         out: &out,
@@ -418,7 +421,10 @@ pub fn run(args: &DemoArgs, cli: &Cli) -> Result<()> {
         );
     }
     if let Err(e) = &s2 {
-        println!("stage 2 (αSurf) did not run: {}", first_line(&format!("{e:#}")));
+        println!(
+            "stage 2 (αSurf) did not run: {}",
+            first_line(&format!("{e:#}"))
+        );
     }
     println!(
         "demo done in {:.1} s: {} ({} figures)",
@@ -467,7 +473,10 @@ mod tests {
     fn tables_align_and_show_failures() {
         let mut failed = row("αSurf", "alphasurf", None, None);
         failed.error = Some("boom".into());
-        let rows = vec![row("Plen σ = 10", "plenoxels", Some(10.0), Some(0.91234)), failed];
+        let rows = vec![
+            row("Plen σ = 10", "plenoxels", Some(10.0), Some(0.91234)),
+            failed,
+        ];
         let t = table(&rows, false);
         let lines: Vec<&str> = t.lines().collect();
         assert_eq!(lines.len(), 3);

@@ -8,8 +8,8 @@ use crate::eval::PointIndex;
 use crate::io::read_points;
 use crate::report::canvas::{load_rgb_on_white, side_by_side, Canvas, WHITE};
 use crate::report::cloud::{error_figure, Panel};
-use crate::report::plot::{self, Axis, Plot, Series, Style, PALETTE};
 use crate::report::log;
+use crate::report::plot::{self, Axis, Plot, Series, Style, PALETTE};
 use crate::scene::SceneKind;
 use anyhow::{Context, Result};
 use serde_json::json;
@@ -34,6 +34,9 @@ pub struct Inputs<'a> {
     pub backend: &'a str,
     pub elapsed_s: f64,
 }
+
+/// A figure maker: writes the PNG at the path, returns the report section introducing it.
+type Figure = fn(&Inputs, &Path) -> Result<String>;
 
 /// Write the figures, `report.md` and `results.json`; returns the PNG paths.
 pub fn write(r: &Inputs) -> Result<Vec<PathBuf>> {
@@ -65,7 +68,11 @@ pub fn write(r: &Inputs) -> Result<Vec<PathBuf>> {
            plus `alphasurf extract`, on this machine.\n\n";
     let best = r.rows.iter().find(|x| x.kind == "plenoxels_best");
     let surf = r.rows.iter().find(|x| x.kind == "alphasurf");
-    match (&r.s2, best.and_then(|b| b.chamfer_e2), surf.and_then(|s| s.chamfer_e2)) {
+    match (
+        &r.s2,
+        best.and_then(|b| b.chamfer_e2),
+        surf.and_then(|s| s.chamfer_e2),
+    ) {
         (Ok(_), Some(b), Some(a)) => {
             md += &format!(
                 "αSurf's Chamfer is {:+.1} % relative to the best Plenoxels level set.\n\n",
@@ -81,7 +88,7 @@ pub fn write(r: &Inputs) -> Result<Vec<PathBuf>> {
         _ => md += "αSurf's point cloud could not be evaluated (see the table).\n\n",
     }
 
-    let figs: [(&str, fn(&Inputs, &Path) -> Result<String>); 4] = [
+    let figs: [(&str, Figure); 4] = [
         ("test_view.png", test_view),
         ("error_cloud.png", error_cloud),
         ("curves.png", curves),
@@ -211,7 +218,11 @@ fn test_view(r: &Inputs, path: &Path) -> Result<String> {
     Ok(format!(
         "## Test view\n\nTest view {i} (the one showing the most of the object): ground truth, \
          then the renderings of stage 1 (Plenoxels){} with their PSNR.\n",
-        if r.s2.is_ok() { " and stage 2 (αSurf)" } else { "" }
+        if r.s2.is_ok() {
+            " and stage 2 (αSurf)"
+        } else {
+            ""
+        }
     ))
 }
 
@@ -241,15 +252,7 @@ fn error_cloud(r: &Inputs, path: &Path) -> Result<String> {
             .iter()
             .map(|(t, p, d)| (t.clone(), p.as_slice(), Some(d.as_slice()))),
     );
-    error_figure(
-        &panels,
-        &gt,
-        CLOUD_VIEW,
-        480,
-        ERROR_VMAX,
-        "DISTANCE TO GT",
-    )
-    .save(path)?;
+    error_figure(&panels, &gt, CLOUD_VIEW, 480, ERROR_VMAX, "DISTANCE TO GT").save(path)?;
     Ok(format!(
         "## Point clouds coloured by error\n\nOrthographic view (azimuth {}°, elevation {}°) of \
          the ground truth (grey) and of the predicted points, each coloured by its distance to \
@@ -358,9 +361,9 @@ fn chamfer_levels(r: &Inputs, path: &Path) -> Result<String> {
         .find(|x| x.kind == "alphasurf")
         .and_then(|x| x.chamfer_e2)
     {
-        let (lo, hi) = plen
-            .iter()
-            .fold((f64::MAX, f64::MIN), |(lo, hi), p| (lo.min(p.0), hi.max(p.0)));
+        let (lo, hi) = plen.iter().fold((f64::MAX, f64::MIN), |(lo, hi), p| {
+            (lo.min(p.0), hi.max(p.0))
+        });
         series.push(Series {
             label: "αSURF".into(),
             points: vec![(lo, a), (hi, a)],
