@@ -295,6 +295,9 @@ pub fn run(args: &TimeVsErrorArgs, cli: &Cli) -> Result<()> {
     if args.points.is_empty() {
         bail!("--points: give at least one sweep point");
     }
+    if args.size.grid_res.is_some() || args.size.iters.is_some() {
+        bail!("--grid-res/--iters: the sweep points (--points BACKEND:RES:ITERS) set these");
+    }
     let out = args
         .out
         .clone()
@@ -359,7 +362,8 @@ pub fn run(args: &TimeVsErrorArgs, cli: &Cli) -> Result<()> {
             &data,
             &dir.join("alphasurf"),
             args.scene,
-            args.size.surface_iters,
+            &args.size,
+            false,
             false,
         ) {
             Ok(s2) => {

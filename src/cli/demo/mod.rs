@@ -28,7 +28,7 @@ pub struct DemoArgs {
     /// Which built-in scene.
     #[arg(long, value_enum, default_value = "thin")]
     pub scene: SceneKind,
-    /// A smaller run (128² images, 40 views, 64³ grid, fewer steps; a few minutes on 2 cores)
+    /// A smaller run (128² images, 40 views, 64³ grid, 1000 + 600 steps; a few minutes on 2 cores)
     /// instead of the default (256² images, 100 views, stage-1 preset `fast`: 128³, 3000 steps;
     /// about 15 minutes at most on 2 cores).
     #[arg(long)]
@@ -70,6 +70,9 @@ pub struct SizeArgs {
     /// Stage-2 steps.
     #[arg(long, hide = true)]
     pub surface_iters: Option<u32>,
+    /// Stage-2 configuration overrides, passed on as `train --set KEY=VALUE`. Repeatable.
+    #[arg(long, hide = true, value_name = "KEY=VALUE")]
+    pub surface_set: Vec<String>,
 }
 
 impl SizeArgs {
@@ -109,7 +112,7 @@ impl SizeArgs {
 
     /// Stage-2 steps (`None`: the preset's).
     pub fn surface_iters(&self, fast: bool) -> Option<u32> {
-        self.surface_iters.or(fast.then_some(1000))
+        self.surface_iters.or(fast.then_some(600))
     }
 }
 
@@ -217,7 +220,8 @@ pub fn stage2(
     data: &Path,
     out: &Path,
     scene: SceneKind,
-    iters: Option<u32>,
+    size: &SizeArgs,
+    fast: bool,
     progress: bool,
 ) -> Result<TrainedRun> {
     let category = match scene {
@@ -225,7 +229,16 @@ pub fn stage2(
         SceneKind::Translucent => "translucent",
         SceneKind::Solid => "synthetic",
     };
-    inv.train_surface(&s1.dir, data, out, category, iters, progress)
+    let iters = size.surface_iters(fast);
+    inv.train_surface(
+        &s1.dir,
+        data,
+        out,
+        category,
+        iters,
+        &size.surface_set,
+        progress,
+    )
 }
 
 /// αSurf's row: extract (α ≥ 0.1) and evaluate the stage-2 run.
@@ -366,13 +379,7 @@ pub fn run(args: &DemoArgs, cli: &Cli) -> Result<()> {
         ),
     );
     let s2 = stage2(
-        &inv,
-        &s1,
-        &data,
-        &s2_dir,
-        scene,
-        args.size.surface_iters(args.fast),
-        progress,
+        &inv, &s1, &data, &s2_dir, scene, &args.size, args.fast, progress,
     );
     if let Err(e) = &s2 {
         eprintln!("demo: STAGE 2 FAILED — the table shows the Plenoxels rows only.\n  {e:#}");

@@ -157,7 +157,9 @@ impl Invoker {
         read_run(out, wall_s)
     }
 
-    /// Stage 2: `train --stage surface --init STAGE1_RUN` (αSurf), on the stage-1 run `init`.
+    /// Stage 2: `train --stage surface --init STAGE1_RUN` (αSurf), on the stage-1 run `init`,
+    /// with `--set` overrides.
+    #[allow(clippy::too_many_arguments)]
     pub fn train_surface(
         &self,
         init: &Path,
@@ -165,6 +167,7 @@ impl Invoker {
         out: &Path,
         category: &str,
         iters: Option<u32>,
+        set: &[String],
         progress: bool,
     ) -> Result<TrainedRun> {
         let mut a = vec![
@@ -191,6 +194,9 @@ impl Invoker {
                 ..Default::default()
             },
         );
+        for kv in set {
+            a.extend([os("--set"), os(kv)]);
+        }
         if !progress {
             a.push(os("--quiet"));
         }
