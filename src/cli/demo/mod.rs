@@ -212,16 +212,18 @@ pub fn best_plenoxels(rows: &[Row]) -> Option<Row> {
     Some(r)
 }
 
-/// Stage 2 (αSurf) from the stage-1 run: `train --stage surface --init S1 …`. An error (e.g. the
-/// command not existing yet in this build) is returned to the caller, who reports it.
+/// Stage 2 (αSurf) from the stage-1 run: `train --stage surface --init S1 --category C --preset
+/// fast [--iters N] [--set K=V]…`. An error (e.g. the command not existing yet in this build) is
+/// returned to the caller, who reports it.
+#[allow(clippy::too_many_arguments)]
 pub fn stage2(
     inv: &Invoker,
     s1: &TrainedRun,
     data: &Path,
     out: &Path,
     scene: SceneKind,
-    size: &SizeArgs,
-    fast: bool,
+    iters: Option<u32>,
+    set: &[String],
     progress: bool,
 ) -> Result<TrainedRun> {
     let category = match scene {
@@ -229,16 +231,7 @@ pub fn stage2(
         SceneKind::Translucent => "translucent",
         SceneKind::Solid => "synthetic",
     };
-    let iters = size.surface_iters(fast);
-    inv.train_surface(
-        &s1.dir,
-        data,
-        out,
-        category,
-        iters,
-        &size.surface_set,
-        progress,
-    )
+    inv.train_surface(&s1.dir, data, out, category, iters, set, progress)
 }
 
 /// αSurf's row: extract (α ≥ 0.1) and evaluate the stage-2 run.
@@ -379,7 +372,14 @@ pub fn run(args: &DemoArgs, cli: &Cli) -> Result<()> {
         ),
     );
     let s2 = stage2(
-        &inv, &s1, &data, &s2_dir, scene, &args.size, args.fast, progress,
+        &inv,
+        &s1,
+        &data,
+        &s2_dir,
+        scene,
+        args.size.surface_iters(args.fast),
+        &args.size.surface_set,
+        progress,
     );
     if let Err(e) = &s2 {
         eprintln!("demo: STAGE 2 FAILED — the table shows the Plenoxels rows only.\n  {e:#}");
