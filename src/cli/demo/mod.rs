@@ -14,7 +14,6 @@ use crate::eval::Metrics;
 use crate::scene::SceneKind;
 use anyhow::{Context, Result};
 use serde::Serialize;
-use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 use steps::{Invoker, SceneSize, TrainSize, TrainedRun};
@@ -315,7 +314,8 @@ pub fn run(args: &DemoArgs, cli: &Cli) -> Result<()> {
     });
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
     let inv = Invoker::new(args.backend, cli)?;
-    let progress = std::io::stderr().is_terminal();
+    // The training commands draw a bar on a terminal and log every 10 % otherwise.
+    let progress = true;
     let (data, s1_dir, s2_dir) = (
         out.join("scene"),
         out.join("plenoxels"),

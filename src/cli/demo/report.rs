@@ -65,7 +65,13 @@ pub fn write(r: &Inputs) -> Result<Vec<PathBuf>> {
            (Blender units, distances ≥ 1.5 left out) × 100; F1 at 0.01 (`alphasurf eval`). \
            Test PSNR: mean over the test views of the run the points come from. Wall time: the \
            training command(s) that produced the points (stage 1; stage 1 + stage 2 for αSurf) \
-           plus `alphasurf extract`, on this machine.\n\n";
+           plus `alphasurf extract`.\n\n";
+    md += &format!(
+        "Backend `{}`, {} CPU threads; wall times include whatever else the machine was \
+         running.\n\n",
+        r.backend,
+        std::thread::available_parallelism().map_or(0, |n| n.get())
+    );
     let best = r.rows.iter().find(|x| x.kind == "plenoxels_best");
     let surf = r.rows.iter().find(|x| x.kind == "alphasurf");
     match (
