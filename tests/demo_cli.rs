@@ -91,7 +91,7 @@ fn demo_fast_writes_table_report_and_figures() {
     // The table: header, one row per level, the best level.
     let header = stdout
         .lines()
-        .find(|l| l.starts_with("method"))
+        .find(|l| l.starts_with("method "))
         .unwrap_or_else(|| panic!("no table header in:\n{stdout}"));
     for col in ["Chamfer ×10⁻²", "F1", "test PSNR", "wall time"] {
         assert!(header.contains(col), "header {header:?} lacks {col}");
@@ -102,6 +102,7 @@ fn demo_fast_writes_table_report_and_figures() {
     }
     let best = stdout
         .lines()
+        .skip_while(|l| !l.starts_with("method "))
         .find(|l| l.starts_with("best Plen (σ = "))
         .unwrap_or_else(|| panic!("no best-level row in:\n{stdout}"));
     assert!(best.contains(" dB"), "{best}");
@@ -176,8 +177,10 @@ fn bench_time_vs_error_writes_csv_png_and_json() {
 
 /// Stage 2 ran: an αSurf row in the table and the results, its point cloud evaluated.
 fn check_stage2(stdout: &str, report: &str, rows: &[serde_json::Value]) {
+    // The table is the last block of the output (subcommands print their own lines before it).
     let line = stdout
         .lines()
+        .skip_while(|l| !l.starts_with("method "))
         .find(|l| l.starts_with("αSurf "))
         .unwrap_or_else(|| panic!("no αSurf row in:\n{stdout}"));
     assert!(line.contains(" dB") && line.ends_with(" s"), "{line}");
