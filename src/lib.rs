@@ -17,6 +17,7 @@ pub mod io;
 pub mod kernels;
 pub mod math;
 pub mod plenoxel;
+pub mod report;
 pub mod scene;
 pub mod surface;
 pub mod train;

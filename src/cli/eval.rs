@@ -3,7 +3,7 @@
 //! (the paper downsamples predicted and GT points at 0.001); an extraction is already thinned at
 //! that radius, so this only changes an unthinned cloud.
 
-use crate::eval::{evaluate, thin, EvalOptions};
+use crate::eval::{evaluate, thin, EvalOptions, Metrics};
 use crate::io::read_points;
 use anyhow::{ensure, Result};
 use serde_json::json;
@@ -41,8 +41,8 @@ fn load(path: &Path, radius: f64) -> Result<(Vec<[f32; 3]>, usize)> {
     Ok((kept.into_iter().map(|i| pts[i]).collect(), n))
 }
 
-/// Run the command.
-pub fn run(args: &EvalArgs) -> Result<()> {
+/// Run the command; returns the metrics it printed (for `demo` and `bench time-vs-error`).
+pub fn run(args: &EvalArgs) -> Result<Metrics> {
     ensure!(
         args.max_dist > 0.0 && args.threshold > 0.0 && args.downsample >= 0.0,
         "--max-dist and --threshold must be positive, --downsample ≥ 0"
@@ -116,5 +116,5 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         });
         println!("{j}");
     }
-    Ok(())
+    Ok(m)
 }

@@ -2,6 +2,7 @@
 //! handler lives in its own module; this file only wires them together.
 
 mod check_kernels;
+pub mod demo;
 mod devices;
 pub mod eval;
 pub mod extract;
@@ -60,6 +61,9 @@ pub enum Command {
     Import(train::ImportArgs),
     /// Benchmarks: figures on the Vulkan device and the CPU twin, parity verdict, `--json` line.
     Bench(BenchArgs),
+    /// The whole method on a built-in scene: make-scene → stage 1 → Plenoxels level-set sweep →
+    /// stage 2 → extract → eval; prints the results table and writes report.md with PNG figures.
+    Demo(demo::DemoArgs),
 }
 
 /// `alphasurf bench <kind>`.
@@ -79,6 +83,10 @@ pub enum BenchKind {
     /// Stage-1 training throughput on both backends (rays/s, device time per kernel, samples
     /// per ray shaded/empty/skipped, atomic adds per ray) from the same partly trained grid.
     Plenoxels(crate::bench::plenoxels::PlenoxelsBenchArgs),
+    /// Run time against error: stage 1 (and stage 2) over a sweep of backend × grid resolution ×
+    /// steps on one built-in scene; wall time, training rays/s, Chamfer, F1 and test PSNR of the
+    /// best Plenoxels level and of αSurf; CSV, a PNG plot, a table and `--json`.
+    TimeVsError(crate::bench::time_vs_error::TimeVsErrorArgs),
 }
 
 /// Entry point of the binary: parse, run, map errors to a message and exit code 1.
@@ -184,10 +192,18 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             train::run_import(a)?;
             ExitCode::SUCCESS
         }
+        Command::Demo(a) => {
+            demo::run(a, &cli)?;
+            ExitCode::SUCCESS
+        }
         Command::Bench(b) => match &b.kind {
             BenchKind::Plenoxels(args) => {
                 let gpu = gpu_used.insert(open_gpu(&cli)?);
                 crate::bench::plenoxels::run(gpu, args)?;
+                ExitCode::SUCCESS
+            }
+            BenchKind::TimeVsError(args) => {
+                crate::bench::time_vs_error::run(args, &cli)?;
                 ExitCode::SUCCESS
             }
             BenchKind::Dda(args) => {

@@ -4,7 +4,7 @@
 
 use super::config::Stage1Config;
 use super::progress::Progress;
-use super::render::{render_split, RenderedSplit};
+use super::render::{psnr, render_split, RenderedSplit};
 use crate::data::{Dataset, RaySampler, Split};
 use crate::grid::{checkpoint, dilate, upsample, Grid};
 use crate::plenoxel::{Plenoxels, StepParams, TvParams};
@@ -12,11 +12,38 @@ use anyhow::{bail, Context, Result};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
 use serde_json::json;
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 /// File name of the stage-1 checkpoint inside a run directory.
 pub const CHECKPOINT: &str = "plenoxels.npz";
+
+/// Per-step training log inside a run directory: CSV with the header [`TRAIN_LOG_HEADER`], one
+/// row per step (`step` = steps done, `psnr_batch` = PSNR of that step's batch MSE, `elapsed_s` =
+/// seconds since this process started training). A resumed run appends to it.
+pub const TRAIN_LOG: &str = "train_log.csv";
+
+/// Header line of [`TRAIN_LOG`].
+pub const TRAIN_LOG_HEADER: &str = "step,mse,psnr_batch,elapsed_s";
+
+/// Open the run's train log: truncated with a header at step 0, appended to on resume.
+fn open_train_log(out: &Path, start_step: u32) -> Result<std::io::BufWriter<std::fs::File>> {
+    let path = out.join(TRAIN_LOG);
+    let fresh = start_step == 0 || !path.exists();
+    let file = std::fs::OpenOptions::new()
+        .create(true)
+        .write(true)
+        .append(!fresh)
+        .truncate(fresh)
+        .open(&path)
+        .with_context(|| format!("opening {}", path.display()))?;
+    let mut w = std::io::BufWriter::new(file);
+    if fresh {
+        writeln!(w, "{TRAIN_LOG_HEADER}").with_context(|| format!("writing {}", path.display()))?;
+    }
+    Ok(w)
+}
 
 /// Wall time per phase and throughput of a finished run.
 #[derive(Clone, Debug, Default, serde::Serialize)]
@@ -160,6 +187,8 @@ pub fn train(
     let mut sample_totals = [0u64; 4];
     let mut rays_total = 0u64;
     let mut mse = f64::NAN;
+    let mut log = open_train_log(out, start_step)?;
+    let t_train = Instant::now();
     for step in start_step..cfg.iters {
         if let Some((_, r)) = cfg.upsample.iter().find(|(s, _)| *s == step) {
             let t = Instant::now();
@@ -207,6 +236,9 @@ pub fn train(
         }
         mse = stats.mse;
         let secs = t.elapsed().as_secs_f64();
+        let elapsed = t_train.elapsed().as_secs_f64();
+        writeln!(log, "{},{mse:e},{:.4},{elapsed:.3}", step + 1, psnr(mse))
+            .with_context(|| format!("writing {}", out.join(TRAIN_LOG).display()))?;
         if step >= start_step + 10 {
             timed_rays += batch.len() as u64;
             timed_secs += secs;
@@ -225,6 +257,9 @@ pub fn train(
         }
     }
     progress.finish();
+    log.flush()
+        .with_context(|| format!("writing {}", out.join(TRAIN_LOG).display()))?;
+    drop(log);
     let t = Instant::now();
     save(backend, cfg, out, cfg.iters)?;
     report.checkpoint_seconds += t.elapsed().as_secs_f64();
