@@ -1,13 +1,12 @@
 #!/usr/bin/env bash
-# The main job on a fresh machine: set up, build, generate the built-in thin scene (if not there
-# yet) and train stage 1 (Plenoxels, preset fast): on a GPU through Vulkan, on a machine without one
-# with the CPU twins (faster than lavapipe there; `--backend vulkan` forces lavapipe).
-# Writes runs/thin/ (dataset) and runs/thin-plenoxels/ (checkpoint, test renders, metrics.json).
-# Extra arguments go to `alphasurf train` (e.g. --backend cpu, --iters 500).
+# The main job on a fresh machine: set up, build, and run the end-to-end αSurf demo on the built-in
+# thin scene: make-scene → stage 1 (Plenoxels, preset fast) → Plenoxels level-set sweep → stage 2
+# (αSurf) → extraction → evaluation, then a table and runs/demo-thin/report.md with PNGs.
+# On a GPU the kernels run through Vulkan; on a machine without one, the CPU twins (faster than
+# lavapipe there; `--backend vulkan` forces lavapipe). About 5–15 minutes on 2 CPU cores.
+# Extra arguments go to `alphasurf demo` (e.g. --fast, --scene translucent, --backend cpu).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash tools/setup.sh
 cargo build --release --locked
-bin=./target/release/alphasurf
-[ -f runs/thin/transforms_train.json ] || $bin make-scene --kind thin --out runs/thin
-$bin train --data runs/thin --out runs/thin-plenoxels --preset fast "$@"
+./target/release/alphasurf demo --out runs/demo-thin "$@"
