@@ -10,6 +10,7 @@ pub mod fill_pattern;
 pub mod plenoxel;
 pub mod sh_eval;
 pub mod surface_fwd;
+pub mod surface_train;
 pub mod trilerp_eval;
 
 /// Result of comparing one kernel on the Vulkan device with its CPU twin.
@@ -50,6 +51,7 @@ pub const CHECKS: &[(&str, CheckFn)] = &[
     ("cubic_solve", cubic_solve::check),
     ("extract_points", extract_points::check),
     ("surface_fwd", surface_fwd::check),
+    ("surface_train", surface_train::check),
 ];
 
 /// Elementwise |a − b| ≤ abs + rel·|b| test with running maxima.
