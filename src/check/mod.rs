@@ -11,6 +11,7 @@ pub mod plenoxel;
 pub mod sh_eval;
 pub mod surface_fwd;
 pub mod surface_train;
+pub mod surface_reg;
 pub mod trilerp_eval;
 
 /// Result of comparing one kernel on the Vulkan device with its CPU twin.
@@ -52,6 +53,9 @@ pub const CHECKS: &[(&str, CheckFn)] = &[
     ("extract_points", extract_points::check),
     ("surface_fwd", surface_fwd::check),
     ("surface_train", surface_train::check),
+    ("surface_opacity_reg", surface_reg::check_opacity_reg),
+    ("surface_normal_reg", surface_reg::check_normal_reg),
+    ("surface_rmsprop", surface_reg::check_rmsprop),
 ];
 
 /// Elementwise |a − b| ≤ abs + rel·|b| test with running maxima.

@@ -12,12 +12,16 @@ mod sh_eval;
 pub mod step;
 pub mod surface_fwd;
 pub mod surface_train;
+pub mod surface_reg;
 mod trilerp_eval;
 mod tv;
 
 pub use dda_walk::dda_walk;
 pub use fill_pattern::fill_pattern;
-pub use rmsprop::{rmsprop_one, rmsprop_sparse, RmsProp, Stage1Params};
+pub use rmsprop::{
+    rmsprop_one, rmsprop_sparse, surface_rmsprop_sparse, RmsProp, Stage1Params, Stage2Params,
+    SurfaceRmsProp,
+};
 pub use sh_eval::sh_eval;
 pub use trilerp_eval::trilerp_eval;
 pub use tv::{tv, TvChunk};

@@ -1,5 +1,6 @@
-//! Twins of `glsl/lib/rmsprop.glsl` (one scalar) and `glsl/rmsprop_sparse.comp` (σ and 27 SH of
-//! every touched vertex, then the flag cleared).
+//! Twins of `glsl/lib/rmsprop.glsl` (one scalar), `glsl/rmsprop_sparse.comp` (σ and 27 SH of
+//! every touched vertex, then the flag cleared) and `glsl/surface_rmsprop.comp` (the same for the
+//! stage-2 groups δ, σα and SH).
 
 use crate::grid::SH_DIM;
 use rayon::prelude::*;
@@ -51,6 +52,59 @@ pub fn rmsprop_sparse(p: Stage1Params, touched: &mut [u32], h: &RmsProp) {
                 return;
             }
             rmsprop_one(d, gd, sd, h.lr_sigma, h.beta, h.eps);
+            for k in 0..SH_DIM {
+                rmsprop_one(&mut sh[k], &mut gs[k], &mut ss[k], h.lr_sh, h.beta, h.eps);
+            }
+            *t = 0;
+        });
+}
+
+/// Hyper-parameters of one stage-2 RMSProp step (one learning rate per parameter group).
+#[derive(Clone, Copy, Debug)]
+pub struct SurfaceRmsProp {
+    pub lr_delta: f32,
+    pub lr_opacity: f32,
+    pub lr_sh: f32,
+    pub beta: f32,
+    pub eps: f32,
+}
+
+/// Parameters, gradients and RMS state of the stage-2 grid (per allocated vertex: δ, raw
+/// opacity σα, 27 SH).
+pub struct Stage2Params<'a> {
+    pub delta: &'a mut [f32],
+    pub opacity: &'a mut [f32],
+    pub sh: &'a mut [f32],
+    pub grad_delta: &'a mut [f32],
+    pub grad_opacity: &'a mut [f32],
+    pub grad_sh: &'a mut [f32],
+    pub state_delta: &'a mut [f32],
+    pub state_opacity: &'a mut [f32],
+    pub state_sh: &'a mut [f32],
+}
+
+/// Update δ, σα and SH of every vertex whose flag is set (their gradients cleared), and clear
+/// the flags.
+pub fn surface_rmsprop_sparse(p: Stage2Params, touched: &mut [u32], h: &SurfaceRmsProp) {
+    let scalars = p
+        .delta
+        .par_iter_mut()
+        .zip(p.grad_delta.par_iter_mut())
+        .zip(p.state_delta.par_iter_mut())
+        .zip(p.opacity.par_iter_mut())
+        .zip(p.grad_opacity.par_iter_mut())
+        .zip(p.state_opacity.par_iter_mut());
+    scalars
+        .zip(p.sh.par_chunks_mut(SH_DIM))
+        .zip(p.grad_sh.par_chunks_mut(SH_DIM))
+        .zip(p.state_sh.par_chunks_mut(SH_DIM))
+        .zip(touched.par_iter_mut())
+        .for_each(|(((((((((d, gd), sd), o), go), so), sh), gs), ss), t)| {
+            if *t == 0 {
+                return;
+            }
+            rmsprop_one(d, gd, sd, h.lr_delta, h.beta, h.eps);
+            rmsprop_one(o, go, so, h.lr_opacity, h.beta, h.eps);
             for k in 0..SH_DIM {
                 rmsprop_one(&mut sh[k], &mut gs[k], &mut ss[k], h.lr_sh, h.beta, h.eps);
             }

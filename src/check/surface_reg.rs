@@ -1,0 +1,446 @@
+//! Parity of the stage-2 regulariser and optimiser kernels (surface_opacity_reg,
+//! surface_normal_reg, surface_rmsprop) with their CPU twins, on a random surface grid with a
+//! band of allocated vertices around a noisy sphere (unallocated neighbours, holes), a slab
+//! allocated on the grid's outer faces, a flat block (tiny normals), σα ≤ 0, tiny and large
+//! σα, and chunks inside, whole and wrapping past the end.
+
+use super::{CheckRow, Compare};
+use crate::cpu::step::{optim_args, STEP_COUNT, STEP_FLAGS, STEP_N};
+use crate::cpu::surface_reg::{
+    row_slots, surface_normal_reg, surface_opacity_reg, NormalChunk, NormalPrefix, NormalRegStats,
+    OpacityChunk,
+};
+use crate::cpu::{surface_rmsprop_sparse, Stage2Params, SurfaceRmsProp};
+use crate::gpu::{Gpu, GpuBuffer};
+use crate::grid::SH_DIM;
+use crate::kernels;
+use anyhow::Result;
+use rand::{Rng, SeedableRng};
+use rand_pcg::Pcg64;
+
+/// A random stage-2 test grid: links (x-major res³), δ and σα per allocated vertex.
+pub struct RegGrid {
+    pub res: [u32; 3],
+    pub links: Vec<i32>,
+    pub delta: Vec<f32>,
+    pub opacity: Vec<f32>,
+}
+
+impl RegGrid {
+    pub fn slots(&self) -> u32 {
+        self.links.len() as u32
+    }
+    pub fn allocated(&self) -> usize {
+        self.delta.len()
+    }
+}
+
+/// δ = |p − c| − 0.5 + noise on [−1, 1]³ sampled at res³ vertices; allocated: the band |δ| < band
+/// (3 % holes punched), the x = res − 1 and z = 0 faces, and a 4³ block with constant δ (tiny
+/// normals). σα uniform in [−1, 3] with every 9th exactly 0 and every 13th 1e-12.
+pub fn reg_grid(seed: u64, res: u32, band: f32) -> RegGrid {
+    let mut rng = Pcg64::seed_from_u64(seed);
+    let r = res as usize;
+    let c: [f32; 3] = std::array::from_fn(|_| rng.random_range(-0.2..0.2));
+    let mut links = vec![-1i32; r * r * r];
+    let mut delta = Vec::new();
+    for x in 0..r {
+        for y in 0..r {
+            for z in 0..r {
+                let p = [x, y, z].map(|i| 2.0 * i as f32 / (r - 1) as f32 - 1.0);
+                let d = (0..3).map(|i| (p[i] - c[i]).powi(2)).sum::<f32>().sqrt() - 0.5;
+                let flat =
+                    (1..5).contains(&x) && (1..5).contains(&y) && (r - 5..r - 1).contains(&z);
+                let keep =
+                    (d.abs() < band || x == r - 1 || z == 0 || flat) && rng.random::<f32>() > 0.03;
+                if keep {
+                    links[(x * r + y) * r + z] = delta.len() as i32;
+                    delta.push(if flat {
+                        0.25
+                    } else {
+                        d + rng.random_range(-0.02..0.02)
+                    });
+                }
+            }
+        }
+    }
+    let opacity = (0..delta.len())
+        .map(|i| match (i % 9, i % 13) {
+            (0, _) => 0.0,
+            (_, 0) => 1e-12,
+            _ => rng.random_range(-1.0..3.0),
+        })
+        .collect();
+    RegGrid {
+        res: [res; 3],
+        links,
+        delta,
+        opacity,
+    }
+}
+
+/// A step buffer (step.glsl) for n vertices with nothing touched.
+pub fn empty_step(n: usize) -> Vec<u32> {
+    let mut v = vec![0u32; STEP_FLAGS + 2 * n];
+    v[STEP_N] = n as u32;
+    v
+}
+
+/// Random initial gradients, so the checks see that the kernels add.
+fn random_vec(rng: &mut Pcg64, n: usize, scale: f32) -> Vec<f32> {
+    (0..n).map(|_| rng.random_range(-scale..scale)).collect()
+}
+
+/// What a regulariser kernel run returned.
+pub struct GpuRegOut {
+    /// The gradient array after the kernel added to it.
+    pub grad: Vec<f32>,
+    /// The touched flags (step buffer).
+    pub touched: Vec<u32>,
+    /// loss[0].
+    pub loss: f32,
+    /// skipped[0] (surface_normal_reg only; zero otherwise).
+    pub skipped: u32,
+    /// Device time of the kernel's dispatches, ns.
+    pub ns: f64,
+}
+
+/// Run surface_normal_reg on the device.
+pub fn gpu_normal_reg(gpu: &Gpu, g: &RegGrid, grad0: &[f32], c: &NormalChunk) -> Result<GpuRegOut> {
+    let n = g.allocated();
+    let links = gpu.upload(&g.links)?;
+    let row_slot = gpu.upload(&row_slots(&g.links, n))?;
+    let delta = gpu.upload(&g.delta)?;
+    let grad = gpu.upload(grad0)?;
+    let step = gpu.upload(&empty_step(n))?;
+    let loss = gpu.zeros::<f32>(1)?;
+    let skipped = gpu.zeros::<u32>(1)?;
+    let t = gpu.run_1d(
+        &kernels::surface_normal_reg::INFO,
+        &kernels::surface_normal_reg::Push {
+            links: links.address(),
+            row_slot: row_slot.address(),
+            delta: delta.address(),
+            grad: grad.address(),
+            step: step.address(),
+            loss: loss.address(),
+            skipped: skipped.address(),
+            res: c.res,
+            rows: c.rows,
+            start: c.start,
+            count: c.count,
+            cells: c.cells,
+            lambda1: c.lambda1,
+            lambda2: c.lambda2,
+            ..Default::default()
+        },
+        c.count.min(c.rows),
+    )?;
+    Ok(GpuRegOut {
+        grad: grad.download()?,
+        touched: step.download_range(STEP_FLAGS, n)?,
+        loss: loss.download::<f32>()?[0],
+        skipped: skipped.download::<u32>()?[0],
+        ns: t.kernel_ns("surface_normal_reg"),
+    })
+}
+
+/// Run surface_opacity_reg on the device.
+pub fn gpu_opacity_reg(
+    gpu: &Gpu,
+    opacity: &[f32],
+    grad0: &[f32],
+    c: &OpacityChunk,
+) -> Result<GpuRegOut> {
+    let n = opacity.len();
+    let op = gpu.upload(opacity)?;
+    let grad = gpu.upload(grad0)?;
+    let step = gpu.upload(&empty_step(n))?;
+    let loss = gpu.zeros::<f32>(1)?;
+    let t = gpu.run_1d(
+        &kernels::surface_opacity_reg::INFO,
+        &kernels::surface_opacity_reg::Push {
+            opacity: op.address(),
+            grad: grad.address(),
+            step: step.address(),
+            loss: loss.address(),
+            rows: c.rows,
+            start: c.start,
+            count: c.count,
+            lambda: c.lambda,
+        },
+        c.count.min(c.rows),
+    )?;
+    Ok(GpuRegOut {
+        grad: grad.download()?,
+        touched: step.download_range(STEP_FLAGS, n)?,
+        loss: loss.download::<f32>()?[0],
+        skipped: 0,
+        ns: t.kernel_ns("surface_opacity_reg"),
+    })
+}
+
+pub fn check_opacity_reg(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
+    let g = reg_grid(seed, 24, 0.15);
+    let n = g.allocated();
+    let rows = n as u32;
+    let mut rng = Pcg64::seed_from_u64(seed ^ 0x5eed);
+    let grad0 = random_vec(&mut rng, n, 1e-3);
+    let mut cmp = Compare::new(1e-9, 1e-6);
+    let (mut flags_diff, mut worst_loss) = (0usize, 0f64);
+    let cases = [
+        (rows / 3, rows / 10),
+        (rows - rows / 20, rows / 10),
+        (0, rows),
+        (rows + 5, rows * 2),
+    ];
+    for &(start, count) in &cases {
+        let c = OpacityChunk {
+            rows,
+            start,
+            count,
+            lambda: 1e-3,
+        };
+        let (mut want, mut want_t) = (grad0.clone(), vec![0u32; n]);
+        let loss = surface_opacity_reg(&g.opacity, &mut want, &mut want_t, &c);
+        let out = gpu_opacity_reg(gpu, &g.opacity, &grad0, &c)?;
+        let (got, got_t, got_loss) = (out.grad, out.touched, out.loss);
+        for (i, (&a, &b)) in got.iter().zip(&want).enumerate() {
+            cmp.value(a as f64, b as f64, || {
+                format!("chunk {start}+{count} grad[{i}]")
+            });
+        }
+        flags_diff += got_t.iter().zip(&want_t).filter(|(a, b)| a != b).count();
+        // The loss is a float-atomic sum of subgroup sums of terms of both signs: compare
+        // relative to Σ|terms|.
+        let abs_sum: f64 = (0..c.count.min(rows))
+            .map(|i| g.opacity[((start % rows + i) % rows) as usize])
+            .filter(|&a| a > 0.0)
+            .map(|a| (c.lambda * a.ln()).abs() as f64)
+            .sum();
+        worst_loss = worst_loss.max((got_loss as f64 - loss).abs() / abs_sum.max(1e-30));
+    }
+    cmp.value(flags_diff as f64, 0.0, || "touched flags differing".into());
+    let mut row = cmp.row(
+        "surface_opacity_reg",
+        cases.len(),
+        format!(
+            "one owner per element; loss (float-atomic sum) |Δ|/Σ|terms| {worst_loss:.1e} (≤ 1e-5 \
+             required); σα = 0, 1e-12, < 0; chunks inside, past the end (wrapping), whole, \
+             count > rows; touched flags exact"
+        ),
+    );
+    row.pass &= worst_loss <= 1e-5;
+    Ok(row)
+}
+
+pub fn check_normal_reg(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
+    let g = reg_grid(seed, 24, 0.2);
+    let n = g.allocated();
+    let rows = n as u32;
+    let rs = row_slots(&g.links, n);
+    let prefix = NormalPrefix::new(&g.links, &rs, g.res);
+    let mut rng = Pcg64::seed_from_u64(seed ^ 0xa11);
+    let grad0 = random_vec(&mut rng, n, 1e-4);
+    let mut cmp = Compare::new(0.0, 0.0);
+    let (mut worst_l2, mut worst_loss, mut notes) = (0f64, 0f64, Vec::new());
+    let cases = [
+        (0, rows),
+        (rows / 3, rows / 4),
+        (rows - rows / 10, rows / 3),
+    ];
+    for &(start, count) in &cases {
+        let c = prefix.chunk(start, count, 1e-2, 1e-3);
+        let (mut want, mut want_t) = (grad0.clone(), vec![0u32; n]);
+        let st: NormalRegStats =
+            surface_normal_reg(&g.links, &rs, &g.delta, &mut want, &mut want_t, &c);
+        let out = gpu_normal_reg(gpu, &g, &grad0, &c)?;
+        let (got, got_t, got_loss) = (out.grad, out.touched, out.loss);
+        // Atomic sums in another order: elementwise |Δ| ≤ 1e-6·max|added gradient| + 1e-4·|cpu|.
+        let scale = want
+            .iter()
+            .zip(&grad0)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0f32, f32::max) as f64;
+        let mut e = Compare::new(1e-6 * scale, 1e-4);
+        let (mut num, mut den) = (0f64, 0f64);
+        for (i, ((&a, &b), &b0)) in got.iter().zip(&want).zip(&grad0).enumerate() {
+            e.value(a as f64, b as f64, || {
+                format!("chunk {start}+{count} grad[{i}]")
+            });
+            num += (a as f64 - b as f64).powi(2);
+            den += (b as f64 - b0 as f64).powi(2);
+        }
+        let l2 = (num / den.max(1e-300)).sqrt();
+        worst_l2 = worst_l2.max(l2);
+        e.value(out.skipped as f64, st.skipped as f64, || {
+            format!("chunk {start}+{count} skipped pairs")
+        });
+        let fd = got_t.iter().zip(&want_t).filter(|(a, b)| a != b).count();
+        e.value(fd as f64, 0.0, || "touched flags differing".into());
+        worst_loss = worst_loss.max((got_loss as f64 - st.loss).abs() / st.loss.abs().max(1e-30));
+        notes.push(format!(
+            "chunk {start}+{count}: {} cells, {} skipped pairs",
+            c.cells, st.skipped
+        ));
+        // Merge into the row's comparison.
+        cmp.compared += e.compared;
+        cmp.failures += e.failures;
+        cmp.max_abs = cmp.max_abs.max(e.max_abs);
+        cmp.max_rel = cmp.max_rel.max(e.max_rel);
+        if cmp.first_failure.is_none() {
+            cmp.first_failure = e.first_failure;
+        }
+        cmp.tol = e.tol;
+    }
+    let mut row = cmp.row(
+        "surface_normal_reg",
+        cases.len(),
+        format!(
+            "aggregate rel L2 of the added gradient {worst_l2:.1e} (≤ 1e-5 required); loss rel {worst_loss:.1e} (≤ 1e-5; \
+             terms are non-negative); skipped pairs and touched flags exact; {}",
+            notes.join("; ")
+        ),
+    );
+    row.tolerance = "|Δ| ≤ 1e-6·max|Δgrad| + 1e-4·|cpu| elementwise (float-atomic sums)".into();
+    row.pass &= worst_l2 <= 1e-5 && worst_loss <= 1e-5;
+    Ok(row)
+}
+
+pub fn check_rmsprop(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
+    let mut rng = Pcg64::seed_from_u64(seed);
+    let n = 20_000;
+    let mut vals = |len: usize, lo: f32, hi: f32| -> Vec<f32> {
+        (0..len).map(|_| rng.random_range(lo..hi)).collect()
+    };
+    let mut p: Vec<Vec<f32>> = vec![
+        vals(n, -1.0, 1.0),
+        vals(n, -2.0, 4.0),
+        vals(n * SH_DIM, -1.0, 1.0),
+        vals(n, -1.0, 1.0),
+        vals(n, -1.0, 1.0),
+        vals(n * SH_DIM, -1.0, 1.0),
+        vals(n, 0.0, 2.0),
+        vals(n, 0.0, 2.0),
+        vals(n * SH_DIM, 0.0, 2.0),
+    ];
+    // Fresh state on a fifth, zero gradients on a seventh, magnitudes 1e-8..1e4.
+    for grp in 0..3 {
+        for i in 0..p[grp + 3].len() {
+            if i % 7 == grp {
+                p[grp + 3][i] = 0.0;
+            }
+            p[grp + 3][i] *= 10f32.powi((i % 13) as i32 - 8);
+            if i % 5 == grp {
+                p[grp + 6][i] = 0.0;
+            }
+        }
+    }
+    let touched_list: Vec<usize> = (0..n).rev().filter(|v| v % 3 != 1).collect();
+    let mut step = empty_step(n);
+    let mut flags = vec![0u32; n];
+    step[STEP_COUNT] = touched_list.len() as u32;
+    for (i, &v) in touched_list.iter().enumerate() {
+        step[STEP_FLAGS + v] = 1;
+        step[STEP_FLAGS + n + i] = v as u32;
+        flags[v] = 1;
+    }
+    let bufs: Vec<GpuBuffer> = p.iter().map(|v| gpu.upload(v)).collect::<Result<_>>()?;
+    let sb = gpu.upload(&step)?;
+    let args = gpu.zeros::<u32>(3)?;
+    let h = SurfaceRmsProp {
+        lr_delta: 1e-4,
+        lr_opacity: 1e-2,
+        lr_sh: 1e-3,
+        beta: 0.95,
+        eps: 1e-8,
+    };
+    let mut b = gpu.batch()?;
+    b.dispatch(
+        &kernels::optim_args::INFO,
+        &kernels::optim_args::Push {
+            step: sb.address(),
+            args: args.address(),
+        },
+        [1, 1, 1],
+    )?;
+    let a = |i: usize| bufs[i].address();
+    b.dispatch_indirect(
+        &kernels::surface_rmsprop::INFO,
+        &kernels::surface_rmsprop::Push {
+            delta: a(0),
+            opacity: a(1),
+            sh: a(2),
+            grad_delta: a(3),
+            grad_opacity: a(4),
+            grad_sh: a(5),
+            state_delta: a(6),
+            state_opacity: a(7),
+            state_sh: a(8),
+            step: sb.address(),
+            lr_delta: h.lr_delta,
+            lr_opacity: h.lr_opacity,
+            lr_sh: h.lr_sh,
+            beta: h.beta,
+            eps: h.eps,
+            ..Default::default()
+        },
+        &args,
+    )?;
+    b.submit()?;
+    let got_args: Vec<u32> = args.download()?;
+    let [d, o, sh, gd, go, gs, sd, so, ss] = &mut p[..] else {
+        unreachable!("nine arrays")
+    };
+    surface_rmsprop_sparse(
+        Stage2Params {
+            delta: d,
+            opacity: o,
+            sh,
+            grad_delta: gd,
+            grad_opacity: go,
+            grad_sh: gs,
+            state_delta: sd,
+            state_opacity: so,
+            state_sh: ss,
+        },
+        &mut flags,
+        &h,
+    );
+    let mut cmp = Compare::new(1e-7, 1e-5);
+    let names = [
+        "delta",
+        "opacity",
+        "sh",
+        "grad_delta",
+        "grad_opacity",
+        "grad_sh",
+        "state_delta",
+        "state_opacity",
+        "state_sh",
+    ];
+    for ((buf, w), name) in bufs.iter().zip(&p).zip(names) {
+        let got: Vec<f32> = buf.download()?;
+        for (i, (&x, &y)) in got.iter().zip(w).enumerate() {
+            cmp.value(x as f64, y as f64, || format!("{name}[{i}]"));
+        }
+    }
+    let got_flags: Vec<u32> = sb.download_range(STEP_FLAGS, n)?;
+    for (i, (&x, &y)) in got_flags.iter().zip(&flags).enumerate() {
+        cmp.value(x as f64, y as f64, || format!("touched flag {i}"));
+    }
+    for (i, (&x, &y)) in got_args
+        .iter()
+        .zip(&optim_args(touched_list.len() as u32))
+        .enumerate()
+    {
+        cmp.value(x as f64, y as f64, || format!("indirect arg {i}"));
+    }
+    Ok(cmp.row(
+        "surface_rmsprop",
+        n,
+        "δ, σα, 27 SH; 2/3 of vertices touched in scrambled order; fresh state, zero and \
+         1e-8..1e4 gradients; gradients and flags cleared"
+            .into(),
+    ))
+}

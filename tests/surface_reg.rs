@@ -1,0 +1,552 @@
+//! Stage-2 regularisers and optimiser (method.md §3.4–3.5): the CPU twins' gradients against
+//! central finite differences of independent f64 definitions (Lδ through tv.comp/cpu::tv with
+//! `delta_tv_chunk`, TVα with `opacity_tv_chunk`, Lα, Ln1 + Ln2) on small hand-built grids;
+//! adversarial cases (unallocated neighbours, grid edges, zero-length normals, σα ≤ 0, chunks
+//! that wrap); the parity rows of the three stage-2 kernels under validation.
+
+use alphasurf::check::surface_reg::{empty_step, gpu_normal_reg, RegGrid};
+use alphasurf::cpu::surface_reg::{
+    delta_tv_chunk, opacity_tv_chunk, row_slots, surface_normal_reg, surface_opacity_reg, tv_loss,
+    NormalChunk, NormalPrefix, NormalRegStats, OpacityChunk,
+};
+use alphasurf::cpu::{surface_rmsprop_sparse, tv, Stage2Params, SurfaceRmsProp};
+use alphasurf::kernels;
+use rand::{Rng, SeedableRng};
+use rand_pcg::Pcg64;
+
+/// Relative L2 distance ‖a − b‖/‖b‖.
+fn rel_l2(a: &[f64], b: &[f64]) -> f64 {
+    let num: f64 = a.iter().zip(b).map(|(x, y)| (x - y).powi(2)).sum();
+    let den: f64 = b.iter().map(|y| y * y).sum();
+    (num / den).sqrt()
+}
+
+/// Central differences of f at x (step h per element).
+fn fd(x: &[f64], h: f64, f: impl Fn(&[f64]) -> f64) -> Vec<f64> {
+    let mut x = x.to_vec();
+    (0..x.len())
+        .map(|i| {
+            let v = x[i];
+            x[i] = v + h;
+            let fp = f(&x);
+            x[i] = v - h;
+            let fm = f(&x);
+            x[i] = v;
+            (fp - fm) / (2.0 * h)
+        })
+        .collect()
+}
+
+/// A small grid: res³ with a smooth δ (tilted plane + sphere + noise, far from flat), holes
+/// punched where `hole` says.
+fn small_grid(seed: u64, res: u32, hole: impl Fn([usize; 3]) -> bool) -> RegGrid {
+    let mut rng = Pcg64::seed_from_u64(seed);
+    let r = res as usize;
+    let mut links = vec![-1i32; r * r * r];
+    let mut delta = Vec::new();
+    for x in 0..r {
+        for y in 0..r {
+            for z in 0..r {
+                if hole([x, y, z]) {
+                    continue;
+                }
+                links[(x * r + y) * r + z] = delta.len() as i32;
+                let p = [x, y, z].map(|i| i as f32 - r as f32 / 2.0);
+                let d = 0.3 * p[0] - 0.2 * p[1]
+                    + 0.1 * p[2]
+                    + 0.05 * (p[0] * p[0] + p[1] * p[1] + p[2] * p[2])
+                    + rng.random_range(-0.2..0.2);
+                delta.push(d);
+            }
+        }
+    }
+    let opacity = (0..delta.len())
+        .map(|_| rng.random_range(0.05..2.0))
+        .collect();
+    RegGrid {
+        res: [res; 3],
+        links,
+        delta,
+        opacity,
+    }
+}
+
+/// f64 TV loss: scale_outer·Σ_{slots in chunk, allocated} √(κ²|d|² + eps) with forward
+/// differences (unallocated or outside neighbours: d = 0).
+fn tv_f64(g: &RegGrid, data: &[f64], start: usize, count: usize, kappa: f64, eps: f64) -> f64 {
+    let r = g.res[0] as usize;
+    let mut sum = 0.0;
+    for s in start..(start + count).min(g.links.len()) {
+        let l = g.links[s];
+        if l < 0 {
+            continue;
+        }
+        let v = [s / (r * r), (s / r) % r, s % r];
+        let mut d2 = 0.0;
+        for a in 0..3 {
+            let stride = [r * r, r, 1][a];
+            if v[a] + 1 < r && g.links[s + stride] >= 0 {
+                d2 += (data[g.links[s + stride] as usize] - data[l as usize]).powi(2);
+            }
+        }
+        sum += (kappa * kappa * d2 + eps).sqrt();
+    }
+    sum
+}
+
+#[test]
+fn delta_tv_matches_definition_fd_cpu_and_gpu() {
+    // 12³ with holes and the grid's faces: N = 12 → κ = 12/256, λ = 5e-3.
+    let g = small_grid(1, 12, |v| (v[0] * 7 + v[1] * 3 + v[2]) % 11 == 0);
+    let lambda = 5e-3f32;
+    let c = delta_tv_chunk(g.res, g.allocated(), lambda);
+    assert_eq!((c.start, c.count, c.channels), (0, 12 * 12 * 12, 1));
+    let kappa = 12.0 / 256.0;
+    let n = g.allocated() as f64;
+    let x: Vec<f64> = g.delta.iter().map(|&d| d as f64).collect();
+    // The exact definition: λ/#allocated·Σ √(κ²|d|² + 1e-9).
+    let want = fd(&x, 1e-4, |x| {
+        lambda as f64 / n * tv_f64(&g, x, 0, g.links.len(), kappa, 1e-9)
+    });
+    let mut grad = vec![0f32; g.allocated()];
+    let mut touched = vec![0u32; g.allocated()];
+    tv(&g.links, &g.delta, &mut grad, &mut touched, &c);
+    let got: Vec<f64> = grad.iter().map(|&v| v as f64).collect();
+    let e = rel_l2(&got, &want);
+    // The kernel's ε is κ²·1e-9 instead of 1e-9: invisible at these |d| ~ 0.1–1.
+    assert!(e <= 1e-3, "Lδ CPU gradient vs FD: rel L2 {e:e}");
+    // Value: tv_loss reports the same loss.
+    let v = tv_loss(&g.links, &g.delta, &c);
+    let v64 = lambda as f64 / n * tv_f64(&g, &x, 0, g.links.len(), kappa, 1e-9);
+    assert!((v - v64).abs() <= 1e-5 * v64, "Lδ value {v} vs {v64}");
+    assert!(
+        touched.iter().all(|&t| t == 1),
+        "every allocated vertex has a TV gradient here"
+    );
+    // The GPU tv kernel with the same chunk.
+    let gpu = alphasurf::gpu::test_gpu();
+    let links = gpu.upload(&g.links).unwrap();
+    let db = gpu.upload(&g.delta).unwrap();
+    let gb = gpu.zeros::<f32>(g.allocated()).unwrap();
+    let step = gpu.upload(&empty_step(g.allocated())).unwrap();
+    gpu.run_1d(
+        &kernels::tv::INFO,
+        &kernels::tv::Push {
+            links: links.address(),
+            data: db.address(),
+            grad: gb.address(),
+            step: step.address(),
+            res: c.res,
+            start: c.start,
+            count: c.count,
+            channels: 1,
+            scale: c.scale,
+            ..Default::default()
+        },
+        c.count + c.res[1] * c.res[2],
+    )
+    .unwrap();
+    let gpu_grad: Vec<f64> = gb
+        .download::<f32>()
+        .unwrap()
+        .iter()
+        .map(|&v| v as f64)
+        .collect();
+    let e = rel_l2(&gpu_grad, &want);
+    assert!(e <= 1e-3, "Lδ GPU gradient vs FD: rel L2 {e:e}");
+    assert!(
+        gpu.validation_messages().is_empty(),
+        "{:?}",
+        gpu.validation_messages()
+    );
+}
+
+#[test]
+fn opacity_tv_chunk_fd_and_bounds() {
+    // Bounds: 1 % of 128³, never past the end, for any draw.
+    let res = [128u32; 3];
+    for draw in [0u64, 1, 12345, u64::MAX, (128 * 128 * 128) as u64 - 1] {
+        let c = opacity_tv_chunk(res, 0.01, 1e-5, draw);
+        assert_eq!(c.count, 20972);
+        assert!(c.start as u64 + c.count as u64 <= 128 * 128 * 128);
+        assert_eq!(c.scale, 1e-5 / 20972.0);
+    }
+    let tiny = opacity_tv_chunk([1, 1, 1], 0.01, 1.0, 7);
+    assert_eq!((tiny.start, tiny.count), (0, 1));
+    // FD on a 10³ grid with a 30 % chunk (1 % of 1000 slots is 10 — too few for a test).
+    let g = small_grid(2, 10, |v| (v[0] + 2 * v[1] + 5 * v[2]) % 9 == 0);
+    let c = opacity_tv_chunk(g.res, 0.3, 1e-5, 4242);
+    let x: Vec<f64> = g.opacity.iter().map(|&d| d as f64).collect();
+    let want = fd(&x, 1e-4, |x| {
+        c.scale as f64 * tv_f64(&g, x, c.start as usize, c.count as usize, 1.0, 1e-9)
+    });
+    let mut grad = vec![0f32; g.allocated()];
+    let mut touched = vec![0u32; g.allocated()];
+    tv(&g.links, &g.opacity, &mut grad, &mut touched, &c);
+    let got: Vec<f64> = grad.iter().map(|&v| v as f64).collect();
+    let e = rel_l2(&got, &want);
+    assert!(e <= 1e-3, "TVα gradient vs FD: rel L2 {e:e}");
+    // Touched exactly where a gradient can be non-zero.
+    for (i, (&t, &w)) in touched.iter().zip(&want).enumerate() {
+        if w != 0.0 {
+            assert_eq!(t, 1, "vertex {i} has a gradient but is not touched");
+        }
+    }
+}
+
+/// f64 Lα: λ·Σ ln σα over the chunk rows with σα > 0.
+fn opacity_reg_f64(x: &[f64], c: &OpacityChunk) -> f64 {
+    let rows = c.rows as usize;
+    (0..(c.count as usize).min(rows))
+        .map(|i| x[(c.start as usize % rows + i) % rows])
+        .filter(|&a| a > 0.0)
+        .map(|a| c.lambda as f64 * a.ln())
+        .sum()
+}
+
+#[test]
+fn opacity_reg_fd_and_adversarial() {
+    let mut rng = Pcg64::seed_from_u64(3);
+    // σα ≤ 0 (negative, exactly 0) gets no gradient and no touch; tiny σα uses the 1e-8 floor.
+    let mut op: Vec<f32> = (0..200).map(|_| rng.random_range(0.01..3.0)).collect();
+    op[5] = -0.5;
+    op[6] = 0.0;
+    op[7] = 1e-12;
+    // A chunk wrapping past the end: rows 190..199 then 0..29.
+    let c = OpacityChunk {
+        rows: 200,
+        start: 190,
+        count: 40,
+        lambda: 1e-3,
+    };
+    let mut grad = vec![0.5f32; 200];
+    let mut touched = vec![0u32; 200];
+    let loss = surface_opacity_reg(&op, &mut grad, &mut touched, &c);
+    let x: Vec<f64> = op.iter().map(|&v| v as f64).collect();
+    assert!((loss - opacity_reg_f64(&x, &c)).abs() <= 1e-6 * loss.abs());
+    // FD away from σα = 0 and the 1e-8 floor (h = 1e-6 relative to σα ≥ 0.01).
+    let want = fd(&x, 1e-6, |x| opacity_reg_f64(x, &c));
+    let got: Vec<f64> = grad.iter().map(|&g| g as f64 - 0.5).collect();
+    let keep: Vec<usize> = (0..200).filter(|&i| i != 6 && i != 7).collect();
+    let e = rel_l2(
+        &keep.iter().map(|&i| got[i]).collect::<Vec<_>>(),
+        &keep.iter().map(|&i| want[i]).collect::<Vec<_>>(),
+    );
+    assert!(e <= 1e-3, "Lα gradient vs FD: rel L2 {e:e}");
+    for i in 0..200 {
+        let in_chunk = !(30..190).contains(&i);
+        let positive = op[i] > 0.0;
+        assert_eq!(touched[i], (in_chunk && positive) as u32, "touched[{i}]");
+        if !(in_chunk && positive) {
+            assert_eq!(grad[i], 0.5, "grad[{i}] changed");
+        }
+    }
+    assert_eq!(grad[7], 0.5 + 1e-3 / 1e-8, "floor 1e-8 for tiny σα");
+    // count ≥ rows visits every row once.
+    let all = OpacityChunk {
+        rows: 200,
+        start: 77,
+        count: 1000,
+        lambda: 1.0,
+    };
+    let (mut g1, mut t1) = (vec![0f32; 200], vec![0u32; 200]);
+    let l1 = surface_opacity_reg(&op, &mut g1, &mut t1, &all);
+    let l_ref = opacity_reg_f64(
+        &x,
+        &OpacityChunk {
+            start: 0,
+            count: 200,
+            ..all
+        },
+    );
+    assert!((l1 - l_ref).abs() <= 1e-6 * l_ref.abs());
+}
+
+/// f64 Ln1 + Ln2 of the kernel's definition: mean over the chunk's cells with an existing
+/// forward neighbour of Σ_pairs (λ1‖ΔN‖₁ + λ2‖ΔN‖₂²)/k_c, pairs with a tiny normal dropped.
+fn normal_reg_f64(g: &RegGrid, x: &[f64], c: &NormalChunk) -> f64 {
+    let r = g.res[0] as usize;
+    let rs = row_slots(&g.links, g.allocated());
+    // None: missing; Some(None): tiny; Some(Some(N)).
+    let normal = |v: [usize; 3]| -> Option<Option<[f64; 3]>> {
+        if v.iter().any(|&i| i + 1 >= r) {
+            return None;
+        }
+        let mut n = [0f64; 3];
+        for k in 0..8 {
+            let b = [(k >> 2) & 1, (k >> 1) & 1, k & 1];
+            let l = g.links[((v[0] + b[0]) * r + v[1] + b[1]) * r + v[2] + b[2]];
+            if l < 0 {
+                return None;
+            }
+            for a in 0..3 {
+                n[a] += if b[a] == 1 {
+                    x[l as usize]
+                } else {
+                    -x[l as usize]
+                } / 4.0;
+            }
+        }
+        let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+        Some((len * len > 1e-12).then(|| n.map(|v| v / len)))
+    };
+    let rows = c.rows as usize;
+    let (mut sum, mut cells) = (0.0, 0usize);
+    for i in 0..(c.count as usize).min(rows) {
+        let s = rs[(c.start as usize % rows + i) % rows] as usize;
+        let v = [s / (r * r), (s / r) % r, s % r];
+        let Some(nc) = normal(v) else { continue };
+        let nbs: Vec<Option<[f64; 3]>> = (0..3)
+            .filter_map(|a| {
+                let mut va = v;
+                va[a] += 1;
+                normal(va)
+            })
+            .collect();
+        if nbs.is_empty() {
+            continue;
+        }
+        cells += 1;
+        let Some(nc) = nc else { continue };
+        for nn in nbs.iter().flatten() {
+            let d: Vec<f64> = (0..3).map(|j| nc[j] - nn[j]).collect();
+            sum += (c.lambda1 as f64 * d.iter().map(|v| v.abs()).sum::<f64>()
+                + c.lambda2 as f64 * d.iter().map(|v| v * v).sum::<f64>())
+                / nbs.len() as f64;
+        }
+    }
+    assert_eq!(cells as u32, c.cells, "NormalPrefix's M");
+    sum / cells.max(1) as f64
+}
+
+/// A chunk of g's rows.
+fn chunk(g: &RegGrid, start: u32, count: u32, lambda1: f32, lambda2: f32) -> NormalChunk {
+    let rs = row_slots(&g.links, g.allocated());
+    NormalPrefix::new(&g.links, &rs, g.res).chunk(start, count, lambda1, lambda2)
+}
+
+/// The CPU twin on g from zero gradients: (grad, touched, stats).
+fn run_normal(g: &RegGrid, c: &NormalChunk) -> (Vec<f32>, Vec<u32>, NormalRegStats) {
+    let rs = row_slots(&g.links, g.allocated());
+    let (mut grad, mut touched) = (vec![0f32; g.allocated()], vec![0u32; g.allocated()]);
+    let st = surface_normal_reg(&g.links, &rs, &g.delta, &mut grad, &mut touched, c);
+    (grad, touched, st)
+}
+
+fn normal_fd_case(g: &RegGrid, c: &NormalChunk, what: &str) {
+    let x: Vec<f64> = g.delta.iter().map(|&d| d as f64).collect();
+    let want = fd(&x, 1e-5, |x| normal_reg_f64(g, x, c));
+    let (grad, touched, st) = run_normal(g, c);
+    let got: Vec<f64> = grad.iter().map(|&v| v as f64).collect();
+    let e = rel_l2(&got, &want);
+    assert!(e <= 1e-3, "{what}: Ln gradient vs FD rel L2 {e:e}");
+    let v = normal_reg_f64(g, &x, c);
+    assert!(
+        (st.loss - v).abs() <= 1e-5 * v,
+        "{what}: loss {} vs {v}",
+        st.loss
+    );
+    assert!(c.cells > 0, "{what}: no cell has a term");
+    let wmax = want.iter().fold(0f64, |m, v| m.max(v.abs()));
+    for (i, (&t, &w)) in touched.iter().zip(&want).enumerate() {
+        if w.abs() > 1e-9 * wmax {
+            assert_eq!(t, 1, "{what}: vertex {i} has a gradient but is not touched");
+        }
+    }
+}
+
+#[test]
+fn normal_reg_fd() {
+    // Full 6³ grid, whole chunk: L1 + L2, L2 only, L1 only.
+    let g = small_grid(4, 6, |_| false);
+    normal_fd_case(&g, &chunk(&g, 0, 216, 1e-2, 1e-3), "full grid, L1+L2");
+    normal_fd_case(&g, &chunk(&g, 0, 216, 0.0, 1e-3), "L2 only");
+    normal_fd_case(&g, &chunk(&g, 0, 216, 1e-2, 0.0), "L1 only");
+    // Holes (unallocated neighbours), grid faces, a chunk wrapping past the last row.
+    let h = small_grid(5, 7, |v| (v[0] * 5 + v[1] * 3 + v[2]) % 13 == 0);
+    let rows = h.allocated() as u32;
+    normal_fd_case(
+        &h,
+        &chunk(&h, rows - 40, 150, 1e-2, 1e-3),
+        "holes, wrapping",
+    );
+}
+
+#[test]
+fn normal_reg_adversarial() {
+    // Constant δ: every normal is zero → every pair skipped and counted, nothing changes.
+    let mut g = small_grid(6, 5, |_| false);
+    g.delta.iter_mut().for_each(|d| *d = 0.7);
+    let rs = row_slots(&g.links, g.allocated());
+    let mut grad = vec![0.25f32; g.allocated()];
+    let mut touched = vec![0u32; g.allocated()];
+    let c = chunk(&g, 0, 125, 1.0, 1.0);
+    // 4³ cells, all but (3, 3, 3) with a forward neighbour; 3·4·4·3 pairs.
+    assert_eq!(c.cells, 63);
+    let st = surface_normal_reg(&g.links, &rs, &g.delta, &mut grad, &mut touched, &c);
+    assert_eq!((st.loss, st.skipped), (0.0, 144));
+    assert!(grad.iter().all(|&v| v == 0.25) && touched.iter().all(|&t| t == 0));
+    // One flat cell among sloped ones: its pairs are skipped, the others still count in k_c.
+    let mut f = small_grid(10, 5, |_| false);
+    for x in 0..2 {
+        for y in 0..2 {
+            for z in 0..2 {
+                f.delta[f.links[(x * 5 + y) * 5 + z] as usize] = 0.5;
+            }
+        }
+    }
+    let cf = chunk(&f, 0, 125, 1e-2, 1e-3);
+    let (_, _, st) = run_normal(&f, &cf);
+    assert_eq!(
+        st.skipped, 3,
+        "the flat cell (0, 0, 0) has 3 neighbours, no backward ones"
+    );
+    // A single cell (2³ grid): no forward neighbour inside the grid → no term.
+    let g2 = small_grid(7, 2, |_| false);
+    let c2 = chunk(&g2, 3, 8, 1.0, 1.0);
+    assert_eq!(c2.cells, 0);
+    let (gr, t2, st) = run_normal(&g2, &c2);
+    assert_eq!((st.loss, st.skipped), (0.0, 0));
+    assert!(gr.iter().all(|&v| v == 0.0) && t2.iter().all(|&t| t == 0));
+    // An empty grid (no rows) and an empty chunk.
+    let empty = RegGrid {
+        res: [3; 3],
+        links: vec![-1; 27],
+        delta: vec![],
+        opacity: vec![],
+    };
+    let ce = chunk(&empty, 5, 10, 1.0, 1.0);
+    assert_eq!((ce.rows, ce.cells), (0, 0));
+    assert_eq!(run_normal(&empty, &ce).2, Default::default());
+    assert_eq!(
+        run_normal(&g, &chunk(&g, 5, 0, 1.0, 1.0)).2,
+        Default::default()
+    );
+    // Identical normals (δ linear) with L1: sign(0) = 0 → zero gradient, but touched.
+    let mut lin = small_grid(8, 4, |_| false);
+    for s in 0..64 {
+        let v = [s / 16, (s / 4) % 4, s % 4];
+        lin.delta[lin.links[s] as usize] = (v[0] + 2 * v[1] + 4 * v[2]) as f32;
+    }
+    let cl = chunk(&lin, 0, 64, 1.0, 0.0);
+    assert_eq!(cl.cells, 26);
+    let (gr, t3, st) = run_normal(&lin, &cl);
+    assert_eq!(st.loss, 0.0);
+    assert!(gr.iter().all(|&v| v == 0.0), "{gr:?}");
+    assert!(t3.iter().all(|&t| t == 1));
+    // A whole chunk starting anywhere (wrapping, count > rows) covers every cell once.
+    let g4 = small_grid(9, 6, |v| (v[0] * 5 + v[1] * 3 + v[2]) % 13 == 0);
+    let rows = g4.allocated() as u32;
+    let ca = chunk(&g4, 0, rows, 1e-2, 1e-3);
+    let cb = chunk(&g4, 100, 3 * rows, 1e-2, 1e-3);
+    assert!(ca.cells > 20 && ca.cells == cb.cells, "{ca:?} {cb:?}");
+    let (ga, ta, _) = run_normal(&g4, &ca);
+    let (gb, tb, _) = run_normal(&g4, &cb);
+    assert_eq!(ta, tb);
+    let a64: Vec<f64> = ga.iter().map(|&v| v as f64).collect();
+    let b64: Vec<f64> = gb.iter().map(|&v| v as f64).collect();
+    let e = rel_l2(&b64, &a64);
+    assert!(e <= 1e-5, "whole chunk from 0 vs from 100: rel L2 {e:e}");
+    // A wrapping chunk's M is the sum of its two pieces'.
+    let cw = chunk(&g4, rows - 30, 60, 1e-2, 1e-3);
+    let (p1, p2) = (
+        chunk(&g4, rows - 30, 30, 0.0, 0.0),
+        chunk(&g4, 0, 30, 0.0, 0.0),
+    );
+    assert_eq!(cw.cells, p1.cells + p2.cells);
+    // And the device agrees on it (the grid's x = max slab, unallocated neighbours).
+    let gpu = alphasurf::gpu::test_gpu();
+    let (want, want_t, st) = run_normal(&g4, &cw);
+    let out = gpu_normal_reg(gpu, &g4, &vec![0f32; g4.allocated()], &cw).unwrap();
+    assert_eq!(out.touched, want_t);
+    assert_eq!(out.skipped, st.skipped);
+    let (g64, w64): (Vec<f64>, Vec<f64>) = out
+        .grad
+        .iter()
+        .zip(&want)
+        .map(|(&a, &b)| (a as f64, b as f64))
+        .unzip();
+    assert!(rel_l2(&g64, &w64) <= 1e-5);
+    assert!((out.loss as f64 - st.loss).abs() <= 1e-5 * st.loss);
+    assert!(
+        gpu.validation_messages().is_empty(),
+        "{:?}",
+        gpu.validation_messages()
+    );
+}
+
+#[test]
+fn surface_rmsprop_twin_updates_touched_only() {
+    let n = 3;
+    let mut p: Vec<Vec<f32>> = vec![
+        vec![1.0; n],
+        vec![2.0; n],
+        vec![0.5; n * 27],
+        vec![0.1, 0.2, 0.0],
+        vec![-0.3; n],
+        vec![0.01; n * 27],
+        vec![0.0, 0.04, 0.0],
+        vec![0.0; n],
+        vec![0.0; n * 27],
+    ];
+    let mut touched = vec![1u32, 1, 0];
+    let h = SurfaceRmsProp {
+        lr_delta: 0.1,
+        lr_opacity: 0.01,
+        lr_sh: 0.001,
+        beta: 0.9,
+        eps: 1e-8,
+    };
+    let [d, o, sh, gd, go, gs, sd, so, ss] = &mut p[..] else {
+        unreachable!()
+    };
+    surface_rmsprop_sparse(
+        Stage2Params {
+            delta: d,
+            opacity: o,
+            sh,
+            grad_delta: gd,
+            grad_opacity: go,
+            grad_sh: gs,
+            state_delta: sd,
+            state_opacity: so,
+            state_sh: ss,
+        },
+        &mut touched,
+        &h,
+    );
+    assert_eq!(touched, vec![0, 0, 0]);
+    // Vertex 0: fresh state → r = g², step lr·sign(g).
+    assert!((p[0][0] - 0.9).abs() < 1e-6 && (p[6][0] - 0.01).abs() < 1e-9);
+    // Vertex 1: r = 0.9·0.04 + 0.1·0.04 = 0.04 → step 0.1·0.2/0.2.
+    assert!((p[0][1] - 0.9).abs() < 1e-6);
+    assert!((p[1][0] - 2.01).abs() < 1e-6 && (p[2][0] - 0.499).abs() < 1e-6);
+    // Gradients of touched vertices cleared; vertex 2 untouched entirely.
+    assert_eq!((p[3][0], p[4][1], p[5][26]), (0.0, 0.0, 0.0));
+    assert_eq!(
+        (p[0][2], p[1][2], p[2][2 * 27], p[4][2], p[5][2 * 27]),
+        (1.0, 2.0, 0.5, -0.3, 0.01)
+    );
+}
+
+#[test]
+fn parity_rows_pass() {
+    let gpu = alphasurf::gpu::test_gpu();
+    for name in [
+        "surface_opacity_reg",
+        "surface_normal_reg",
+        "surface_rmsprop",
+    ] {
+        let (_, f) = alphasurf::check::CHECKS
+            .iter()
+            .find(|(n, _)| *n == name)
+            .unwrap_or_else(|| panic!("{name} not registered"));
+        let row = f(gpu, 11).unwrap();
+        assert!(row.pass, "{row:?}");
+    }
+    assert!(
+        gpu.validation_messages().is_empty(),
+        "{:?}",
+        gpu.validation_messages()
+    );
+}
