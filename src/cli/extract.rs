@@ -1,14 +1,16 @@
 //! `alphasurf extract`: level-set point cloud of a trained grid as binary PLY (method.md §4). For
-//! a stage-1 density grid this is the Plenoxels baseline "Plen (σ = τ)": the surfaces σ = τ for
-//! each `--levels` value, with no opacity trimming.
+//! a stage-2 run (surface.npz) these are the αSurf surfaces δ = τ_i at the run's levels, trimmed
+//! by raw opacity σα ≥ `--min-alpha`. For a stage-1 density grid this is the Plenoxels baseline
+//! "Plen (σ = τ)": the surfaces σ = τ for each `--levels` value, with no opacity trimming.
 
 use super::train::Backend;
 use crate::cpu::extract_points::ExtractInput;
 use crate::data::SceneBox;
 use crate::eval::extract::{allocated_cells, extract_sorted, to_cloud, ExtractBackend, GridFrame};
 use crate::gpu::Gpu;
+use crate::grid::surface::SurfaceGrid;
 use crate::grid::{checkpoint, npz, Grid};
-use crate::train::stage1;
+use crate::train::{stage1, stage2};
 use anyhow::{ensure, Context, Result};
 use serde_json::json;
 use std::path::PathBuf;
@@ -17,7 +19,8 @@ use std::time::Instant;
 /// Arguments of `extract`.
 #[derive(clap::Args, Debug)]
 pub struct ExtractArgs {
-    /// A run directory written by `train` (its `plenoxels.npz`).
+    /// A run directory written by `train`: its `surface.npz` (stage 2) if there is one, else its
+    /// `plenoxels.npz` (stage 1).
     #[arg(long, required_unless_present = "ckpt", conflicts_with = "ckpt")]
     pub run: Option<PathBuf>,
     /// An svox2 `ckpt.npz` (or any npz with the svox2 grid arrays) instead of `--run`.
@@ -26,10 +29,11 @@ pub struct ExtractArgs {
     /// Output PLY (binary little-endian: x, y, z, level, alpha, nx, ny, nz; Blender units).
     #[arg(long)]
     pub out: PathBuf,
-    /// Level values τ, comma-separated (density units for a stage-1 grid; the paper sweeps
-    /// 10,30,50,70,90,100 and reports the best single level).
-    #[arg(long, value_delimiter = ',', default_value = "50")]
-    pub levels: Vec<f32>,
+    /// Level values τ, comma-separated, for a stage-1 grid (density units; the paper sweeps
+    /// 10,30,50,70,90,100 and reports the best single level). Default 50. A stage-2 run uses its
+    /// own levels; giving --levels there is an error.
+    #[arg(long, value_delimiter = ',')]
+    pub levels: Option<Vec<f32>>,
     /// Keep a crossing only where the trilerped raw opacity σα ≥ this (stage-2 grids; a stage-1
     /// density grid has no opacity field, so it is not used there).
     #[arg(long, default_value_t = 0.1)]
@@ -53,12 +57,22 @@ pub struct ExtractArgs {
     pub json: bool,
 }
 
+/// The field to extract: a stage-1 density grid, or a stage-2 surface grid.
+enum Field {
+    Density(Grid),
+    Surface(SurfaceGrid),
+}
+
 /// Load the grid named by `--run` or `--ckpt`.
-fn load_grid(args: &ExtractArgs) -> Result<(Grid, PathBuf)> {
+fn load_grid(args: &ExtractArgs) -> Result<(Field, PathBuf)> {
     if let Some(ckpt) = &args.ckpt {
-        return Ok((npz::load_svox2(ckpt)?, ckpt.clone()));
+        return Ok((Field::Density(npz::load_svox2(ckpt)?), ckpt.clone()));
     }
     let run = args.run.as_ref().context("give --run or --ckpt")?;
+    let surface = stage2::checkpoint_path(run);
+    if surface.exists() {
+        return Ok((Field::Surface(SurfaceGrid::load(&surface)?.grid), surface));
+    }
     let path = stage1::checkpoint_path(run);
     ensure!(
         path.exists(),
@@ -66,18 +80,13 @@ fn load_grid(args: &ExtractArgs) -> Result<(Grid, PathBuf)> {
         run.display(),
         stage1::CHECKPOINT
     );
-    Ok((checkpoint::load(&path)?.grid, path))
+    Ok((Field::Density(checkpoint::load(&path)?.grid), path))
 }
 
 /// Run the command.
 pub fn run(args: &ExtractArgs, gpu: Option<&Gpu>) -> Result<()> {
     let t0 = Instant::now();
-    ensure!(!args.levels.is_empty(), "--levels: give at least one level");
-    ensure!(
-        args.levels.iter().all(|l| l.is_finite()),
-        "--levels: every level must be finite, got {:?}",
-        args.levels
-    );
+
     ensure!(
         (1..=64).contains(&args.rays_per_axis),
         "--rays-per-axis must be in 1..=64, got {}",
@@ -92,27 +101,55 @@ pub fn run(args: &ExtractArgs, gpu: Option<&Gpu>) -> Result<()> {
         scene_scale > 0.0 && scene_scale.is_finite(),
         "--scene-scale must be positive"
     );
-    let (grid, path) = load_grid(args)?;
+    let (field, path) = load_grid(args)?;
     let t_load = t0.elapsed().as_secs_f64() * 1e3;
-    let cells = allocated_cells(grid.res, &grid.links)?;
+    let (res, center, radius, links) = match &field {
+        Field::Density(g) => (g.res, g.center, g.radius, &g.links),
+        Field::Surface(g) => (g.res, g.center, g.radius, &g.links),
+    };
+    let cells = allocated_cells(res, links)?;
+    let (values, opacity, levels) = match &field {
+        Field::Density(g) => {
+            let levels = args.levels.clone().unwrap_or(vec![50.0]);
+            println!(
+                "density levels {levels:?} (Plen σ = τ; no opacity field, --min-alpha {} not used)",
+                args.min_alpha
+            );
+            (&g.density, None, levels)
+        }
+        Field::Surface(g) => {
+            ensure!(
+                args.levels.is_none(),
+                "--levels applies to stage-1 grids; {} has its own levels {:?}",
+                path.display(),
+                g.levels
+            );
+            println!(
+                "αSurf levels τ = {:?} (δ units), kept where σα ≥ {}",
+                g.levels, args.min_alpha
+            );
+            (&g.delta, Some(g.opacity.as_slice()), g.levels.clone())
+        }
+    };
+    ensure!(!levels.is_empty(), "--levels: give at least one level");
+    ensure!(
+        levels.iter().all(|l| l.is_finite()),
+        "--levels: every level must be finite, got {levels:?}"
+    );
     println!(
         "grid {} : {:?} vertices, {} allocated, {} cells with 8 allocated corners",
         path.display(),
-        grid.res,
-        grid.allocated(),
+        res,
+        values.len(),
         cells.len()
-    );
-    println!(
-        "density levels {:?} (Plen σ = τ; no opacity field, --min-alpha {} not used)",
-        args.levels, args.min_alpha
     );
     let inp = ExtractInput {
         cells: &cells,
-        links: &grid.links,
-        field: &grid.density,
-        opacity: None,
-        levels: &args.levels,
-        res: grid.res,
+        links,
+        field: values,
+        opacity,
+        levels: &levels,
+        res,
         rays_per_axis: args.rays_per_axis,
         min_opacity: args.min_alpha,
     };
@@ -128,17 +165,16 @@ pub fn run(args: &ExtractArgs, gpu: Option<&Gpu>) -> Result<()> {
         );
     }
     let frame = GridFrame {
-        res: grid.res,
-        center: grid.center,
-        radius: grid.radius,
+        res,
+        center,
+        radius,
         scene_scale,
     };
-    let (cloud, tstats) = to_cloud(&points, &args.levels, &frame, args.thin_radius)?;
+    let (cloud, tstats) = to_cloud(&points, &levels, &frame, args.thin_radius)?;
     ensure!(
         !cloud.points.is_empty(),
-        "no surface points at levels {:?} (density range {:?}); nothing written",
-        args.levels,
-        density_range(&grid)
+        "no surface points at levels {levels:?} (field range {:?}); nothing written",
+        value_range(values)
     );
     let t_w = Instant::now();
     crate::io::write_ply(&args.out, &cloud)?;
@@ -151,7 +187,7 @@ pub fn run(args: &ExtractArgs, gpu: Option<&Gpu>) -> Result<()> {
         "{}² rays per axis and cell on {}: {} raw points in {:.1} ms (kernel {:.1} ms device)",
         args.rays_per_axis, backend_name, kstats.points, kstats.wall_ms, kstats.device_ms
     );
-    for (l, n) in args.levels.iter().zip(&tstats.per_level) {
+    for (l, n) in levels.iter().zip(&tstats.per_level) {
         println!("  level {l:>8}: {n:>9} points");
     }
     println!(
@@ -168,8 +204,8 @@ pub fn run(args: &ExtractArgs, gpu: Option<&Gpu>) -> Result<()> {
         let j = json!({
             "out": args.out,
             "grid": path,
-            "res": grid.res,
-            "levels": args.levels,
+            "res": res,
+            "levels": levels,
             "rays_per_axis": args.rays_per_axis,
             "backend": backend_name,
             "kernel": kstats,
@@ -182,9 +218,8 @@ pub fn run(args: &ExtractArgs, gpu: Option<&Gpu>) -> Result<()> {
     Ok(())
 }
 
-/// (min, max) of the density over the allocated vertices.
-fn density_range(grid: &Grid) -> (f32, f32) {
-    grid.density
-        .iter()
+/// (min, max) of the field over the allocated vertices.
+fn value_range(v: &[f32]) -> (f32, f32) {
+    v.iter()
         .fold((f32::MAX, f32::MIN), |(a, b), &x| (a.min(x), b.max(x)))
 }

@@ -8,6 +8,7 @@ pub mod extract;
 pub mod inspect;
 pub mod make_scene;
 mod train;
+mod train_surface;
 
 use crate::gpu::{Gpu, GpuOptions};
 use clap::{Parser, Subcommand};
@@ -42,8 +43,9 @@ pub enum Command {
     MakeScene(make_scene::MakeSceneArgs),
     /// Summarise a NeRF-synthetic dataset: splits, cameras, object bounds, warnings.
     Inspect(inspect::InspectArgs),
-    /// Train a reconstruction (stage 1: Plenoxels) with a progress bar, periodic atomic
-    /// checkpoints (`--resume`), test renders and metrics.json.
+    /// Train a reconstruction — stage 1 (Plenoxels), stage 2 (αSurf surfaces, `--init` from a
+    /// stage-1 run) or both — with a progress bar, periodic atomic checkpoints (`--resume`), test
+    /// renders, metrics.json and train_log.csv.
     Train(train::TrainArgs),
     /// Render a split of a trained run to PNG and print per-view and mean PSNR.
     Render(train::RenderArgs),

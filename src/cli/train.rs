@@ -13,8 +13,12 @@ use std::time::Instant;
 /// Which stage to train.
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Stage {
-    /// Stage 1: Plenoxels density + SH grid.
+    /// Stage 1: Plenoxels density + SH grid (writes plenoxels.npz).
     Plenoxels,
+    /// Stage 2: αSurf surfaces initialised from a stage-1 grid (`--init`; writes surface.npz).
+    Surface,
+    /// Stage 1 into OUT/plenoxels, then stage 2 from it into OUT/surface.
+    All,
 }
 
 /// Where the kernels run.
@@ -30,7 +34,7 @@ pub enum Backend {
 }
 
 /// Arguments of `train`.
-#[derive(clap::Args, Debug)]
+#[derive(clap::Args, Debug, Clone)]
 pub struct TrainArgs {
     /// Which stage.
     #[arg(long, value_enum, default_value = "plenoxels")]
@@ -38,16 +42,37 @@ pub struct TrainArgs {
     /// Dataset directory (NeRF-synthetic format, e.g. from `make-scene`).
     #[arg(long)]
     pub data: PathBuf,
+    /// Stage 2: the stage-1 run directory (its plenoxels.npz) or an svox2 `ckpt.npz` to
+    /// initialise from.
+    #[arg(long, required_if_eq("stage", "surface"))]
+    pub init: Option<PathBuf>,
+    /// Stage 2 hyper-parameters from the paper's supplement: thin, translucent, synthetic
+    /// (= thin), real or dtu (levels, learning rates, regulariser weights, truncation schedule).
+    #[arg(long, default_value = "thin")]
+    pub category: String,
+    /// Stage 2: initial raw opacity σα = s·σ (default: the category's, 0.05; the released code
+    /// used 0.005).
+    #[arg(long)]
+    pub alpha_init_scale: Option<f32>,
+    /// Stage 2 steps (overrides the preset; with `--stage all`, `--iters` is stage 1's).
+    #[arg(long)]
+    pub surface_iters: Option<u32>,
+    /// Stage 2: override any field of the configuration (as printed in metrics.json), e.g.
+    /// `--set lambda_h=1e-3 --set lr_delta.init=1e-4`; the value is JSON. Repeatable.
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub set: Vec<String>,
     /// Run directory: checkpoints, test renders, metrics.json.
     #[arg(long)]
     pub out: PathBuf,
-    /// Schedule: `paper` (svox2's synthetic schedule, 256³→512³, 128k steps) or `fast` (sized for
-    /// a 2-core CPU: 64³→128³, 3000 steps).
+    /// Schedule: `paper` (svox2's synthetic schedule, 256³→512³, 128k steps; stage 2: 50k steps
+    /// of 5000 rays) or `fast` (sized for a 2-core CPU: 64³→128³, 3000 steps; stage 2: 1500 steps
+    /// of 4096 rays, every schedule scaled alike).
     #[arg(long, default_value = "fast")]
     pub preset: String,
     #[arg(long, value_enum, default_value = "auto")]
     pub backend: Backend,
-    /// Number of steps (overrides the preset; the learning-rate decays keep their length).
+    /// Number of steps (overrides the preset; stage 1's learning-rate decays keep their length,
+    /// stage 2's schedules scale with it).
     #[arg(long)]
     pub iters: Option<u32>,
     /// Final grid resolution (the preset's upsampling schedule is scaled to it).
@@ -137,8 +162,35 @@ fn config(args: &TrainArgs) -> Result<Stage1Config> {
     Ok(cfg)
 }
 
-/// Run `train`.
+/// Run `train`: the stage(s) asked for.
 pub fn run_train(args: &TrainArgs, gpu: Option<&Gpu>) -> Result<()> {
+    match args.stage {
+        Stage::Plenoxels => run_stage1(args, gpu),
+        Stage::Surface => super::train_surface::run(args, gpu),
+        Stage::All => {
+            let stage1_dir = args.out.join("plenoxels");
+            run_stage1(
+                &TrainArgs {
+                    out: stage1_dir.clone(),
+                    ..args.clone()
+                },
+                gpu,
+            )?;
+            super::train_surface::run(
+                &TrainArgs {
+                    out: args.out.join("surface"),
+                    init: Some(stage1_dir),
+                    iters: args.surface_iters,
+                    ..args.clone()
+                },
+                gpu,
+            )
+        }
+    }
+}
+
+/// Run stage 1.
+fn run_stage1(args: &TrainArgs, gpu: Option<&Gpu>) -> Result<()> {
     let t_all = Instant::now();
     let t = Instant::now();
     let data = Dataset::load(
@@ -256,7 +308,7 @@ pub fn run_train(args: &TrainArgs, gpu: Option<&Gpu>) -> Result<()> {
     write_json(&args.out.join("metrics.json"), &metrics)
 }
 
-fn write_json(path: &Path, v: &serde_json::Value) -> Result<()> {
+pub(super) fn write_json(path: &Path, v: &serde_json::Value) -> Result<()> {
     std::fs::write(path, serde_json::to_vec_pretty(v)?)
         .with_context(|| format!("writing {}", path.display()))
 }

@@ -3,9 +3,25 @@
 //! dilated twice over the 26-neighbourhood; rescale δ and τ by the mean forward-difference
 //! gradient norm so δ is SDF-like; raw opacity σα = s·σ; SH copied.
 
+use super::npz::{self, Data, NpzReader};
 use super::{dilate, Grid, SH_DIM};
 use crate::cpu::surface_fwd::SurfaceGridRef;
-use anyhow::{ensure, Result};
+use anyhow::{bail, ensure, Context, Result};
+use std::path::Path;
+
+/// Metadata array of a stage-2 checkpoint (JSON as uint8 bytes).
+const META: &str = "alphasurf_meta";
+/// Prefix of the optimiser-state arrays.
+const OPTIM_PREFIX: &str = "optim_";
+
+/// A loaded stage-2 checkpoint.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SurfaceCheckpoint {
+    pub grid: SurfaceGrid,
+    /// Optimiser state by name, in file order.
+    pub optim: Vec<(String, Vec<f32>)>,
+    pub meta: serde_json::Value,
+}
 
 /// How to turn a density grid into a surface grid.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -51,6 +67,130 @@ impl SurfaceGrid {
             opacity: &self.opacity,
             sh: &self.sh,
         }
+    }
+
+    /// Array sizes, link ranges and uniqueness, finite values.
+    pub fn validate(&self) -> Result<()> {
+        ensure!(
+            self.res[0] == self.res[1] && self.res[1] == self.res[2],
+            "surface grids are cubic, got {:?}",
+            self.res
+        );
+        self.as_ref().validate()?;
+        let mut seen = vec![false; self.delta.len()];
+        for &l in &self.links {
+            if l >= 0 {
+                ensure!(
+                    !std::mem::replace(&mut seen[l as usize], true),
+                    "links: row {l} is used by two vertices"
+                );
+            }
+        }
+        ensure!(
+            !self.levels.is_empty() && self.levels.len() <= 8,
+            "{} levels (1 ..= 8 allowed)",
+            self.levels.len()
+        );
+        for (name, v) in [
+            ("delta", &self.delta),
+            ("opacity", &self.opacity),
+            ("sh", &self.sh),
+            ("levels", &self.levels),
+        ] {
+            if let Some(i) = v.iter().position(|x| !x.is_finite()) {
+                bail!("{name}: non-finite value {} at index {i}", v[i]);
+            }
+        }
+        Ok(())
+    }
+
+    /// Drop the surfaces that cannot reach α ≥ `min_alpha` (method.md §3.5): a vertex goes when
+    /// every cell it belongs to has all 8 corners below the raw opacity −ln(1 − min_alpha). A
+    /// trilerped σα never exceeds its cell's largest corner, so the surfaces kept are exactly those
+    /// where some point can reach the threshold. Returns the number of vertices removed.
+    pub fn prune_transparent(&mut self, min_alpha: f32) -> usize {
+        let thresh = -(1.0 - min_alpha).ln();
+        let n = self.res[0] as usize;
+        let slot = |x: usize, y: usize, z: usize| (x * n + y) * n + z;
+        let mut keep = vec![false; self.links.len()];
+        for x in 0..n - 1 {
+            for y in 0..n - 1 {
+                for z in 0..n - 1 {
+                    let corners = [0, 1, 2, 3, 4, 5, 6, 7]
+                        .map(|i| slot(x + (i >> 2 & 1), y + (i >> 1 & 1), z + (i & 1)));
+                    let lk = corners.map(|s| self.links[s]);
+                    if lk.iter().any(|&l| l < 0) {
+                        continue;
+                    }
+                    if lk.iter().any(|&l| self.opacity[l as usize] >= thresh) {
+                        corners.iter().for_each(|&s| keep[s] = true);
+                    }
+                }
+            }
+        }
+        let before = self.delta.len();
+        let mut next = SurfaceGrid {
+            links: vec![-1; self.links.len()],
+            delta: Vec::new(),
+            opacity: Vec::new(),
+            sh: Vec::new(),
+            ..self.clone()
+        };
+        for (s, &l) in self.links.iter().enumerate() {
+            if l < 0 || !keep[s] {
+                continue;
+            }
+            let l = l as usize;
+            next.links[s] = next.delta.len() as i32;
+            next.delta.push(self.delta[l]);
+            next.opacity.push(self.opacity[l]);
+            next.sh
+                .extend_from_slice(&self.sh[l * SH_DIM..(l + 1) * SH_DIM]);
+        }
+        *self = next;
+        before - self.delta.len()
+    }
+
+    /// Write a checkpoint atomically (temp file, fsync, rename): the grid, named optimiser arrays
+    /// and JSON metadata. Refuses invalid or non-finite data, leaving the previous file intact.
+    pub fn save(
+        &self,
+        path: &Path,
+        optim: &[(String, Vec<f32>)],
+        meta: &serde_json::Value,
+    ) -> Result<()> {
+        (|| -> Result<()> {
+            self.validate()?;
+            for (name, v) in optim {
+                if let Some(j) = v.iter().position(|x| !x.is_finite()) {
+                    bail!("optimiser array '{name}': non-finite value {} at {j}", v[j]);
+                }
+            }
+            let meta = serde_json::to_vec(meta)?;
+            let n = self.delta.len() as u64;
+            npz::write_atomic(path, |w| {
+                w.array("links", &self.res.map(u64::from), &self.links)?;
+                w.array("delta_data", &[n], &self.delta)?;
+                w.array("opacity_data", &[n], &self.opacity)?;
+                w.array("sh_data", &[n, SH_DIM as u64], &self.sh)?;
+                w.array("levels", &[self.levels.len() as u64], &self.levels)?;
+                w.array("radius", &[3], &self.radius)?;
+                w.array("center", &[3], &self.center)?;
+                w.array("gradient_scale", &[1], &[self.gradient_scale])?;
+                for (name, v) in optim {
+                    w.array(&format!("{OPTIM_PREFIX}{name}"), &[v.len() as u64], v)?;
+                }
+                w.array(META, &[meta.len() as u64], &meta)
+            })
+        })()
+        .with_context(|| format!("saving surface checkpoint {}", path.display()))
+    }
+
+    /// Load and validate a checkpoint written by [`SurfaceGrid::save`].
+    pub fn load(path: &Path) -> Result<SurfaceCheckpoint> {
+        let mut r = NpzReader::open(path)?;
+        read_checkpoint(&mut r)
+            .with_context(|| format!("loading surface checkpoint {}", path.display()))
     }
 
     /// Initialise from a stage-1 density grid (method.md §3.1).
@@ -140,6 +280,65 @@ impl SurfaceGrid {
     }
 }
 
+fn read_checkpoint(r: &mut NpzReader) -> Result<SurfaceCheckpoint> {
+    ensure!(
+        r.contains("delta_data") && r.contains(META),
+        "no 'delta_data' or '{META}' array: not a stage-2 (surface) checkpoint"
+    );
+    let links = r.read("links")?;
+    let Data::I32(links_v) = links.data else {
+        bail!(
+            "array 'links' has dtype {}, expected int32",
+            links.data.kind()
+        );
+    };
+    ensure!(
+        links.shape.len() == 3 && links.shape.iter().all(|&d| d <= 4096),
+        "array 'links' has shape {:?}, expected (N, N, N)",
+        links.shape
+    );
+    let mut f32s = |name: &str| -> Result<Vec<f32>> { r.read(name)?.into_f32(name) };
+    let vec3 = |v: Vec<f32>, name: &str| -> Result<[f32; 3]> {
+        ensure!(
+            v.len() == 3,
+            "array '{name}' has {} values, expected 3",
+            v.len()
+        );
+        Ok([v[0], v[1], v[2]])
+    };
+    let grid = SurfaceGrid {
+        res: [0, 1, 2].map(|i| links.shape[i] as u32),
+        links: links_v.into_iter().map(|l| l.max(-1)).collect(),
+        delta: f32s("delta_data")?,
+        opacity: f32s("opacity_data")?,
+        sh: f32s("sh_data")?,
+        levels: f32s("levels")?,
+        radius: vec3(f32s("radius")?, "radius")?,
+        center: vec3(f32s("center")?, "center")?,
+        gradient_scale: *f32s("gradient_scale")?
+            .first()
+            .context("empty gradient_scale")?,
+    };
+    grid.validate()?;
+    let meta = match r.read(META)?.data {
+        Data::U8(bytes) => serde_json::from_slice(&bytes)
+            .with_context(|| format!("array '{META}' is not valid JSON"))?,
+        d => bail!("array '{META}' has dtype {}, expected uint8", d.kind()),
+    };
+    let mut optim = Vec::new();
+    for array in r.names() {
+        let Some(name) = array.strip_prefix(OPTIM_PREFIX) else {
+            continue;
+        };
+        let v = r.read(&array)?.into_f32(&array)?;
+        if let Some(j) = v.iter().position(|x| !x.is_finite()) {
+            bail!("array '{array}': non-finite value {} at {j}", v[j]);
+        }
+        optim.push((name.to_owned(), v));
+    }
+    Ok(SurfaceCheckpoint { grid, optim, meta })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -203,7 +402,44 @@ mod tests {
         let src = g.links[centre] as usize;
         assert_eq!(s.opacity[row], 0.05 * g.density[src]);
         assert_eq!(s.sh[row * SH_DIM + 3], g.sh[src * SH_DIM + 3]);
-        assert!(s.as_ref().validate().is_ok());
+        assert!(s.validate().is_ok());
+    }
+
+    #[test]
+    fn checkpoint_round_trip_and_prune() {
+        let mut s = SurfaceGrid::from_density(&ball(16), &SurfaceInit::default()).unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("surface.npz");
+        let optim = vec![("rms_delta".to_string(), vec![0.5; s.delta.len()])];
+        s.save(&path, &optim, &serde_json::json!({"step": 3}))
+            .unwrap();
+        let ck = SurfaceGrid::load(&path).unwrap();
+        assert_eq!(ck.grid, s);
+        assert_eq!(ck.optim, optim);
+        assert_eq!(ck.meta["step"], 3);
+        // NaN is refused and the previous file survives.
+        let mut bad = s.clone();
+        bad.opacity[0] = f32::NAN;
+        assert!(bad.save(&path, &[], &serde_json::json!({})).is_err());
+        assert_eq!(SurfaceGrid::load(&path).unwrap().grid, s);
+        // A stage-1 checkpoint is not a surface checkpoint.
+        let e = SurfaceGrid::load(&dir.path().join("missing.npz")).unwrap_err();
+        assert!(format!("{e:#}").contains("missing.npz"), "{e:#}");
+        // Prune: make one vertex opaque, the rest transparent; exactly the vertices of the
+        // cells around it survive (a 3×3×3 block when it is interior).
+        let c = s.links.iter().position(|&l| l >= 0).unwrap();
+        let centre = (0..s.links.len())
+            .find(|&slot| {
+                let n = 16usize;
+                let (x, y, z) = (slot / (n * n), slot / n % n, slot % n);
+                (x, y, z) == (8, 8, 8)
+            })
+            .unwrap_or(c);
+        s.opacity.iter_mut().for_each(|o| *o = 0.01);
+        s.opacity[s.links[centre] as usize] = 1.0;
+        let removed = s.prune_transparent(0.1);
+        assert_eq!(s.delta.len(), 27, "removed {removed}");
+        assert!(s.validate().is_ok());
     }
 
     #[test]

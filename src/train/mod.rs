@@ -6,7 +6,10 @@ pub mod progress;
 pub mod render;
 pub mod schedule;
 pub mod stage1;
+pub mod stage2;
+pub mod surface_config;
 
 pub use config::Stage1Config;
-pub use render::{psnr, render_split, RenderedSplit};
+pub use render::{psnr, render_split, render_split_with, RenderedSplit};
 pub use schedule::DelayedExp;
+pub use surface_config::SurfaceConfig;

@@ -19,12 +19,28 @@ pub fn psnr(mse: f64) -> f64 {
     -10.0 * mse.max(1e-20).log10()
 }
 
-/// Render every view of `split` into `out/r_<i>.png` and measure PSNR.
+/// Render every view of `split` through a stage-1 backend into `out/r_<i>.png` and measure PSNR.
 pub fn render_split(
     backend: &mut dyn Plenoxels,
     data: &Dataset,
     split: &Split,
     stop_thresh: f32,
+    out: &Path,
+) -> Result<RenderedSplit> {
+    render_split_with(
+        &mut |rays| Ok(backend.render(rays, stop_thresh)?.0),
+        data,
+        split,
+        out,
+    )
+}
+
+/// Render every view of `split` with `render` (rays, 6 floats each → rgb, 3 floats each) into
+/// `out/r_<i>.png` and measure PSNR.
+pub fn render_split_with(
+    render: &mut dyn FnMut(&[f32]) -> Result<Vec<f32>>,
+    data: &Dataset,
+    split: &Split,
     out: &Path,
 ) -> Result<RenderedSplit> {
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
@@ -34,7 +50,7 @@ pub fn render_split(
         let rays = b.flat_rays();
         let mut rgb = Vec::with_capacity(3 * b.len());
         for chunk in rays.chunks(6 * 131_072) {
-            rgb.extend(backend.render(chunk, stop_thresh)?.0);
+            rgb.extend(render(chunk)?);
         }
         let mse = rgb
             .iter()

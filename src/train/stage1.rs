@@ -38,7 +38,7 @@ pub struct Stage1Report {
 }
 
 /// Seeded per step, so a resumed run draws the same batches as an uninterrupted one.
-fn step_rng(seed: u64, step: u32) -> Pcg64 {
+pub(crate) fn step_rng(seed: u64, step: u32) -> Pcg64 {
     Pcg64::seed_from_u64(seed ^ (step as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15))
 }
 

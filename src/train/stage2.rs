@@ -1,0 +1,250 @@
+//! The stage-2 (αSurf) training loop: batches of training rays, one backend step each with the
+//! scheduled learning rates, truncation a and regularisers; periodic atomic checkpoints
+//! (resumable); NaN/Inf detection; at the end the α < 0.1 surfaces are dropped, the test split
+//! rendered and metrics.json written.
+
+use super::progress::Progress;
+use super::render::{render_split_with, RenderedSplit};
+use super::stage1::step_rng;
+use super::surface_config::SurfaceConfig;
+use crate::data::{Dataset, RaySampler};
+use crate::grid::surface::SurfaceGrid;
+use crate::surface::{SurfaceBackend, SurfaceRegs, SurfaceStepParams};
+use anyhow::{bail, Context, Result};
+use rand::Rng;
+use serde_json::json;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// File name of the stage-2 checkpoint inside a run directory.
+pub const CHECKPOINT: &str = "surface.npz";
+/// Per-step log: step, mse, batch PSNR, entropy, consistency, seconds since the start.
+pub const LOG: &str = "train_log.csv";
+
+/// Wall time per phase, throughput and counters of a finished run.
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct Stage2Report {
+    pub steps: u32,
+    pub train_seconds: f64,
+    pub checkpoint_seconds: f64,
+    pub render_seconds: f64,
+    /// Training rays per second over the steps after the first 10.
+    pub train_rays_per_s: f64,
+    pub final_mse: f64,
+    pub test_psnr: f64,
+    /// Per training ray: cells visited, cubic solves, solves skipped by min/max culling, hits,
+    /// hits cut by truncation, hits with a guarded δ gradient, gradient atomic adds.
+    pub per_ray: [f64; 7],
+    pub vertices_before_prune: usize,
+    pub allocated_vertices: usize,
+}
+
+/// The run directory's checkpoint path.
+pub fn checkpoint_path(run: &Path) -> PathBuf {
+    run.join(CHECKPOINT)
+}
+
+/// Write the checkpoint of `step` atomically (refuses non-finite values).
+fn save(backend: &dyn SurfaceBackend, cfg: &SurfaceConfig, out: &Path, step: u32) -> Result<()> {
+    let grid = backend.grid()?;
+    let [sd, so, ss] = backend.optimizer_state()?;
+    let meta = json!({ "stage": "surface", "step": step, "config": cfg });
+    grid.save(
+        &out.join(CHECKPOINT),
+        &[
+            ("rms_delta".into(), sd),
+            ("rms_opacity".into(), so),
+            ("rms_sh".into(), ss),
+        ],
+        &meta,
+    )
+    .with_context(|| format!("after step {step}"))
+}
+
+/// Restore grid, optimiser state and step from a stage-2 checkpoint; returns the next step.
+pub fn resume(backend: &mut dyn SurfaceBackend, path: &Path) -> Result<(u32, SurfaceConfig)> {
+    let ck = SurfaceGrid::load(path)?;
+    if ck.meta["stage"] != "surface" {
+        bail!("{} is not a stage-2 (surface) checkpoint", path.display());
+    }
+    let step = ck.meta["step"]
+        .as_u64()
+        .with_context(|| format!("{}: metadata has no step", path.display()))?
+        as u32;
+    let cfg: SurfaceConfig = serde_json::from_value(ck.meta["config"].clone())
+        .with_context(|| format!("{}: metadata has no valid config", path.display()))?;
+    let state = |name: &str| {
+        ck.optim
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, v)| v.clone())
+            .with_context(|| format!("{}: no optimiser array {name}", path.display()))
+    };
+    let state = [state("rms_delta")?, state("rms_opacity")?, state("rms_sh")?];
+    backend.load(ck.grid, Some(state))?;
+    Ok((step, cfg))
+}
+
+/// The scheduled parameters of step `step` (random regulariser chunks from `rng`).
+fn step_params(
+    cfg: &SurfaceConfig,
+    grid_slots: u32,
+    rows: u32,
+    step: u32,
+    rng: &mut impl Rng,
+) -> SurfaceStepParams {
+    let mut chunk = |total: u32, fraction: f32| {
+        let count = ((total as f32 * fraction) as u32).clamp(1, total.max(1));
+        (rng.random_range(0..=total.saturating_sub(count)), count)
+    };
+    let (tv_start, tv_count) = chunk(grid_slots, cfg.tv_alpha_fraction);
+    let (la_start, la_count) = chunk(rows, cfg.alpha_fraction);
+    let (n_start, n_count) = chunk(grid_slots, cfg.normal_fraction);
+    let (ln1, ln2) = (cfg.lambda_n1.at(step), cfg.lambda_n2);
+    SurfaceStepParams {
+        lr_delta: cfg.lr_delta.at(step),
+        lr_opacity: cfg.lr_opacity.at(step),
+        lr_sh: cfg.lr_sh.at(step),
+        beta: cfg.beta,
+        eps: cfg.eps,
+        a: cfg.a.at(step),
+        stop_thresh: cfg.stop_thresh,
+        lambda_h: cfg.lambda_h,
+        lambda_c: if step < cfg.lambda_c_until {
+            cfg.lambda_c
+        } else {
+            0.0
+        },
+        regs: SurfaceRegs {
+            delta_tv: (cfg.lambda_delta > 0.0).then_some(cfg.lambda_delta),
+            opacity_tv: (cfg.lambda_tv_alpha > 0.0).then_some((
+                tv_start,
+                tv_count,
+                cfg.lambda_tv_alpha,
+            )),
+            opacity_log: (cfg.lambda_alpha > 0.0).then_some((la_start, la_count, cfg.lambda_alpha)),
+            normals: (ln1 > 0.0 || ln2 > 0.0).then_some((n_start, n_count, ln1, ln2)),
+        },
+    }
+}
+
+/// Train stage 2 from `start_step` to `cfg.iters`, then prune, save, render the test split into
+/// `out/test/` and write `out/metrics.json`'s report.
+pub fn train(
+    backend: &mut dyn SurfaceBackend,
+    data: &Dataset,
+    cfg: &SurfaceConfig,
+    out: &Path,
+    start_step: u32,
+    show_progress: bool,
+) -> Result<(Stage2Report, RenderedSplit)> {
+    std::fs::create_dir_all(out)
+        .with_context(|| format!("creating run directory {}", out.display()))?;
+    let log_path = out.join(LOG);
+    let mut log = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(&log_path)
+        .with_context(|| format!("opening {}", log_path.display()))?;
+    if start_step == 0 {
+        log.set_len(0)?;
+        writeln!(log, "step,mse,psnr_batch,entropy,consistency,elapsed_s")?;
+    }
+    let mut report = Stage2Report::default();
+    let mut progress = Progress::new(cfg.iters as u64, start_step as u64, show_progress);
+    let (mut timed_rays, mut timed_secs, mut rays_total) = (0u64, 0.0f64, 0u64);
+    let mut totals = [0u64; 7];
+    let mut mse = f64::NAN;
+    let t_start = Instant::now();
+    let grid0 = backend.grid()?;
+    let (slots, rows) = (grid0.links.len() as u32, grid0.delta.len() as u32);
+    drop(grid0);
+    for step in start_step..cfg.iters {
+        let t = Instant::now();
+        let mut rng = step_rng(cfg.seed, step);
+        let batch = RaySampler::new(&data.train, rng.random()).next_batch(
+            &data.train,
+            &data.scene,
+            cfg.batch as usize,
+        );
+        let p = step_params(cfg, slots, rows, step, &mut rng);
+        let stats = backend.step(&batch.flat_rays(), &batch.flat_targets(), &p)?;
+        if !(stats.mse.is_finite() && stats.entropy.is_finite() && stats.consistency.is_finite()) {
+            bail!(
+                "non-finite loss at step {step} (mse {}, entropy {}, consistency {}); the last \
+                 good checkpoint is {}",
+                stats.mse,
+                stats.entropy,
+                stats.consistency,
+                out.join(CHECKPOINT).display()
+            );
+        }
+        mse = stats.mse;
+        let secs = t.elapsed().as_secs_f64();
+        if step >= start_step + 10 {
+            timed_rays += batch.len() as u64;
+            timed_secs += secs;
+        }
+        rays_total += batch.len() as u64;
+        for (a, &c) in totals.iter_mut().zip(&stats.counts) {
+            *a += c as u64;
+        }
+        writeln!(
+            log,
+            "{},{:.6e},{:.3},{:.5},{:.5},{:.3}",
+            step + 1,
+            mse,
+            super::psnr(mse),
+            stats.entropy,
+            stats.consistency,
+            t_start.elapsed().as_secs_f64()
+        )?;
+        let rays_per_s = (timed_secs > 0.0).then(|| timed_rays as f64 / timed_secs);
+        progress.step(step as u64 + 1, mse, rays_per_s);
+        report.train_seconds += secs;
+        if (step + 1) % cfg.checkpoint_every == 0 && step + 1 < cfg.iters {
+            let t = Instant::now();
+            save(backend, cfg, out, step + 1)?;
+            report.checkpoint_seconds += t.elapsed().as_secs_f64();
+        }
+    }
+    progress.finish();
+    log.flush()?;
+
+    // Drop the surfaces that cannot reach α ≥ prune_alpha; the optimiser state ends with them.
+    let mut grid = backend.grid()?;
+    report.vertices_before_prune = grid.delta.len();
+    grid.prune_transparent(cfg.prune_alpha);
+    if grid.delta.is_empty() {
+        bail!(
+            "no surface reaches α ≥ {} after training: nothing left (training diverged?)",
+            cfg.prune_alpha
+        );
+    }
+    backend.load(grid, None)?;
+    let t = Instant::now();
+    save(backend, cfg, out, cfg.iters)?;
+    report.checkpoint_seconds += t.elapsed().as_secs_f64();
+
+    let t = Instant::now();
+    let a = cfg.a.at(cfg.iters);
+    let rendered = render_split_with(
+        &mut |rays| Ok(backend.render(rays, a, cfg.stop_thresh)?.0),
+        data,
+        &data.test,
+        &out.join("test"),
+    )?;
+    report.render_seconds = t.elapsed().as_secs_f64();
+    report.steps = cfg.iters;
+    report.train_rays_per_s = if timed_secs > 0.0 {
+        timed_rays as f64 / timed_secs
+    } else {
+        0.0
+    };
+    report.final_mse = mse;
+    report.test_psnr = rendered.mean_psnr;
+    report.per_ray = totals.map(|s| s as f64 / rays_total.max(1) as f64);
+    report.allocated_vertices = backend.grid()?.delta.len();
+    Ok((report, rendered))
+}

@@ -1,0 +1,223 @@
+//! Stage-2 (αSurf) configuration: the supplement's hyper-parameters per data category
+//! (method.md §3.4–3.5) combined with a size preset — `paper` (50k steps of 5000 rays) or `fast`
+//! (a CPU-sized schedule with every step-count scaled by the same factor). One trainer runs both.
+
+use super::schedule::DelayedExp;
+use crate::grid::surface::SurfaceInit;
+use anyhow::{bail, Result};
+use serde::{Deserialize, Serialize};
+
+/// A linear ramp from `start` to `end` over the first `steps` steps, then `end`.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Linear {
+    pub start: f32,
+    pub end: f32,
+    pub steps: u32,
+}
+
+impl Linear {
+    pub fn constant(v: f32) -> Self {
+        Linear {
+            start: v,
+            end: v,
+            steps: 0,
+        }
+    }
+
+    /// The value at step `t`.
+    pub fn at(&self, t: u32) -> f32 {
+        if t >= self.steps {
+            return self.end;
+        }
+        let u = t as f32 / self.steps as f32;
+        self.start + u * (self.end - self.start)
+    }
+}
+
+/// Everything that shapes a stage-2 run; stored in checkpoints and metrics.json.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SurfaceConfig {
+    pub preset: String,
+    pub category: String,
+    pub init: SurfaceInit,
+    pub iters: u32,
+    /// Rays per batch.
+    pub batch: u32,
+    pub lr_delta: DelayedExp,
+    pub lr_opacity: DelayedExp,
+    pub lr_sh: DelayedExp,
+    /// Truncation parameter a.
+    pub a: Linear,
+    /// Entropy weight LH (per-ray term, mean over the batch).
+    pub lambda_h: f32,
+    /// Depth-consistency weight Lc, switched off from step `lambda_c_until` on.
+    pub lambda_c: f32,
+    pub lambda_c_until: u32,
+    /// Lδ: TV on δ over every allocated vertex.
+    pub lambda_delta: f32,
+    /// TVα on a random chunk of this fraction of the slots.
+    pub lambda_tv_alpha: f32,
+    pub tv_alpha_fraction: f32,
+    /// Lα on a random chunk of this fraction of the vertex rows.
+    pub lambda_alpha: f32,
+    pub alpha_fraction: f32,
+    /// Ln1 (linear schedule) and Ln2 on a random chunk of this fraction of the cell slots.
+    pub lambda_n1: Linear,
+    pub lambda_n2: f32,
+    pub normal_fraction: f32,
+    /// Drop surfaces with α below this at the end.
+    pub prune_alpha: f32,
+    pub stop_thresh: f32,
+    pub beta: f32,
+    pub eps: f32,
+    /// Write a checkpoint every this many steps (and at the end).
+    pub checkpoint_every: u32,
+    pub seed: u64,
+}
+
+/// The categories `--category` accepts.
+pub const CATEGORIES: [&str; 5] = ["thin", "translucent", "synthetic", "real", "dtu"];
+
+impl SurfaceConfig {
+    /// The paper's set-up for `category` (50k steps × 5000 rays).
+    pub fn paper(category: &str) -> Result<Self> {
+        // Synthetic / thin values (supplement B.2), then the per-category changes.
+        let mut c = SurfaceConfig {
+            preset: "paper".into(),
+            category: category.into(),
+            init: SurfaceInit::default(),
+            iters: 50_000,
+            batch: 5000,
+            lr_delta: DelayedExp {
+                init: 1e-5,
+                last: 1e-5,
+                max_steps: 50_000,
+                delay_steps: 25_000,
+                delay_mult: 0.01,
+            },
+            lr_opacity: DelayedExp {
+                init: 1e-2,
+                last: 1e-3,
+                max_steps: 50_000,
+                delay_steps: 25_000,
+                delay_mult: 0.01,
+            },
+            lr_sh: DelayedExp::constant(1e-3),
+            a: Linear {
+                start: 5.0,
+                end: 2.0,
+                steps: 10_000,
+            },
+            lambda_h: 1e-4,
+            lambda_c: 1e-6,
+            lambda_c_until: 10_000,
+            lambda_delta: 1e-3,
+            lambda_tv_alpha: 1e-5,
+            tv_alpha_fraction: 0.01,
+            lambda_alpha: 1e-9,
+            alpha_fraction: 0.1,
+            lambda_n1: Linear::constant(1e-6),
+            lambda_n2: 0.0,
+            normal_fraction: 1.0,
+            prune_alpha: 0.1,
+            stop_thresh: 1e-4,
+            beta: 0.95,
+            eps: 1e-8,
+            checkpoint_every: 5000,
+            seed: 0,
+        };
+        match category {
+            "thin" | "synthetic" => {}
+            "translucent" => {
+                c.lambda_delta = 1e-5;
+                c.lambda_alpha = 1e-11;
+                c.lambda_n1 = Linear {
+                    start: 1e-2,
+                    end: 1e-4,
+                    steps: c.iters,
+                };
+                c.lambda_n2 = 1e-4;
+            }
+            "real" | "dtu" => {
+                c.init.density_levels = vec![10.0, 30.0, 50.0];
+                c.lr_delta.init = 1e-4;
+                c.lr_delta.last = 1e-4;
+                c.lambda_delta = 5e-3;
+                c.lambda_n1 = Linear {
+                    start: 1e-2,
+                    end: 1e-3,
+                    steps: c.iters,
+                };
+                c.lambda_n2 = 1e-3;
+                if category == "dtu" {
+                    c.lambda_delta = 0.05;
+                    c.lambda_h = 1e-3;
+                    c.lambda_alpha = 1e-8;
+                    c.lr_delta.last = 1e-6;
+                    c.a = Linear::constant(5.0);
+                }
+            }
+            other => bail!(
+                "unknown category {other:?} (expected one of {})",
+                CATEGORIES.join(", ")
+            ),
+        }
+        Ok(c)
+    }
+
+    /// `preset` (paper or fast) for `category`.
+    pub fn preset(preset: &str, category: &str) -> Result<Self> {
+        let paper = Self::paper(category)?;
+        match preset {
+            "paper" => Ok(paper),
+            "fast" => {
+                let mut c = paper.scaled(1500);
+                c.preset = "fast".into();
+                c.batch = 4096;
+                c.checkpoint_every = 500;
+                Ok(c)
+            }
+            other => bail!("unknown preset {other:?} (expected fast or paper)"),
+        }
+    }
+
+    /// The same schedule over `iters` steps: every step count (delays, decays, a's ramp, the
+    /// Lc cut-off, Ln1's ramp) scales by iters / self.iters.
+    pub fn scaled(&self, iters: u32) -> Self {
+        let f = |s: u32| ((s as u64 * iters as u64) / self.iters.max(1) as u64) as u32;
+        let mut c = self.clone();
+        for lr in [&mut c.lr_delta, &mut c.lr_opacity, &mut c.lr_sh] {
+            lr.max_steps = f(lr.max_steps).max(1);
+            lr.delay_steps = f(lr.delay_steps);
+        }
+        c.a.steps = f(c.a.steps);
+        c.lambda_c_until = f(c.lambda_c_until);
+        c.lambda_n1.steps = f(c.lambda_n1.steps);
+        c.checkpoint_every = c.checkpoint_every.min(iters).max(1);
+        c.iters = iters;
+        c
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn categories_and_scaling() {
+        let thin = SurfaceConfig::paper("thin").unwrap();
+        assert_eq!(thin.a.at(0), 5.0);
+        assert_eq!(thin.a.at(5000), 3.5);
+        assert_eq!(thin.a.at(20_000), 2.0);
+        let tr = SurfaceConfig::paper("translucent").unwrap();
+        assert_eq!(tr.lambda_n1.at(0), 1e-2);
+        assert!((tr.lambda_n1.at(50_000) - 1e-4).abs() < 1e-9);
+        assert_eq!(SurfaceConfig::paper("dtu").unwrap().a.at(30_000), 5.0);
+        assert!(SurfaceConfig::paper("shiny").is_err());
+        let fast = SurfaceConfig::preset("fast", "thin").unwrap();
+        assert_eq!(fast.iters, 1500);
+        assert_eq!(fast.a.steps, 300);
+        assert_eq!(fast.lr_opacity.delay_steps, 750);
+        assert_eq!(fast.lambda_c_until, 300);
+    }
+}
