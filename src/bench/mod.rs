@@ -3,3 +3,4 @@
 pub mod cubic;
 pub mod dda;
 pub mod plenoxels;
+pub mod surface;

@@ -10,8 +10,8 @@ pub mod fill_pattern;
 pub mod plenoxel;
 pub mod sh_eval;
 pub mod surface_fwd;
-pub mod surface_train;
 pub mod surface_reg;
+pub mod surface_train;
 pub mod trilerp_eval;
 
 /// Result of comparing one kernel on the Vulkan device with its CPU twin.

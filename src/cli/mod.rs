@@ -79,6 +79,10 @@ pub enum BenchKind {
     /// Stage-1 training throughput on both backends (rays/s, device time per kernel, samples
     /// per ray shaded/empty/skipped, atomic adds per ray) from the same partly trained grid.
     Plenoxels(crate::bench::plenoxels::PlenoxelsBenchArgs),
+    /// Stage-2 training throughput on both backends (rays/s, device time per kernel, cells, cubic
+    /// solves, culled solves, hits, cut and guarded hits, atomic adds per ray) from the same grid,
+    /// and the ratio to stage-1 training on the Vulkan device at the same resolution.
+    Surface(crate::bench::surface::SurfaceBenchArgs),
 }
 
 /// Entry point of the binary: parse, run, map errors to a message and exit code 1.
@@ -188,6 +192,11 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             BenchKind::Plenoxels(args) => {
                 let gpu = gpu_used.insert(open_gpu(&cli)?);
                 crate::bench::plenoxels::run(gpu, args)?;
+                ExitCode::SUCCESS
+            }
+            BenchKind::Surface(args) => {
+                let gpu = gpu_used.insert(open_gpu(&cli)?);
+                crate::bench::surface::run(gpu, args)?;
                 ExitCode::SUCCESS
             }
             BenchKind::Dda(args) => {

@@ -11,8 +11,8 @@ mod rmsprop;
 mod sh_eval;
 pub mod step;
 pub mod surface_fwd;
-pub mod surface_train;
 pub mod surface_reg;
+pub mod surface_train;
 mod trilerp_eval;
 mod tv;
 

@@ -1,12 +1,14 @@
 //! The Vulkan stage-2 backend: grid, gradients and optimiser state live in device buffers; a
 //! training step is one batch and one submission: step reset → surface_train → regularisers
-//! (Lδ and TVα through `tv`) → optim_args → indirect surface_rmsprop over the touched vertices.
+//! (Lδ and TVα through `tv`, Lα through surface_opacity_reg, Ln1/Ln2 through surface_normal_reg)
+//! → optim_args → indirect surface_rmsprop over the touched vertices.
 
 use super::{
     batch_loss, surface_params, SurfaceBackend, SurfaceState, SurfaceStepParams, SurfaceStepStats,
 };
 use crate::cpu::step::{STEP_COUNT, STEP_FLAGS, STEP_N};
 use crate::cpu::surface_fwd::{SurfCounts, SurfaceParams};
+use crate::cpu::surface_reg::{row_slots, NormalPrefix};
 use crate::cpu::surface_train::{RayLoss, SurfaceLoss, TrainCounts, SURF_MAX_HITS};
 use crate::gpu::{Batch, BatchTimes, Gpu, GpuBuffer};
 use crate::grid::surface::SurfaceGrid;
@@ -68,6 +70,12 @@ pub struct VulkanSurface {
     levels: GpuBuffer,
     /// Counters: 7 of surface_train, or 5 of surface_fwd.
     stats: GpuBuffer,
+    /// The slot of each allocated row, and the normal regulariser's per-grid prefix count.
+    row_slot: GpuBuffer,
+    normal_prefix: NormalPrefix,
+    /// Regulariser values: Lα, Ln (floats); pairs skipped by Ln (u32).
+    reg_loss: GpuBuffer,
+    reg_skipped: GpuBuffer,
     rays: Option<RayBuffers>,
 }
 
@@ -115,6 +123,7 @@ impl VulkanSurface {
                 gpu.zeros::<f32>(rows * SH_DIM)?,
             ])
         };
+        let row_slot = row_slots(&grid.links, n);
         Ok(VulkanSurface {
             gpu: gpu.clone(),
             rows: n,
@@ -133,6 +142,14 @@ impl VulkanSurface {
             params: gpu.zeros::<f32>(PARAMS_LEN)?,
             levels: gpu.upload(&levels)?,
             stats: gpu.zeros::<u32>(7)?,
+            row_slot: if row_slot.is_empty() {
+                gpu.zeros::<u32>(1)?
+            } else {
+                gpu.upload(&row_slot)?
+            },
+            normal_prefix: NormalPrefix::new(&grid.links, &row_slot, grid.res),
+            reg_loss: gpu.zeros::<f32>(2)?,
+            reg_skipped: gpu.zeros::<u32>(1)?,
             rays: None,
             meta: SurfaceGrid {
                 links: Vec::new(),
@@ -179,6 +196,8 @@ impl VulkanSurface {
         let mut b = self.gpu.batch()?;
         b.fill_zero_range(&self.step, 0, 4 * STEP_N as u64);
         b.fill_zero(&self.stats);
+        b.fill_zero(&self.reg_loss);
+        b.fill_zero(&self.reg_skipped);
         Ok((b, addrs))
     }
 
@@ -267,10 +286,48 @@ impl VulkanSurface {
                 lambda / count.max(1) as f32,
             )?;
         }
-        ensure!(
-            p.regs.opacity_log.is_none() && p.regs.normals.is_none(),
-            "the Vulkan surface backend has no Lα / normal regulariser yet"
-        );
+        let rows = self.rows as u32;
+        if let (Some((start, count, lambda)), true) = (p.regs.opacity_log, rows > 0) {
+            b.dispatch_1d(
+                &kernels::surface_opacity_reg::INFO,
+                &kernels::surface_opacity_reg::Push {
+                    opacity: self.opacity.address(),
+                    grad: self.grad[1].address(),
+                    step: self.step.address(),
+                    loss: self.reg_loss.address(),
+                    rows,
+                    start,
+                    count,
+                    lambda,
+                },
+                count.min(rows),
+            )?;
+        }
+        if let (Some((start, count, lambda1, lambda2)), true) = (p.regs.normals, rows > 0) {
+            // A row chunk (the kernel's convention), with its mean's denominator.
+            let c = self.normal_prefix.chunk(start, count, lambda1, lambda2);
+            b.dispatch_1d(
+                &kernels::surface_normal_reg::INFO,
+                &kernels::surface_normal_reg::Push {
+                    links: self.links.address(),
+                    row_slot: self.row_slot.address(),
+                    delta: self.delta.address(),
+                    grad: self.grad[0].address(),
+                    step: self.step.address(),
+                    loss: self.reg_loss.address() + 4,
+                    skipped: self.reg_skipped.address(),
+                    res,
+                    rows,
+                    start: c.start,
+                    count: c.count,
+                    cells: c.cells,
+                    lambda1: c.lambda1,
+                    lambda2: c.lambda2,
+                    ..Default::default()
+                },
+                count.min(rows),
+            )?;
+        }
         Ok(())
     }
 

@@ -1,0 +1,313 @@
+//! `alphasurf bench surface`: stage-2 (αSurf) training throughput on both backends from the same
+//! grid. The built-in thin scene is generated (small images, as `bench plenoxels`), a short
+//! fast-preset stage-1 run on the CPU backend brings a density grid to `--res`³, the stage-2 grid
+//! is initialised from it (method.md §3.1, `SurfaceGrid::from_density`) and trained for
+//! `--warm-steps` CPU steps, then each backend trains the same `--steps` batches from that state
+//! (thin-category weights: LH, Lc, Lδ over every vertex, TVα on a 1 % chunk; Lα and the normal
+//! terms are not implemented by the backends yet). Reported per backend: training rays/s (wall
+//! time, after one untimed step), mean MSE, and per ray: cells visited, cubic solves, solves
+//! skipped by min/max culling, hits composited, hits cut by truncation, hits whose δ gradient the
+//! f′ guard dropped, gradient atomic adds; the Vulkan/CPU ratio; the Vulkan device time per kernel
+//! (timestamps). For the issue's target it also times stage-1 training on the Vulkan device at
+//! the same resolution, from the stage-1 grid, the way `bench plenoxels` does, and prints the
+//! ratio of the two Vulkan rates.
+
+use crate::data::{Dataset, LoadOptions, RaySampler};
+use crate::gpu::Gpu;
+use crate::grid::surface::{SurfaceGrid, SurfaceInit};
+use crate::plenoxel::{CpuPlenoxels, Plenoxels, StepParams, VulkanPlenoxels};
+use crate::scene::{generate, GenerateOptions, SceneKind};
+use crate::surface::{
+    CpuSurface, SurfaceBackend, SurfaceRegs, SurfaceStepParams, SurfaceStepStats, VulkanSurface,
+};
+use crate::train::{stage1, Stage1Config};
+use anyhow::{ensure, Result};
+use serde_json::json;
+use std::collections::BTreeMap;
+use std::time::Instant;
+
+/// Arguments of `bench surface`.
+#[derive(clap::Args, Debug)]
+pub struct SurfaceBenchArgs {
+    /// Print one JSON object with the figures as the last stdout line.
+    #[arg(long)]
+    pub json: bool,
+    /// Grid resolution.
+    #[arg(long, default_value_t = 128)]
+    pub res: u32,
+    /// Fast-preset stage-1 steps (CPU backend) that prepare the density grid.
+    #[arg(long, default_value_t = 300)]
+    pub stage1_steps: u32,
+    /// Stage-2 steps (CPU backend) after the initialisation, before timing.
+    #[arg(long, default_value_t = 20)]
+    pub warm_steps: u32,
+    /// Timed steps per backend.
+    #[arg(long, default_value_t = 20)]
+    pub steps: u32,
+    /// Rays per batch.
+    #[arg(long, default_value_t = 4096)]
+    pub batch: u32,
+    /// Truncation parameter a (the schedule runs 5 → 2).
+    #[arg(long, default_value_t = 5.0)]
+    pub a: f32,
+}
+
+/// Names of the stage-2 counters, per ray.
+const COUNTERS: [&str; 7] = [
+    "cells", "solves", "culled", "hits", "cut", "guarded", "atomics",
+];
+
+/// One backend's figures.
+#[derive(Debug, Default, serde::Serialize)]
+struct Figures {
+    rays_per_s: f64,
+    mean_mse: f64,
+    /// The counters per ray (see [`COUNTERS`]).
+    per_ray: BTreeMap<&'static str, f64>,
+    /// Device ms per step and kernel (Vulkan only).
+    device_ms_per_step: BTreeMap<&'static str, f64>,
+}
+
+/// Thin-category stage-2 step parameters (method.md §3.4–3.5) at the start of the schedule.
+fn step_params(slots: u32, a: f32, step: u32) -> SurfaceStepParams {
+    let chunk = (slots / 100).max(1);
+    SurfaceStepParams {
+        lr_delta: 1e-5,
+        lr_opacity: 1e-2,
+        lr_sh: 1e-3,
+        beta: 0.95,
+        eps: 1e-8,
+        a,
+        stop_thresh: 1e-4,
+        lambda_h: 1e-4,
+        lambda_c: 1e-6,
+        regs: SurfaceRegs {
+            delta_tv: Some(1e-3),
+            opacity_tv: Some(((step as u64 * 7919 % slots as u64) as u32, chunk, 1e-5)),
+            ..Default::default()
+        },
+    }
+}
+
+/// `steps + 1` stage-2 steps (the first untimed) on the batches of a fixed sampler.
+fn time_surface(
+    step: &mut dyn FnMut(&[f32], &[f32], &SurfaceStepParams) -> Result<SurfaceStepStats>,
+    grid: &SurfaceGrid,
+    data: &Dataset,
+    args: &SurfaceBenchArgs,
+) -> Result<Figures> {
+    let mut f = Figures::default();
+    let mut sampler = RaySampler::new(&data.train, 11);
+    let mut secs = 0.0;
+    let mut counts = [0u64; 7];
+    for i in 0..=args.steps {
+        let b = sampler.next_batch(&data.train, &data.scene, args.batch as usize);
+        let (rays, targets) = (b.flat_rays(), b.flat_targets());
+        let p = step_params(grid.links.len() as u32, args.a, i);
+        let t = Instant::now();
+        let s = step(&rays, &targets, &p)?;
+        if i == 0 {
+            continue; // warm-up: first-dispatch compilation on lavapipe
+        }
+        secs += t.elapsed().as_secs_f64();
+        f.mean_mse += s.mse / args.steps as f64;
+        for (c, &v) in counts.iter_mut().zip(&s.counts) {
+            *c += v as u64;
+        }
+    }
+    let rays = (args.batch * args.steps) as f64;
+    f.rays_per_s = rays / secs;
+    f.per_ray = COUNTERS
+        .iter()
+        .zip(counts)
+        .map(|(&k, c)| (k, c as f64 / rays))
+        .collect();
+    Ok(f)
+}
+
+/// Stage-1 training rays/s of `backend` over `steps` timed steps (after one untimed), the same
+/// measurement as `bench plenoxels`.
+fn time_stage1(
+    backend: &mut dyn Plenoxels,
+    data: &Dataset,
+    cfg: &Stage1Config,
+    args: &SurfaceBenchArgs,
+) -> Result<f64> {
+    let mut sampler = RaySampler::new(&data.train, 7);
+    let mut secs = 0.0;
+    for step in 0..=args.steps {
+        let b = sampler.next_batch(&data.train, &data.scene, args.batch as usize);
+        let (rays, targets) = (b.flat_rays(), b.flat_targets());
+        let t = Instant::now();
+        backend.step(
+            &rays,
+            &targets,
+            &StepParams {
+                lr_sigma: cfg.lr_sigma.at(cfg.iters),
+                lr_sh: cfg.lr_sh.at(cfg.iters),
+                beta: cfg.beta,
+                eps: cfg.eps,
+                stop_thresh: cfg.stop_thresh,
+                tv: None,
+            },
+        )?;
+        if step > 0 {
+            secs += t.elapsed().as_secs_f64();
+        }
+    }
+    Ok((args.batch * args.steps) as f64 / secs)
+}
+
+/// Run the benchmark and print it.
+pub fn run(gpu: &Gpu, args: &SurfaceBenchArgs) -> Result<()> {
+    ensure!((16..=512).contains(&args.res), "--res must be in 16..=512");
+    ensure!(
+        args.steps >= 1 && args.batch >= 1 && args.stage1_steps >= 3,
+        "--steps and --batch must be at least 1, --stage1-steps at least 3"
+    );
+    ensure!(
+        args.a > 0.0 && args.a <= 8.0,
+        "--a must be in (0, 8], got {}",
+        args.a
+    );
+    let dir = std::env::temp_dir().join(format!("alphasurf-bench-surface-{}", std::process::id()));
+    std::fs::create_dir_all(&dir)?;
+    let result = run_in(gpu, args, &dir);
+    let _ = std::fs::remove_dir_all(&dir);
+    result
+}
+
+fn run_in(gpu: &Gpu, args: &SurfaceBenchArgs, dir: &std::path::Path) -> Result<()> {
+    let scene_dir = dir.join("scene");
+    let mut opts = GenerateOptions::new(SceneKind::Thin);
+    (opts.res, opts.views, opts.spp_side, opts.gt_spacing) = (128, 40, 2, 0.05);
+    eprintln!("bench surface: generating the thin scene (128², 40 views)");
+    generate(&scene_dir, &opts)?;
+    let data = Dataset::load(&scene_dir, &LoadOptions::default())?;
+
+    // Stage 1, briefly, on the CPU backend (the faster one on a CPU-only machine).
+    let mut cfg = Stage1Config::fast();
+    cfg.res = args.res / 2;
+    cfg.upsample = vec![(args.stage1_steps / 3, args.res)];
+    cfg.iters = args.stage1_steps;
+    cfg.checkpoint_every = u32::MAX;
+    let grid0 = crate::grid::Grid::sphere(cfg.res, [0.0; 3], [1.0; 3], 1.0, cfg.init_sigma);
+    let mut s1 = CpuPlenoxels::new(grid0);
+    eprintln!(
+        "bench surface: {} stage-1 steps (CPU) to reach a {}³ density grid",
+        cfg.iters, args.res
+    );
+    stage1::train(&mut s1, &data, &cfg, &dir.join("stage1"), 0, false)?;
+    let density = s1.grid()?;
+    eprintln!("bench surface: stage-1 training on the Vulkan device at the same resolution");
+    let stage1_vk = time_stage1(
+        &mut VulkanPlenoxels::new(gpu, density.clone())?,
+        &data,
+        &cfg,
+        args,
+    )?;
+
+    let init = SurfaceInit::default();
+    let init_grid = SurfaceGrid::from_density(&density, &init)?;
+    let slots = init_grid.links.len() as u32;
+    let mut cpu = CpuSurface::new(init_grid);
+    eprintln!(
+        "bench surface: {} stage-2 warm-up steps (CPU)",
+        args.warm_steps
+    );
+    let mut sampler = RaySampler::new(&data.train, 3);
+    for i in 0..args.warm_steps {
+        let b = sampler.next_batch(&data.train, &data.scene, args.batch as usize);
+        cpu.step(
+            &b.flat_rays(),
+            &b.flat_targets(),
+            &step_params(slots, args.a, i),
+        )?;
+    }
+    let grid = cpu.grid()?;
+    let state = cpu.optimizer_state()?;
+
+    eprintln!("bench surface: timing the Vulkan backend");
+    let mut vk = VulkanSurface::new(gpu, grid.clone())?;
+    vk.load(grid.clone(), Some(state.clone()))?;
+    let mut kernel_ns: BTreeMap<&'static str, f64> = BTreeMap::new();
+    let mut first = true;
+    let mut fv = time_surface(
+        &mut |r, t, p| {
+            let (s, times) = vk.step_timed(r, t, p)?;
+            if !std::mem::take(&mut first) {
+                for (k, ns) in times.dispatches {
+                    *kernel_ns.entry(k).or_default() += ns;
+                }
+            }
+            Ok(s)
+        },
+        &grid,
+        &data,
+        args,
+    )?;
+    fv.device_ms_per_step = kernel_ns
+        .into_iter()
+        .map(|(k, ns)| (k, ns / 1e6 / args.steps as f64))
+        .collect();
+    eprintln!("bench surface: timing the CPU backend");
+    let mut cpu = CpuSurface::new(grid.clone());
+    cpu.load(grid.clone(), Some(state))?;
+    let fc = time_surface(&mut |r, t, p| cpu.step(r, t, p), &grid, &data, args)?;
+
+    println!(
+        "stage-2 training at {}³ ({} allocated vertices, {} levels), {} steps of {} rays, a = {}, \
+         thin scene",
+        args.res,
+        grid.delta.len(),
+        grid.levels.len(),
+        args.steps,
+        args.batch,
+        args.a
+    );
+    print!("{:<8} {:>10} {:>9}", "backend", "rays/s", "mse");
+    for k in COUNTERS {
+        print!(" {k:>8}");
+    }
+    println!("   (per ray)");
+    for (name, f) in [("vulkan", &fv), ("cpu", &fc)] {
+        print!("{name:<8} {:>10.0} {:>9.5}", f.rays_per_s, f.mean_mse);
+        for k in COUNTERS {
+            print!(" {:>8.2}", f.per_ray[k]);
+        }
+        println!();
+    }
+    let ratio = fv.rays_per_s / fc.rays_per_s;
+    println!("vulkan / cpu: {ratio:.2}×");
+    println!("device ms per step (Vulkan):");
+    for (k, ms) in &fv.device_ms_per_step {
+        println!("  {k:<18} {ms:>9.3}");
+    }
+    let vs_stage1 = fv.rays_per_s / stage1_vk;
+    println!(
+        "stage-1 training on the Vulkan device at {}³: {stage1_vk:.0} rays/s; stage 2 / stage 1: \
+         {vs_stage1:.2}× (target ≥ 3×)",
+        args.res
+    );
+    if args.json {
+        println!(
+            "{}",
+            json!({
+                "bench": "surface",
+                "device": gpu.info().name,
+                "res": args.res,
+                "allocated_vertices": grid.delta.len(),
+                "levels": grid.levels.len(),
+                "a": args.a,
+                "batch": args.batch,
+                "steps": args.steps,
+                "vulkan": fv,
+                "cpu": fc,
+                "ratio_vulkan_over_cpu": ratio,
+                "stage1_vulkan_rays_per_s": stage1_vk,
+                "ratio_surface_over_stage1_vulkan": vs_stage1,
+            })
+        );
+    }
+    Ok(())
+}
