@@ -14,7 +14,9 @@
 // in registers (in the reverse order) and flushed with one float atomic per corner, parameter and
 // non-zero sum when the cell changes (SH: 3 accumulators per corner, times Y_k at the flush);
 // every vertex that receives a gradient is touched (step.glsl).
-// Inputs: links (n³, < 0 unallocated), delta, opacity (raw σα), sh (27) per allocated vertex;
+// Inputs: links (n³, < 0 unallocated), complete (bit i of word i/32 set when the cell with lower
+// corner slot i has its 8 corners allocated: the walk reads one bit per empty cell instead of 8
+// links), delta, opacity (raw σα), sh (27) per allocated vertex;
 // params (floats): scale[3], offset[3], a, stop_thresh, grad_scale, lambda_h, lambda_c, (pad),
 // levels[8] (n_levels used); rays (6 floats), targets (3 floats).
 // Outputs: grad_delta, grad_opacity, grad_sh += (float atomics), touched list (step buffer);
@@ -38,6 +40,7 @@ layout(buffer_reference, scalar, buffer_reference_align = 4) buffer SurfTrainOut
 
 layout(push_constant, scalar) uniform Push {
     I32Buf links;
+    U32Buf complete;
     F32Buf delta;
     F32Buf opacity;
     F32Buf sh;
@@ -201,8 +204,9 @@ void main() {
         bool found = false;
         while (dda_next(w, l, t0, t1)) {
             cnt.x++;
+            uint ci = dda_cell_index(l, n);
+            if ((pc.complete.v[ci >> 5u] & (1u << (ci & 31u))) == 0u) continue;
             cell_links(l, lk);
-            if (min(min(min(lk[0], lk[1]), min(lk[2], lk[3])), min(min(lk[4], lk[5]), min(lk[6], lk[7]))) < 0) continue;
             for (int i = 0; i < 8; i++) c[i] = pc.delta.v[lk[i]];
             mask = surf_level_mask(c, lv, nl);
             uint ns = uint(bitCount(mask));

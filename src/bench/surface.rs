@@ -8,9 +8,11 @@
 //! time, after one untimed step), mean MSE, and per ray: cells visited, cubic solves, solves
 //! skipped by min/max culling, hits composited, hits cut by truncation, hits whose δ gradient the
 //! f′ guard dropped, gradient atomic adds; the Vulkan/CPU ratio; the Vulkan device time per kernel
-//! (timestamps). For the issue's target it also times stage-1 training on the Vulkan device at
-//! the same resolution, from the stage-1 grid, the way `bench plenoxels` does, and prints the
-//! ratio of the two Vulkan rates.
+//! (timestamps). The Vulkan backend is also timed without the regularisers (the data term, its
+//! scatter and RMSProp over the vertices the rays touched): `bench plenoxels` times stage-1 steps
+//! without TV, and Lδ alone touches every vertex each step. For the issue's target it times
+//! stage-1 training on the Vulkan device at the same resolution, from the stage-1 grid, the way
+//! `bench plenoxels` does, and prints the ratios of the Vulkan rates.
 
 use crate::data::{Dataset, LoadOptions, RaySampler};
 use crate::gpu::Gpu;
@@ -89,12 +91,14 @@ fn step_params(slots: u32, a: f32, step: u32) -> SurfaceStepParams {
     }
 }
 
-/// `steps + 1` stage-2 steps (the first untimed) on the batches of a fixed sampler.
+/// `steps + 1` stage-2 steps (the first untimed) on the batches of a fixed sampler; `regs`:
+/// with the regularisers, else the data term alone.
 fn time_surface(
     step: &mut dyn FnMut(&[f32], &[f32], &SurfaceStepParams) -> Result<SurfaceStepStats>,
     grid: &SurfaceGrid,
     data: &Dataset,
     args: &SurfaceBenchArgs,
+    regs: bool,
 ) -> Result<Figures> {
     let mut f = Figures::default();
     let mut sampler = RaySampler::new(&data.train, 11);
@@ -103,7 +107,10 @@ fn time_surface(
     for i in 0..=args.steps {
         let b = sampler.next_batch(&data.train, &data.scene, args.batch as usize);
         let (rays, targets) = (b.flat_rays(), b.flat_targets());
-        let p = step_params(grid.links.len() as u32, args.a, i);
+        let mut p = step_params(grid.links.len() as u32, args.a, i);
+        if !regs {
+            p.regs = SurfaceRegs::default();
+        }
         let t = Instant::now();
         let s = step(&rays, &targets, &p)?;
         if i == 0 {
@@ -227,33 +234,44 @@ fn run_in(gpu: &Gpu, args: &SurfaceBenchArgs, dir: &std::path::Path) -> Result<(
     let grid = cpu.grid()?;
     let state = cpu.optimizer_state()?;
 
-    eprintln!("bench surface: timing the Vulkan backend");
-    let mut vk = VulkanSurface::new(gpu, grid.clone())?;
-    vk.load(grid.clone(), Some(state.clone()))?;
-    let mut kernel_ns: BTreeMap<&'static str, f64> = BTreeMap::new();
-    let mut first = true;
-    let mut fv = time_surface(
-        &mut |r, t, p| {
-            let (s, times) = vk.step_timed(r, t, p)?;
-            if !std::mem::take(&mut first) {
-                for (k, ns) in times.dispatches {
-                    *kernel_ns.entry(k).or_default() += ns;
+    // The Vulkan backend with and without the regularisers, each from the same state.
+    let mut vulkan = Vec::new();
+    for regs in [true, false] {
+        eprintln!(
+            "bench surface: timing the Vulkan backend{}",
+            if regs { "" } else { " (data term only)" }
+        );
+        let mut vk = VulkanSurface::new(gpu, grid.clone())?;
+        vk.load(grid.clone(), Some(state.clone()))?;
+        let mut kernel_ns: BTreeMap<&'static str, f64> = BTreeMap::new();
+        let mut first = true;
+        let mut f = time_surface(
+            &mut |r, t, p| {
+                let (s, times) = vk.step_timed(r, t, p)?;
+                if !std::mem::take(&mut first) {
+                    for (k, ns) in times.dispatches {
+                        *kernel_ns.entry(k).or_default() += ns;
+                    }
                 }
-            }
-            Ok(s)
-        },
-        &grid,
-        &data,
-        args,
-    )?;
-    fv.device_ms_per_step = kernel_ns
-        .into_iter()
-        .map(|(k, ns)| (k, ns / 1e6 / args.steps as f64))
-        .collect();
+                Ok(s)
+            },
+            &grid,
+            &data,
+            args,
+            regs,
+        )?;
+        f.device_ms_per_step = kernel_ns
+            .into_iter()
+            .map(|(k, ns)| (k, ns / 1e6 / args.steps as f64))
+            .collect();
+        vulkan.push(f);
+    }
+    let fd = vulkan.pop().expect("two runs");
+    let fv = vulkan.pop().expect("two runs");
     eprintln!("bench surface: timing the CPU backend");
     let mut cpu = CpuSurface::new(grid.clone());
     cpu.load(grid.clone(), Some(state))?;
-    let fc = time_surface(&mut |r, t, p| cpu.step(r, t, p), &grid, &data, args)?;
+    let fc = time_surface(&mut |r, t, p| cpu.step(r, t, p), &grid, &data, args, true)?;
 
     println!(
         "stage-2 training at {}³ ({} allocated vertices, {} levels), {} steps of {} rays, a = {}, \
@@ -270,23 +288,30 @@ fn run_in(gpu: &Gpu, args: &SurfaceBenchArgs, dir: &std::path::Path) -> Result<(
         print!(" {k:>8}");
     }
     println!("   (per ray)");
-    for (name, f) in [("vulkan", &fv), ("cpu", &fc)] {
+    for (name, f) in [("vulkan", &fv), ("cpu", &fc), ("vk-data", &fd)] {
         print!("{name:<8} {:>10.0} {:>9.5}", f.rays_per_s, f.mean_mse);
         for k in COUNTERS {
             print!(" {:>8.2}", f.per_ray[k]);
         }
         println!();
     }
+    println!(
+        "(vk-data: the Vulkan backend without the regularisers, like `bench plenoxels`' steps)"
+    );
     let ratio = fv.rays_per_s / fc.rays_per_s;
     println!("vulkan / cpu: {ratio:.2}×");
-    println!("device ms per step (Vulkan):");
-    for (k, ms) in &fv.device_ms_per_step {
-        println!("  {k:<18} {ms:>9.3}");
+    for (what, f) in [("", &fv), (", data term only", &fd)] {
+        println!("device ms per step (Vulkan{what}):");
+        for (k, ms) in &f.device_ms_per_step {
+            println!("  {k:<20} {ms:>9.3}");
+        }
     }
     let vs_stage1 = fv.rays_per_s / stage1_vk;
+    let data_vs_stage1 = fd.rays_per_s / stage1_vk;
     println!(
-        "stage-1 training on the Vulkan device at {}³: {stage1_vk:.0} rays/s; stage 2 / stage 1: \
-         {vs_stage1:.2}× (target ≥ 3×)",
+        "stage-1 training on the Vulkan device at {}³ (no TV, as `bench plenoxels`): {stage1_vk:.0} \
+         rays/s; stage 2 / stage 1: {vs_stage1:.2}× with the regularisers, {data_vs_stage1:.2}× \
+         data term only (target ≥ 3×)",
         args.res
     );
     if args.json {
@@ -302,10 +327,12 @@ fn run_in(gpu: &Gpu, args: &SurfaceBenchArgs, dir: &std::path::Path) -> Result<(
                 "batch": args.batch,
                 "steps": args.steps,
                 "vulkan": fv,
+                "vulkan_data_term_only": fd,
                 "cpu": fc,
                 "ratio_vulkan_over_cpu": ratio,
                 "stage1_vulkan_rays_per_s": stage1_vk,
                 "ratio_surface_over_stage1_vulkan": vs_stage1,
+                "ratio_surface_data_term_over_stage1_vulkan": data_vs_stage1,
             })
         );
     }

@@ -37,6 +37,35 @@ pub fn train_params(sp: &SurfaceParams, loss: &SurfaceLoss) -> [f32; PARAMS_LEN]
     v
 }
 
+/// Bit i of word i/32 set when the cell whose lower corner is slot i (x-major, `n`³ slots) has
+/// its 8 corners allocated: `surface_train`'s walk tests this bit before reading any link.
+pub fn complete_cells(links: &[i32], n: u32) -> Vec<u32> {
+    let n = n as usize;
+    let mut bits = vec![0u32; (n * n * n).div_ceil(32).max(1)];
+    let (nz, nyz) = (n, n * n);
+    for x in 0..n.saturating_sub(1) {
+        for y in 0..n - 1 {
+            for z in 0..n - 1 {
+                let s = (x * n + y) * n + z;
+                let corners = [
+                    s,
+                    s + 1,
+                    s + nz,
+                    s + nz + 1,
+                    s + nyz,
+                    s + nyz + 1,
+                    s + nyz + nz,
+                    s + nyz + nz + 1,
+                ];
+                if corners.iter().all(|&c| links[c] >= 0) {
+                    bits[s / 32] |= 1 << (s % 32);
+                }
+            }
+        }
+    }
+    bits
+}
+
 /// The data term of one training pass, read back (see [`VulkanSurface::gradients`]).
 pub struct SurfaceGradients {
     pub ray_loss: Vec<RayLoss>,
@@ -55,6 +84,10 @@ pub struct VulkanSurface {
     meta: SurfaceGrid,
     rows: usize,
     links: GpuBuffer,
+    /// Complete-cell bits ([`complete_cells`]).
+    complete: GpuBuffer,
+    /// Slots [first, last] of the allocated vertices (Lδ's TV needs no other slots).
+    allocated_span: (u32, u32),
     delta: GpuBuffer,
     opacity: GpuBuffer,
     sh: GpuBuffer,
@@ -128,6 +161,11 @@ impl VulkanSurface {
             gpu: gpu.clone(),
             rows: n,
             links: gpu.upload(&grid.links)?,
+            complete: gpu.upload(&complete_cells(&grid.links, grid.res[0]))?,
+            allocated_span: (
+                grid.links.iter().position(|&l| l >= 0).unwrap_or(0) as u32,
+                grid.links.iter().rposition(|&l| l >= 0).unwrap_or(0) as u32,
+            ),
             delta: upload_nonempty(gpu, &grid.delta)?,
             opacity: upload_nonempty(gpu, &grid.opacity)?,
             sh: upload_nonempty(gpu, &grid.sh)?,
@@ -227,6 +265,7 @@ impl VulkanSurface {
             &kernels::surface_train::INFO,
             &kernels::surface_train::Push {
                 links: self.links.address(),
+                complete: self.complete.address(),
                 delta: self.delta.address(),
                 opacity: self.opacity.address(),
                 sh: self.sh.address(),
@@ -252,7 +291,6 @@ impl VulkanSurface {
     /// Record the per-vertex regularisers (the same terms and scales as `CpuSurface`).
     fn record_regularisers(&self, b: &mut Batch, p: &SurfaceStepParams) -> Result<()> {
         let res = self.meta.res;
-        let slots = res[0] * res[1] * res[2];
         let mut tv = |data: &GpuBuffer, grad: &GpuBuffer, start: u32, count: u32, scale: f32| {
             b.dispatch_1d(
                 &kernels::tv::INFO,
@@ -275,7 +313,17 @@ impl VulkanSurface {
             // κ·√(|d|² + ε/κ²) = √(|κd|² + ε): the N/256-scaled TV up to ε.
             let kappa = res[0] as f32 / 256.0;
             let count = self.rows.max(1) as f32;
-            tv(&self.delta, &self.grad[0], 0, slots, lambda * kappa / count)?;
+            // Over the span of allocated slots only: a slot outside it has no vertex, and no
+            // vertex inside has a backward neighbour outside it, so the gradient is that of the
+            // chunk of all slots (CpuSurface's), for a fraction of the invocations.
+            let (first, last) = self.allocated_span;
+            tv(
+                &self.delta,
+                &self.grad[0],
+                first,
+                last + 1 - first,
+                lambda * kappa / count,
+            )?;
         }
         if let Some((start, count, lambda)) = p.regs.opacity_tv {
             tv(
