@@ -91,10 +91,13 @@ fn step_params(slots: u32, a: f32, step: u32) -> SurfaceStepParams {
     }
 }
 
+/// One backend step: rays, targets, parameters.
+type StepFn<'a> = dyn FnMut(&[f32], &[f32], &SurfaceStepParams) -> Result<SurfaceStepStats> + 'a;
+
 /// `steps + 1` stage-2 steps (the first untimed) on the batches of a fixed sampler; `regs`:
 /// with the regularisers, else the data term alone.
 fn time_surface(
-    step: &mut dyn FnMut(&[f32], &[f32], &SurfaceStepParams) -> Result<SurfaceStepStats>,
+    step: &mut StepFn,
     grid: &SurfaceGrid,
     data: &Dataset,
     args: &SurfaceBenchArgs,

@@ -227,16 +227,22 @@ fn compare_grads(
     rel
 }
 
+/// One pass: its parameters, its name, and whether every hit must be guarded (the guard scene).
+struct Pass<'a> {
+    p: &'a SurfaceStepParams,
+    what: &'a str,
+    all_guarded: bool,
+}
+
 fn run_pass(
     gpu: &Gpu,
     grid: &SurfaceGrid,
     rays: &[f32],
     targets: &[f32],
-    p: &SurfaceStepParams,
-    what: &str,
-    all_guarded: bool,
+    pass: &Pass,
     cmp: &mut Compare,
 ) -> Result<PassNote> {
+    let (p, what, all_guarded) = (pass.p, pass.what, pass.all_guarded);
     let train_gpu = |rays: &[f32], targets: &[f32]| {
         VulkanSurface::new(gpu, grid.clone())?.gradients(rays, targets, p)
     };
@@ -387,7 +393,12 @@ pub fn check(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
             let p = pass_params(a, stop, 0.5, 0.2);
             let what = format!("{variant} a {a}");
             let guard = *variant == "guard";
-            let n = run_pass(gpu, grid, rays, &targets, &p, &what, guard, &mut cmp)?;
+            let pass = Pass {
+                p: &p,
+                what: &what,
+                all_guarded: guard,
+            };
+            let n = run_pass(gpu, grid, rays, &targets, &pass, &mut cmp)?;
             excused += n.excused;
             ill += n.ill;
             cases += n.kept;
