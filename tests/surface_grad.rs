@@ -8,6 +8,9 @@
 //! kept only when every hit is away from the discontinuities (cell faces, tangencies, colour
 //! clamps, weight ties for the mode), so the loss is smooth in a neighbourhood of the grid.
 
+// Index loops mirror the formulas; the f64 forward takes the whole ray context.
+#![allow(clippy::needless_range_loop, clippy::too_many_arguments)]
+
 use alphasurf::cpu::surface_fwd::{SurfaceGridRef, SurfaceParams};
 use alphasurf::cpu::surface_train::{
     hit_point, trace_ray, train, SurfaceGrads, SurfaceLoss, Trace,

@@ -114,6 +114,7 @@ fn delta_tv_matches_definition_fd_cpu_and_gpu() {
     let got: Vec<f64> = grad.iter().map(|&v| v as f64).collect();
     let e = rel_l2(&got, &want);
     // The kernel's ε is κ²·1e-9 instead of 1e-9: invisible at these |d| ~ 0.1–1.
+    println!("Lδ CPU gradient vs FD: rel L2 {e:.1e}");
     assert!(e <= 1e-3, "Lδ CPU gradient vs FD: rel L2 {e:e}");
     // Value: tv_loss reports the same loss.
     let v = tv_loss(&g.links, &g.delta, &c);
@@ -153,6 +154,7 @@ fn delta_tv_matches_definition_fd_cpu_and_gpu() {
         .map(|&v| v as f64)
         .collect();
     let e = rel_l2(&gpu_grad, &want);
+    println!("Lδ GPU gradient vs FD: rel L2 {e:.1e}");
     assert!(e <= 1e-3, "Lδ GPU gradient vs FD: rel L2 {e:e}");
     assert!(
         gpu.validation_messages().is_empty(),
@@ -185,6 +187,7 @@ fn opacity_tv_chunk_fd_and_bounds() {
     tv(&g.links, &g.opacity, &mut grad, &mut touched, &c);
     let got: Vec<f64> = grad.iter().map(|&v| v as f64).collect();
     let e = rel_l2(&got, &want);
+    println!("TVα gradient vs FD: rel L2 {e:.1e}");
     assert!(e <= 1e-3, "TVα gradient vs FD: rel L2 {e:e}");
     // Touched exactly where a gradient can be non-zero.
     for (i, (&t, &w)) in touched.iter().zip(&want).enumerate() {
@@ -232,6 +235,7 @@ fn opacity_reg_fd_and_adversarial() {
         &keep.iter().map(|&i| got[i]).collect::<Vec<_>>(),
         &keep.iter().map(|&i| want[i]).collect::<Vec<_>>(),
     );
+    println!("Lα gradient vs FD: rel L2 {e:.1e}");
     assert!(e <= 1e-3, "Lα gradient vs FD: rel L2 {e:e}");
     for i in 0..200 {
         let in_chunk = !(30..190).contains(&i);
@@ -339,6 +343,7 @@ fn normal_fd_case(g: &RegGrid, c: &NormalChunk, what: &str) {
     let (grad, touched, st) = run_normal(g, c);
     let got: Vec<f64> = grad.iter().map(|&v| v as f64).collect();
     let e = rel_l2(&got, &want);
+    println!("{what}: Ln gradient vs FD: rel L2 {e:.1e}");
     assert!(e <= 1e-3, "{what}: Ln gradient vs FD rel L2 {e:e}");
     let v = normal_reg_f64(g, &x, c);
     assert!(

@@ -90,6 +90,14 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         m.recall
     );
     println!("{:<26} {:>12.4}", "F1", m.f1);
+    for (name, q) in [("d2s", m.d2s_quantiles), ("s2d", m.s2d_quantiles)] {
+        println!(
+            "{name} median / p90 / p99 ×10⁻²: {:.4} / {:.4} / {:.4}",
+            q[0] * 100.0,
+            q[1] * 100.0,
+            q[2] * 100.0
+        );
+    }
     println!(
         "(means over distances < {}: {} of {} pred, {} of {} gt; read+thin {:.2} s, NN {:.2} s)",
         args.max_dist, m.d2s_used, m.n_pred, m.s2d_used, m.n_gt, t_load, t_eval

@@ -43,8 +43,8 @@ pub struct TrainArgs {
     #[arg(long)]
     pub data: PathBuf,
     /// Stage 2: the stage-1 run directory (its plenoxels.npz) or an svox2 `ckpt.npz` to
-    /// initialise from.
-    #[arg(long, required_if_eq("stage", "surface"))]
+    /// initialise from (required unless resuming).
+    #[arg(long)]
     pub init: Option<PathBuf>,
     /// Stage 2 hyper-parameters from the paper's supplement: thin, translucent, synthetic
     /// (= thin), real or dtu (levels, learning rates, regulariser weights, truncation schedule).

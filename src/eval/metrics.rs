@@ -45,6 +45,20 @@ pub struct Metrics {
     pub s2d_used: usize,
     pub max_dist: f64,
     pub threshold: f64,
+    /// Median, 90th and 99th percentile of d2s and of s2d (where the error sits: a low median
+    /// with a high mean means outliers).
+    pub d2s_quantiles: [f64; 3],
+    pub s2d_quantiles: [f64; 3],
+}
+
+/// The 50th, 90th and 99th percentiles (nearest rank; NaN for no values).
+fn quantiles(d: &[f64]) -> [f64; 3] {
+    if d.is_empty() {
+        return [f64::NAN; 3];
+    }
+    let mut v = d.to_vec();
+    v.sort_unstable_by(f64::total_cmp);
+    [0.5, 0.9, 0.99].map(|q| v[((q * v.len() as f64).ceil() as usize).clamp(1, v.len()) - 1])
 }
 
 /// Mean of the values < `max`, and how many there were.
@@ -88,6 +102,8 @@ pub fn from_distances(d2s: &[f64], s2d: &[f64], opts: &EvalOptions) -> Metrics {
         s2d_used,
         max_dist: opts.max_dist,
         threshold: opts.threshold,
+        d2s_quantiles: quantiles(d2s),
+        s2d_quantiles: quantiles(s2d),
     }
 }
 

@@ -3,14 +3,13 @@
 use super::{
     batch_loss, surface_params, SurfaceBackend, SurfaceState, SurfaceStepParams, SurfaceStepStats,
 };
-use crate::cpu::rmsprop_one;
 use crate::cpu::surface_fwd::{render, SurfCounts};
+use crate::cpu::surface_reg::{row_slots, surface_normal_reg, surface_opacity_reg, NormalPrefix};
 use crate::cpu::surface_train::{train, SurfaceGrads};
-use crate::cpu::{tv, TvChunk};
+use crate::cpu::{surface_rmsprop_sparse, tv, Stage2Params, SurfaceRmsProp};
 use crate::grid::surface::SurfaceGrid;
 use crate::grid::SH_DIM;
 use anyhow::{ensure, Result};
-use rayon::prelude::*;
 
 /// Host-resident stage-2 state.
 pub struct CpuSurface {
@@ -18,12 +17,19 @@ pub struct CpuSurface {
     grad: [Vec<f32>; 3],
     state: SurfaceState,
     touched: Vec<u32>,
+    /// Slot of each vertex row, and the cell counts the normal regulariser's chunks need.
+    row_slot: Vec<u32>,
+    normals: NormalPrefix,
 }
 
 impl CpuSurface {
     pub fn new(grid: SurfaceGrid) -> Self {
         let n = grid.delta.len();
+        let row_slot = row_slots(&grid.links, n);
+        let normals = NormalPrefix::new(&grid.links, &row_slot, grid.res);
         CpuSurface {
+            row_slot,
+            normals,
             grid,
             grad: [vec![0.0; n], vec![0.0; n], vec![0.0; n * SH_DIM]],
             state: [vec![0.0; n], vec![0.0; n], vec![0.0; n * SH_DIM]],
@@ -31,48 +37,35 @@ impl CpuSurface {
         }
     }
 
-    /// The per-vertex regularisers' gradients.
-    fn regularise(&mut self, p: &SurfaceStepParams) -> Result<()> {
+    /// The per-vertex regularisers' gradients; returns the Lα + Ln loss.
+    fn regularise(&mut self, p: &SurfaceStepParams) -> Result<f64> {
         let g = &self.grid;
-        let slots = g.links.len() as u32;
-        if let Some(lambda) = p.regs.delta_tv {
-            // κ·√(|d|² + ε/κ²) = √(|κd|² + ε): the N/256-scaled TV up to ε.
-            let kappa = g.res[0] as f32 / 256.0;
-            let count = g.delta.len().max(1) as f32;
-            tv(
+        let [gd, go, _] = &mut self.grad;
+        for (chunk, data, grad) in [
+            (p.regs.delta_tv, &g.delta, gd),
+            (p.regs.opacity_tv, &g.opacity, go),
+        ] {
+            if let Some(c) = chunk {
+                tv(&g.links, data, grad, &mut self.touched, &c);
+            }
+        }
+        let mut loss = 0.0;
+        if let Some(c) = p.regs.opacity_log {
+            loss += surface_opacity_reg(&g.opacity, &mut self.grad[1], &mut self.touched, &c);
+        }
+        if let Some((start, count, l1, l2)) = p.regs.normals {
+            let chunk = self.normals.chunk(start, count, l1, l2);
+            loss += surface_normal_reg(
                 &g.links,
+                &self.row_slot,
                 &g.delta,
                 &mut self.grad[0],
                 &mut self.touched,
-                &TvChunk {
-                    res: g.res,
-                    start: 0,
-                    count: slots,
-                    channels: 1,
-                    scale: lambda * kappa / count,
-                },
-            );
+                &chunk,
+            )
+            .loss;
         }
-        if let Some((start, count, lambda)) = p.regs.opacity_tv {
-            tv(
-                &g.links,
-                &g.opacity,
-                &mut self.grad[1],
-                &mut self.touched,
-                &TvChunk {
-                    res: g.res,
-                    start,
-                    count,
-                    channels: 1,
-                    scale: lambda / count.max(1) as f32,
-                },
-            );
-        }
-        ensure!(
-            p.regs.opacity_log.is_none() && p.regs.normals.is_none(),
-            "the CPU backend has no Lα / normal regulariser yet"
-        );
-        Ok(())
+        Ok(loss)
     }
 
     /// RMSProp on every touched vertex (δ, σα, SH), then clear flags and gradients.
@@ -80,28 +73,27 @@ impl CpuSurface {
         let [gd, go, gs] = &mut self.grad;
         let [sd, so, ss] = &mut self.state;
         let g = &mut self.grid;
-        g.delta
-            .par_iter_mut()
-            .zip(g.opacity.par_iter_mut())
-            .zip(g.sh.par_chunks_mut(SH_DIM))
-            .zip(gd.par_iter_mut())
-            .zip(go.par_iter_mut())
-            .zip(gs.par_chunks_mut(SH_DIM))
-            .zip(sd.par_iter_mut())
-            .zip(so.par_iter_mut())
-            .zip(ss.par_chunks_mut(SH_DIM))
-            .zip(self.touched.par_iter_mut())
-            .for_each(|(((((((((d, o), sh), gd), go), gs), sd), so), ss), t)| {
-                if *t == 0 {
-                    return;
-                }
-                *t = 0;
-                rmsprop_one(d, gd, sd, p.lr_delta, p.beta, p.eps);
-                rmsprop_one(o, go, so, p.lr_opacity, p.beta, p.eps);
-                for k in 0..SH_DIM {
-                    rmsprop_one(&mut sh[k], &mut gs[k], &mut ss[k], p.lr_sh, p.beta, p.eps);
-                }
-            });
+        surface_rmsprop_sparse(
+            Stage2Params {
+                delta: &mut g.delta,
+                opacity: &mut g.opacity,
+                sh: &mut g.sh,
+                grad_delta: gd,
+                grad_opacity: go,
+                grad_sh: gs,
+                state_delta: sd,
+                state_opacity: so,
+                state_sh: ss,
+            },
+            &mut self.touched,
+            &SurfaceRmsProp {
+                lr_delta: p.lr_delta,
+                lr_opacity: p.lr_opacity,
+                lr_sh: p.lr_sh,
+                beta: p.beta,
+                eps: p.eps,
+            },
+        );
     }
 }
 
@@ -132,13 +124,14 @@ impl SurfaceBackend for CpuSurface {
                 touched: &mut self.touched,
             },
         )?;
-        self.regularise(p)?;
+        let reg_loss = self.regularise(p)?;
         self.optimise(p);
         let nf = n.max(1) as f64;
         Ok(SurfaceStepStats {
             mse: losses.iter().map(|l| l.sq_err as f64).sum::<f64>() / (3.0 * nf),
             entropy: losses.iter().map(|l| l.entropy as f64).sum::<f64>() / nf,
             consistency: losses.iter().map(|l| l.consistency as f64).sum::<f64>() / nf,
+            reg_loss,
             counts,
             device_ns: 0.0,
         })

@@ -8,21 +8,22 @@ pub use cpu::CpuSurface;
 pub use vulkan::{train_params, SurfaceGradients, VulkanSurface};
 
 use crate::cpu::surface_fwd::{SurfCounts, SurfaceParams};
+use crate::cpu::surface_reg::OpacityChunk;
 use crate::cpu::surface_train::{SurfaceLoss, TrainCounts};
+use crate::cpu::TvChunk;
 use crate::grid::surface::SurfaceGrid;
 use anyhow::Result;
 
-/// The per-vertex regularisers of one step (method.md §3.4); `None` switches a term off. Chunks
-/// are contiguous ranges, [start, start + count), of vertex slots (TV, normals) or rows (Lα).
+/// The per-vertex regularisers of one step (method.md §3.4); `None` switches a term off.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct SurfaceRegs {
-    /// Lδ: TV on δ over every allocated vertex, forward differences scaled by N/256; weight.
-    pub delta_tv: Option<f32>,
-    /// TVα on σα: slot chunk and weight.
-    pub opacity_tv: Option<(u32, u32, f32)>,
-    /// Lα = λ Σ log σα (σα > 0): row chunk and weight.
-    pub opacity_log: Option<(u32, u32, f32)>,
-    /// Ln1, Ln2 on cell normals: cell-slot chunk and the two weights.
+    /// Lδ: TV on δ over every slot, forward differences scaled by N/256 (`delta_tv_chunk`).
+    pub delta_tv: Option<TvChunk>,
+    /// TVα on σα over a random slot chunk (`opacity_tv_chunk`).
+    pub opacity_tv: Option<TvChunk>,
+    /// Lα = λ Σ log σα (σα > 0) over a row chunk.
+    pub opacity_log: Option<OpacityChunk>,
+    /// Ln1, Ln2 on the cells of a chunk of vertex rows: (start, count, λ1, λ2).
     pub normals: Option<(u32, u32, f32, f32)>,
 }
 
@@ -51,6 +52,8 @@ pub struct SurfaceStepStats {
     /// Means over rays of the entropy and depth-consistency terms (unweighted).
     pub entropy: f64,
     pub consistency: f64,
+    /// Weighted losses of the regularisers Lα and Ln (the TV terms are not evaluated).
+    pub reg_loss: f64,
     /// Counters of the training pass (see `cpu::surface_train::TrainCounts`).
     pub counts: TrainCounts,
     /// Device time of the step's kernels in ns (0 on the CPU backend).

@@ -7,6 +7,7 @@ use super::progress::Progress;
 use super::render::{render_split_with, RenderedSplit};
 use super::stage1::step_rng;
 use super::surface_config::SurfaceConfig;
+use crate::cpu::surface_reg::{delta_tv_chunk, opacity_tv_chunk, OpacityChunk};
 use crate::data::{Dataset, RaySampler};
 use crate::grid::surface::SurfaceGrid;
 use crate::surface::{SurfaceBackend, SurfaceRegs, SurfaceStepParams};
@@ -19,7 +20,8 @@ use std::time::Instant;
 
 /// File name of the stage-2 checkpoint inside a run directory.
 pub const CHECKPOINT: &str = "surface.npz";
-/// Per-step log: step, mse, batch PSNR, entropy, consistency, seconds since the start.
+/// Per-step log: step, mse, batch PSNR, entropy, consistency, regulariser loss (Lα + Ln),
+/// seconds since the start.
 pub const LOG: &str = "train_log.csv";
 
 /// Wall time per phase, throughput and counters of a finished run.
@@ -86,21 +88,22 @@ pub fn resume(backend: &mut dyn SurfaceBackend, path: &Path) -> Result<(u32, Sur
     Ok((step, cfg))
 }
 
-/// The scheduled parameters of step `step` (random regulariser chunks from `rng`).
+/// The scheduled parameters of step `step` (random regulariser chunks from `rng`) for a grid of
+/// resolution `res` with `rows` allocated vertices.
 fn step_params(
     cfg: &SurfaceConfig,
-    grid_slots: u32,
+    res: [u32; 3],
     rows: u32,
     step: u32,
     rng: &mut impl Rng,
 ) -> SurfaceStepParams {
-    let mut chunk = |total: u32, fraction: f32| {
-        let count = ((total as f32 * fraction) as u32).clamp(1, total.max(1));
-        (rng.random_range(0..=total.saturating_sub(count)), count)
+    let row_chunk = |fraction: f32, draw: u32| {
+        let count = ((rows as f32 * fraction) as u32).clamp(1, rows.max(1));
+        (draw % rows.max(1), count)
     };
-    let (tv_start, tv_count) = chunk(grid_slots, cfg.tv_alpha_fraction);
-    let (la_start, la_count) = chunk(rows, cfg.alpha_fraction);
-    let (n_start, n_count) = chunk(grid_slots, cfg.normal_fraction);
+    let (la_start, la_count) = row_chunk(cfg.alpha_fraction, rng.random());
+    let (n_start, n_count) = row_chunk(cfg.normal_fraction, rng.random());
+    let tv_draw: u64 = rng.random();
     let (ln1, ln2) = (cfg.lambda_n1.at(step), cfg.lambda_n2);
     SurfaceStepParams {
         lr_delta: cfg.lr_delta.at(step),
@@ -117,13 +120,17 @@ fn step_params(
             0.0
         },
         regs: SurfaceRegs {
-            delta_tv: (cfg.lambda_delta > 0.0).then_some(cfg.lambda_delta),
-            opacity_tv: (cfg.lambda_tv_alpha > 0.0).then_some((
-                tv_start,
-                tv_count,
-                cfg.lambda_tv_alpha,
-            )),
-            opacity_log: (cfg.lambda_alpha > 0.0).then_some((la_start, la_count, cfg.lambda_alpha)),
+            delta_tv: (cfg.lambda_delta > 0.0)
+                .then(|| delta_tv_chunk(res, rows as usize, cfg.lambda_delta)),
+            opacity_tv: (cfg.lambda_tv_alpha > 0.0).then(|| {
+                opacity_tv_chunk(res, cfg.tv_alpha_fraction, cfg.lambda_tv_alpha, tv_draw)
+            }),
+            opacity_log: (cfg.lambda_alpha > 0.0).then_some(OpacityChunk {
+                rows,
+                start: la_start,
+                count: la_count,
+                lambda: cfg.lambda_alpha,
+            }),
             normals: (ln1 > 0.0 || ln2 > 0.0).then_some((n_start, n_count, ln1, ln2)),
         },
     }
@@ -149,7 +156,10 @@ pub fn train(
         .with_context(|| format!("opening {}", log_path.display()))?;
     if start_step == 0 {
         log.set_len(0)?;
-        writeln!(log, "step,mse,psnr_batch,entropy,consistency,elapsed_s")?;
+        writeln!(
+            log,
+            "step,mse,psnr_batch,entropy,consistency,reg_loss,elapsed_s"
+        )?;
     }
     let mut report = Stage2Report::default();
     let mut progress = Progress::new(cfg.iters as u64, start_step as u64, show_progress);
@@ -158,7 +168,7 @@ pub fn train(
     let mut mse = f64::NAN;
     let t_start = Instant::now();
     let grid0 = backend.grid()?;
-    let (slots, rows) = (grid0.links.len() as u32, grid0.delta.len() as u32);
+    let (res, rows) = (grid0.res, grid0.delta.len() as u32);
     drop(grid0);
     for step in start_step..cfg.iters {
         let t = Instant::now();
@@ -168,7 +178,7 @@ pub fn train(
             &data.scene,
             cfg.batch as usize,
         );
-        let p = step_params(cfg, slots, rows, step, &mut rng);
+        let p = step_params(cfg, res, rows, step, &mut rng);
         let stats = backend.step(&batch.flat_rays(), &batch.flat_targets(), &p)?;
         if !(stats.mse.is_finite() && stats.entropy.is_finite() && stats.consistency.is_finite()) {
             bail!(
@@ -192,12 +202,13 @@ pub fn train(
         }
         writeln!(
             log,
-            "{},{:.6e},{:.3},{:.5},{:.5},{:.3}",
+            "{},{:.6e},{:.3},{:.5},{:.5},{:.4e},{:.3}",
             step + 1,
             mse,
             super::psnr(mse),
             stats.entropy,
             stats.consistency,
+            stats.reg_loss,
             t_start.elapsed().as_secs_f64()
         )?;
         let rays_per_s = (timed_secs > 0.0).then(|| timed_rays as f64 / timed_secs);
