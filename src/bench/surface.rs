@@ -3,8 +3,8 @@
 //! fast-preset stage-1 run on the CPU backend brings a density grid to `--res`³, the stage-2 grid
 //! is initialised from it (method.md §3.1, `SurfaceGrid::from_density`) and trained for
 //! `--warm-steps` CPU steps, then each backend trains the same `--steps` batches from that state
-//! (thin-category weights: LH, Lc, Lδ over every vertex, TVα on a 1 % chunk; Lα and the normal
-//! terms are not implemented by the backends yet). Reported per backend: training rays/s (wall
+//! (the thin category's fast-preset weights and regulariser chunks at step 0: LH, Lc, Lδ over
+//! every vertex, TVα, Lα and Ln1/Ln2 on random chunks). Reported per backend: training rays/s (wall
 //! time, after one untimed step), mean MSE, and per ray: cells visited, cubic solves, solves
 //! skipped by min/max culling, hits composited, hits cut by truncation, hits whose δ gradient the
 //! f′ guard dropped, gradient atomic adds; the Vulkan/CPU ratio; the Vulkan device time per kernel
@@ -14,14 +14,16 @@
 //! stage-1 training on the Vulkan device at the same resolution, from the stage-1 grid, the way
 //! `bench plenoxels` does, and prints the ratios of the Vulkan rates.
 
+use crate::cpu::surface_reg::{delta_tv_chunk, opacity_tv_chunk, OpacityChunk};
 use crate::data::{Dataset, LoadOptions, RaySampler};
 use crate::gpu::Gpu;
-use crate::grid::surface::{SurfaceGrid, SurfaceInit};
+use crate::grid::surface::SurfaceGrid;
 use crate::plenoxel::{CpuPlenoxels, Plenoxels, StepParams, VulkanPlenoxels};
 use crate::scene::{generate, GenerateOptions, SceneKind};
 use crate::surface::{
     CpuSurface, SurfaceBackend, SurfaceRegs, SurfaceStepParams, SurfaceStepStats, VulkanSurface,
 };
+use crate::train::surface_config::SurfaceConfig;
 use crate::train::{stage1, Stage1Config};
 use anyhow::{ensure, Result};
 use serde_json::json;
@@ -70,23 +72,46 @@ struct Figures {
     device_ms_per_step: BTreeMap<&'static str, f64>,
 }
 
-/// Thin-category stage-2 step parameters (method.md §3.4–3.5) at the start of the schedule.
-fn step_params(slots: u32, a: f32, step: u32) -> SurfaceStepParams {
-    let chunk = (slots / 100).max(1);
+/// The stage-2 step parameters of the thin category's fast preset at step 0 (as the training
+/// loop builds them, with chunk positions drawn from the step index), truncation `a`.
+fn step_params(
+    cfg: &SurfaceConfig,
+    res: [u32; 3],
+    rows: u32,
+    a: f32,
+    step: u32,
+) -> SurfaceStepParams {
+    let draw = (step as u64 + 1).wrapping_mul(0x9e37_79b9_7f4a_7c15);
+    let row_chunk = |fraction: f32, draw: u64| {
+        let count = ((rows as f32 * fraction) as u32).clamp(1, rows.max(1));
+        ((draw % rows.max(1) as u64) as u32, count)
+    };
+    let (la_start, la_count) = row_chunk(cfg.alpha_fraction, draw);
+    let (n_start, n_count) = row_chunk(cfg.normal_fraction, draw >> 17);
+    let (ln1, ln2) = (cfg.lambda_n1.at(0), cfg.lambda_n2);
     SurfaceStepParams {
-        lr_delta: 1e-5,
-        lr_opacity: 1e-2,
-        lr_sh: 1e-3,
-        beta: 0.95,
-        eps: 1e-8,
+        lr_delta: cfg.lr_delta.at(0),
+        lr_opacity: cfg.lr_opacity.at(0),
+        lr_sh: cfg.lr_sh.at(0),
+        beta: cfg.beta,
+        eps: cfg.eps,
         a,
-        stop_thresh: 1e-4,
-        lambda_h: 1e-4,
-        lambda_c: 1e-6,
+        stop_thresh: cfg.stop_thresh,
+        lambda_h: cfg.lambda_h,
+        lambda_c: cfg.lambda_c,
         regs: SurfaceRegs {
-            delta_tv: Some(1e-3),
-            opacity_tv: Some(((step as u64 * 7919 % slots as u64) as u32, chunk, 1e-5)),
-            ..Default::default()
+            delta_tv: (cfg.lambda_delta > 0.0)
+                .then(|| delta_tv_chunk(res, rows as usize, cfg.lambda_delta)),
+            opacity_tv: (cfg.lambda_tv_alpha > 0.0).then(|| {
+                opacity_tv_chunk(res, cfg.tv_alpha_fraction, cfg.lambda_tv_alpha, draw >> 7)
+            }),
+            opacity_log: (cfg.lambda_alpha > 0.0).then_some(OpacityChunk {
+                rows,
+                start: la_start,
+                count: la_count,
+                lambda: cfg.lambda_alpha,
+            }),
+            normals: (ln1 > 0.0 || ln2 > 0.0).then_some((n_start, n_count, ln1, ln2)),
         },
     }
 }
@@ -99,6 +124,7 @@ type StepFn<'a> = dyn FnMut(&[f32], &[f32], &SurfaceStepParams) -> Result<Surfac
 fn time_surface(
     step: &mut StepFn,
     grid: &SurfaceGrid,
+    cfg: &SurfaceConfig,
     data: &Dataset,
     args: &SurfaceBenchArgs,
     regs: bool,
@@ -110,7 +136,7 @@ fn time_surface(
     for i in 0..=args.steps {
         let b = sampler.next_batch(&data.train, &data.scene, args.batch as usize);
         let (rays, targets) = (b.flat_rays(), b.flat_targets());
-        let mut p = step_params(grid.links.len() as u32, args.a, i);
+        let mut p = step_params(cfg, grid.res, grid.delta.len() as u32, args.a, i);
         if !regs {
             p.regs = SurfaceRegs::default();
         }
@@ -217,9 +243,9 @@ fn run_in(gpu: &Gpu, args: &SurfaceBenchArgs, dir: &std::path::Path) -> Result<(
         args,
     )?;
 
-    let init = SurfaceInit::default();
-    let init_grid = SurfaceGrid::from_density(&density, &init)?;
-    let slots = init_grid.links.len() as u32;
+    let scfg = SurfaceConfig::preset("fast", "thin")?;
+    let init_grid = SurfaceGrid::from_density(&density, &scfg.init)?;
+    let (res, rows) = (init_grid.res, init_grid.delta.len() as u32);
     let mut cpu = CpuSurface::new(init_grid);
     eprintln!(
         "bench surface: {} stage-2 warm-up steps (CPU)",
@@ -231,7 +257,7 @@ fn run_in(gpu: &Gpu, args: &SurfaceBenchArgs, dir: &std::path::Path) -> Result<(
         cpu.step(
             &b.flat_rays(),
             &b.flat_targets(),
-            &step_params(slots, args.a, i),
+            &step_params(&scfg, res, rows, args.a, i),
         )?;
     }
     let grid = cpu.grid()?;
@@ -259,6 +285,7 @@ fn run_in(gpu: &Gpu, args: &SurfaceBenchArgs, dir: &std::path::Path) -> Result<(
                 Ok(s)
             },
             &grid,
+            &scfg,
             &data,
             args,
             regs,
@@ -274,7 +301,14 @@ fn run_in(gpu: &Gpu, args: &SurfaceBenchArgs, dir: &std::path::Path) -> Result<(
     eprintln!("bench surface: timing the CPU backend");
     let mut cpu = CpuSurface::new(grid.clone());
     cpu.load(grid.clone(), Some(state))?;
-    let fc = time_surface(&mut |r, t, p| cpu.step(r, t, p), &grid, &data, args, true)?;
+    let fc = time_surface(
+        &mut |r, t, p| cpu.step(r, t, p),
+        &grid,
+        &scfg,
+        &data,
+        args,
+        true,
+    )?;
 
     println!(
         "stage-2 training at {}³ ({} allocated vertices, {} levels), {} steps of {} rays, a = {}, \

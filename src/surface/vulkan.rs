@@ -288,10 +288,30 @@ impl VulkanSurface {
         Ok(b)
     }
 
-    /// Record the per-vertex regularisers (the same terms and scales as `CpuSurface`).
+    /// Record the per-vertex regularisers (the same chunks and scales as `CpuSurface`).
     fn record_regularisers(&self, b: &mut Batch, p: &SurfaceStepParams) -> Result<()> {
         let res = self.meta.res;
-        let mut tv = |data: &GpuBuffer, grad: &GpuBuffer, start: u32, count: u32, scale: f32| {
+        // TV chunks are dispatched over their intersection with the span of allocated slots: a
+        // slot outside it holds no vertex, and every term of the chunk (a vertex and its
+        // forward neighbours) lies inside it, so the gradient is the whole chunk's, for a
+        // fraction of the invocations (Lδ's chunk is every slot).
+        let (first, last) = self.allocated_span;
+        for (chunk, data, grad) in [
+            (p.regs.delta_tv, &self.delta, &self.grad[0]),
+            (p.regs.opacity_tv, &self.opacity, &self.grad[1]),
+        ] {
+            let Some(c) = chunk else { continue };
+            ensure!(
+                c.res == res && c.channels == 1,
+                "TV chunk for a {:?} grid with {} channels on a {res:?} grid",
+                c.res,
+                c.channels
+            );
+            let start = c.start.max(first);
+            let end = c.start.saturating_add(c.count).min(last + 1);
+            if self.rows == 0 || start >= end {
+                continue;
+            }
             b.dispatch_1d(
                 &kernels::tv::INFO,
                 &kernels::tv::Push {
@@ -301,41 +321,21 @@ impl VulkanSurface {
                     step: self.step.address(),
                     res,
                     start,
-                    count,
+                    count: end - start,
                     channels: 1,
-                    scale,
+                    scale: c.scale,
                     ..Default::default()
                 },
-                count + res[1] * res[2],
-            )
-        };
-        if let Some(lambda) = p.regs.delta_tv {
-            // κ·√(|d|² + ε/κ²) = √(|κd|² + ε): the N/256-scaled TV up to ε.
-            let kappa = res[0] as f32 / 256.0;
-            let count = self.rows.max(1) as f32;
-            // Over the span of allocated slots only: a slot outside it has no vertex, and no
-            // vertex inside has a backward neighbour outside it, so the gradient is that of the
-            // chunk of all slots (CpuSurface's), for a fraction of the invocations.
-            let (first, last) = self.allocated_span;
-            tv(
-                &self.delta,
-                &self.grad[0],
-                first,
-                last + 1 - first,
-                lambda * kappa / count,
-            )?;
-        }
-        if let Some((start, count, lambda)) = p.regs.opacity_tv {
-            tv(
-                &self.opacity,
-                &self.grad[1],
-                start,
-                count,
-                lambda / count.max(1) as f32,
+                end - start + res[1] * res[2],
             )?;
         }
         let rows = self.rows as u32;
-        if let (Some((start, count, lambda)), true) = (p.regs.opacity_log, rows > 0) {
+        if let (Some(c), true) = (p.regs.opacity_log, rows > 0) {
+            ensure!(
+                c.rows == rows,
+                "Lα chunk over {} rows on a grid of {rows}",
+                c.rows
+            );
             b.dispatch_1d(
                 &kernels::surface_opacity_reg::INFO,
                 &kernels::surface_opacity_reg::Push {
@@ -344,11 +344,11 @@ impl VulkanSurface {
                     step: self.step.address(),
                     loss: self.reg_loss.address(),
                     rows,
-                    start,
-                    count,
-                    lambda,
+                    start: c.start,
+                    count: c.count,
+                    lambda: c.lambda,
                 },
-                count.min(rows),
+                c.count.min(rows),
             )?;
         }
         if let (Some((start, count, lambda1, lambda2)), true) = (p.regs.normals, rows > 0) {
@@ -471,8 +471,10 @@ impl VulkanSurface {
         let loss = self.ray_loss(n)?;
         let nf = n as f64;
         let sum = |f: fn(&RayLoss) -> f32| loss.iter().map(|l| f(l) as f64).sum::<f64>();
+        let reg: Vec<f32> = self.reg_loss.download()?;
         let stats = SurfaceStepStats {
             mse: sum(|l| l.sq_err) / (3.0 * nf),
+            reg_loss: reg.iter().map(|&x| x as f64).sum(),
             entropy: sum(|l| l.entropy) / nf,
             consistency: sum(|l| l.consistency) / nf,
             counts: self.read_train_counts()?,
