@@ -3,4 +3,5 @@
 pub mod cubic;
 pub mod dda;
 pub mod plenoxels;
+pub mod surface;
 pub mod time_vs_error;

@@ -12,6 +12,7 @@ pub mod sh_eval;
 pub mod surface_blocks;
 pub mod surface_fwd;
 pub mod surface_reg;
+pub mod surface_train;
 pub mod trilerp_eval;
 
 /// Result of comparing one kernel on the Vulkan device with its CPU twin.
@@ -53,6 +54,7 @@ pub const CHECKS: &[(&str, CheckFn)] = &[
     ("extract_points", extract_points::check),
     ("surface_blocks", surface_blocks::check),
     ("surface_fwd", surface_fwd::check),
+    ("surface_train", surface_train::check),
     ("surface_opacity_reg", surface_reg::check_opacity_reg),
     ("surface_normal_reg", surface_reg::check_normal_reg),
     ("surface_rmsprop", surface_reg::check_rmsprop),

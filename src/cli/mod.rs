@@ -87,6 +87,10 @@ pub enum BenchKind {
     /// steps on one built-in scene; wall time, training rays/s, Chamfer, F1 and test PSNR of the
     /// best Plenoxels level and of αSurf; CSV, a PNG plot, a table and `--json`.
     TimeVsError(crate::bench::time_vs_error::TimeVsErrorArgs),
+    /// Stage-2 training throughput on both backends (rays/s, device time per kernel, cells, cubic
+    /// solves, culled solves, hits, cut and guarded hits, atomic adds per ray) from the same grid,
+    /// and the ratio to stage-1 training on the Vulkan device at the same resolution.
+    Surface(crate::bench::surface::SurfaceBenchArgs),
 }
 
 /// Entry point of the binary: parse, run, map errors to a message and exit code 1.
@@ -204,6 +208,11 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             }
             BenchKind::TimeVsError(args) => {
                 crate::bench::time_vs_error::run(args, &cli)?;
+                ExitCode::SUCCESS
+            }
+            BenchKind::Surface(args) => {
+                let gpu = gpu_used.insert(open_gpu(&cli)?);
+                crate::bench::surface::run(gpu, args)?;
                 ExitCode::SUCCESS
             }
             BenchKind::Dda(args) => {

@@ -14,6 +14,10 @@
 //!   spatial derivatives along d of σα and raw colour at p, and Lc. Hits with
 //!   |f′| ≤ FPRIME_GUARD·(max δ − min δ over the cell) give δ no gradient and are counted.
 //!
+//! Scatter: the per-corner gradients of consecutive hits in one cell are summed (in reverse hit
+//! order, as the kernel's reverse recurrence visits them) and added with one atomic per corner,
+//! parameter and non-zero sum when the cell changes (SH: 3 colour sums per corner, times Y_k).
+//!
 //! Each loss term is a per-ray sum; the caller's weights (`grad_scale` for the squared error,
 //! `lambda_h`, `lambda_c`) carry the batch normalisation.
 
@@ -62,6 +66,8 @@ pub struct SurfaceGrads<'a> {
 /// One composited hit: its cell, corner links, level, and where the ray meets it.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Hit {
+    /// Grid cell (lower corner).
+    pub cell: [i32; 3],
     pub lk: [i32; 8],
     /// Corner δ values (paper order).
     pub c: [f32; 8],
@@ -147,6 +153,7 @@ pub fn trace_ray(
                 break 'walk;
             }
             let h = Hit {
+                cell: l,
                 lk,
                 c,
                 q0,
@@ -229,12 +236,15 @@ fn shade(g: &SurfaceGridRef, h: &Hit, dn: [f32; 3], y: &[f32; 9], a: f32, j: usi
     }
 }
 
-/// Per-ray output of the backward pass: squared error, entropy and Lc terms (unweighted).
-#[derive(Clone, Copy, Debug, Default)]
+/// Per-ray output of the training pass: squared error, entropy and Lc terms (unweighted), and
+/// the hits composited (`SurfTrainOut` in the GLSL, scalar layout, 16 bytes).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct RayLoss {
     pub sq_err: f32,
     pub entropy: f32,
     pub consistency: f32,
+    pub hits: u32,
 }
 
 /// Twin of `surface_train.comp`: per-ray losses and the summed counters; dL/dδ, dL/dσα and
@@ -332,6 +342,7 @@ fn ray_backward(
     let diff: [f32; 3] = std::array::from_fn(|ch| total[ch] - target[ch]);
     let mut out = RayLoss {
         sq_err: diff[0] * diff[0] + diff[1] * diff[1] + diff[2] * diff[2],
+        hits: n as u32,
         ..Default::default()
     };
     let d_c = diff.map(|d| loss.grad_scale * d);
@@ -432,7 +443,10 @@ fn train_ray(
         .map(|j| shade(g, &tr.hits[j], tr.dn, &y, p.a, j))
         .collect();
     let (rl, hg) = ray_backward(&tr, &shades, target, loss);
-    for j in 0..tr.n {
+    // Per-corner sums over consecutive hits in one cell, in reverse hit order (the kernel scatters
+    // inside its reverse recurrence), flushed when the cell changes.
+    let mut acc = CellAcc::default();
+    for j in (0..tr.n).rev() {
         let (h, s, gr) = (&tr.hits[j], &shades[j], &hg[j]);
         let d_sa = if s.sa > 0.0 {
             gr.d_at * s.gamma * s.e
@@ -470,23 +484,57 @@ fn train_ray(
         } else {
             -dl_ds / f1
         };
+        if acc.cell != Some(h.cell) {
+            cnt[6] += acc.flush(out, &y);
+            acc.cell = Some(h.cell);
+            acc.lk = h.lk;
+        }
         for i in 0..8 {
-            let row = h.lk[i] as usize;
             let wi = s.wt[i];
-            let dd = wi * d_delta_scale;
-            let dsa = wi * d_sa;
-            let dcol = gr.d_raw.map(|d| wi * d);
+            acc.delta[i] += wi * d_delta_scale;
+            acc.opacity[i] += wi * d_sa;
+            for ch in 0..3 {
+                acc.color[i][ch] += wi * gr.d_raw[ch];
+            }
+        }
+    }
+    cnt[6] += acc.flush(out, &y);
+    (rl, cnt)
+}
+
+/// Per-corner gradient sums of the current cell (SH as 3 colour sums: Y is constant along a ray).
+#[derive(Default)]
+struct CellAcc {
+    cell: Option<[i32; 3]>,
+    lk: [i32; 8],
+    delta: [f32; 8],
+    opacity: [f32; 8],
+    color: [[f32; 3]; 8],
+}
+
+impl CellAcc {
+    /// One atomic add per corner, parameter and non-zero sum; corners that get one are touched.
+    /// Clears the sums and returns the number of adds.
+    fn flush(&mut self, out: &Scatter, y: &[f32; 9]) -> u32 {
+        if self.cell.is_none() {
+            return 0;
+        }
+        let mut adds = 0;
+        for i in 0..8 {
+            let (dd, dsa, dcol) = (self.delta[i], self.opacity[i], self.color[i]);
+            (self.delta[i], self.opacity[i], self.color[i]) = (0.0, 0.0, [0.0; 3]);
             if dd == 0.0 && dsa == 0.0 && dcol == [0.0; 3] {
                 continue;
             }
+            let row = self.lk[i] as usize;
             touch(out.touched, row);
             if dd != 0.0 {
                 atomic::add(&out.delta[row], dd);
-                cnt[6] += 1;
+                adds += 1;
             }
             if dsa != 0.0 {
                 atomic::add(&out.opacity[row], dsa);
-                cnt[6] += 1;
+                adds += 1;
             }
             for ch in 0..3 {
                 if dcol[ch] == 0.0 {
@@ -495,9 +543,9 @@ fn train_ray(
                 for k in 0..9 {
                     atomic::add(&out.sh[row * 27 + ch * 9 + k], dcol[ch] * y[k]);
                 }
-                cnt[6] += 9;
+                adds += 9;
             }
         }
+        adds
     }
-    (rl, cnt)
 }

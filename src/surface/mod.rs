@@ -2,8 +2,10 @@
 //! twins and a Vulkan implementation running the GLSL kernels (one submission per step).
 
 mod cpu;
+mod vulkan;
 
 pub use cpu::CpuSurface;
+pub use vulkan::{train_params, SurfaceGradients, VulkanSurface};
 
 use crate::cpu::surface_fwd::{SurfCounts, SurfaceParams};
 use crate::cpu::surface_reg::OpacityChunk;

@@ -1,0 +1,403 @@
+#version 460
+// surface_train — one stage-2 (αSurf) training pass over a batch of rays, forward and backward
+// fused per ray (method.md §3.2–3.4): squared error, entropy LH and depth consistency Lc.
+// Thread mapping: one invocation per ray.
+// Forward: the walk of surface_fwd (same DDA, culling, per-cell hits, truncation, early stop),
+// recording the ≤ a ≤ SURF_MAX_HITS composited hits in registers together with what the
+// backward needs of them (hit point, depth, σα, α̃, raw colour, and the derivatives along the ray
+// of σα, raw colour and δ: dσα/ds, draw/ds, f′(s), plus the f′ guard verdict).
+// Backward: compositing recomputed from the records; losses; ∂LH/∂w_j and ∂Lc/∂t_j; a reverse
+// recurrence (colour and entropy seen from behind each hit) gives ∂L/∂α̃_j and ∂L/∂raw_j; then
+// ∂L/∂σα = ∂L/∂α̃·γ·e^{−σα} (σα > 0), ∂L/∂SH = ∂L/∂raw·Y (ReLU-gated), and δ through the hit
+// position: ∂L/∂δ_i = −w_i·(∂L/∂s)/f′(s), no δ gradient where |f′| ≤ FPRIME_GUARD·(max − min of
+// the cell's δ) (counted). Per-corner gradients of consecutive hits in the same cell are summed
+// in registers (in the reverse order) and flushed with one float atomic per corner, parameter and
+// non-zero sum when the cell changes (SH: 3 accumulators per corner, times Y_k at the flush);
+// every vertex that receives a gradient is touched (step.glsl).
+// Inputs: links (n³, < 0 unallocated), complete (bit i of word i/32 set when the cell with lower
+// corner slot i has its 8 corners allocated: the walk reads one bit per empty cell instead of 8
+// links), delta, opacity (raw σα), sh (27) per allocated vertex;
+// params (floats): scale[3], offset[3], a, stop_thresh, grad_scale, lambda_h, lambda_c, (pad),
+// levels[8] (n_levels used); rays (6 floats), targets (3 floats).
+// Outputs: grad_delta, grad_opacity, grad_sh += (float atomics), touched list (step buffer);
+// out_rays[r] = (squared error, entropy, consistency, hits composited); stats (7 u32) += cells
+// visited, cubic solves, solves culled by min/max, hits composited, hits cut by truncation,
+// guarded hits, gradient atomic adds (subgroup-reduced).
+// CPU twin: cpu::surface_train::train (src/cpu/surface_train.rs).
+#extension GL_EXT_shader_atomic_float : require
+#include "common.glsl"
+#include "surface.glsl"
+layout(local_size_x = 64) in;
+
+// Per-ray output (scalar layout, 16 bytes); twin cpu::surface_train::RayLoss.
+struct SurfTrainOut {
+    float sq_err;
+    float entropy;
+    float consistency;
+    uint hits;
+};
+layout(buffer_reference, scalar, buffer_reference_align = 4) buffer SurfTrainOutBuf { SurfTrainOut v[]; };
+
+layout(push_constant, scalar) uniform Push {
+    I32Buf links;
+    U32Buf complete;
+    F32Buf delta;
+    F32Buf opacity;
+    F32Buf sh;
+    F32Buf params;
+    F32Buf rays;
+    F32Buf targets;
+    F32Buf grad_delta;
+    F32Buf grad_opacity;
+    F32Buf grad_sh;
+    SurfTrainOutBuf out_rays;
+    U32Buf stats;
+    U32Buf step;
+    uint n;
+    uint n_rays;
+    uint n_levels;
+} pc;
+
+#include "step.glsl"
+
+// Composited hits recorded per ray (the truncation parameter a may not exceed this).
+const uint SURF_MAX_HITS = 8u;
+// Relative guard on the implicit derivative's denominator f′(s).
+const float FPRIME_GUARD = 1e-3;
+// Layout of the params buffer.
+const uint P_SCALE = 0u;
+const uint P_OFFSET = 3u;
+const uint P_A = 6u;
+const uint P_STOP = 7u;
+const uint P_GRAD_SCALE = 8u;
+const uint P_LAMBDA_H = 9u;
+const uint P_LAMBDA_C = 10u;
+const uint P_LEVELS = 12u;
+
+// Corner links of cell l (paper order).
+void cell_links(ivec3 l, out int lk[8]) {
+    uint base = dda_cell_index(l, pc.n);
+    uint nz = pc.n;
+    uint nyz = pc.n * pc.n;
+    lk[0] = pc.links.v[base];
+    lk[1] = pc.links.v[base + 1u];
+    lk[2] = pc.links.v[base + nz];
+    lk[3] = pc.links.v[base + nz + 1u];
+    lk[4] = pc.links.v[base + nyz];
+    lk[5] = pc.links.v[base + nyz + 1u];
+    lk[6] = pc.links.v[base + nyz + nz];
+    lk[7] = pc.links.v[base + nyz + nz + 1u];
+}
+
+// ∂w_i/∂s at local point p moving along unit direction d.
+void trilerp_dwds(vec3 p, vec3 d, out float dw[8]) {
+    vec3 q = vec3(1.0) - p;
+    for (uint i = 0u; i < 8u; i++) {
+        bool bx = ((i >> 2u) & 1u) == 1u;
+        bool by = ((i >> 1u) & 1u) == 1u;
+        bool bz = (i & 1u) == 1u;
+        float fx = bx ? p.x : q.x;
+        float fy = by ? p.y : q.y;
+        float fz = bz ? p.z : q.z;
+        float sx = bx ? 1.0 : -1.0;
+        float sy = by ? 1.0 : -1.0;
+        float sz = bz ? 1.0 : -1.0;
+        precise float v = sx * fy * fz * d.x + fx * sy * fz * d.y + fx * fy * sz * d.z;
+        dw[i] = v;
+    }
+}
+
+// Adds a cell's per-corner gradient sums (one atomic per corner, parameter and non-zero sum),
+// touches the corners that get one, clears the sums; returns the atomic adds.
+uint flush(ivec3 cell, float y[9], inout float acc_d[8], inout float acc_a[8], inout vec3 acc_c[8]) {
+    if (cell.x < 0) return 0u;
+    int lk[8];
+    cell_links(cell, lk);
+    uint adds = 0u;
+    for (uint i = 0u; i < 8u; i++) {
+        float gd = acc_d[i];
+        float ga = acc_a[i];
+        vec3 gc = acc_c[i];
+        acc_d[i] = 0.0;
+        acc_a[i] = 0.0;
+        acc_c[i] = vec3(0.0);
+        if (gd == 0.0 && ga == 0.0 && gc == vec3(0.0)) continue;
+        uint row = uint(lk[i]);
+        touch(row);
+        if (gd != 0.0) {
+            atomicAdd(pc.grad_delta.v[row], gd);
+            adds++;
+        }
+        if (ga != 0.0) {
+            atomicAdd(pc.grad_opacity.v[row], ga);
+            adds++;
+        }
+        for (uint ch = 0u; ch < 3u; ch++) {
+            if (gc[ch] == 0.0) continue;
+            uint base = row * 27u + ch * 9u;
+            for (uint k = 0u; k < 9u; k++) {
+                precise float g = gc[ch] * y[k];
+                atomicAdd(pc.grad_sh.v[base + k], g);
+            }
+            adds += 9u;
+        }
+    }
+    return adds;
+}
+
+void add_train_stats(uvec4 c, uvec3 d) {
+    uvec4 s = subgroupAdd(c);
+    uvec3 t = subgroupAdd(d);
+    if (subgroupElect()) {
+        for (uint i = 0u; i < 4u; i++) atomicAdd(pc.stats.v[i], s[i]);
+        for (uint i = 0u; i < 3u; i++) atomicAdd(pc.stats.v[4u + i], t[i]);
+    }
+}
+
+void main() {
+    uint r = flat_id();
+    if (r >= pc.n_rays) return;
+    vec3 ro = vec3(pc.rays.v[6u * r], pc.rays.v[6u * r + 1u], pc.rays.v[6u * r + 2u]);
+    vec3 rd = vec3(pc.rays.v[6u * r + 3u], pc.rays.v[6u * r + 4u], pc.rays.v[6u * r + 5u]);
+    vec3 target = vec3(pc.targets.v[3u * r], pc.targets.v[3u * r + 1u], pc.targets.v[3u * r + 2u]);
+    vec3 scale = vec3(pc.params.v[P_SCALE], pc.params.v[P_SCALE + 1u], pc.params.v[P_SCALE + 2u]);
+    vec3 offset = vec3(pc.params.v[P_OFFSET], pc.params.v[P_OFFSET + 1u], pc.params.v[P_OFFSET + 2u]);
+    float a = pc.params.v[P_A];
+    float stop_thresh = pc.params.v[P_STOP];
+    uint nl = min(pc.n_levels, SURF_MAX_LEVELS);
+    float lv[SURF_MAX_LEVELS];
+    for (uint i = 0u; i < SURF_MAX_LEVELS; i++) lv[i] = i < nl ? pc.params.v[P_LEVELS + i] : 0.0;
+    vec3 og, dn;
+    surf_ray(ro, rd, scale, offset, og, dn);
+    precise vec3 dg = rd * scale;
+    precise float len2 = dg.x * dg.x + dg.y * dg.y + dg.z * dg.z;
+    float len = sqrt(len2);
+    float inv_len = len > 0.0 ? 1.0 / len : 0.0;
+    float y[9];
+    sh_basis(ray_unit(rd), y);
+    uint n = pc.n;
+    uvec4 cnt = uvec4(0u); // cells, solves, culled, hits
+    uvec3 cnt2 = uvec3(0u); // cut, guarded, atomic adds
+
+    // Forward walk, recording the composited hits.
+    ivec3 h_cell[SURF_MAX_HITS];
+    vec3 h_p[SURF_MAX_HITS];
+    float h_depth[SURF_MAX_HITS]; // t0 + s (voxels)
+    float h_sa[SURF_MAX_HITS];
+    float h_at[SURF_MAX_HITS];
+    vec3 h_raw[SURF_MAX_HITS];
+    vec3 h_draw[SURF_MAX_HITS]; // ∂raw/∂s
+    float h_dsa[SURF_MAX_HITS]; // ∂σα/∂s
+    float h_f1[SURF_MAX_HITS]; // f′(s)
+    bool h_guard[SURF_MAX_HITS];
+    float T = 1.0;
+    uint j = 0u;
+    bool done = false;
+    Dda w = dda_init(og, dn, int(n), 0.0);
+    ivec3 l;
+    float t0, t1;
+    int lk[8];
+    float c[8];
+    uint mask = 0u;
+    while (!done) {
+        // Walk on to the next cell where some level can cross before solving (as surface_fwd).
+        bool found = false;
+        while (dda_next(w, l, t0, t1)) {
+            cnt.x++;
+            uint ci = dda_cell_index(l, n);
+            if ((pc.complete.v[ci >> 5u] & (1u << (ci & 31u))) == 0u) continue;
+            cell_links(l, lk);
+            for (int i = 0; i < 8; i++) c[i] = pc.delta.v[lk[i]];
+            mask = surf_level_mask(c, lv, nl);
+            uint ns = uint(bitCount(mask));
+            cnt.y += ns;
+            cnt.z += nl - ns;
+            if (mask != 0u) {
+                found = true;
+                break;
+            }
+        }
+        if (!found) break;
+        vec3 q0 = surf_local(og, dn, t0, l);
+        vec3 q1 = surf_local(og, dn, t1, l);
+        precise float L = t1 - t0;
+        float hs[SURF_MAX_CELL_HITS];
+        uint nh = surf_cell_hits(c, q0, q1, dn, L, lv, mask, hs);
+        float cmin = min(min(min(c[0], c[1]), min(c[2], c[3])), min(min(c[4], c[5]), min(c[6], c[7])));
+        float cmax = max(max(max(c[0], c[1]), max(c[2], c[3])), max(max(c[4], c[5]), max(c[6], c[7])));
+        for (uint h = 0u; h < nh; h++) {
+            if (float(j) >= a || j >= SURF_MAX_HITS) {
+                cnt2.x++;
+                done = true;
+                break;
+            }
+            precise vec3 p = clamp(q0 + hs[h] * dn, 0.0, 1.0);
+            float wt[8];
+            trilerp_weights(p, wt);
+            float dw[8];
+            trilerp_dwds(p, dn, dw);
+            precise float sa = 0.0;
+            for (int i = 0; i < 8; i++) sa += wt[i] * pc.opacity.v[lk[i]];
+            precise float at = surf_alpha(sa) * surf_gamma(a, j);
+            // Shading and the derivatives along the ray the backward pass needs.
+            precise vec3 raw = vec3(0.5);
+            precise vec3 draw = vec3(0.0);
+            precise float dsa = 0.0;
+            precise float f1 = 0.0;
+            for (int i = 0; i < 8; i++) {
+                uint row = uint(lk[i]);
+                dsa += dw[i] * pc.opacity.v[row];
+                f1 += dw[i] * c[i];
+                for (uint ch = 0u; ch < 3u; ch++) {
+                    precise float v = 0.0;
+                    uint base = row * 27u + ch * 9u;
+                    for (uint k = 0u; k < 9u; k++) v += y[k] * pc.sh.v[base + k];
+                    raw[ch] += wt[i] * v;
+                    draw[ch] += dw[i] * v;
+                }
+            }
+            h_cell[j] = l;
+            h_p[j] = p;
+            precise float depth = t0 + hs[h];
+            h_depth[j] = depth;
+            h_sa[j] = sa;
+            h_at[j] = at;
+            h_raw[j] = raw;
+            h_draw[j] = draw;
+            h_dsa[j] = dsa;
+            h_f1[j] = f1;
+            h_guard[j] = abs(f1) <= FPRIME_GUARD * (cmax - cmin);
+            j++;
+            cnt.w++;
+            precise float tn = T * (1.0 - at);
+            T = tn;
+            if (T < stop_thresh) {
+                done = true;
+                break;
+            }
+        }
+    }
+    uint nh = j;
+
+    // Compositing from the records, and the squared error.
+    float tr[SURF_MAX_HITS + 1u];
+    float wj[SURF_MAX_HITS];
+    tr[0] = 1.0;
+    precise vec3 color = vec3(0.0);
+    for (uint k = 0u; k < nh; k++) {
+        precise float wk = tr[k] * h_at[k];
+        wj[k] = wk;
+        color += wk * max(h_raw[k], vec3(0.0));
+        precise float tn = tr[k] * (1.0 - h_at[k]);
+        tr[k + 1u] = tn;
+    }
+    precise vec3 total = color + vec3(tr[nh]);
+    precise vec3 diff = total - target;
+    SurfTrainOut o;
+    precise float sq = diff.x * diff.x + diff.y * diff.y + diff.z * diff.z;
+    o.sq_err = sq;
+    o.entropy = 0.0;
+    o.consistency = 0.0;
+    o.hits = nh;
+    precise vec3 d_c = pc.params.v[P_GRAD_SCALE] * diff;
+
+    // Entropy of the normalised weights and ∂(λH·LH)/∂w_j.
+    float lambda_h = pc.params.v[P_LAMBDA_H];
+    float e[SURF_MAX_HITS];
+    for (uint k = 0u; k < SURF_MAX_HITS; k++) e[k] = 0.0;
+    precise float wsum = 0.0;
+    for (uint k = 0u; k < nh; k++) wsum += wj[k];
+    if (lambda_h != 0.0 && wsum > 1e-8) {
+        precise float H = 0.0;
+        for (uint k = 0u; k < nh; k++) {
+            if (wj[k] > 0.0) {
+                precise float pk = wj[k] / wsum;
+                H -= pk * log(pk);
+            }
+        }
+        o.entropy = H;
+        for (uint k = 0u; k < nh; k++) {
+            if (wj[k] > 0.0) {
+                precise float ek = -lambda_h * (log(wj[k] / wsum) + H) / wsum;
+                e[k] = ek;
+            }
+        }
+    }
+    // Lc: depths in scene units, mode = first largest weight.
+    float lambda_c = pc.params.v[P_LAMBDA_C];
+    float d_t[SURF_MAX_HITS];
+    for (uint k = 0u; k < SURF_MAX_HITS; k++) d_t[k] = 0.0;
+    if (lambda_c != 0.0 && nh > 1u) {
+        uint m = 0u;
+        for (uint k = 1u; k < nh; k++) {
+            if (wj[k] > wj[m]) m = k;
+        }
+        precise float tm = h_depth[m] * inv_len;
+        precise float lc = 0.0;
+        for (uint k = 0u; k < nh; k++) {
+            if (k == m) continue;
+            precise float dk = h_depth[k] * inv_len - tm;
+            lc += abs(dk);
+            float sg = dk > 0.0 ? 1.0 : (dk < 0.0 ? -1.0 : 0.0);
+            precise float a1 = d_t[k] + lambda_c * sg;
+            d_t[k] = a1;
+            precise float a2 = d_t[m] - lambda_c * sg;
+            d_t[m] = a2;
+        }
+        o.consistency = lc;
+    }
+    pc.out_rays.v[r] = o;
+
+    // Reverse pass: colour and entropy seen from behind each hit; the gradients of consecutive
+    // hits in one cell are summed per corner and flushed when the cell changes.
+    precise vec3 s_c = vec3(1.0);
+    precise float s_e = 0.0;
+    ivec3 cur = ivec3(-1);
+    float acc_d[8];
+    float acc_a[8];
+    vec3 acc_c[8];
+    for (uint i = 0u; i < 8u; i++) {
+        acc_d[i] = 0.0;
+        acc_a[i] = 0.0;
+        acc_c[i] = vec3(0.0);
+    }
+    for (int jj = int(nh) - 1; jj >= 0; jj--) {
+        uint k = uint(jj);
+        float at = h_at[k];
+        vec3 raw = h_raw[k];
+        vec3 col = max(raw, vec3(0.0));
+        precise float d_at = tr[k] * (e[k] - s_e);
+        for (uint ch = 0u; ch < 3u; ch++) {
+            precise float term = d_c[ch] * tr[k] * (col[ch] - s_c[ch]);
+            d_at += term;
+        }
+        precise vec3 d_raw = mix(vec3(0.0), d_c * wj[k], greaterThan(raw, vec3(0.0)));
+        s_c = at * col + (1.0 - at) * s_c;
+        s_e = at * e[k] + (1.0 - at) * s_e;
+        // ∂L/∂σα, and ∂L/∂s: opacity and colour move with the hit point, and the depth (Lc).
+        float sa = h_sa[k];
+        float ex = exp(-max(sa, 0.0));
+        precise float d_sa = sa > 0.0 ? d_at * surf_gamma(a, k) * ex : 0.0;
+        precise float dl_ds = d_sa * h_dsa[k] + d_t[k] * inv_len;
+        for (uint ch = 0u; ch < 3u; ch++) dl_ds += d_raw[ch] * h_draw[k][ch];
+        bool guarded = h_guard[k];
+        if (guarded) cnt2.y++;
+        precise float dds = (guarded || dl_ds == 0.0) ? 0.0 : -dl_ds / h_f1[k];
+        if (h_cell[k] != cur) {
+            cnt2.z += flush(cur, y, acc_d, acc_a, acc_c);
+            cur = h_cell[k];
+        }
+        float wt[8];
+        trilerp_weights(h_p[k], wt);
+        for (uint i = 0u; i < 8u; i++) {
+            precise float gd = acc_d[i] + wt[i] * dds;
+            acc_d[i] = gd;
+            precise float ga = acc_a[i] + wt[i] * d_sa;
+            acc_a[i] = ga;
+            precise vec3 gc = acc_c[i] + wt[i] * d_raw;
+            acc_c[i] = gc;
+        }
+    }
+    cnt2.z += flush(cur, y, acc_d, acc_a, acc_c);
+    add_train_stats(cnt, cnt2);
+}

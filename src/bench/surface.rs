@@ -1,0 +1,377 @@
+//! `alphasurf bench surface`: stage-2 (αSurf) training throughput on both backends from the same
+//! grid. The built-in thin scene is generated (small images, as `bench plenoxels`), a short
+//! fast-preset stage-1 run on the CPU backend brings a density grid to `--res`³, the stage-2 grid
+//! is initialised from it (method.md §3.1, `SurfaceGrid::from_density`) and trained for
+//! `--warm-steps` CPU steps, then each backend trains the same `--steps` batches from that state
+//! (the thin category's fast-preset weights and regulariser chunks at step 0: LH, Lc, Lδ over
+//! every vertex, TVα, Lα and Ln1/Ln2 on random chunks). Reported per backend: training rays/s (wall
+//! time, after one untimed step), mean MSE, and per ray: cells visited, cubic solves, solves
+//! skipped by min/max culling, hits composited, hits cut by truncation, hits whose δ gradient the
+//! f′ guard dropped, gradient atomic adds; the Vulkan/CPU ratio; the Vulkan device time per kernel
+//! (timestamps). The Vulkan backend is also timed without the regularisers (the data term, its
+//! scatter and RMSProp over the vertices the rays touched): `bench plenoxels` times stage-1 steps
+//! without TV, and Lδ alone touches every vertex each step. For the issue's target it times
+//! stage-1 training on the Vulkan device at the same resolution, from the stage-1 grid, the way
+//! `bench plenoxels` does, and prints the ratios of the Vulkan rates.
+
+use crate::cpu::surface_reg::{delta_tv_chunk, opacity_tv_chunk, OpacityChunk};
+use crate::data::{Dataset, LoadOptions, RaySampler};
+use crate::gpu::Gpu;
+use crate::grid::surface::SurfaceGrid;
+use crate::plenoxel::{CpuPlenoxels, Plenoxels, StepParams, VulkanPlenoxels};
+use crate::scene::{generate, GenerateOptions, SceneKind};
+use crate::surface::{
+    CpuSurface, SurfaceBackend, SurfaceRegs, SurfaceStepParams, SurfaceStepStats, VulkanSurface,
+};
+use crate::train::surface_config::SurfaceConfig;
+use crate::train::{stage1, Stage1Config};
+use anyhow::{ensure, Result};
+use serde_json::json;
+use std::collections::BTreeMap;
+use std::time::Instant;
+
+/// Arguments of `bench surface`.
+#[derive(clap::Args, Debug)]
+pub struct SurfaceBenchArgs {
+    /// Print one JSON object with the figures as the last stdout line.
+    #[arg(long)]
+    pub json: bool,
+    /// Grid resolution.
+    #[arg(long, default_value_t = 128)]
+    pub res: u32,
+    /// Fast-preset stage-1 steps (CPU backend) that prepare the density grid.
+    #[arg(long, default_value_t = 300)]
+    pub stage1_steps: u32,
+    /// Stage-2 steps (CPU backend) after the initialisation, before timing.
+    #[arg(long, default_value_t = 20)]
+    pub warm_steps: u32,
+    /// Timed steps per backend.
+    #[arg(long, default_value_t = 20)]
+    pub steps: u32,
+    /// Rays per batch.
+    #[arg(long, default_value_t = 4096)]
+    pub batch: u32,
+    /// Truncation parameter a (the schedule runs 5 → 2).
+    #[arg(long, default_value_t = 5.0)]
+    pub a: f32,
+}
+
+/// Names of the stage-2 counters, per ray.
+const COUNTERS: [&str; 7] = [
+    "cells", "solves", "culled", "hits", "cut", "guarded", "atomics",
+];
+
+/// One backend's figures.
+#[derive(Debug, Default, serde::Serialize)]
+struct Figures {
+    rays_per_s: f64,
+    mean_mse: f64,
+    /// The counters per ray (see [`COUNTERS`]).
+    per_ray: BTreeMap<&'static str, f64>,
+    /// Device ms per step and kernel (Vulkan only).
+    device_ms_per_step: BTreeMap<&'static str, f64>,
+}
+
+/// The stage-2 step parameters of the thin category's fast preset at step 0 (as the training
+/// loop builds them, with chunk positions drawn from the step index), truncation `a`.
+fn step_params(
+    cfg: &SurfaceConfig,
+    res: [u32; 3],
+    rows: u32,
+    a: f32,
+    step: u32,
+) -> SurfaceStepParams {
+    let draw = (step as u64 + 1).wrapping_mul(0x9e37_79b9_7f4a_7c15);
+    let row_chunk = |fraction: f32, draw: u64| {
+        let count = ((rows as f32 * fraction) as u32).clamp(1, rows.max(1));
+        ((draw % rows.max(1) as u64) as u32, count)
+    };
+    let (la_start, la_count) = row_chunk(cfg.alpha_fraction, draw);
+    let (n_start, n_count) = row_chunk(cfg.normal_fraction, draw >> 17);
+    let (ln1, ln2) = (cfg.lambda_n1.at(0), cfg.lambda_n2);
+    SurfaceStepParams {
+        lr_delta: cfg.lr_delta.at(0),
+        lr_opacity: cfg.lr_opacity.at(0),
+        lr_sh: cfg.lr_sh.at(0),
+        beta: cfg.beta,
+        eps: cfg.eps,
+        a,
+        stop_thresh: cfg.stop_thresh,
+        lambda_h: cfg.lambda_h,
+        lambda_c: cfg.lambda_c,
+        regs: SurfaceRegs {
+            delta_tv: (cfg.lambda_delta > 0.0)
+                .then(|| delta_tv_chunk(res, rows as usize, cfg.lambda_delta)),
+            opacity_tv: (cfg.lambda_tv_alpha > 0.0).then(|| {
+                opacity_tv_chunk(res, cfg.tv_alpha_fraction, cfg.lambda_tv_alpha, draw >> 7)
+            }),
+            opacity_log: (cfg.lambda_alpha > 0.0).then_some(OpacityChunk {
+                rows,
+                start: la_start,
+                count: la_count,
+                lambda: cfg.lambda_alpha,
+            }),
+            normals: (ln1 > 0.0 || ln2 > 0.0).then_some((n_start, n_count, ln1, ln2)),
+        },
+    }
+}
+
+/// One backend step: rays, targets, parameters.
+type StepFn<'a> = dyn FnMut(&[f32], &[f32], &SurfaceStepParams) -> Result<SurfaceStepStats> + 'a;
+
+/// `steps + 1` stage-2 steps (the first untimed) on the batches of a fixed sampler; `regs`:
+/// with the regularisers, else the data term alone.
+fn time_surface(
+    step: &mut StepFn,
+    grid: &SurfaceGrid,
+    cfg: &SurfaceConfig,
+    data: &Dataset,
+    args: &SurfaceBenchArgs,
+    regs: bool,
+) -> Result<Figures> {
+    let mut f = Figures::default();
+    let mut sampler = RaySampler::new(&data.train, 11);
+    let mut secs = 0.0;
+    let mut counts = [0u64; 7];
+    for i in 0..=args.steps {
+        let b = sampler.next_batch(&data.train, &data.scene, args.batch as usize);
+        let (rays, targets) = (b.flat_rays(), b.flat_targets());
+        let mut p = step_params(cfg, grid.res, grid.delta.len() as u32, args.a, i);
+        if !regs {
+            p.regs = SurfaceRegs::default();
+        }
+        let t = Instant::now();
+        let s = step(&rays, &targets, &p)?;
+        if i == 0 {
+            continue; // warm-up: first-dispatch compilation on lavapipe
+        }
+        secs += t.elapsed().as_secs_f64();
+        f.mean_mse += s.mse / args.steps as f64;
+        for (c, &v) in counts.iter_mut().zip(&s.counts) {
+            *c += v as u64;
+        }
+    }
+    let rays = (args.batch * args.steps) as f64;
+    f.rays_per_s = rays / secs;
+    f.per_ray = COUNTERS
+        .iter()
+        .zip(counts)
+        .map(|(&k, c)| (k, c as f64 / rays))
+        .collect();
+    Ok(f)
+}
+
+/// Stage-1 training rays/s of `backend` over `steps` timed steps (after one untimed), the same
+/// measurement as `bench plenoxels`.
+fn time_stage1(
+    backend: &mut dyn Plenoxels,
+    data: &Dataset,
+    cfg: &Stage1Config,
+    args: &SurfaceBenchArgs,
+) -> Result<f64> {
+    let mut sampler = RaySampler::new(&data.train, 7);
+    let mut secs = 0.0;
+    for step in 0..=args.steps {
+        let b = sampler.next_batch(&data.train, &data.scene, args.batch as usize);
+        let (rays, targets) = (b.flat_rays(), b.flat_targets());
+        let t = Instant::now();
+        backend.step(
+            &rays,
+            &targets,
+            &StepParams {
+                lr_sigma: cfg.lr_sigma.at(cfg.iters),
+                lr_sh: cfg.lr_sh.at(cfg.iters),
+                beta: cfg.beta,
+                eps: cfg.eps,
+                stop_thresh: cfg.stop_thresh,
+                tv: None,
+            },
+        )?;
+        if step > 0 {
+            secs += t.elapsed().as_secs_f64();
+        }
+    }
+    Ok((args.batch * args.steps) as f64 / secs)
+}
+
+/// Run the benchmark and print it.
+pub fn run(gpu: &Gpu, args: &SurfaceBenchArgs) -> Result<()> {
+    ensure!((16..=512).contains(&args.res), "--res must be in 16..=512");
+    ensure!(
+        args.steps >= 1 && args.batch >= 1 && args.stage1_steps >= 3,
+        "--steps and --batch must be at least 1, --stage1-steps at least 3"
+    );
+    ensure!(
+        args.a > 0.0 && args.a <= 8.0,
+        "--a must be in (0, 8], got {}",
+        args.a
+    );
+    let dir = std::env::temp_dir().join(format!("alphasurf-bench-surface-{}", std::process::id()));
+    std::fs::create_dir_all(&dir)?;
+    let result = run_in(gpu, args, &dir);
+    let _ = std::fs::remove_dir_all(&dir);
+    result
+}
+
+fn run_in(gpu: &Gpu, args: &SurfaceBenchArgs, dir: &std::path::Path) -> Result<()> {
+    let scene_dir = dir.join("scene");
+    let mut opts = GenerateOptions::new(SceneKind::Thin);
+    (opts.res, opts.views, opts.spp_side, opts.gt_spacing) = (128, 40, 2, 0.05);
+    eprintln!("bench surface: generating the thin scene (128², 40 views)");
+    generate(&scene_dir, &opts)?;
+    let data = Dataset::load(&scene_dir, &LoadOptions::default())?;
+
+    // Stage 1, briefly, on the CPU backend (the faster one on a CPU-only machine).
+    let mut cfg = Stage1Config::fast();
+    cfg.res = args.res / 2;
+    cfg.upsample = vec![(args.stage1_steps / 3, args.res)];
+    cfg.iters = args.stage1_steps;
+    cfg.checkpoint_every = u32::MAX;
+    let grid0 = crate::grid::Grid::sphere(cfg.res, [0.0; 3], [1.0; 3], 1.0, cfg.init_sigma);
+    let mut s1 = CpuPlenoxels::new(grid0);
+    eprintln!(
+        "bench surface: {} stage-1 steps (CPU) to reach a {}³ density grid",
+        cfg.iters, args.res
+    );
+    stage1::train(&mut s1, &data, &cfg, &dir.join("stage1"), 0, false)?;
+    let density = s1.grid()?;
+    eprintln!("bench surface: stage-1 training on the Vulkan device at the same resolution");
+    let stage1_vk = time_stage1(
+        &mut VulkanPlenoxels::new(gpu, density.clone())?,
+        &data,
+        &cfg,
+        args,
+    )?;
+
+    let scfg = SurfaceConfig::preset("fast", "thin")?;
+    let init_grid = SurfaceGrid::from_density(&density, &scfg.init)?;
+    let (res, rows) = (init_grid.res, init_grid.delta.len() as u32);
+    let mut cpu = CpuSurface::new(init_grid);
+    eprintln!(
+        "bench surface: {} stage-2 warm-up steps (CPU)",
+        args.warm_steps
+    );
+    let mut sampler = RaySampler::new(&data.train, 3);
+    for i in 0..args.warm_steps {
+        let b = sampler.next_batch(&data.train, &data.scene, args.batch as usize);
+        cpu.step(
+            &b.flat_rays(),
+            &b.flat_targets(),
+            &step_params(&scfg, res, rows, args.a, i),
+        )?;
+    }
+    let grid = cpu.grid()?;
+    let state = cpu.optimizer_state()?;
+
+    // The Vulkan backend with and without the regularisers, each from the same state.
+    let mut vulkan = Vec::new();
+    for regs in [true, false] {
+        eprintln!(
+            "bench surface: timing the Vulkan backend{}",
+            if regs { "" } else { " (data term only)" }
+        );
+        let mut vk = VulkanSurface::new(gpu, grid.clone())?;
+        vk.load(grid.clone(), Some(state.clone()))?;
+        let mut kernel_ns: BTreeMap<&'static str, f64> = BTreeMap::new();
+        let mut first = true;
+        let mut f = time_surface(
+            &mut |r, t, p| {
+                let (s, times) = vk.step_timed(r, t, p)?;
+                if !std::mem::take(&mut first) {
+                    for (k, ns) in times.dispatches {
+                        *kernel_ns.entry(k).or_default() += ns;
+                    }
+                }
+                Ok(s)
+            },
+            &grid,
+            &scfg,
+            &data,
+            args,
+            regs,
+        )?;
+        f.device_ms_per_step = kernel_ns
+            .into_iter()
+            .map(|(k, ns)| (k, ns / 1e6 / args.steps as f64))
+            .collect();
+        vulkan.push(f);
+    }
+    let fd = vulkan.pop().expect("two runs");
+    let fv = vulkan.pop().expect("two runs");
+    eprintln!("bench surface: timing the CPU backend");
+    let mut cpu = CpuSurface::new(grid.clone());
+    cpu.load(grid.clone(), Some(state))?;
+    let fc = time_surface(
+        &mut |r, t, p| cpu.step(r, t, p),
+        &grid,
+        &scfg,
+        &data,
+        args,
+        true,
+    )?;
+
+    println!(
+        "stage-2 training at {}³ ({} allocated vertices, {} levels), {} steps of {} rays, a = {}, \
+         thin scene",
+        args.res,
+        grid.delta.len(),
+        grid.levels.len(),
+        args.steps,
+        args.batch,
+        args.a
+    );
+    print!("{:<8} {:>10} {:>9}", "backend", "rays/s", "mse");
+    for k in COUNTERS {
+        print!(" {k:>8}");
+    }
+    println!("   (per ray)");
+    for (name, f) in [("vulkan", &fv), ("cpu", &fc), ("vk-data", &fd)] {
+        print!("{name:<8} {:>10.0} {:>9.5}", f.rays_per_s, f.mean_mse);
+        for k in COUNTERS {
+            print!(" {:>8.2}", f.per_ray[k]);
+        }
+        println!();
+    }
+    println!(
+        "(vk-data: the Vulkan backend without the regularisers, like `bench plenoxels`' steps)"
+    );
+    let ratio = fv.rays_per_s / fc.rays_per_s;
+    println!("vulkan / cpu: {ratio:.2}×");
+    for (what, f) in [("", &fv), (", data term only", &fd)] {
+        println!("device ms per step (Vulkan{what}):");
+        for (k, ms) in &f.device_ms_per_step {
+            println!("  {k:<20} {ms:>9.3}");
+        }
+    }
+    let vs_stage1 = fv.rays_per_s / stage1_vk;
+    let data_vs_stage1 = fd.rays_per_s / stage1_vk;
+    println!(
+        "stage-1 training on the Vulkan device at {}³ (no TV, as `bench plenoxels`): {stage1_vk:.0} \
+         rays/s; stage 2 / stage 1: {vs_stage1:.2}× with the regularisers, {data_vs_stage1:.2}× \
+         data term only (target ≥ 3×)",
+        args.res
+    );
+    if args.json {
+        println!(
+            "{}",
+            json!({
+                "bench": "surface",
+                "device": gpu.info().name,
+                "res": args.res,
+                "allocated_vertices": grid.delta.len(),
+                "levels": grid.levels.len(),
+                "a": args.a,
+                "batch": args.batch,
+                "steps": args.steps,
+                "vulkan": fv,
+                "vulkan_data_term_only": fd,
+                "cpu": fc,
+                "ratio_vulkan_over_cpu": ratio,
+                "stage1_vulkan_rays_per_s": stage1_vk,
+                "ratio_surface_over_stage1_vulkan": vs_stage1,
+                "ratio_surface_data_term_over_stage1_vulkan": data_vs_stage1,
+            })
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,440 @@
+//! Parity of `glsl/surface_train.comp` (the stage-2 fused training pass) with
+//! `cpu::surface_train::train`, through `VulkanSurface::gradients`, on the random test scenes of
+//! `surface_fwd` (SDF-like δ with 5 levels, 3 % unallocated vertices, random σα and SH, random and
+//! adversarial rays) plus a quantised variant whose δ sits on a lattice of the level spacing
+//! (levels through vertices, flat cell faces), and a scene built to trip the f′ guard
+//! (`guard_scene`). Random targets; λH
+//! and λc large enough that their gradients matter. Passes: a = 3.5 / stop 1e-4 (fractional γ,
+//! truncation) and a = 8 / stop 1e-3.
+//!
+//! Each pass runs three rounds. First on every ray: a ray whose hit count differs between the
+//! backends is excused (near-tangent or face-ambiguous crossings, as in `surface_fwd`; capped at
+//! 0.5 % of the rays). Then on the rays that agree:
+//! - per-ray squared error, entropy and consistency: |Δ| ≤ 1e-4 + 1e-3·|cpu| (the f32 roots, `exp`,
+//!   `log` and `cos` differ by ulps between lavapipe and the twin);
+//! - counters: hits exact; the others within 0.1 % + 2 (a ray through a vertex or along an edge
+//!   may visit one cell more or less, since lavapipe does not fuse `ray_unit`'s fma while the twin
+//!   does; a degenerate crossing behind the last hit can decide the cut; the guard compares f′
+//!   against a threshold and the scatter skips exact zeros, and an ulp can flip either);
+//! - touched flags: equal;
+//! - gradients per parameter type (δ, σα, SH): relative L2 ≤ 1e-3, and elementwise
+//!   |Δ| ≤ 1e-4·max|g| + 1e-3·|g| for all but 0.1 % of the elements (atomic summation order).
+//!
+//! Last on the well-conditioned rays, those whose every hit has |f′| ≥ [`ILL_CONDITIONED`]·(the
+//! cell's δ range): the same gradient test with relative L2 ≤ 1e-4. (Where f′ is small an ulp of
+//! the f32 root moves the hit far, and the δ gradient goes as 1/f′: such rays, ~2 % of the random
+//! ones and all of the guard scene's, keep the looser bound.) In the guard scene every hit must be
+//! guarded and no δ gradient may appear on either backend.
+
+use super::surface_fwd::{test_rays, test_scene, SurfaceScene, RES};
+use super::{CheckRow, Compare};
+use crate::cpu::surface_fwd::SurfaceParams;
+use crate::cpu::surface_train::{hit_point, trace_ray, train, RayLoss, SurfaceGrads, TrainCounts};
+use crate::gpu::Gpu;
+use crate::grid::surface::SurfaceGrid;
+use crate::grid::SH_DIM;
+use crate::math::trilerp::trilerp_grad;
+use crate::surface::{
+    batch_loss, surface_params, SurfaceGradients, SurfaceStepParams, VulkanSurface,
+};
+use anyhow::Result;
+use rand::{Rng, SeedableRng};
+use rand_pcg::Pcg64;
+
+/// Largest fraction of rays whose hit counts may differ (excused as near-degenerate).
+pub const EXCUSED_CAP_FRAC: f64 = 0.005;
+
+/// The stage-2 grid of a test scene (its scale and offset come back from `surface_params`).
+pub fn scene_grid(s: &SurfaceScene) -> SurfaceGrid {
+    SurfaceGrid {
+        res: [s.n; 3],
+        center: [0.0; 3],
+        radius: [s.n as f32 / 32.0; 3],
+        links: s.links.clone(),
+        delta: s.delta.clone(),
+        opacity: s.opacity.clone(),
+        sh: s.sh.clone(),
+        levels: s.levels.clone(),
+        gradient_scale: 1.0,
+    }
+}
+
+/// Step parameters of a pass: truncation, stop threshold and the loss weights (no regulariser).
+pub fn pass_params(a: f32, stop_thresh: f32, lambda_h: f32, lambda_c: f32) -> SurfaceStepParams {
+    SurfaceStepParams {
+        lr_delta: 0.0,
+        lr_opacity: 0.0,
+        lr_sh: 0.0,
+        beta: 0.95,
+        eps: 1e-8,
+        a,
+        stop_thresh,
+        lambda_h,
+        lambda_c,
+        regs: Default::default(),
+    }
+}
+
+/// The CPU twin's outputs: per-ray losses, counters, gradients (δ, σα, SH) and touched flags.
+pub struct CpuTrain {
+    pub ray_loss: Vec<RayLoss>,
+    pub counts: TrainCounts,
+    pub grads: [Vec<f32>; 3],
+    pub touched: Vec<u32>,
+}
+
+/// Run the CPU twin on `grid` the way the backends do (surface_params, batch_loss).
+pub fn cpu_train(
+    grid: &SurfaceGrid,
+    rays: &[f32],
+    targets: &[f32],
+    p: &SurfaceStepParams,
+) -> Result<CpuTrain> {
+    let rows = grid.delta.len();
+    let mut grads = [vec![0.0; rows], vec![0.0; rows], vec![0.0; rows * SH_DIM]];
+    let mut touched = vec![0u32; rows];
+    let [gd, go, gs] = &mut grads;
+    let (ray_loss, counts) = train(
+        &grid.as_ref(),
+        rays,
+        targets,
+        &surface_params(grid, p.a, p.stop_thresh),
+        &batch_loss(rays.len() / 6, p),
+        SurfaceGrads {
+            delta: gd,
+            opacity: go,
+            sh: gs,
+            touched: &mut touched,
+        },
+    )?;
+    Ok(CpuTrain {
+        ray_loss,
+        counts,
+        grads,
+        touched,
+    })
+}
+
+/// Relative L2 distance ‖a − b‖/‖b‖ (0 when both vanish).
+pub fn rel_l2(a: &[f32], b: &[f32]) -> f64 {
+    let (mut num, mut den) = (0.0f64, 0.0f64);
+    for (&x, &y) in a.iter().zip(b) {
+        num += (x as f64 - y as f64).powi(2);
+        den += (y as f64).powi(2);
+    }
+    if den == 0.0 {
+        if num == 0.0 {
+            0.0
+        } else {
+            f64::INFINITY
+        }
+    } else {
+        (num / den).sqrt()
+    }
+}
+
+/// δ snapped to a lattice of a quarter of the scene's smallest level spacing: levels pass through
+/// vertices and many cells have flat faces.
+fn quantised(mut s: SurfaceScene) -> SurfaceScene {
+    let step = s
+        .levels
+        .windows(2)
+        .map(|w| w[1] - w[0])
+        .fold(f32::INFINITY, f32::min)
+        / 4.0;
+    let base = s.levels[0];
+    for d in &mut s.delta {
+        *d = base + ((*d - base) / step).round() * step;
+    }
+    s
+}
+
+/// The smallest |f′(s)|/(max − min of the cell's δ) over a ray's composited hits (∞ without
+/// hits): how well its hit positions are determined (the f′ guard drops δ gradients below 1e-3).
+fn min_fprime(grid: &SurfaceGrid, ro: [f32; 3], rd: [f32; 3], sp: &SurfaceParams) -> f32 {
+    let tr = trace_ray(&grid.as_ref(), ro, rd, sp, &mut [0; 7]);
+    tr.hits[..tr.n]
+        .iter()
+        .map(|h| {
+            let (_, g) = trilerp_grad(&h.c, hit_point(h, tr.dn));
+            let f1 = g[0] * tr.dn[0] + g[1] * tr.dn[1] + g[2] * tr.dn[2];
+            let cmin = h.c.iter().copied().fold(f32::INFINITY, f32::min);
+            let cmax = h.c.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+            f1.abs() / (cmax - cmin)
+        })
+        .fold(f32::INFINITY, f32::min)
+}
+
+/// Hits with |f′| below this fraction of their cell's δ range make a ray ill-conditioned: an ulp
+/// of δ moves the root by ≳ 1e-6 voxels, and the δ gradient (∝ 1/f′) by more.
+pub const ILL_CONDITIONED: f32 = 0.1;
+
+/// Figures of one pass, for the note.
+struct PassNote {
+    excused: usize,
+    ill: usize,
+    kept: usize,
+    /// Relative L2 of dδ, dσα, dSH: well-conditioned rays, then all agreeing rays.
+    rel: [f64; 3],
+    rel_all: [f64; 3],
+    counts: TrainCounts,
+}
+
+/// The rays (and targets) with the given indices.
+fn subset(rays: &[f32], targets: &[f32], idx: &[usize]) -> (Vec<f32>, Vec<f32>) {
+    (
+        idx.iter()
+            .flat_map(|&i| rays[6 * i..6 * i + 6].to_vec())
+            .collect(),
+        idx.iter()
+            .flat_map(|&i| targets[3 * i..3 * i + 3].to_vec())
+            .collect(),
+    )
+}
+
+/// Gradients of both backends on `rays`: relative L2 per parameter type; a failure message when
+/// one exceeds `limit` or more than 0.1 % of its elements miss |Δ| ≤ 1e-4·max|g| + 1e-3·|g|.
+fn compare_grads(
+    got: &SurfaceGradients,
+    want: &CpuTrain,
+    limit: f64,
+    what: &str,
+    errs: &mut Vec<String>,
+) -> [f64; 3] {
+    let mut rel = [0.0; 3];
+    for (t, (name, a, b)) in [
+        ("dδ", &got.delta, &want.grads[0]),
+        ("dσα", &got.opacity, &want.grads[1]),
+        ("dSH", &got.sh, &want.grads[2]),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let e = rel_l2(a, b);
+        rel[t] = e;
+        let scale = b.iter().fold(0f32, |m, &x| m.max(x.abs())) as f64;
+        let bad = a
+            .iter()
+            .zip(b.iter())
+            .filter(|(&x, &y)| (x as f64 - y as f64).abs() > 1e-4 * scale + 1e-3 * (y as f64).abs())
+            .count();
+        if e > limit || bad > b.len() / 1000 {
+            errs.push(format!(
+                "{what} {name}: rel L2 {e:.2e} (limit {limit:.0e}), {bad} elements off"
+            ));
+        }
+    }
+    rel
+}
+
+/// One pass: its parameters, its name, and whether every hit must be guarded (the guard scene).
+struct Pass<'a> {
+    p: &'a SurfaceStepParams,
+    what: &'a str,
+    all_guarded: bool,
+}
+
+fn run_pass(
+    gpu: &Gpu,
+    grid: &SurfaceGrid,
+    rays: &[f32],
+    targets: &[f32],
+    pass: &Pass,
+    cmp: &mut Compare,
+) -> Result<PassNote> {
+    let (p, what, all_guarded) = (pass.p, pass.what, pass.all_guarded);
+    let train_gpu = |rays: &[f32], targets: &[f32]| {
+        VulkanSurface::new(gpu, grid.clone())?.gradients(rays, targets, p)
+    };
+    // 1: every ray; keep those whose hit counts agree.
+    let want = cpu_train(grid, rays, targets, p)?;
+    let got = train_gpu(rays, targets)?;
+    let keep: Vec<usize> = (0..rays.len() / 6)
+        .filter(|&i| got.ray_loss[i].hits == want.ray_loss[i].hits)
+        .collect();
+    let excused = rays.len() / 6 - keep.len();
+    // 2: the agreeing rays: losses, counters, touched flags, gradients within 1e-3.
+    let (rays_k, targets_k) = subset(rays, targets, &keep);
+    let want = cpu_train(grid, &rays_k, &targets_k, p)?;
+    let got = train_gpu(&rays_k, &targets_k)?;
+    let mut errs = Vec::new();
+    for (i, (g, w)) in got.ray_loss.iter().zip(&want.ray_loss).enumerate() {
+        if g.hits != w.hits {
+            errs.push(format!("{what} ray {i}: hits {} vs {}", g.hits, w.hits));
+        }
+        cmp.value(g.sq_err as f64, w.sq_err as f64, || {
+            format!("{what} ray {i} squared error")
+        });
+        cmp.value(g.entropy as f64, w.entropy as f64, || {
+            format!("{what} ray {i} entropy")
+        });
+        cmp.value(g.consistency as f64, w.consistency as f64, || {
+            format!("{what} ray {i} consistency")
+        });
+    }
+    let (gc, wc) = (got.counts, want.counts);
+    let near = |i: usize| (gc[i] as f64 - wc[i] as f64).abs() <= 1e-3 * wc[i] as f64 + 2.0;
+    if !(gc[3] == wc[3] && [0, 1, 2, 4, 5, 6].into_iter().all(near)) {
+        errs.push(format!("{what}: counters gpu {gc:?} cpu {wc:?}"));
+    }
+    let touched_off = got
+        .touched
+        .iter()
+        .zip(&want.touched)
+        .filter(|(g, w)| (**g != 0) != (**w != 0))
+        .count();
+    if touched_off > 0 {
+        errs.push(format!("{what}: {touched_off} touched flags differ"));
+    }
+    let rel_all = compare_grads(&got, &want, 1e-3, &format!("{what} (all)"), &mut errs);
+    if all_guarded
+        && (wc[5] != wc[3]
+            || gc[5] != gc[3]
+            || got.delta.iter().chain(&want.grads[0]).any(|&g| g != 0.0))
+    {
+        errs.push(format!(
+            "{what}: every hit should be guarded and give δ no gradient"
+        ));
+    }
+    // 3: the well-conditioned rays: gradients within 1e-4.
+    let sp = surface_params(grid, p.a, p.stop_thresh);
+    let good: Vec<usize> = (0..keep.len())
+        .filter(|&i| {
+            let r = &rays_k[6 * i..6 * i + 6];
+            min_fprime(grid, [r[0], r[1], r[2]], [r[3], r[4], r[5]], &sp) >= ILL_CONDITIONED
+        })
+        .collect();
+    let rel = if good.is_empty() {
+        [0.0; 3]
+    } else {
+        let (rays_g, targets_g) = subset(&rays_k, &targets_k, &good);
+        let want = cpu_train(grid, &rays_g, &targets_g, p)?;
+        let got = train_gpu(&rays_g, &targets_g)?;
+        compare_grads(&got, &want, 1e-4, what, &mut errs)
+    };
+    for msg in errs {
+        cmp.failures += 1;
+        cmp.first_failure.get_or_insert(msg);
+    }
+    Ok(PassNote {
+        excused,
+        ill: keep.len() - good.len(),
+        kept: keep.len(),
+        rel,
+        rel_all,
+        counts: wc,
+    })
+}
+
+/// A field built to trip the f′ guard: δ = (x − c)(y − c)(z − c) + ε·((x − c) + (y − c) + (z − c))
+/// in grid units (multilinear, so every cell reproduces it exactly), c the centre of the middle
+/// cell, ε = 1.25e-4, one level at 0; rays along (1, 1, 1) through points within 1e-3 of (c, c, c),
+/// their directions perturbed by 1e-3. Along such a ray δ is monotone (a single, well-bracketed
+/// front-face root near the centre) but f′ ≈ √3·ε ≈ 2.2e-4, below 1e-3 of the cell’s δ range (≈ 2.5e-4), while the root stays
+/// well enough conditioned (an f error of 1e-8 moves it by ~5e-5 voxels) for the loss comparison.
+fn guard_scene(seed: u64, n_rays: usize) -> (SurfaceGrid, Vec<f32>) {
+    let n = 8u32;
+    let c = 3.5f32;
+    let mut rng = Pcg64::seed_from_u64(seed ^ 0x6a4d);
+    let mut g = SurfaceGrid {
+        res: [n; 3],
+        center: [0.0; 3],
+        radius: [n as f32 / 32.0; 3],
+        links: Vec::new(),
+        delta: Vec::new(),
+        opacity: Vec::new(),
+        sh: Vec::new(),
+        levels: vec![0.0],
+        gradient_scale: 1.0,
+    };
+    for slot in 0..(n * n * n) as usize {
+        let v = [slot / 64, slot / 8 % 8, slot % 8].map(|x| x as f32 - c);
+        g.links.push(slot as i32);
+        g.delta
+            .push(v[0] * v[1] * v[2] + 1.25e-4 * (v[0] + v[1] + v[2]));
+        g.opacity.push(rng.random_range(0.2..3.0));
+        g.sh.extend((0..27).map(|_| rng.random_range(-0.4f32..0.4)));
+    }
+    // grid = p·16 + 3.5 (surface_params of this grid).
+    let mut rays = Vec::with_capacity(6 * n_rays);
+    for _ in 0..n_rays {
+        let at: [f32; 3] = std::array::from_fn(|_| c + rng.random_range(-1e-3..1e-3));
+        let d: [f32; 3] = std::array::from_fn(|_| 1.0 + rng.random_range(-1e-3..1e-3));
+        let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+        let d = d.map(|x| x / len);
+        let o: [f32; 3] = std::array::from_fn(|i| at[i] - 6.0 * d[i]);
+        rays.extend(o.map(|x| (x - c) / 16.0));
+        rays.extend(d);
+    }
+    (g, rays)
+}
+
+/// The parity row.
+pub fn check(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
+    let mut cmp = Compare::new(1e-4, 1e-3);
+    let mut notes = Vec::new();
+    let (mut excused, mut cases, mut worst) = (0usize, 0usize, [0.0f64; 3]);
+    let mut total_rays = 0usize;
+    let mut variants = Vec::new();
+    for (name, scene) in [
+        ("random", test_scene(seed, RES)),
+        ("quantised", quantised(test_scene(seed ^ 0x9e37, RES))),
+    ] {
+        let rays = test_rays(&scene, seed, 3000);
+        variants.push((name, scene_grid(&scene), rays));
+    }
+    let (g, rays) = guard_scene(seed, 200);
+    variants.push(("guard", g, rays));
+    let (mut ill, mut worst_all) = (0usize, [0.0f64; 3]);
+    for (variant, grid, rays) in &variants {
+        let mut rng = Pcg64::seed_from_u64(seed ^ 0x7a26_e7a5);
+        let targets: Vec<f32> = (0..rays.len() / 6 * 3).map(|_| rng.random()).collect();
+        for (a, stop) in [(3.5f32, 1e-4f32), (8.0, 1e-3)] {
+            let p = pass_params(a, stop, 0.5, 0.2);
+            let what = format!("{variant} a {a}");
+            let guard = *variant == "guard";
+            let pass = Pass {
+                p: &p,
+                what: &what,
+                all_guarded: guard,
+            };
+            let n = run_pass(gpu, grid, rays, &targets, &pass, &mut cmp)?;
+            excused += n.excused;
+            ill += n.ill;
+            cases += n.kept;
+            total_rays += rays.len() / 6;
+            for t in 0..3 {
+                worst[t] = worst[t].max(n.rel[t]);
+                worst_all[t] = worst_all[t].max(n.rel_all[t]);
+            }
+            notes.push(format!(
+                "{what}: cells/solves/culled/hits/cut/guarded/adds {:?}",
+                n.counts
+            ));
+        }
+    }
+    let cap = (EXCUSED_CAP_FRAC * total_rays as f64).floor() as usize;
+    if excused > cap {
+        cmp.failures += 1;
+        cmp.first_failure
+            .get_or_insert_with(|| format!("{excused} rays with differing hit counts > cap {cap}"));
+    }
+    Ok(cmp.row(
+        "surface_train",
+        cases,
+        format!(
+            "grad rel L2 δ/σα/SH {:.1e}/{:.1e}/{:.1e} on well-conditioned rays (≤ 1e-4), \
+             {:.1e}/{:.1e}/{:.1e} with the {ill} ill-conditioned ones (|f′| < {ILL_CONDITIONED}·range; \
+             ≤ 1e-3); elementwise |Δ| ≤ 1e-4·max|g| + 1e-3·|g| for all but 0.1 %; touched \
+             equal; guard scene: δ gradients 0, every hit guarded; {excused} rays excused (cap \
+             {cap}); {}",
+            worst[0],
+            worst[1],
+            worst[2],
+            worst_all[0],
+            worst_all[1],
+            worst_all[2],
+            notes.join("; ")
+        ),
+    ))
+}

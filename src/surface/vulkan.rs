@@ -1,0 +1,573 @@
+//! The Vulkan stage-2 backend: grid, gradients and optimiser state live in device buffers; a
+//! training step is one batch and one submission: step reset → surface_train → regularisers
+//! (Lδ and TVα through `tv`, Lα through surface_opacity_reg, Ln1/Ln2 through surface_normal_reg)
+//! → optim_args → indirect surface_rmsprop over the touched vertices.
+
+use super::{
+    batch_loss, surface_params, SurfaceBackend, SurfaceState, SurfaceStepParams, SurfaceStepStats,
+};
+use crate::cpu::step::{STEP_COUNT, STEP_FLAGS, STEP_N};
+use crate::cpu::surface_fwd::{SurfCounts, SurfaceParams};
+use crate::cpu::surface_reg::{row_slots, NormalPrefix};
+use crate::cpu::surface_train::{RayLoss, SurfaceLoss, TrainCounts, SURF_MAX_HITS};
+use crate::gpu::{Batch, BatchTimes, Gpu, GpuBuffer};
+use crate::grid::surface::SurfaceGrid;
+use crate::grid::SH_DIM;
+use crate::kernels;
+use crate::math::surface::{SurfOut, SURF_MAX_LEVELS};
+use anyhow::{ensure, Result};
+
+/// Floats in the params buffer of `surface_train` (layout in the kernel's header).
+const PARAMS_LEN: usize = 12 + SURF_MAX_LEVELS;
+
+/// The params buffer of `surface_train`: scale, offset, a, stop threshold, the three loss
+/// weights, padding, the levels (zero-padded to [`SURF_MAX_LEVELS`]).
+pub fn train_params(sp: &SurfaceParams, loss: &SurfaceLoss) -> [f32; PARAMS_LEN] {
+    let mut v = [0.0f32; PARAMS_LEN];
+    v[0..3].copy_from_slice(&sp.scale);
+    v[3..6].copy_from_slice(&sp.offset);
+    v[6] = sp.a;
+    v[7] = sp.stop_thresh;
+    v[8] = loss.grad_scale;
+    v[9] = loss.lambda_h;
+    v[10] = loss.lambda_c;
+    for (d, &l) in v[12..].iter_mut().zip(&sp.levels) {
+        *d = l;
+    }
+    v
+}
+
+/// Bit i of word i/32 set when the cell whose lower corner is slot i (x-major, `n`³ slots) has
+/// its 8 corners allocated: `surface_train`'s walk tests this bit before reading any link.
+pub fn complete_cells(links: &[i32], n: u32) -> Vec<u32> {
+    let n = n as usize;
+    let mut bits = vec![0u32; (n * n * n).div_ceil(32).max(1)];
+    let (nz, nyz) = (n, n * n);
+    for x in 0..n.saturating_sub(1) {
+        for y in 0..n - 1 {
+            for z in 0..n - 1 {
+                let s = (x * n + y) * n + z;
+                let corners = [
+                    s,
+                    s + 1,
+                    s + nz,
+                    s + nz + 1,
+                    s + nyz,
+                    s + nyz + 1,
+                    s + nyz + nz,
+                    s + nyz + nz + 1,
+                ];
+                if corners.iter().all(|&c| links[c] >= 0) {
+                    bits[s / 32] |= 1 << (s % 32);
+                }
+            }
+        }
+    }
+    bits
+}
+
+/// The data term of one training pass, read back (see [`VulkanSurface::gradients`]).
+pub struct SurfaceGradients {
+    pub ray_loss: Vec<RayLoss>,
+    pub delta: Vec<f32>,
+    pub opacity: Vec<f32>,
+    pub sh: Vec<f32>,
+    /// Per-vertex touched flags (0/1).
+    pub touched: Vec<u32>,
+    pub counts: TrainCounts,
+}
+
+/// Device-resident stage-2 state.
+pub struct VulkanSurface {
+    gpu: Gpu,
+    /// The grid without its arrays (resolution, bounds, levels).
+    meta: SurfaceGrid,
+    rows: usize,
+    links: GpuBuffer,
+    /// Complete-cell bits ([`complete_cells`]).
+    complete: GpuBuffer,
+    /// Slots [first, last] of the allocated vertices (Lδ's TV needs no other slots).
+    allocated_span: (u32, u32),
+    delta: GpuBuffer,
+    opacity: GpuBuffer,
+    sh: GpuBuffer,
+    grad: [GpuBuffer; 3],
+    state: [GpuBuffer; 3],
+    /// Step record (glsl/lib/step.glsl): touched count, n, flags, list.
+    step: GpuBuffer,
+    /// Indirect dispatch arguments of surface_rmsprop.
+    args: GpuBuffer,
+    /// surface_train's params buffer.
+    params: GpuBuffer,
+    /// The levels, zero-padded (surface_fwd).
+    levels: GpuBuffer,
+    /// Counters: 7 of surface_train, or 5 of surface_fwd.
+    stats: GpuBuffer,
+    /// The slot of each allocated row, and the normal regulariser's per-grid prefix count.
+    row_slot: GpuBuffer,
+    normal_prefix: NormalPrefix,
+    /// Regulariser values: Lα, Ln (floats); pairs skipped by Ln (u32).
+    reg_loss: GpuBuffer,
+    reg_skipped: GpuBuffer,
+    rays: Option<RayBuffers>,
+}
+
+/// Per-batch buffers, grown to the next power of two when a batch does not fit.
+struct RayBuffers {
+    capacity: usize,
+    /// 6 floats per ray.
+    rays: GpuBuffer,
+    /// 3 floats per ray.
+    targets: GpuBuffer,
+    /// Per-ray output: `RayLoss` (16 bytes) for training, `SurfOut` (20 bytes) for rendering.
+    out: GpuBuffer,
+}
+
+/// A buffer holding `v`, or one zero when `v` is empty.
+fn upload_nonempty(gpu: &Gpu, v: &[f32]) -> Result<GpuBuffer> {
+    if v.is_empty() {
+        gpu.zeros::<f32>(1)
+    } else {
+        gpu.upload(v)
+    }
+}
+
+impl VulkanSurface {
+    pub fn new(gpu: &Gpu, grid: SurfaceGrid) -> Result<Self> {
+        ensure!(
+            grid.res[0] == grid.res[1] && grid.res[1] == grid.res[2],
+            "the surface renderer needs a cubic grid, got {:?}",
+            grid.res
+        );
+        grid.as_ref().validate()?;
+        ensure!(
+            grid.levels.len() <= SURF_MAX_LEVELS,
+            "at most {SURF_MAX_LEVELS} levels, got {}",
+            grid.levels.len()
+        );
+        let n = grid.delta.len();
+        let rows = n.max(1);
+        let mut levels = grid.levels.clone();
+        levels.resize(SURF_MAX_LEVELS, 0.0);
+        let zeros3 = || -> Result<[GpuBuffer; 3]> {
+            Ok([
+                gpu.zeros::<f32>(rows)?,
+                gpu.zeros::<f32>(rows)?,
+                gpu.zeros::<f32>(rows * SH_DIM)?,
+            ])
+        };
+        let row_slot = row_slots(&grid.links, n);
+        Ok(VulkanSurface {
+            gpu: gpu.clone(),
+            rows: n,
+            links: gpu.upload(&grid.links)?,
+            complete: gpu.upload(&complete_cells(&grid.links, grid.res[0]))?,
+            allocated_span: (
+                grid.links.iter().position(|&l| l >= 0).unwrap_or(0) as u32,
+                grid.links.iter().rposition(|&l| l >= 0).unwrap_or(0) as u32,
+            ),
+            delta: upload_nonempty(gpu, &grid.delta)?,
+            opacity: upload_nonempty(gpu, &grid.opacity)?,
+            sh: upload_nonempty(gpu, &grid.sh)?,
+            grad: zeros3()?,
+            state: zeros3()?,
+            step: {
+                let mut init = vec![0u32; STEP_FLAGS + 2 * rows];
+                init[STEP_N] = n as u32;
+                gpu.upload(&init)?
+            },
+            args: gpu.zeros::<u32>(3)?,
+            params: gpu.zeros::<f32>(PARAMS_LEN)?,
+            levels: gpu.upload(&levels)?,
+            stats: gpu.zeros::<u32>(7)?,
+            row_slot: if row_slot.is_empty() {
+                gpu.zeros::<u32>(1)?
+            } else {
+                gpu.upload(&row_slot)?
+            },
+            normal_prefix: NormalPrefix::new(&grid.links, &row_slot, grid.res),
+            reg_loss: gpu.zeros::<f32>(2)?,
+            reg_skipped: gpu.zeros::<u32>(1)?,
+            rays: None,
+            meta: SurfaceGrid {
+                links: Vec::new(),
+                delta: Vec::new(),
+                opacity: Vec::new(),
+                sh: Vec::new(),
+                ..grid
+            },
+        })
+    }
+
+    /// Ray, target and per-ray output buffers holding at least `n` rays.
+    fn ray_buffers(&mut self, n: usize) -> Result<&RayBuffers> {
+        if self.rays.as_ref().is_none_or(|r| r.capacity < n) {
+            let cap = n.next_power_of_two();
+            self.rays = Some(RayBuffers {
+                capacity: cap,
+                rays: self.gpu.zeros::<f32>(6 * cap)?,
+                targets: self.gpu.zeros::<f32>(3 * cap)?,
+                out: self.gpu.zeros::<SurfOut>(cap)?,
+            });
+        }
+        Ok(self.rays.as_ref().expect("just set"))
+    }
+
+    fn out_buffer(&self) -> &GpuBuffer {
+        &self.rays.as_ref().expect("allocated by begin").out
+    }
+
+    /// Upload rays (and targets), start a batch and record the step reset (touched count) and the
+    /// counters' reset. Returns the batch and the addresses of rays, targets and per-ray output.
+    fn begin(&mut self, rays: &[f32], targets: Option<&[f32]>) -> Result<(Batch, [u64; 3])> {
+        ensure!(
+            rays.len().is_multiple_of(6),
+            "rays must be 6 floats each, got {} floats",
+            rays.len()
+        );
+        let r = self.ray_buffers((rays.len() / 6).max(1))?;
+        r.rays.write(rays)?;
+        if let Some(t) = targets {
+            r.targets.write(t)?;
+        }
+        let addrs = [r.rays.address(), r.targets.address(), r.out.address()];
+        let mut b = self.gpu.batch()?;
+        b.fill_zero_range(&self.step, 0, 4 * STEP_N as u64);
+        b.fill_zero(&self.stats);
+        b.fill_zero(&self.reg_loss);
+        b.fill_zero(&self.reg_skipped);
+        Ok((b, addrs))
+    }
+
+    /// Upload a batch and record the fused training pass (gradients += data term).
+    fn record_train(
+        &mut self,
+        rays: &[f32],
+        targets: &[f32],
+        p: &SurfaceStepParams,
+    ) -> Result<Batch> {
+        let n = rays.len() / 6;
+        ensure!(
+            n > 0 && targets.len() == 3 * n && rays.len() == 6 * n,
+            "batch of {} ray floats with {} target floats",
+            rays.len(),
+            targets.len()
+        );
+        ensure!(
+            p.a <= SURF_MAX_HITS as f32,
+            "truncation parameter a = {} exceeds the {SURF_MAX_HITS} hits a ray records",
+            p.a
+        );
+        let sp = surface_params(&self.meta, p.a, p.stop_thresh);
+        self.params.write(&train_params(&sp, &batch_loss(n, p)))?;
+        let (mut b, [ray_buf, target_buf, out_buf]) = self.begin(rays, Some(targets))?;
+        b.dispatch_1d(
+            &kernels::surface_train::INFO,
+            &kernels::surface_train::Push {
+                links: self.links.address(),
+                complete: self.complete.address(),
+                delta: self.delta.address(),
+                opacity: self.opacity.address(),
+                sh: self.sh.address(),
+                params: self.params.address(),
+                rays: ray_buf,
+                targets: target_buf,
+                grad_delta: self.grad[0].address(),
+                grad_opacity: self.grad[1].address(),
+                grad_sh: self.grad[2].address(),
+                out_rays: out_buf,
+                stats: self.stats.address(),
+                step: self.step.address(),
+                n: self.meta.res[0],
+                n_rays: n as u32,
+                n_levels: self.meta.levels.len() as u32,
+                ..Default::default()
+            },
+            n as u32,
+        )?;
+        Ok(b)
+    }
+
+    /// Record the per-vertex regularisers (the same chunks and scales as `CpuSurface`).
+    fn record_regularisers(&self, b: &mut Batch, p: &SurfaceStepParams) -> Result<()> {
+        let res = self.meta.res;
+        // TV chunks are dispatched over their intersection with the span of allocated slots: a
+        // slot outside it holds no vertex, and every term of the chunk (a vertex and its
+        // forward neighbours) lies inside it, so the gradient is the whole chunk's, for a
+        // fraction of the invocations (Lδ's chunk is every slot).
+        let (first, last) = self.allocated_span;
+        for (chunk, data, grad) in [
+            (p.regs.delta_tv, &self.delta, &self.grad[0]),
+            (p.regs.opacity_tv, &self.opacity, &self.grad[1]),
+        ] {
+            let Some(c) = chunk else { continue };
+            ensure!(
+                c.res == res && c.channels == 1,
+                "TV chunk for a {:?} grid with {} channels on a {res:?} grid",
+                c.res,
+                c.channels
+            );
+            let start = c.start.max(first);
+            let end = c.start.saturating_add(c.count).min(last + 1);
+            if self.rows == 0 || start >= end {
+                continue;
+            }
+            b.dispatch_1d(
+                &kernels::tv::INFO,
+                &kernels::tv::Push {
+                    links: self.links.address(),
+                    data: data.address(),
+                    grad: grad.address(),
+                    step: self.step.address(),
+                    res,
+                    start,
+                    count: end - start,
+                    channels: 1,
+                    scale: c.scale,
+                    ..Default::default()
+                },
+                end - start + res[1] * res[2],
+            )?;
+        }
+        let rows = self.rows as u32;
+        if let (Some(c), true) = (p.regs.opacity_log, rows > 0) {
+            ensure!(
+                c.rows == rows,
+                "Lα chunk over {} rows on a grid of {rows}",
+                c.rows
+            );
+            b.dispatch_1d(
+                &kernels::surface_opacity_reg::INFO,
+                &kernels::surface_opacity_reg::Push {
+                    opacity: self.opacity.address(),
+                    grad: self.grad[1].address(),
+                    step: self.step.address(),
+                    loss: self.reg_loss.address(),
+                    rows,
+                    start: c.start,
+                    count: c.count,
+                    lambda: c.lambda,
+                },
+                c.count.min(rows),
+            )?;
+        }
+        if let (Some((start, count, lambda1, lambda2)), true) = (p.regs.normals, rows > 0) {
+            // A row chunk (the kernel's convention), with its mean's denominator.
+            let c = self.normal_prefix.chunk(start, count, lambda1, lambda2);
+            b.dispatch_1d(
+                &kernels::surface_normal_reg::INFO,
+                &kernels::surface_normal_reg::Push {
+                    links: self.links.address(),
+                    row_slot: self.row_slot.address(),
+                    delta: self.delta.address(),
+                    grad: self.grad[0].address(),
+                    step: self.step.address(),
+                    loss: self.reg_loss.address() + 4,
+                    skipped: self.reg_skipped.address(),
+                    res,
+                    rows,
+                    start: c.start,
+                    count: c.count,
+                    cells: c.cells,
+                    lambda1: c.lambda1,
+                    lambda2: c.lambda2,
+                    ..Default::default()
+                },
+                count.min(rows),
+            )?;
+        }
+        Ok(())
+    }
+
+    /// Record the sparse RMSProp step over the vertices touched this step.
+    fn record_rmsprop(&self, b: &mut Batch, p: &SurfaceStepParams) -> Result<()> {
+        b.dispatch(
+            &kernels::optim_args::INFO,
+            &kernels::optim_args::Push {
+                step: self.step.address(),
+                args: self.args.address(),
+            },
+            [1, 1, 1],
+        )?;
+        b.dispatch_indirect(
+            &kernels::surface_rmsprop::INFO,
+            &kernels::surface_rmsprop::Push {
+                delta: self.delta.address(),
+                opacity: self.opacity.address(),
+                sh: self.sh.address(),
+                grad_delta: self.grad[0].address(),
+                grad_opacity: self.grad[1].address(),
+                grad_sh: self.grad[2].address(),
+                state_delta: self.state[0].address(),
+                state_opacity: self.state[1].address(),
+                state_sh: self.state[2].address(),
+                step: self.step.address(),
+                lr_delta: p.lr_delta,
+                lr_opacity: p.lr_opacity,
+                lr_sh: p.lr_sh,
+                beta: p.beta,
+                eps: p.eps,
+                ..Default::default()
+            },
+            &self.args,
+        )
+    }
+
+    fn read_train_counts(&self) -> Result<TrainCounts> {
+        let v: Vec<u32> = self.stats.download_range(0, 7)?;
+        Ok(std::array::from_fn(|i| v[i]))
+    }
+
+    fn ray_loss(&self, n: usize) -> Result<Vec<RayLoss>> {
+        self.out_buffer().download_range(0, n)
+    }
+
+    /// The training pass alone (no regulariser, no update): per-ray losses, the gradients, the
+    /// touched flags and the counters; gradients and flags are cleared afterwards.
+    pub fn gradients(
+        &mut self,
+        rays: &[f32],
+        targets: &[f32],
+        p: &SurfaceStepParams,
+    ) -> Result<SurfaceGradients> {
+        let n = rays.len() / 6;
+        self.record_train(rays, targets, p)?.submit()?;
+        let rows = self.rows;
+        let g = SurfaceGradients {
+            ray_loss: self.ray_loss(n)?,
+            delta: self.grad[0].download_range(0, rows)?,
+            opacity: self.grad[1].download_range(0, rows)?,
+            sh: self.grad[2].download_range(0, rows * SH_DIM)?,
+            touched: self.step.download_range(STEP_FLAGS, rows)?,
+            counts: self.read_train_counts()?,
+        };
+        // Leave no gradient or touched flag behind for the next step.
+        let mut b = self.gpu.batch()?;
+        for gb in &self.grad {
+            b.fill_zero(gb);
+        }
+        b.fill_zero_range(&self.step, 4 * STEP_FLAGS as u64, 4 * rows.max(1) as u64);
+        b.submit()?;
+        Ok(g)
+    }
+
+    /// Number of vertices touched by the last step (read from the step record).
+    pub fn last_touched(&self) -> Result<u32> {
+        Ok(self.step.download_range::<u32>(STEP_COUNT, 1)?[0])
+    }
+
+    /// One training step, returning its statistics and the device times of its dispatches.
+    pub fn step_timed(
+        &mut self,
+        rays: &[f32],
+        targets: &[f32],
+        p: &SurfaceStepParams,
+    ) -> Result<(SurfaceStepStats, BatchTimes)> {
+        let n = rays.len() / 6;
+        let mut b = self.record_train(rays, targets, p)?;
+        self.record_regularisers(&mut b, p)?;
+        self.record_rmsprop(&mut b, p)?;
+        let times = b.submit()?;
+        let loss = self.ray_loss(n)?;
+        let nf = n as f64;
+        let sum = |f: fn(&RayLoss) -> f32| loss.iter().map(|l| f(l) as f64).sum::<f64>();
+        let reg: Vec<f32> = self.reg_loss.download()?;
+        let stats = SurfaceStepStats {
+            mse: sum(|l| l.sq_err) / (3.0 * nf),
+            reg_loss: reg.iter().map(|&x| x as f64).sum(),
+            entropy: sum(|l| l.entropy) / nf,
+            consistency: sum(|l| l.consistency) / nf,
+            counts: self.read_train_counts()?,
+            device_ns: times.total_ns(),
+        };
+        Ok((stats, times))
+    }
+}
+
+impl SurfaceBackend for VulkanSurface {
+    fn name(&self) -> &'static str {
+        "vulkan"
+    }
+
+    fn step(
+        &mut self,
+        rays: &[f32],
+        targets: &[f32],
+        p: &SurfaceStepParams,
+    ) -> Result<SurfaceStepStats> {
+        Ok(self.step_timed(rays, targets, p)?.0)
+    }
+
+    fn render(&mut self, rays: &[f32], a: f32, stop_thresh: f32) -> Result<(Vec<f32>, SurfCounts)> {
+        let n = rays.len() / 6;
+        let (mut b, [ray_buf, _, out_buf]) = self.begin(rays, None)?;
+        let sp = surface_params(&self.meta, a, stop_thresh);
+        b.dispatch_1d(
+            &kernels::surface_fwd::INFO,
+            &kernels::surface_fwd::Push {
+                links: self.links.address(),
+                delta: self.delta.address(),
+                opacity: self.opacity.address(),
+                sh: self.sh.address(),
+                levels: self.levels.address(),
+                rays: ray_buf,
+                out_rays: out_buf,
+                stats: self.stats.address(),
+                scale: sp.scale,
+                offset: sp.offset,
+                n: self.meta.res[0],
+                n_rays: n as u32,
+                n_levels: self.meta.levels.len() as u32,
+                a,
+                stop_thresh,
+                ..Default::default()
+            },
+            n as u32,
+        )?;
+        b.submit()?;
+        let out: Vec<SurfOut> = self.out_buffer().download_range(0, n)?;
+        let s: Vec<u32> = self.stats.download_range(0, 5)?;
+        Ok((
+            out.iter().flat_map(|o| o.rgb).collect(),
+            std::array::from_fn(|i| s[i]),
+        ))
+    }
+
+    fn grid(&self) -> Result<SurfaceGrid> {
+        let rows = self.rows;
+        Ok(SurfaceGrid {
+            links: self.links.download()?,
+            delta: self.delta.download_range(0, rows)?,
+            opacity: self.opacity.download_range(0, rows)?,
+            sh: self.sh.download_range(0, rows * SH_DIM)?,
+            ..self.meta.clone()
+        })
+    }
+
+    fn optimizer_state(&self) -> Result<SurfaceState> {
+        let rows = self.rows;
+        Ok([
+            self.state[0].download_range(0, rows)?,
+            self.state[1].download_range(0, rows)?,
+            self.state[2].download_range(0, rows * SH_DIM)?,
+        ])
+    }
+
+    fn load(&mut self, grid: SurfaceGrid, state: Option<SurfaceState>) -> Result<()> {
+        let n = grid.delta.len();
+        if let Some(s) = &state {
+            ensure!(
+                s[0].len() == n && s[1].len() == n && s[2].len() == n * SH_DIM,
+                "optimizer state does not match the surface grid"
+            );
+        }
+        let fresh = VulkanSurface::new(&self.gpu, grid)?;
+        if let Some(s) = state {
+            for (buf, v) in fresh.state.iter().zip(&s) {
+                buf.write(v)?;
+            }
+        }
+        *self = fresh;
+        Ok(())
+    }
+}
