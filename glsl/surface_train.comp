@@ -14,19 +14,22 @@
 // in registers (in the reverse order) and flushed with one float atomic per corner, parameter and
 // non-zero sum when the cell changes (SH: 3 accumulators per corner, times Y_k at the flush);
 // every vertex that receives a gradient is touched (step.glsl).
-// Inputs: links (n³, < 0 unallocated), complete (bit i of word i/32 set when the cell with lower
-// corner slot i has its 8 corners allocated: the walk reads one bit per empty cell instead of 8
-// links), delta, opacity (raw σα), sh (27) per allocated vertex;
+// Inputs: links (n³, < 0 unallocated), complete: words [0, W = ⌈n³/32⌉) hold bit i of word i/32
+// set when the cell with lower corner slot i has its 8 corners allocated (the walk reads one bit
+// per empty cell instead of 8 links), words [W, W + nb³) the 8³-cell block level masks of
+// surface_blocks for the current δ (a cell in a mask-0 block cannot hold a hit: the walk restarts
+// past the block, surf_block_skip; exact), delta, opacity (raw σα), sh (27) per allocated vertex;
 // params (floats): scale[3], offset[3], a, stop_thresh, grad_scale, lambda_h, lambda_c, (pad),
 // levels[8] (n_levels used); rays (6 floats), targets (3 floats).
 // Outputs: grad_delta, grad_opacity, grad_sh += (float atomics), touched list (step buffer);
-// out_rays[r] = (squared error, entropy, consistency, hits composited); stats (7 u32) += cells
+// out_rays[r] = (squared error, entropy, consistency, hits composited); stats (8 u32) += cells
 // visited, cubic solves, solves culled by min/max, hits composited, hits cut by truncation,
-// guarded hits, gradient atomic adds (subgroup-reduced).
+// guarded hits, gradient atomic adds, blocks skipped (subgroup-reduced).
 // CPU twin: cpu::surface_train::train (src/cpu/surface_train.rs).
 #extension GL_EXT_shader_atomic_float : require
 #include "common.glsl"
 #include "surface.glsl"
+#include "surface_blocks.glsl"
 layout(local_size_x = 64) in;
 
 // Per-ray output (scalar layout, 16 bytes); twin cpu::surface_train::RayLoss.
@@ -145,12 +148,12 @@ uint flush(ivec3 cell, float y[9], inout float acc_d[8], inout float acc_a[8], i
     return adds;
 }
 
-void add_train_stats(uvec4 c, uvec3 d) {
+void add_train_stats(uvec4 c, uvec4 d) {
     uvec4 s = subgroupAdd(c);
-    uvec3 t = subgroupAdd(d);
+    uvec4 t = subgroupAdd(d);
     if (subgroupElect()) {
         for (uint i = 0u; i < 4u; i++) atomicAdd(pc.stats.v[i], s[i]);
-        for (uint i = 0u; i < 3u; i++) atomicAdd(pc.stats.v[4u + i], t[i]);
+        for (uint i = 0u; i < 4u; i++) atomicAdd(pc.stats.v[4u + i], t[i]);
     }
 }
 
@@ -177,7 +180,7 @@ void main() {
     sh_basis(ray_unit(rd), y);
     uint n = pc.n;
     uvec4 cnt = uvec4(0u); // cells, solves, culled, hits
-    uvec3 cnt2 = uvec3(0u); // cut, guarded, atomic adds
+    uvec4 cnt2 = uvec4(0u); // cut, guarded, atomic adds, blocks skipped
 
     // Forward walk, recording the composited hits.
     ivec3 h_cell[SURF_MAX_HITS];
@@ -199,10 +202,18 @@ void main() {
     int lk[8];
     float c[8];
     uint mask = 0u;
+    uint nb = surf_blocks_per_axis(n);
+    uint bbase = (n * n * n + 31u) >> 5u;
+    uint skipped = SURF_NO_BLOCK;
     while (!done) {
         // Walk on to the next cell where some level can cross before solving (as surface_fwd).
         bool found = false;
         while (dda_next(w, l, t0, t1)) {
+            uint bi = surf_block_index(l, nb);
+            if (pc.complete.v[bbase + bi] == 0u && surf_block_skip(w, dn, int(n), l, bi, skipped)) {
+                cnt2.w++;
+                continue;
+            }
             cnt.x++;
             uint ci = dda_cell_index(l, n);
             if ((pc.complete.v[ci >> 5u] & (1u << (ci & 31u))) == 0u) continue;

@@ -241,8 +241,8 @@ fn cpu_backward_matches_f64_central_differences() {
             rng.random_range(0.0..1.0),
             rng.random_range(0.0..1.0),
         ];
-        let mut cnt = [0; 7];
-        let tr = trace_ray(&g, ro, rd, &p, &mut cnt);
+        let mut cnt = [0; 8];
+        let tr = trace_ray(&g, ro, rd, &p, None, &mut cnt);
         if tr.n == 0 || ray_loss64(&tr, rd, target, &levels, p.a as f64, &lp, &q, true).is_none() {
             continue;
         }
@@ -271,6 +271,7 @@ fn cpu_backward_matches_f64_central_differences() {
         &targets,
         &p,
         &lp,
+        None,
         SurfaceGrads {
             delta: &mut gd,
             opacity: &mut go,

@@ -57,8 +57,8 @@ pub struct SurfaceBenchArgs {
 }
 
 /// Names of the stage-2 counters, per ray.
-const COUNTERS: [&str; 7] = [
-    "cells", "solves", "culled", "hits", "cut", "guarded", "atomics",
+const COUNTERS: [&str; 8] = [
+    "cells", "solves", "culled", "hits", "cut", "guarded", "atomics", "skips",
 ];
 
 /// One backend's figures.
@@ -132,7 +132,7 @@ fn time_surface(
     let mut f = Figures::default();
     let mut sampler = RaySampler::new(&data.train, 11);
     let mut secs = 0.0;
-    let mut counts = [0u64; 7];
+    let mut counts = [0u64; 8];
     for i in 0..=args.steps {
         let b = sampler.next_batch(&data.train, &data.scene, args.batch as usize);
         let (rays, targets) = (b.flat_rays(), b.flat_targets());

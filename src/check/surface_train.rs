@@ -28,6 +28,7 @@
 
 use super::surface_fwd::{test_rays, test_scene, SurfaceScene, RES};
 use super::{CheckRow, Compare};
+use crate::cpu::surface_blocks::build_blocks;
 use crate::cpu::surface_fwd::SurfaceParams;
 use crate::cpu::surface_train::{hit_point, trace_ray, train, RayLoss, SurfaceGrads, TrainCounts};
 use crate::gpu::Gpu;
@@ -94,12 +95,14 @@ pub fn cpu_train(
     let mut grads = [vec![0.0; rows], vec![0.0; rows], vec![0.0; rows * SH_DIM]];
     let mut touched = vec![0u32; rows];
     let [gd, go, gs] = &mut grads;
+    let blocks = build_blocks(&grid.as_ref(), &grid.levels, 0.0)?;
     let (ray_loss, counts) = train(
         &grid.as_ref(),
         rays,
         targets,
         &surface_params(grid, p.a, p.stop_thresh),
         &batch_loss(rays.len() / 6, p),
+        Some(&blocks),
         SurfaceGrads {
             delta: gd,
             opacity: go,
@@ -152,7 +155,7 @@ fn quantised(mut s: SurfaceScene) -> SurfaceScene {
 /// The smallest |f′(s)|/(max − min of the cell's δ) over a ray's composited hits (∞ without
 /// hits): how well its hit positions are determined (the f′ guard drops δ gradients below 1e-3).
 fn min_fprime(grid: &SurfaceGrid, ro: [f32; 3], rd: [f32; 3], sp: &SurfaceParams) -> f32 {
-    let tr = trace_ray(&grid.as_ref(), ro, rd, sp, &mut [0; 7]);
+    let tr = trace_ray(&grid.as_ref(), ro, rd, sp, None, &mut [0; 8]);
     tr.hits[..tr.n]
         .iter()
         .map(|h| {

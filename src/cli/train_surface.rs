@@ -6,22 +6,20 @@ use crate::data::{dataset::peak_rss_bytes, Dataset, LoadOptions};
 use crate::gpu::Gpu;
 use crate::grid::surface::SurfaceGrid;
 use crate::grid::{npz, Grid};
-use crate::surface::{CpuSurface, SurfaceBackend};
+use crate::surface::{CpuSurface, SurfaceBackend, VulkanSurface};
 use crate::train::{stage1, stage2, SurfaceConfig};
-use anyhow::{bail, ensure, Context, Result};
+use anyhow::{ensure, Context, Result};
 use serde_json::json;
 use std::path::Path;
 use std::time::Instant;
 
 /// The Vulkan backend on `gpu`, or the CPU backend when there is none.
 fn make_backend(gpu: Option<&Gpu>, grid: SurfaceGrid) -> Result<Box<dyn SurfaceBackend>> {
-    match gpu {
-        Some(_) => bail!(
-            "the Vulkan stage-2 backend is not built yet; run stage 2 with --backend cpu \
-             (or auto)"
-        ),
-        None => Ok(Box::new(CpuSurface::new(grid))),
-    }
+    grid.validate()?;
+    Ok(match gpu {
+        Some(gpu) => Box::new(VulkanSurface::new(gpu, grid)?),
+        None => Box::new(CpuSurface::new(grid)),
+    })
 }
 
 /// The stage-1 grid `--init` names: a run directory (its plenoxels.npz) or an npz file.
@@ -178,9 +176,10 @@ pub fn run(args: &TrainArgs, gpu: Option<&Gpu>) -> Result<()> {
     }
     let r = report.per_ray;
     println!(
-        "per training ray: {:.1} cells, {:.2} cubic solves ({:.1} skipped by min/max culling), \
-         {:.2} hits, {:.2} cut by truncation, {:.3} guarded, {:.1} gradient atomic adds",
-        r[0], r[1], r[2], r[3], r[4], r[5], r[6]
+        "per training ray: {:.1} cells visited ({:.1} empty blocks skipped), {:.2} cubic solves \
+         ({:.1} skipped by min/max culling), {:.2} hits, {:.2} cut by truncation, {:.3} guarded, \
+         {:.1} gradient atomic adds",
+        r[0], r[7], r[1], r[2], r[3], r[4], r[5], r[6]
     );
     println!(
         "stage 2 done: test PSNR {:.2} dB, {:.0} training rays/s, {} vertices after dropping \
@@ -209,7 +208,7 @@ pub fn run(args: &TrainArgs, gpu: Option<&Gpu>) -> Result<()> {
         "test_psnr_per_view": rendered.psnr,
         "per_ray": {
             "cells": r[0], "solves": r[1], "culled_solves": r[2], "hits": r[3],
-            "cut_hits": r[4], "guarded_hits": r[5], "atomic_adds": r[6],
+            "cut_hits": r[4], "guarded_hits": r[5], "atomic_adds": r[6], "blocks_skipped": r[7],
         },
         "vertices_before_prune": report.vertices_before_prune,
         "allocated_vertices": report.allocated_vertices,

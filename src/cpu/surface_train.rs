@@ -23,11 +23,14 @@
 
 use super::atomic;
 use super::step::touch;
-use super::surface_fwd::{validate_inputs, SurfaceGridRef, SurfaceParams};
-use crate::math::dda::{dda_cell_index, dda_init, ray_unit};
+use super::surface_fwd::{validate_blocks, validate_inputs, SurfaceGridRef, SurfaceParams};
+use crate::math::dda::{dda_cell_index, dda_init, dda_next, ray_unit};
 use crate::math::sh::sh_basis;
 use crate::math::surface::{
     surf_alpha, surf_cell_hits, surf_gamma, surf_level_mask, surf_local, surf_ray, SURF_MAX_LEVELS,
+};
+use crate::math::surface_blocks::{
+    surf_block_index, surf_block_skip, surf_blocks_per_axis, SURF_NO_BLOCK,
 };
 use crate::math::trilerp::trilerp_weights;
 use anyhow::{ensure, Result};
@@ -41,8 +44,8 @@ pub const FPRIME_GUARD: f32 = 1e-3;
 
 /// Counters summed over rays: cells visited, cubic solves, solves skipped by min/max culling,
 /// hits composited, hits cut off by truncation, hits whose δ gradient was dropped by the f′ guard,
-/// gradient atomic adds.
-pub type TrainCounts = [u32; 7];
+/// gradient atomic adds, 8³-cell blocks skipped.
+pub type TrainCounts = [u32; 8];
 
 /// Loss weights of the fused per-ray terms (per-ray coefficients: the batch mean is the caller's).
 #[derive(Clone, Copy, Debug)]
@@ -98,12 +101,14 @@ pub fn hit_point(h: &Hit, dn: [f32; 3]) -> [f32; 3] {
 }
 
 /// The forward walk of one ray (the kernel's first loop): the composited hits in order, with the
-/// counters; the same stopping rules as `surface_fwd`.
+/// counters; the same stopping rules as `surface_fwd`. With `blocks` (the `surface_blocks` masks of
+/// the current δ), cells of mask-0 blocks are skipped as in `surface_fwd` (exact).
 pub fn trace_ray(
     g: &SurfaceGridRef,
     ro: [f32; 3],
     rd: [f32; 3],
     p: &SurfaceParams,
+    blocks: Option<&[u32]>,
     cnt: &mut TrainCounts,
 ) -> Trace {
     let levels = &p.levels[..p.levels.len().min(SURF_MAX_LEVELS)];
@@ -119,7 +124,19 @@ pub fn trace_ray(
     let n = g.n as usize;
     let (nz, nyz) = (n, n * n);
     let mut t_acc = 1.0f32;
-    'walk: for piece in dda_init(og, dn, g.n as i32, 0.0) {
+    let nb = surf_blocks_per_axis(g.n);
+    let mut skipped = SURF_NO_BLOCK;
+    let mut w = dda_init(og, dn, g.n as i32, 0.0);
+    'walk: while let Some(piece) = dda_next(&mut w) {
+        if let Some(blocks) = blocks {
+            let bi = surf_block_index(piece.cell, nb);
+            if blocks[bi as usize] == 0
+                && surf_block_skip(&mut w, dn, g.n as i32, piece.cell, bi, &mut skipped)
+            {
+                cnt[7] += 1;
+                continue;
+            }
+        }
         cnt[0] += 1;
         let l = piece.cell;
         let base = dda_cell_index(l, g.n) as usize;
@@ -248,16 +265,20 @@ pub struct RayLoss {
 }
 
 /// Twin of `surface_train.comp`: per-ray losses and the summed counters; dL/dδ, dL/dσα and
-/// dL/dSH are added into `grads` and every vertex receiving a gradient is flagged.
+/// dL/dSH are added into `grads` and every vertex receiving a gradient is flagged. `blocks`: the
+/// `surface_blocks` masks of the current δ (the kernel always skips with them; `None` walks every
+/// cell, with the same result).
 pub fn train(
     g: &SurfaceGridRef,
     rays: &[f32],
     targets: &[f32],
     p: &SurfaceParams,
     loss: &SurfaceLoss,
+    blocks: Option<&[u32]>,
     grads: SurfaceGrads,
 ) -> Result<(Vec<RayLoss>, TrainCounts)> {
     validate_inputs(g, rays, p)?;
+    validate_blocks(g, blocks)?;
     ensure!(
         p.a <= SURF_MAX_HITS as f32,
         "truncation parameter a = {} exceeds the {SURF_MAX_HITS} hits a ray records",
@@ -294,11 +315,12 @@ pub fn train(
                 [t[0], t[1], t[2]],
                 p,
                 loss,
+                blocks,
                 &out,
             )
         })
         .collect();
-    let counts = res.iter().fold([0u32; 7], |a, (_, c)| {
+    let counts = res.iter().fold([0u32; 8], |a, (_, c)| {
         std::array::from_fn(|i| a[i].wrapping_add(c[i]))
     });
     Ok((res.into_iter().map(|o| o.0).collect(), counts))
@@ -434,10 +456,11 @@ fn train_ray(
     target: [f32; 3],
     p: &SurfaceParams,
     loss: &SurfaceLoss,
+    blocks: Option<&[u32]>,
     out: &Scatter,
 ) -> (RayLoss, TrainCounts) {
-    let mut cnt: TrainCounts = [0; 7];
-    let tr = trace_ray(g, ro, rd, p, &mut cnt);
+    let mut cnt: TrainCounts = [0; 8];
+    let tr = trace_ray(g, ro, rd, p, blocks, &mut cnt);
     let y = sh_basis(ray_unit(rd));
     let shades: Vec<Shade> = (0..tr.n)
         .map(|j| shade(g, &tr.hits[j], tr.dn, &y, p.a, j))

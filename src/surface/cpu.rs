@@ -111,6 +111,7 @@ impl SurfaceBackend for CpuSurface {
     ) -> Result<SurfaceStepStats> {
         let sp = surface_params(&self.grid, p.a, p.stop_thresh);
         let n = rays.len() / 6;
+        let blocks = build_blocks(&self.grid.as_ref(), &self.grid.levels, 0.0)?;
         let [gd, go, gs] = &mut self.grad;
         let (losses, counts) = train(
             &self.grid.as_ref(),
@@ -118,6 +119,7 @@ impl SurfaceBackend for CpuSurface {
             targets,
             &sp,
             &batch_loss(n, p),
+            Some(&blocks),
             SurfaceGrads {
                 delta: gd,
                 opacity: go,

@@ -15,6 +15,7 @@ use crate::grid::surface::SurfaceGrid;
 use crate::grid::SH_DIM;
 use crate::kernels;
 use crate::math::surface::{SurfOut, SURF_MAX_LEVELS};
+use crate::math::surface_blocks::surf_blocks_per_axis;
 use anyhow::{ensure, Result};
 
 /// Floats in the params buffer of `surface_train` (layout in the kernel's header).
@@ -37,11 +38,17 @@ pub fn train_params(sp: &SurfaceParams, loss: &SurfaceLoss) -> [f32; PARAMS_LEN]
     v
 }
 
+/// Words of [`complete_cells`] for an `n`³ grid (⌈n³/32⌉; the kernel's block masks follow them).
+pub fn complete_cells_len(n: u32) -> usize {
+    let n = n as usize;
+    (n * n * n).div_ceil(32).max(1)
+}
+
 /// Bit i of word i/32 set when the cell whose lower corner is slot i (x-major, `n`³ slots) has
 /// its 8 corners allocated: `surface_train`'s walk tests this bit before reading any link.
 pub fn complete_cells(links: &[i32], n: u32) -> Vec<u32> {
+    let mut bits = vec![0u32; complete_cells_len(n)];
     let n = n as usize;
-    let mut bits = vec![0u32; (n * n * n).div_ceil(32).max(1)];
     let (nz, nyz) = (n, n * n);
     for x in 0..n.saturating_sub(1) {
         for y in 0..n - 1 {
@@ -84,8 +91,10 @@ pub struct VulkanSurface {
     meta: SurfaceGrid,
     rows: usize,
     links: GpuBuffer,
-    /// Complete-cell bits ([`complete_cells`]).
+    /// Complete-cell bits ([`complete_cells`], `complete_words` words), then the nb³ block level
+    /// masks of `surface_blocks` (rebuilt before every pass that walks).
     complete: GpuBuffer,
+    complete_words: u64,
     /// Slots [first, last] of the allocated vertices (Lδ's TV needs no other slots).
     allocated_span: (u32, u32),
     delta: GpuBuffer,
@@ -161,7 +170,13 @@ impl VulkanSurface {
             gpu: gpu.clone(),
             rows: n,
             links: gpu.upload(&grid.links)?,
-            complete: gpu.upload(&complete_cells(&grid.links, grid.res[0]))?,
+            complete: {
+                let mut words = complete_cells(&grid.links, grid.res[0]);
+                let nb = surf_blocks_per_axis(grid.res[0]) as usize;
+                words.resize(words.len() + nb * nb * nb, 0);
+                gpu.upload(&words)?
+            },
+            complete_words: complete_cells_len(grid.res[0]) as u64,
             allocated_span: (
                 grid.links.iter().position(|&l| l >= 0).unwrap_or(0) as u32,
                 grid.links.iter().rposition(|&l| l >= 0).unwrap_or(0) as u32,
@@ -179,7 +194,7 @@ impl VulkanSurface {
             args: gpu.zeros::<u32>(3)?,
             params: gpu.zeros::<f32>(PARAMS_LEN)?,
             levels: gpu.upload(&levels)?,
-            stats: gpu.zeros::<u32>(7)?,
+            stats: gpu.zeros::<u32>(8)?,
             row_slot: if row_slot.is_empty() {
                 gpu.zeros::<u32>(1)?
             } else {
@@ -261,6 +276,7 @@ impl VulkanSurface {
         let sp = surface_params(&self.meta, p.a, p.stop_thresh);
         self.params.write(&train_params(&sp, &batch_loss(n, p)))?;
         let (mut b, [ray_buf, target_buf, out_buf]) = self.begin(rays, Some(targets))?;
+        self.record_blocks(&mut b)?;
         b.dispatch_1d(
             &kernels::surface_train::INFO,
             &kernels::surface_train::Push {
@@ -286,6 +302,33 @@ impl VulkanSurface {
             n as u32,
         )?;
         Ok(b)
+    }
+
+    /// Device address of the block masks (after the complete-cell bits).
+    fn blocks_address(&self) -> u64 {
+        self.complete.address() + 4 * self.complete_words
+    }
+
+    /// Record `surface_blocks`: the level masks of the current δ per 8³-cell block (margin 0, so
+    /// the walks that read them skip exactly the blocks that cannot hold a hit).
+    fn record_blocks(&self, b: &mut Batch) -> Result<()> {
+        let n = self.meta.res[0];
+        let nb = surf_blocks_per_axis(n);
+        b.dispatch_1d(
+            &kernels::surface_blocks::INFO,
+            &kernels::surface_blocks::Push {
+                links: self.links.address(),
+                delta: self.delta.address(),
+                levels: self.levels.address(),
+                blocks: self.blocks_address(),
+                n,
+                n_levels: self.meta.levels.len() as u32,
+                margin: 0.0,
+                ..Default::default()
+            },
+            nb * nb * nb,
+        )?;
+        Ok(())
     }
 
     /// Record the per-vertex regularisers (the same chunks and scales as `CpuSurface`).
@@ -414,7 +457,7 @@ impl VulkanSurface {
     }
 
     fn read_train_counts(&self) -> Result<TrainCounts> {
-        let v: Vec<u32> = self.stats.download_range(0, 7)?;
+        let v: Vec<u32> = self.stats.download_range(0, 8)?;
         Ok(std::array::from_fn(|i| v[i]))
     }
 
@@ -502,6 +545,7 @@ impl SurfaceBackend for VulkanSurface {
         let n = rays.len() / 6;
         let (mut b, [ray_buf, _, out_buf]) = self.begin(rays, None)?;
         let sp = surface_params(&self.meta, a, stop_thresh);
+        self.record_blocks(&mut b)?;
         b.dispatch_1d(
             &kernels::surface_fwd::INFO,
             &kernels::surface_fwd::Push {
@@ -520,13 +564,15 @@ impl SurfaceBackend for VulkanSurface {
                 n_levels: self.meta.levels.len() as u32,
                 a,
                 stop_thresh,
+                blocks: self.blocks_address(),
+                block_skip: 1,
                 ..Default::default()
             },
             n as u32,
         )?;
         b.submit()?;
         let out: Vec<SurfOut> = self.out_buffer().download_range(0, n)?;
-        let s: Vec<u32> = self.stats.download_range(0, 5)?;
+        let s: Vec<u32> = self.stats.download_range(0, 6)?;
         Ok((
             out.iter().flat_map(|o| o.rgb).collect(),
             std::array::from_fn(|i| s[i]),

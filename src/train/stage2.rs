@@ -36,8 +36,9 @@ pub struct Stage2Report {
     pub final_mse: f64,
     pub test_psnr: f64,
     /// Per training ray: cells visited, cubic solves, solves skipped by min/max culling, hits,
-    /// hits cut by truncation, hits with a guarded δ gradient, gradient atomic adds.
-    pub per_ray: [f64; 7],
+    /// hits cut by truncation, hits with a guarded δ gradient, gradient atomic adds, 8³-cell
+    /// blocks skipped.
+    pub per_ray: [f64; 8],
     pub vertices_before_prune: usize,
     pub allocated_vertices: usize,
 }
@@ -164,7 +165,7 @@ pub fn train(
     let mut report = Stage2Report::default();
     let mut progress = Progress::new(cfg.iters as u64, start_step as u64, show_progress);
     let (mut timed_rays, mut timed_secs, mut rays_total) = (0u64, 0.0f64, 0u64);
-    let mut totals = [0u64; 7];
+    let mut totals = [0u64; 8];
     let mut mse = f64::NAN;
     let t_start = Instant::now();
     let grid0 = backend.grid()?;
