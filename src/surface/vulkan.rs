@@ -566,7 +566,6 @@ impl SurfaceBackend for VulkanSurface {
                 stop_thresh,
                 blocks: self.blocks_address(),
                 block_skip: 1,
-                ..Default::default()
             },
             n as u32,
         )?;
