@@ -1,7 +1,8 @@
 //! The CPU stage-2 backend: the kernels' twins on a host-resident surface grid.
 
 use super::{
-    batch_loss, surface_params, SurfaceBackend, SurfaceState, SurfaceStepParams, SurfaceStepStats,
+    batch_loss, surface_params, BlockRefresh, SurfaceBackend, SurfaceState, SurfaceStepParams,
+    SurfaceStepStats,
 };
 use crate::cpu::surface_blocks::build_blocks;
 use crate::cpu::surface_fwd::{render, SurfCounts};
@@ -21,6 +22,9 @@ pub struct CpuSurface {
     /// Slot of each vertex row, and the cell counts the normal regulariser's chunks need.
     row_slot: Vec<u32>,
     normals: NormalPrefix,
+    /// The block masks the walks skip with, and when to rebuild them.
+    blocks: Vec<u32>,
+    refresh: BlockRefresh,
 }
 
 impl CpuSurface {
@@ -31,11 +35,21 @@ impl CpuSurface {
         CpuSurface {
             row_slot,
             normals,
+            blocks: Vec::new(),
+            refresh: BlockRefresh::default(),
             grid,
             grad: [vec![0.0; n], vec![0.0; n], vec![0.0; n * SH_DIM]],
             state: [vec![0.0; n], vec![0.0; n], vec![0.0; n * SH_DIM]],
             touched: vec![0; n],
         }
+    }
+
+    /// Rebuild the block masks when δ may have drifted past their margin.
+    fn refresh_blocks(&mut self, lr_delta: f32, beta: f32) -> Result<()> {
+        if let Some(margin) = self.refresh.before_pass(lr_delta, beta) {
+            self.blocks = build_blocks(&self.grid.as_ref(), &self.grid.levels, margin)?;
+        }
+        Ok(())
     }
 
     /// The per-vertex regularisers' gradients; returns the Lα + Ln loss.
@@ -111,7 +125,7 @@ impl SurfaceBackend for CpuSurface {
     ) -> Result<SurfaceStepStats> {
         let sp = surface_params(&self.grid, p.a, p.stop_thresh);
         let n = rays.len() / 6;
-        let blocks = build_blocks(&self.grid.as_ref(), &self.grid.levels, 0.0)?;
+        self.refresh_blocks(p.lr_delta, p.beta)?;
         let [gd, go, gs] = &mut self.grad;
         let (losses, counts) = train(
             &self.grid.as_ref(),
@@ -119,7 +133,7 @@ impl SurfaceBackend for CpuSurface {
             targets,
             &sp,
             &batch_loss(n, p),
-            Some(&blocks),
+            Some(&self.blocks),
             SurfaceGrads {
                 delta: gd,
                 opacity: go,
@@ -129,6 +143,7 @@ impl SurfaceBackend for CpuSurface {
         )?;
         let reg_loss = self.regularise(p)?;
         self.optimise(p);
+        self.refresh.after_update(p.lr_delta, p.beta);
         let nf = n.max(1) as f64;
         Ok(SurfaceStepStats {
             mse: losses.iter().map(|l| l.sq_err as f64).sum::<f64>() / (3.0 * nf),
@@ -142,8 +157,8 @@ impl SurfaceBackend for CpuSurface {
 
     fn render(&mut self, rays: &[f32], a: f32, stop_thresh: f32) -> Result<(Vec<f32>, SurfCounts)> {
         let sp = surface_params(&self.grid, a, stop_thresh);
-        let blocks = build_blocks(&self.grid.as_ref(), &sp.levels, 0.0)?;
-        let (out, counts) = render(&self.grid.as_ref(), rays, &sp, Some(&blocks))?;
+        self.refresh_blocks(0.0, 0.0)?;
+        let (out, counts) = render(&self.grid.as_ref(), rays, &sp, Some(&self.blocks))?;
         Ok((out.iter().flat_map(|o| o.rgb).collect(), counts))
     }
 

@@ -84,6 +84,47 @@ pub trait SurfaceBackend {
     fn load(&mut self, grid: SurfaceGrid, state: Option<SurfaceState>) -> Result<()>;
 }
 
+/// Passes between rebuilds of the 8³-cell block masks the walks skip with (see [`BlockRefresh`]).
+pub const BLOCK_REFRESH_STEPS: f32 = 16.0;
+
+/// When the block masks (`surface_blocks`) must be rebuilt. Masks built with margin M stay exact
+/// (a block whose widened δ range holds no level cannot hold a hit) while δ has moved by at most M
+/// since the build. RMSProp moves a parameter by at most lr/√(1 − β) per update (after any update
+/// with g ≠ 0, r ≥ (1 − β)g²), so each update adds that bound for δ's rate; the masks are rebuilt,
+/// with room for [`BLOCK_REFRESH_STEPS`] more updates at the current rate, once the drift bound
+/// exceeds the margin.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct BlockRefresh {
+    margin: f32,
+    drift: f32,
+    valid: bool,
+}
+
+impl BlockRefresh {
+    /// Bound on one RMSProp update of a parameter with rate `lr` (1 % slack for rounding).
+    fn step_bound(lr: f32, beta: f32) -> f32 {
+        1.01 * lr / (1.0 - beta).max(1e-6).sqrt()
+    }
+
+    /// Before a pass that walks: `Some(margin)` when the masks must be rebuilt with that margin
+    /// (`lr_delta`, `beta`: the coming updates' rate; 0 for a render).
+    pub fn before_pass(&mut self, lr_delta: f32, beta: f32) -> Option<f32> {
+        if self.valid && self.drift <= self.margin {
+            return None;
+        }
+        // A diverging rate gives an infinite bound: every block with a vertex stays live.
+        self.margin = (BLOCK_REFRESH_STEPS * Self::step_bound(lr_delta, beta)).min(f32::MAX);
+        self.drift = 0.0;
+        self.valid = true;
+        Some(self.margin)
+    }
+
+    /// After an optimiser update of δ with rate `lr_delta`.
+    pub fn after_update(&mut self, lr_delta: f32, beta: f32) {
+        self.drift += Self::step_bound(lr_delta, beta);
+    }
+}
+
 /// Ray → grid mapping and rendering parameters of a surface grid.
 pub fn surface_params(g: &SurfaceGrid, a: f32, stop_thresh: f32) -> SurfaceParams {
     SurfaceParams {

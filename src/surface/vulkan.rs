@@ -4,7 +4,8 @@
 //! → optim_args → indirect surface_rmsprop over the touched vertices.
 
 use super::{
-    batch_loss, surface_params, SurfaceBackend, SurfaceState, SurfaceStepParams, SurfaceStepStats,
+    batch_loss, surface_params, BlockRefresh, SurfaceBackend, SurfaceState, SurfaceStepParams,
+    SurfaceStepStats,
 };
 use crate::cpu::step::{STEP_COUNT, STEP_FLAGS, STEP_N};
 use crate::cpu::surface_fwd::{SurfCounts, SurfaceParams};
@@ -95,6 +96,8 @@ pub struct VulkanSurface {
     /// masks of `surface_blocks` (rebuilt before every pass that walks).
     complete: GpuBuffer,
     complete_words: u64,
+    /// When the block masks must be rebuilt.
+    refresh: BlockRefresh,
     /// Slots [first, last] of the allocated vertices (Lδ's TV needs no other slots).
     allocated_span: (u32, u32),
     delta: GpuBuffer,
@@ -177,6 +180,7 @@ impl VulkanSurface {
                 gpu.upload(&words)?
             },
             complete_words: complete_cells_len(grid.res[0]) as u64,
+            refresh: BlockRefresh::default(),
             allocated_span: (
                 grid.links.iter().position(|&l| l >= 0).unwrap_or(0) as u32,
                 grid.links.iter().rposition(|&l| l >= 0).unwrap_or(0) as u32,
@@ -276,7 +280,9 @@ impl VulkanSurface {
         let sp = surface_params(&self.meta, p.a, p.stop_thresh);
         self.params.write(&train_params(&sp, &batch_loss(n, p)))?;
         let (mut b, [ray_buf, target_buf, out_buf]) = self.begin(rays, Some(targets))?;
-        self.record_blocks(&mut b)?;
+        if let Some(margin) = self.refresh.before_pass(p.lr_delta, p.beta) {
+            self.record_blocks(&mut b, margin)?;
+        }
         b.dispatch_1d(
             &kernels::surface_train::INFO,
             &kernels::surface_train::Push {
@@ -309,9 +315,9 @@ impl VulkanSurface {
         self.complete.address() + 4 * self.complete_words
     }
 
-    /// Record `surface_blocks`: the level masks of the current δ per 8³-cell block (margin 0, so
-    /// the walks that read them skip exactly the blocks that cannot hold a hit).
-    fn record_blocks(&self, b: &mut Batch) -> Result<()> {
+    /// Record `surface_blocks`: the level masks of the current δ per 8³-cell block, widened by
+    /// `margin` (see `BlockRefresh`), so the walks skip only blocks that cannot hold a hit.
+    fn record_blocks(&self, b: &mut Batch, margin: f32) -> Result<()> {
         let n = self.meta.res[0];
         let nb = surf_blocks_per_axis(n);
         b.dispatch_1d(
@@ -323,7 +329,7 @@ impl VulkanSurface {
                 blocks: self.blocks_address(),
                 n,
                 n_levels: self.meta.levels.len() as u32,
-                margin: 0.0,
+                margin,
                 ..Default::default()
             },
             nb * nb * nb,
@@ -511,6 +517,7 @@ impl VulkanSurface {
         self.record_regularisers(&mut b, p)?;
         self.record_rmsprop(&mut b, p)?;
         let times = b.submit()?;
+        self.refresh.after_update(p.lr_delta, p.beta);
         let loss = self.ray_loss(n)?;
         let nf = n as f64;
         let sum = |f: fn(&RayLoss) -> f32| loss.iter().map(|l| f(l) as f64).sum::<f64>();
@@ -545,7 +552,9 @@ impl SurfaceBackend for VulkanSurface {
         let n = rays.len() / 6;
         let (mut b, [ray_buf, _, out_buf]) = self.begin(rays, None)?;
         let sp = surface_params(&self.meta, a, stop_thresh);
-        self.record_blocks(&mut b)?;
+        if let Some(margin) = self.refresh.before_pass(0.0, 0.0) {
+            self.record_blocks(&mut b, margin)?;
+        }
         b.dispatch_1d(
             &kernels::surface_fwd::INFO,
             &kernels::surface_fwd::Push {
