@@ -2,7 +2,7 @@
 //! the same DDA walk (`math::dda`) with the same block skipping (`math::surface_blocks`), per-cell
 //! hits (`math::surface`) and compositing arithmetic.
 
-use crate::math::dda::{dda_cell_index, dda_init, dda_next, ray_unit};
+use crate::math::dda::{dda_cell_index, dda_init, dda_next, ray_unit, Dda, DdaPiece};
 use crate::math::sh::sh_basis;
 use crate::math::surface::{
     surf_alpha, surf_cell_hits, surf_gamma, surf_level_mask, surf_local, surf_ray, SurfOut,
@@ -72,6 +72,94 @@ pub struct SurfaceParams {
     pub stop_thresh: f32,
 }
 
+/// A cell of the walk that some level can cross: its DDA piece, corner links and δ values, and the
+/// levels that pass min/max culling.
+pub struct WalkCell {
+    pub piece: DdaPiece,
+    pub lk: [i32; 8],
+    pub c: [f32; 8],
+    pub mask: u32,
+}
+
+/// The cell walk both surface kernels share: DDA front to back from t = 0; cells of mask-0 blocks
+/// skipped (with `blocks`), cells with an unallocated corner and cells no level crosses passed
+/// over. `counts` = cells visited (links read), cubic solves, solves culled, blocks skipped.
+pub struct CellWalk<'a> {
+    g: &'a SurfaceGridRef<'a>,
+    levels: &'a [f32],
+    blocks: Option<&'a [u32]>,
+    dn: [f32; 3],
+    w: Dda,
+    skipped: u32,
+    pub counts: [u32; 4],
+}
+
+impl<'a> CellWalk<'a> {
+    pub fn new(
+        g: &'a SurfaceGridRef<'a>,
+        og: [f32; 3],
+        dn: [f32; 3],
+        levels: &'a [f32],
+        blocks: Option<&'a [u32]>,
+    ) -> Self {
+        CellWalk {
+            g,
+            levels,
+            blocks,
+            dn,
+            w: dda_init(og, dn, g.n as i32, 0.0),
+            skipped: SURF_NO_BLOCK,
+            counts: [0; 4],
+        }
+    }
+}
+
+impl Iterator for CellWalk<'_> {
+    type Item = WalkCell;
+
+    fn next(&mut self) -> Option<WalkCell> {
+        let g = self.g;
+        let n = g.n as usize;
+        let (nz, nyz) = (n, n * n);
+        let nb = surf_blocks_per_axis(g.n);
+        while let Some(piece) = dda_next(&mut self.w) {
+            let l = piece.cell;
+            if let Some(blocks) = self.blocks {
+                let bi = surf_block_index(l, nb);
+                if blocks[bi as usize] == 0
+                    && surf_block_skip(&mut self.w, self.dn, g.n as i32, l, bi, &mut self.skipped)
+                {
+                    self.counts[3] += 1;
+                    continue;
+                }
+            }
+            self.counts[0] += 1;
+            let base = dda_cell_index(l, g.n) as usize;
+            let lk = [
+                g.links[base],
+                g.links[base + 1],
+                g.links[base + nz],
+                g.links[base + nz + 1],
+                g.links[base + nyz],
+                g.links[base + nyz + 1],
+                g.links[base + nyz + nz],
+                g.links[base + nyz + nz + 1],
+            ];
+            if lk.iter().any(|&k| k < 0) {
+                continue;
+            }
+            let c = lk.map(|k| g.delta[k as usize]);
+            let mask = surf_level_mask(&c, self.levels);
+            self.counts[1] += mask.count_ones();
+            self.counts[2] += self.levels.len() as u32 - mask.count_ones();
+            if mask != 0 {
+                return Some(WalkCell { piece, lk, c, mask });
+            }
+        }
+        None
+    }
+}
+
 /// One ray: its output and counters. `blocks`: the block level masks of `g` for `p.levels`
 /// (`cpu::surface_blocks::build_blocks`), skipping blocks with mask 0; `None` walks every cell.
 pub fn render_ray(
@@ -84,48 +172,14 @@ pub fn render_ray(
     let levels = &p.levels[..p.levels.len().min(SURF_MAX_LEVELS)];
     let (og, dn) = surf_ray(ro, rd, p.scale, p.offset);
     let y = sh_basis(ray_unit(rd));
-    let n = g.n as usize;
-    let (nz, nyz) = (n, n * n);
     let mut color = [0f32; 3];
     let mut t_acc = 1.0f32;
     let mut j = 0u32;
     let mut cnt: SurfCounts = [0; 6];
-    let nb = surf_blocks_per_axis(g.n);
-    let mut skipped = SURF_NO_BLOCK;
-    let mut w = dda_init(og, dn, g.n as i32, 0.0);
-    'walk: while let Some(piece) = dda_next(&mut w) {
-        if let Some(blocks) = blocks {
-            let bi = surf_block_index(piece.cell, nb);
-            if blocks[bi as usize] == 0
-                && surf_block_skip(&mut w, dn, g.n as i32, piece.cell, bi, &mut skipped)
-            {
-                cnt[5] += 1;
-                continue;
-            }
-        }
-        cnt[0] += 1;
-        let l = piece.cell;
-        let base = dda_cell_index(l, g.n) as usize;
-        let lk = [
-            g.links[base],
-            g.links[base + 1],
-            g.links[base + nz],
-            g.links[base + nz + 1],
-            g.links[base + nyz],
-            g.links[base + nyz + 1],
-            g.links[base + nyz + nz],
-            g.links[base + nyz + nz + 1],
-        ];
-        if lk.iter().any(|&k| k < 0) {
-            continue;
-        }
-        let c = lk.map(|k| g.delta[k as usize]);
-        let mask = surf_level_mask(&c, levels);
-        cnt[1] += mask.count_ones();
-        cnt[2] += levels.len() as u32 - mask.count_ones();
-        if mask == 0 {
-            continue;
-        }
+    let mut walk = CellWalk::new(g, og, dn, levels, blocks);
+    'walk: for cell in walk.by_ref() {
+        let (piece, l, c, mask) = (cell.piece, cell.piece.cell, cell.c, cell.mask);
+        let lk = cell.lk;
         let q0 = surf_local(og, dn, piece.t0, l);
         let q1 = surf_local(og, dn, piece.t1, l);
         let len = piece.t1 - piece.t0;
@@ -165,6 +219,7 @@ pub fn render_ray(
             }
         }
     }
+    [cnt[0], cnt[1], cnt[2], cnt[5]] = walk.counts;
     (
         SurfOut {
             rgb: color.map(|c| c + t_acc),

@@ -23,14 +23,13 @@
 
 use super::atomic;
 use super::step::touch;
-use super::surface_fwd::{validate_blocks, validate_inputs, SurfaceGridRef, SurfaceParams};
-use crate::math::dda::{dda_cell_index, dda_init, dda_next, ray_unit};
+use super::surface_fwd::{
+    validate_blocks, validate_inputs, CellWalk, SurfaceGridRef, SurfaceParams,
+};
+use crate::math::dda::ray_unit;
 use crate::math::sh::sh_basis;
 use crate::math::surface::{
-    surf_alpha, surf_cell_hits, surf_gamma, surf_level_mask, surf_local, surf_ray, SURF_MAX_LEVELS,
-};
-use crate::math::surface_blocks::{
-    surf_block_index, surf_block_skip, surf_blocks_per_axis, SURF_NO_BLOCK,
+    surf_alpha, surf_cell_hits, surf_gamma, surf_local, surf_ray, SURF_MAX_LEVELS,
 };
 use crate::math::trilerp::trilerp_weights;
 use anyhow::{ensure, Result};
@@ -121,45 +120,10 @@ pub fn trace_ray(
         dn,
         inv_len: if len > 0.0 { 1.0 / len } else { 0.0 },
     };
-    let n = g.n as usize;
-    let (nz, nyz) = (n, n * n);
     let mut t_acc = 1.0f32;
-    let nb = surf_blocks_per_axis(g.n);
-    let mut skipped = SURF_NO_BLOCK;
-    let mut w = dda_init(og, dn, g.n as i32, 0.0);
-    'walk: while let Some(piece) = dda_next(&mut w) {
-        if let Some(blocks) = blocks {
-            let bi = surf_block_index(piece.cell, nb);
-            if blocks[bi as usize] == 0
-                && surf_block_skip(&mut w, dn, g.n as i32, piece.cell, bi, &mut skipped)
-            {
-                cnt[7] += 1;
-                continue;
-            }
-        }
-        cnt[0] += 1;
-        let l = piece.cell;
-        let base = dda_cell_index(l, g.n) as usize;
-        let lk = [
-            g.links[base],
-            g.links[base + 1],
-            g.links[base + nz],
-            g.links[base + nz + 1],
-            g.links[base + nyz],
-            g.links[base + nyz + 1],
-            g.links[base + nyz + nz],
-            g.links[base + nyz + nz + 1],
-        ];
-        if lk.iter().any(|&k| k < 0) {
-            continue;
-        }
-        let c = lk.map(|k| g.delta[k as usize]);
-        let mask = surf_level_mask(&c, levels);
-        cnt[1] += mask.count_ones();
-        cnt[2] += levels.len() as u32 - mask.count_ones();
-        if mask == 0 {
-            continue;
-        }
+    let mut walk = CellWalk::new(g, og, dn, levels, blocks);
+    'walk: for cell in walk.by_ref() {
+        let (piece, l, c, mask, lk) = (cell.piece, cell.piece.cell, cell.c, cell.mask, cell.lk);
         let q0 = surf_local(og, dn, piece.t0, l);
         let q1 = surf_local(og, dn, piece.t1, l);
         let hits = surf_cell_hits(&c, q0, q1, dn, piece.t1 - piece.t0, levels, mask);
@@ -194,6 +158,7 @@ pub fn trace_ray(
             }
         }
     }
+    [cnt[0], cnt[1], cnt[2], cnt[7]] = walk.counts;
     tr
 }
 
