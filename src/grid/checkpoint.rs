@@ -22,7 +22,7 @@ pub const OPTIM_PREFIX: &str = "optim_";
 pub struct Checkpoint {
     pub grid: Grid,
     /// Optimiser state by name, in file order.
-    pub optim: Vec<(String, Vec<f32>)>,
+    pub optim: OptimArrays,
     pub meta: serde_json::Value,
 }
 
@@ -51,6 +51,16 @@ fn write(
     optim: &[(String, Vec<f32>)],
     meta: &serde_json::Value,
 ) -> Result<()> {
+    check_optim(optim)?;
+    let meta = serde_json::to_vec(meta)?;
+    npz::write_atomic(path, |w| {
+        npz::write_grid(w, grid)?;
+        write_extras(w, optim, &meta)
+    })
+}
+
+/// Refuse bad or duplicate optimiser-array names and non-finite optimiser state.
+pub(crate) fn check_optim(optim: &[(String, Vec<f32>)]) -> Result<()> {
     for (i, (name, v)) in optim.iter().enumerate() {
         check_name(name)?;
         ensure!(
@@ -61,14 +71,19 @@ fn write(
             bail!("optimiser array '{name}': non-finite value {} at {j}", v[j]);
         }
     }
-    let meta = serde_json::to_vec(meta)?;
-    npz::write_atomic(path, |w| {
-        npz::write_grid(w, grid)?;
-        for (name, v) in optim {
-            w.array(&format!("{OPTIM_PREFIX}{name}"), &[v.len() as u64], v)?;
-        }
-        w.array(META, &[meta.len() as u64], &meta)
-    })
+    Ok(())
+}
+
+/// Add the optimiser arrays and the metadata (JSON bytes) to an npz being written.
+pub(crate) fn write_extras<W: std::io::Write + std::io::Seek>(
+    w: &mut npz::NpzWriter<W>,
+    optim: &[(String, Vec<f32>)],
+    meta: &[u8],
+) -> Result<()> {
+    for (name, v) in optim {
+        w.array(&format!("{OPTIM_PREFIX}{name}"), &[v.len() as u64], v)?;
+    }
+    w.array(META, &[meta.len() as u64], meta)
 }
 
 /// Load and validate a checkpoint written by [`save`].
@@ -84,6 +99,15 @@ fn read(r: &mut NpzReader) -> Result<Checkpoint> {
          npz::load_svox2)"
     );
     let grid = npz::read_grid(r)?;
+    let (optim, meta) = read_extras(r)?;
+    Ok(Checkpoint { grid, optim, meta })
+}
+
+/// Named optimiser-state arrays, in file order.
+pub type OptimArrays = Vec<(String, Vec<f32>)>;
+
+/// The optimiser arrays (validated 1-D and finite) and the metadata of an open checkpoint.
+pub(crate) fn read_extras(r: &mut NpzReader) -> Result<(OptimArrays, serde_json::Value)> {
     let meta = match r.read(META)?.data {
         Data::U8(bytes) => serde_json::from_slice(&bytes)
             .with_context(|| format!("array '{META}' is not valid JSON"))?,
@@ -106,5 +130,31 @@ fn read(r: &mut NpzReader) -> Result<Checkpoint> {
         }
         optim.push((name.to_owned(), v));
     }
-    Ok(Checkpoint { grid, optim, meta })
+    Ok((optim, meta))
+}
+
+/// The step and configuration of a checkpoint's metadata, which must say `stage`.
+pub fn meta_step_config<C: serde::de::DeserializeOwned>(
+    meta: &serde_json::Value,
+    stage: &str,
+    path: &Path,
+) -> Result<(u32, C)> {
+    if meta["stage"] != stage {
+        bail!("{} is not a {stage} checkpoint", path.display());
+    }
+    let step = meta["step"]
+        .as_u64()
+        .with_context(|| format!("{}: metadata has no step", path.display()))?;
+    let cfg = serde_json::from_value(meta["config"].clone())
+        .with_context(|| format!("{}: metadata has no valid config", path.display()))?;
+    Ok((step as u32, cfg))
+}
+
+/// The optimiser array `name` of a loaded checkpoint.
+pub fn optim_array(optim: &[(String, Vec<f32>)], name: &str, path: &Path) -> Result<Vec<f32>> {
+    optim
+        .iter()
+        .find(|(n, _)| n == name)
+        .map(|(_, v)| v.clone())
+        .with_context(|| format!("{}: no optimiser array {name}", path.display()))
 }

@@ -3,16 +3,12 @@
 //! dilated twice over the 26-neighbourhood; rescale δ and τ by the mean forward-difference
 //! gradient norm so δ is SDF-like; raw opacity σα = s·σ; SH copied.
 
+use super::checkpoint::{check_optim, read_extras, write_extras, META};
 use super::npz::{self, Data, NpzReader};
 use super::{dilate, Grid, SH_DIM};
 use crate::cpu::surface_fwd::SurfaceGridRef;
 use anyhow::{bail, ensure, Context, Result};
 use std::path::Path;
-
-/// Metadata array of a stage-2 checkpoint (JSON as uint8 bytes).
-const META: &str = "alphasurf_meta";
-/// Prefix of the optimiser-state arrays.
-const OPTIM_PREFIX: &str = "optim_";
 
 /// A loaded stage-2 checkpoint.
 #[derive(Debug, Clone, PartialEq)]
@@ -163,11 +159,7 @@ impl SurfaceGrid {
     ) -> Result<()> {
         (|| -> Result<()> {
             self.validate()?;
-            for (name, v) in optim {
-                if let Some(j) = v.iter().position(|x| !x.is_finite()) {
-                    bail!("optimiser array '{name}': non-finite value {} at {j}", v[j]);
-                }
-            }
+            check_optim(optim)?;
             let meta = serde_json::to_vec(meta)?;
             let n = self.delta.len() as u64;
             npz::write_atomic(path, |w| {
@@ -179,10 +171,7 @@ impl SurfaceGrid {
                 w.array("radius", &[3], &self.radius)?;
                 w.array("center", &[3], &self.center)?;
                 w.array("gradient_scale", &[1], &[self.gradient_scale])?;
-                for (name, v) in optim {
-                    w.array(&format!("{OPTIM_PREFIX}{name}"), &[v.len() as u64], v)?;
-                }
-                w.array(META, &[meta.len() as u64], &meta)
+                write_extras(w, optim, &meta)
             })
         })()
         .with_context(|| format!("saving surface checkpoint {}", path.display()))
@@ -322,22 +311,7 @@ fn read_checkpoint(r: &mut NpzReader) -> Result<SurfaceCheckpoint> {
             .context("empty gradient_scale")?,
     };
     grid.validate()?;
-    let meta = match r.read(META)?.data {
-        Data::U8(bytes) => serde_json::from_slice(&bytes)
-            .with_context(|| format!("array '{META}' is not valid JSON"))?,
-        d => bail!("array '{META}' has dtype {}, expected uint8", d.kind()),
-    };
-    let mut optim = Vec::new();
-    for array in r.names() {
-        let Some(name) = array.strip_prefix(OPTIM_PREFIX) else {
-            continue;
-        };
-        let v = r.read(&array)?.into_f32(&array)?;
-        if let Some(j) = v.iter().position(|x| !x.is_finite()) {
-            bail!("array '{array}': non-finite value {} at {j}", v[j]);
-        }
-        optim.push((name.to_owned(), v));
-    }
+    let (optim, meta) = read_extras(r)?;
     Ok(SurfaceCheckpoint { grid, optim, meta })
 }
 

@@ -147,22 +147,8 @@ fn save(backend: &dyn Plenoxels, cfg: &Stage1Config, out: &Path, step: u32) -> R
 /// Restore grid, optimiser state and step from a run's checkpoint; returns the next step.
 pub fn resume(backend: &mut dyn Plenoxels, path: &Path) -> Result<(u32, Stage1Config)> {
     let ck = checkpoint::load(path)?;
-    if ck.meta["stage"] != "plenoxels" {
-        bail!("{} is not a stage-1 (plenoxels) checkpoint", path.display());
-    }
-    let step = ck.meta["step"]
-        .as_u64()
-        .with_context(|| format!("{}: metadata has no step", path.display()))?
-        as u32;
-    let cfg: Stage1Config = serde_json::from_value(ck.meta["config"].clone())
-        .with_context(|| format!("{}: metadata has no valid config", path.display()))?;
-    let state = |name: &str| {
-        ck.optim
-            .iter()
-            .find(|(n, _)| n == name)
-            .map(|(_, v)| v.clone())
-            .with_context(|| format!("{}: no optimiser array {name}", path.display()))
-    };
+    let (step, cfg) = checkpoint::meta_step_config(&ck.meta, "plenoxels", path)?;
+    let state = |name: &str| checkpoint::optim_array(&ck.optim, name, path);
     let state = (state("rms_density")?, state("rms_sh")?);
     backend.load(ck.grid, Some(state))?;
     Ok((step, cfg))

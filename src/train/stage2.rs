@@ -9,6 +9,7 @@ use super::stage1::step_rng;
 use super::surface_config::SurfaceConfig;
 use crate::cpu::surface_reg::{delta_tv_chunk, opacity_tv_chunk, OpacityChunk};
 use crate::data::{Dataset, RaySampler};
+use crate::grid::checkpoint;
 use crate::grid::surface::SurfaceGrid;
 use crate::surface::{SurfaceBackend, SurfaceRegs, SurfaceStepParams};
 use anyhow::{bail, Context, Result};
@@ -68,22 +69,8 @@ fn save(backend: &dyn SurfaceBackend, cfg: &SurfaceConfig, out: &Path, step: u32
 /// Restore grid, optimiser state and step from a stage-2 checkpoint; returns the next step.
 pub fn resume(backend: &mut dyn SurfaceBackend, path: &Path) -> Result<(u32, SurfaceConfig)> {
     let ck = SurfaceGrid::load(path)?;
-    if ck.meta["stage"] != "surface" {
-        bail!("{} is not a stage-2 (surface) checkpoint", path.display());
-    }
-    let step = ck.meta["step"]
-        .as_u64()
-        .with_context(|| format!("{}: metadata has no step", path.display()))?
-        as u32;
-    let cfg: SurfaceConfig = serde_json::from_value(ck.meta["config"].clone())
-        .with_context(|| format!("{}: metadata has no valid config", path.display()))?;
-    let state = |name: &str| {
-        ck.optim
-            .iter()
-            .find(|(n, _)| n == name)
-            .map(|(_, v)| v.clone())
-            .with_context(|| format!("{}: no optimiser array {name}", path.display()))
-    };
+    let (step, cfg) = checkpoint::meta_step_config(&ck.meta, "surface", path)?;
+    let state = |name: &str| checkpoint::optim_array(&ck.optim, name, path);
     let state = [state("rms_delta")?, state("rms_opacity")?, state("rms_sh")?];
     backend.load(ck.grid, Some(state))?;
     Ok((step, cfg))
