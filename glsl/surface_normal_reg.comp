@@ -19,7 +19,7 @@
 // Inputs: links, row_slot (slot of each allocated row), delta, res, rows, start, count, cells,
 // lambda1, lambda2.
 // Outputs: grad += ∂loss/∂δ by float atomic adds (per cell with a kept pair: 8 for its corners,
-// 4 more per kept neighbour), those corners touched (step.glsl); loss[0] += loss and
+// 4 more per kept neighbour), those corners given the touched bits touch_bits (step.glsl); loss[0] += loss and
 // skipped[0] += skipped pairs (atomic adds, one per subgroup; the host zeroes both).
 // CPU twin: cpu::surface_reg::surface_normal_reg.
 #include "common.glsl"
@@ -42,6 +42,7 @@ layout(push_constant, scalar) uniform Push {
     uint cells;
     float lambda1;
     float lambda2;
+    uint touch_bits;
 } pc;
 
 #include "step.glsl"
@@ -153,7 +154,7 @@ float cell_term(uint id, out uint skipped) {
                 g[kk | bit] += gk;
             } else {
                 atomicAdd(pc.grad.v[uint(ln[a][kk])], gk);
-                touch(uint(ln[a][kk]));
+                touch_mask(uint(ln[a][kk]), pc.touch_bits);
             }
         }
     }
@@ -161,7 +162,7 @@ float cell_term(uint id, out uint skipped) {
     [[unroll]] for (uint kk = 0u; kk < 8u; kk++) {
         precise float gk = g[kk] + corner_grad(kk, gnc);
         atomicAdd(pc.grad.v[uint(lc[kk])], gk);
-        touch(uint(lc[kk]));
+        touch_mask(uint(lc[kk]), pc.touch_bits);
     }
     precise float cell_loss = w * lsum;
     return cell_loss;

@@ -6,7 +6,7 @@
 // caller may draw start uniformly in [0, rows) (the 10 % chunk of the spec).
 // Thread mapping: flat id = i (one row each; one owner per gradient element, no atomics).
 // Inputs: opacity (raw σα per allocated vertex), rows, start, count, lambda.
-// Outputs: grad += (plain read-modify-write) and touch(r) for each row with σα > 0;
+// Outputs: grad += (plain read-modify-write) and touch_mask(r, TOUCH_OPACITY) for each row with σα > 0;
 // loss[0] += λ·Σ log σα (float atomic add, one per subgroup; the host zeroes it).
 // CPU twin: cpu::surface_opacity_reg.
 #include "common.glsl"
@@ -36,7 +36,7 @@ void main() {
             l = pc.lambda * log(a);
             precise float g = pc.grad.v[r] + pc.lambda / max(a, 1e-8);
             pc.grad.v[r] = g;
-            touch(r);
+            touch_mask(r, TOUCH_OPACITY);
         }
     }
     float s = subgroupAdd(l);

@@ -13,7 +13,7 @@
 // the cell's δ) (counted). Per-corner gradients of consecutive hits in the same cell are summed
 // in registers (in the reverse order) and flushed with one float atomic per corner, parameter and
 // non-zero sum when the cell changes (SH: 3 accumulators per corner, times Y_k at the flush);
-// every vertex that receives a gradient is touched (step.glsl).
+// every vertex that receives a gradient is touched in all three groups (step.glsl).
 // Inputs: links (n³, < 0 unallocated), complete: words [0, W = ⌈n³/32⌉) hold bit i of word i/32
 // set when the cell with lower corner slot i has its 8 corners allocated (the walk reads one bit
 // per empty cell instead of 8 links), words [W, W + nb³) the 8³-cell block level masks of
@@ -126,7 +126,7 @@ uint flush(ivec3 cell, float y[9], inout float acc_d[8], inout float acc_a[8], i
         acc_c[i] = vec3(0.0);
         if (gd == 0.0 && ga == 0.0 && gc == vec3(0.0)) continue;
         uint row = uint(lk[i]);
-        touch(row);
+        touch_mask(row, TOUCH_SURFACE);
         if (gd != 0.0) {
             atomicAdd(pc.grad_delta.v[row], gd);
             adds++;

@@ -10,7 +10,7 @@
 // Thread mapping: flat id = slot − start.
 // Inputs: links, data (channels floats per allocated vertex), res, chunk, scale (λ/count).
 // Output: grad += (plain read-modify-write; one owner per element) for vertices with a TV term;
-// each is touched (step.glsl). CPU twin: cpu::tv.
+// each gets the touched bits touch_bits (0: none; step.glsl). CPU twin: cpu::tv.
 #include "common.glsl"
 layout(local_size_x = 256) in;
 
@@ -24,6 +24,7 @@ layout(push_constant, scalar) uniform Push {
     uint count;
     uint channels;
     float scale;
+    uint touch_bits;
 } pc;
 
 #include "step.glsl"
@@ -105,5 +106,5 @@ void main() {
         uint i = uint(l) * pc.channels + c;
         pc.grad.v[i] = pc.grad.v[i] + pc.scale * g;
     }
-    touch(uint(l));
+    touch_mask(uint(l), pc.touch_bits);
 }

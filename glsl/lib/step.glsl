@@ -2,7 +2,8 @@
 // "touched vertices" that let the optimiser visit only the vertices that received a gradient this
 // step (method.md §2; svox2's sparse updates).
 // Step buffer (u32) layout: [0] touched count, [1..5) counters (samples shaded, samples empty,
-// samples skipped, gradient atomic adds), [5] vertex count n, [STEP_FLAGS, STEP_FLAGS + n) touched flags, then the touched list (n).
+// samples skipped, gradient atomic adds), [5] vertex count n, [STEP_FLAGS, STEP_FLAGS + n) touched flags (bit masks of parameter groups), then
+// the touched list (n).
 // The host zeroes [0, 5) each step; rmsprop_sparse clears the flags it visits.
 // Include after a push block `pc` with member `step` (U32Buf). Rust twin: src/cpu/step.rs.
 #ifndef STEP_GLSL
@@ -16,12 +17,26 @@ const uint STEP_STATS = 1u;
 const uint STEP_N = 5u;
 const uint STEP_FLAGS = 8u;
 
-// Mark vertex v touched (once per step: the first marker appends it to the list).
-void touch(uint v) {
-    if (pc.step.v[STEP_FLAGS + v] != 0u) return;
-    if (atomicExchange(pc.step.v[STEP_FLAGS + v], 1u) != 0u) return;
+// Touched-flag bits. Stage 1 has one group (TOUCH_ALL); stage 2 flags its three parameter groups
+// apart, so the optimiser updates only the groups of a vertex that received a gradient.
+const uint TOUCH_ALL = 1u;
+const uint TOUCH_DELTA = 1u;
+const uint TOUCH_OPACITY = 2u;
+const uint TOUCH_SH = 4u;
+const uint TOUCH_SURFACE = TOUCH_DELTA | TOUCH_OPACITY | TOUCH_SH;
+
+// Set the bits m of vertex v's flag (m = 0: nothing); the first marker of the step appends v to
+// the list.
+void touch_mask(uint v, uint m) {
+    if (m == 0u || (pc.step.v[STEP_FLAGS + v] & m) == m) return;
+    if (atomicOr(pc.step.v[STEP_FLAGS + v], m) != 0u) return;
     uint i = atomicAdd(pc.step.v[STEP_COUNT], 1u);
     pc.step.v[STEP_FLAGS + pc.step.v[STEP_N] + i] = v;
+}
+
+// Mark vertex v touched (every group).
+void touch(uint v) {
+    touch_mask(v, TOUCH_ALL);
 }
 
 // The counters += (shaded, empty, skipped, atomic adds), reduced over the subgroup first: one

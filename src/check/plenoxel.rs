@@ -5,7 +5,7 @@
 
 use super::{CheckRow, Compare};
 use crate::cpu::plenoxel as twin;
-use crate::cpu::step::{optim_args, STEP_COUNT, STEP_FLAGS, STEP_N};
+use crate::cpu::step::{optim_args, STEP_COUNT, STEP_FLAGS, STEP_N, TOUCH_ALL};
 use crate::cpu::{rmsprop_sparse, tv, RmsProp, Stage1Params, TvChunk};
 use crate::gpu::{Gpu, GpuBuffer};
 use crate::grid::{Grid, SH_DIM};
@@ -410,6 +410,7 @@ pub fn check_tv(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
                 count,
                 channels,
                 scale: 0.7,
+                touch: TOUCH_ALL,
             };
             let mut want = vec![0.0f32; data.len()];
             let mut want_touched = vec![0u32; g.allocated()];
@@ -429,6 +430,7 @@ pub fn check_tv(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
                     count,
                     channels,
                     scale: 0.7,
+                    touch_bits: c.touch,
                     ..Default::default()
                 },
                 count + g.res[1] * g.res[2],

@@ -66,6 +66,7 @@ fn config(args: &TrainArgs) -> Result<SurfaceConfig> {
         );
         cfg.init.alpha_init_scale = s;
     }
+    cfg.validate()?;
     Ok(cfg)
 }
 

@@ -10,9 +10,24 @@ pub const STEP_STATS: usize = 1;
 pub const STEP_N: usize = 5;
 pub const STEP_FLAGS: usize = 8;
 
-/// Mark vertex v touched.
+/// Touched-flag bits, as in step.glsl: stage 1's one group, stage 2's three.
+pub const TOUCH_ALL: u32 = 1;
+pub const TOUCH_DELTA: u32 = 1;
+pub const TOUCH_OPACITY: u32 = 2;
+pub const TOUCH_SH: u32 = 4;
+/// Every stage-2 group.
+pub const TOUCH_SURFACE: u32 = TOUCH_DELTA | TOUCH_OPACITY | TOUCH_SH;
+
+/// Set the bits `m` of vertex v's flag.
+pub fn touch_mask(flags: &[AtomicU32], v: usize, m: u32) {
+    if m != 0 {
+        flags[v].fetch_or(m, Ordering::Relaxed);
+    }
+}
+
+/// Mark vertex v touched (every group).
 pub fn touch(flags: &[AtomicU32], v: usize) {
-    flags[v].store(1, Ordering::Relaxed);
+    touch_mask(flags, v, TOUCH_ALL);
 }
 
 /// Twin of `optim_args.comp`: indirect dispatch arguments for `count` touched vertices.

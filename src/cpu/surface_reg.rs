@@ -5,7 +5,7 @@
 //! `touched` (the twin of step.glsl's `touch`).
 
 use super::atomic::{add, as_atomic, as_atomic_u32};
-use super::step::touch;
+use super::step::{touch_mask, TOUCH_DELTA, TOUCH_OPACITY};
 use super::TvChunk;
 use rayon::prelude::*;
 use std::sync::atomic::AtomicU32;
@@ -21,7 +21,7 @@ pub struct OpacityChunk {
 }
 
 /// Lα = λ·Σ log σα over the chunk's rows with σα > 0; grad += λ/max(σα, 1e-8) there (and those
-/// rows touched). Returns Lα (f64 sum of the f32 terms λ·ln σα).
+/// rows' σα group touched). Returns Lα (f64 sum of the f32 terms λ·ln σα).
 pub fn surface_opacity_reg(
     opacity: &[f32],
     grad: &mut [f32],
@@ -41,7 +41,7 @@ pub fn surface_opacity_reg(
         if a > 0.0 {
             loss += (c.lambda * a.ln()) as f64;
             grad[r] += c.lambda / a.max(1e-8);
-            touched[r] = 1;
+            touched[r] |= TOUCH_OPACITY;
         }
     }
     loss
@@ -60,6 +60,8 @@ pub struct NormalChunk {
     pub cells: u32,
     pub lambda1: f32,
     pub lambda2: f32,
+    /// Touched-flag bits set on the vertices given a gradient (0: none; step.glsl).
+    pub touch: u32,
 }
 
 /// What one call of [`surface_normal_reg`] found.
@@ -170,6 +172,7 @@ impl NormalPrefix {
     }
 
     /// The chunk of rows (start + i) mod rows, i < min(count, rows), with its M.
+    /// The chunk of `count` rows from `start`, flagging δ touched (set `touch` to change that).
     pub fn chunk(&self, start: u32, count: u32, lambda1: f32, lambda2: f32) -> NormalChunk {
         let rows = self.rows();
         let n = count.min(rows);
@@ -188,6 +191,7 @@ impl NormalPrefix {
             cells,
             lambda1,
             lambda2,
+            touch: TOUCH_DELTA,
         }
     }
 }
@@ -291,14 +295,14 @@ fn cell_term(
                 g[kk | bit] += gk;
             } else {
                 add(&grad[ln[kk] as usize], gk);
-                touch(flags, ln[kk] as usize);
+                touch_mask(flags, ln[kk] as usize, c.touch);
             }
         }
     }
     let gnc = unnormalise_grad(nc, gc);
     for kk in 0..8 {
         add(&grad[lc[kk] as usize], g[kk] + corner_grad(kk, gnc));
-        touch(flags, lc[kk] as usize);
+        touch_mask(flags, lc[kk] as usize, c.touch);
     }
     ((w * lsum) as f64, skipped)
 }
@@ -346,6 +350,7 @@ pub fn delta_tv_chunk(res: [u32; 3], allocated: usize, lambda: f32) -> TvChunk {
         count: res.iter().product(),
         channels: 1,
         scale: lambda * kappa / allocated.max(1) as f32,
+        touch: TOUCH_DELTA,
     }
 }
 
@@ -363,6 +368,7 @@ pub fn opacity_tv_chunk(res: [u32; 3], frac: f32, lambda: f32, draw: u64) -> TvC
         count,
         channels: 1,
         scale: lambda / count as f32,
+        touch: TOUCH_OPACITY,
     }
 }
 

@@ -22,7 +22,7 @@
 //! `lambda_h`, `lambda_c`) carry the batch normalisation.
 
 use super::atomic;
-use super::step::touch;
+use super::step::{touch_mask, TOUCH_SURFACE};
 use super::surface_fwd::{
     validate_blocks, validate_inputs, CellWalk, SurfaceGridRef, SurfaceParams,
 };
@@ -516,7 +516,7 @@ impl CellAcc {
                 continue;
             }
             let row = self.lk[i] as usize;
-            touch(out.touched, row);
+            touch_mask(out.touched, row, TOUCH_SURFACE);
             if dd != 0.0 {
                 atomic::add(&out.delta[row], dd);
                 adds += 1;

@@ -11,6 +11,8 @@ pub struct TvChunk {
     pub count: u32,
     pub channels: u32,
     pub scale: f32,
+    /// Touched-flag bits set on every vertex given a gradient (0: none; step.glsl).
+    pub touch: u32,
 }
 
 fn forward_diffs(
@@ -40,7 +42,7 @@ fn forward_diffs(
 }
 
 /// grad += ∂(scale·Σ_chunk TV)/∂data, per allocated vertex and channel; every vertex written is
-/// flagged in `touched`.
+/// flagged in `touched` with the chunk's bits.
 pub fn tv(links: &[i32], data: &[f32], grad: &mut [f32], touched: &mut [u32], c: &TvChunk) {
     let n = c.channels as usize;
     let (ry, rz) = (c.res[1] as usize, c.res[2] as usize);
@@ -92,7 +94,7 @@ pub fn tv(links: &[i32], data: &[f32], grad: &mut [f32], touched: &mut [u32], c:
         })
         .collect();
     for (l, g) in updates {
-        touched[l] = 1;
+        touched[l] |= c.touch;
         for (ch, gv) in g.into_iter().enumerate() {
             grad[l * n + ch] += c.scale * gv;
         }

@@ -2,6 +2,7 @@
 
 use super::{march_params, Gradients, Plenoxels, StepParams, StepStats};
 use crate::cpu::plenoxel::{self as twin, TrainGrads};
+use crate::cpu::step::TOUCH_ALL;
 use crate::cpu::{rmsprop_sparse, tv, RmsProp, Stage1Params, TvChunk};
 use crate::grid::{Grid, SH_DIM};
 use crate::math::plenoxel::{Counts, GridRef};
@@ -104,6 +105,7 @@ impl Plenoxels for CpuPlenoxels {
                 count: t.count,
                 channels,
                 scale: lambda / t.count.max(1) as f32,
+                touch: TOUCH_ALL,
             };
             let g = &self.grid;
             let touched = &mut self.touched;

@@ -2,7 +2,7 @@
 //! training step is one batch (occupancy → train → TV → RMSProp) and one submission.
 
 use super::{march_params, Gradients, Plenoxels, StepParams, StepStats};
-use crate::cpu::step::{STEP_FLAGS, STEP_N, STEP_STATS};
+use crate::cpu::step::{STEP_FLAGS, STEP_N, STEP_STATS, TOUCH_ALL};
 use crate::gpu::{Batch, Gpu, GpuBuffer};
 use crate::grid::{Grid, SH_DIM};
 use crate::kernels;
@@ -231,6 +231,7 @@ impl Plenoxels for VulkanPlenoxels {
                         count: t.count,
                         channels,
                         scale: lambda / t.count.max(1) as f32,
+                        touch_bits: TOUCH_ALL,
                         ..Default::default()
                     },
                     span,

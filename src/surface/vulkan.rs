@@ -373,6 +373,7 @@ impl VulkanSurface {
                     count: end - start,
                     channels: 1,
                     scale: c.scale,
+                    touch_bits: c.touch,
                     ..Default::default()
                 },
                 end - start + res[1] * res[2],
@@ -420,6 +421,7 @@ impl VulkanSurface {
                     cells: c.cells,
                     lambda1: c.lambda1,
                     lambda2: c.lambda2,
+                    touch_bits: c.touch,
                     ..Default::default()
                 },
                 count.min(rows),

@@ -3,7 +3,8 @@
 use serde::{Deserialize, Serialize};
 
 /// lr(t) = D(t)·exp((1 − u)·ln lr₀ + u·ln lr₁), u = clip(t/T_max, 0, 1);
-/// D(t) = m + (1 − m)·sin(½π·clip(t/t_delay, 0, 1)) when t_delay > 0, else 1.
+/// D(t) = m + (1 − m)·sin(½π·clip(t/t_delay, 0, 1)) when t_delay > 0, else 1. A zero endpoint
+/// (a frozen or vanishing rate) has no logarithm: then the interpolation is linear.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct DelayedExp {
     pub init: f32,
@@ -28,7 +29,12 @@ impl DelayedExp {
     /// The rate at step `t`.
     pub fn at(&self, t: u32) -> f32 {
         let u = (t as f64 / self.max_steps.max(1) as f64).clamp(0.0, 1.0);
-        let base = ((1.0 - u) * (self.init as f64).ln() + u * (self.last as f64).ln()).exp();
+        let (a, b) = (self.init as f64, self.last as f64);
+        let base = if a > 0.0 && b > 0.0 {
+            ((1.0 - u) * a.ln() + u * b.ln()).exp()
+        } else {
+            (1.0 - u) * a + u * b
+        };
         let delay = if self.delay_steps > 0 {
             let v = (t as f64 / self.delay_steps as f64).clamp(0.0, 1.0);
             let m = self.delay_mult as f64;
@@ -43,6 +49,19 @@ impl DelayedExp {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn zero_rates_stay_finite() {
+        let mut s = DelayedExp::constant(0.0);
+        s.max_steps = 100;
+        assert!(
+            (0..200).all(|t| s.at(t) == 0.0),
+            "a frozen group stays frozen"
+        );
+        s.init = 1e-3;
+        assert!((s.at(50) - 5e-4).abs() < 1e-9, "towards zero: linear");
+        assert_eq!(s.at(100), 0.0);
+    }
 
     #[test]
     fn delayed_exponential_endpoints() {

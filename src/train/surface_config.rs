@@ -4,7 +4,7 @@
 
 use super::schedule::DelayedExp;
 use crate::grid::surface::SurfaceInit;
-use anyhow::{bail, Result};
+use anyhow::{bail, ensure, Result};
 use serde::{Deserialize, Serialize};
 
 /// A linear ramp from `start` to `end` over the first `steps` steps, then `end`.
@@ -163,6 +163,69 @@ impl SurfaceConfig {
             ),
         }
         Ok(c)
+    }
+
+    /// Reject values no run can use (after `--set` overrides): negative or non-finite rates,
+    /// weights and fractions, fractions above 1, no levels.
+    pub fn validate(&self) -> Result<()> {
+        for (name, lr) in [
+            ("lr_delta", &self.lr_delta),
+            ("lr_opacity", &self.lr_opacity),
+            ("lr_sh", &self.lr_sh),
+        ] {
+            for (field, v) in [
+                ("init", lr.init),
+                ("last", lr.last),
+                ("delay_mult", lr.delay_mult),
+            ] {
+                ensure!(
+                    v.is_finite() && v >= 0.0,
+                    "{name}.{field} must be finite and ≥ 0, got {v}"
+                );
+            }
+        }
+        let weights = [
+            ("lambda_h", self.lambda_h),
+            ("lambda_c", self.lambda_c),
+            ("lambda_delta", self.lambda_delta),
+            ("lambda_tv_alpha", self.lambda_tv_alpha),
+            ("lambda_alpha", self.lambda_alpha),
+            ("lambda_n1.start", self.lambda_n1.start),
+            ("lambda_n1.end", self.lambda_n1.end),
+            ("lambda_n2", self.lambda_n2),
+            ("prune_alpha", self.prune_alpha),
+            ("stop_thresh", self.stop_thresh),
+            ("eps", self.eps),
+            ("a.start", self.a.start),
+            ("a.end", self.a.end),
+        ];
+        for (name, v) in weights {
+            ensure!(
+                v.is_finite() && v >= 0.0,
+                "{name} must be finite and ≥ 0, got {v}"
+            );
+        }
+        for (name, v) in [
+            ("tv_alpha_fraction", self.tv_alpha_fraction),
+            ("alpha_fraction", self.alpha_fraction),
+            ("normal_fraction", self.normal_fraction),
+            ("beta", self.beta),
+        ] {
+            ensure!(
+                (0.0..=1.0).contains(&v),
+                "{name} must be in [0, 1], got {v}"
+            );
+        }
+        ensure!(
+            !self.init.density_levels.is_empty()
+                && self.init.density_levels.iter().all(|l| l.is_finite()),
+            "init.density_levels must be a non-empty list of finite numbers"
+        );
+        ensure!(
+            self.iters > 0 && self.batch > 0,
+            "iters and batch must be at least 1"
+        );
+        Ok(())
     }
 
     /// `preset` (paper or fast) for `category`.
