@@ -1,13 +1,17 @@
 #version 460
-// surface_rmsprop — one RMSProp step of the stage-2 grid for the vertices touched this step (by
-// the surface training and regulariser kernels), for its three parameter groups at once: δ
-// (lr_delta), raw opacity σα (lr_opacity) and the 27 SH (lr_sh); then clears their gradients
-// and their touched flag (method.md §3.5; the update is rmsprop.glsl's, as in rmsprop_sparse):
-// r ← (r == 0 ? g² : β·r + (1 − β)·g²); θ ← θ − lr·g/(√r + ε); g ← 0.
-// Thread mapping: one invocation per entry of the touched list (indirect dispatch with the
-// arguments optim_args writes). Inputs/outputs: delta, opacity, sh, their gradients and RMS
-// states; the step buffer (step.glsl) gives the list and has each visited flag cleared (the
-// host resets the count). CPU twin: cpu::surface_rmsprop_sparse.
+// surface_rmsprop — one RMSProp step of the stage-2 grid (method.md §3.5; the update is
+// rmsprop.glsl's, as in rmsprop_sparse): r ← (r == 0 ? g² : β·r + (1 − β)·g²);
+// θ ← θ − lr·g/(√r + ε); g ← 0. Parameter groups: δ (lr_delta), raw opacity σα (lr_opacity),
+// the 27 SH (lr_sh). Two modes:
+// - list (dense_rows = 0): one invocation per entry of the touched list (indirect dispatch with
+//   the arguments optim_args writes); vertex v updates the groups whose bits are set both in its
+//   flag and in `groups` (step.glsl TOUCH_*), then its flag is cleared. A group that received no
+//   gradient this step is left alone, its RMS state included (svox2's sparse update, per group).
+// - dense (dense_rows = n): one invocation per vertex row < n updates δ alone, for steps where a
+//   regulariser gives every vertex a δ gradient (Lδ); the list pass then runs without the δ bit.
+// Inputs/outputs: delta, opacity, sh, their gradients and RMS states; the step buffer (list mode:
+// the list; its flags are cleared, the host resets the count). CPU twin:
+// cpu::surface_rmsprop_sparse (both modes at once).
 #include "common.glsl"
 layout(local_size_x = 64) in;
 
@@ -27,6 +31,8 @@ layout(push_constant, scalar) uniform Push {
     float lr_sh;
     float beta;
     float eps;
+    uint groups;
+    uint dense_rows;
 } pc;
 
 #include "rmsprop.glsl"
@@ -34,12 +40,21 @@ layout(push_constant, scalar) uniform Push {
 
 void main() {
     uint i = flat_id();
+    if (pc.dense_rows != 0u) {
+        if (i < pc.dense_rows) RMSPROP_UPDATE(pc.delta, pc.grad_delta, pc.state_delta, i, pc.lr_delta);
+        return;
+    }
     if (i >= pc.step.v[STEP_COUNT]) return;
     uint v = pc.step.v[STEP_FLAGS + pc.step.v[STEP_N] + i];
-    RMSPROP_UPDATE(pc.delta, pc.grad_delta, pc.state_delta, v, pc.lr_delta);
-    RMSPROP_UPDATE(pc.opacity, pc.grad_opacity, pc.state_opacity, v, pc.lr_opacity);
-    for (uint k = 0u; k < 27u; k++) {
-        RMSPROP_UPDATE(pc.sh, pc.grad_sh, pc.state_sh, v * 27u + k, pc.lr_sh);
+    uint m = pc.step.v[STEP_FLAGS + v] & pc.groups;
+    if ((m & TOUCH_DELTA) != 0u) RMSPROP_UPDATE(pc.delta, pc.grad_delta, pc.state_delta, v, pc.lr_delta);
+    if ((m & TOUCH_OPACITY) != 0u) {
+        RMSPROP_UPDATE(pc.opacity, pc.grad_opacity, pc.state_opacity, v, pc.lr_opacity);
+    }
+    if ((m & TOUCH_SH) != 0u) {
+        for (uint k = 0u; k < 27u; k++) {
+            RMSPROP_UPDATE(pc.sh, pc.grad_sh, pc.state_sh, v * 27u + k, pc.lr_sh);
+        }
     }
     pc.step.v[STEP_FLAGS + v] = 0u;
 }

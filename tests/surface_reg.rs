@@ -5,6 +5,7 @@
 //! that wrap); the parity rows of the three stage-2 kernels under validation.
 
 use alphasurf::check::surface_reg::{empty_step, gpu_normal_reg, RegGrid};
+use alphasurf::cpu::step::{TOUCH_OPACITY, TOUCH_SURFACE};
 use alphasurf::cpu::surface_reg::{
     delta_tv_chunk, opacity_tv_chunk, row_slots, surface_normal_reg, surface_opacity_reg, tv_loss,
     NormalChunk, NormalPrefix, NormalRegStats, OpacityChunk,
@@ -121,8 +122,8 @@ fn delta_tv_matches_definition_fd_cpu_and_gpu() {
     let v64 = lambda as f64 / n * tv_f64(&g, &x, 0, g.links.len(), kappa, 1e-9);
     assert!((v - v64).abs() <= 1e-5 * v64, "Lδ value {v} vs {v64}");
     assert!(
-        touched.iter().all(|&t| t == 1),
-        "every allocated vertex has a TV gradient here"
+        touched.iter().all(|&t| t == 0),
+        "Lδ flags nothing: every vertex has a δ gradient, the backends update δ densely"
     );
     // The GPU tv kernel with the same chunk.
     let gpu = alphasurf::gpu::test_gpu();
@@ -192,7 +193,10 @@ fn opacity_tv_chunk_fd_and_bounds() {
     // Touched exactly where a gradient can be non-zero.
     for (i, (&t, &w)) in touched.iter().zip(&want).enumerate() {
         if w != 0.0 {
-            assert_eq!(t, 1, "vertex {i} has a gradient but is not touched");
+            assert_eq!(
+                t, TOUCH_OPACITY,
+                "vertex {i} has a gradient but σα is not touched"
+            );
         }
     }
 }
@@ -240,7 +244,11 @@ fn opacity_reg_fd_and_adversarial() {
     for i in 0..200 {
         let in_chunk = !(30..190).contains(&i);
         let positive = op[i] > 0.0;
-        assert_eq!(touched[i], (in_chunk && positive) as u32, "touched[{i}]");
+        assert_eq!(
+            touched[i],
+            (in_chunk && positive) as u32 * TOUCH_OPACITY,
+            "touched[{i}]"
+        );
         if !(in_chunk && positive) {
             assert_eq!(grad[i], 0.5, "grad[{i}] changed");
         }
@@ -481,56 +489,79 @@ fn normal_reg_adversarial() {
 }
 
 #[test]
-fn surface_rmsprop_twin_updates_touched_only() {
-    let n = 3;
-    let mut p: Vec<Vec<f32>> = vec![
-        vec![1.0; n],
-        vec![2.0; n],
-        vec![0.5; n * 27],
-        vec![0.1, 0.2, 0.0],
-        vec![-0.3; n],
-        vec![0.01; n * 27],
-        vec![0.0, 0.04, 0.0],
-        vec![0.0; n],
-        vec![0.0; n * 27],
-    ];
-    let mut touched = vec![1u32, 1, 0];
-    let h = SurfaceRmsProp {
-        lr_delta: 0.1,
-        lr_opacity: 0.01,
-        lr_sh: 0.001,
-        beta: 0.9,
-        eps: 1e-8,
+fn surface_rmsprop_twin_updates_touched_groups_only() {
+    let n = 4;
+    let fresh = || -> Vec<Vec<f32>> {
+        vec![
+            vec![1.0; n],
+            vec![2.0; n],
+            vec![0.5; n * 27],
+            vec![0.1, 0.2, 0.0, 0.3],
+            vec![-0.3; n],
+            vec![0.01; n * 27],
+            vec![0.0, 0.04, 0.0, 0.0],
+            vec![0.0; n],
+            vec![0.0; n * 27],
+        ]
     };
-    let [d, o, sh, gd, go, gs, sd, so, ss] = &mut p[..] else {
-        unreachable!()
+    let run = |p: &mut Vec<Vec<f32>>, touched: &mut Vec<u32>, dense_delta: bool| {
+        let h = SurfaceRmsProp {
+            lr_delta: 0.1,
+            lr_opacity: 0.01,
+            lr_sh: 0.001,
+            beta: 0.9,
+            eps: 1e-8,
+            dense_delta,
+        };
+        let [d, o, sh, gd, go, gs, sd, so, ss] = &mut p[..] else {
+            unreachable!()
+        };
+        surface_rmsprop_sparse(
+            Stage2Params {
+                delta: d,
+                opacity: o,
+                sh,
+                grad_delta: gd,
+                grad_opacity: go,
+                grad_sh: gs,
+                state_delta: sd,
+                state_opacity: so,
+                state_sh: ss,
+            },
+            touched,
+            &h,
+        );
     };
-    surface_rmsprop_sparse(
-        Stage2Params {
-            delta: d,
-            opacity: o,
-            sh,
-            grad_delta: gd,
-            grad_opacity: go,
-            grad_sh: gs,
-            state_delta: sd,
-            state_opacity: so,
-            state_sh: ss,
-        },
-        &mut touched,
-        &h,
-    );
-    assert_eq!(touched, vec![0, 0, 0]);
+    // Vertices 0, 1 touched in every group, 2 not at all, 3 in σα only.
+    let mut p = fresh();
+    let mut touched = vec![TOUCH_SURFACE, TOUCH_SURFACE, 0, TOUCH_OPACITY];
+    run(&mut p, &mut touched, false);
+    assert_eq!(touched, vec![0; n]);
     // Vertex 0: fresh state → r = g², step lr·sign(g).
     assert!((p[0][0] - 0.9).abs() < 1e-6 && (p[6][0] - 0.01).abs() < 1e-9);
     // Vertex 1: r = 0.9·0.04 + 0.1·0.04 = 0.04 → step 0.1·0.2/0.2.
     assert!((p[0][1] - 0.9).abs() < 1e-6);
     assert!((p[1][0] - 2.01).abs() < 1e-6 && (p[2][0] - 0.499).abs() < 1e-6);
-    // Gradients of touched vertices cleared; vertex 2 untouched entirely.
+    // Gradients of touched groups cleared; vertex 2 untouched entirely.
     assert_eq!((p[3][0], p[4][1], p[5][26]), (0.0, 0.0, 0.0));
     assert_eq!(
         (p[0][2], p[1][2], p[2][2 * 27], p[4][2], p[5][2 * 27]),
         (1.0, 2.0, 0.5, -0.3, 0.01)
+    );
+    // Vertex 3: σα updated; δ and SH (values, gradients, RMS state) left alone.
+    assert!((p[1][3] - 2.01).abs() < 1e-6 && p[4][3] == 0.0);
+    assert_eq!((p[0][3], p[3][3], p[6][3]), (1.0, 0.3, 0.0));
+    assert_eq!((p[2][3 * 27], p[5][3 * 27], p[8][3 * 27]), (0.5, 0.01, 0.0));
+    // Dense δ: every vertex's δ is updated (vertex 3's too), flags or not.
+    let mut p = fresh();
+    let mut touched = vec![TOUCH_SURFACE, 0, 0, TOUCH_OPACITY];
+    run(&mut p, &mut touched, true);
+    assert!((p[0][3] - 0.9).abs() < 1e-6 && p[3][3] == 0.0);
+    assert!((p[0][1] - 0.9).abs() < 1e-6, "unflagged vertex 1's δ moves");
+    assert_eq!((p[1][1], p[4][1]), (2.0, -0.3), "but not its σα");
+    assert!(
+        (p[6][2] - 0.0).abs() < 1e-12 && p[0][2] == 1.0,
+        "g = 0: no move"
     );
 }
 

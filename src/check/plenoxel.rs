@@ -6,6 +6,7 @@
 use super::{CheckRow, Compare};
 use crate::cpu::plenoxel as twin;
 use crate::cpu::step::{optim_args, STEP_COUNT, STEP_FLAGS, STEP_N, TOUCH_ALL};
+use crate::cpu::surface_reg::row_slots;
 use crate::cpu::{rmsprop_sparse, tv, RmsProp, Stage1Params, TvChunk};
 use crate::gpu::{Gpu, GpuBuffer};
 use crate::grid::{Grid, SH_DIM};
@@ -399,18 +400,28 @@ pub fn check_tv(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
     let (g, _, _) = test_scene(seed, 40, 0);
     let mut cmp = Compare::new(1e-6, 1e-4);
     let links = gpu.upload(&g.links)?;
+    let row_slot = row_slots(&g.links, g.allocated());
+    let row_slot_buf = gpu.upload(&row_slot)?;
     let slots = g.slots() as u32;
+    let rows = g.allocated() as u32;
     let mut cases = 0;
     for (data, channels) in [(&g.density, 1u32), (&g.sh, SH_DIM as u32)] {
-        // A chunk in the middle and one running off the end of the slot range.
-        for (start, count) in [(slots / 3, slots / 10), (slots - slots / 20, slots / 10)] {
+        // A chunk in the middle, one running off the end of the slot range (slot invocations),
+        // and the whole grid with an invocation per vertex row (Lδ's way), each with other
+        // touched bits.
+        for (start, count, by_rows, touch) in [
+            (slots / 3, slots / 10, false, TOUCH_ALL),
+            (slots - slots / 20, slots / 10, false, 2),
+            (0, slots, true, 0),
+            (0, slots, true, 5),
+        ] {
             let c = TvChunk {
                 res: g.res,
                 start,
                 count,
                 channels,
                 scale: 0.7,
-                touch: TOUCH_ALL,
+                touch,
             };
             let mut want = vec![0.0f32; data.len()];
             let mut want_touched = vec![0u32; g.allocated()];
@@ -422,6 +433,7 @@ pub fn check_tv(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
                 &kernels::tv::INFO,
                 &kernels::tv::Push {
                     links: links.address(),
+                    row_slot: row_slot_buf.address(),
                     data: db.address(),
                     grad: gb.address(),
                     step: step.address(),
@@ -431,14 +443,25 @@ pub fn check_tv(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
                     channels,
                     scale: 0.7,
                     touch_bits: c.touch,
+                    rows: if by_rows { rows } else { 0 },
                     ..Default::default()
                 },
-                count + g.res[1] * g.res[2],
+                if by_rows {
+                    rows
+                } else {
+                    count + g.res[1] * g.res[2]
+                },
             )?;
             let got: Vec<f32> = gb.download()?;
             for (i, (&a, &b)) in got.iter().zip(&want).enumerate() {
                 cmp.value(a as f64, b as f64, || {
-                    format!("{channels}-channel element {i}")
+                    format!("{channels}-channel element {i} (rows {by_rows})")
+                });
+            }
+            let flags: Vec<u32> = step.download_range(STEP_FLAGS, g.allocated())?;
+            for (i, (&a, &b)) in flags.iter().zip(&want_touched).enumerate() {
+                cmp.value(a as f64, b as f64, || {
+                    format!("touched flag {i} (bits {touch})")
                 });
             }
             cases += count as usize;
@@ -447,6 +470,8 @@ pub fn check_tv(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
     Ok(cmp.row(
         "tv",
         cases,
-        "σ and SH, chunk inside and past the end; touched flags exact".into(),
+        "σ and SH, chunk inside and past the end (an invocation per slot), whole grid (one per \
+         vertex row); touched bits 0, 1, 2, 5: flags exact"
+            .into(),
     ))
 }

@@ -5,7 +5,9 @@
 //! σα, and chunks inside, whole and wrapping past the end.
 
 use super::{CheckRow, Compare};
-use crate::cpu::step::{optim_args, STEP_COUNT, STEP_FLAGS, STEP_N};
+use crate::cpu::step::{
+    optim_args, STEP_COUNT, STEP_FLAGS, STEP_N, TOUCH_OPACITY, TOUCH_SH, TOUCH_SURFACE,
+};
 use crate::cpu::surface_reg::{
     row_slots, surface_normal_reg, surface_opacity_reg, NormalChunk, NormalPrefix, NormalRegStats,
     OpacityChunk,
@@ -309,8 +311,31 @@ pub fn check_normal_reg(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
 }
 
 pub fn check_rmsprop(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
-    let mut rng = Pcg64::seed_from_u64(seed);
+    let mut cmp = Compare::new(1e-7, 1e-5);
     let n = 20_000;
+    for dense_delta in [false, true] {
+        rmsprop_case(gpu, seed, n, dense_delta, &mut cmp)?;
+    }
+    Ok(cmp.row(
+        "surface_rmsprop",
+        2 * n,
+        "δ, σα, 27 SH; 2/3 of vertices touched in scrambled order with every combination of \
+         group bits; list pass alone, and dense δ pass + list pass without δ; fresh state, zero \
+         and 1e-8..1e4 gradients; untouched groups unchanged, gradients and flags cleared"
+            .into(),
+    ))
+}
+
+/// One RMSProp step on random state, GPU (dense δ pass when `dense_delta`, then the list pass)
+/// against the twin; every array, flag and indirect argument compared into `cmp`.
+fn rmsprop_case(
+    gpu: &Gpu,
+    seed: u64,
+    n: usize,
+    dense_delta: bool,
+    cmp: &mut Compare,
+) -> Result<()> {
+    let mut rng = Pcg64::seed_from_u64(seed);
     let mut vals = |len: usize, lo: f32, hi: f32| -> Vec<f32> {
         (0..len).map(|_| rng.random_range(lo..hi)).collect()
     };
@@ -337,14 +362,16 @@ pub fn check_rmsprop(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
             }
         }
     }
+    // Touched vertices get the group bits 1..=7 in turn.
     let touched_list: Vec<usize> = (0..n).rev().filter(|v| v % 3 != 1).collect();
     let mut step = empty_step(n);
     let mut flags = vec![0u32; n];
     step[STEP_COUNT] = touched_list.len() as u32;
     for (i, &v) in touched_list.iter().enumerate() {
-        step[STEP_FLAGS + v] = 1;
+        let bits = 1 + (v as u32 / 3) % 7;
+        step[STEP_FLAGS + v] = bits;
         step[STEP_FLAGS + n + i] = v as u32;
-        flags[v] = 1;
+        flags[v] = bits;
     }
     let bufs: Vec<GpuBuffer> = p.iter().map(|v| gpu.upload(v)).collect::<Result<_>>()?;
     let sb = gpu.upload(&step)?;
@@ -355,8 +382,36 @@ pub fn check_rmsprop(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
         lr_sh: 1e-3,
         beta: 0.95,
         eps: 1e-8,
+        dense_delta,
+    };
+    let a = |i: usize| bufs[i].address();
+    let push = kernels::surface_rmsprop::Push {
+        delta: a(0),
+        opacity: a(1),
+        sh: a(2),
+        grad_delta: a(3),
+        grad_opacity: a(4),
+        grad_sh: a(5),
+        state_delta: a(6),
+        state_opacity: a(7),
+        state_sh: a(8),
+        step: sb.address(),
+        lr_delta: h.lr_delta,
+        lr_opacity: h.lr_opacity,
+        lr_sh: h.lr_sh,
+        beta: h.beta,
+        eps: h.eps,
+        groups: TOUCH_SURFACE,
+        ..Default::default()
     };
     let mut b = gpu.batch()?;
+    if dense_delta {
+        let dense = kernels::surface_rmsprop::Push {
+            dense_rows: n as u32,
+            ..push
+        };
+        b.dispatch_1d(&kernels::surface_rmsprop::INFO, &dense, n as u32)?;
+    }
     b.dispatch(
         &kernels::optim_args::INFO,
         &kernels::optim_args::Push {
@@ -365,27 +420,14 @@ pub fn check_rmsprop(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
         },
         [1, 1, 1],
     )?;
-    let a = |i: usize| bufs[i].address();
+    let groups = if dense_delta {
+        TOUCH_OPACITY | TOUCH_SH
+    } else {
+        TOUCH_SURFACE
+    };
     b.dispatch_indirect(
         &kernels::surface_rmsprop::INFO,
-        &kernels::surface_rmsprop::Push {
-            delta: a(0),
-            opacity: a(1),
-            sh: a(2),
-            grad_delta: a(3),
-            grad_opacity: a(4),
-            grad_sh: a(5),
-            state_delta: a(6),
-            state_opacity: a(7),
-            state_sh: a(8),
-            step: sb.address(),
-            lr_delta: h.lr_delta,
-            lr_opacity: h.lr_opacity,
-            lr_sh: h.lr_sh,
-            beta: h.beta,
-            eps: h.eps,
-            ..Default::default()
-        },
+        &kernels::surface_rmsprop::Push { groups, ..push },
         &args,
     )?;
     b.submit()?;
@@ -408,7 +450,6 @@ pub fn check_rmsprop(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
         &mut flags,
         &h,
     );
-    let mut cmp = Compare::new(1e-7, 1e-5);
     let names = [
         "delta",
         "opacity",
@@ -423,7 +464,9 @@ pub fn check_rmsprop(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
     for ((buf, w), name) in bufs.iter().zip(&p).zip(names) {
         let got: Vec<f32> = buf.download()?;
         for (i, (&x, &y)) in got.iter().zip(w).enumerate() {
-            cmp.value(x as f64, y as f64, || format!("{name}[{i}]"));
+            cmp.value(x as f64, y as f64, || {
+                format!("{name}[{i}] (dense δ {dense_delta})")
+            });
         }
     }
     let got_flags: Vec<u32> = sb.download_range(STEP_FLAGS, n)?;
@@ -437,11 +480,5 @@ pub fn check_rmsprop(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
     {
         cmp.value(x as f64, y as f64, || format!("indirect arg {i}"));
     }
-    Ok(cmp.row(
-        "surface_rmsprop",
-        n,
-        "δ, σα, 27 SH; 2/3 of vertices touched in scrambled order; fresh state, zero and \
-         1e-8..1e4 gradients; gradients and flags cleared"
-            .into(),
-    ))
+    Ok(())
 }

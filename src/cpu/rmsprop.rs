@@ -1,7 +1,8 @@
 //! Twins of `glsl/lib/rmsprop.glsl` (one scalar), `glsl/rmsprop_sparse.comp` (σ and 27 SH of
 //! every touched vertex, then the flag cleared) and `glsl/surface_rmsprop.comp` (the same for the
-//! stage-2 groups δ, σα and SH).
+//! stage-2 groups δ, σα and SH, each only where it was touched, or δ densely).
 
+use super::step::{TOUCH_DELTA, TOUCH_OPACITY, TOUCH_SH};
 use crate::grid::SH_DIM;
 use rayon::prelude::*;
 
@@ -67,6 +68,9 @@ pub struct SurfaceRmsProp {
     pub lr_sh: f32,
     pub beta: f32,
     pub eps: f32,
+    /// δ of every vertex is updated, flagged or not (a regulariser gave every vertex a δ
+    /// gradient: Lδ); otherwise δ only where its flag bit is set.
+    pub dense_delta: bool,
 }
 
 /// Parameters, gradients and RMS state of the stage-2 grid (per allocated vertex: δ, raw
@@ -83,8 +87,9 @@ pub struct Stage2Params<'a> {
     pub state_sh: &'a mut [f32],
 }
 
-/// Update δ, σα and SH of every vertex whose flag is set (their gradients cleared), and clear
-/// the flags.
+/// Update, per vertex, each group whose touched bit (step.rs TOUCH_*) is set — δ everywhere when
+/// `dense_delta` — clearing the updated gradients, and clear the flags (surface_rmsprop.comp's
+/// dense and list passes in one).
 pub fn surface_rmsprop_sparse(p: Stage2Params, touched: &mut [u32], h: &SurfaceRmsProp) {
     let scalars = p
         .delta
@@ -100,13 +105,16 @@ pub fn surface_rmsprop_sparse(p: Stage2Params, touched: &mut [u32], h: &SurfaceR
         .zip(p.state_sh.par_chunks_mut(SH_DIM))
         .zip(touched.par_iter_mut())
         .for_each(|(((((((((d, gd), sd), o), go), so), sh), gs), ss), t)| {
-            if *t == 0 {
-                return;
+            if h.dense_delta || *t & TOUCH_DELTA != 0 {
+                rmsprop_one(d, gd, sd, h.lr_delta, h.beta, h.eps);
             }
-            rmsprop_one(d, gd, sd, h.lr_delta, h.beta, h.eps);
-            rmsprop_one(o, go, so, h.lr_opacity, h.beta, h.eps);
-            for k in 0..SH_DIM {
-                rmsprop_one(&mut sh[k], &mut gs[k], &mut ss[k], h.lr_sh, h.beta, h.eps);
+            if *t & TOUCH_OPACITY != 0 {
+                rmsprop_one(o, go, so, h.lr_opacity, h.beta, h.eps);
+            }
+            if *t & TOUCH_SH != 0 {
+                for k in 0..SH_DIM {
+                    rmsprop_one(&mut sh[k], &mut gs[k], &mut ss[k], h.lr_sh, h.beta, h.eps);
+                }
             }
             *t = 0;
         });

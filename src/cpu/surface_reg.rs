@@ -350,7 +350,8 @@ pub fn delta_tv_chunk(res: [u32; 3], allocated: usize, lambda: f32) -> TvChunk {
         count: res.iter().product(),
         channels: 1,
         scale: lambda * kappa / allocated.max(1) as f32,
-        touch: TOUCH_DELTA,
+        // Every vertex gets a δ gradient: the backends update δ densely instead of flagging it.
+        touch: 0,
     }
 }
 

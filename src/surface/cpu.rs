@@ -69,7 +69,10 @@ impl CpuSurface {
             loss += surface_opacity_reg(&g.opacity, &mut self.grad[1], &mut self.touched, &c);
         }
         if let Some((start, count, l1, l2)) = p.regs.normals {
-            let chunk = self.normals.chunk(start, count, l1, l2);
+            let mut chunk = self.normals.chunk(start, count, l1, l2);
+            if p.dense_delta() {
+                chunk.touch = 0;
+            }
             loss += surface_normal_reg(
                 &g.links,
                 &self.row_slot,
@@ -83,7 +86,8 @@ impl CpuSurface {
         Ok(loss)
     }
 
-    /// RMSProp on every touched vertex (δ, σα, SH), then clear flags and gradients.
+    /// RMSProp on the touched groups of every vertex (δ everywhere under Lδ), then clear flags
+    /// and gradients.
     fn optimise(&mut self, p: &SurfaceStepParams) {
         let [gd, go, gs] = &mut self.grad;
         let [sd, so, ss] = &mut self.state;
@@ -107,6 +111,7 @@ impl CpuSurface {
                 lr_sh: p.lr_sh,
                 beta: p.beta,
                 eps: p.eps,
+                dense_delta: p.dense_delta(),
             },
         );
     }

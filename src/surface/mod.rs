@@ -44,6 +44,14 @@ pub struct SurfaceStepParams {
     pub regs: SurfaceRegs,
 }
 
+impl SurfaceStepParams {
+    /// Whether δ is updated at every vertex this step: Lδ (a TV over the whole grid) gives every
+    /// vertex a δ gradient, so flagging δ would only cost; σα and SH stay per-vertex flagged.
+    pub fn dense_delta(&self) -> bool {
+        self.regs.delta_tv.is_some()
+    }
+}
+
 /// What a step reports back.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct SurfaceStepStats {

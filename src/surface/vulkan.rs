@@ -7,7 +7,7 @@ use super::{
     batch_loss, surface_params, BlockRefresh, SurfaceBackend, SurfaceState, SurfaceStepParams,
     SurfaceStepStats,
 };
-use crate::cpu::step::{STEP_COUNT, STEP_FLAGS, STEP_N};
+use crate::cpu::step::{STEP_COUNT, STEP_FLAGS, STEP_N, TOUCH_OPACITY, TOUCH_SH, TOUCH_SURFACE};
 use crate::cpu::surface_fwd::{SurfCounts, SurfaceParams};
 use crate::cpu::surface_reg::{row_slots, NormalPrefix};
 use crate::cpu::surface_train::{RayLoss, SurfaceLoss, TrainCounts, SURF_MAX_HITS};
@@ -340,10 +340,11 @@ impl VulkanSurface {
     /// Record the per-vertex regularisers (the same chunks and scales as `CpuSurface`).
     fn record_regularisers(&self, b: &mut Batch, p: &SurfaceStepParams) -> Result<()> {
         let res = self.meta.res;
-        // TV chunks are dispatched over their intersection with the span of allocated slots: a
-        // slot outside it holds no vertex, and every term of the chunk (a vertex and its
-        // forward neighbours) lies inside it, so the gradient is the whole chunk's, for a
-        // fraction of the invocations (Lδ's chunk is every slot).
+        let slots: u32 = res.iter().product();
+        // A TV chunk over the whole grid (Lδ) runs one invocation per vertex row; other chunks
+        // are dispatched over their intersection with the span of allocated slots: a slot
+        // outside it holds no vertex, and every term of the chunk (a vertex and its forward
+        // neighbours) lies inside it, so the gradient is the whole chunk's.
         let (first, last) = self.allocated_span;
         for (chunk, data, grad) in [
             (p.regs.delta_tv, &self.delta, &self.grad[0]),
@@ -356,28 +357,40 @@ impl VulkanSurface {
                 c.res,
                 c.channels
             );
+            let push = kernels::tv::Push {
+                links: self.links.address(),
+                row_slot: self.row_slot.address(),
+                data: data.address(),
+                grad: grad.address(),
+                step: self.step.address(),
+                res,
+                channels: 1,
+                scale: c.scale,
+                touch_bits: c.touch,
+                ..Default::default()
+            };
+            if self.rows > 0 && c.start == 0 && c.count >= slots {
+                let rows = self.rows as u32;
+                let push = kernels::tv::Push {
+                    start: 0,
+                    count: slots,
+                    rows,
+                    ..push
+                };
+                b.dispatch_1d(&kernels::tv::INFO, &push, rows)?;
+                continue;
+            }
             let start = c.start.max(first);
             let end = c.start.saturating_add(c.count).min(last + 1);
             if self.rows == 0 || start >= end {
                 continue;
             }
-            b.dispatch_1d(
-                &kernels::tv::INFO,
-                &kernels::tv::Push {
-                    links: self.links.address(),
-                    data: data.address(),
-                    grad: grad.address(),
-                    step: self.step.address(),
-                    res,
-                    start,
-                    count: end - start,
-                    channels: 1,
-                    scale: c.scale,
-                    touch_bits: c.touch,
-                    ..Default::default()
-                },
-                end - start + res[1] * res[2],
-            )?;
+            let push = kernels::tv::Push {
+                start,
+                count: end - start,
+                ..push
+            };
+            b.dispatch_1d(&kernels::tv::INFO, &push, end - start + res[1] * res[2])?;
         }
         let rows = self.rows as u32;
         if let (Some(c), true) = (p.regs.opacity_log, rows > 0) {
@@ -403,7 +416,10 @@ impl VulkanSurface {
         }
         if let (Some((start, count, lambda1, lambda2)), true) = (p.regs.normals, rows > 0) {
             // A row chunk (the kernel's convention), with its mean's denominator.
-            let c = self.normal_prefix.chunk(start, count, lambda1, lambda2);
+            let mut c = self.normal_prefix.chunk(start, count, lambda1, lambda2);
+            if p.dense_delta() {
+                c.touch = 0;
+            }
             b.dispatch_1d(
                 &kernels::surface_normal_reg::INFO,
                 &kernels::surface_normal_reg::Push {
@@ -430,8 +446,41 @@ impl VulkanSurface {
         Ok(())
     }
 
-    /// Record the sparse RMSProp step over the vertices touched this step.
+    /// Record the RMSProp step: δ of every row first when it is dense this step, then the
+    /// flagged groups of the vertices touched this step.
     fn record_rmsprop(&self, b: &mut Batch, p: &SurfaceStepParams) -> Result<()> {
+        let push = kernels::surface_rmsprop::Push {
+            delta: self.delta.address(),
+            opacity: self.opacity.address(),
+            sh: self.sh.address(),
+            grad_delta: self.grad[0].address(),
+            grad_opacity: self.grad[1].address(),
+            grad_sh: self.grad[2].address(),
+            state_delta: self.state[0].address(),
+            state_opacity: self.state[1].address(),
+            state_sh: self.state[2].address(),
+            step: self.step.address(),
+            lr_delta: p.lr_delta,
+            lr_opacity: p.lr_opacity,
+            lr_sh: p.lr_sh,
+            beta: p.beta,
+            eps: p.eps,
+            groups: TOUCH_SURFACE,
+            dense_rows: 0,
+            ..Default::default()
+        };
+        let dense = p.dense_delta() && self.rows > 0;
+        if dense {
+            let rows = self.rows as u32;
+            b.dispatch_1d(
+                &kernels::surface_rmsprop::INFO,
+                &kernels::surface_rmsprop::Push {
+                    dense_rows: rows,
+                    ..push
+                },
+                rows,
+            )?;
+        }
         b.dispatch(
             &kernels::optim_args::INFO,
             &kernels::optim_args::Push {
@@ -443,22 +492,12 @@ impl VulkanSurface {
         b.dispatch_indirect(
             &kernels::surface_rmsprop::INFO,
             &kernels::surface_rmsprop::Push {
-                delta: self.delta.address(),
-                opacity: self.opacity.address(),
-                sh: self.sh.address(),
-                grad_delta: self.grad[0].address(),
-                grad_opacity: self.grad[1].address(),
-                grad_sh: self.grad[2].address(),
-                state_delta: self.state[0].address(),
-                state_opacity: self.state[1].address(),
-                state_sh: self.state[2].address(),
-                step: self.step.address(),
-                lr_delta: p.lr_delta,
-                lr_opacity: p.lr_opacity,
-                lr_sh: p.lr_sh,
-                beta: p.beta,
-                eps: p.eps,
-                ..Default::default()
+                groups: if dense {
+                    TOUCH_OPACITY | TOUCH_SH
+                } else {
+                    TOUCH_SURFACE
+                },
+                ..push
             },
             &self.args,
         )
