@@ -135,7 +135,6 @@ pub fn gpu_normal_reg(gpu: &Gpu, g: &RegGrid, grad0: &[f32], c: &NormalChunk) ->
             lambda1: c.lambda1,
             lambda2: c.lambda2,
             touch_bits: c.touch,
-            ..Default::default()
         },
         c.count.min(c.rows),
     )?;

@@ -438,7 +438,6 @@ impl VulkanSurface {
                     lambda1: c.lambda1,
                     lambda2: c.lambda2,
                     touch_bits: c.touch,
-                    ..Default::default()
                 },
                 count.min(rows),
             )?;
