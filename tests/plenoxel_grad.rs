@@ -202,6 +202,7 @@ fn tv_gradient_matches_finite_differences() {
         count: 150,
         channels: SH_DIM as u32,
         scale: 0.01,
+        touch: alphasurf::cpu::step::TOUCH_ALL,
     };
     let mut grad = vec![0.0f32; g.sh.len()];
     let mut touched = vec![0u32; g.allocated()];
