@@ -1,7 +1,8 @@
 //! The Vulkan stage-2 backend: grid, gradients and optimiser state live in device buffers; a
 //! training step is one batch and one submission: step reset → surface_train → regularisers
 //! (Lδ and TVα through `tv`, Lα through surface_opacity_reg, Ln1/Ln2 through surface_normal_reg)
-//! → optim_args → indirect surface_rmsprop over the touched vertices.
+//! (Lδ's TV with an invocation per vertex row) → surface_rmsprop: δ of every row when Lδ is on,
+//! then (optim_args → indirect) the flagged groups of the touched vertices.
 
 use super::{
     batch_loss, surface_params, BlockRefresh, SurfaceBackend, SurfaceState, SurfaceStepParams,
