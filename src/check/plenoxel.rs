@@ -7,7 +7,7 @@ use super::{CheckRow, Compare};
 use crate::cpu::plenoxel as twin;
 use crate::cpu::step::{optim_args, STEP_COUNT, STEP_FLAGS, STEP_N, TOUCH_ALL};
 use crate::cpu::surface_reg::row_slots;
-use crate::cpu::{rmsprop_sparse, tv, RmsProp, Stage1Params, TvChunk};
+use crate::cpu::{rmsprop_sparse, tv, tv_rows, RmsProp, Stage1Params, TvChunk};
 use crate::gpu::{Gpu, GpuBuffer};
 use crate::grid::{Grid, SH_DIM};
 use crate::kernels;
@@ -426,6 +426,25 @@ pub fn check_tv(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
             let mut want = vec![0.0f32; data.len()];
             let mut want_touched = vec![0u32; g.allocated()];
             tv(&g.links, data, &mut want, &mut want_touched, &c);
+            if by_rows {
+                // The twin's rows mode: exactly the slot walk's result.
+                let mut rows_grad = vec![0.0f32; data.len()];
+                let mut rows_touched = vec![0u32; g.allocated()];
+                tv_rows(
+                    &g.links,
+                    &row_slot,
+                    data,
+                    &mut rows_grad,
+                    &mut rows_touched,
+                    &c,
+                );
+                for (i, (&a, &b)) in rows_grad.iter().zip(&want).enumerate() {
+                    cmp.value(a as f64, b as f64, || format!("tv_rows element {i}"));
+                }
+                for (i, (&a, &b)) in rows_touched.iter().zip(&want_touched).enumerate() {
+                    cmp.value(a as f64, b as f64, || format!("tv_rows flag {i}"));
+                }
+            }
             let db = gpu.upload(data)?;
             let gb = gpu.zeros::<f32>(data.len())?;
             let step = gpu.upload(&step_buffer(g.allocated(), &[]))?;

@@ -25,4 +25,4 @@ pub use rmsprop::{
 };
 pub use sh_eval::sh_eval;
 pub use trilerp_eval::trilerp_eval;
-pub use tv::{tv, TvChunk};
+pub use tv::{tv, tv_rows, TvChunk};

@@ -41,62 +41,90 @@ fn forward_diffs(
     [d[0], d[1], d[2], tv]
 }
 
-/// grad += ∂(scale·Σ_chunk TV)/∂data, per allocated vertex and channel; every vertex written is
-/// flagged in `touched` with the chunk's bits.
-pub fn tv(links: &[i32], data: &[f32], grad: &mut [f32], touched: &mut [u32], c: &TvChunk) {
+/// The gradient entries slot `s` owns (its vertex's `channels` values), or None when it holds
+/// no vertex or no TV term of the chunk involves it.
+fn slot_grad(links: &[i32], data: &[f32], c: &TvChunk, s: usize) -> Option<(usize, Vec<f32>)> {
     let n = c.channels as usize;
     let (ry, rz) = (c.res[1] as usize, c.res[2] as usize);
-    let slots = links.len();
-    let start = c.start as usize;
-    let end = start + c.count as usize;
-    let span_end = (end + ry * rz).min(slots);
-    // Each allocated slot owns its n gradient entries; compute them, then add.
-    let updates: Vec<(usize, Vec<f32>)> = (start.min(slots)..span_end)
-        .into_par_iter()
-        .filter_map(|s| {
-            let l = links[s];
-            if l < 0 {
-                return None;
+    let (start, end) = (c.start as usize, c.start as usize + c.count as usize);
+    let l = links[s];
+    if l < 0 {
+        return None;
+    }
+    let v = [s / (ry * rz), (s / rz) % ry, s % rz];
+    let has_term = |a: usize| {
+        let stride = [ry * rz, rz, 1][a];
+        v[a] > 0 && (start..end).contains(&(s - stride)) && links[s - stride] >= 0
+    };
+    if s >= end && !(0..3).any(has_term) {
+        return None;
+    }
+    let g: Vec<f32> = (0..n)
+        .map(|ch| {
+            let mut g = 0.0f32;
+            if (start..end).contains(&s) {
+                let own = forward_diffs(links, data, c, s, l, ch);
+                g -= (own[0] + own[1] + own[2]) / own[3];
             }
-            let v = [s / (ry * rz), (s / rz) % ry, s % rz];
-            let has_term = |a: usize| {
+            for a in 0..3 {
                 let stride = [ry * rz, rz, 1][a];
-                v[a] > 0 && (start..end).contains(&(s - stride)) && links[s - stride] >= 0
-            };
-            if s >= end && !(0..3).any(has_term) {
-                return None;
+                if v[a] == 0 {
+                    continue;
+                }
+                let u = s - stride;
+                if u < start || u >= end || links[u] < 0 {
+                    continue;
+                }
+                let tu = forward_diffs(links, data, c, u, links[u], ch);
+                g += tu[a] / tu[3];
             }
-            Some({
-                let g: Vec<f32> = (0..n)
-                    .map(|ch| {
-                        let mut g = 0.0f32;
-                        if s < end {
-                            let own = forward_diffs(links, data, c, s, l, ch);
-                            g -= (own[0] + own[1] + own[2]) / own[3];
-                        }
-                        for a in 0..3 {
-                            let stride = [ry * rz, rz, 1][a];
-                            if v[a] == 0 {
-                                continue;
-                            }
-                            let u = s - stride;
-                            if u < start || u >= end || links[u] < 0 {
-                                continue;
-                            }
-                            let tu = forward_diffs(links, data, c, u, links[u], ch);
-                            g += tu[a] / tu[3];
-                        }
-                        g
-                    })
-                    .collect();
-                (l as usize, g)
-            })
+            g
         })
         .collect();
+    Some((l as usize, g))
+}
+
+/// Add the owned gradients and set the chunk's touched bits.
+fn apply(updates: Vec<(usize, Vec<f32>)>, grad: &mut [f32], touched: &mut [u32], c: &TvChunk) {
+    let n = c.channels as usize;
     for (l, g) in updates {
         touched[l] |= c.touch;
         for (ch, gv) in g.into_iter().enumerate() {
             grad[l * n + ch] += c.scale * gv;
         }
     }
+}
+
+/// grad += ∂(scale·Σ_chunk TV)/∂data, per allocated vertex and channel; every vertex written is
+/// flagged in `touched` with the chunk's bits.
+pub fn tv(links: &[i32], data: &[f32], grad: &mut [f32], touched: &mut [u32], c: &TvChunk) {
+    let (ry, rz) = (c.res[1] as usize, c.res[2] as usize);
+    let slots = links.len();
+    let span_end = (c.start as usize + c.count as usize + ry * rz).min(slots);
+    let updates: Vec<_> = ((c.start as usize).min(slots)..span_end)
+        .into_par_iter()
+        .filter_map(|s| slot_grad(links, data, c, s))
+        .collect();
+    apply(updates, grad, touched, c);
+}
+
+/// [`tv`] for a chunk over the whole grid, visiting the allocated slots `row_slot` only (the
+/// kernel's rows mode): the same result for a fraction of the work.
+pub fn tv_rows(
+    links: &[i32],
+    row_slot: &[u32],
+    data: &[f32],
+    grad: &mut [f32],
+    touched: &mut [u32],
+    c: &TvChunk,
+) {
+    debug_assert!(
+        c.start == 0 && c.count as usize >= links.len(),
+        "whole-grid chunk"
+    );
+    let updates: Vec<_> = row_slot
+        .par_iter()
+        .filter_map(|&s| slot_grad(links, data, c, s as usize))
+        .collect();
+    apply(updates, grad, touched, c);
 }

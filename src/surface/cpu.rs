@@ -8,7 +8,7 @@ use crate::cpu::surface_blocks::build_blocks;
 use crate::cpu::surface_fwd::{render, SurfCounts};
 use crate::cpu::surface_reg::{row_slots, surface_normal_reg, surface_opacity_reg, NormalPrefix};
 use crate::cpu::surface_train::{train, SurfaceGrads};
-use crate::cpu::{surface_rmsprop_sparse, tv, Stage2Params, SurfaceRmsProp};
+use crate::cpu::{surface_rmsprop_sparse, tv, tv_rows, Stage2Params, SurfaceRmsProp};
 use crate::grid::surface::SurfaceGrid;
 use crate::grid::SH_DIM;
 use anyhow::{ensure, Result};
@@ -56,12 +56,17 @@ impl CpuSurface {
     fn regularise(&mut self, p: &SurfaceStepParams) -> Result<f64> {
         let g = &self.grid;
         let [gd, go, _] = &mut self.grad;
+        let slots = g.links.len();
         for (chunk, data, grad) in [
             (p.regs.delta_tv, &g.delta, gd),
             (p.regs.opacity_tv, &g.opacity, go),
         ] {
-            if let Some(c) = chunk {
-                tv(&g.links, data, grad, &mut self.touched, &c);
+            match chunk {
+                Some(c) if c.start == 0 && c.count as usize >= slots => {
+                    tv_rows(&g.links, &self.row_slot, data, grad, &mut self.touched, &c)
+                }
+                Some(c) => tv(&g.links, data, grad, &mut self.touched, &c),
+                None => {}
             }
         }
         let mut loss = 0.0;
