@@ -8,12 +8,13 @@
 // hit j: α = 1 − exp(−max(σα, 0)), colour max(0, SH + 0.5) (trilerped at the hit, basis on the unit
 // scene direction), α̃ = α·γ_a(j); C = Σ w_j c_j + T·1. The ray stops at the first hit with j ≥ a
 // (γ = 0, not shaded, counted as cut) or once T < stop_thresh.
-// Block skipping (block_skip ≠ 0): a cell whose 8³-cell block has level mask 0 in `blocks` (kernel
-// surface_blocks) is not read; the walk restarts at the block's exit (surf_block_skip in
-// glsl/lib/surface_blocks.glsl: the same pieces as the continuous walk, so the same hits).
+// Skipping (block_skip ≠ 0) with the skip structure `blocks` (glsl/lib/surface_blocks.glsl): a
+// cell whose 8³-cell block has level mask 0 (kernel surface_blocks) is not read and the walk
+// restarts at the block's exit (surf_block_skip: the same pieces as the continuous walk, so the
+// same hits); a cell whose live bit is clear (kernel surface_live_cells) is passed over unread.
 // Inputs: links (n³ i32, < 0 unallocated), per allocated vertex delta, opacity (raw σα) and sh
 // (27), levels[n_levels ≤ 8], rays (6 floats: scene origin, direction), a, stop_thresh, blocks
-// (nb³ u32 level masks, read only when block_skip ≠ 0).
+// (live-cell words, then nb³ u32 level masks; read only when block_skip ≠ 0).
 // Outputs: out[r] = (rgb, transmittance, hits composited); stats (6 u32) += cells visited (links
 // read), cubic solves, solves skipped by min/max culling, hits composited, hits cut by
 // truncation, blocks skipped (subgroup-reduced atomics).
@@ -78,6 +79,7 @@ void main() {
     uint cut = 0u;
     uint skips = 0u;
     uint nb = surf_blocks_per_axis(n);
+    uint words = surf_live_words(n);
     uint skipped = SURF_NO_BLOCK;
     bool done = false;
     Dda w = dda_init(og, dn, int(n), 0.0);
@@ -92,15 +94,16 @@ void main() {
         // one solving while the others idle through empty cells.
         bool found = false;
         while (dda_next(w, l, t0, t1)) {
+            uint base = dda_cell_index(l, n);
             if (pc.block_skip != 0u) {
                 uint bi = surf_block_index(l, nb);
-                if (pc.blocks.v[bi] == 0u && surf_block_skip(w, dn, int(n), l, bi, skipped)) {
+                if (pc.blocks.v[words + bi] == 0u && surf_block_skip(w, dn, int(n), l, bi, skipped)) {
                     skips++;
                     continue;
                 }
+                if (!SURF_CELL_LIVE(pc.blocks, base)) continue;
             }
             cnt.x++;
-            uint base = dda_cell_index(l, n);
             lk[0] = pc.links.v[base];
             lk[1] = pc.links.v[base + 1u];
             lk[2] = pc.links.v[base + nz];

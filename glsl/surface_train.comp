@@ -14,11 +14,12 @@
 // in registers (in the reverse order) and flushed with one float atomic per corner, parameter and
 // non-zero sum when the cell changes (SH: 3 accumulators per corner, times Y_k at the flush);
 // every vertex that receives a gradient is touched in all three groups (step.glsl).
-// Inputs: links (n³, < 0 unallocated), complete: words [0, W = ⌈n³/32⌉) hold bit i of word i/32
-// set when the cell with lower corner slot i has its 8 corners allocated (the walk reads one bit
-// per empty cell instead of 8 links), words [W, W + nb³) the 8³-cell block level masks of
-// surface_blocks for the current δ (a cell in a mask-0 block cannot hold a hit: the walk restarts
-// past the block, surf_block_skip; exact), delta, opacity (raw σα), sh (27) per allocated vertex;
+// Inputs: links (n³, < 0 unallocated), skip: the skip structure (glsl/lib/surface_blocks.glsl):
+// words [0, W = ⌈n³/32⌉) the live-cell bits of surface_live_cells (a cell with its bit clear has
+// an unallocated corner or no level within its δ range: one bit read instead of 8 links and 8 δ),
+// words [W, W + nb³) the 8³-cell block level masks of surface_blocks (a cell in a mask-0 block
+// cannot hold a hit: the walk restarts past the block, surf_block_skip); both built for the
+// current δ or with a margin bounding its drift since (exact), delta, opacity (raw σα), sh (27) per allocated vertex;
 // params (floats): scale[3], offset[3], a, stop_thresh, grad_scale, lambda_h, lambda_c, (pad),
 // levels[8] (n_levels used); rays (6 floats), targets (3 floats).
 // Outputs: grad_delta, grad_opacity, grad_sh += (float atomics), touched list (step buffer);
@@ -43,7 +44,7 @@ layout(buffer_reference, scalar, buffer_reference_align = 4) buffer SurfTrainOut
 
 layout(push_constant, scalar) uniform Push {
     I32Buf links;
-    U32Buf complete;
+    U32Buf skip;
     F32Buf delta;
     F32Buf opacity;
     F32Buf sh;
@@ -203,20 +204,19 @@ void main() {
     float c[8];
     uint mask = 0u;
     uint nb = surf_blocks_per_axis(n);
-    uint bbase = (n * n * n + 31u) >> 5u;
+    uint bbase = surf_live_words(n);
     uint skipped = SURF_NO_BLOCK;
     while (!done) {
         // Walk on to the next cell where some level can cross before solving (as surface_fwd).
         bool found = false;
         while (dda_next(w, l, t0, t1)) {
             uint bi = surf_block_index(l, nb);
-            if (pc.complete.v[bbase + bi] == 0u && surf_block_skip(w, dn, int(n), l, bi, skipped)) {
+            if (pc.skip.v[bbase + bi] == 0u && surf_block_skip(w, dn, int(n), l, bi, skipped)) {
                 cnt2.w++;
                 continue;
             }
+            if (!SURF_CELL_LIVE(pc.skip, dda_cell_index(l, n))) continue;
             cnt.x++;
-            uint ci = dda_cell_index(l, n);
-            if ((pc.complete.v[ci >> 5u] & (1u << (ci & 31u))) == 0u) continue;
             cell_links(l, lk);
             for (int i = 0; i < 8; i++) c[i] = pc.delta.v[lk[i]];
             mask = surf_level_mask(c, lv, nl);

@@ -13,6 +13,7 @@ use alphasurf::cpu::surface_blocks::build_blocks;
 use alphasurf::cpu::surface_fwd::render;
 use alphasurf::gpu::test_gpu;
 use alphasurf::math::surface::SurfOut;
+use alphasurf::math::surface_blocks::surf_live_words;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
 
@@ -582,8 +583,22 @@ fn planar_field_one_live_block() {
         sc.sh.extend_from_slice(&sh);
     }
     let blocks = build_blocks(&sc.grid(), &sc.levels, 0.0).unwrap();
-    let live: Vec<usize> = (0..blocks.len()).filter(|&b| blocks[b] != 0).collect();
-    assert_eq!(live, vec![(4 + 1) * 4 + 1], "{blocks:?}");
+    let words = surf_live_words(n) as usize;
+    let masks = &blocks[words..];
+    let live: Vec<usize> = (0..masks.len()).filter(|&b| masks[b] != 0).collect();
+    assert_eq!(live, vec![(4 + 1) * 4 + 1], "{masks:?}");
+    // Live cells: the complete cells of the patch whose x extent holds the plane x = c (δ's
+    // range over a cell is its x extent's), x = 12, y, z ∈ [9, 15) — none other.
+    let live_cells: Vec<usize> = (0..nu * nu * nu)
+        .filter(|&ci| blocks[ci >> 5] & (1 << (ci & 31)) != 0)
+        .collect();
+    let want: Vec<usize> = (0..nu * nu * nu)
+        .filter(|&ci| {
+            let v = [ci / (nu * nu), (ci / nu) % nu, ci % nu];
+            v[0] == 12 && (9..15).contains(&v[1]) && (9..15).contains(&v[2])
+        })
+        .collect();
+    assert_eq!(live_cells, want);
     let mut rng = Pcg64::seed_from_u64(9);
     let mut rays = Vec::new();
     for r in 0..3000 {

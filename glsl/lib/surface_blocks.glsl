@@ -15,8 +15,11 @@
 //         uint bi = surf_block_index(l, nb);
 //         if (<block mask of bi> == 0u && surf_block_skip(w, dn, int(n), l, bi, skipped))
 //             continue;   // w now restarts at the block's exit
+//         if (!<cell live bit>) continue;   // no level can cross it: no corner is read
 //         ... the cell as before ...
 //     }
+// A live bit is the same test per cell (its corners' δ range), so it too only drops cells that
+// cannot hold a hit.
 // dn: the direction the walk was started with (dda_init(og, dn, n, ·)).
 // Exactness: the block exit t_exit (surf_block_exit) is the far-plane crossing (k − o)·(1/d) with
 // dda.glsl's own formula, hence bit-identical to the t at which the continuous walk leaves the
@@ -42,6 +45,17 @@ const uint SURF_NO_BLOCK = 0xffffffffu;
 uint surf_blocks_per_axis(uint n) {
     return (n + uint(SURF_BLOCK - 2)) >> SURF_BLOCK_SHIFT;
 }
+
+// Words of live-cell bits of an n³-vertex grid: ⌈n³/32⌉ (at least 1). The walks' skip structure
+// is these words (bit i of word i/32: the cell with lower-corner slot i is live — all 8 corners
+// allocated and some level within [cmin − margin, cmax + margin]; kernel surface_live_cells),
+// then the nb³ block masks.
+uint surf_live_words(uint n) {
+    return max((n * n * n + 31u) >> 5u, 1u);
+}
+
+// Whether the cell with lower-corner slot ci is live in the skip structure `words`.
+#define SURF_CELL_LIVE(SKIP, CI) ((SKIP.v[(CI) >> 5u] & (1u << ((CI) & 31u))) != 0u)
 
 // Linear index of the block holding cell l.
 uint surf_block_index(ivec3 l, uint nb) {

@@ -1,19 +1,22 @@
-//! Parity of `glsl/surface_blocks.comp` (block level masks for the stage-2 walk's empty-space
-//! skipping) with `cpu::surface_blocks::build_blocks`: exact equality of every mask, on random
+//! Parity of `glsl/surface_live_cells.comp` and `glsl/surface_blocks.comp` (the stage-2 walks'
+//! skip structure: live-cell bits and block level masks) with
+//! `cpu::surface_blocks::build_blocks`: exact equality of every word, on random
 //! test scenes at sizes that are and are not 8k+1 vertices (n = 40, 24, 17, 9, 2), with 3 % and 60 %
 //! of the vertices unallocated (whole blocks without an allocated vertex included), 5 and 8
 //! levels, margins 0 and 0.05.
 
 use super::surface_fwd::test_scene;
 use super::{CheckRow, Compare};
-use crate::cpu::surface_blocks::build_blocks;
+use crate::cpu::surface_blocks::{build_blocks, complete_cells};
 use crate::gpu::Gpu;
-use crate::kernels::surface_blocks::{Push, INFO};
+use crate::kernels;
+use crate::math::surface_blocks::{surf_blocks_per_axis, surf_live_words};
 use anyhow::Result;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
 
-/// Runs `surface_blocks` on the device: the masks (`nb`³) and the device time (ns).
+/// Runs `surface_live_cells` and `surface_blocks` on the device: the skip structure (live-cell
+/// words, then the `nb`³ block masks) and the device time of both (ns).
 pub fn build_blocks_gpu(
     gpu: &Gpu,
     n: u32,
@@ -22,21 +25,39 @@ pub fn build_blocks_gpu(
     levels: &[f32],
     margin: f32,
 ) -> Result<(Vec<u32>, f64)> {
-    let nb = crate::math::surface_blocks::surf_blocks_per_axis(n);
+    let nb = surf_blocks_per_axis(n);
+    let words = surf_live_words(n);
     let count = nb * nb * nb;
     let mut lv = levels.to_vec();
     lv.resize(8, 0.0);
+    let cb = gpu.upload(&complete_cells(links, n))?;
     let lb = gpu.upload(links)?;
     let db = gpu.upload(if delta.is_empty() { &[0.0] } else { delta })?;
     let vb = gpu.upload(&lv)?;
-    let out = gpu.zeros::<u32>(count as usize)?;
-    let times = gpu.run_1d(
-        &INFO,
-        &Push {
+    let out = gpu.zeros::<u32>((words + count) as usize)?;
+    let mut b = gpu.batch()?;
+    b.dispatch_1d(
+        &kernels::surface_live_cells::INFO,
+        &kernels::surface_live_cells::Push {
+            complete: cb.address(),
             links: lb.address(),
             delta: db.address(),
             levels: vb.address(),
-            blocks: out.address(),
+            live: out.address(),
+            n,
+            n_levels: levels.len() as u32,
+            margin,
+            ..Default::default()
+        },
+        words,
+    )?;
+    b.dispatch_1d(
+        &kernels::surface_blocks::INFO,
+        &kernels::surface_blocks::Push {
+            links: lb.address(),
+            delta: db.address(),
+            levels: vb.address(),
+            blocks: out.address() + 4 * words as u64,
             n,
             n_levels: levels.len() as u32,
             margin,
@@ -44,15 +65,31 @@ pub fn build_blocks_gpu(
         },
         count,
     )?;
-    Ok((out.download()?, times.kernel_ns("surface_blocks")))
+    let times = b.submit()?;
+    Ok((
+        out.download()?,
+        times.kernel_ns("surface_live_cells") + times.kernel_ns("surface_blocks"),
+    ))
 }
 
-/// The parity row.
+/// The parity row of the block masks (`surface_blocks`).
 pub fn check(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
+    compare(gpu, seed, false)
+}
+
+/// The parity row of the live-cell bits (`surface_live_cells`).
+pub fn check_live(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
+    compare(gpu, seed, true)
+}
+
+/// Both parts built on the device and on the CPU for every case; `live`: compare the live-cell
+/// words, else the block masks.
+fn compare(gpu: &Gpu, seed: u64, live_part: bool) -> Result<CheckRow> {
     let mut cmp = Compare::new(0.0, 0.0);
     let mut rng = Pcg64::seed_from_u64(seed ^ 0xb10c_5eed);
     let mut cases = 0;
     let mut live = 0;
+    let mut live_cells = 0;
     for (k, n) in [40u32, 24, 17, 9, 2].into_iter().enumerate() {
         for holes in [0.0f32, 0.6] {
             let mut sc = test_scene(seed + k as u64, n);
@@ -77,24 +114,49 @@ pub fn check(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
             ] {
                 let want = build_blocks(&sc.grid(), &levels, margin)?;
                 let (got, _) = build_blocks_gpu(gpu, n, &sc.links, &sc.delta, &levels, margin)?;
-                for (i, (g, w)) in got.iter().zip(&want).enumerate() {
-                    cmp.value(*g as f64, *w as f64, || {
+                let words = surf_live_words(n) as usize;
+                if got.len() != want.len() {
+                    cmp.failures += 1;
+                    continue;
+                }
+                let part = if live_part {
+                    0..words
+                } else {
+                    words..want.len()
+                };
+                for i in part.clone() {
+                    let (g, w) = (got[i], want[i]);
+                    cmp.value(g as f64, w as f64, || {
+                        let what = if live_part { "live word" } else { "block" };
                         format!(
-                            "n {n} holes {holes} margin {margin} block {i}: gpu {g:#b} cpu {w:#b}"
+                            "n {n} holes {holes} margin {margin} {what} {i}: gpu {g:#b} cpu {w:#b}"
                         )
                     });
                 }
-                if got.len() != want.len() {
-                    cmp.failures += 1;
-                }
-                live += want.iter().filter(|&&m| m != 0).count();
-                cases += want.len();
+                live += want[words..].iter().filter(|&&m| m != 0).count();
+                live_cells += want[..words]
+                    .iter()
+                    .map(|w| w.count_ones() as usize)
+                    .sum::<usize>();
+                cases += if live_part {
+                    (n as usize).pow(3)
+                } else {
+                    part.len()
+                };
             }
         }
     }
-    Ok(cmp.row(
-        "surface_blocks",
-        cases,
-        format!("masks exact; {live} of {cases} blocks live"),
-    ))
+    Ok(if live_part {
+        cmp.row(
+            "surface_live_cells",
+            cases,
+            format!("live-cell bits exact; {live_cells} of {cases} cells live"),
+        )
+    } else {
+        cmp.row(
+            "surface_blocks",
+            cases,
+            format!("masks exact; {live} of {cases} blocks live"),
+        )
+    })
 }

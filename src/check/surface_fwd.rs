@@ -20,6 +20,7 @@ use crate::cpu::surface_fwd::{
 use crate::gpu::Gpu;
 use crate::kernels::surface_fwd::{Push, INFO};
 use crate::math::surface::{SurfOut, SURF_MAX_LEVELS};
+use crate::math::surface_blocks::surf_live_words;
 use anyhow::Result;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
@@ -279,9 +280,17 @@ pub fn check(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
     // they drop hits, but both backends must skip alike).
     let real = build_blocks(&scene.grid(), &scene.levels, 0.0)?;
     let mut rng = Pcg64::seed_from_u64(seed ^ 0xb10c);
+    let words = surf_live_words(scene.n) as usize;
     let random: Vec<u32> = real
         .iter()
-        .map(|_| u32::from(rng.random::<f32>() < 0.4))
+        .enumerate()
+        .map(|(i, &w)| {
+            if i < words {
+                w // live-cell bits (exact), random block masks
+            } else {
+                u32::from(rng.random::<f32>() < 0.4)
+            }
+        })
         .collect();
     for (a, stop, blocks) in [(3.5f32, 1e-4f32, &real), (100.0, 1e-3, &random)] {
         let p = scene.params(a, stop);

@@ -1,18 +1,23 @@
-//! Twin of `glsl/surface_blocks.comp`: the level mask of every 8³-cell block of a stage-2 grid
-//! (coarse empty-space skipping for the surface walk; `math::surface_blocks` has the
-//! conventions), one rayon task per block.
+//! Twins of `glsl/surface_live_cells.comp` and `glsl/surface_blocks.comp`: the skip structure of
+//! the stage-2 walks (`math::surface_blocks` has the conventions) — a live bit per cell (all 8
+//! corners allocated and some level within its corners' δ range ± margin), then the level mask
+//! of every 8³-cell block; one rayon task per bit word and per block.
 
 use super::surface_fwd::SurfaceGridRef;
 use crate::math::surface::SURF_MAX_LEVELS;
 use crate::math::surface_blocks::{
-    surf_block_box, surf_block_mask, surf_blocks_per_axis, SURF_BLOCK_BIG, SURF_BLOCK_SHIFT,
+    surf_block_box, surf_block_mask, surf_blocks_per_axis, surf_live_words, SURF_BLOCK_BIG,
+    SURF_BLOCK_SHIFT,
 };
 use anyhow::{ensure, Result};
 use rayon::prelude::*;
 
-/// Block masks of grid `g` for `levels` (at most 8) widened by `margin` ≥ 0: `nb`³ entries,
-/// `nb = ceil((n−1)/8)`, x-major; bit i set iff τ_i ∈ [bmin − margin, bmax + margin] over the
-/// block's allocated vertices (0 if none). Pass `margin = 0` for masks of the current δ.
+/// The skip structure of grid `g` for `levels` (at most 8), ranges widened by `margin` ≥ 0:
+/// `surf_live_words(n)` words of live-cell bits (bit i of word i/32: the cell with lower-corner
+/// slot i has its 8 corners allocated and a level τ in [cmin − margin, cmax + margin] of their
+/// δ), then the `nb`³ block masks, `nb = ceil((n−1)/8)`, x-major: bit i set iff
+/// τ_i ∈ [bmin − margin, bmax + margin] over the block's allocated vertices (0 if none). Pass
+/// `margin = 0` for the structure of the current δ.
 pub fn build_blocks(g: &SurfaceGridRef, levels: &[f32], margin: f32) -> Result<Vec<u32>> {
     g.validate()?;
     ensure!(
@@ -26,28 +31,102 @@ pub fn build_blocks(g: &SurfaceGridRef, levels: &[f32], margin: f32) -> Result<V
     );
     let n = g.n;
     let nb = surf_blocks_per_axis(n);
-    Ok((0..nb * nb * nb)
-        .into_par_iter()
-        .map(|b| {
-            let l = [b / (nb * nb), (b / nb) % nb, b % nb].map(|x| (x as i32) << SURF_BLOCK_SHIFT);
-            let (lo, hi) = surf_block_box(l, n as i32);
-            let (v0, v1) = (lo.map(|x| x as u32), hi.map(|x| x as u32));
-            let (mut bmin, mut bmax) = (SURF_BLOCK_BIG, -SURF_BLOCK_BIG);
-            for x in v0[0]..=v1[0] {
-                for y in v0[1]..=v1[1] {
-                    let row = ((x * n + y) * n) as usize;
-                    for z in v0[2]..=v1[2] {
-                        let k = g.links[row + z as usize];
-                        if k < 0 {
-                            continue;
+    let mut out = live_cells(g, levels, margin);
+    out.extend(
+        (0..nb * nb * nb)
+            .into_par_iter()
+            .map(|b| {
+                let l =
+                    [b / (nb * nb), (b / nb) % nb, b % nb].map(|x| (x as i32) << SURF_BLOCK_SHIFT);
+                let (lo, hi) = surf_block_box(l, n as i32);
+                let (v0, v1) = (lo.map(|x| x as u32), hi.map(|x| x as u32));
+                let (mut bmin, mut bmax) = (SURF_BLOCK_BIG, -SURF_BLOCK_BIG);
+                for x in v0[0]..=v1[0] {
+                    for y in v0[1]..=v1[1] {
+                        let row = ((x * n + y) * n) as usize;
+                        for z in v0[2]..=v1[2] {
+                            let k = g.links[row + z as usize];
+                            if k < 0 {
+                                continue;
+                            }
+                            let d = g.delta[k as usize];
+                            bmin = bmin.min(d);
+                            bmax = bmax.max(d);
                         }
-                        let d = g.delta[k as usize];
-                        bmin = bmin.min(d);
-                        bmax = bmax.max(d);
                     }
                 }
+                surf_block_mask(bmin, bmax, margin, levels)
+            })
+            .collect::<Vec<u32>>(),
+    );
+    Ok(out)
+}
+
+/// The live-cell words of [`build_blocks`] (as `surface_live_cells.comp`, which reads the cells'
+/// allocation from precomputed complete-cell bits instead of the links: the same bits).
+fn live_cells(g: &SurfaceGridRef, levels: &[f32], margin: f32) -> Vec<u32> {
+    let n = g.n as usize;
+    let cells = n * n * n;
+    (0..surf_live_words(g.n) as usize)
+        .into_par_iter()
+        .map(|w| {
+            let mut bits = 0u32;
+            for b in 0..32 {
+                let ci = 32 * w + b;
+                if ci >= cells {
+                    break;
+                }
+                let (x, y, z) = (ci / (n * n), (ci / n) % n, ci % n);
+                if x + 1 >= n || y + 1 >= n || z + 1 >= n {
+                    continue;
+                }
+                let (mut cmin, mut cmax) = (SURF_BLOCK_BIG, -SURF_BLOCK_BIG);
+                let mut complete = true;
+                for k in 0..8 {
+                    let s = ci + (k >> 2) * n * n + ((k >> 1) & 1) * n + (k & 1);
+                    let l = g.links[s];
+                    if l < 0 {
+                        complete = false;
+                        break;
+                    }
+                    let d = g.delta[l as usize];
+                    cmin = cmin.min(d);
+                    cmax = cmax.max(d);
+                }
+                if complete && surf_block_mask(cmin, cmax, margin, levels) != 0 {
+                    bits |= 1 << b;
+                }
             }
-            surf_block_mask(bmin, bmax, margin, levels)
+            bits
         })
-        .collect())
+        .collect()
+}
+
+/// Bit i of word i/32 set when the cell whose lower corner is slot i (x-major, `n`³ slots) has
+/// its 8 corners allocated: `surface_live_cells` reads these instead of the links.
+pub fn complete_cells(links: &[i32], n: u32) -> Vec<u32> {
+    let mut bits = vec![0u32; surf_live_words(n) as usize];
+    let n = n as usize;
+    let (nz, nyz) = (n, n * n);
+    for x in 0..n.saturating_sub(1) {
+        for y in 0..n - 1 {
+            for z in 0..n - 1 {
+                let s = (x * n + y) * n + z;
+                let corners = [
+                    s,
+                    s + 1,
+                    s + nz,
+                    s + nz + 1,
+                    s + nyz,
+                    s + nyz + 1,
+                    s + nyz + nz,
+                    s + nyz + nz + 1,
+                ];
+                if corners.iter().all(|&c| links[c] >= 0) {
+                    bits[s / 32] |= 1 << (s % 32);
+                }
+            }
+        }
+    }
+    bits
 }

@@ -9,7 +9,7 @@ use crate::math::surface::{
     SURF_MAX_LEVELS,
 };
 use crate::math::surface_blocks::{
-    surf_block_index, surf_block_skip, surf_blocks_per_axis, SURF_NO_BLOCK,
+    surf_block_index, surf_block_skip, surf_blocks_per_axis, surf_live_words, SURF_NO_BLOCK,
 };
 use crate::math::trilerp::trilerp_weights;
 use anyhow::{ensure, Result};
@@ -81,9 +81,11 @@ pub struct WalkCell {
     pub mask: u32,
 }
 
-/// The cell walk both surface kernels share: DDA front to back from t = 0; cells of mask-0 blocks
-/// skipped (with `blocks`), cells with an unallocated corner and cells no level crosses passed
-/// over. `counts` = cells visited (links read), cubic solves, solves culled, blocks skipped.
+/// The cell walk both surface kernels share: DDA front to back from t = 0; with a skip structure
+/// (`blocks`, `cpu::surface_blocks::build_blocks`) cells of mask-0 blocks are skipped and cells
+/// whose live bit is clear are passed over unread; cells with an unallocated corner and cells no
+/// level crosses are passed over. `counts` = cells visited (corners read), cubic solves, solves
+/// culled, blocks skipped.
 pub struct CellWalk<'a> {
     g: &'a SurfaceGridRef<'a>,
     levels: &'a [f32],
@@ -122,19 +124,23 @@ impl Iterator for CellWalk<'_> {
         let n = g.n as usize;
         let (nz, nyz) = (n, n * n);
         let nb = surf_blocks_per_axis(g.n);
+        let words = surf_live_words(g.n) as usize;
         while let Some(piece) = dda_next(&mut self.w) {
             let l = piece.cell;
-            if let Some(blocks) = self.blocks {
+            let base = dda_cell_index(l, g.n) as usize;
+            if let Some(skip) = self.blocks {
                 let bi = surf_block_index(l, nb);
-                if blocks[bi as usize] == 0
+                if skip[words + bi as usize] == 0
                     && surf_block_skip(&mut self.w, self.dn, g.n as i32, l, bi, &mut self.skipped)
                 {
                     self.counts[3] += 1;
                     continue;
                 }
+                if skip[base >> 5] & (1 << (base & 31)) == 0 {
+                    continue;
+                }
             }
             self.counts[0] += 1;
-            let base = dda_cell_index(l, g.n) as usize;
             let lk = [
                 g.links[base],
                 g.links[base + 1],
@@ -160,8 +166,8 @@ impl Iterator for CellWalk<'_> {
     }
 }
 
-/// One ray: its output and counters. `blocks`: the block level masks of `g` for `p.levels`
-/// (`cpu::surface_blocks::build_blocks`), skipping blocks with mask 0; `None` walks every cell.
+/// One ray: its output and counters. `blocks`: the skip structure of `g` for `p.levels`
+/// (`cpu::surface_blocks::build_blocks`: live-cell bits and block masks); `None` walks every cell.
 pub fn render_ray(
     g: &SurfaceGridRef,
     ro: [f32; 3],
@@ -234,9 +240,11 @@ pub fn render_ray(
 pub fn validate_blocks(g: &SurfaceGridRef, blocks: Option<&[u32]>) -> Result<()> {
     if let Some(b) = blocks {
         let nb = surf_blocks_per_axis(g.n) as usize;
+        let words = surf_live_words(g.n) as usize;
         ensure!(
-            b.len() == nb * nb * nb,
-            "{} block masks, want {nb}³ for n = {}",
+            b.len() == words + nb * nb * nb,
+            "skip structure of {} words, want {words} live-cell words + {nb}³ block masks for \
+             n = {}",
             b.len(),
             g.n
         );

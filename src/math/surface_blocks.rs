@@ -34,6 +34,13 @@ pub fn surf_blocks_per_axis(n: u32) -> u32 {
     (n + (SURF_BLOCK - 2) as u32) >> SURF_BLOCK_SHIFT
 }
 
+/// Words of live-cell bits of an `n`³-vertex grid: ⌈n³/32⌉ (at least 1). The walks' skip
+/// structure is these words (bit i of word i/32: cell with lower-corner slot i is live), then
+/// the nb³ block masks.
+pub fn surf_live_words(n: u32) -> u32 {
+    (n * n * n).div_ceil(32).max(1)
+}
+
 /// Linear index of the block holding cell `l`.
 pub fn surf_block_index(l: [i32; 3], nb: u32) -> u32 {
     let b = l.map(|x| (x >> SURF_BLOCK_SHIFT) as u32);

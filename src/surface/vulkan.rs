@@ -9,6 +9,7 @@ use super::{
     SurfaceStepStats,
 };
 use crate::cpu::step::{STEP_COUNT, STEP_FLAGS, STEP_N, TOUCH_OPACITY, TOUCH_SH, TOUCH_SURFACE};
+use crate::cpu::surface_blocks::complete_cells;
 use crate::cpu::surface_fwd::{SurfCounts, SurfaceParams};
 use crate::cpu::surface_reg::{row_slots, NormalPrefix};
 use crate::cpu::surface_train::{RayLoss, SurfaceLoss, TrainCounts, SURF_MAX_HITS};
@@ -17,7 +18,7 @@ use crate::grid::surface::SurfaceGrid;
 use crate::grid::SH_DIM;
 use crate::kernels;
 use crate::math::surface::{SurfOut, SURF_MAX_LEVELS};
-use crate::math::surface_blocks::surf_blocks_per_axis;
+use crate::math::surface_blocks::{surf_blocks_per_axis, surf_live_words};
 use anyhow::{ensure, Result};
 
 /// Floats in the params buffer of `surface_train` (layout in the kernel's header).
@@ -40,41 +41,6 @@ pub fn train_params(sp: &SurfaceParams, loss: &SurfaceLoss) -> [f32; PARAMS_LEN]
     v
 }
 
-/// Words of [`complete_cells`] for an `n`³ grid (⌈n³/32⌉; the kernel's block masks follow them).
-pub fn complete_cells_len(n: u32) -> usize {
-    let n = n as usize;
-    (n * n * n).div_ceil(32).max(1)
-}
-
-/// Bit i of word i/32 set when the cell whose lower corner is slot i (x-major, `n`³ slots) has
-/// its 8 corners allocated: `surface_train`'s walk tests this bit before reading any link.
-pub fn complete_cells(links: &[i32], n: u32) -> Vec<u32> {
-    let mut bits = vec![0u32; complete_cells_len(n)];
-    let n = n as usize;
-    let (nz, nyz) = (n, n * n);
-    for x in 0..n.saturating_sub(1) {
-        for y in 0..n - 1 {
-            for z in 0..n - 1 {
-                let s = (x * n + y) * n + z;
-                let corners = [
-                    s,
-                    s + 1,
-                    s + nz,
-                    s + nz + 1,
-                    s + nyz,
-                    s + nyz + 1,
-                    s + nyz + nz,
-                    s + nyz + nz + 1,
-                ];
-                if corners.iter().all(|&c| links[c] >= 0) {
-                    bits[s / 32] |= 1 << (s % 32);
-                }
-            }
-        }
-    }
-    bits
-}
-
 /// The data term of one training pass, read back (see [`VulkanSurface::gradients`]).
 pub struct SurfaceGradients {
     pub ray_loss: Vec<RayLoss>,
@@ -93,8 +59,9 @@ pub struct VulkanSurface {
     meta: SurfaceGrid,
     rows: usize,
     links: GpuBuffer,
-    /// Complete-cell bits ([`complete_cells`], `complete_words` words), then the nb³ block level
-    /// masks of `surface_blocks` (rebuilt before every pass that walks).
+    /// Complete-cell bits ([`complete_cells`], `complete_words` words, static), then the walks'
+    /// skip structure: as many live-cell words (`surface_live_cells`) and the nb³ block level
+    /// masks (`surface_blocks`), rebuilt whenever δ may have drifted past their margin.
     complete: GpuBuffer,
     complete_words: u64,
     /// When the block masks must be rebuilt.
@@ -177,10 +144,10 @@ impl VulkanSurface {
             complete: {
                 let mut words = complete_cells(&grid.links, grid.res[0]);
                 let nb = surf_blocks_per_axis(grid.res[0]) as usize;
-                words.resize(words.len() + nb * nb * nb, 0);
+                words.resize(2 * words.len() + nb * nb * nb, 0);
                 gpu.upload(&words)?
             },
-            complete_words: complete_cells_len(grid.res[0]) as u64,
+            complete_words: surf_live_words(grid.res[0]) as u64,
             refresh: BlockRefresh::default(),
             allocated_span: (
                 grid.links.iter().position(|&l| l >= 0).unwrap_or(0) as u32,
@@ -288,7 +255,7 @@ impl VulkanSurface {
             &kernels::surface_train::INFO,
             &kernels::surface_train::Push {
                 links: self.links.address(),
-                complete: self.complete.address(),
+                skip: self.skip_address(),
                 delta: self.delta.address(),
                 opacity: self.opacity.address(),
                 sh: self.sh.address(),
@@ -311,23 +278,40 @@ impl VulkanSurface {
         Ok(b)
     }
 
-    /// Device address of the block masks (after the complete-cell bits).
-    fn blocks_address(&self) -> u64 {
+    /// Device address of the skip structure (after the complete-cell bits).
+    fn skip_address(&self) -> u64 {
         self.complete.address() + 4 * self.complete_words
     }
 
-    /// Record `surface_blocks`: the level masks of the current δ per 8³-cell block, widened by
-    /// `margin` (see `BlockRefresh`), so the walks skip only blocks that cannot hold a hit.
+    /// Record `surface_live_cells` and `surface_blocks`: the skip structure of the current δ
+    /// (live-cell bits, and level masks per 8³-cell block), ranges widened by `margin` (see
+    /// `BlockRefresh`), so the walks skip only cells and blocks that cannot hold a hit.
     fn record_blocks(&self, b: &mut Batch, margin: f32) -> Result<()> {
         let n = self.meta.res[0];
         let nb = surf_blocks_per_axis(n);
+        let words = self.complete_words as u32;
+        b.dispatch_1d(
+            &kernels::surface_live_cells::INFO,
+            &kernels::surface_live_cells::Push {
+                complete: self.complete.address(),
+                links: self.links.address(),
+                delta: self.delta.address(),
+                levels: self.levels.address(),
+                live: self.skip_address(),
+                n,
+                n_levels: self.meta.levels.len() as u32,
+                margin,
+                ..Default::default()
+            },
+            words,
+        )?;
         b.dispatch_1d(
             &kernels::surface_blocks::INFO,
             &kernels::surface_blocks::Push {
                 links: self.links.address(),
                 delta: self.delta.address(),
                 levels: self.levels.address(),
-                blocks: self.blocks_address(),
+                blocks: self.skip_address() + 4 * self.complete_words,
                 n,
                 n_levels: self.meta.levels.len() as u32,
                 margin,
@@ -614,7 +598,7 @@ impl SurfaceBackend for VulkanSurface {
                 n_levels: self.meta.levels.len() as u32,
                 a,
                 stop_thresh,
-                blocks: self.blocks_address(),
+                blocks: self.skip_address(),
                 block_skip: 1,
             },
             n as u32,
