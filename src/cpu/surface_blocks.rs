@@ -130,3 +130,48 @@ pub fn complete_cells(links: &[i32], n: u32) -> Vec<u32> {
     }
     bits
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A 3³-vertex grid (8 cells), every vertex allocated with δ = its slot index.
+    fn ramp() -> (Vec<i32>, Vec<f32>) {
+        ((0..27).collect(), (0..27).map(|s| s as f32).collect())
+    }
+
+    fn live(links: &[i32], delta: &[f32], levels: &[f32], margin: f32) -> u32 {
+        let (o, sh) = (vec![0.0; delta.len()], vec![0.0; delta.len() * 27]);
+        let g = SurfaceGridRef {
+            n: 3,
+            links,
+            delta,
+            opacity: &o,
+            sh: &sh,
+        };
+        build_blocks(&g, levels, margin).unwrap()[0]
+    }
+
+    #[test]
+    fn live_bits_are_inclusive_need_every_corner_and_honour_the_margin() {
+        let (mut links, delta) = ramp();
+        let c0 = 1u32;
+        // τ = 13, the shared centre vertex's value, ends or lies in every cell's range
+        // [s, s + 13] (s = lower-corner slot): all 8 cells live (closed ranges).
+        let all = [0, 1, 3, 4, 9, 10, 12, 13]
+            .iter()
+            .fold(0u32, |m, &s| m | 1 << s);
+        assert_eq!(live(&links, &delta, &[13.0], 0.0), all);
+        // τ just above a cell's max: dead; the cell (1,1,1) range [13, 26] ends at 26.
+        assert_eq!(live(&links, &delta, &[26.0], 0.0), 1 << 13);
+        assert_eq!(live(&links, &delta, &[26.5], 0.0), 0);
+        // Only the cells whose range holds τ = 0.5: cell (0,0,0) alone.
+        assert_eq!(live(&links, &delta, &[0.5], 0.0), c0);
+        // Just below every range: dead, until the margin reaches it.
+        assert_eq!(live(&links, &delta, &[-0.25], 0.0), 0);
+        assert_eq!(live(&links, &delta, &[-0.25], 0.25), c0);
+        // An unallocated corner kills the cell whatever its range.
+        links[13] = -1;
+        assert_eq!(live(&links, &delta, &[0.5], 0.0), 0);
+    }
+}
