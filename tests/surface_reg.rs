@@ -2,7 +2,7 @@
 //! central finite differences of independent f64 definitions (Lδ through tv.comp/cpu::tv with
 //! `delta_tv_chunk`, TVα with `opacity_tv_chunk`, Lα, Ln1 + Ln2) on small hand-built grids;
 //! adversarial cases (unallocated neighbours, grid edges, zero-length normals, σα ≤ 0, chunks
-//! that wrap); the parity rows of the three stage-2 kernels under validation.
+//! that wrap); the parity rows of the stage-2 kernels under validation.
 
 use alphasurf::check::surface_reg::{empty_step, gpu_normal_reg, RegGrid};
 use alphasurf::cpu::step::{TOUCH_OPACITY, TOUCH_SURFACE};
@@ -570,7 +570,9 @@ fn parity_rows_pass() {
     let gpu = alphasurf::gpu::test_gpu();
     for name in [
         "surface_opacity_reg",
-        "surface_normal_reg",
+        "surface_normal_reg_cells",
+        "surface_normal_reg_pairs",
+        "surface_normal_reg_gather",
         "surface_rmsprop",
     ] {
         let (_, f) = alphasurf::check::CHECKS

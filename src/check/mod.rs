@@ -57,7 +57,12 @@ pub const CHECKS: &[(&str, CheckFn)] = &[
     ("surface_fwd", surface_fwd::check),
     ("surface_train", surface_train::check),
     ("surface_opacity_reg", surface_reg::check_opacity_reg),
-    ("surface_normal_reg", surface_reg::check_normal_reg),
+    ("surface_normal_reg_cells", surface_reg::check_normal_cells),
+    ("surface_normal_reg_pairs", surface_reg::check_normal_pairs),
+    (
+        "surface_normal_reg_gather",
+        surface_reg::check_normal_gather,
+    ),
     ("surface_rmsprop", surface_reg::check_rmsprop),
 ];
 

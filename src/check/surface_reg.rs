@@ -1,7 +1,7 @@
-//! Parity of the stage-2 regulariser and optimiser kernels (surface_opacity_reg,
-//! surface_normal_reg, surface_rmsprop) with their CPU twins, on a random surface grid with a
-//! band of allocated vertices around a noisy sphere (unallocated neighbours, holes), a slab
-//! allocated on the grid's outer faces, a flat block (tiny normals), σα ≤ 0, tiny and large
+//! Parity of the stage-2 regulariser and optimiser kernels (surface_opacity_reg, the three
+//! surface_normal_reg_* passes, surface_rmsprop) with their CPU twins, on a random surface grid
+//! with a band of allocated vertices around a noisy sphere (unallocated neighbours, holes), a
+//! slab allocated on the grid's outer faces, a flat block (tiny normals), σα ≤ 0, tiny and large
 //! σα, and chunks inside, whole and wrapping past the end.
 
 use super::{CheckRow, Compare};
@@ -9,13 +9,14 @@ use crate::cpu::step::{
     optim_args, STEP_COUNT, STEP_FLAGS, STEP_N, TOUCH_OPACITY, TOUCH_SH, TOUCH_SURFACE,
 };
 use crate::cpu::surface_reg::{
-    row_slots, surface_normal_reg, surface_opacity_reg, NormalChunk, NormalPrefix, NormalRegStats,
-    OpacityChunk,
+    normal_reg_passes, row_slots, surface_opacity_reg, NormalChunk, NormalPrefix, NormalScratch,
+    OpacityChunk, CORNERS_STRIDE, NORMALS_STRIDE,
 };
 use crate::cpu::{surface_rmsprop_sparse, Stage2Params, SurfaceRmsProp};
 use crate::gpu::{Gpu, GpuBuffer};
 use crate::grid::SH_DIM;
 use crate::kernels;
+use crate::surface::normal_reg::{record_normal_reg, NormalRegBuffers, NormalRegIo};
 use anyhow::Result;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
@@ -101,50 +102,62 @@ pub struct GpuRegOut {
     pub touched: Vec<u32>,
     /// loss[0].
     pub loss: f32,
-    /// skipped[0] (surface_normal_reg only; zero otherwise).
+    /// skipped[0] (the normal regularisers only; zero otherwise).
     pub skipped: u32,
     /// Device time of the kernel's dispatches, ns.
     pub ns: f64,
 }
 
-/// Run surface_normal_reg on the device.
-pub fn gpu_normal_reg(gpu: &Gpu, g: &RegGrid, grad0: &[f32], c: &NormalChunk) -> Result<GpuRegOut> {
+/// The kernels of the normal regularisers' passes, in order.
+pub const NORMAL_REG_KERNELS: [&str; 3] = [
+    "surface_normal_reg_cells",
+    "surface_normal_reg_pairs",
+    "surface_normal_reg_gather",
+];
+
+/// Run the normal regularisers' passes on the device (`ns`: their total), also returning the
+/// per-row arrays they passed on.
+pub fn gpu_normal_reg_scratch(
+    gpu: &Gpu,
+    g: &RegGrid,
+    grad0: &[f32],
+    c: &NormalChunk,
+) -> Result<(GpuRegOut, NormalScratch)> {
     let n = g.allocated();
-    let links = gpu.upload(&g.links)?;
-    let row_slot = gpu.upload(&row_slots(&g.links, n))?;
+    let prefix = NormalPrefix::new(&g.links, &row_slots(&g.links, n), g.res);
+    let bufs = NormalRegBuffers::new(gpu, &prefix)?;
     let delta = gpu.upload(&g.delta)?;
     let grad = gpu.upload(grad0)?;
     let step = gpu.upload(&empty_step(n))?;
     let loss = gpu.zeros::<f32>(1)?;
     let skipped = gpu.zeros::<u32>(1)?;
-    let t = gpu.run_1d(
-        &kernels::surface_normal_reg::INFO,
-        &kernels::surface_normal_reg::Push {
-            links: links.address(),
-            row_slot: row_slot.address(),
-            delta: delta.address(),
-            grad: grad.address(),
-            step: step.address(),
-            loss: loss.address(),
-            skipped: skipped.address(),
-            res: c.res,
-            rows: c.rows,
-            start: c.start,
-            count: c.count,
-            cells: c.cells,
-            lambda1: c.lambda1,
-            lambda2: c.lambda2,
-            touch_bits: c.touch,
-        },
-        c.count.min(c.rows),
-    )?;
-    Ok(GpuRegOut {
+    let io = NormalRegIo {
+        delta: delta.address(),
+        grad: grad.address(),
+        step: step.address(),
+        loss: loss.address(),
+        skipped: skipped.address(),
+    };
+    let mut b = gpu.batch()?;
+    record_normal_reg(&mut b, &bufs, &io, c)?;
+    let t = b.submit()?;
+    let out = GpuRegOut {
         grad: grad.download()?,
         touched: step.download_range(STEP_FLAGS, n)?,
         loss: loss.download::<f32>()?[0],
         skipped: skipped.download::<u32>()?[0],
-        ns: t.kernel_ns("surface_normal_reg"),
-    })
+        ns: NORMAL_REG_KERNELS.iter().map(|k| t.kernel_ns(k)).sum(),
+    };
+    let scratch = NormalScratch {
+        normals: bufs.normals.download_range(0, NORMALS_STRIDE * n)?,
+        corners: bufs.corners.download_range(0, CORNERS_STRIDE * n)?,
+    };
+    Ok((out, scratch))
+}
+
+/// Run the normal regularisers' passes on the device.
+pub fn gpu_normal_reg(gpu: &Gpu, g: &RegGrid, grad0: &[f32], c: &NormalChunk) -> Result<GpuRegOut> {
+    Ok(gpu_normal_reg_scratch(gpu, g, grad0, c)?.0)
 }
 
 /// Run surface_opacity_reg on the device.
@@ -236,77 +249,138 @@ pub fn check_opacity_reg(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
     Ok(row)
 }
 
-pub fn check_normal_reg(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
+/// The parity rows of the three normal-regulariser passes, from the same runs: each compares
+/// its pass's output (cells: normals; pairs: each cell's corner gradients, loss, skipped pairs;
+/// gather: the gradient and the touched flags) on three chunks. No atomics in the gradient:
+/// lavapipe matches the twin bit for bit; the tolerances leave room for devices whose division
+/// and square root are not correctly rounded (the normals are sums and ×¼ only: exact).
+fn normal_reg_rows(gpu: &Gpu, seed: u64) -> Result<Vec<CheckRow>> {
     let g = reg_grid(seed, 24, 0.2);
     let n = g.allocated();
     let rows = n as u32;
-    let rs = row_slots(&g.links, n);
-    let prefix = NormalPrefix::new(&g.links, &rs, g.res);
+    let prefix = NormalPrefix::new(&g.links, &row_slots(&g.links, n), g.res);
     let mut rng = Pcg64::seed_from_u64(seed ^ 0xa11);
     let grad0 = random_vec(&mut rng, n, 1e-4);
-    let mut cmp = Compare::new(0.0, 0.0);
-    let (mut worst_l2, mut worst_loss, mut notes) = (0f64, 0f64, Vec::new());
     let cases = [
         (0, rows),
         (rows / 3, rows / 4),
         (rows - rows / 10, rows / 3),
     ];
+    let mut runs = Vec::new();
     for &(start, count) in &cases {
         let c = prefix.chunk(start, count, 1e-2, 1e-3);
         let (mut want, mut want_t) = (grad0.clone(), vec![0u32; n]);
-        let st: NormalRegStats =
-            surface_normal_reg(&g.links, &rs, &g.delta, &mut want, &mut want_t, &c);
-        let out = gpu_normal_reg(gpu, &g, &grad0, &c)?;
-        let (got, got_t, got_loss) = (out.grad, out.touched, out.loss);
-        // Atomic sums in another order: elementwise |Δ| ≤ 1e-6·max|added gradient| + 1e-4·|cpu|.
-        let scale = want
-            .iter()
-            .zip(&grad0)
-            .map(|(a, b)| (a - b).abs())
-            .fold(0f32, f32::max) as f64;
-        let mut e = Compare::new(1e-6 * scale, 1e-4);
+        let (st, ws) = normal_reg_passes(prefix.neighbours(), &g.delta, &mut want, &mut want_t, &c);
+        let (out, gs) = gpu_normal_reg_scratch(gpu, &g, &grad0, &c)?;
+        runs.push((start, count, c, st, ws, want, want_t, out, gs));
+    }
+    // Scales of the elementwise tolerances: the largest finite corner gradient, the largest
+    // added gradient.
+    let (mut corner_max, mut added_max) = (0f64, 0f64);
+    for (.., ws, want, _, _, _) in &runs {
+        for &v in ws.corners.iter().filter(|v| v.is_finite()) {
+            corner_max = corner_max.max(v.abs() as f64);
+        }
+        for (&w, &w0) in want.iter().zip(&grad0) {
+            added_max = added_max.max((w - w0).abs() as f64);
+        }
+    }
+    let mut cmp = [
+        Compare::new(0.0, 0.0),
+        Compare::new(1e-6 * corner_max, 1e-5),
+        Compare::new(1e-6 * added_max, 1e-5),
+    ];
+    let (mut worst_loss, mut worst_l2, mut flags_diff, mut notes) = (0f64, 0f64, 0, Vec::new());
+    for (start, count, c, st, ws, want, want_t, out, gs) in &runs {
+        for (k, (got, want, name, stride)) in [
+            (&gs.normals, &ws.normals, "normals", NORMALS_STRIDE),
+            (&gs.corners, &ws.corners, "corners", CORNERS_STRIDE),
+            (&out.grad, want, "grad", 1),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            for (i, (&a, &b)) in got.iter().zip(want.iter()).enumerate() {
+                cmp[k].value(a as f64, b as f64, || {
+                    format!(
+                        "chunk {start}+{count} {name}[{}][{}]",
+                        i / stride,
+                        i % stride
+                    )
+                });
+            }
+        }
+        cmp[1].value(out.skipped as f64, st.skipped as f64, || {
+            format!("chunk {start}+{count} skipped pairs")
+        });
         let (mut num, mut den) = (0f64, 0f64);
-        for (i, ((&a, &b), &b0)) in got.iter().zip(&want).zip(&grad0).enumerate() {
-            e.value(a as f64, b as f64, || {
-                format!("chunk {start}+{count} grad[{i}]")
-            });
+        for ((&a, &b), &b0) in out.grad.iter().zip(want).zip(&grad0) {
             num += (a as f64 - b as f64).powi(2);
             den += (b as f64 - b0 as f64).powi(2);
         }
-        let l2 = (num / den.max(1e-300)).sqrt();
-        worst_l2 = worst_l2.max(l2);
-        e.value(out.skipped as f64, st.skipped as f64, || {
-            format!("chunk {start}+{count} skipped pairs")
-        });
-        let fd = got_t.iter().zip(&want_t).filter(|(a, b)| a != b).count();
-        e.value(fd as f64, 0.0, || "touched flags differing".into());
-        worst_loss = worst_loss.max((got_loss as f64 - st.loss).abs() / st.loss.abs().max(1e-30));
+        worst_l2 = worst_l2.max((num / den.max(1e-300)).sqrt());
+        flags_diff += out
+            .touched
+            .iter()
+            .zip(want_t)
+            .filter(|(a, b)| a != b)
+            .count();
+        worst_loss = worst_loss.max((out.loss as f64 - st.loss).abs() / st.loss.abs().max(1e-30));
         notes.push(format!(
-            "chunk {start}+{count}: {} cells, {} skipped pairs",
-            c.cells, st.skipped
+            "chunk {start}+{count}: {} cells, {} skipped pairs, {} touched",
+            c.cells,
+            st.skipped,
+            want_t.iter().filter(|&&t| t != 0).count()
         ));
-        // Merge into the row's comparison.
-        cmp.compared += e.compared;
-        cmp.failures += e.failures;
-        cmp.max_abs = cmp.max_abs.max(e.max_abs);
-        cmp.max_rel = cmp.max_rel.max(e.max_rel);
-        if cmp.first_failure.is_none() {
-            cmp.first_failure = e.first_failure;
-        }
-        cmp.tol = e.tol;
     }
-    let mut row = cmp.row(
-        "surface_normal_reg",
+    cmp[2].value(flags_diff as f64, 0.0, || "touched flags differing".into());
+    let notes = notes.join("; ");
+    let [c0, c1, c2] = cmp;
+    let mut cells = c0.row(
+        "surface_normal_reg_cells",
+        cases.len(),
+        format!("cell normals, status and k, every row; {notes}"),
+    );
+    cells.tolerance = "exact (sums and ×¼ only)".into();
+    let mut pairs = c1.row(
+        "surface_normal_reg_pairs",
         cases.len(),
         format!(
-            "aggregate rel L2 of the added gradient {worst_l2:.1e} (≤ 1e-5 required); loss rel {worst_loss:.1e} (≤ 1e-5; \
-             terms are non-negative); skipped pairs and touched flags exact; {}",
-            notes.join("; ")
+            "cells' corner gradients (+∞ for cells in no pair) and skipped pairs; loss \
+             (float-atomic sum of non-negative terms) rel {worst_loss:.1e} (≤ 1e-5 required); \
+             {notes}"
         ),
     );
-    row.tolerance = "|Δ| ≤ 1e-6·max|Δgrad| + 1e-4·|cpu| elementwise (float-atomic sums)".into();
-    row.pass &= worst_l2 <= 1e-5 && worst_loss <= 1e-5;
-    Ok(row)
+    pairs.tolerance = "|Δ| ≤ 1e-6·max|corner| + 1e-5·|cpu| elementwise; +∞ exact".into();
+    pairs.pass &= worst_loss <= 1e-5;
+    let mut gather = c2.row(
+        "surface_normal_reg_gather",
+        cases.len(),
+        format!(
+            "gradient added to random initial values: rel L2 of the added gradient \
+             {worst_l2:.1e} (≤ 1e-6 required); touched flags exact; {notes}"
+        ),
+    );
+    gather.tolerance = "|Δ| ≤ 1e-6·max|Δgrad| + 1e-5·|cpu| elementwise".into();
+    gather.pass &= worst_l2 <= 1e-6;
+    Ok(vec![cells, pairs, gather])
+}
+
+/// The row of normal-regulariser pass `i` (see [`normal_reg_rows`]).
+fn normal_reg_row(gpu: &Gpu, seed: u64, i: usize) -> Result<CheckRow> {
+    Ok(normal_reg_rows(gpu, seed)?.swap_remove(i))
+}
+
+pub fn check_normal_cells(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
+    normal_reg_row(gpu, seed, 0)
+}
+
+pub fn check_normal_pairs(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
+    normal_reg_row(gpu, seed, 1)
+}
+
+pub fn check_normal_gather(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
+    normal_reg_row(gpu, seed, 2)
 }
 
 pub fn check_rmsprop(gpu: &Gpu, seed: u64) -> Result<CheckRow> {

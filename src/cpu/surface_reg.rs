@@ -1,14 +1,13 @@
 //! Twins of the stage-2 per-vertex regularisers (method.md §3.4): `glsl/surface_opacity_reg.comp`
-//! (Lα) and `glsl/surface_normal_reg.comp` (Ln1 + Ln2), same formulation and operation order as
-//! the kernels; and the [`TvChunk`]s with which `glsl/tv.comp` (twin [`super::tv`]) computes Lδ
-//! and TVα. Each function ADDS its gradient and flags every vertex it gives a gradient in
-//! `touched` (the twin of step.glsl's `touch`).
+//! (Lα) and the three passes `glsl/surface_normal_reg_{cells,pairs,gather}.comp` (Ln1 +
+//! Ln2; with `glsl/lib/normal_reg.glsl`), same formulation and operation order as the kernels;
+//! and the [`TvChunk`]s with which `glsl/tv.comp` (twin [`super::tv`]) computes Lδ and TVα. Each
+//! function ADDS its gradient and flags every vertex it gives a gradient in `touched` (the twin
+//! of step.glsl's `touch_mask`).
 
-use super::atomic::{add, as_atomic, as_atomic_u32};
-use super::step::{touch_mask, TOUCH_DELTA, TOUCH_OPACITY};
+use super::step::{TOUCH_DELTA, TOUCH_OPACITY};
 use super::TvChunk;
 use rayon::prelude::*;
-use std::sync::atomic::AtomicU32;
 
 /// Lα over a chunk of allocated vertex rows: rows (start + i) mod rows for i < min(count, rows)
 /// (the kernel wraps; `rows` is the allocated vertex count).
@@ -76,94 +75,85 @@ pub struct NormalRegStats {
 /// Pairs where a cell's unnormalised normal has |n|² at most this are skipped (no direction).
 pub const TINY_NORMAL2: f32 = 1e-12;
 
-/// A cell's state: missing (outside the grid or a corner unallocated), tiny normal, or a
-/// direction.
-#[derive(Clone, Copy, PartialEq)]
-enum Cell {
-    Missing,
-    Tiny([i32; 8]),
-    Valid([i32; 8], [f32; 3]),
-}
+/// Ints per row of the neighbour table (layout in glsl/lib/normal_reg.glsl): [0] k, [j] the row
+/// of v + NBR_B[j], [8 + j] the row of v − NBR_B[j] (j = 1..7; −1 outside the grid or
+/// unallocated), [8] −1.
+pub const NBR_STRIDE: usize = 16;
+/// The corner offset b (4·x + 2·y + z bits) of neighbour-table entry j and 8 + j: the face
+/// neighbours z, y, x first.
+pub const NBR_B: [usize; 8] = [0, 1, 2, 4, 3, 5, 6, 7];
+/// Floats per row of the normals ((n, status + 4·k)) and corners (∂L/∂δ of the 8 corners, +∞
+/// for a cell in no kept pair) arrays.
+pub const NORMALS_STRIDE: usize = 4;
+pub const CORNERS_STRIDE: usize = 8;
 
-fn slot_vertex(res: [u32; 3], s: usize) -> [usize; 3] {
+/// The normal regulariser's neighbour table of every row (see [`NBR_STRIDE`]): the rows of the
+/// vertices v ± b and k, the number of existing forward neighbour cells of the cell v (a cell
+/// exists when it lies inside the grid and its 8 corners are allocated; k = 0 when the cell
+/// does not). Depends on the allocation only.
+pub fn normal_neighbours(links: &[i32], row_slot: &[u32], res: [u32; 3]) -> Vec<i32> {
     let (ry, rz) = (res[1] as usize, res[2] as usize);
-    [s / (ry * rz), (s / rz) % ry, s % rz]
-}
-
-fn axis_stride(res: [u32; 3], a: usize) -> usize {
-    [(res[1] * res[2]) as usize, res[2] as usize, 1][a]
-}
-
-/// The corner links of the cell at slot s, vertex v, if it exists.
-fn cell_links(links: &[i32], res: [u32; 3], s: usize, v: [usize; 3]) -> Option<[i32; 8]> {
-    if (0..3).any(|a| v[a] + 1 >= res[a] as usize) {
-        return None;
-    }
-    let mut l = [0i32; 8];
-    for (k, lk) in l.iter_mut().enumerate() {
-        let cs =
-            s + ((k >> 2) & 1) * axis_stride(res, 0) + ((k >> 1) & 1) * res[2] as usize + (k & 1);
-        *lk = links[cs];
-        if *lk < 0 {
-            return None;
-        }
-    }
-    Some(l)
-}
-
-/// Twin of the kernel's `cell_normal`.
-fn cell_normal(links: &[i32], delta: &[f32], res: [u32; 3], s: usize, v: [usize; 3]) -> Cell {
-    let Some(l) = cell_links(links, res, s, v) else {
-        return Cell::Missing;
-    };
-    let d = l.map(|x| delta[x as usize]);
-    let mx = ((d[4] + d[5]) + (d[6] + d[7])) - ((d[0] + d[1]) + (d[2] + d[3]));
-    let my = ((d[2] + d[3]) + (d[6] + d[7])) - ((d[0] + d[1]) + (d[4] + d[5]));
-    let mz = ((d[1] + d[3]) + (d[5] + d[7])) - ((d[0] + d[2]) + (d[4] + d[6]));
-    let n = [mx * 0.25, my * 0.25, mz * 0.25];
-    let n2 = (n[0] * n[0] + n[1] * n[1]) + n[2] * n[2];
-    if n2 <= TINY_NORMAL2 {
-        Cell::Tiny(l)
-    } else {
-        Cell::Valid(l, n)
-    }
-}
-
-/// Number of existing forward neighbours of the cell of row slot s (0 if it does not exist).
-fn existing_neighbours(links: &[i32], res: [u32; 3], s: usize) -> u32 {
-    let v = slot_vertex(res, s);
-    if cell_links(links, res, s, v).is_none() {
-        return 0;
-    }
-    (0..3)
-        .filter(|&a| {
-            let mut va = v;
-            va[a] += 1;
-            cell_links(links, res, s + axis_stride(res, a), va).is_some()
+    let mut nbr = vec![-1i32; NBR_STRIDE * row_slot.len()];
+    nbr.par_chunks_mut(NBR_STRIDE)
+        .zip(row_slot)
+        .for_each(|(t, &s)| {
+            let s = s as usize;
+            let v = [s / (ry * rz), (s / rz) % ry, s % rz];
+            for (j, &b) in NBR_B.iter().enumerate().skip(1) {
+                let o = [(b >> 2) & 1, (b >> 1) & 1, b & 1];
+                let off = (o[0] * ry + o[1]) * rz + o[2];
+                if (0..3).all(|a| v[a] + o[a] < res[a] as usize) {
+                    t[j] = links[s + off];
+                }
+                if (0..3).all(|a| v[a] >= o[a]) {
+                    t[8 + j] = links[s - off];
+                }
+            }
+        });
+    // k: the cell exists when its 7 other corners are rows; its forward neighbours are the cells
+    // of its corners 1, 2, 4 (entries 1, 2, 3).
+    let exists = |r: usize| (1..8).all(|j| nbr[NBR_STRIDE * r + j] >= 0);
+    let k: Vec<i32> = (0..row_slot.len())
+        .into_par_iter()
+        .map(|r| {
+            if !exists(r) {
+                return 0;
+            }
+            (1..4)
+                .filter(|&j| exists(nbr[NBR_STRIDE * r + j] as usize))
+                .count() as i32
         })
-        .count() as u32
+        .collect();
+    for (t, k) in nbr.chunks_mut(NBR_STRIDE).zip(k) {
+        t[0] = k;
+    }
+    nbr
 }
 
-/// Per-grid prefix count of the rows whose cell has an existing forward neighbour; gives the
+/// Per-grid data of the normal regularisers: the neighbour table ([`normal_neighbours`]) and a
+/// prefix count of the rows whose cell has an existing forward neighbour, which gives the
 /// denominator M of any row chunk. Depends on the allocation only: build it once per grid.
 pub struct NormalPrefix {
     res: [u32; 3],
+    nbr: Vec<i32>,
     /// prefix[r] = number of such rows below r (rows + 1 entries).
     prefix: Vec<u32>,
 }
 
 impl NormalPrefix {
     pub fn new(links: &[i32], row_slot: &[u32], res: [u32; 3]) -> NormalPrefix {
-        let has: Vec<u32> = row_slot
-            .par_iter()
-            .map(|&s| (existing_neighbours(links, res, s as usize) > 0) as u32)
-            .collect();
-        let mut prefix = Vec::with_capacity(has.len() + 1);
+        let nbr = normal_neighbours(links, row_slot, res);
+        let mut prefix = Vec::with_capacity(row_slot.len() + 1);
         prefix.push(0);
-        for h in has {
-            prefix.push(prefix.last().copied().unwrap_or(0) + h);
+        for t in nbr.chunks(NBR_STRIDE) {
+            prefix.push(prefix.last().copied().unwrap_or(0) + (t[0] > 0) as u32);
         }
-        NormalPrefix { res, prefix }
+        NormalPrefix { res, nbr, prefix }
+    }
+
+    /// The neighbour table ([`normal_neighbours`]).
+    pub fn neighbours(&self) -> &[i32] {
+        &self.nbr
     }
 
     /// The number of allocated rows.
@@ -171,8 +161,8 @@ impl NormalPrefix {
         (self.prefix.len() - 1) as u32
     }
 
-    /// The chunk of rows (start + i) mod rows, i < min(count, rows), with its M.
-    /// The chunk of `count` rows from `start`, flagging δ touched (set `touch` to change that).
+    /// The chunk of `count` rows from `start` (rows (start + i) mod rows, i < min(count, rows)),
+    /// with its M, flagging δ touched (set `touch` to change that).
     pub fn chunk(&self, start: u32, count: u32, lambda1: f32, lambda2: f32) -> NormalChunk {
         let rows = self.rows();
         let n = count.min(rows);
@@ -200,19 +190,11 @@ fn norm3(n: [f32; 3]) -> f32 {
     ((n[0] * n[0] + n[1] * n[1]) + n[2] * n[2]).sqrt()
 }
 
-/// ∂L/∂n from ∂L/∂N for N = n/|n|: (g − N·(N·g))/|n|.
-fn unnormalise_grad(n: [f32; 3], g: [f32; 3]) -> [f32; 3] {
-    let r = norm3(n);
-    let nn = n.map(|x| x / r);
-    let p = (nn[0] * g[0] + nn[1] * g[1]) + nn[2] * g[2];
-    std::array::from_fn(|i| (g[i] - nn[i] * p) / r)
-}
-
-/// ∂n/∂δ_k contracted with gn: Σ_a gn_a·(bit_a(k) ? +¼ : −¼).
-fn corner_grad(k: usize, gn: [f32; 3]) -> f32 {
+/// ∂n/∂δ_b contracted with gn: Σ_a gn_a·(bit_a(b) ? +¼ : −¼).
+fn corner_grad(b: usize, gn: [f32; 3]) -> f32 {
     let q = gn.map(|x| x * 0.25);
     let s = |bit: usize, x: f32| if bit != 0 { x } else { -x };
-    (s((k >> 2) & 1, q[0]) + s((k >> 1) & 1, q[1])) + s(k & 1, q[2])
+    (s((b >> 2) & 1, q[0]) + s((b >> 1) & 1, q[1])) + s(b & 1, q[2])
 }
 
 /// GLSL sign(): 0 at 0.
@@ -226,89 +208,213 @@ fn sign0(x: f32) -> f32 {
     }
 }
 
-/// Twin of the kernel's `cell_term` for chunk cell i: adds its gradients, returns its loss share
-/// and skipped pairs.
-fn cell_term(
-    links: &[i32],
-    row_slot: &[u32],
-    delta: &[f32],
-    c: &NormalChunk,
-    i: usize,
-    grad: &[AtomicU32],
-    flags: &[AtomicU32],
-) -> (f64, u32) {
-    let rows = c.rows as usize;
-    let s = row_slot[(c.start as usize % rows + i) % rows] as usize;
-    let v = slot_vertex(c.res, s);
-    let own = cell_normal(links, delta, c.res, s, v);
-    if own == Cell::Missing {
-        return (0.0, 0);
-    }
-    let mut k = 0u32;
-    let mut skipped = 0u32;
-    let nb: [Option<([i32; 8], [f32; 3])>; 3] = std::array::from_fn(|a| {
-        let mut va = v;
-        va[a] += 1;
-        let cn = cell_normal(links, delta, c.res, s + axis_stride(c.res, a), va);
-        if cn != Cell::Missing {
-            k += 1;
-        }
-        match (cn, own) {
-            (Cell::Valid(l, n), Cell::Valid(..)) => Some((l, n)),
-            (Cell::Missing, _) => None,
-            _ => {
-                skipped += 1;
-                None
+/// Pass 1, twin of `surface_normal_reg_cells`: normals[r] = (n, status + 4·k) of every row's
+/// cell (0 where it does not exist).
+pub fn normal_cells(nbr: &[i32], delta: &[f32]) -> Vec<f32> {
+    let mut normals = vec![0f32; NORMALS_STRIDE * (nbr.len() / NBR_STRIDE)];
+    normals
+        .par_chunks_mut(NORMALS_STRIDE)
+        .zip(nbr.par_chunks(NBR_STRIDE))
+        .enumerate()
+        .for_each(|(r, (out, t))| {
+            if t[1..8].iter().any(|&l| l < 0) {
+                return;
             }
-        }
-    });
-    let Cell::Valid(lc, nc) = own else {
-        return (0.0, skipped);
-    };
-    if nb.iter().all(Option::is_none) {
-        return (0.0, skipped);
-    }
-    let w = 1.0 / (k as f32 * c.cells as f32);
-    let rc = norm3(nc);
-    let n_c = nc.map(|x| x / rc);
-    let mut gc = [0f32; 3];
-    let mut g = [0f32; 8];
-    let mut lsum = 0f32;
-    for (a, nb) in nb.iter().enumerate() {
-        let Some((ln, nn)) = nb else { continue };
-        let r = norm3(*nn);
-        let n_n = nn.map(|x| x / r);
-        let d: [f32; 3] = std::array::from_fn(|j| n_c[j] - n_n[j]);
-        let l1 = (d[0].abs() + d[1].abs()) + d[2].abs();
-        let l2 = (d[0] * d[0] + d[1] * d[1]) + d[2] * d[2];
-        lsum += c.lambda1 * l1 + c.lambda2 * l2;
-        let gn: [f32; 3] =
-            std::array::from_fn(|j| w * (c.lambda1 * sign0(d[j]) + (2.0 * c.lambda2) * d[j]));
-        for j in 0..3 {
-            gc[j] += gn[j];
-        }
-        let gnn = unnormalise_grad(*nn, gn.map(|x| -x));
-        let bit = 4usize >> a;
-        for kk in 0..8 {
-            let gk = corner_grad(kk, gnn);
-            if kk & bit == 0 {
-                g[kk | bit] += gk;
-            } else {
-                add(&grad[ln[kk] as usize], gk);
-                touch_mask(flags, ln[kk] as usize, c.touch);
+            let mut d = [delta[r]; 8];
+            for j in 1..8 {
+                d[NBR_B[j]] = delta[t[j] as usize];
             }
-        }
-    }
-    let gnc = unnormalise_grad(nc, gc);
-    for kk in 0..8 {
-        add(&grad[lc[kk] as usize], g[kk] + corner_grad(kk, gnc));
-        touch_mask(flags, lc[kk] as usize, c.touch);
-    }
-    ((w * lsum) as f64, skipped)
+            let mx = ((d[4] + d[5]) + (d[6] + d[7])) - ((d[0] + d[1]) + (d[2] + d[3]));
+            let my = ((d[2] + d[3]) + (d[6] + d[7])) - ((d[0] + d[1]) + (d[4] + d[5]));
+            let mz = ((d[1] + d[3]) + (d[5] + d[7])) - ((d[0] + d[2]) + (d[4] + d[6]));
+            let n = [mx * 0.25, my * 0.25, mz * 0.25];
+            let n2 = (n[0] * n[0] + n[1] * n[1]) + n[2] * n[2];
+            let status = if n2 <= TINY_NORMAL2 { 1 } else { 2 };
+            out.copy_from_slice(&[n[0], n[1], n[2], (status + 4 * t[0] as u32) as f32]);
+        });
+    normals
 }
 
-/// Ln1 + Ln2 (see `glsl/surface_normal_reg.comp` for the definition): grad += ∂loss/∂δ by atomic
-/// adds (as the kernel), the corners of the cells of every kept pair touched.
+/// A normals entry: (n, status, k).
+fn read_normal(normals: &[f32], r: usize) -> ([f32; 3], u32, u32) {
+    let e = &normals[NORMALS_STRIDE * r..][..NORMALS_STRIDE];
+    let w = e[3] as u32;
+    ([e[0], e[1], e[2]], w & 3, w >> 2)
+}
+
+/// Twin of `surface_normal_reg_pairs`'s pair_grad: w·(λ1·sign(d) + 2λ2·d).
+fn pair_grad(c: &NormalChunk, w: f32, d: [f32; 3]) -> [f32; 3] {
+    d.map(|x| w * (c.lambda1 * sign0(x) + (2.0 * c.lambda2) * x))
+}
+
+/// Twin of `surface_normal_reg_pairs`'s `cell_term` for row r: writes its corners (`out`),
+/// returns its loss share and its skipped forward pairs.
+fn cell_pairs(
+    nbr: &[i32],
+    normals: &[f32],
+    c: &NormalChunk,
+    r: usize,
+    out: &mut [f32],
+) -> (f64, u32) {
+    let (rows, start) = (c.rows as usize, (c.start % c.rows) as usize);
+    let count = (c.count as usize).min(rows);
+    let in_chunk = |r: usize| {
+        let i = if r >= start {
+            r - start
+        } else {
+            r + (rows - start)
+        };
+        i < count
+    };
+    let t = &nbr[NBR_STRIDE * r..][..NBR_STRIDE];
+    let (nc, st, k) = read_normal(normals, r);
+    let rc = norm3(nc);
+    let n_c = nc.map(|x| x / rc);
+    let mut g = [0f32; 3];
+    let mut member = false;
+    let (mut loss, mut skipped) = (0.0, 0u32);
+    if st != 0 && in_chunk(r) {
+        // The forward face neighbours along x, y, z (entries 3, 2, 1): corners of the cell, so
+        // rows.
+        let nb: [([f32; 3], bool); 3] = std::array::from_fn(|a| {
+            let (nn, sn, _) = read_normal(normals, t[3 - a] as usize);
+            let ok = sn == 2 && st == 2;
+            if sn != 0 && !ok {
+                skipped += 1;
+            }
+            (nn, ok)
+        });
+        if nb.iter().any(|x| x.1) {
+            let w = 1.0 / (k as f32 * c.cells as f32);
+            let mut lsum = 0f32;
+            for &(nn, ok) in &nb {
+                if !ok {
+                    continue;
+                }
+                let r_n = norm3(nn);
+                let d: [f32; 3] = std::array::from_fn(|j| n_c[j] - nn[j] / r_n);
+                let l1 = (d[0].abs() + d[1].abs()) + d[2].abs();
+                let l2 = (d[0] * d[0] + d[1] * d[1]) + d[2] * d[2];
+                lsum += c.lambda1 * l1 + c.lambda2 * l2;
+                let gp = pair_grad(c, w, d);
+                for j in 0..3 {
+                    g[j] += gp[j];
+                }
+            }
+            member = true;
+            loss = (w * lsum) as f64;
+        }
+    }
+    if st == 2 {
+        // The backward face neighbours along x, y, z (entries 11, 10, 9).
+        for a in 0..3 {
+            let l = t[11 - a];
+            if l < 0 {
+                continue;
+            }
+            let (nb, sb, kb) = read_normal(normals, l as usize);
+            if sb != 2 || !in_chunk(l as usize) {
+                continue;
+            }
+            let w = 1.0 / (kb as f32 * c.cells as f32);
+            let r_b = norm3(nb);
+            let d: [f32; 3] = std::array::from_fn(|j| nb[j] / r_b - n_c[j]);
+            let gp = pair_grad(c, w, d);
+            for j in 0..3 {
+                g[j] -= gp[j];
+            }
+            member = true;
+        }
+    }
+    if member {
+        let p = (n_c[0] * g[0] + n_c[1] * g[1]) + n_c[2] * g[2];
+        let u: [f32; 3] = std::array::from_fn(|j| (g[j] - n_c[j] * p) / rc);
+        for (b, o) in out.iter_mut().enumerate() {
+            *o = corner_grad(b, u);
+        }
+    } else {
+        out.fill(f32::INFINITY);
+    }
+    (loss, skipped)
+}
+
+/// Pass 2, twin of `surface_normal_reg_pairs`: every row's corners (∂L/∂δ of the cell's 8
+/// corners from its kept pairs, +∞ for a cell in none); returns the loss and the skipped pairs.
+pub fn normal_pairs(nbr: &[i32], normals: &[f32], c: &NormalChunk) -> (Vec<f32>, NormalRegStats) {
+    let mut corners = vec![0f32; CORNERS_STRIDE * (nbr.len() / NBR_STRIDE)];
+    let (loss, skipped) = corners
+        .par_chunks_mut(CORNERS_STRIDE)
+        .enumerate()
+        .map(|(r, out)| cell_pairs(nbr, normals, c, r, out))
+        .reduce(|| (0.0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+    (corners, NormalRegStats { loss, skipped })
+}
+
+/// Pass 3, twin of `surface_normal_reg_gather`: each vertex v (row r) sums corner b of its cells
+/// v − b (b = 0..7 in order; those that are rows and in a kept pair, i.e. not +∞); where it has
+/// such a cell, grad[r] += the sum and touched[r] |= `touch`.
+pub fn normal_gather(
+    nbr: &[i32],
+    corners: &[f32],
+    grad: &mut [f32],
+    touched: &mut [u32],
+    touch: u32,
+) {
+    grad.par_iter_mut()
+        .zip(touched.par_iter_mut())
+        .zip(nbr.par_chunks(NBR_STRIDE))
+        .enumerate()
+        .for_each(|(r, ((g, t), nb))| {
+            let mut sum = 0f32;
+            let mut hit = false;
+            let mut l = [r as i32; 8];
+            for j in 1..8 {
+                l[NBR_B[j]] = nb[8 + j];
+            }
+            for (b, &l) in l.iter().enumerate() {
+                if l < 0 {
+                    continue;
+                }
+                let c = corners[CORNERS_STRIDE * l as usize + b];
+                if c == f32::INFINITY {
+                    continue;
+                }
+                hit = true;
+                sum += c;
+            }
+            if hit {
+                *g += sum;
+                *t |= touch;
+            }
+        });
+}
+
+/// The per-row arrays the passes leave behind (layouts in glsl/lib/normal_reg.glsl).
+pub struct NormalScratch {
+    pub normals: Vec<f32>,
+    pub corners: Vec<f32>,
+}
+
+/// The three passes with the grid's neighbour table `nbr` ([`NormalPrefix::neighbours`]): as
+/// [`surface_normal_reg`], also returning the per-row arrays (for the parity checks).
+pub fn normal_reg_passes(
+    nbr: &[i32],
+    delta: &[f32],
+    grad: &mut [f32],
+    touched: &mut [u32],
+    c: &NormalChunk,
+) -> (NormalRegStats, NormalScratch) {
+    let normals = normal_cells(nbr, delta);
+    let (corners, st) = normal_pairs(nbr, &normals, c);
+    normal_gather(nbr, &corners, grad, touched, c.touch);
+    (st, NormalScratch { normals, corners })
+}
+
+/// Ln1 + Ln2 (definition in `glsl/surface_normal_reg_pairs.comp`) in the kernels' three passes,
+/// cell normals, pairs, gather (no atomics), with the neighbour table built here (callers that
+/// keep a [`NormalPrefix`] call [`normal_reg_passes`] with its table). Adds ∂loss/∂δ to `grad`
+/// and sets the `touch` bits of the corners of every cell in a kept pair. Nothing is done for an
+/// empty chunk.
 pub fn surface_normal_reg(
     links: &[i32],
     row_slot: &[u32],
@@ -317,14 +423,11 @@ pub fn surface_normal_reg(
     touched: &mut [u32],
     c: &NormalChunk,
 ) -> NormalRegStats {
-    let n = (c.count as usize).min(c.rows as usize);
-    let grad = as_atomic(grad);
-    let flags = as_atomic_u32(touched);
-    let (loss, skipped) = (0..n)
-        .into_par_iter()
-        .map(|i| cell_term(links, row_slot, delta, c, i, grad, flags))
-        .reduce(|| (0.0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
-    NormalRegStats { loss, skipped }
+    if c.count.min(c.rows) == 0 {
+        return NormalRegStats::default();
+    }
+    let nbr = normal_neighbours(links, row_slot, c.res);
+    normal_reg_passes(&nbr, delta, grad, touched, c).0
 }
 
 /// The slot of each allocated vertex row (the inverse of `links`), for [`surface_normal_reg`].

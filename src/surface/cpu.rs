@@ -6,7 +6,7 @@ use super::{
 };
 use crate::cpu::surface_blocks::build_blocks;
 use crate::cpu::surface_fwd::{render, SurfCounts};
-use crate::cpu::surface_reg::{row_slots, surface_normal_reg, surface_opacity_reg, NormalPrefix};
+use crate::cpu::surface_reg::{normal_reg_passes, row_slots, surface_opacity_reg, NormalPrefix};
 use crate::cpu::surface_train::{train, SurfaceGrads};
 use crate::cpu::{surface_rmsprop_sparse, tv, tv_rows, Stage2Params, SurfaceRmsProp};
 use crate::grid::surface::SurfaceGrid;
@@ -19,7 +19,8 @@ pub struct CpuSurface {
     grad: [Vec<f32>; 3],
     state: SurfaceState,
     touched: Vec<u32>,
-    /// Slot of each vertex row, and the cell counts the normal regulariser's chunks need.
+    /// Slot of each vertex row, and the normal regulariser's per-grid data (neighbour table, cell
+    /// counts of the chunks).
     row_slot: Vec<u32>,
     normals: NormalPrefix,
     /// The block masks the walks skip with, and when to rebuild them.
@@ -78,15 +79,12 @@ impl CpuSurface {
             if p.dense_delta() {
                 chunk.touch = 0;
             }
-            loss += surface_normal_reg(
-                &g.links,
-                &self.row_slot,
-                &g.delta,
-                &mut self.grad[0],
-                &mut self.touched,
-                &chunk,
-            )
-            .loss;
+            if chunk.count.min(chunk.rows) > 0 {
+                let nbr = self.normals.neighbours();
+                let (st, _) =
+                    normal_reg_passes(nbr, &g.delta, &mut self.grad[0], &mut self.touched, &chunk);
+                loss += st.loss;
+            }
         }
         Ok(loss)
     }

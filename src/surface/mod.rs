@@ -2,6 +2,7 @@
 //! twins and a Vulkan implementation running the GLSL kernels (one submission per step).
 
 mod cpu;
+pub mod normal_reg;
 mod vulkan;
 
 pub use cpu::CpuSurface;

@@ -1,9 +1,11 @@
 //! The Vulkan stage-2 backend: grid, gradients and optimiser state live in device buffers; a
 //! training step is one batch and one submission: step reset → surface_train → regularisers
-//! (Lδ and TVα through `tv`, Lα through surface_opacity_reg, Ln1/Ln2 through surface_normal_reg)
-//! (Lδ's TV with an invocation per vertex row) → surface_rmsprop: δ of every row when Lδ is on,
-//! then (optim_args → indirect) the flagged groups of the touched vertices.
+//! (Lδ and TVα through `tv`, Lα through surface_opacity_reg, Ln1/Ln2 through the three
+//! surface_normal_reg_* passes) (Lδ's TV with an invocation per vertex row) → surface_rmsprop: δ
+//! of every row when Lδ is on, then (optim_args → indirect) the flagged groups of the touched
+//! vertices.
 
+use super::normal_reg::{record_normal_reg, NormalRegBuffers, NormalRegIo};
 use super::{
     batch_loss, surface_params, BlockRefresh, SurfaceBackend, SurfaceState, SurfaceStepParams,
     SurfaceStepStats,
@@ -83,9 +85,12 @@ pub struct VulkanSurface {
     levels: GpuBuffer,
     /// Counters: 7 of surface_train, or 5 of surface_fwd.
     stats: GpuBuffer,
-    /// The slot of each allocated row, and the normal regulariser's per-grid prefix count.
+    /// The slot of each allocated row, and the normal regulariser's per-grid data (neighbour
+    /// table, prefix count).
     row_slot: GpuBuffer,
     normal_prefix: NormalPrefix,
+    /// The normal regulariser's neighbour table and per-row arrays on the device.
+    normal_bufs: NormalRegBuffers,
     /// Regulariser values: Lα, Ln (floats); pairs skipped by Ln (u32).
     reg_loss: GpuBuffer,
     reg_skipped: GpuBuffer,
@@ -137,6 +142,7 @@ impl VulkanSurface {
             ])
         };
         let row_slot = row_slots(&grid.links, n);
+        let normal_prefix = NormalPrefix::new(&grid.links, &row_slot, grid.res);
         Ok(VulkanSurface {
             gpu: gpu.clone(),
             rows: n,
@@ -172,7 +178,8 @@ impl VulkanSurface {
             } else {
                 gpu.upload(&row_slot)?
             },
-            normal_prefix: NormalPrefix::new(&grid.links, &row_slot, grid.res),
+            normal_bufs: NormalRegBuffers::new(gpu, &normal_prefix)?,
+            normal_prefix,
             reg_loss: gpu.zeros::<f32>(2)?,
             reg_skipped: gpu.zeros::<u32>(1)?,
             rays: None,
@@ -400,32 +407,19 @@ impl VulkanSurface {
             )?;
         }
         if let (Some((start, count, lambda1, lambda2)), true) = (p.regs.normals, rows > 0) {
-            // A row chunk (the kernel's convention), with its mean's denominator.
+            // A row chunk (the kernels' convention), with its mean's denominator.
             let mut c = self.normal_prefix.chunk(start, count, lambda1, lambda2);
             if p.dense_delta() {
                 c.touch = 0;
             }
-            b.dispatch_1d(
-                &kernels::surface_normal_reg::INFO,
-                &kernels::surface_normal_reg::Push {
-                    links: self.links.address(),
-                    row_slot: self.row_slot.address(),
-                    delta: self.delta.address(),
-                    grad: self.grad[0].address(),
-                    step: self.step.address(),
-                    loss: self.reg_loss.address() + 4,
-                    skipped: self.reg_skipped.address(),
-                    res,
-                    rows,
-                    start: c.start,
-                    count: c.count,
-                    cells: c.cells,
-                    lambda1: c.lambda1,
-                    lambda2: c.lambda2,
-                    touch_bits: c.touch,
-                },
-                count.min(rows),
-            )?;
+            let io = NormalRegIo {
+                delta: self.delta.address(),
+                grad: self.grad[0].address(),
+                step: self.step.address(),
+                loss: self.reg_loss.address() + 4,
+                skipped: self.reg_skipped.address(),
+            };
+            record_normal_reg(b, &self.normal_bufs, &io, &c)?;
         }
         Ok(())
     }

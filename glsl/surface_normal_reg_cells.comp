@@ -1,0 +1,53 @@
+#version 460
+// surface_normal_reg_cells — pass 1 of 3 of the stage-2 normal regularisers Ln1 + Ln2 (method.md
+// §3.4; definition in surface_normal_reg_pairs, layouts in normal_reg.glsl): the normal and
+// status of every cell. A cell is named by its lower corner vertex v (row r); it exists when it
+// lies inside the grid and its 8 corners are allocated (nbr[r][j] ≥ 0 for j = 1..7). Its normal
+// is n = (Σ_{b,c} δ_1bc − Σ_{b,c} δ_0bc, likewise for y and z)/4 (corner b = 4·x + 2·y + z bits).
+// Every row, not only the chunk's: the pairs pass reads the neighbours of the chunk's cells.
+// Thread mapping: flat id = r < rows, one cell (row) each; one owner per written element.
+// Inputs: nbr (rows of the corners, k), delta, rows.
+// Outputs: normals[r] = (n, status + 4·k) (plain stores; n = 0 where the cell does not exist).
+// CPU twin: cpu::surface_reg::normal_cells.
+#include "common.glsl"
+#include "normal_reg.glsl"
+#extension GL_EXT_control_flow_attributes : require
+layout(local_size_x = 64) in;
+
+layout(push_constant, scalar) uniform Push {
+    U64Buf nbr;
+    F32Buf delta;
+    Vec4Buf normals;
+    uint rows;
+} pc;
+
+void main() {
+    uint r = flat_id();
+    if (r >= pc.rows) return;
+    // l[b] = the row of corner b.
+    int l[8];
+    uint k = 0u;
+    [[unroll]] for (uint w = 0u; w < 4u; w++) {
+        ivec2 e = nbr_word(r, w);
+        if (w == 0u) {
+            k = uint(e.x);
+        } else {
+            l[NBR_B[2u * w]] = e.x;
+        }
+        l[NBR_B[2u * w + 1u]] = e.y;
+    }
+    l[0] = int(r);
+    vec4 out_n = vec4(0.0);
+    if (all(greaterThanEqual(ivec4(l[1], l[2], l[3], l[4]), ivec4(0)))
+        && all(greaterThanEqual(ivec3(l[5], l[6], l[7]), ivec3(0)))) {
+        float d[8];
+        [[unroll]] for (uint b = 0u; b < 8u; b++) d[b] = pc.delta.v[l[b]];
+        precise float mx = ((d[4] + d[5]) + (d[6] + d[7])) - ((d[0] + d[1]) + (d[2] + d[3]));
+        precise float my = ((d[2] + d[3]) + (d[6] + d[7])) - ((d[0] + d[1]) + (d[4] + d[5]));
+        precise float mz = ((d[1] + d[3]) + (d[5] + d[7])) - ((d[0] + d[2]) + (d[4] + d[6]));
+        vec3 n = vec3(mx, my, mz) * 0.25;
+        precise float n2 = (n.x * n.x + n.y * n.y) + n.z * n.z;
+        out_n = vec4(n, float((n2 <= TINY_NORMAL2 ? 1u : 2u) + 4u * k));
+    }
+    pc.normals.v[r] = pack4(out_n);
+}

@@ -1,0 +1,111 @@
+//! Recording of the stage-2 normal regularisers Ln1 + Ln2 (method.md §3.4) on the Vulkan device:
+//! the three passes `surface_normal_reg_{cells,pairs,gather}` (definition in
+//! `glsl/surface_normal_reg_pairs.comp`, layouts in `glsl/lib/normal_reg.glsl`, twin
+//! `cpu::surface_reg::normal_reg_passes`), shared by `VulkanSurface` and the parity checks.
+
+use crate::cpu::surface_reg::{NormalChunk, NormalPrefix, CORNERS_STRIDE, NORMALS_STRIDE};
+use crate::gpu::{Batch, Gpu, GpuBuffer};
+use crate::kernels;
+use anyhow::{ensure, Result};
+
+/// The per-grid buffers of the passes: the neighbour table, and the per-row arrays they pass on.
+pub struct NormalRegBuffers {
+    pub nbr: GpuBuffer,
+    pub normals: GpuBuffer,
+    pub corners: GpuBuffer,
+}
+
+impl NormalRegBuffers {
+    /// The buffers of the grid of `prefix` (at least one row each, so that none is empty).
+    pub fn new(gpu: &Gpu, prefix: &NormalPrefix) -> Result<Self> {
+        let rows = (prefix.rows() as usize).max(1);
+        let nbr = prefix.neighbours();
+        let b = NormalRegBuffers {
+            nbr: if nbr.is_empty() {
+                gpu.zeros::<i32>(16)?
+            } else {
+                gpu.upload(nbr)?
+            },
+            normals: gpu.zeros::<f32>(NORMALS_STRIDE * rows)?,
+            corners: gpu.zeros::<f32>(CORNERS_STRIDE * rows)?,
+        };
+        // The kernels read them as 64-bit words and pairs of words, declared 16-byte aligned.
+        for buf in [&b.nbr, &b.normals, &b.corners] {
+            ensure!(
+                buf.address() % 16 == 0,
+                "normal regulariser buffer at {:#x} is not 16-byte aligned",
+                buf.address()
+            );
+        }
+        Ok(b)
+    }
+}
+
+/// Device addresses of the inputs and outputs of the passes.
+#[derive(Clone, Copy, Debug)]
+pub struct NormalRegIo {
+    pub delta: u64,
+    /// ∂/∂δ, added to.
+    pub grad: u64,
+    /// The step record (touched flags and list).
+    pub step: u64,
+    /// One float, added to.
+    pub loss: u64,
+    /// One u32, added to (pairs skipped for a tiny normal).
+    pub skipped: u64,
+}
+
+/// Record the three passes for chunk `c` of the grid of `bufs` (nothing for an empty chunk).
+/// Every pass runs over all rows: the pairs pass gathers the pairs of the chunk's cells from
+/// both of their cells.
+pub fn record_normal_reg(
+    b: &mut Batch,
+    bufs: &NormalRegBuffers,
+    io: &NormalRegIo,
+    c: &NormalChunk,
+) -> Result<()> {
+    let rows = c.rows;
+    if c.count.min(rows) == 0 {
+        return Ok(());
+    }
+    b.dispatch_1d(
+        &kernels::surface_normal_reg_cells::INFO,
+        &kernels::surface_normal_reg_cells::Push {
+            nbr: bufs.nbr.address(),
+            delta: io.delta,
+            normals: bufs.normals.address(),
+            rows,
+            ..Default::default()
+        },
+        rows,
+    )?;
+    b.dispatch_1d(
+        &kernels::surface_normal_reg_pairs::INFO,
+        &kernels::surface_normal_reg_pairs::Push {
+            nbr: bufs.nbr.address(),
+            normals: bufs.normals.address(),
+            corners: bufs.corners.address(),
+            loss: io.loss,
+            skipped: io.skipped,
+            rows,
+            start: c.start % rows,
+            count: c.count.min(rows),
+            cells: c.cells,
+            lambda1: c.lambda1,
+            lambda2: c.lambda2,
+        },
+        rows,
+    )?;
+    b.dispatch_1d(
+        &kernels::surface_normal_reg_gather::INFO,
+        &kernels::surface_normal_reg_gather::Push {
+            nbr: bufs.nbr.address(),
+            corners: bufs.corners.address(),
+            grad: io.grad,
+            step: io.step,
+            rows,
+            touch_bits: c.touch,
+        },
+        rows,
+    )
+}
