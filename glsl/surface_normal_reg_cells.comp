@@ -4,10 +4,12 @@
 // status of every cell. A cell is named by its lower corner vertex v (row r); it exists when it
 // lies inside the grid and its 8 corners are allocated (nbr[r][j] ≥ 0 for j = 1..7). Its normal
 // is n = (Σ_{b,c} δ_1bc − Σ_{b,c} δ_0bc, likewise for y and z)/4 (corner b = 4·x + 2·y + z bits).
-// Every row, not only the chunk's: the pairs pass reads the neighbours of the chunk's cells.
-// Thread mapping: flat id = r < rows, one cell (row) each; one owner per written element.
-// Inputs: nbr (rows of the corners, k), delta, rows.
-// Outputs: normals[r] = (n, status + 4·k) (plain stores; n = 0 where the cell does not exist).
+// Every existing cell, not only the chunk's: the pairs pass reads the neighbours of the chunk's
+// cells. The cells that do not exist keep normals[r] = 0 (status 0) from the buffer's creation.
+// Thread mapping: flat id = i < n_cells, one existing cell each, row r = cell_rows[i] (a static
+// list, built once per grid on the host: NormalPrefix::cell_rows); one owner per written element.
+// Inputs: cell_rows, n_cells, nbr (rows of the corners, k), delta.
+// Outputs: normals[r] = (n, status + 4·k) (plain stores).
 // CPU twin: cpu::surface_reg::normal_cells.
 #include "common.glsl"
 #include "normal_reg.glsl"
@@ -15,15 +17,17 @@
 layout(local_size_x = 64) in;
 
 layout(push_constant, scalar) uniform Push {
+    U32Buf cell_rows;
     U64Buf nbr;
     F32Buf delta;
     Vec4Buf normals;
-    uint rows;
+    uint n_cells;
 } pc;
 
 void main() {
-    uint r = flat_id();
-    if (r >= pc.rows) return;
+    uint i = flat_id();
+    if (i >= pc.n_cells) return;
+    uint r = pc.cell_rows.v[i];
     // l[b] = the row of corner b.
     int l[8];
     uint k = 0u;
@@ -37,17 +41,12 @@ void main() {
         l[NBR_B[2u * w + 1u]] = e.y;
     }
     l[0] = int(r);
-    vec4 out_n = vec4(0.0);
-    if (all(greaterThanEqual(ivec4(l[1], l[2], l[3], l[4]), ivec4(0)))
-        && all(greaterThanEqual(ivec3(l[5], l[6], l[7]), ivec3(0)))) {
-        float d[8];
-        [[unroll]] for (uint b = 0u; b < 8u; b++) d[b] = pc.delta.v[l[b]];
-        precise float mx = ((d[4] + d[5]) + (d[6] + d[7])) - ((d[0] + d[1]) + (d[2] + d[3]));
-        precise float my = ((d[2] + d[3]) + (d[6] + d[7])) - ((d[0] + d[1]) + (d[4] + d[5]));
-        precise float mz = ((d[1] + d[3]) + (d[5] + d[7])) - ((d[0] + d[2]) + (d[4] + d[6]));
-        vec3 n = vec3(mx, my, mz) * 0.25;
-        precise float n2 = (n.x * n.x + n.y * n.y) + n.z * n.z;
-        out_n = vec4(n, float((n2 <= TINY_NORMAL2 ? 1u : 2u) + 4u * k));
-    }
-    pc.normals.v[r] = pack4(out_n);
+    float d[8];
+    [[unroll]] for (uint b = 0u; b < 8u; b++) d[b] = pc.delta.v[l[b]];
+    precise float mx = ((d[4] + d[5]) + (d[6] + d[7])) - ((d[0] + d[1]) + (d[2] + d[3]));
+    precise float my = ((d[2] + d[3]) + (d[6] + d[7])) - ((d[0] + d[1]) + (d[4] + d[5]));
+    precise float mz = ((d[1] + d[3]) + (d[5] + d[7])) - ((d[0] + d[2]) + (d[4] + d[6]));
+    vec3 n = vec3(mx, my, mz) * 0.25;
+    precise float n2 = (n.x * n.x + n.y * n.y) + n.z * n.z;
+    pc.normals.v[r] = pack4(vec4(n, float((n2 <= TINY_NORMAL2 ? 1u : 2u) + 4u * k)));
 }

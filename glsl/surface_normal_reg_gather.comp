@@ -7,8 +7,10 @@
 // Touched semantics (as the single-pass kernel had them): v is touched exactly when one of its
 // cells is in a kept pair (either cell of a pair whose normals both have a direction), even if
 // the sum is 0 (e.g. L1 alone with identical normals).
-// Thread mapping: flat id = r < rows, one vertex each; one owner per gradient element, no atomics.
-// Inputs: nbr (rows of v − b), corners (pass 2), rows, touch_bits.
+// Thread mapping: flat id = i < n_corners, one vertex each, row r = corner_rows[i] (static list of
+// the corners of the existing cells, NormalPrefix::corner_rows); one owner per gradient element,
+// no atomics.
+// Inputs: corner_rows, n_corners, nbr (rows of v − b), corners (pass 2), touch_bits.
 // Outputs: for each touched v: grad[r] += sum (plain read-modify-write) and touch_mask(r,
 // touch_bits) (step.glsl; touch_bits = 0 sets nothing).
 // CPU twin: cpu::surface_reg::normal_gather.
@@ -18,19 +20,21 @@
 layout(local_size_x = 64) in;
 
 layout(push_constant, scalar) uniform Push {
+    U32Buf corner_rows;
     U64Buf nbr;
     F32Buf corners;
     F32Buf grad;
     U32Buf step;
-    uint rows;
+    uint n_corners;
     uint touch_bits;
 } pc;
 
 #include "step.glsl"
 
 void main() {
-    uint r = flat_id();
-    if (r >= pc.rows) return;
+    uint i = flat_id();
+    if (i >= pc.n_corners) return;
+    uint r = pc.corner_rows.v[i];
     // l[b] = the row of v − b.
     int l[8];
     [[unroll]] for (uint w = 0u; w < 4u; w++) {

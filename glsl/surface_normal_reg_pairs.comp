@@ -19,10 +19,11 @@
 // ∂L/∂n_c = (G − N·(N·G))/|n_c|.
 // The cell's corners then get ∂L/∂δ_b = corner_grad(b, ∂L/∂n_c) = Σ_a (∂L/∂n_c)_a·(bit_a(b) ?
 // +¼ : −¼) (∂n/∂δ_b contracted), gathered per vertex by surface_normal_reg_gather.
-// Thread mapping: flat id = r < rows, one cell (row) each, every row; one owner per written
-// element.
-// Inputs: nbr (rows of the face neighbours), normals (pass 1), rows, start (< rows), count
-// (≤ rows), cells, lambda1, lambda2.
+// Thread mapping: flat id = i < n_cells, one existing cell each, row r = cell_rows[i] (static
+// list, NormalPrefix::cell_rows); one owner per written element. The cells that do not exist are
+// in no pair and keep corners = +∞ from the buffer's creation.
+// Inputs: cell_rows, n_cells, nbr (rows of the face neighbours), normals (pass 1), rows, start
+// (< rows), count (≤ rows), cells, lambda1, lambda2.
 // Outputs: corners[8·r + b] = corner_grad(b, ∂L/∂n_c) for a cell in a kept pair, else +∞
 // (plain stores, as 4 words); loss[0] += loss and skipped[0] += skipped pairs (atomic adds, one
 // per subgroup; the host zeroes both).
@@ -36,11 +37,13 @@
 layout(local_size_x = 64) in;
 
 layout(push_constant, scalar) uniform Push {
+    U32Buf cell_rows;
     U64Buf nbr;
     Vec4Buf normals;
     U64Buf corners;
     F32Buf loss;
     U32Buf skipped;
+    uint n_cells;
     uint rows;
     uint start;
     uint count;
@@ -152,9 +155,9 @@ float cell_term(uint r, out uint skipped) {
 }
 
 void main() {
-    uint r = flat_id();
+    uint i = flat_id();
     uint skipped = 0u;
-    float l = r < pc.rows ? cell_term(r, skipped) : 0.0;
+    float l = i < pc.n_cells ? cell_term(pc.cell_rows.v[i], skipped) : 0.0;
     uint sk = subgroupAdd(skipped);
     float sl = subgroupAdd(l);
     if (subgroupElect()) {

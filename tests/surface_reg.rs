@@ -2,13 +2,14 @@
 //! central finite differences of independent f64 definitions (Lδ through tv.comp/cpu::tv with
 //! `delta_tv_chunk`, TVα with `opacity_tv_chunk`, Lα, Ln1 + Ln2) on small hand-built grids;
 //! adversarial cases (unallocated neighbours, grid edges, zero-length normals, σα ≤ 0, chunks
-//! that wrap); the parity rows of the stage-2 kernels under validation.
+//! that wrap); the normal regularisers' neighbour table and work lists; the parity rows of the
+//! stage-2 kernels under validation.
 
 use alphasurf::check::surface_reg::{empty_step, gpu_normal_reg, RegGrid};
 use alphasurf::cpu::step::{TOUCH_OPACITY, TOUCH_SURFACE};
 use alphasurf::cpu::surface_reg::{
     delta_tv_chunk, opacity_tv_chunk, row_slots, surface_normal_reg, surface_opacity_reg, tv_loss,
-    NormalChunk, NormalPrefix, NormalRegStats, OpacityChunk,
+    NormalChunk, NormalPrefix, NormalRegStats, OpacityChunk, NBR_B, NBR_STRIDE,
 };
 use alphasurf::cpu::{surface_rmsprop_sparse, tv, Stage2Params, SurfaceRmsProp};
 use alphasurf::kernels;
@@ -383,6 +384,79 @@ fn normal_reg_fd() {
         &chunk(&h, rows - 40, 150, 1e-2, 1e-3),
         "holes, wrapping",
     );
+}
+
+#[test]
+fn normal_prefix_table_and_work_lists() {
+    // Holes, the grid's faces: every table entry, k and both work lists against the links.
+    let g = small_grid(12, 6, |v| (v[0] * 5 + v[1] * 3 + v[2]) % 13 == 0);
+    let r = 6usize;
+    let rs = row_slots(&g.links, g.allocated());
+    let p = NormalPrefix::new(&g.links, &rs, g.res);
+    let row = |v: [i64; 3]| -> i32 {
+        if v.iter().any(|&i| i < 0 || i >= r as i64) {
+            return -1;
+        }
+        g.links[((v[0] as usize * r) + v[1] as usize) * r + v[2] as usize]
+    };
+    let exists = |v: [i64; 3]| {
+        (0..8).all(|b| row([v[0] + (b >> 2), v[1] + ((b >> 1) & 1), v[2] + (b & 1)]) >= 0)
+    };
+    let (mut cells, mut corners) = (Vec::new(), vec![false; g.allocated()]);
+    for (ri, &s) in rs.iter().enumerate() {
+        let s = s as usize;
+        let v = [(s / (r * r)) as i64, ((s / r) % r) as i64, (s % r) as i64];
+        let t = &p.neighbours()[NBR_STRIDE * ri..][..NBR_STRIDE];
+        for (j, &b) in NBR_B.iter().enumerate().skip(1) {
+            let o = [(b >> 2) as i64, ((b >> 1) & 1) as i64, (b & 1) as i64];
+            assert_eq!(
+                t[j],
+                row([v[0] + o[0], v[1] + o[1], v[2] + o[2]]),
+                "row {ri} +{b}"
+            );
+            assert_eq!(
+                t[8 + j],
+                row([v[0] - o[0], v[1] - o[1], v[2] - o[2]]),
+                "row {ri} −{b}"
+            );
+        }
+        let k = if exists(v) {
+            (0..3)
+                .filter(|&a| {
+                    let mut w = v;
+                    w[a] += 1;
+                    exists(w)
+                })
+                .count() as i32
+        } else {
+            0
+        };
+        assert_eq!(t[0], k, "k of row {ri}");
+        if exists(v) {
+            cells.push(ri as u32);
+            for b in 0..8 {
+                corners[row([v[0] + (b >> 2), v[1] + ((b >> 1) & 1), v[2] + (b & 1)]) as usize] =
+                    true;
+            }
+        }
+    }
+    assert!(
+        cells.len() > 10 && cells.len() < g.allocated(),
+        "{} cells",
+        cells.len()
+    );
+    assert_eq!(p.cell_rows(), &cells[..]);
+    let corners: Vec<u32> = (0..g.allocated() as u32)
+        .filter(|&i| corners[i as usize])
+        .collect();
+    assert_eq!(p.corner_rows(), &corners[..]);
+    // No cell at all (2 × 2 × 1 allocated): empty lists, and the passes do nothing.
+    let flat = small_grid(13, 3, |v| v[2] > 0 || v[0] > 1 || v[1] > 1);
+    let fr = row_slots(&flat.links, flat.allocated());
+    let fp = NormalPrefix::new(&flat.links, &fr, flat.res);
+    assert!(fp.cell_rows().is_empty() && fp.corner_rows().is_empty());
+    let c = fp.chunk(0, 4, 1.0, 1.0);
+    assert_eq!(run_normal(&flat, &c).2, Default::default());
 }
 
 #[test]

@@ -270,7 +270,7 @@ fn normal_reg_rows(gpu: &Gpu, seed: u64) -> Result<Vec<CheckRow>> {
     for &(start, count) in &cases {
         let c = prefix.chunk(start, count, 1e-2, 1e-3);
         let (mut want, mut want_t) = (grad0.clone(), vec![0u32; n]);
-        let (st, ws) = normal_reg_passes(prefix.neighbours(), &g.delta, &mut want, &mut want_t, &c);
+        let (st, ws) = normal_reg_passes(&prefix, &g.delta, &mut want, &mut want_t, &c);
         let (out, gs) = gpu_normal_reg_scratch(gpu, &g, &grad0, &c)?;
         runs.push((start, count, c, st, ws, want, want_t, out, gs));
     }

@@ -130,12 +130,17 @@ pub fn normal_neighbours(links: &[i32], row_slot: &[u32], res: [u32; 3]) -> Vec<
     nbr
 }
 
-/// Per-grid data of the normal regularisers: the neighbour table ([`normal_neighbours`]) and a
-/// prefix count of the rows whose cell has an existing forward neighbour, which gives the
-/// denominator M of any row chunk. Depends on the allocation only: build it once per grid.
+/// Per-grid data of the normal regularisers: the neighbour table ([`normal_neighbours`]), the
+/// work lists of the passes, and a prefix count of the rows whose cell has an existing forward
+/// neighbour, which gives the denominator M of any row chunk. Depends on the allocation only:
+/// build it once per grid.
 pub struct NormalPrefix {
     res: [u32; 3],
     nbr: Vec<i32>,
+    /// The rows whose cell exists, ascending.
+    cell_rows: Vec<u32>,
+    /// The rows that are a corner of an existing cell, ascending.
+    corner_rows: Vec<u32>,
     /// prefix[r] = number of such rows below r (rows + 1 entries).
     prefix: Vec<u32>,
 }
@@ -145,15 +150,42 @@ impl NormalPrefix {
         let nbr = normal_neighbours(links, row_slot, res);
         let mut prefix = Vec::with_capacity(row_slot.len() + 1);
         prefix.push(0);
-        for t in nbr.chunks(NBR_STRIDE) {
+        let (mut cell_rows, mut corner) = (Vec::new(), vec![false; row_slot.len()]);
+        for (r, t) in nbr.chunks(NBR_STRIDE).enumerate() {
             prefix.push(prefix.last().copied().unwrap_or(0) + (t[0] > 0) as u32);
+            if t[1..8].iter().all(|&l| l >= 0) {
+                cell_rows.push(r as u32);
+                corner[r] = true;
+                for &l in &t[1..8] {
+                    corner[l as usize] = true;
+                }
+            }
         }
-        NormalPrefix { res, nbr, prefix }
+        let corner_rows = (0..row_slot.len() as u32)
+            .filter(|&r| corner[r as usize])
+            .collect();
+        NormalPrefix {
+            res,
+            nbr,
+            cell_rows,
+            corner_rows,
+            prefix,
+        }
     }
 
     /// The neighbour table ([`normal_neighbours`]).
     pub fn neighbours(&self) -> &[i32] {
         &self.nbr
+    }
+
+    /// The rows whose cell exists (the work of the cells and pairs passes), ascending.
+    pub fn cell_rows(&self) -> &[u32] {
+        &self.cell_rows
+    }
+
+    /// The rows that are a corner of an existing cell (the work of the gather pass), ascending.
+    pub fn corner_rows(&self) -> &[u32] {
+        &self.corner_rows
     }
 
     /// The number of allocated rows.
@@ -209,17 +241,16 @@ fn sign0(x: f32) -> f32 {
 }
 
 /// Pass 1, twin of `surface_normal_reg_cells`: normals[r] = (n, status + 4·k) of every row's
-/// cell (0 where it does not exist).
-pub fn normal_cells(nbr: &[i32], delta: &[f32]) -> Vec<f32> {
-    let mut normals = vec![0f32; NORMALS_STRIDE * (nbr.len() / NBR_STRIDE)];
-    normals
-        .par_chunks_mut(NORMALS_STRIDE)
-        .zip(nbr.par_chunks(NBR_STRIDE))
-        .enumerate()
-        .for_each(|(r, (out, t))| {
-            if t[1..8].iter().any(|&l| l < 0) {
-                return;
-            }
+/// cell, computed for the existing cells (`p.cell_rows()`), 0 for the others (as the kernel's
+/// buffer holds from its creation on).
+pub fn normal_cells(p: &NormalPrefix, delta: &[f32]) -> Vec<f32> {
+    let rows = p.rows() as usize;
+    let computed: Vec<[f32; NORMALS_STRIDE]> = p
+        .cell_rows
+        .par_iter()
+        .map(|&r| {
+            let r = r as usize;
+            let t = &p.nbr[NBR_STRIDE * r..][..NBR_STRIDE];
             let mut d = [delta[r]; 8];
             for j in 1..8 {
                 d[NBR_B[j]] = delta[t[j] as usize];
@@ -230,8 +261,13 @@ pub fn normal_cells(nbr: &[i32], delta: &[f32]) -> Vec<f32> {
             let n = [mx * 0.25, my * 0.25, mz * 0.25];
             let n2 = (n[0] * n[0] + n[1] * n[1]) + n[2] * n[2];
             let status = if n2 <= TINY_NORMAL2 { 1 } else { 2 };
-            out.copy_from_slice(&[n[0], n[1], n[2], (status + 4 * t[0] as u32) as f32]);
-        });
+            [n[0], n[1], n[2], (status + 4 * t[0] as u32) as f32]
+        })
+        .collect();
+    let mut normals = vec![0f32; NORMALS_STRIDE * rows];
+    for (&r, v) in p.cell_rows.iter().zip(&computed) {
+        normals[NORMALS_STRIDE * r as usize..][..NORMALS_STRIDE].copy_from_slice(v);
+    }
     normals
 }
 
@@ -339,32 +375,49 @@ fn cell_pairs(
 }
 
 /// Pass 2, twin of `surface_normal_reg_pairs`: every row's corners (∂L/∂δ of the cell's 8
-/// corners from its kept pairs, +∞ for a cell in none); returns the loss and the skipped pairs.
-pub fn normal_pairs(nbr: &[i32], normals: &[f32], c: &NormalChunk) -> (Vec<f32>, NormalRegStats) {
-    let mut corners = vec![0f32; CORNERS_STRIDE * (nbr.len() / NBR_STRIDE)];
-    let (loss, skipped) = corners
-        .par_chunks_mut(CORNERS_STRIDE)
-        .enumerate()
-        .map(|(r, out)| cell_pairs(nbr, normals, c, r, out))
-        .reduce(|| (0.0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
-    (corners, NormalRegStats { loss, skipped })
+/// corners from its kept pairs, +∞ for a cell in none), computed for the existing cells, +∞ for
+/// the others (as the kernel's buffer holds from its creation on); returns the loss and the
+/// skipped pairs.
+pub fn normal_pairs(
+    p: &NormalPrefix,
+    normals: &[f32],
+    c: &NormalChunk,
+) -> (Vec<f32>, NormalRegStats) {
+    let computed: Vec<([f32; CORNERS_STRIDE], f64, u32)> = p
+        .cell_rows
+        .par_iter()
+        .map(|&r| {
+            let mut out = [0f32; CORNERS_STRIDE];
+            let (loss, skipped) = cell_pairs(&p.nbr, normals, c, r as usize, &mut out);
+            (out, loss, skipped)
+        })
+        .collect();
+    let mut corners = vec![f32::INFINITY; CORNERS_STRIDE * p.rows() as usize];
+    let mut st = NormalRegStats::default();
+    for (&r, (v, loss, skipped)) in p.cell_rows.iter().zip(&computed) {
+        corners[CORNERS_STRIDE * r as usize..][..CORNERS_STRIDE].copy_from_slice(v);
+        st.loss += loss;
+        st.skipped += skipped;
+    }
+    (corners, st)
 }
 
-/// Pass 3, twin of `surface_normal_reg_gather`: each vertex v (row r) sums corner b of its cells
-/// v − b (b = 0..7 in order; those that are rows and in a kept pair, i.e. not +∞); where it has
-/// such a cell, grad[r] += the sum and touched[r] |= `touch`.
+/// Pass 3, twin of `surface_normal_reg_gather`: each vertex v (row r) of `p.corner_rows()` sums
+/// corner b of its cells v − b (b = 0..7 in order; those that are rows and in a kept pair, i.e.
+/// not +∞); where it has such a cell, grad[r] += the sum and touched[r] |= `touch`.
 pub fn normal_gather(
-    nbr: &[i32],
+    p: &NormalPrefix,
     corners: &[f32],
     grad: &mut [f32],
     touched: &mut [u32],
     touch: u32,
 ) {
-    grad.par_iter_mut()
-        .zip(touched.par_iter_mut())
-        .zip(nbr.par_chunks(NBR_STRIDE))
-        .enumerate()
-        .for_each(|(r, ((g, t), nb))| {
+    let sums: Vec<Option<f32>> = p
+        .corner_rows
+        .par_iter()
+        .map(|&r| {
+            let r = r as usize;
+            let nb = &p.nbr[NBR_STRIDE * r..][..NBR_STRIDE];
             let mut sum = 0f32;
             let mut hit = false;
             let mut l = [r as i32; 8];
@@ -382,11 +435,15 @@ pub fn normal_gather(
                 hit = true;
                 sum += c;
             }
-            if hit {
-                *g += sum;
-                *t |= touch;
-            }
-        });
+            hit.then_some(sum)
+        })
+        .collect();
+    for (&r, sum) in p.corner_rows.iter().zip(sums) {
+        if let Some(sum) = sum {
+            grad[r as usize] += sum;
+            touched[r as usize] |= touch;
+        }
+    }
 }
 
 /// The per-row arrays the passes leave behind (layouts in glsl/lib/normal_reg.glsl).
@@ -395,24 +452,24 @@ pub struct NormalScratch {
     pub corners: Vec<f32>,
 }
 
-/// The three passes with the grid's neighbour table `nbr` ([`NormalPrefix::neighbours`]): as
+/// The three passes with the grid's [`NormalPrefix`] (neighbour table, work lists): as
 /// [`surface_normal_reg`], also returning the per-row arrays (for the parity checks).
 pub fn normal_reg_passes(
-    nbr: &[i32],
+    p: &NormalPrefix,
     delta: &[f32],
     grad: &mut [f32],
     touched: &mut [u32],
     c: &NormalChunk,
 ) -> (NormalRegStats, NormalScratch) {
-    let normals = normal_cells(nbr, delta);
-    let (corners, st) = normal_pairs(nbr, &normals, c);
-    normal_gather(nbr, &corners, grad, touched, c.touch);
+    let normals = normal_cells(p, delta);
+    let (corners, st) = normal_pairs(p, &normals, c);
+    normal_gather(p, &corners, grad, touched, c.touch);
     (st, NormalScratch { normals, corners })
 }
 
 /// Ln1 + Ln2 (definition in `glsl/surface_normal_reg_pairs.comp`) in the kernels' three passes,
-/// cell normals, pairs, gather (no atomics), with the neighbour table built here (callers that
-/// keep a [`NormalPrefix`] call [`normal_reg_passes`] with its table). Adds ∂loss/∂δ to `grad`
+/// cell normals, pairs, gather (no atomics), with the grid's [`NormalPrefix`] built here
+/// (callers that keep one call [`normal_reg_passes`]). Adds ∂loss/∂δ to `grad`
 /// and sets the `touch` bits of the corners of every cell in a kept pair. Nothing is done for an
 /// empty chunk.
 pub fn surface_normal_reg(
@@ -426,8 +483,8 @@ pub fn surface_normal_reg(
     if c.count.min(c.rows) == 0 {
         return NormalRegStats::default();
     }
-    let nbr = normal_neighbours(links, row_slot, c.res);
-    normal_reg_passes(&nbr, delta, grad, touched, c).0
+    let p = NormalPrefix::new(links, row_slot, c.res);
+    normal_reg_passes(&p, delta, grad, touched, c).0
 }
 
 /// The slot of each allocated vertex row (the inverse of `links`), for [`surface_normal_reg`].

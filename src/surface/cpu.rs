@@ -80,9 +80,13 @@ impl CpuSurface {
                 chunk.touch = 0;
             }
             if chunk.count.min(chunk.rows) > 0 {
-                let nbr = self.normals.neighbours();
-                let (st, _) =
-                    normal_reg_passes(nbr, &g.delta, &mut self.grad[0], &mut self.touched, &chunk);
+                let (st, _) = normal_reg_passes(
+                    &self.normals,
+                    &g.delta,
+                    &mut self.grad[0],
+                    &mut self.touched,
+                    &chunk,
+                );
                 loss += st.loss;
             }
         }

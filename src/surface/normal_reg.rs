@@ -8,26 +8,44 @@ use crate::gpu::{Batch, Gpu, GpuBuffer};
 use crate::kernels;
 use anyhow::{ensure, Result};
 
-/// The per-grid buffers of the passes: the neighbour table, and the per-row arrays they pass on.
+/// The per-grid buffers of the passes: the neighbour table and the work lists (static), and the
+/// per-row arrays they pass on.
 pub struct NormalRegBuffers {
     pub nbr: GpuBuffer,
+    pub cell_rows: GpuBuffer,
+    pub corner_rows: GpuBuffer,
+    /// Counts of the work lists.
+    pub n_cells: u32,
+    pub n_corners: u32,
+    /// (n, status + 4·k) per row: 0 from the start, the rows of the existing cells rewritten
+    /// by every run.
     pub normals: GpuBuffer,
+    /// ∂L/∂δ of the 8 corners of each row's cell: +∞ (no pair) from the start, the rows of the
+    /// existing cells rewritten by every run.
     pub corners: GpuBuffer,
 }
 
+/// A buffer holding `v`, or one zero element when `v` is empty.
+fn upload_nonempty<T: bytemuck::Pod>(gpu: &Gpu, v: &[T]) -> Result<GpuBuffer> {
+    if v.is_empty() {
+        gpu.zeros::<T>(1)
+    } else {
+        gpu.upload(v)
+    }
+}
+
 impl NormalRegBuffers {
-    /// The buffers of the grid of `prefix` (at least one row each, so that none is empty).
+    /// The buffers of the grid of `prefix`.
     pub fn new(gpu: &Gpu, prefix: &NormalPrefix) -> Result<Self> {
         let rows = (prefix.rows() as usize).max(1);
-        let nbr = prefix.neighbours();
         let b = NormalRegBuffers {
-            nbr: if nbr.is_empty() {
-                gpu.zeros::<i32>(16)?
-            } else {
-                gpu.upload(nbr)?
-            },
+            nbr: upload_nonempty(gpu, prefix.neighbours())?,
+            cell_rows: upload_nonempty(gpu, prefix.cell_rows())?,
+            corner_rows: upload_nonempty(gpu, prefix.corner_rows())?,
+            n_cells: prefix.cell_rows().len() as u32,
+            n_corners: prefix.corner_rows().len() as u32,
             normals: gpu.zeros::<f32>(NORMALS_STRIDE * rows)?,
-            corners: gpu.zeros::<f32>(CORNERS_STRIDE * rows)?,
+            corners: gpu.upload(&vec![f32::INFINITY; CORNERS_STRIDE * rows])?,
         };
         // The kernels read them as 64-bit words and pairs of words, declared 16-byte aligned.
         for buf in [&b.nbr, &b.normals, &b.corners] {
@@ -55,9 +73,10 @@ pub struct NormalRegIo {
     pub skipped: u64,
 }
 
-/// Record the three passes for chunk `c` of the grid of `bufs` (nothing for an empty chunk).
-/// Every pass runs over all rows: the pairs pass gathers the pairs of the chunk's cells from
-/// both of their cells.
+/// Record the three passes for chunk `c` of the grid of `bufs` (nothing for an empty chunk or a
+/// grid without cells). The cells and pairs passes run over every existing cell, the gather
+/// over every corner of one: the pairs pass gathers the pairs of the chunk's cells from both of
+/// their cells.
 pub fn record_normal_reg(
     b: &mut Batch,
     bufs: &NormalRegBuffers,
@@ -65,47 +84,52 @@ pub fn record_normal_reg(
     c: &NormalChunk,
 ) -> Result<()> {
     let rows = c.rows;
-    if c.count.min(rows) == 0 {
+    if c.count.min(rows) == 0 || bufs.n_cells == 0 {
         return Ok(());
     }
     b.dispatch_1d(
         &kernels::surface_normal_reg_cells::INFO,
         &kernels::surface_normal_reg_cells::Push {
+            cell_rows: bufs.cell_rows.address(),
             nbr: bufs.nbr.address(),
             delta: io.delta,
             normals: bufs.normals.address(),
-            rows,
+            n_cells: bufs.n_cells,
             ..Default::default()
         },
-        rows,
+        bufs.n_cells,
     )?;
     b.dispatch_1d(
         &kernels::surface_normal_reg_pairs::INFO,
         &kernels::surface_normal_reg_pairs::Push {
+            cell_rows: bufs.cell_rows.address(),
             nbr: bufs.nbr.address(),
             normals: bufs.normals.address(),
             corners: bufs.corners.address(),
             loss: io.loss,
             skipped: io.skipped,
+            n_cells: bufs.n_cells,
             rows,
             start: c.start % rows,
             count: c.count.min(rows),
             cells: c.cells,
             lambda1: c.lambda1,
             lambda2: c.lambda2,
+            ..Default::default()
         },
-        rows,
+        bufs.n_cells,
     )?;
     b.dispatch_1d(
         &kernels::surface_normal_reg_gather::INFO,
         &kernels::surface_normal_reg_gather::Push {
+            corner_rows: bufs.corner_rows.address(),
             nbr: bufs.nbr.address(),
             corners: bufs.corners.address(),
             grad: io.grad,
             step: io.step,
-            rows,
+            n_corners: bufs.n_corners,
             touch_bits: c.touch,
         },
-        rows,
+        bufs.n_corners,
     )
 }
