@@ -7,8 +7,10 @@
 //   the arguments optim_args writes); vertex v updates the groups whose bits are set both in its
 //   flag and in `groups` (step.glsl TOUCH_*), then its flag is cleared. A group that received no
 //   gradient this step is left alone, its RMS state included (svox2's sparse update, per group).
-// - dense (dense_rows = n): one invocation per vertex row < n updates δ alone, for steps where a
-//   regulariser gives every vertex a δ gradient (Lδ); the list pass then runs without the δ bit.
+// - dense (dense_rows = n): invocation i < ⌈n/16⌉ updates δ alone of the rows i + k·⌈n/16⌉,
+//   k < 16, for steps where a regulariser gives every vertex a δ gradient (Lδ); the list pass
+//   then runs without the δ bit. (16 rows per invocation: lavapipe's cost per invocation is
+//   larger than one update's; one row each took 3× as long, measured.)
 // Inputs/outputs: delta, opacity, sh, their gradients and RMS states; the step buffer (list mode:
 // the list; its flags are cleared, the host resets the count). CPU twin:
 // cpu::surface_rmsprop_sparse (both modes at once).
@@ -36,12 +38,20 @@ layout(push_constant, scalar) uniform Push {
 } pc;
 
 #include "rmsprop.glsl"
+
+// Rows per invocation of the dense pass.
+const uint DENSE_ROWS = 16u;
 #include "step.glsl"
 
 void main() {
     uint i = flat_id();
     if (pc.dense_rows != 0u) {
-        if (i < pc.dense_rows) RMSPROP_UPDATE(pc.delta, pc.grad_delta, pc.state_delta, i, pc.lr_delta);
+        uint stride = (pc.dense_rows + DENSE_ROWS - 1u) / DENSE_ROWS;
+        if (i >= stride) return;
+        for (uint k = 0u; k < DENSE_ROWS; k++) {
+            uint v = i + k * stride;
+            if (v < pc.dense_rows) RMSPROP_UPDATE(pc.delta, pc.grad_delta, pc.state_delta, v, pc.lr_delta);
+        }
         return;
     }
     if (i >= pc.step.v[STEP_COUNT]) return;

@@ -23,6 +23,9 @@ use crate::math::surface::{SurfOut, SURF_MAX_LEVELS};
 use crate::math::surface_blocks::{surf_blocks_per_axis, surf_live_words};
 use anyhow::{ensure, Result};
 
+/// Rows per invocation of surface_rmsprop's dense pass (its DENSE_ROWS).
+const SURFACE_RMSPROP_DENSE_ROWS: u32 = 16;
+
 /// Floats in the params buffer of `surface_train` (layout in the kernel's header).
 const PARAMS_LEN: usize = 12 + SURF_MAX_LEVELS;
 
@@ -456,7 +459,7 @@ impl VulkanSurface {
                     dense_rows: rows,
                     ..push
                 },
-                rows,
+                rows.div_ceil(SURFACE_RMSPROP_DENSE_ROWS),
             )?;
         }
         b.dispatch(
