@@ -15,8 +15,8 @@
 // Inputs: links (n³ i32, < 0 unallocated), per allocated vertex delta, opacity (raw σα) and sh
 // (27), levels[n_levels ≤ 8], rays (6 floats: scene origin, direction), a, stop_thresh, blocks
 // (live-cell words, then nb³ u32 level masks; read only when block_skip ≠ 0).
-// Outputs: out[r] = (rgb, transmittance, hits composited); stats (6 u32) += cells visited (links
-// read), cubic solves, solves skipped by min/max culling, hits composited, hits cut by
+// Outputs: out[r] = (rgb, transmittance, hits composited); stats (6 u32) += cells read (live
+// cells: links read), cubic solves, solves skipped by min/max culling, hits composited, hits cut by
 // truncation, blocks skipped (subgroup-reduced atomics).
 // CPU twin: cpu::surface_fwd::render (src/cpu/surface_fwd.rs).
 #include "common.glsl"

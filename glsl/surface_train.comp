@@ -24,8 +24,9 @@
 // levels[8] (n_levels used); rays (6 floats), targets (3 floats).
 // Outputs: grad_delta, grad_opacity, grad_sh += (float atomics), touched list (step buffer);
 // out_rays[r] = (squared error, entropy, consistency, hits composited); stats (8 u32) += cells
-// visited, cubic solves, solves culled by min/max, hits composited, hits cut by truncation,
-// guarded hits, gradient atomic adds, blocks skipped (subgroup-reduced).
+// read (live cells: links and δ loaded), cubic solves, solves culled by min/max, hits
+// composited, hits cut by truncation, guarded hits, gradient atomic adds, blocks skipped
+// (subgroup-reduced).
 // CPU twin: cpu::surface_train::train (src/cpu/surface_train.rs).
 #extension GL_EXT_shader_atomic_float : require
 #include "common.glsl"

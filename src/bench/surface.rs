@@ -5,7 +5,7 @@
 //! `--warm-steps` CPU steps, then each backend trains the same `--steps` batches from that state
 //! (the thin category's fast-preset weights and regulariser chunks at step 0: LH, Lc, Lδ over
 //! every vertex, TVα, Lα and Ln1/Ln2 on random chunks). Reported per backend: training rays/s (wall
-//! time, after one untimed step), mean MSE, and per ray: cells visited, cubic solves, solves
+//! time, after one untimed step), mean MSE, and per ray: cells read (live cells), cubic solves, solves
 //! skipped by min/max culling, hits composited, hits cut by truncation, hits whose δ gradient the
 //! f′ guard dropped, gradient atomic adds; the Vulkan/CPU ratio; the Vulkan device time per kernel
 //! (timestamps). The Vulkan backend is also timed without the regularisers (the data term, its

@@ -15,7 +15,7 @@ use crate::math::trilerp::trilerp_weights;
 use anyhow::{ensure, Result};
 use rayon::prelude::*;
 
-/// Counters summed over rays: cells visited (links read), cubic solves, solves skipped by min/max
+/// Counters summed over rays: cells read (links read: live cells when skipping), cubic solves, solves skipped by min/max
 /// culling, hits composited, hits cut off by truncation, blocks skipped (the kernel's `stats`
 /// buffer).
 pub type SurfCounts = [u32; 6];

@@ -41,7 +41,7 @@ pub const SURF_MAX_HITS: usize = 8;
 /// Relative guard on the implicit derivative's denominator f′(s).
 pub const FPRIME_GUARD: f32 = 1e-3;
 
-/// Counters summed over rays: cells visited, cubic solves, solves skipped by min/max culling,
+/// Counters summed over rays: cells read (live cells: corners loaded), cubic solves, solves skipped by min/max culling,
 /// hits composited, hits cut off by truncation, hits whose δ gradient was dropped by the f′ guard,
 /// gradient atomic adds, 8³-cell blocks skipped.
 pub type TrainCounts = [u32; 8];
