@@ -84,7 +84,7 @@ pub struct WalkCell {
 /// The cell walk both surface kernels share: DDA front to back from t = 0; with a skip structure
 /// (`blocks`, `cpu::surface_blocks::build_blocks`) cells of mask-0 blocks are skipped and cells
 /// whose live bit is clear are passed over unread; cells with an unallocated corner and cells no
-/// level crosses are passed over. `counts` = cells visited (corners read), cubic solves, solves
+/// level crosses are passed over. `counts` = cells read (corners loaded), cubic solves, solves
 /// culled, blocks skipped.
 pub struct CellWalk<'a> {
     g: &'a SurfaceGridRef<'a>,
