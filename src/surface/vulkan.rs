@@ -1,8 +1,9 @@
 //! The Vulkan stage-2 backend: grid, gradients and optimiser state live in device buffers; a
-//! training step is one batch and one submission: step reset → surface_train → regularisers
-//! (Lδ and TVα through `tv`, Lα through surface_opacity_reg, Ln1/Ln2 through the three
-//! surface_normal_reg_* passes) (Lδ's TV with an invocation per vertex row) → surface_rmsprop: δ
-//! of every row when Lδ is on, then (optim_args → indirect) the flagged groups of the touched
+//! training step is one batch and one submission: step reset → (surface_live_cells and
+//! surface_blocks when δ may have drifted past their margin) → surface_train → regularisers (Lδ
+//! through `tv` with an invocation per vertex row, TVα through `tv`, Lα through
+//! surface_opacity_reg, Ln1/Ln2 through the three surface_normal_reg_* passes) → surface_rmsprop:
+//! δ of every row when Lδ is on, then (optim_args → indirect) the flagged groups of the touched
 //! vertices.
 
 use super::normal_reg::{record_normal_reg, NormalRegBuffers, NormalRegIo};
