@@ -7,11 +7,8 @@
 // the derivative of TV_v and of the TVs of its backward neighbours v − e_a that lie in the chunk,
 // so no atomics are needed; the neighbour links are read once for all channels. Slots range over
 // [start, start + count + Y·Z) to reach those neighbours.
-// Thread mapping: flat id = slot − start; or, when `rows` ≠ 0 (the chunk must then be the whole
-// grid), flat id = vertex row, slot = row_slot[row]: the same terms for an invocation per
-// allocated vertex instead of per slot (at 128³ about 5 % of the slots are allocated).
-// Inputs: links, row_slot (rows mode), data (channels floats per allocated vertex), res, chunk,
-// scale (λ/count), touch_bits, rows.
+// Thread mapping: flat id = slot − start.
+// Inputs: links, data (channels floats per allocated vertex), res, chunk, scale (λ/count).
 // Output: grad += (plain read-modify-write; one owner per element) for vertices with a TV term;
 // each gets the touched bits touch_bits (0: none; step.glsl). CPU twin: cpu::tv.
 #include "common.glsl"
@@ -19,7 +16,6 @@ layout(local_size_x = 256) in;
 
 layout(push_constant, scalar) uniform Push {
     I32Buf links;
-    U32Buf row_slot;
     F32Buf data;
     F32Buf grad;
     U32Buf step;
@@ -29,7 +25,6 @@ layout(push_constant, scalar) uniform Push {
     uint channels;
     float scale;
     uint touch_bits;
-    uint rows;
 } pc;
 
 #include "step.glsl"
@@ -66,16 +61,12 @@ vec3 diffs(int l, int n[3], uint c) {
 }
 
 void main() {
+    uint span = pc.count + pc.res.y * pc.res.z;
     uint id = flat_id();
-    uint s;
-    if (pc.rows != 0u) {
-        if (id >= pc.rows) return;
-        s = pc.row_slot.v[id];
-    } else {
-        if (id >= pc.count + pc.res.y * pc.res.z) return;
-        s = pc.start + id;
-        if (s >= pc.res.x * pc.res.y * pc.res.z) return;
-    }
+    if (id >= span) return;
+    uint s = pc.start + id;
+    uint slots = pc.res.x * pc.res.y * pc.res.z;
+    if (s >= slots) return;
     int l = pc.links.v[s];
     if (l < 0) return;
     uint end = pc.start + pc.count;

@@ -1,18 +1,18 @@
 //! Stage-2 regularisers and optimiser (method.md §3.4–3.5): the CPU twins' gradients against
-//! central finite differences of independent f64 definitions (Lδ through tv.comp/cpu::tv with
-//! `delta_tv_chunk`, TVα with `opacity_tv_chunk`, Lα, Ln1 + Ln2) on small hand-built grids;
+//! central finite differences of independent f64 definitions (Lδ through surface_delta_tv with
+//! `delta_tv_chunk`'s scale, TVα with `opacity_tv_chunk`, Lα, Ln1 + Ln2) on small hand-built grids;
 //! adversarial cases (unallocated neighbours, grid edges, zero-length normals, σα ≤ 0, chunks
 //! that wrap); the normal regularisers' neighbour table and work lists; the parity rows of the
 //! stage-2 kernels under validation.
 
-use alphasurf::check::surface_reg::{empty_step, gpu_normal_reg, RegGrid};
+use alphasurf::check::surface_reg::{gpu_delta_tv, gpu_normal_reg, RegGrid};
 use alphasurf::cpu::step::{TOUCH_OPACITY, TOUCH_SURFACE};
+use alphasurf::cpu::surface_delta_tv::{axis_neighbours, delta_tv};
 use alphasurf::cpu::surface_reg::{
     delta_tv_chunk, opacity_tv_chunk, row_slots, surface_normal_reg, surface_opacity_reg, tv_loss,
     NormalChunk, NormalPrefix, NormalRegStats, OpacityChunk, NBR_B, NBR_STRIDE,
 };
 use alphasurf::cpu::{surface_rmsprop_sparse, tv, Stage2Params, SurfaceRmsProp};
-use alphasurf::kernels;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
 
@@ -110,9 +110,9 @@ fn delta_tv_matches_definition_fd_cpu_and_gpu() {
     let want = fd(&x, 1e-4, |x| {
         lambda as f64 / n * tv_f64(&g, x, 0, g.links.len(), kappa, 1e-9)
     });
+    let nbr = axis_neighbours(&g.links, &row_slots(&g.links, g.allocated()), g.res);
     let mut grad = vec![0f32; g.allocated()];
-    let mut touched = vec![0u32; g.allocated()];
-    tv(&g.links, &g.delta, &mut grad, &mut touched, &c);
+    delta_tv(&nbr, &g.delta, &mut grad, c.scale);
     let got: Vec<f64> = grad.iter().map(|&v| v as f64).collect();
     let e = rel_l2(&got, &want);
     // The kernel's ε is κ²·1e-9 instead of 1e-9: invisible at these |d| ~ 0.1–1.
@@ -122,35 +122,25 @@ fn delta_tv_matches_definition_fd_cpu_and_gpu() {
     let v = tv_loss(&g.links, &g.delta, &c);
     let v64 = lambda as f64 / n * tv_f64(&g, &x, 0, g.links.len(), kappa, 1e-9);
     assert!((v - v64).abs() <= 1e-5 * v64, "Lδ value {v} vs {v64}");
-    assert!(
-        touched.iter().all(|&t| t == 0),
-        "Lδ flags nothing: every vertex has a δ gradient, the backends update δ densely"
-    );
-    // The GPU tv kernel with the same chunk.
+    // The axis-neighbour table: +x, +y, +z, −x, −y, −z rows, −1 off the grid or unallocated.
+    let rs = row_slots(&g.links, g.allocated());
+    for (r, &s) in rs.iter().enumerate() {
+        let s = s as usize;
+        let v = [s / 144, (s / 12) % 12, s % 12];
+        for a in 0..3 {
+            let stride = [144, 12, 1][a];
+            let fwd = if v[a] < 11 { g.links[s + stride] } else { -1 };
+            let back = if v[a] > 0 { g.links[s - stride] } else { -1 };
+            assert_eq!(
+                (nbr[6 * r + a], nbr[6 * r + 3 + a]),
+                (fwd, back),
+                "row {r} axis {a}"
+            );
+        }
+    }
+    // The GPU kernel (both stages) with the same scale.
     let gpu = alphasurf::gpu::test_gpu();
-    let links = gpu.upload(&g.links).unwrap();
-    let db = gpu.upload(&g.delta).unwrap();
-    let gb = gpu.zeros::<f32>(g.allocated()).unwrap();
-    let step = gpu.upload(&empty_step(g.allocated())).unwrap();
-    gpu.run_1d(
-        &kernels::tv::INFO,
-        &kernels::tv::Push {
-            links: links.address(),
-            data: db.address(),
-            grad: gb.address(),
-            step: step.address(),
-            res: c.res,
-            start: c.start,
-            count: c.count,
-            channels: 1,
-            scale: c.scale,
-            ..Default::default()
-        },
-        c.count + c.res[1] * c.res[2],
-    )
-    .unwrap();
-    let gpu_grad: Vec<f64> = gb
-        .download::<f32>()
+    let gpu_grad: Vec<f64> = gpu_delta_tv(gpu, &g, &vec![0.0; g.allocated()], c.scale)
         .unwrap()
         .iter()
         .map(|&v| v as f64)

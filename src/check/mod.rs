@@ -56,6 +56,7 @@ pub const CHECKS: &[(&str, CheckFn)] = &[
     ("surface_live_cells", surface_blocks::check_live),
     ("surface_fwd", surface_fwd::check),
     ("surface_train", surface_train::check),
+    ("surface_delta_tv", surface_reg::check_delta_tv),
     ("surface_opacity_reg", surface_reg::check_opacity_reg),
     ("surface_normal_reg_cells", surface_reg::check_normal_cells),
     ("surface_normal_reg_pairs", surface_reg::check_normal_pairs),

@@ -6,8 +6,7 @@
 use super::{CheckRow, Compare};
 use crate::cpu::plenoxel as twin;
 use crate::cpu::step::{optim_args, STEP_COUNT, STEP_FLAGS, STEP_N, TOUCH_ALL};
-use crate::cpu::surface_reg::row_slots;
-use crate::cpu::{rmsprop_sparse, tv, tv_rows, RmsProp, Stage1Params, TvChunk};
+use crate::cpu::{rmsprop_sparse, tv, RmsProp, Stage1Params, TvChunk};
 use crate::gpu::{Gpu, GpuBuffer};
 use crate::grid::{Grid, SH_DIM};
 use crate::kernels;
@@ -400,20 +399,15 @@ pub fn check_tv(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
     let (g, _, _) = test_scene(seed, 40, 0);
     let mut cmp = Compare::new(1e-6, 1e-4);
     let links = gpu.upload(&g.links)?;
-    let row_slot = row_slots(&g.links, g.allocated());
-    let row_slot_buf = gpu.upload(&row_slot)?;
     let slots = g.slots() as u32;
-    let rows = g.allocated() as u32;
     let mut cases = 0;
     for (data, channels) in [(&g.density, 1u32), (&g.sh, SH_DIM as u32)] {
-        // A chunk in the middle, one running off the end of the slot range (slot invocations),
-        // and the whole grid with an invocation per vertex row (Lδ's way), each with other
-        // touched bits.
-        for (start, count, by_rows, touch) in [
-            (slots / 3, slots / 10, false, TOUCH_ALL),
-            (slots - slots / 20, slots / 10, false, 2),
-            (0, slots, true, 0),
-            (0, slots, true, 5),
+        // A chunk in the middle, one running off the end of the slot range, and the whole
+        // grid, each with other touched bits.
+        for (start, count, touch) in [
+            (slots / 3, slots / 10, TOUCH_ALL),
+            (slots - slots / 20, slots / 10, 2),
+            (0, slots, 0),
         ] {
             let c = TvChunk {
                 res: g.res,
@@ -426,25 +420,6 @@ pub fn check_tv(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
             let mut want = vec![0.0f32; data.len()];
             let mut want_touched = vec![0u32; g.allocated()];
             tv(&g.links, data, &mut want, &mut want_touched, &c);
-            if by_rows {
-                // The twin's rows mode: exactly the slot walk's result.
-                let mut rows_grad = vec![0.0f32; data.len()];
-                let mut rows_touched = vec![0u32; g.allocated()];
-                tv_rows(
-                    &g.links,
-                    &row_slot,
-                    data,
-                    &mut rows_grad,
-                    &mut rows_touched,
-                    &c,
-                );
-                for (i, (&a, &b)) in rows_grad.iter().zip(&want).enumerate() {
-                    cmp.value(a as f64, b as f64, || format!("tv_rows element {i}"));
-                }
-                for (i, (&a, &b)) in rows_touched.iter().zip(&want_touched).enumerate() {
-                    cmp.value(a as f64, b as f64, || format!("tv_rows flag {i}"));
-                }
-            }
             let db = gpu.upload(data)?;
             let gb = gpu.zeros::<f32>(data.len())?;
             let step = gpu.upload(&step_buffer(g.allocated(), &[]))?;
@@ -452,7 +427,6 @@ pub fn check_tv(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
                 &kernels::tv::INFO,
                 &kernels::tv::Push {
                     links: links.address(),
-                    row_slot: row_slot_buf.address(),
                     data: db.address(),
                     grad: gb.address(),
                     step: step.address(),
@@ -462,19 +436,13 @@ pub fn check_tv(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
                     channels,
                     scale: 0.7,
                     touch_bits: c.touch,
-                    rows: if by_rows { rows } else { 0 },
-                    ..Default::default()
                 },
-                if by_rows {
-                    rows
-                } else {
-                    count + g.res[1] * g.res[2]
-                },
+                count + g.res[1] * g.res[2],
             )?;
             let got: Vec<f32> = gb.download()?;
             for (i, (&a, &b)) in got.iter().zip(&want).enumerate() {
                 cmp.value(a as f64, b as f64, || {
-                    format!("{channels}-channel element {i} (rows {by_rows})")
+                    format!("{channels}-channel element {i} (chunk at {start})")
                 });
             }
             let flags: Vec<u32> = step.download_range(STEP_FLAGS, g.allocated())?;
@@ -489,8 +457,8 @@ pub fn check_tv(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
     Ok(cmp.row(
         "tv",
         cases,
-        "σ and SH, chunk inside and past the end (an invocation per slot), whole grid (one per \
-         vertex row); touched bits 0, 1, 2, 5: flags exact"
+        "σ and SH, chunk inside, past the end and the whole grid; touched bits 1, 2, 0: flags \
+         exact"
             .into(),
     ))
 }

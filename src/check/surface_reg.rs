@@ -1,18 +1,21 @@
-//! Parity of the stage-2 regulariser and optimiser kernels (surface_opacity_reg, the three
+//! Parity of the stage-2 regulariser and optimiser kernels (surface_delta_tv, surface_opacity_reg, the three
 //! surface_normal_reg_* passes, surface_rmsprop) with their CPU twins, on a random surface grid
 //! with a band of allocated vertices around a noisy sphere (unallocated neighbours, holes), a
 //! slab allocated on the grid's outer faces, a flat block (tiny normals), σα ≤ 0, tiny and large
 //! σα, and chunks inside, whole and wrapping past the end.
 
+use super::plenoxel::rel_l2;
 use super::{CheckRow, Compare};
 use crate::cpu::step::{
     optim_args, STEP_COUNT, STEP_FLAGS, STEP_N, TOUCH_OPACITY, TOUCH_SH, TOUCH_SURFACE,
 };
+use crate::cpu::surface_delta_tv::{axis_neighbours, delta_tv};
+use crate::cpu::surface_reg::delta_tv_chunk;
 use crate::cpu::surface_reg::{
     normal_reg_passes, row_slots, surface_opacity_reg, NormalChunk, NormalPrefix, NormalScratch,
     OpacityChunk, CORNERS_STRIDE, NORMALS_STRIDE,
 };
-use crate::cpu::{surface_rmsprop_sparse, Stage2Params, SurfaceRmsProp};
+use crate::cpu::{surface_rmsprop_sparse, tv, Stage2Params, SurfaceRmsProp};
 use crate::gpu::{Gpu, GpuBuffer};
 use crate::grid::SH_DIM;
 use crate::kernels;
@@ -193,6 +196,72 @@ pub fn gpu_opacity_reg(
         skipped: 0,
         ns: t.kernel_ns("surface_opacity_reg"),
     })
+}
+
+/// Runs both surface_delta_tv stages on the device: grad0 + the Lδ gradient.
+pub fn gpu_delta_tv(gpu: &Gpu, g: &RegGrid, grad0: &[f32], scale: f32) -> Result<Vec<f32>> {
+    let rows = g.allocated() as u32;
+    let nbr = axis_neighbours(&g.links, &row_slots(&g.links, g.allocated()), g.res);
+    let nb = gpu.upload(&nbr)?;
+    let db = gpu.upload(&g.delta)?;
+    let qb = gpu.zeros::<f32>(3 * g.allocated())?;
+    let gb = gpu.upload(grad0)?;
+    let mut b = gpu.batch()?;
+    for stage in 0..2 {
+        b.dispatch_1d(
+            &kernels::surface_delta_tv::INFO,
+            &kernels::surface_delta_tv::Push {
+                nbr: nb.address(),
+                delta: db.address(),
+                q: qb.address(),
+                grad: gb.address(),
+                rows,
+                stage,
+                scale,
+                ..Default::default()
+            },
+            rows,
+        )?;
+    }
+    b.submit()?;
+    gb.download()
+}
+
+/// Lδ on the random grid (band with holes, a slab on the grid's faces): the device against the
+/// twin elementwise, and the twin against `tv` over the whole grid (the definition Lδ shares with
+/// TVα) in aggregate.
+pub fn check_delta_tv(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
+    let g = reg_grid(seed, 24, 0.15);
+    let n = g.allocated();
+    let mut rng = Pcg64::seed_from_u64(seed ^ 0xde17a);
+    let grad0 = random_vec(&mut rng, n, 1e-3);
+    let c = delta_tv_chunk(g.res, n, 5e-3);
+    let nbr = axis_neighbours(&g.links, &row_slots(&g.links, n), g.res);
+    let mut want = grad0.clone();
+    delta_tv(&nbr, &g.delta, &mut want, c.scale);
+    let got = gpu_delta_tv(gpu, &g, &grad0, c.scale)?;
+    let added = |v: &[f32]| -> Vec<f32> { v.iter().zip(&grad0).map(|(a, b)| a - b).collect() };
+    let scale = added(&want).iter().fold(0f32, |m, x| m.max(x.abs())) as f64;
+    let mut cmp = Compare::new(1e-6 * scale, 1e-5);
+    for (i, (&a, &b)) in got.iter().zip(&want).enumerate() {
+        cmp.value(a as f64, b as f64, || format!("δ gradient {i}"));
+    }
+    // The slot-walking TV twin over the whole grid: the same derivative, other rounding.
+    let mut by_slots = grad0.clone();
+    let mut touched = vec![0u32; n];
+    tv(&g.links, &g.delta, &mut by_slots, &mut touched, &c);
+    let l2 = rel_l2(&added(&want), &added(&by_slots));
+    let mut row = cmp.row(
+        "surface_delta_tv",
+        n,
+        format!(
+            "24³ band with holes and faces; against `tv` over the whole grid: rel L2 {l2:.1e} \
+             (≤ 1e-5 required)"
+        ),
+    );
+    row.tolerance = "|Δ| ≤ 1e-6·max|Δgrad| + 1e-5·|cpu| elementwise".into();
+    row.pass &= l2 <= 1e-5;
+    Ok(row)
 }
 
 pub fn check_opacity_reg(gpu: &Gpu, seed: u64) -> Result<CheckRow> {

@@ -11,6 +11,7 @@ mod rmsprop;
 mod sh_eval;
 pub mod step;
 pub mod surface_blocks;
+pub mod surface_delta_tv;
 pub mod surface_fwd;
 pub mod surface_reg;
 pub mod surface_train;
@@ -25,4 +26,4 @@ pub use rmsprop::{
 };
 pub use sh_eval::sh_eval;
 pub use trilerp_eval::trilerp_eval;
-pub use tv::{tv, tv_rows, TvChunk};
+pub use tv::{tv, TvChunk};

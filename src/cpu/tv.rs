@@ -107,24 +107,3 @@ pub fn tv(links: &[i32], data: &[f32], grad: &mut [f32], touched: &mut [u32], c:
         .collect();
     apply(updates, grad, touched, c);
 }
-
-/// [`tv`] for a chunk over the whole grid, visiting the allocated slots `row_slot` only (the
-/// kernel's rows mode): the same result for a fraction of the work.
-pub fn tv_rows(
-    links: &[i32],
-    row_slot: &[u32],
-    data: &[f32],
-    grad: &mut [f32],
-    touched: &mut [u32],
-    c: &TvChunk,
-) {
-    debug_assert!(
-        c.start == 0 && c.count as usize >= links.len(),
-        "whole-grid chunk"
-    );
-    let updates: Vec<_> = row_slot
-        .par_iter()
-        .filter_map(|&s| slot_grad(links, data, c, s as usize))
-        .collect();
-    apply(updates, grad, touched, c);
-}

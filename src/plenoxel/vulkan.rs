@@ -232,7 +232,6 @@ impl Plenoxels for VulkanPlenoxels {
                         channels,
                         scale: lambda / t.count.max(1) as f32,
                         touch_bits: TOUCH_ALL,
-                        ..Default::default()
                     },
                     span,
                 )?;

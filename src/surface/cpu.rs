@@ -5,10 +5,11 @@ use super::{
     SurfaceStepStats,
 };
 use crate::cpu::surface_blocks::build_blocks;
+use crate::cpu::surface_delta_tv::{axis_neighbours, delta_tv};
 use crate::cpu::surface_fwd::{render, SurfCounts};
 use crate::cpu::surface_reg::{normal_reg_passes, row_slots, surface_opacity_reg, NormalPrefix};
 use crate::cpu::surface_train::{train, SurfaceGrads};
-use crate::cpu::{surface_rmsprop_sparse, tv, tv_rows, Stage2Params, SurfaceRmsProp};
+use crate::cpu::{surface_rmsprop_sparse, tv, Stage2Params, SurfaceRmsProp};
 use crate::grid::surface::SurfaceGrid;
 use crate::grid::SH_DIM;
 use anyhow::{ensure, Result};
@@ -19,9 +20,9 @@ pub struct CpuSurface {
     grad: [Vec<f32>; 3],
     state: SurfaceState,
     touched: Vec<u32>,
-    /// Slot of each vertex row, and the normal regulariser's per-grid data (neighbour table, cell
-    /// counts of the chunks).
-    row_slot: Vec<u32>,
+    /// Per-grid neighbour tables: Lδ's axis neighbours, and the normal regulariser's data
+    /// (neighbour table, cell counts of the chunks).
+    axis_nbrs: Vec<i32>,
     normals: NormalPrefix,
     /// The block masks the walks skip with, and when to rebuild them.
     blocks: Vec<u32>,
@@ -34,7 +35,7 @@ impl CpuSurface {
         let row_slot = row_slots(&grid.links, n);
         let normals = NormalPrefix::new(&grid.links, &row_slot, grid.res);
         CpuSurface {
-            row_slot,
+            axis_nbrs: axis_neighbours(&grid.links, &row_slot, grid.res),
             normals,
             blocks: Vec::new(),
             refresh: BlockRefresh::default(),
@@ -57,18 +58,15 @@ impl CpuSurface {
     fn regularise(&mut self, p: &SurfaceStepParams) -> Result<f64> {
         let g = &self.grid;
         let [gd, go, _] = &mut self.grad;
-        let slots = g.links.len();
-        for (chunk, data, grad) in [
-            (p.regs.delta_tv, &g.delta, gd),
-            (p.regs.opacity_tv, &g.opacity, go),
-        ] {
-            match chunk {
-                Some(c) if c.start == 0 && c.count as usize >= slots => {
-                    tv_rows(&g.links, &self.row_slot, data, grad, &mut self.touched, &c)
-                }
-                Some(c) => tv(&g.links, data, grad, &mut self.touched, &c),
-                None => {}
-            }
+        if let Some(c) = p.regs.delta_tv {
+            ensure!(
+                c.start == 0 && c.count as usize >= g.links.len() && c.channels == 1,
+                "Lδ is a TV over the whole grid (delta_tv_chunk)"
+            );
+            delta_tv(&self.axis_nbrs, &g.delta, gd, c.scale);
+        }
+        if let Some(c) = p.regs.opacity_tv {
+            tv(&g.links, &g.opacity, go, &mut self.touched, &c);
         }
         let mut loss = 0.0;
         if let Some(c) = p.regs.opacity_log {

@@ -1,7 +1,7 @@
 //! The Vulkan stage-2 backend: grid, gradients and optimiser state live in device buffers; a
 //! training step is one batch and one submission: step reset → (surface_live_cells and
 //! surface_blocks when δ may have drifted past their margin) → surface_train → regularisers (Lδ
-//! through `tv` with an invocation per vertex row, TVα through `tv`, Lα through
+//! through the two surface_delta_tv passes, TVα through `tv`, Lα through
 //! surface_opacity_reg, Ln1/Ln2 through the three surface_normal_reg_* passes) → surface_rmsprop:
 //! δ of every row when Lδ is on, then (optim_args → indirect) the flagged groups of the touched
 //! vertices.
@@ -13,6 +13,7 @@ use super::{
 };
 use crate::cpu::step::{STEP_COUNT, STEP_FLAGS, STEP_N, TOUCH_OPACITY, TOUCH_SH, TOUCH_SURFACE};
 use crate::cpu::surface_blocks::complete_cells;
+use crate::cpu::surface_delta_tv::axis_neighbours;
 use crate::cpu::surface_fwd::{SurfCounts, SurfaceParams};
 use crate::cpu::surface_reg::{row_slots, NormalPrefix};
 use crate::cpu::surface_train::{RayLoss, SurfaceLoss, TrainCounts, SURF_MAX_HITS};
@@ -89,9 +90,10 @@ pub struct VulkanSurface {
     levels: GpuBuffer,
     /// Counters: 7 of surface_train, or 5 of surface_fwd.
     stats: GpuBuffer,
-    /// The slot of each allocated row, and the normal regulariser's per-grid data (neighbour
-    /// table, prefix count).
-    row_slot: GpuBuffer,
+    /// Lδ's axis-neighbour table (6 rows per row) and its per-row directions q (3 floats).
+    axis_nbrs: GpuBuffer,
+    tv_dirs: GpuBuffer,
+    /// The normal regulariser's per-grid data (neighbour table, prefix count).
     normal_prefix: NormalPrefix,
     /// The normal regulariser's neighbour table and per-row arrays on the device.
     normal_bufs: NormalRegBuffers,
@@ -177,11 +179,12 @@ impl VulkanSurface {
             params: gpu.zeros::<f32>(PARAMS_LEN)?,
             levels: gpu.upload(&levels)?,
             stats: gpu.zeros::<u32>(8)?,
-            row_slot: if row_slot.is_empty() {
-                gpu.zeros::<u32>(1)?
+            axis_nbrs: if n == 0 {
+                gpu.zeros::<i32>(1)?
             } else {
-                gpu.upload(&row_slot)?
+                gpu.upload(&axis_neighbours(&grid.links, &row_slot, grid.res))?
             },
+            tv_dirs: gpu.zeros::<f32>(3 * n.max(1))?,
             normal_bufs: NormalRegBuffers::new(gpu, &normal_prefix)?,
             normal_prefix,
             reg_loss: gpu.zeros::<f32>(2)?,
@@ -337,56 +340,60 @@ impl VulkanSurface {
     fn record_regularisers(&self, b: &mut Batch, p: &SurfaceStepParams) -> Result<()> {
         let res = self.meta.res;
         let slots: u32 = res.iter().product();
-        // A TV chunk over the whole grid (Lδ) runs one invocation per vertex row; other chunks
-        // are dispatched over their intersection with the span of allocated slots: a slot
-        // outside it holds no vertex, and every term of the chunk (a vertex and its forward
+        if let (Some(c), true) = (p.regs.delta_tv, self.rows > 0) {
+            ensure!(
+                c.res == res && c.start == 0 && c.count >= slots && c.channels == 1,
+                "Lδ is a TV over the whole grid (delta_tv_chunk)"
+            );
+            let rows = self.rows as u32;
+            for stage in 0..2 {
+                b.dispatch_1d(
+                    &kernels::surface_delta_tv::INFO,
+                    &kernels::surface_delta_tv::Push {
+                        nbr: self.axis_nbrs.address(),
+                        delta: self.delta.address(),
+                        q: self.tv_dirs.address(),
+                        grad: self.grad[0].address(),
+                        rows,
+                        stage,
+                        scale: c.scale,
+                        ..Default::default()
+                    },
+                    rows,
+                )?;
+            }
+        }
+        // TVα's chunk is dispatched over its intersection with the span of allocated slots: a
+        // slot outside it holds no vertex, and every term of the chunk (a vertex and its forward
         // neighbours) lies inside it, so the gradient is the whole chunk's.
-        let (first, last) = self.allocated_span;
-        for (chunk, data, grad) in [
-            (p.regs.delta_tv, &self.delta, &self.grad[0]),
-            (p.regs.opacity_tv, &self.opacity, &self.grad[1]),
-        ] {
-            let Some(c) = chunk else { continue };
+        if let Some(c) = p.regs.opacity_tv {
             ensure!(
                 c.res == res && c.channels == 1,
                 "TV chunk for a {:?} grid with {} channels on a {res:?} grid",
                 c.res,
                 c.channels
             );
-            let push = kernels::tv::Push {
-                links: self.links.address(),
-                row_slot: self.row_slot.address(),
-                data: data.address(),
-                grad: grad.address(),
-                step: self.step.address(),
-                res,
-                channels: 1,
-                scale: c.scale,
-                touch_bits: c.touch,
-                ..Default::default()
-            };
-            if self.rows > 0 && c.start == 0 && c.count >= slots {
-                let rows = self.rows as u32;
-                let push = kernels::tv::Push {
-                    start: 0,
-                    count: slots,
-                    rows,
-                    ..push
-                };
-                b.dispatch_1d(&kernels::tv::INFO, &push, rows)?;
-                continue;
-            }
+            let (first, last) = self.allocated_span;
             let start = c.start.max(first);
             let end = c.start.saturating_add(c.count).min(last + 1);
-            if self.rows == 0 || start >= end {
-                continue;
+            if self.rows > 0 && start < end {
+                b.dispatch_1d(
+                    &kernels::tv::INFO,
+                    &kernels::tv::Push {
+                        links: self.links.address(),
+                        data: self.opacity.address(),
+                        grad: self.grad[1].address(),
+                        step: self.step.address(),
+                        res,
+                        start,
+                        count: end - start,
+                        channels: 1,
+                        scale: c.scale,
+                        touch_bits: c.touch,
+                    },
+                    end - start + res[1] * res[2],
+                )?;
             }
-            let push = kernels::tv::Push {
-                start,
-                count: end - start,
-                ..push
-            };
-            b.dispatch_1d(&kernels::tv::INFO, &push, end - start + res[1] * res[2])?;
         }
         let rows = self.rows as u32;
         if let (Some(c), true) = (p.regs.opacity_log, rows > 0) {
