@@ -5,7 +5,8 @@
 // r ← (r == 0 ? g² : β·r + (1 − β)·g²); θ ← θ − lr·g/(√r + ε); g ← 0.
 // Thread mapping: one invocation per entry of the touched list (indirect dispatch from
 // optim_args). Inputs/outputs: density, sh and their gradients and RMS states; the step buffer
-// (touch.glsl) gives the list and has each visited flag cleared.
+// (step.glsl) gives the list and has each visited flag cleared. SH through RMSPROP_UPDATE_SH27
+// (64-bit pairs).
 // CPU twin: cpu::rmsprop_sparse.
 #include "common.glsl"
 layout(local_size_x = 64) in;
@@ -32,8 +33,6 @@ void main() {
     if (i >= pc.step.v[STEP_COUNT]) return;
     uint v = pc.step.v[STEP_FLAGS + pc.step.v[STEP_N] + i];
     RMSPROP_UPDATE(pc.density, pc.grad_density, pc.state_density, v, pc.lr_sigma);
-    for (uint k = 0u; k < 27u; k++) {
-        RMSPROP_UPDATE(pc.sh, pc.grad_sh, pc.state_sh, v * 27u + k, pc.lr_sh);
-    }
+    RMSPROP_UPDATE_SH27(pc.sh, pc.grad_sh, pc.state_sh, v, pc.lr_sh);
     pc.step.v[STEP_FLAGS + v] = 0u;
 }

@@ -11,9 +11,8 @@
 //   k < 16, for steps where a regulariser gives every vertex a δ gradient (Lδ); the list pass
 //   then runs without the δ bit. (16 rows per invocation: lavapipe's cost per invocation is
 //   larger than one update's; one row each took 3× as long, measured.)
-// SH are moved as 13 aligned 64-bit words and one float per vertex (lavapipe's loads and stores
-// go one component at a time; measured: the list pass 6.3 → 4.7 ms per bench surface step); the
-// update per float is the same.
+// SH through RMSPROP_UPDATE_SH27 (64-bit pairs; measured: the list pass 6.3 → 4.7 ms per bench
+// surface step).
 // Inputs/outputs: delta, opacity, sh, their gradients and RMS states; the step buffer (list mode:
 // the list; its flags are cleared, the host resets the count). CPU twin:
 // cpu::surface_rmsprop_sparse (both modes at once).
@@ -42,8 +41,6 @@ layout(push_constant, scalar) uniform Push {
 
 #include "rmsprop.glsl"
 
-layout(buffer_reference, scalar, buffer_reference_align = 8) buffer W64Buf { uint64_t v[]; };
-
 // Rows per invocation of the dense pass.
 const uint DENSE_ROWS = 16u;
 #include "step.glsl"
@@ -66,28 +63,6 @@ void main() {
     if ((m & TOUCH_OPACITY) != 0u) {
         RMSPROP_UPDATE(pc.opacity, pc.grad_opacity, pc.state_opacity, v, pc.lr_opacity);
     }
-    if ((m & TOUCH_SH) != 0u) {
-        // The 27 SH as 13 aligned 64-bit words and one float (first for odd v, last for even v):
-        // lavapipe moves memory one component at a time, so pairs halve the loads and stores.
-        uint b = 27u * v;
-        uint lone = (b & 1u) != 0u ? b : b + 26u;
-        uint p0 = (b & 1u) != 0u ? b + 1u : b;
-        RMSPROP_UPDATE(pc.sh, pc.grad_sh, pc.state_sh, lone, pc.lr_sh);
-        W64Buf th = W64Buf(uint64_t(pc.sh) + 4ul * uint64_t(p0));
-        W64Buf gr = W64Buf(uint64_t(pc.grad_sh) + 4ul * uint64_t(p0));
-        W64Buf st = W64Buf(uint64_t(pc.state_sh) + 4ul * uint64_t(p0));
-        for (uint k = 0u; k < 13u; k++) {
-            vec2 g = uintBitsToFloat(unpack32(gr.v[k]));
-            vec2 r = uintBitsToFloat(unpack32(st.v[k]));
-            vec2 t = uintBitsToFloat(unpack32(th.v[k]));
-            precise vec2 g2 = g * g;
-            precise vec2 rn = mix(pc.beta * r + (1.0 - pc.beta) * g2, g2, equal(r, vec2(0.0)));
-            precise vec2 step_ = pc.lr_sh * g / (sqrt(rn) + pc.eps);
-            precise vec2 tn = t - step_;
-            st.v[k] = pack64(floatBitsToUint(rn));
-            th.v[k] = pack64(floatBitsToUint(tn));
-            gr.v[k] = 0ul;
-        }
-    }
+    if ((m & TOUCH_SH) != 0u) RMSPROP_UPDATE_SH27(pc.sh, pc.grad_sh, pc.state_sh, v, pc.lr_sh);
     pc.step.v[STEP_FLAGS + v] = 0u;
 }

@@ -16,4 +16,31 @@
     GRAD.v[I] = 0.0;                                                                    \
 }
 
+// The update of the 27 SH of vertex V (floats 27V … 27V + 26), moved as 13 aligned 64-bit words
+// and one float (the first for odd V, the last for even V): lavapipe loads and stores memory one
+// component at a time, so pairs halve the memory operations; per float the update is
+// RMSPROP_UPDATE's (the same operations, componentwise). Needs the buffers 8-byte aligned.
+layout(buffer_reference, scalar, buffer_reference_align = 8) buffer W64Buf { uint64_t v[]; };
+
+#define RMSPROP_UPDATE_SH27(PARAM, GRAD, STATE, V, LR) {                                  \
+    uint b_ = 27u * (V);                                                                \
+    uint p0_ = (b_ & 1u) != 0u ? b_ + 1u : b_;                                          \
+    RMSPROP_UPDATE(PARAM, GRAD, STATE, (b_ & 1u) != 0u ? b_ : b_ + 26u, LR);            \
+    W64Buf th_ = W64Buf(uint64_t(PARAM) + 4ul * uint64_t(p0_));                         \
+    W64Buf gr_ = W64Buf(uint64_t(GRAD) + 4ul * uint64_t(p0_));                          \
+    W64Buf st_ = W64Buf(uint64_t(STATE) + 4ul * uint64_t(p0_));                         \
+    for (uint k_ = 0u; k_ < 13u; k_++) {                                                \
+        vec2 g_ = uintBitsToFloat(unpack32(gr_.v[k_]));                                 \
+        vec2 r_ = uintBitsToFloat(unpack32(st_.v[k_]));                                 \
+        vec2 t_ = uintBitsToFloat(unpack32(th_.v[k_]));                                 \
+        precise vec2 g2_ = g_ * g_;                                                     \
+        precise vec2 rn_ = mix(pc.beta * r_ + (1.0 - pc.beta) * g2_, g2_, equal(r_, vec2(0.0))); \
+        precise vec2 step_ = (LR) * g_ / (sqrt(rn_) + pc.eps);                          \
+        precise vec2 tn_ = t_ - step_;                                                  \
+        st_.v[k_] = pack64(floatBitsToUint(rn_));                                       \
+        th_.v[k_] = pack64(floatBitsToUint(tn_));                                       \
+        gr_.v[k_] = 0ul;                                                                \
+    }                                                                                   \
+}
+
 #endif

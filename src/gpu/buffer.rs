@@ -70,14 +70,23 @@ impl GpuBuffer {
                 .get_buffer_device_address(&vk::BufferDeviceAddressInfo::default().buffer(buffer))
         };
         inner.live_buffers.fetch_add(1, Ordering::SeqCst);
-        Ok(GpuBuffer {
+        let buf = GpuBuffer {
             gpu: gpu.clone(),
             buffer,
             allocation: Some(allocation),
             device_local: location == MemoryLocation::GpuOnly,
             size,
             address,
-        })
+        };
+        // Kernels read 64-bit words from buffer starts (rmsprop.glsl's RMSPROP_UPDATE_SH27, the
+        // normal regulariser's tables): every allocation is at least 16-byte aligned in Vulkan
+        // practice; refuse a device where it is not rather than read misaligned words
+        // (dropping `buf` frees it).
+        anyhow::ensure!(
+            address % 16 == 0,
+            "buffer {name}: device address {address:#x} is not 16-byte aligned"
+        );
+        Ok(buf)
     }
 
     /// Device address to put in a kernel's push constants.
