@@ -555,8 +555,8 @@ fn normal_reg_adversarial() {
 #[test]
 fn surface_rmsprop_twin_updates_touched_groups_only() {
     let n = 4;
-    let fresh = || -> Vec<Vec<f32>> {
-        vec![
+    let fresh = || -> [Vec<f32>; 9] {
+        [
             vec![1.0; n],
             vec![2.0; n],
             vec![0.5; n * 27],
@@ -568,7 +568,7 @@ fn surface_rmsprop_twin_updates_touched_groups_only() {
             vec![0.0; n * 27],
         ]
     };
-    let run = |p: &mut Vec<Vec<f32>>, touched: &mut Vec<u32>, dense_delta: bool| {
+    let run = |p: &mut [Vec<f32>; 9], touched: &mut Vec<u32>, dense_delta: bool| {
         let h = SurfaceRmsProp {
             lr_delta: 0.1,
             lr_opacity: 0.01,
@@ -577,24 +577,7 @@ fn surface_rmsprop_twin_updates_touched_groups_only() {
             eps: 1e-8,
             dense_delta,
         };
-        let [d, o, sh, gd, go, gs, sd, so, ss] = &mut p[..] else {
-            unreachable!()
-        };
-        surface_rmsprop_sparse(
-            Stage2Params {
-                delta: d,
-                opacity: o,
-                sh,
-                grad_delta: gd,
-                grad_opacity: go,
-                grad_sh: gs,
-                state_delta: sd,
-                state_opacity: so,
-                state_sh: ss,
-            },
-            touched,
-            &h,
-        );
+        surface_rmsprop_sparse(Stage2Params::from_arrays(p), touched, &h);
     };
     // Vertices 0, 1 touched in every group, 2 not at all, 3 in σα only.
     let mut p = fresh();

@@ -481,7 +481,7 @@ fn rmsprop_case(
     let mut vals = |len: usize, lo: f32, hi: f32| -> Vec<f32> {
         (0..len).map(|_| rng.random_range(lo..hi)).collect()
     };
-    let mut p: Vec<Vec<f32>> = vec![
+    let mut p: [Vec<f32>; 9] = [
         vals(n, -1.0, 1.0),
         vals(n, -2.0, 4.0),
         vals(n * SH_DIM, -1.0, 1.0),
@@ -574,24 +574,7 @@ fn rmsprop_case(
     )?;
     b.submit()?;
     let got_args: Vec<u32> = args.download()?;
-    let [d, o, sh, gd, go, gs, sd, so, ss] = &mut p[..] else {
-        unreachable!("nine arrays")
-    };
-    surface_rmsprop_sparse(
-        Stage2Params {
-            delta: d,
-            opacity: o,
-            sh,
-            grad_delta: gd,
-            grad_opacity: go,
-            grad_sh: gs,
-            state_delta: sd,
-            state_opacity: so,
-            state_sh: ss,
-        },
-        &mut flags,
-        &h,
-    );
+    surface_rmsprop_sparse(Stage2Params::from_arrays(&mut p), &mut flags, &h);
     let names = [
         "delta",
         "opacity",

@@ -87,6 +87,24 @@ pub struct Stage2Params<'a> {
     pub state_sh: &'a mut [f32],
 }
 
+impl<'a> Stage2Params<'a> {
+    /// The nine arrays in field order: δ, σα, SH, their gradients, their RMS states.
+    pub fn from_arrays(p: &'a mut [Vec<f32>; 9]) -> Self {
+        let [d, o, sh, gd, go, gs, sd, so, ss] = p;
+        Stage2Params {
+            delta: d,
+            opacity: o,
+            sh,
+            grad_delta: gd,
+            grad_opacity: go,
+            grad_sh: gs,
+            state_delta: sd,
+            state_opacity: so,
+            state_sh: ss,
+        }
+    }
+}
+
 /// Update, per vertex, each group whose touched bit (step.rs TOUCH_*) is set — δ everywhere when
 /// `dense_delta` — clearing the updated gradients, and clear the flags (surface_rmsprop.comp's
 /// dense and list passes in one).
