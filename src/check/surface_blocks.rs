@@ -9,8 +9,8 @@ use super::surface_fwd::test_scene;
 use super::{CheckRow, Compare};
 use crate::cpu::surface_blocks::{build_blocks, complete_cells};
 use crate::gpu::Gpu;
-use crate::kernels;
 use crate::math::surface_blocks::{surf_blocks_per_axis, surf_live_words};
+use crate::surface::skip::{record_skip_structure, SkipIo};
 use anyhow::Result;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
@@ -36,34 +36,18 @@ pub fn build_blocks_gpu(
     let vb = gpu.upload(&lv)?;
     let out = gpu.zeros::<u32>((words + count) as usize)?;
     let mut b = gpu.batch()?;
-    b.dispatch_1d(
-        &kernels::surface_live_cells::INFO,
-        &kernels::surface_live_cells::Push {
+    record_skip_structure(
+        &mut b,
+        &SkipIo {
             complete: cb.address(),
             links: lb.address(),
             delta: db.address(),
             levels: vb.address(),
-            live: out.address(),
+            skip: out.address(),
             n,
             n_levels: levels.len() as u32,
-            margin,
-            ..Default::default()
         },
-        words,
-    )?;
-    b.dispatch_1d(
-        &kernels::surface_blocks::INFO,
-        &kernels::surface_blocks::Push {
-            links: lb.address(),
-            delta: db.address(),
-            levels: vb.address(),
-            blocks: out.address() + 4 * words as u64,
-            n,
-            n_levels: levels.len() as u32,
-            margin,
-            ..Default::default()
-        },
-        count,
+        margin,
     )?;
     let times = b.submit()?;
     Ok((

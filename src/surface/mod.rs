@@ -3,6 +3,7 @@
 
 mod cpu;
 pub mod normal_reg;
+pub mod skip;
 mod vulkan;
 
 pub use cpu::CpuSurface;

@@ -7,6 +7,7 @@
 //! vertices.
 
 use super::normal_reg::{record_normal_reg, NormalRegBuffers, NormalRegIo};
+use super::skip::{record_skip_structure, SkipIo};
 use super::{
     batch_loss, surface_params, BlockRefresh, SurfaceBackend, SurfaceState, SurfaceStepParams,
     SurfaceStepStats,
@@ -301,39 +302,19 @@ impl VulkanSurface {
     /// (live-cell bits, and level masks per 8³-cell block), ranges widened by `margin` (see
     /// `BlockRefresh`), so the walks skip only cells and blocks that cannot hold a hit.
     fn record_blocks(&self, b: &mut Batch, margin: f32) -> Result<()> {
-        let n = self.meta.res[0];
-        let nb = surf_blocks_per_axis(n);
-        let words = self.complete_words as u32;
-        b.dispatch_1d(
-            &kernels::surface_live_cells::INFO,
-            &kernels::surface_live_cells::Push {
+        record_skip_structure(
+            b,
+            &SkipIo {
                 complete: self.complete.address(),
                 links: self.links.address(),
                 delta: self.delta.address(),
                 levels: self.levels.address(),
-                live: self.skip_address(),
-                n,
+                skip: self.skip_address(),
+                n: self.meta.res[0],
                 n_levels: self.meta.levels.len() as u32,
-                margin,
-                ..Default::default()
             },
-            words,
-        )?;
-        b.dispatch_1d(
-            &kernels::surface_blocks::INFO,
-            &kernels::surface_blocks::Push {
-                links: self.links.address(),
-                delta: self.delta.address(),
-                levels: self.levels.address(),
-                blocks: self.skip_address() + 4 * self.complete_words,
-                n,
-                n_levels: self.meta.levels.len() as u32,
-                margin,
-                ..Default::default()
-            },
-            nb * nb * nb,
-        )?;
-        Ok(())
+            margin,
+        )
     }
 
     /// Record the per-vertex regularisers (the same chunks and scales as `CpuSurface`).
