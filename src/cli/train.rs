@@ -1,5 +1,6 @@
 //! `alphasurf train` and `alphasurf render`: wire the dataset, a backend and the trainer.
 
+use super::resume::resume;
 use crate::data::{dataset::peak_rss_bytes, Dataset, LoadOptions};
 use crate::gpu::Gpu;
 use crate::grid::Grid;
@@ -203,34 +204,26 @@ fn run_stage1(args: &TrainArgs, gpu: Option<&Gpu>) -> Result<()> {
     let load_s = t.elapsed().as_secs_f64();
     let ckpt = stage1::checkpoint_path(&args.out);
     let (mut backend, cfg, start) = if args.resume {
-        if !ckpt.exists() {
-            bail!("--resume: no checkpoint at {}", ckpt.display());
+        let restore = || {
+            let probe = crate::grid::checkpoint::load(&ckpt)?;
+            let mut b = make_backend(gpu, probe.grid)?;
+            let (step, cfg) = stage1::resume(b.as_mut(), &ckpt)?;
+            if args.res.is_some() || args.batch.is_some() || args.preset != "fast" {
+                eprintln!(
+                    "--resume: the checkpoint's configuration wins; --res/--batch/--preset ignored"
+                );
+            }
+            Ok((b, step, cfg))
+        };
+        match resume(
+            &ckpt,
+            args.iters,
+            |c: &mut Stage1Config| &mut c.iters,
+            restore,
+        )? {
+            Some(resumed) => resumed,
+            None => return Ok(()),
         }
-        let probe = crate::grid::checkpoint::load(&ckpt)?;
-        let mut b = make_backend(gpu, probe.grid)?;
-        let (step, mut cfg) = stage1::resume(b.as_mut(), &ckpt)?;
-        if args.res.is_some() || args.batch.is_some() || args.preset != "fast" {
-            eprintln!(
-                "--resume: the checkpoint's configuration wins; --res/--batch/--preset ignored"
-            );
-        }
-        if let Some(n) = args.iters {
-            cfg.iters = n; // extend (or shorten) the run; the schedules keep their lengths
-        }
-        if step >= cfg.iters {
-            println!(
-                "{} is already at step {step} of {}: nothing to train (pass --iters to extend)",
-                ckpt.display(),
-                cfg.iters
-            );
-            return Ok(());
-        }
-        eprintln!(
-            "resuming {} at step {step} of {}",
-            ckpt.display(),
-            cfg.iters
-        );
-        (b, cfg, step)
     } else {
         let cfg = config(args)?;
         let grid = Grid::sphere(

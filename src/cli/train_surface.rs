@@ -1,6 +1,7 @@
 //! `alphasurf train --stage surface`: initialise the αSurf grid from a stage-1 run or an svox2
 //! checkpoint (method.md §3.1), or resume a stage-2 run, and train it.
 
+use super::resume::resume;
 use super::train::{write_json, TrainArgs};
 use crate::data::{dataset::peak_rss_bytes, Dataset, LoadOptions};
 use crate::gpu::Gpu;
@@ -107,31 +108,17 @@ pub fn run(args: &TrainArgs, gpu: Option<&Gpu>) -> Result<()> {
     let load_s = t_all.elapsed().as_secs_f64();
     let ckpt = stage2::checkpoint_path(&args.out);
     let (mut backend, cfg, start) = if args.resume {
-        ensure!(
-            ckpt.exists(),
-            "--resume: no checkpoint at {}",
-            ckpt.display()
-        );
-        let probe = SurfaceGrid::load(&ckpt)?;
-        let mut b = make_backend(gpu, probe.grid)?;
-        let (step, mut cfg) = stage2::resume(b.as_mut(), &ckpt)?;
-        if let Some(n) = args.surface_iters.or(args.iters) {
-            cfg.iters = n;
+        let restore = || {
+            let probe = SurfaceGrid::load(&ckpt)?;
+            let mut b = make_backend(gpu, probe.grid)?;
+            let (step, cfg) = stage2::resume(b.as_mut(), &ckpt)?;
+            Ok((b, step, cfg))
+        };
+        let iters = args.surface_iters.or(args.iters);
+        match resume(&ckpt, iters, |c: &mut SurfaceConfig| &mut c.iters, restore)? {
+            Some(resumed) => resumed,
+            None => return Ok(()),
         }
-        if step >= cfg.iters {
-            println!(
-                "{} is already at step {step} of {}: nothing to train (pass --iters to extend)",
-                ckpt.display(),
-                cfg.iters
-            );
-            return Ok(());
-        }
-        eprintln!(
-            "resuming {} at step {step} of {}",
-            ckpt.display(),
-            cfg.iters
-        );
-        (b, cfg, step)
     } else {
         let cfg = config(args)?;
         let init = args
