@@ -4,8 +4,7 @@
 //! slab allocated on the grid's outer faces, a flat block (tiny normals), σα ≤ 0, tiny and large
 //! σα, and chunks inside, whole and wrapping past the end.
 
-use super::plenoxel::rel_l2;
-use super::{CheckRow, Compare};
+use super::{rel_l2, CheckRow, Compare};
 use crate::cpu::step::{
     optim_args, STEP_COUNT, STEP_FLAGS, STEP_N, TOUCH_OPACITY, TOUCH_SH, TOUCH_SURFACE,
 };
