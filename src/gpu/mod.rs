@@ -1,6 +1,7 @@
 //! Vulkan compute runtime: instance and device choice (`device`), the context with its allocator
 //! and pipelines (`context`), RAII buffers addressed by device address (`buffer`), batched
-//! submission with timestamp queries (`batch`), and per-kernel profiles (`profile`).
+//! submission with timestamp queries (`batch`), per-kernel profiles (`profile`), and the Vulkan
+//! backends' per-batch ray buffers (`ray_buffers`).
 
 mod batch;
 mod buffer;
@@ -8,12 +9,14 @@ mod context;
 mod device;
 mod instance;
 mod profile;
+mod ray_buffers;
 
 pub use batch::{Batch, BatchTimes};
 pub use buffer::GpuBuffer;
 pub use context::{list_devices, Gpu, GpuOptions};
 pub use device::{pick_default, DeviceInfo};
 pub use profile::Profile;
+pub use ray_buffers::RayBuffers;
 
 use std::sync::OnceLock;
 
