@@ -14,17 +14,17 @@
 //! stage-1 training on the Vulkan device at the same resolution, from the stage-1 grid, the way
 //! `bench plenoxels` does, and prints the ratios of the Vulkan rates.
 
+use super::stage1::{thin_scene, time_steps, warm_config};
 use crate::cpu::surface_reg::{delta_tv_chunk, opacity_tv_chunk, OpacityChunk};
-use crate::data::{Dataset, LoadOptions, RaySampler};
+use crate::data::{Dataset, RaySampler};
 use crate::gpu::Gpu;
 use crate::grid::surface::SurfaceGrid;
-use crate::plenoxel::{CpuPlenoxels, Plenoxels, StepParams, VulkanPlenoxels};
-use crate::scene::{generate, GenerateOptions, SceneKind};
+use crate::plenoxel::{CpuPlenoxels, Plenoxels, VulkanPlenoxels};
 use crate::surface::{
     CpuSurface, SurfaceBackend, SurfaceRegs, SurfaceStepParams, SurfaceStepStats, VulkanSurface,
 };
+use crate::train::stage1;
 use crate::train::surface_config::SurfaceConfig;
-use crate::train::{stage1, Stage1Config};
 use anyhow::{ensure, Result};
 use serde_json::json;
 use std::collections::BTreeMap;
@@ -161,39 +161,6 @@ fn time_surface(
     Ok(f)
 }
 
-/// Stage-1 training rays/s of `backend` over `steps` timed steps (after one untimed), the same
-/// measurement as `bench plenoxels`.
-fn time_stage1(
-    backend: &mut dyn Plenoxels,
-    data: &Dataset,
-    cfg: &Stage1Config,
-    args: &SurfaceBenchArgs,
-) -> Result<f64> {
-    let mut sampler = RaySampler::new(&data.train, 7);
-    let mut secs = 0.0;
-    for step in 0..=args.steps {
-        let b = sampler.next_batch(&data.train, &data.scene, args.batch as usize);
-        let (rays, targets) = (b.flat_rays(), b.flat_targets());
-        let t = Instant::now();
-        backend.step(
-            &rays,
-            &targets,
-            &StepParams {
-                lr_sigma: cfg.lr_sigma.at(cfg.iters),
-                lr_sh: cfg.lr_sh.at(cfg.iters),
-                beta: cfg.beta,
-                eps: cfg.eps,
-                stop_thresh: cfg.stop_thresh,
-                tv: None,
-            },
-        )?;
-        if step > 0 {
-            secs += t.elapsed().as_secs_f64();
-        }
-    }
-    Ok((args.batch * args.steps) as f64 / secs)
-}
-
 /// Run the benchmark and print it.
 pub fn run(gpu: &Gpu, args: &SurfaceBenchArgs) -> Result<()> {
     ensure!((16..=512).contains(&args.res), "--res must be in 16..=512");
@@ -214,20 +181,11 @@ pub fn run(gpu: &Gpu, args: &SurfaceBenchArgs) -> Result<()> {
 }
 
 fn run_in(gpu: &Gpu, args: &SurfaceBenchArgs, dir: &std::path::Path) -> Result<()> {
-    let scene_dir = dir.join("scene");
-    let mut opts = GenerateOptions::new(SceneKind::Thin);
-    (opts.res, opts.views, opts.spp_side, opts.gt_spacing) = (128, 40, 2, 0.05);
     eprintln!("bench surface: generating the thin scene (128², 40 views)");
-    generate(&scene_dir, &opts)?;
-    let data = Dataset::load(&scene_dir, &LoadOptions::default())?;
+    let data = thin_scene(&dir.join("scene"))?;
 
     // Stage 1, briefly, on the CPU backend (the faster one on a CPU-only machine).
-    let mut cfg = Stage1Config::fast();
-    cfg.res = args.res / 2;
-    cfg.upsample = vec![(args.stage1_steps / 3, args.res)];
-    cfg.iters = args.stage1_steps;
-    cfg.checkpoint_every = u32::MAX;
-    let grid0 = crate::grid::Grid::sphere(cfg.res, [0.0; 3], [1.0; 3], 1.0, cfg.init_sigma);
+    let (cfg, grid0) = warm_config(args.res, args.stage1_steps);
     let mut s1 = CpuPlenoxels::new(grid0);
     eprintln!(
         "bench surface: {} stage-1 steps (CPU) to reach a {}³ density grid",
@@ -236,12 +194,14 @@ fn run_in(gpu: &Gpu, args: &SurfaceBenchArgs, dir: &std::path::Path) -> Result<(
     stage1::train(&mut s1, &data, &cfg, &dir.join("stage1"), 0, false)?;
     let density = s1.grid()?;
     eprintln!("bench surface: stage-1 training on the Vulkan device at the same resolution");
-    let stage1_vk = time_stage1(
+    let stage1_vk = time_steps(
         &mut VulkanPlenoxels::new(gpu, density.clone())?,
         &data,
         &cfg,
-        args,
-    )?;
+        args.steps,
+        args.batch,
+    )?
+    .rays_per_s;
 
     let scfg = SurfaceConfig::preset("fast", "thin")?;
     let init_grid = SurfaceGrid::from_density(&density, &scfg.init)?;
