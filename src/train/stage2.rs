@@ -3,7 +3,7 @@
 //! (resumable); NaN/Inf detection; at the end the α < 0.1 surfaces are dropped, the test split
 //! rendered and metrics.json written.
 
-use super::progress::Progress;
+use super::progress::{Progress, Throughput};
 use super::render::{render_split_with, RenderedSplit};
 use super::stage1::step_rng;
 use super::surface_config::SurfaceConfig;
@@ -151,7 +151,7 @@ pub fn train(
     }
     let mut report = Stage2Report::default();
     let mut progress = Progress::new(cfg.iters as u64, start_step as u64, show_progress);
-    let (mut timed_rays, mut timed_secs, mut rays_total) = (0u64, 0.0f64, 0u64);
+    let mut throughput = Throughput::new(start_step);
     let mut totals = [0u64; 8];
     let mut mse = f64::NAN;
     let t_start = Instant::now();
@@ -180,11 +180,7 @@ pub fn train(
         }
         mse = stats.mse;
         let secs = t.elapsed().as_secs_f64();
-        if step >= start_step + 10 {
-            timed_rays += batch.len() as u64;
-            timed_secs += secs;
-        }
-        rays_total += batch.len() as u64;
+        throughput.add(step, batch.len(), secs);
         for (a, &c) in totals.iter_mut().zip(&stats.counts) {
             *a += c as u64;
         }
@@ -199,8 +195,7 @@ pub fn train(
             stats.reg_loss,
             t_start.elapsed().as_secs_f64()
         )?;
-        let rays_per_s = (timed_secs > 0.0).then(|| timed_rays as f64 / timed_secs);
-        progress.step(step as u64 + 1, mse, rays_per_s);
+        progress.step(step as u64 + 1, mse, throughput.rays_per_s());
         report.train_seconds += secs;
         if (step + 1) % cfg.checkpoint_every == 0 && step + 1 < cfg.iters {
             let t = Instant::now();
@@ -236,14 +231,10 @@ pub fn train(
     )?;
     report.render_seconds = t.elapsed().as_secs_f64();
     report.steps = cfg.iters;
-    report.train_rays_per_s = if timed_secs > 0.0 {
-        timed_rays as f64 / timed_secs
-    } else {
-        0.0
-    };
+    report.train_rays_per_s = throughput.rays_per_s().unwrap_or(0.0);
     report.final_mse = mse;
     report.test_psnr = rendered.mean_psnr;
-    report.per_ray = totals.map(|s| s as f64 / rays_total.max(1) as f64);
+    report.per_ray = totals.map(|s| s as f64 / throughput.rays().max(1) as f64);
     report.allocated_vertices = backend.grid()?.delta.len();
     Ok((report, rendered))
 }
