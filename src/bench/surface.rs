@@ -15,7 +15,6 @@
 //! `bench plenoxels` does, and prints the ratios of the Vulkan rates.
 
 use super::stage1::{thin_scene, time_steps, warm_config};
-use crate::cpu::surface_reg::{delta_tv_chunk, opacity_tv_chunk, OpacityChunk};
 use crate::data::{Dataset, RaySampler};
 use crate::gpu::Gpu;
 use crate::grid::surface::SurfaceGrid;
@@ -23,8 +22,8 @@ use crate::plenoxel::{CpuPlenoxels, Plenoxels, VulkanPlenoxels};
 use crate::surface::{
     CpuSurface, SurfaceBackend, SurfaceRegs, SurfaceStepParams, SurfaceStepStats, VulkanSurface,
 };
-use crate::train::stage1;
 use crate::train::surface_config::SurfaceConfig;
+use crate::train::{stage1, stage2};
 use anyhow::{ensure, Result};
 use serde_json::json;
 use std::collections::BTreeMap;
@@ -82,38 +81,7 @@ fn step_params(
     step: u32,
 ) -> SurfaceStepParams {
     let draw = (step as u64 + 1).wrapping_mul(0x9e37_79b9_7f4a_7c15);
-    let row_chunk = |fraction: f32, draw: u64| {
-        let count = ((rows as f32 * fraction) as u32).clamp(1, rows.max(1));
-        ((draw % rows.max(1) as u64) as u32, count)
-    };
-    let (la_start, la_count) = row_chunk(cfg.alpha_fraction, draw);
-    let (n_start, n_count) = row_chunk(cfg.normal_fraction, draw >> 17);
-    let (ln1, ln2) = (cfg.lambda_n1.at(0), cfg.lambda_n2);
-    SurfaceStepParams {
-        lr_delta: cfg.lr_delta.at(0),
-        lr_opacity: cfg.lr_opacity.at(0),
-        lr_sh: cfg.lr_sh.at(0),
-        beta: cfg.beta,
-        eps: cfg.eps,
-        a,
-        stop_thresh: cfg.stop_thresh,
-        lambda_h: cfg.lambda_h,
-        lambda_c: cfg.lambda_c,
-        regs: SurfaceRegs {
-            delta_tv: (cfg.lambda_delta > 0.0)
-                .then(|| delta_tv_chunk(res, rows as usize, cfg.lambda_delta)),
-            opacity_tv: (cfg.lambda_tv_alpha > 0.0).then(|| {
-                opacity_tv_chunk(res, cfg.tv_alpha_fraction, cfg.lambda_tv_alpha, draw >> 7)
-            }),
-            opacity_log: (cfg.lambda_alpha > 0.0).then_some(OpacityChunk {
-                rows,
-                start: la_start,
-                count: la_count,
-                lambda: cfg.lambda_alpha,
-            }),
-            normals: (ln1 > 0.0 || ln2 > 0.0).then_some((n_start, n_count, ln1, ln2)),
-        },
-    }
+    stage2::step_params(cfg, res, rows, 0, a, [draw, draw >> 17, draw >> 7])
 }
 
 /// One backend step: rays, targets, parameters.

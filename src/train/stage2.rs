@@ -76,22 +76,24 @@ pub fn resume(backend: &mut dyn SurfaceBackend, path: &Path) -> Result<(u32, Sur
     Ok((step, cfg))
 }
 
-/// The scheduled parameters of step `step` (random regulariser chunks from `rng`) for a grid of
-/// resolution `res` with `rows` allocated vertices.
-fn step_params(
+/// The scheduled parameters of step `step`, with truncation `a`, for a grid of resolution `res`
+/// with `rows` allocated vertices; `draws` place the random regulariser chunks (Lα's start, Ln's
+/// start, TVα's draw).
+pub fn step_params(
     cfg: &SurfaceConfig,
     res: [u32; 3],
     rows: u32,
     step: u32,
-    rng: &mut impl Rng,
+    a: f32,
+    draws: [u64; 3],
 ) -> SurfaceStepParams {
-    let row_chunk = |fraction: f32, draw: u32| {
+    let row_chunk = |fraction: f32, draw: u64| {
         let count = ((rows as f32 * fraction) as u32).clamp(1, rows.max(1));
-        (draw % rows.max(1), count)
+        ((draw % rows.max(1) as u64) as u32, count)
     };
-    let (la_start, la_count) = row_chunk(cfg.alpha_fraction, rng.random());
-    let (n_start, n_count) = row_chunk(cfg.normal_fraction, rng.random());
-    let tv_draw: u64 = rng.random();
+    let (la_start, la_count) = row_chunk(cfg.alpha_fraction, draws[0]);
+    let (n_start, n_count) = row_chunk(cfg.normal_fraction, draws[1]);
+    let tv_draw = draws[2];
     let (ln1, ln2) = (cfg.lambda_n1.at(step), cfg.lambda_n2);
     SurfaceStepParams {
         lr_delta: cfg.lr_delta.at(step),
@@ -99,7 +101,7 @@ fn step_params(
         lr_sh: cfg.lr_sh.at(step),
         beta: cfg.beta,
         eps: cfg.eps,
-        a: cfg.a.at(step),
+        a,
         stop_thresh: cfg.stop_thresh,
         lambda_h: cfg.lambda_h,
         lambda_c: if step < cfg.lambda_c_until {
@@ -166,7 +168,12 @@ pub fn train(
             &data.scene,
             cfg.batch as usize,
         );
-        let p = step_params(cfg, res, rows, step, &mut rng);
+        let draws = [
+            rng.random::<u32>().into(),
+            rng.random::<u32>().into(),
+            rng.random(),
+        ];
+        let p = step_params(cfg, res, rows, step, cfg.a.at(step), draws);
         let stats = backend.step(&batch.flat_rays(), &batch.flat_targets(), &p)?;
         if !(stats.mse.is_finite() && stats.entropy.is_finite() && stats.consistency.is_finite()) {
             bail!(
