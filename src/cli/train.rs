@@ -193,15 +193,8 @@ pub fn run_train(args: &TrainArgs, gpu: Option<&Gpu>) -> Result<()> {
 /// Run stage 1.
 fn run_stage1(args: &TrainArgs, gpu: Option<&Gpu>) -> Result<()> {
     let t_all = Instant::now();
-    let t = Instant::now();
-    let data = Dataset::load(
-        &args.data,
-        &LoadOptions {
-            downscale: args.downscale,
-            ..Default::default()
-        },
-    )?;
-    let load_s = t.elapsed().as_secs_f64();
+    let data = load_data(args)?;
+    let load_s = t_all.elapsed().as_secs_f64();
     let ckpt = stage1::checkpoint_path(&args.out);
     let (mut backend, cfg, start) = if args.resume {
         let restore = || {
@@ -235,15 +228,7 @@ fn run_stage1(args: &TrainArgs, gpu: Option<&Gpu>) -> Result<()> {
         );
         (make_backend(gpu, grid)?, cfg, 0)
     };
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("creating run directory {}", args.out.display()))?;
-    let run_info =
-        json!({ "data": std::fs::canonicalize(&args.data)?, "downscale": args.downscale });
-    std::fs::write(
-        args.out.join("run.json"),
-        serde_json::to_vec_pretty(&run_info)?,
-    )
-    .with_context(|| format!("writing {}", args.out.join("run.json").display()))?;
+    create_run_dir(args, &[])?;
     eprintln!(
         "stage 1 on {} ({}): preset {}, {} steps of {} rays, grid {}³{}",
         backend.name(),
@@ -299,6 +284,30 @@ fn run_stage1(args: &TrainArgs, gpu: Option<&Gpu>) -> Result<()> {
         "config": cfg,
     });
     write_json(&args.out.join("metrics.json"), &metrics)
+}
+
+/// The dataset `--data` names, at `--downscale`.
+pub(super) fn load_data(args: &TrainArgs) -> Result<Dataset> {
+    Dataset::load(
+        &args.data,
+        &LoadOptions {
+            downscale: args.downscale,
+            ..Default::default()
+        },
+    )
+}
+
+/// Creates the run directory `--out` and writes its run.json: the dataset's absolute path, the
+/// downscale factor and the `extra` fields.
+pub(super) fn create_run_dir(args: &TrainArgs, extra: &[(&str, serde_json::Value)]) -> Result<()> {
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating run directory {}", args.out.display()))?;
+    let mut run_info =
+        json!({ "data": std::fs::canonicalize(&args.data)?, "downscale": args.downscale });
+    for (key, value) in extra {
+        run_info[*key] = value.clone();
+    }
+    write_json(&args.out.join("run.json"), &run_info)
 }
 
 pub(super) fn write_json(path: &Path, v: &serde_json::Value) -> Result<()> {
