@@ -7,7 +7,7 @@ use super::{grad_outliers, rel_l2, CheckRow, Compare};
 use crate::cpu::plenoxel as twin;
 use crate::cpu::step::{optim_args, STEP_COUNT, STEP_FLAGS, STEP_N, TOUCH_ALL};
 use crate::cpu::{rmsprop_sparse, tv, RmsProp, Stage1Params, TvChunk};
-use crate::gpu::{Gpu, GpuBuffer};
+use crate::gpu::{record_optim_args, Gpu, GpuBuffer};
 use crate::grid::{Grid, SH_DIM};
 use crate::kernels;
 use crate::math::plenoxel::Counts;
@@ -307,14 +307,7 @@ pub fn check_rmsprop(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
         eps: 1e-8,
     };
     let mut b = gpu.batch()?;
-    b.dispatch(
-        &kernels::optim_args::INFO,
-        &kernels::optim_args::Push {
-            step: step.address(),
-            args: args.address(),
-        },
-        [1, 1, 1],
-    )?;
+    record_optim_args(&mut b, &step, &args)?;
     b.dispatch_indirect(
         &kernels::rmsprop_sparse::INFO,
         &kernels::rmsprop_sparse::Push {

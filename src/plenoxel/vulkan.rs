@@ -3,7 +3,7 @@
 
 use super::{march_params, Gradients, Plenoxels, StepParams, StepStats};
 use crate::cpu::step::{STEP_FLAGS, STEP_N, STEP_STATS, TOUCH_ALL};
-use crate::gpu::{Batch, Gpu, GpuBuffer, RayBuffers};
+use crate::gpu::{record_optim_args, Batch, Gpu, GpuBuffer, RayBuffers};
 use crate::grid::{Grid, SH_DIM};
 use crate::kernels;
 use crate::math::plenoxel::{occ_dims, Counts};
@@ -91,14 +91,7 @@ impl VulkanPlenoxels {
 
     /// Record the sparse RMSProp step over the vertices touched this step.
     fn record_rmsprop(&self, b: &mut Batch, p: &StepParams) -> Result<()> {
-        b.dispatch(
-            &kernels::optim_args::INFO,
-            &kernels::optim_args::Push {
-                step: self.step.address(),
-                args: self.args.address(),
-            },
-            [1, 1, 1],
-        )?;
+        record_optim_args(b, &self.step, &self.args)?;
         b.dispatch_indirect(
             &kernels::rmsprop_sparse::INFO,
             &kernels::rmsprop_sparse::Push {

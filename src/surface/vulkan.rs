@@ -18,7 +18,7 @@ use crate::cpu::surface_delta_tv::axis_neighbours;
 use crate::cpu::surface_fwd::{SurfCounts, SurfaceParams};
 use crate::cpu::surface_reg::{row_slots, NormalPrefix};
 use crate::cpu::surface_train::{RayLoss, SurfaceLoss, TrainCounts, SURF_MAX_HITS};
-use crate::gpu::{Batch, BatchTimes, Gpu, GpuBuffer, RayBuffers};
+use crate::gpu::{record_optim_args, Batch, BatchTimes, Gpu, GpuBuffer, RayBuffers};
 use crate::grid::surface::SurfaceGrid;
 use crate::grid::SH_DIM;
 use crate::kernels;
@@ -419,14 +419,7 @@ impl VulkanSurface {
                 rows.div_ceil(SURFACE_RMSPROP_DENSE_ROWS),
             )?;
         }
-        b.dispatch(
-            &kernels::optim_args::INFO,
-            &kernels::optim_args::Push {
-                step: self.step.address(),
-                args: self.args.address(),
-            },
-            [1, 1, 1],
-        )?;
+        record_optim_args(b, &self.step, &self.args)?;
         b.dispatch_indirect(
             &kernels::surface_rmsprop::INFO,
             &kernels::surface_rmsprop::Push {
