@@ -3,8 +3,9 @@
 //! The kernel-level parity (per-ray losses, gradients, touched flags, counters) is the
 //! `surface_train` row of `check-kernels`, asserted in tests/parity.rs.
 
+use alphasurf::check::rel_l2;
 use alphasurf::check::surface_fwd::{test_rays, test_scene};
-use alphasurf::check::surface_train::{rel_l2, scene_grid};
+use alphasurf::check::surface_train::scene_grid;
 use alphasurf::cpu::surface_reg::{delta_tv_chunk, opacity_tv_chunk, OpacityChunk};
 use alphasurf::gpu::test_gpu;
 use alphasurf::grid::surface::SurfaceGrid;

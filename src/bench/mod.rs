@@ -3,5 +3,6 @@
 pub mod cubic;
 pub mod dda;
 pub mod plenoxels;
+mod stage1;
 pub mod surface;
 pub mod time_vs_error;

@@ -6,14 +6,12 @@
 //! ratio, device time per kernel (timestamp queries), samples per ray shaded / evaluated empty /
 //! skipped by the occupancy volume, and gradient atomic adds per ray.
 
-use crate::data::{Dataset, LoadOptions, RaySampler};
+use super::stage1::{thin_scene, time_steps, warm_config};
 use crate::gpu::Gpu;
-use crate::plenoxel::{CpuPlenoxels, Plenoxels, StepParams, VulkanPlenoxels};
-use crate::scene::{generate, GenerateOptions, SceneKind};
-use crate::train::{stage1, Stage1Config};
+use crate::plenoxel::{CpuPlenoxels, Plenoxels, VulkanPlenoxels};
+use crate::train::stage1;
 use anyhow::{ensure, Result};
 use serde_json::json;
-use std::time::Instant;
 
 /// Arguments of `bench plenoxels`.
 #[derive(clap::Args, Debug)]
@@ -35,53 +33,6 @@ pub struct PlenoxelsBenchArgs {
     pub batch: u32,
 }
 
-/// One backend's figures.
-#[derive(Debug, Default, serde::Serialize)]
-struct Figures {
-    rays_per_s: f64,
-    mean_mse: f64,
-    /// shaded, empty, skipped samples and atomic adds, per ray.
-    per_ray: [f64; 4],
-}
-
-fn time_steps(
-    backend: &mut dyn Plenoxels,
-    data: &Dataset,
-    cfg: &Stage1Config,
-    args: &PlenoxelsBenchArgs,
-) -> Result<Figures> {
-    let mut f = Figures::default();
-    let mut secs = 0.0;
-    let mut sampler = RaySampler::new(&data.train, 7);
-    for step in 0..=args.steps {
-        let b = sampler.next_batch(&data.train, &data.scene, args.batch as usize);
-        let (rays, targets) = (b.flat_rays(), b.flat_targets());
-        let t = Instant::now();
-        let s = backend.step(
-            &rays,
-            &targets,
-            &StepParams {
-                lr_sigma: cfg.lr_sigma.at(cfg.iters),
-                lr_sh: cfg.lr_sh.at(cfg.iters),
-                beta: cfg.beta,
-                eps: cfg.eps,
-                stop_thresh: cfg.stop_thresh,
-                tv: None,
-            },
-        )?;
-        if step == 0 {
-            continue; // warm-up: first-dispatch compilation on lavapipe
-        }
-        secs += t.elapsed().as_secs_f64();
-        f.mean_mse += s.mse / args.steps as f64;
-        for i in 0..4 {
-            f.per_ray[i] += s.counts[i] as f64 / (args.batch * args.steps) as f64;
-        }
-    }
-    f.rays_per_s = (args.batch * args.steps) as f64 / secs;
-    Ok(f)
-}
-
 /// Run the benchmark and print it.
 pub fn run(gpu: &Gpu, args: &PlenoxelsBenchArgs) -> Result<()> {
     ensure!((16..=512).contains(&args.res), "--res must be in 16..=512");
@@ -90,22 +41,12 @@ pub fn run(gpu: &Gpu, args: &PlenoxelsBenchArgs) -> Result<()> {
         "--steps and --batch must be at least 1"
     );
     let dir = tempfile_dir()?;
-    let scene_dir = dir.join("scene");
-    let mut opts = GenerateOptions::new(SceneKind::Thin);
-    (opts.res, opts.views, opts.spp_side, opts.gt_spacing) = (128, 40, 2, 0.05);
     eprintln!(
         "bench plenoxels: generating the thin scene (128², 40 views) in {}",
         dir.display()
     );
-    generate(&scene_dir, &opts)?;
-    let data = Dataset::load(&scene_dir, &LoadOptions::default())?;
-
-    let mut cfg = Stage1Config::fast();
-    cfg.res = args.res / 2;
-    cfg.upsample = vec![(args.warm_steps / 3, args.res)];
-    cfg.iters = args.warm_steps;
-    cfg.checkpoint_every = u32::MAX;
-    let grid0 = crate::grid::Grid::sphere(cfg.res, [0.0; 3], [1.0; 3], 1.0, cfg.init_sigma);
+    let data = thin_scene(&dir.join("scene"))?;
+    let (cfg, grid0) = warm_config(args.res, args.warm_steps);
     let mut vk = VulkanPlenoxels::new(gpu, grid0)?;
     eprintln!(
         "bench plenoxels: {} warm-up steps to reach a {}³ grid",
@@ -116,7 +57,7 @@ pub fn run(gpu: &Gpu, args: &PlenoxelsBenchArgs) -> Result<()> {
 
     let before: Vec<(&str, u64, f64)> = gpu.profile().totals();
     let mut vk = VulkanPlenoxels::new(gpu, grid.clone())?;
-    let fv = time_steps(&mut vk, &data, &cfg, args)?;
+    let fv = time_steps(&mut vk, &data, &cfg, args.steps, args.batch)?;
     let kernels: Vec<(String, f64)> = gpu
         .profile()
         .totals()
@@ -132,7 +73,7 @@ pub fn run(gpu: &Gpu, args: &PlenoxelsBenchArgs) -> Result<()> {
         .map(|(k, _, ns)| (k, ns / 1e6 / (args.steps + 1) as f64))
         .collect();
     let mut cpu = CpuPlenoxels::new(grid.clone());
-    let fc = time_steps(&mut cpu, &data, &cfg, args)?;
+    let fc = time_steps(&mut cpu, &data, &cfg, args.steps, args.batch)?;
     let _ = std::fs::remove_dir_all(&dir);
 
     println!(

@@ -14,17 +14,16 @@
 //! stage-1 training on the Vulkan device at the same resolution, from the stage-1 grid, the way
 //! `bench plenoxels` does, and prints the ratios of the Vulkan rates.
 
-use crate::cpu::surface_reg::{delta_tv_chunk, opacity_tv_chunk, OpacityChunk};
-use crate::data::{Dataset, LoadOptions, RaySampler};
+use super::stage1::{thin_scene, time_steps, warm_config};
+use crate::data::{Dataset, RaySampler};
 use crate::gpu::Gpu;
 use crate::grid::surface::SurfaceGrid;
-use crate::plenoxel::{CpuPlenoxels, Plenoxels, StepParams, VulkanPlenoxels};
-use crate::scene::{generate, GenerateOptions, SceneKind};
+use crate::plenoxel::{CpuPlenoxels, Plenoxels, VulkanPlenoxels};
 use crate::surface::{
     CpuSurface, SurfaceBackend, SurfaceRegs, SurfaceStepParams, SurfaceStepStats, VulkanSurface,
 };
 use crate::train::surface_config::SurfaceConfig;
-use crate::train::{stage1, Stage1Config};
+use crate::train::{stage1, stage2};
 use anyhow::{ensure, Result};
 use serde_json::json;
 use std::collections::BTreeMap;
@@ -82,38 +81,7 @@ fn step_params(
     step: u32,
 ) -> SurfaceStepParams {
     let draw = (step as u64 + 1).wrapping_mul(0x9e37_79b9_7f4a_7c15);
-    let row_chunk = |fraction: f32, draw: u64| {
-        let count = ((rows as f32 * fraction) as u32).clamp(1, rows.max(1));
-        ((draw % rows.max(1) as u64) as u32, count)
-    };
-    let (la_start, la_count) = row_chunk(cfg.alpha_fraction, draw);
-    let (n_start, n_count) = row_chunk(cfg.normal_fraction, draw >> 17);
-    let (ln1, ln2) = (cfg.lambda_n1.at(0), cfg.lambda_n2);
-    SurfaceStepParams {
-        lr_delta: cfg.lr_delta.at(0),
-        lr_opacity: cfg.lr_opacity.at(0),
-        lr_sh: cfg.lr_sh.at(0),
-        beta: cfg.beta,
-        eps: cfg.eps,
-        a,
-        stop_thresh: cfg.stop_thresh,
-        lambda_h: cfg.lambda_h,
-        lambda_c: cfg.lambda_c,
-        regs: SurfaceRegs {
-            delta_tv: (cfg.lambda_delta > 0.0)
-                .then(|| delta_tv_chunk(res, rows as usize, cfg.lambda_delta)),
-            opacity_tv: (cfg.lambda_tv_alpha > 0.0).then(|| {
-                opacity_tv_chunk(res, cfg.tv_alpha_fraction, cfg.lambda_tv_alpha, draw >> 7)
-            }),
-            opacity_log: (cfg.lambda_alpha > 0.0).then_some(OpacityChunk {
-                rows,
-                start: la_start,
-                count: la_count,
-                lambda: cfg.lambda_alpha,
-            }),
-            normals: (ln1 > 0.0 || ln2 > 0.0).then_some((n_start, n_count, ln1, ln2)),
-        },
-    }
+    stage2::step_params(cfg, res, rows, 0, a, [draw, draw >> 17, draw >> 7])
 }
 
 /// One backend step: rays, targets, parameters.
@@ -161,39 +129,6 @@ fn time_surface(
     Ok(f)
 }
 
-/// Stage-1 training rays/s of `backend` over `steps` timed steps (after one untimed), the same
-/// measurement as `bench plenoxels`.
-fn time_stage1(
-    backend: &mut dyn Plenoxels,
-    data: &Dataset,
-    cfg: &Stage1Config,
-    args: &SurfaceBenchArgs,
-) -> Result<f64> {
-    let mut sampler = RaySampler::new(&data.train, 7);
-    let mut secs = 0.0;
-    for step in 0..=args.steps {
-        let b = sampler.next_batch(&data.train, &data.scene, args.batch as usize);
-        let (rays, targets) = (b.flat_rays(), b.flat_targets());
-        let t = Instant::now();
-        backend.step(
-            &rays,
-            &targets,
-            &StepParams {
-                lr_sigma: cfg.lr_sigma.at(cfg.iters),
-                lr_sh: cfg.lr_sh.at(cfg.iters),
-                beta: cfg.beta,
-                eps: cfg.eps,
-                stop_thresh: cfg.stop_thresh,
-                tv: None,
-            },
-        )?;
-        if step > 0 {
-            secs += t.elapsed().as_secs_f64();
-        }
-    }
-    Ok((args.batch * args.steps) as f64 / secs)
-}
-
 /// Run the benchmark and print it.
 pub fn run(gpu: &Gpu, args: &SurfaceBenchArgs) -> Result<()> {
     ensure!((16..=512).contains(&args.res), "--res must be in 16..=512");
@@ -214,20 +149,11 @@ pub fn run(gpu: &Gpu, args: &SurfaceBenchArgs) -> Result<()> {
 }
 
 fn run_in(gpu: &Gpu, args: &SurfaceBenchArgs, dir: &std::path::Path) -> Result<()> {
-    let scene_dir = dir.join("scene");
-    let mut opts = GenerateOptions::new(SceneKind::Thin);
-    (opts.res, opts.views, opts.spp_side, opts.gt_spacing) = (128, 40, 2, 0.05);
     eprintln!("bench surface: generating the thin scene (128², 40 views)");
-    generate(&scene_dir, &opts)?;
-    let data = Dataset::load(&scene_dir, &LoadOptions::default())?;
+    let data = thin_scene(&dir.join("scene"))?;
 
     // Stage 1, briefly, on the CPU backend (the faster one on a CPU-only machine).
-    let mut cfg = Stage1Config::fast();
-    cfg.res = args.res / 2;
-    cfg.upsample = vec![(args.stage1_steps / 3, args.res)];
-    cfg.iters = args.stage1_steps;
-    cfg.checkpoint_every = u32::MAX;
-    let grid0 = crate::grid::Grid::sphere(cfg.res, [0.0; 3], [1.0; 3], 1.0, cfg.init_sigma);
+    let (cfg, grid0) = warm_config(args.res, args.stage1_steps);
     let mut s1 = CpuPlenoxels::new(grid0);
     eprintln!(
         "bench surface: {} stage-1 steps (CPU) to reach a {}³ density grid",
@@ -236,12 +162,14 @@ fn run_in(gpu: &Gpu, args: &SurfaceBenchArgs, dir: &std::path::Path) -> Result<(
     stage1::train(&mut s1, &data, &cfg, &dir.join("stage1"), 0, false)?;
     let density = s1.grid()?;
     eprintln!("bench surface: stage-1 training on the Vulkan device at the same resolution");
-    let stage1_vk = time_stage1(
+    let stage1_vk = time_steps(
         &mut VulkanPlenoxels::new(gpu, density.clone())?,
         &data,
         &cfg,
-        args,
-    )?;
+        args.steps,
+        args.batch,
+    )?
+    .rays_per_s;
 
     let scfg = SurfaceConfig::preset("fast", "thin")?;
     let init_grid = SurfaceGrid::from_density(&density, &scfg.init)?;

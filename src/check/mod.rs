@@ -67,6 +67,34 @@ pub const CHECKS: &[(&str, CheckFn)] = &[
     ("surface_rmsprop", surface_reg::check_rmsprop),
 ];
 
+/// Relative L2 distance ‖a − b‖/‖b‖ (0 when both vanish, ∞ when only `b` does).
+pub fn rel_l2(a: &[f32], b: &[f32]) -> f64 {
+    let (mut num, mut den) = (0.0f64, 0.0f64);
+    for (&x, &y) in a.iter().zip(b) {
+        num += (x as f64 - y as f64).powi(2);
+        den += (y as f64).powi(2);
+    }
+    if den == 0.0 {
+        if num == 0.0 {
+            0.0
+        } else {
+            f64::INFINITY
+        }
+    } else {
+        (num / den).sqrt()
+    }
+}
+
+/// How many elements of `a` are off `b` by more than 1e-4·max|b| + 1e-3·|b| (the gradient checks
+/// of both stages allow 0.1 % of them, next to a bound on `rel_l2`).
+pub fn grad_outliers(a: &[f32], b: &[f32]) -> usize {
+    let scale = b.iter().fold(0f32, |m, &x| m.max(x.abs())) as f64;
+    a.iter()
+        .zip(b)
+        .filter(|(&x, &y)| (x as f64 - y as f64).abs() > 1e-4 * scale + 1e-3 * (y as f64).abs())
+        .count()
+}
+
 /// Elementwise |a − b| ≤ abs + rel·|b| test with running maxima.
 #[derive(Debug, Default, Clone, Copy)]
 pub struct Tolerance {

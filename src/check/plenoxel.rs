@@ -3,11 +3,11 @@
 //! blocks and a dense blob, and on random plus adversarial rays (axis-aligned, starting inside
 //! the box, grazing, missing).
 
-use super::{CheckRow, Compare};
+use super::{grad_outliers, rel_l2, CheckRow, Compare};
 use crate::cpu::plenoxel as twin;
 use crate::cpu::step::{optim_args, STEP_COUNT, STEP_FLAGS, STEP_N, TOUCH_ALL};
 use crate::cpu::{rmsprop_sparse, tv, RmsProp, Stage1Params, TvChunk};
-use crate::gpu::{Gpu, GpuBuffer};
+use crate::gpu::{record_optim_args, Gpu, GpuBuffer};
 use crate::grid::{Grid, SH_DIM};
 use crate::kernels;
 use crate::math::plenoxel::Counts;
@@ -108,17 +108,6 @@ fn unit(v: [f32; 3]) -> [f32; 3] {
     v.map(|x| x / l)
 }
 
-/// Relative L2 distance ‖a − b‖/‖b‖ in f64.
-pub fn rel_l2(a: &[f32], b: &[f32]) -> f64 {
-    let num: f64 = a
-        .iter()
-        .zip(b)
-        .map(|(&x, &y)| (x as f64 - y as f64).powi(2))
-        .sum();
-    let den: f64 = b.iter().map(|&y| (y as f64).powi(2)).sum();
-    (num / den.max(1e-300)).sqrt()
-}
-
 fn counts_note(g: Counts, c: Counts) -> String {
     format!("samples shaded/empty/skipped, atomic adds: gpu {g:?} cpu {c:?}")
 }
@@ -194,12 +183,7 @@ pub fn check_train(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
     ] {
         let e = rel_l2(a, b);
         worst = worst.max(e);
-        let scale = b.iter().fold(0f32, |m, &x| m.max(x.abs())) as f64;
-        let bad = a
-            .iter()
-            .zip(b.iter())
-            .filter(|(&x, &y)| (x as f64 - y as f64).abs() > 1e-4 * scale + 1e-3 * (y as f64).abs())
-            .count();
+        let bad = grad_outliers(a, b);
         if e > 1e-4 || bad > b.len() / 1000 {
             cmp.failures += 1;
             cmp.first_failure
@@ -323,14 +307,7 @@ pub fn check_rmsprop(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
         eps: 1e-8,
     };
     let mut b = gpu.batch()?;
-    b.dispatch(
-        &kernels::optim_args::INFO,
-        &kernels::optim_args::Push {
-            step: step.address(),
-            args: args.address(),
-        },
-        [1, 1, 1],
-    )?;
+    record_optim_args(&mut b, &step, &args)?;
     b.dispatch_indirect(
         &kernels::rmsprop_sparse::INFO,
         &kernels::rmsprop_sparse::Push {

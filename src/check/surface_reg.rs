@@ -4,8 +4,7 @@
 //! slab allocated on the grid's outer faces, a flat block (tiny normals), σα ≤ 0, tiny and large
 //! σα, and chunks inside, whole and wrapping past the end.
 
-use super::plenoxel::rel_l2;
-use super::{CheckRow, Compare};
+use super::{rel_l2, CheckRow, Compare};
 use crate::cpu::step::{
     optim_args, STEP_COUNT, STEP_FLAGS, STEP_N, TOUCH_OPACITY, TOUCH_SH, TOUCH_SURFACE,
 };
@@ -16,7 +15,7 @@ use crate::cpu::surface_reg::{
     OpacityChunk, CORNERS_STRIDE, NORMALS_STRIDE,
 };
 use crate::cpu::{surface_rmsprop_sparse, tv, Stage2Params, SurfaceRmsProp};
-use crate::gpu::{Gpu, GpuBuffer};
+use crate::gpu::{record_optim_args, Gpu, GpuBuffer};
 use crate::grid::SH_DIM;
 use crate::kernels;
 use crate::surface::normal_reg::{record_normal_reg, NormalRegBuffers, NormalRegIo};
@@ -554,14 +553,7 @@ fn rmsprop_case(
         };
         b.dispatch_1d(&kernels::surface_rmsprop::INFO, &dense, n as u32)?;
     }
-    b.dispatch(
-        &kernels::optim_args::INFO,
-        &kernels::optim_args::Push {
-            step: sb.address(),
-            args: args.address(),
-        },
-        [1, 1, 1],
-    )?;
+    record_optim_args(&mut b, &sb, &args)?;
     let groups = if dense_delta {
         TOUCH_OPACITY | TOUCH_SH
     } else {

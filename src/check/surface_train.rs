@@ -27,7 +27,7 @@
 //! guarded and no δ gradient may appear on either backend.
 
 use super::surface_fwd::{test_rays, test_scene, SurfaceScene, RES};
-use super::{CheckRow, Compare};
+use super::{grad_outliers, rel_l2, CheckRow, Compare};
 use crate::cpu::surface_blocks::build_blocks;
 use crate::cpu::surface_fwd::SurfaceParams;
 use crate::cpu::surface_train::{hit_point, trace_ray, train, RayLoss, SurfaceGrads, TrainCounts};
@@ -118,24 +118,6 @@ pub fn cpu_train(
     })
 }
 
-/// Relative L2 distance ‖a − b‖/‖b‖ (0 when both vanish).
-pub fn rel_l2(a: &[f32], b: &[f32]) -> f64 {
-    let (mut num, mut den) = (0.0f64, 0.0f64);
-    for (&x, &y) in a.iter().zip(b) {
-        num += (x as f64 - y as f64).powi(2);
-        den += (y as f64).powi(2);
-    }
-    if den == 0.0 {
-        if num == 0.0 {
-            0.0
-        } else {
-            f64::INFINITY
-        }
-    } else {
-        (num / den).sqrt()
-    }
-}
-
 /// δ snapped to a lattice of a quarter of the scene's smallest level spacing: levels pass through
 /// vertices and many cells have flat faces.
 fn quantised(mut s: SurfaceScene) -> SurfaceScene {
@@ -215,12 +197,7 @@ fn compare_grads(
     {
         let e = rel_l2(a, b);
         rel[t] = e;
-        let scale = b.iter().fold(0f32, |m, &x| m.max(x.abs())) as f64;
-        let bad = a
-            .iter()
-            .zip(b.iter())
-            .filter(|(&x, &y)| (x as f64 - y as f64).abs() > 1e-4 * scale + 1e-3 * (y as f64).abs())
-            .count();
+        let bad = grad_outliers(a, b);
         if e > limit || bad > b.len() / 1000 {
             errs.push(format!(
                 "{what} {name}: rel L2 {e:.2e} (limit {limit:.0e}), {bad} elements off"

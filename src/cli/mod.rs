@@ -8,6 +8,7 @@ pub mod eval;
 pub mod extract;
 pub mod inspect;
 pub mod make_scene;
+mod resume;
 mod train;
 mod train_surface;
 

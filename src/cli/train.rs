@@ -1,5 +1,6 @@
 //! `alphasurf train` and `alphasurf render`: wire the dataset, a backend and the trainer.
 
+use super::resume::resume;
 use crate::data::{dataset::peak_rss_bytes, Dataset, LoadOptions};
 use crate::gpu::Gpu;
 use crate::grid::Grid;
@@ -192,45 +193,30 @@ pub fn run_train(args: &TrainArgs, gpu: Option<&Gpu>) -> Result<()> {
 /// Run stage 1.
 fn run_stage1(args: &TrainArgs, gpu: Option<&Gpu>) -> Result<()> {
     let t_all = Instant::now();
-    let t = Instant::now();
-    let data = Dataset::load(
-        &args.data,
-        &LoadOptions {
-            downscale: args.downscale,
-            ..Default::default()
-        },
-    )?;
-    let load_s = t.elapsed().as_secs_f64();
+    let data = load_data(args)?;
+    let load_s = t_all.elapsed().as_secs_f64();
     let ckpt = stage1::checkpoint_path(&args.out);
     let (mut backend, cfg, start) = if args.resume {
-        if !ckpt.exists() {
-            bail!("--resume: no checkpoint at {}", ckpt.display());
+        let restore = || {
+            let probe = crate::grid::checkpoint::load(&ckpt)?;
+            let mut b = make_backend(gpu, probe.grid)?;
+            let (step, cfg) = stage1::resume(b.as_mut(), &ckpt)?;
+            if args.res.is_some() || args.batch.is_some() || args.preset != "fast" {
+                eprintln!(
+                    "--resume: the checkpoint's configuration wins; --res/--batch/--preset ignored"
+                );
+            }
+            Ok((b, step, cfg))
+        };
+        match resume(
+            &ckpt,
+            args.iters,
+            |c: &mut Stage1Config| &mut c.iters,
+            restore,
+        )? {
+            Some(resumed) => resumed,
+            None => return Ok(()),
         }
-        let probe = crate::grid::checkpoint::load(&ckpt)?;
-        let mut b = make_backend(gpu, probe.grid)?;
-        let (step, mut cfg) = stage1::resume(b.as_mut(), &ckpt)?;
-        if args.res.is_some() || args.batch.is_some() || args.preset != "fast" {
-            eprintln!(
-                "--resume: the checkpoint's configuration wins; --res/--batch/--preset ignored"
-            );
-        }
-        if let Some(n) = args.iters {
-            cfg.iters = n; // extend (or shorten) the run; the schedules keep their lengths
-        }
-        if step >= cfg.iters {
-            println!(
-                "{} is already at step {step} of {}: nothing to train (pass --iters to extend)",
-                ckpt.display(),
-                cfg.iters
-            );
-            return Ok(());
-        }
-        eprintln!(
-            "resuming {} at step {step} of {}",
-            ckpt.display(),
-            cfg.iters
-        );
-        (b, cfg, step)
     } else {
         let cfg = config(args)?;
         let grid = Grid::sphere(
@@ -242,15 +228,7 @@ fn run_stage1(args: &TrainArgs, gpu: Option<&Gpu>) -> Result<()> {
         );
         (make_backend(gpu, grid)?, cfg, 0)
     };
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("creating run directory {}", args.out.display()))?;
-    let run_info =
-        json!({ "data": std::fs::canonicalize(&args.data)?, "downscale": args.downscale });
-    std::fs::write(
-        args.out.join("run.json"),
-        serde_json::to_vec_pretty(&run_info)?,
-    )
-    .with_context(|| format!("writing {}", args.out.join("run.json").display()))?;
+    create_run_dir(args, &[])?;
     eprintln!(
         "stage 1 on {} ({}): preset {}, {} steps of {} rays, grid {}³{}",
         backend.name(),
@@ -306,6 +284,30 @@ fn run_stage1(args: &TrainArgs, gpu: Option<&Gpu>) -> Result<()> {
         "config": cfg,
     });
     write_json(&args.out.join("metrics.json"), &metrics)
+}
+
+/// The dataset `--data` names, at `--downscale`.
+pub(super) fn load_data(args: &TrainArgs) -> Result<Dataset> {
+    Dataset::load(
+        &args.data,
+        &LoadOptions {
+            downscale: args.downscale,
+            ..Default::default()
+        },
+    )
+}
+
+/// Creates the run directory `--out` and writes its run.json: the dataset's absolute path, the
+/// downscale factor and the `extra` fields.
+pub(super) fn create_run_dir(args: &TrainArgs, extra: &[(&str, serde_json::Value)]) -> Result<()> {
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating run directory {}", args.out.display()))?;
+    let mut run_info =
+        json!({ "data": std::fs::canonicalize(&args.data)?, "downscale": args.downscale });
+    for (key, value) in extra {
+        run_info[*key] = value.clone();
+    }
+    write_json(&args.out.join("run.json"), &run_info)
 }
 
 pub(super) fn write_json(path: &Path, v: &serde_json::Value) -> Result<()> {

@@ -1,8 +1,9 @@
 //! `alphasurf train --stage surface`: initialise the αSurf grid from a stage-1 run or an svox2
 //! checkpoint (method.md §3.1), or resume a stage-2 run, and train it.
 
-use super::train::{write_json, TrainArgs};
-use crate::data::{dataset::peak_rss_bytes, Dataset, LoadOptions};
+use super::resume::resume;
+use super::train::{create_run_dir, load_data, write_json, TrainArgs};
+use crate::data::dataset::peak_rss_bytes;
 use crate::gpu::Gpu;
 use crate::grid::surface::SurfaceGrid;
 use crate::grid::{npz, Grid};
@@ -97,41 +98,21 @@ fn set_field(cfg: &SurfaceConfig, kv: &str) -> Result<SurfaceConfig> {
 /// Run stage 2.
 pub fn run(args: &TrainArgs, gpu: Option<&Gpu>) -> Result<()> {
     let t_all = Instant::now();
-    let data = Dataset::load(
-        &args.data,
-        &LoadOptions {
-            downscale: args.downscale,
-            ..Default::default()
-        },
-    )?;
+    let data = load_data(args)?;
     let load_s = t_all.elapsed().as_secs_f64();
     let ckpt = stage2::checkpoint_path(&args.out);
     let (mut backend, cfg, start) = if args.resume {
-        ensure!(
-            ckpt.exists(),
-            "--resume: no checkpoint at {}",
-            ckpt.display()
-        );
-        let probe = SurfaceGrid::load(&ckpt)?;
-        let mut b = make_backend(gpu, probe.grid)?;
-        let (step, mut cfg) = stage2::resume(b.as_mut(), &ckpt)?;
-        if let Some(n) = args.surface_iters.or(args.iters) {
-            cfg.iters = n;
+        let restore = || {
+            let probe = SurfaceGrid::load(&ckpt)?;
+            let mut b = make_backend(gpu, probe.grid)?;
+            let (step, cfg) = stage2::resume(b.as_mut(), &ckpt)?;
+            Ok((b, step, cfg))
+        };
+        let iters = args.surface_iters.or(args.iters);
+        match resume(&ckpt, iters, |c: &mut SurfaceConfig| &mut c.iters, restore)? {
+            Some(resumed) => resumed,
+            None => return Ok(()),
         }
-        if step >= cfg.iters {
-            println!(
-                "{} is already at step {step} of {}: nothing to train (pass --iters to extend)",
-                ckpt.display(),
-                cfg.iters
-            );
-            return Ok(());
-        }
-        eprintln!(
-            "resuming {} at step {step} of {}",
-            ckpt.display(),
-            cfg.iters
-        );
-        (b, cfg, step)
     } else {
         let cfg = config(args)?;
         let init = args
@@ -154,11 +135,7 @@ pub fn run(args: &TrainArgs, gpu: Option<&Gpu>) -> Result<()> {
         );
         (make_backend(gpu, grid)?, cfg, 0)
     };
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("creating run directory {}", args.out.display()))?;
-    let run_info = json!({ "data": std::fs::canonicalize(&args.data)?, "downscale": args.downscale,
-        "init": args.init });
-    write_json(&args.out.join("run.json"), &run_info)?;
+    create_run_dir(args, &[("init", json!(args.init))])?;
     eprintln!(
         "stage 2 on {} ({}): preset {}, category {}, {} steps of {} rays, a {} → {}",
         backend.name(),

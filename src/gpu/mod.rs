@@ -1,19 +1,24 @@
 //! Vulkan compute runtime: instance and device choice (`device`), the context with its allocator
 //! and pipelines (`context`), RAII buffers addressed by device address (`buffer`), batched
-//! submission with timestamp queries (`batch`), and per-kernel profiles (`profile`).
+//! submission with timestamp queries (`batch`), per-kernel profiles (`profile`), and what the Vulkan
+//! backends share: per-batch ray buffers (`ray_buffers`), the `optim_args` recording (`optim_args`).
 
 mod batch;
 mod buffer;
 mod context;
 mod device;
 mod instance;
+mod optim_args;
 mod profile;
+mod ray_buffers;
 
 pub use batch::{Batch, BatchTimes};
 pub use buffer::GpuBuffer;
 pub use context::{list_devices, Gpu, GpuOptions};
 pub use device::{pick_default, DeviceInfo};
+pub use optim_args::record_optim_args;
 pub use profile::Profile;
+pub use ray_buffers::RayBuffers;
 
 use std::sync::OnceLock;
 

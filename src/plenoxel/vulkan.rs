@@ -3,7 +3,7 @@
 
 use super::{march_params, Gradients, Plenoxels, StepParams, StepStats};
 use crate::cpu::step::{STEP_FLAGS, STEP_N, STEP_STATS, TOUCH_ALL};
-use crate::gpu::{Batch, Gpu, GpuBuffer};
+use crate::gpu::{record_optim_args, Batch, Gpu, GpuBuffer, RayBuffers};
 use crate::grid::{Grid, SH_DIM};
 use crate::kernels;
 use crate::math::plenoxel::{occ_dims, Counts};
@@ -25,18 +25,9 @@ pub struct VulkanPlenoxels {
     step: GpuBuffer,
     /// Indirect dispatch arguments of rmsprop_sparse.
     args: GpuBuffer,
-    rays: Option<RayBuffers>,
-}
-
-/// Per-batch buffers, grown to the next power of two when a batch does not fit.
-struct RayBuffers {
-    capacity: usize,
-    /// 6 floats per ray.
-    rays: GpuBuffer,
-    /// 3 floats per ray.
-    targets: GpuBuffer,
-    /// Per-ray output: rgb (3 floats) for render, the squared error (1 float) for training.
-    out: GpuBuffer,
+    /// Per-batch rays, targets and per-ray output: rgb (3 floats) for render, the squared error
+    /// (1 float) for training.
+    rays: RayBuffers,
 }
 
 impl VulkanPlenoxels {
@@ -59,7 +50,7 @@ impl VulkanPlenoxels {
                 gpu.upload(&init)?
             },
             args: gpu.zeros::<u32>(3)?,
-            rays: None,
+            rays: RayBuffers::new(3 * std::mem::size_of::<f32>()),
             meta: Grid {
                 links: Vec::new(),
                 density: Vec::new(),
@@ -71,20 +62,6 @@ impl VulkanPlenoxels {
 
     fn allocated(&self) -> usize {
         (self.density.size() / 4) as usize
-    }
-
-    /// Ray, target and per-ray output buffers holding at least `n` rays.
-    fn ray_buffers(&mut self, n: usize) -> Result<&RayBuffers> {
-        if self.rays.as_ref().is_none_or(|r| r.capacity < n) {
-            let cap = n.next_power_of_two();
-            self.rays = Some(RayBuffers {
-                capacity: cap,
-                rays: self.gpu.zeros::<f32>(6 * cap)?,
-                targets: self.gpu.zeros::<f32>(3 * cap)?,
-                out: self.gpu.zeros::<f32>(3 * cap)?,
-            });
-        }
-        Ok(self.rays.as_ref().expect("just set"))
     }
 
     fn record_occupancy(&self, b: &mut Batch) -> Result<()> {
@@ -114,14 +91,7 @@ impl VulkanPlenoxels {
 
     /// Record the sparse RMSProp step over the vertices touched this step.
     fn record_rmsprop(&self, b: &mut Batch, p: &StepParams) -> Result<()> {
-        b.dispatch(
-            &kernels::optim_args::INFO,
-            &kernels::optim_args::Push {
-                step: self.step.address(),
-                args: self.args.address(),
-            },
-            [1, 1, 1],
-        )?;
+        record_optim_args(b, &self.step, &self.args)?;
         b.dispatch_indirect(
             &kernels::rmsprop_sparse::INFO,
             &kernels::rmsprop_sparse::Push {
@@ -145,12 +115,7 @@ impl VulkanPlenoxels {
     /// refresh every march kernel needs first. Returns the batch and the device addresses of the
     /// rays, targets and per-ray output.
     fn begin(&mut self, rays: &[f32], targets: Option<&[f32]>) -> Result<(Batch, [u64; 3])> {
-        let r = self.ray_buffers((rays.len() / 6).max(1))?;
-        r.rays.write(rays)?;
-        if let Some(t) = targets {
-            r.targets.write(t)?;
-        }
-        let addrs = [r.rays.address(), r.targets.address(), r.out.address()];
+        let addrs = self.rays.upload(&self.gpu, rays, targets)?;
         let mut b = self.gpu.batch()?;
         self.record_step_reset(&mut b);
         self.record_occupancy(&mut b)?;
@@ -194,12 +159,7 @@ impl VulkanPlenoxels {
 
     /// Per-ray squared error of the last training pass over `n` rays.
     fn ray_loss(&self, n: usize) -> Result<Vec<f32>> {
-        let mut loss: Vec<f32> = self
-            .rays
-            .as_ref()
-            .expect("allocated by record_train")
-            .out
-            .download()?;
+        let mut loss: Vec<f32> = self.rays.out().download()?;
         loss.truncate(n);
         Ok(loss)
     }
@@ -294,7 +254,7 @@ impl Plenoxels for VulkanPlenoxels {
             n as u32,
         )?;
         b.submit()?;
-        let mut rgb: Vec<f32> = self.rays.as_ref().expect("allocated").out.download()?;
+        let mut rgb: Vec<f32> = self.rays.out().download()?;
         rgb.truncate(3 * n);
         Ok((rgb, self.read_stats()?))
     }

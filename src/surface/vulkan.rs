@@ -18,7 +18,7 @@ use crate::cpu::surface_delta_tv::axis_neighbours;
 use crate::cpu::surface_fwd::{SurfCounts, SurfaceParams};
 use crate::cpu::surface_reg::{row_slots, NormalPrefix};
 use crate::cpu::surface_train::{RayLoss, SurfaceLoss, TrainCounts, SURF_MAX_HITS};
-use crate::gpu::{Batch, BatchTimes, Gpu, GpuBuffer};
+use crate::gpu::{record_optim_args, Batch, BatchTimes, Gpu, GpuBuffer, RayBuffers};
 use crate::grid::surface::SurfaceGrid;
 use crate::grid::SH_DIM;
 use crate::kernels;
@@ -101,18 +101,9 @@ pub struct VulkanSurface {
     /// Regulariser values: Lα, Ln (floats); pairs skipped by Ln (u32).
     reg_loss: GpuBuffer,
     reg_skipped: GpuBuffer,
-    rays: Option<RayBuffers>,
-}
-
-/// Per-batch buffers, grown to the next power of two when a batch does not fit.
-struct RayBuffers {
-    capacity: usize,
-    /// 6 floats per ray.
-    rays: GpuBuffer,
-    /// 3 floats per ray.
-    targets: GpuBuffer,
-    /// Per-ray output: `RayLoss` (16 bytes) for training, `SurfOut` (20 bytes) for rendering.
-    out: GpuBuffer,
+    /// Per-batch rays, targets and per-ray output: `RayLoss` (16 bytes) for training, `SurfOut`
+    /// (20 bytes) for rendering.
+    rays: RayBuffers,
 }
 
 /// A buffer holding `v`, or one zero when `v` is empty.
@@ -190,7 +181,7 @@ impl VulkanSurface {
             normal_prefix,
             reg_loss: gpu.zeros::<f32>(2)?,
             reg_skipped: gpu.zeros::<u32>(1)?,
-            rays: None,
+            rays: RayBuffers::new(std::mem::size_of::<SurfOut>()),
             meta: SurfaceGrid {
                 links: Vec::new(),
                 delta: Vec::new(),
@@ -201,24 +192,6 @@ impl VulkanSurface {
         })
     }
 
-    /// Ray, target and per-ray output buffers holding at least `n` rays.
-    fn ray_buffers(&mut self, n: usize) -> Result<&RayBuffers> {
-        if self.rays.as_ref().is_none_or(|r| r.capacity < n) {
-            let cap = n.next_power_of_two();
-            self.rays = Some(RayBuffers {
-                capacity: cap,
-                rays: self.gpu.zeros::<f32>(6 * cap)?,
-                targets: self.gpu.zeros::<f32>(3 * cap)?,
-                out: self.gpu.zeros::<SurfOut>(cap)?,
-            });
-        }
-        Ok(self.rays.as_ref().expect("just set"))
-    }
-
-    fn out_buffer(&self) -> &GpuBuffer {
-        &self.rays.as_ref().expect("allocated by begin").out
-    }
-
     /// Upload rays (and targets), start a batch and record the step reset (touched count) and the
     /// counters' reset. Returns the batch and the addresses of rays, targets and per-ray output.
     fn begin(&mut self, rays: &[f32], targets: Option<&[f32]>) -> Result<(Batch, [u64; 3])> {
@@ -227,12 +200,7 @@ impl VulkanSurface {
             "rays must be 6 floats each, got {} floats",
             rays.len()
         );
-        let r = self.ray_buffers((rays.len() / 6).max(1))?;
-        r.rays.write(rays)?;
-        if let Some(t) = targets {
-            r.targets.write(t)?;
-        }
-        let addrs = [r.rays.address(), r.targets.address(), r.out.address()];
+        let addrs = self.rays.upload(&self.gpu, rays, targets)?;
         let mut b = self.gpu.batch()?;
         b.fill_zero_range(&self.step, 0, 4 * STEP_N as u64);
         b.fill_zero(&self.stats);
@@ -451,14 +419,7 @@ impl VulkanSurface {
                 rows.div_ceil(SURFACE_RMSPROP_DENSE_ROWS),
             )?;
         }
-        b.dispatch(
-            &kernels::optim_args::INFO,
-            &kernels::optim_args::Push {
-                step: self.step.address(),
-                args: self.args.address(),
-            },
-            [1, 1, 1],
-        )?;
+        record_optim_args(b, &self.step, &self.args)?;
         b.dispatch_indirect(
             &kernels::surface_rmsprop::INFO,
             &kernels::surface_rmsprop::Push {
@@ -479,7 +440,7 @@ impl VulkanSurface {
     }
 
     fn ray_loss(&self, n: usize) -> Result<Vec<RayLoss>> {
-        self.out_buffer().download_range(0, n)
+        self.rays.out().download_range(0, n)
     }
 
     /// The training pass alone (no regulariser, no update): per-ray losses, the gradients, the
@@ -590,7 +551,7 @@ impl SurfaceBackend for VulkanSurface {
             n as u32,
         )?;
         b.submit()?;
-        let out: Vec<SurfOut> = self.out_buffer().download_range(0, n)?;
+        let out: Vec<SurfOut> = self.rays.out().download_range(0, n)?;
         let s: Vec<u32> = self.stats.download_range(0, 6)?;
         Ok((
             out.iter().flat_map(|o| o.rgb).collect(),

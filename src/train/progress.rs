@@ -1,5 +1,6 @@
 //! The training progress bar: step, loss, PSNR (smoothed), rays/s after the warm-up, ETA. Hidden
 //! when stderr is not a terminal or progress is off; a summary line is logged every 10 % then.
+//! With it, the training throughput both stages count the same way ([`Throughput`]).
 
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
@@ -66,6 +67,46 @@ impl Progress {
 
     pub fn finish(&self) {
         self.bar.finish_and_clear();
+    }
+}
+
+/// Training throughput: the rays of every step this process trained, and the rays and seconds of
+/// those after its first 10 (warm-up: pipeline compiles).
+pub struct Throughput {
+    start_step: u32,
+    rays: u64,
+    timed_rays: u64,
+    timed_secs: f64,
+}
+
+impl Throughput {
+    /// Counting from step `start_step` (0, or the step after a resumed checkpoint).
+    pub fn new(start_step: u32) -> Self {
+        Throughput {
+            start_step,
+            rays: 0,
+            timed_rays: 0,
+            timed_secs: 0.0,
+        }
+    }
+
+    /// Step `step` trained `rays` rays in `secs` seconds.
+    pub fn add(&mut self, step: u32, rays: usize, secs: f64) {
+        if step >= self.start_step + 10 {
+            self.timed_rays += rays as u64;
+            self.timed_secs += secs;
+        }
+        self.rays += rays as u64;
+    }
+
+    /// Rays per second over the steps after the warm-up, once there are any.
+    pub fn rays_per_s(&self) -> Option<f64> {
+        (self.timed_secs > 0.0).then(|| self.timed_rays as f64 / self.timed_secs)
+    }
+
+    /// Rays of every step so far.
+    pub fn rays(&self) -> u64 {
+        self.rays
     }
 }
 

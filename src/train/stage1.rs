@@ -3,7 +3,7 @@
 //! detection, and the end-of-run test renders, PSNR and metrics.json.
 
 use super::config::Stage1Config;
-use super::progress::Progress;
+use super::progress::{Progress, Throughput};
 use super::render::{psnr, render_split, RenderedSplit};
 use crate::data::{Dataset, RaySampler, Split};
 use crate::grid::{checkpoint, dilate, upsample, Grid};
@@ -168,10 +168,8 @@ pub fn train(
         .with_context(|| format!("creating run directory {}", out.display()))?;
     let mut report = Stage1Report::default();
     let mut progress = Progress::new(cfg.iters as u64, start_step as u64, show_progress);
-    let mut timed_rays = 0u64;
-    let mut timed_secs = 0.0f64;
+    let mut throughput = Throughput::new(start_step);
     let mut sample_totals = [0u64; 4];
-    let mut rays_total = 0u64;
     let mut mse = f64::NAN;
     let mut log = open_train_log(out, start_step)?;
     let t_train = Instant::now();
@@ -225,16 +223,11 @@ pub fn train(
         let elapsed = t_train.elapsed().as_secs_f64();
         writeln!(log, "{},{mse:e},{:.4},{elapsed:.3}", step + 1, psnr(mse))
             .with_context(|| format!("writing {}", out.join(TRAIN_LOG).display()))?;
-        if step >= start_step + 10 {
-            timed_rays += batch.len() as u64;
-            timed_secs += secs;
-        }
-        rays_total += batch.len() as u64;
+        throughput.add(step, batch.len(), secs);
         for i in 0..4 {
             sample_totals[i] += stats.counts[i] as u64;
         }
-        let rays_per_s = (timed_secs > 0.0).then(|| timed_rays as f64 / timed_secs);
-        progress.step(step as u64 + 1, mse, rays_per_s);
+        progress.step(step as u64 + 1, mse, throughput.rays_per_s());
         report.train_seconds += secs;
         if (step + 1) % cfg.checkpoint_every == 0 && step + 1 < cfg.iters {
             let t = Instant::now();
@@ -261,14 +254,10 @@ pub fn train(
     report.render_seconds = t.elapsed().as_secs_f64();
     let grid = backend.grid()?;
     report.steps = cfg.iters;
-    report.train_rays_per_s = if timed_secs > 0.0 {
-        timed_rays as f64 / timed_secs
-    } else {
-        0.0
-    };
+    report.train_rays_per_s = throughput.rays_per_s().unwrap_or(0.0);
     report.final_mse = mse;
     report.test_psnr = rendered.mean_psnr;
-    report.samples_per_ray = sample_totals.map(|s| s as f64 / rays_total.max(1) as f64);
+    report.samples_per_ray = sample_totals.map(|s| s as f64 / throughput.rays().max(1) as f64);
     report.allocated_vertices = grid.allocated();
     report.bytes_per_vertex = grid.bytes_per_vertex(true);
     Ok((report, rendered))

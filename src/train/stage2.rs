@@ -3,7 +3,7 @@
 //! (resumable); NaN/Inf detection; at the end the α < 0.1 surfaces are dropped, the test split
 //! rendered and metrics.json written.
 
-use super::progress::Progress;
+use super::progress::{Progress, Throughput};
 use super::render::{render_split_with, RenderedSplit};
 use super::stage1::step_rng;
 use super::surface_config::SurfaceConfig;
@@ -76,22 +76,24 @@ pub fn resume(backend: &mut dyn SurfaceBackend, path: &Path) -> Result<(u32, Sur
     Ok((step, cfg))
 }
 
-/// The scheduled parameters of step `step` (random regulariser chunks from `rng`) for a grid of
-/// resolution `res` with `rows` allocated vertices.
-fn step_params(
+/// The scheduled parameters of step `step`, with truncation `a`, for a grid of resolution `res`
+/// with `rows` allocated vertices; `draws` place the random regulariser chunks (Lα's start, Ln's
+/// start, TVα's draw).
+pub fn step_params(
     cfg: &SurfaceConfig,
     res: [u32; 3],
     rows: u32,
     step: u32,
-    rng: &mut impl Rng,
+    a: f32,
+    draws: [u64; 3],
 ) -> SurfaceStepParams {
-    let row_chunk = |fraction: f32, draw: u32| {
+    let row_chunk = |fraction: f32, draw: u64| {
         let count = ((rows as f32 * fraction) as u32).clamp(1, rows.max(1));
-        (draw % rows.max(1), count)
+        ((draw % rows.max(1) as u64) as u32, count)
     };
-    let (la_start, la_count) = row_chunk(cfg.alpha_fraction, rng.random());
-    let (n_start, n_count) = row_chunk(cfg.normal_fraction, rng.random());
-    let tv_draw: u64 = rng.random();
+    let (la_start, la_count) = row_chunk(cfg.alpha_fraction, draws[0]);
+    let (n_start, n_count) = row_chunk(cfg.normal_fraction, draws[1]);
+    let tv_draw = draws[2];
     let (ln1, ln2) = (cfg.lambda_n1.at(step), cfg.lambda_n2);
     SurfaceStepParams {
         lr_delta: cfg.lr_delta.at(step),
@@ -99,7 +101,7 @@ fn step_params(
         lr_sh: cfg.lr_sh.at(step),
         beta: cfg.beta,
         eps: cfg.eps,
-        a: cfg.a.at(step),
+        a,
         stop_thresh: cfg.stop_thresh,
         lambda_h: cfg.lambda_h,
         lambda_c: if step < cfg.lambda_c_until {
@@ -151,7 +153,7 @@ pub fn train(
     }
     let mut report = Stage2Report::default();
     let mut progress = Progress::new(cfg.iters as u64, start_step as u64, show_progress);
-    let (mut timed_rays, mut timed_secs, mut rays_total) = (0u64, 0.0f64, 0u64);
+    let mut throughput = Throughput::new(start_step);
     let mut totals = [0u64; 8];
     let mut mse = f64::NAN;
     let t_start = Instant::now();
@@ -166,7 +168,12 @@ pub fn train(
             &data.scene,
             cfg.batch as usize,
         );
-        let p = step_params(cfg, res, rows, step, &mut rng);
+        let draws = [
+            rng.random::<u32>().into(),
+            rng.random::<u32>().into(),
+            rng.random(),
+        ];
+        let p = step_params(cfg, res, rows, step, cfg.a.at(step), draws);
         let stats = backend.step(&batch.flat_rays(), &batch.flat_targets(), &p)?;
         if !(stats.mse.is_finite() && stats.entropy.is_finite() && stats.consistency.is_finite()) {
             bail!(
@@ -180,11 +187,7 @@ pub fn train(
         }
         mse = stats.mse;
         let secs = t.elapsed().as_secs_f64();
-        if step >= start_step + 10 {
-            timed_rays += batch.len() as u64;
-            timed_secs += secs;
-        }
-        rays_total += batch.len() as u64;
+        throughput.add(step, batch.len(), secs);
         for (a, &c) in totals.iter_mut().zip(&stats.counts) {
             *a += c as u64;
         }
@@ -199,8 +202,7 @@ pub fn train(
             stats.reg_loss,
             t_start.elapsed().as_secs_f64()
         )?;
-        let rays_per_s = (timed_secs > 0.0).then(|| timed_rays as f64 / timed_secs);
-        progress.step(step as u64 + 1, mse, rays_per_s);
+        progress.step(step as u64 + 1, mse, throughput.rays_per_s());
         report.train_seconds += secs;
         if (step + 1) % cfg.checkpoint_every == 0 && step + 1 < cfg.iters {
             let t = Instant::now();
@@ -236,14 +238,10 @@ pub fn train(
     )?;
     report.render_seconds = t.elapsed().as_secs_f64();
     report.steps = cfg.iters;
-    report.train_rays_per_s = if timed_secs > 0.0 {
-        timed_rays as f64 / timed_secs
-    } else {
-        0.0
-    };
+    report.train_rays_per_s = throughput.rays_per_s().unwrap_or(0.0);
     report.final_mse = mse;
     report.test_psnr = rendered.mean_psnr;
-    report.per_ray = totals.map(|s| s as f64 / rays_total.max(1) as f64);
+    report.per_ray = totals.map(|s| s as f64 / throughput.rays().max(1) as f64);
     report.allocated_vertices = backend.grid()?.delta.len();
     Ok((report, rendered))
 }
