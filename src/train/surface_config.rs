@@ -247,11 +247,7 @@ impl SurfaceConfig {
                 // 24.95 dB; at 64³ (demo --fast's stage 1) 3.45 → 3.43 (3e-8 → 1e-7). It fades
                 // the inner sheets of the shells' level sets that truncation hides from every ray,
                 // at the price of 1 dB. Chosen on the only translucent scene there is.
-                c.lambda_alpha *= if category == "translucent" {
-                    1e4
-                } else {
-                    1e3
-                };
+                c.lambda_alpha *= if category == "translucent" { 1e4 } else { 1e3 };
                 // RMSProp leaves a vertex's σα alone in steps that give it no gradient (per-group
                 // sparse updates), so its RMS state no longer decays between Lα visits and each
                 // visit moves σα less; three times the chunk restores the fading: thin scene
