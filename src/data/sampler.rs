@@ -168,7 +168,7 @@ mod tests {
             .windows(2)
             .all(|w| (w[0].view, morton2(w[0].x, w[0].y)) <= (w[1].view, morton2(w[1].x, w[1].y))));
         assert!(px.iter().all(|p| p.view < 4 && p.x < 37 && p.y < 23));
-        // All four views and many distinct pixels: the draw itself is unchanged.
+        // The order runs across all four views.
         assert_eq!(px.last().unwrap().view, 3);
         assert_eq!(px[0].view, 0);
     }
