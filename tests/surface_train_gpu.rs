@@ -29,7 +29,14 @@ fn params(g: &SurfaceGrid, step: u32) -> SurfaceStepParams {
         lambda_h: 1e-2,
         lambda_c: 1e-2,
         regs: SurfaceRegs {
-            delta_tv: Some(delta_tv_chunk(g.res, rows as usize, 1e-3)),
+            // Whole-grid Lδ (dense δ update) and a 30 % chunk (δ flagged) in turn.
+            delta_tv: Some(delta_tv_chunk(
+                g.res,
+                rows,
+                if step % 2 == 0 { 1.0 } else { 0.3 },
+                1e-3,
+                step as u64 * 4099,
+            )),
             opacity_tv: Some(opacity_tv_chunk(g.res, 0.1, 1e-3, step as u64 * 997)),
             opacity_log: Some(OpacityChunk {
                 rows,

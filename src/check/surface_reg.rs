@@ -8,16 +8,17 @@ use super::{rel_l2, CheckRow, Compare};
 use crate::cpu::step::{
     optim_args, STEP_COUNT, STEP_FLAGS, STEP_N, TOUCH_OPACITY, TOUCH_SH, TOUCH_SURFACE,
 };
-use crate::cpu::surface_delta_tv::{axis_neighbours, delta_tv};
+use crate::cpu::surface_delta_tv::{axis_neighbours, delta_tv, forward_reach, DeltaTvChunk};
 use crate::cpu::surface_reg::delta_tv_chunk;
 use crate::cpu::surface_reg::{
     normal_reg_passes, row_slots, surface_opacity_reg, NormalChunk, NormalPrefix, NormalScratch,
     OpacityChunk, CORNERS_STRIDE, NORMALS_STRIDE,
 };
-use crate::cpu::{surface_rmsprop_sparse, tv, Stage2Params, SurfaceRmsProp};
+use crate::cpu::{surface_rmsprop_sparse, tv, Stage2Params, SurfaceRmsProp, TvChunk};
 use crate::gpu::{record_optim_args, Gpu, GpuBuffer};
 use crate::grid::SH_DIM;
 use crate::kernels;
+use crate::surface::delta_tv::{record_delta_tv, DeltaTvIo};
 use crate::surface::normal_reg::{record_normal_reg, NormalRegBuffers, NormalRegIo};
 use anyhow::Result;
 use rand::{Rng, SeedableRng};
@@ -197,65 +198,90 @@ pub fn gpu_opacity_reg(
     })
 }
 
-/// Runs both surface_delta_tv stages on the device: grad0 + the Lδ gradient.
-pub fn gpu_delta_tv(gpu: &Gpu, g: &RegGrid, grad0: &[f32], scale: f32) -> Result<Vec<f32>> {
-    let rows = g.allocated() as u32;
-    let nbr = axis_neighbours(&g.links, &row_slots(&g.links, g.allocated()), g.res);
+/// Runs both surface_delta_tv stages on the device for each chunk in turn, on the same buffers
+/// (q left over from a chunk must not leak into the next): grad0 + the Lδ gradients, and the
+/// touched flags.
+pub fn gpu_delta_tv(
+    gpu: &Gpu,
+    g: &RegGrid,
+    grad0: &[f32],
+    chunks: &[DeltaTvChunk],
+) -> Result<(Vec<f32>, Vec<u32>)> {
+    let n = g.allocated();
+    let nbr = axis_neighbours(&g.links, &row_slots(&g.links, n), g.res);
+    let reach = forward_reach(&nbr);
     let nb = gpu.upload(&nbr)?;
     let db = gpu.upload(&g.delta)?;
-    let qb = gpu.zeros::<f32>(3 * g.allocated())?;
+    let qb = gpu.upload(&vec![f32::NAN; 3 * n])?;
     let gb = gpu.upload(grad0)?;
+    let sb = gpu.upload(&empty_step(n))?;
+    let io = DeltaTvIo {
+        nbr: nb.address(),
+        delta: db.address(),
+        q: qb.address(),
+        grad: gb.address(),
+        step: sb.address(),
+    };
     let mut b = gpu.batch()?;
-    for stage in 0..2 {
-        b.dispatch_1d(
-            &kernels::surface_delta_tv::INFO,
-            &kernels::surface_delta_tv::Push {
-                nbr: nb.address(),
-                delta: db.address(),
-                q: qb.address(),
-                grad: gb.address(),
-                rows,
-                stage,
-                scale,
-                ..Default::default()
-            },
-            rows,
-        )?;
+    for c in chunks {
+        record_delta_tv(&mut b, &io, c, reach)?;
     }
     b.submit()?;
-    gb.download()
+    Ok((gb.download()?, sb.download_range(STEP_FLAGS, n)?))
 }
 
-/// Lδ on the random grid (band with holes, a slab on the grid's faces): the device against the
-/// twin elementwise, and the twin against `tv` over the whole grid (the definition Lδ shares with
-/// TVα) in aggregate.
+/// Lδ on the random grid (band with holes, a slab on the grid's faces), on chunks inside, past
+/// the end (wrapping) and whole, run one after another: the device against the twin
+/// elementwise (touched flags exact), and the whole chunk's twin against `tv` over the whole
+/// grid (the definition Lδ shares with TVα) in aggregate.
 pub fn check_delta_tv(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
     let g = reg_grid(seed, 24, 0.15);
     let n = g.allocated();
+    let rows = n as u32;
     let mut rng = Pcg64::seed_from_u64(seed ^ 0xde17a);
     let grad0 = random_vec(&mut rng, n, 1e-3);
-    let c = delta_tv_chunk(g.res, n, 5e-3);
     let nbr = axis_neighbours(&g.links, &row_slots(&g.links, n), g.res);
-    let mut want = grad0.clone();
-    delta_tv(&nbr, &g.delta, &mut want, c.scale);
-    let got = gpu_delta_tv(gpu, &g, &grad0, c.scale)?;
+    let reach = forward_reach(&nbr);
+    let whole = delta_tv_chunk(g.res, rows, 1.0, 5e-3, 0);
+    let chunks = [
+        delta_tv_chunk(g.res, rows, 0.1, 5e-3, (rows / 3) as u64),
+        delta_tv_chunk(g.res, rows, 0.1, 5e-3, (rows - rows / 30) as u64),
+        whole,
+    ];
+    let (mut want, mut want_t) = (grad0.clone(), vec![0u32; n]);
+    for c in &chunks {
+        delta_tv(&nbr, &g.delta, &mut want, &mut want_t, c, reach);
+    }
+    let (got, got_t) = gpu_delta_tv(gpu, &g, &grad0, &chunks)?;
     let added = |v: &[f32]| -> Vec<f32> { v.iter().zip(&grad0).map(|(a, b)| a - b).collect() };
     let scale = added(&want).iter().fold(0f32, |m, x| m.max(x.abs())) as f64;
     let mut cmp = Compare::new(1e-6 * scale, 1e-5);
     for (i, (&a, &b)) in got.iter().zip(&want).enumerate() {
         cmp.value(a as f64, b as f64, || format!("δ gradient {i}"));
     }
+    let flags_diff = got_t.iter().zip(&want_t).filter(|(a, b)| a != b).count();
+    cmp.value(flags_diff as f64, 0.0, || "touched flags differing".into());
     // The slot-walking TV twin over the whole grid: the same derivative, other rounding.
-    let mut by_slots = grad0.clone();
+    let (mut by_rows, mut by_slots) = (grad0.clone(), grad0.clone());
     let mut touched = vec![0u32; n];
-    tv(&g.links, &g.delta, &mut by_slots, &mut touched, &c);
-    let l2 = rel_l2(&added(&want), &added(&by_slots));
+    delta_tv(&nbr, &g.delta, &mut by_rows, &mut touched, &whole, reach);
+    let all_slots = TvChunk {
+        res: g.res,
+        start: 0,
+        count: g.slots(),
+        channels: 1,
+        scale: whole.scale,
+        touch: 0,
+    };
+    tv(&g.links, &g.delta, &mut by_slots, &mut touched, &all_slots);
+    let l2 = rel_l2(&added(&by_rows), &added(&by_slots));
     let mut row = cmp.row(
         "surface_delta_tv",
         n,
         format!(
-            "24³ band with holes and faces; against `tv` over the whole grid: rel L2 {l2:.1e} \
-             (≤ 1e-5 required)"
+            "24³ band with holes and faces; chunks of 10 % inside and wrapping, then the whole \
+             grid, on the same buffers; touched flags exact; whole grid against `tv`: rel L2 \
+             {l2:.1e} (≤ 1e-5 required)"
         ),
     );
     row.tolerance = "|Δ| ≤ 1e-6·max|Δgrad| + 1e-5·|cpu| elementwise".into();

@@ -1,13 +1,15 @@
-//! Twin of `glsl/surface_delta_tv.comp`: Lδ, the TV on δ over every allocated vertex (method.md
-//! §3.4; scale as [`super::surface_reg::delta_tv_chunk`]), as two gather passes over the vertex
-//! rows with a per-grid table of axis neighbours (no slot arithmetic, no links lookups):
-//! - pass 0: q_v = d_v/√(|d_v|² + 1e-9), d_v the forward differences of δ from v to its +x, +y, +z
-//!   neighbours (0 where there is none: outside the grid or unallocated);
-//! - pass 1: grad_v += scale·(Σ_a q_{v−e_a}[a] − (q_v.x + q_v.y + q_v.z)), the sum over the
-//!   backward neighbours that exist.
+//! Twin of `glsl/surface_delta_tv.comp`: Lδ, the TV on δ (method.md §3.4) over a chunk of the
+//! vertex rows ([`DeltaTvChunk`]; the whole grid in the paper preset), as two gather passes over
+//! the rows with a per-grid table of axis neighbours (no slot arithmetic, no links lookups):
+//! - pass 0: q_v = d_v/√(|d_v|² + 1e-9) for the chunk's rows v, d_v the forward differences of δ
+//!   from v to its +x, +y, +z neighbours (0 where there is none: outside the grid or
+//!   unallocated);
+//! - pass 1: over the chunk's window (its rows and the [`forward_reach`] rows after them),
+//!   grad_v += scale·(Σ_a q_{v−e_a}[a] − (q_v.x + q_v.y + q_v.z)), each sum over its terms whose
+//!   vertex (v − e_a, or v) is in the chunk; a row with a term is flagged with the chunk's bits.
 //!
-//! This is ∂(scale·Σ_v TV_v)/∂δ with TV_v = √(|d_v|² + 1e-9), the value `tv` differentiates over
-//! the whole grid (up to rounding: q divides each difference once).
+//! This is ∂(scale·Σ_{v in chunk} TV_v)/∂δ with TV_v = √(|d_v|² + 1e-9); over the whole grid, the
+//! value `tv` differentiates (up to rounding: q divides each difference once).
 
 use rayon::prelude::*;
 
@@ -37,12 +39,73 @@ pub fn axis_neighbours(links: &[i32], row_slot: &[u32], res: [u32; 3]) -> Vec<i3
         .collect()
 }
 
-/// Pass 0: q (3 floats per row).
-pub fn delta_tv_dirs(nbr: &[i32], delta: &[f32]) -> Vec<f32> {
-    delta
-        .par_iter()
+/// Lδ on the vertex rows (start + i) mod rows, i < count (≤ rows): every vertex's TV term once
+/// the chunk is the whole grid ([`DeltaTvChunk::dense`]), a random chunk otherwise. Make it with
+/// `surface_reg::delta_tv_chunk`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DeltaTvChunk {
+    pub rows: u32,
+    /// First row, < rows.
+    pub start: u32,
+    /// Rows in the chunk, ≤ rows.
+    pub count: u32,
+    pub scale: f32,
+    /// Touched-flag bits set on the rows given a gradient: 0 for a dense chunk (δ is then updated
+    /// at every row), TOUCH_DELTA otherwise (step.glsl).
+    pub touch: u32,
+}
+
+impl DeltaTvChunk {
+    /// Whether the chunk is every row: the backends then update δ densely.
+    pub fn dense(&self) -> bool {
+        self.count >= self.rows
+    }
+
+    /// Whether row v is in the chunk.
+    pub fn contains(&self, v: usize) -> bool {
+        let (rows, start) = (self.rows as usize, self.start as usize);
+        let i = if v >= start { v - start } else { v + rows - start };
+        i < self.count as usize
+    }
+
+    /// Rows of pass 1's window: the chunk's rows and the `reach` rows after them, at most all.
+    pub fn window(&self, reach: u32) -> u32 {
+        self.count.saturating_add(reach).min(self.rows)
+    }
+
+    /// Row i of the chunk or of its window.
+    pub fn row(&self, i: u32) -> usize {
+        ((self.start as u64 + i as u64) % self.rows.max(1) as u64) as usize
+    }
+}
+
+/// The largest row distance (n − v) mod rows from a vertex row v to one of its +x, +y, +z
+/// neighbours n: every row a chunk gives a gradient lies within count + reach rows of its start
+/// (small when rows follow the slot order, as stage 2's allocation makes them). Per grid.
+pub fn forward_reach(nbr: &[i32]) -> u32 {
+    let rows = nbr.len() / AXIS_NBRS;
+    nbr.par_chunks(AXIS_NBRS)
         .enumerate()
-        .flat_map_iter(|(v, &d0)| {
+        .map(|(v, t)| {
+            t[..3]
+                .iter()
+                .filter(|&&n| n >= 0)
+                .map(|&n| (n as usize + rows - v) % rows)
+                .max()
+                .unwrap_or(0) as u32
+        })
+        .max()
+        .unwrap_or(0)
+}
+
+/// Pass 0: q (3 floats per row) of the chunk's rows, 0 for the others (the kernel leaves them as
+/// they were; pass 1 reads only the chunk's).
+pub fn delta_tv_dirs(nbr: &[i32], delta: &[f32], c: &DeltaTvChunk) -> Vec<f32> {
+    let computed: Vec<[f32; 3]> = (0..c.count.min(c.rows))
+        .into_par_iter()
+        .map(|i| {
+            let v = c.row(i);
+            let d0 = delta[v];
             let n = &nbr[AXIS_NBRS * v..AXIS_NBRS * v + 3];
             let d: [f32; 3] = std::array::from_fn(|a| {
                 if n[a] >= 0 {
@@ -54,26 +117,64 @@ pub fn delta_tv_dirs(nbr: &[i32], delta: &[f32]) -> Vec<f32> {
             let tv = (((d[0] * d[0] + d[1] * d[1]) + d[2] * d[2]) + 1e-9).sqrt();
             d.map(|x| x / tv)
         })
-        .collect()
+        .collect();
+    let mut q = vec![0f32; 3 * delta.len()];
+    for (i, qv) in computed.iter().enumerate() {
+        q[3 * c.row(i as u32)..][..3].copy_from_slice(qv);
+    }
+    q
 }
 
-/// Pass 1: grad += scale·(Σ backward q[a] − Σ own q).
-pub fn delta_tv_gather(nbr: &[i32], q: &[f32], grad: &mut [f32], scale: f32) {
-    grad.par_iter_mut().enumerate().for_each(|(v, g)| {
-        let mut back = 0.0f32;
-        for a in 0..3 {
-            let m = nbr[AXIS_NBRS * v + 3 + a];
-            if m >= 0 {
-                back += q[3 * m as usize + a];
+/// Pass 1 over the chunk's window (`reach`: [`forward_reach`]): grad += scale·(Σ backward q[a] −
+/// Σ own q), each over the terms of the chunk's vertices; rows with a term flagged `c.touch`.
+pub fn delta_tv_gather(
+    nbr: &[i32],
+    q: &[f32],
+    grad: &mut [f32],
+    touched: &mut [u32],
+    c: &DeltaTvChunk,
+    reach: u32,
+) {
+    let adds: Vec<Option<f32>> = (0..c.window(reach))
+        .into_par_iter()
+        .map(|i| {
+            let v = c.row(i);
+            let mut back = 0.0f32;
+            let mut any = false;
+            for a in 0..3 {
+                let m = nbr[AXIS_NBRS * v + 3 + a];
+                if m >= 0 && c.contains(m as usize) {
+                    back += q[3 * m as usize + a];
+                    any = true;
+                }
             }
+            let own = if c.contains(v) {
+                any = true;
+                (q[3 * v] + q[3 * v + 1]) + q[3 * v + 2]
+            } else {
+                0.0
+            };
+            any.then(|| c.scale * (back - own))
+        })
+        .collect();
+    for (i, add) in adds.into_iter().enumerate() {
+        if let Some(add) = add {
+            let v = c.row(i as u32);
+            grad[v] += add;
+            touched[v] |= c.touch;
         }
-        let own = (q[3 * v] + q[3 * v + 1]) + q[3 * v + 2];
-        *g += scale * (back - own);
-    });
+    }
 }
 
-/// Both passes: grad += ∂(scale·Σ TV)/∂δ.
-pub fn delta_tv(nbr: &[i32], delta: &[f32], grad: &mut [f32], scale: f32) {
-    let q = delta_tv_dirs(nbr, delta);
-    delta_tv_gather(nbr, &q, grad, scale);
+/// Both passes: grad += ∂(scale·Σ_{chunk} TV)/∂δ, `touched` flagged.
+pub fn delta_tv(
+    nbr: &[i32],
+    delta: &[f32],
+    grad: &mut [f32],
+    touched: &mut [u32],
+    c: &DeltaTvChunk,
+    reach: u32,
+) {
+    let q = delta_tv_dirs(nbr, delta, c);
+    delta_tv_gather(nbr, &q, grad, touched, c, reach);
 }

@@ -1,11 +1,13 @@
 //! Twins of the stage-2 per-vertex regularisers (method.md §3.4): `glsl/surface_opacity_reg.comp`
 //! (Lα) and the three passes `glsl/surface_normal_reg_{cells,pairs,gather}.comp` (Ln1 +
 //! Ln2; with `glsl/lib/normal_reg.glsl`), same formulation and operation order as the kernels;
-//! and the [`TvChunk`]s with which `glsl/tv.comp` (twin [`super::tv`]) computes Lδ and TVα. Each
+//! the [`TvChunk`] with which `glsl/tv.comp` (twin [`super::tv`]) computes TVα and the
+//! [`DeltaTvChunk`] of Lδ (`glsl/surface_delta_tv.comp`). Each
 //! function ADDS its gradient and flags every vertex it gives a gradient in `touched` (the twin
 //! of step.glsl's `touch_mask`).
 
 use super::step::{TOUCH_DELTA, TOUCH_OPACITY};
+use super::surface_delta_tv::DeltaTvChunk;
 use super::TvChunk;
 use rayon::prelude::*;
 
@@ -498,20 +500,28 @@ pub fn row_slots(links: &[i32], rows: usize) -> Vec<u32> {
     out
 }
 
-/// The [`TvChunk`] of Lδ (method.md §3.4): TV on δ (1 channel) over all slots, forward
-/// differences scaled by κ = N/256 (N = the largest resolution, the grid's N for cubic grids),
-/// mean over the `allocated` vertices: loss_v = κ·√(|d|² + 1e-9) = √(κ²|d|² + κ²·1e-9), which
-/// is the definition √(κ²|d|² + 1e-9) up to the ε, so scale = λ·κ/allocated.
-pub fn delta_tv_chunk(res: [u32; 3], allocated: usize, lambda: f32) -> TvChunk {
+/// The [`DeltaTvChunk`] of Lδ (method.md §3.4): TV on δ, forward differences scaled by κ = N/256
+/// (N = the largest resolution, the grid's N for cubic grids), mean over a chunk of `fraction`
+/// of the `rows` allocated vertices (at least one; every vertex at 1) from row `draw` mod rows:
+/// loss_v = κ·√(|d|² + 1e-9) = √(κ²|d|² + κ²·1e-9), which is the definition √(κ²|d|² + 1e-9) up
+/// to the ε, so scale = λ·κ/count. A random chunk's mean is an unbiased estimate of the whole
+/// grid's (the TVα convention). `draw` is the caller's random number.
+pub fn delta_tv_chunk(
+    res: [u32; 3],
+    rows: u32,
+    fraction: f32,
+    lambda: f32,
+    draw: u64,
+) -> DeltaTvChunk {
     let kappa = res.iter().copied().max().unwrap_or(0) as f32 / 256.0;
-    TvChunk {
-        res,
-        start: 0,
-        count: res.iter().product(),
-        channels: 1,
-        scale: lambda * kappa / allocated.max(1) as f32,
-        // Every vertex gets a δ gradient: the backends update δ densely instead of flagging it.
-        touch: 0,
+    let count = ((rows as f64 * fraction as f64).round() as u32).clamp(1, rows.max(1));
+    let dense = count >= rows;
+    DeltaTvChunk {
+        rows,
+        start: if dense { 0 } else { (draw % rows as u64) as u32 },
+        count,
+        scale: lambda * kappa / count as f32,
+        touch: if dense { 0 } else { TOUCH_DELTA },
     }
 }
 

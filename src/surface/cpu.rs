@@ -5,7 +5,7 @@ use super::{
     SurfaceStepStats,
 };
 use crate::cpu::surface_blocks::build_blocks;
-use crate::cpu::surface_delta_tv::{axis_neighbours, delta_tv};
+use crate::cpu::surface_delta_tv::{axis_neighbours, delta_tv, forward_reach};
 use crate::cpu::surface_fwd::{render, SurfCounts};
 use crate::cpu::surface_reg::{normal_reg_passes, row_slots, surface_opacity_reg, NormalPrefix};
 use crate::cpu::surface_train::{train, SurfaceGrads};
@@ -20,9 +20,10 @@ pub struct CpuSurface {
     grad: [Vec<f32>; 3],
     state: SurfaceState,
     touched: Vec<u32>,
-    /// Per-grid neighbour tables: Lδ's axis neighbours, and the normal regulariser's data
-    /// (neighbour table, cell counts of the chunks).
+    /// Per-grid neighbour tables: Lδ's axis neighbours (and their forward reach in rows), and
+    /// the normal regulariser's data (neighbour table, cell counts of the chunks).
     axis_nbrs: Vec<i32>,
+    axis_reach: u32,
     normals: NormalPrefix,
     /// The block masks the walks skip with, and when to rebuild them.
     blocks: Vec<u32>,
@@ -34,8 +35,10 @@ impl CpuSurface {
         let n = grid.delta.len();
         let row_slot = row_slots(&grid.links, n);
         let normals = NormalPrefix::new(&grid.links, &row_slot, grid.res);
+        let axis_nbrs = axis_neighbours(&grid.links, &row_slot, grid.res);
         CpuSurface {
-            axis_nbrs: axis_neighbours(&grid.links, &row_slot, grid.res),
+            axis_reach: forward_reach(&axis_nbrs),
+            axis_nbrs,
             normals,
             blocks: Vec::new(),
             refresh: BlockRefresh::default(),
@@ -60,10 +63,14 @@ impl CpuSurface {
         let [gd, go, _] = &mut self.grad;
         if let Some(c) = p.regs.delta_tv {
             ensure!(
-                c.start == 0 && c.count as usize >= g.links.len() && c.channels == 1,
-                "Lδ is a TV over the whole grid (delta_tv_chunk)"
+                c.rows as usize == g.delta.len() && c.start < c.rows.max(1),
+                "Lδ chunk over {} rows from {} on a grid of {}",
+                c.rows,
+                c.start,
+                g.delta.len()
             );
-            delta_tv(&self.axis_nbrs, &g.delta, gd, c.scale);
+            let reach = self.axis_reach;
+            delta_tv(&self.axis_nbrs, &g.delta, gd, &mut self.touched, &c, reach);
         }
         if let Some(c) = p.regs.opacity_tv {
             tv(&g.links, &g.opacity, go, &mut self.touched, &c);

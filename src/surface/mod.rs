@@ -2,6 +2,7 @@
 //! twins and a Vulkan implementation running the GLSL kernels (one submission per step).
 
 mod cpu;
+pub mod delta_tv;
 pub mod normal_reg;
 pub mod skip;
 mod vulkan;
@@ -9,6 +10,7 @@ mod vulkan;
 pub use cpu::CpuSurface;
 pub use vulkan::{train_params, SurfaceGradients, VulkanSurface};
 
+use crate::cpu::surface_delta_tv::DeltaTvChunk;
 use crate::cpu::surface_fwd::{SurfCounts, SurfaceParams};
 use crate::cpu::surface_reg::OpacityChunk;
 use crate::cpu::surface_train::{SurfaceLoss, TrainCounts};
@@ -19,8 +21,9 @@ use anyhow::Result;
 /// The per-vertex regularisers of one step (method.md §3.4); `None` switches a term off.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct SurfaceRegs {
-    /// Lδ: TV on δ over every slot, forward differences scaled by N/256 (`delta_tv_chunk`).
-    pub delta_tv: Option<TvChunk>,
+    /// Lδ: TV on δ over a chunk of the vertex rows (every row in the paper preset), forward
+    /// differences scaled by N/256 (`delta_tv_chunk`).
+    pub delta_tv: Option<DeltaTvChunk>,
     /// TVα on σα over a random slot chunk (`opacity_tv_chunk`).
     pub opacity_tv: Option<TvChunk>,
     /// Lα = λ Σ log σα (σα > 0) over a row chunk.
@@ -47,10 +50,10 @@ pub struct SurfaceStepParams {
 }
 
 impl SurfaceStepParams {
-    /// Whether δ is updated at every vertex this step: Lδ (a TV over the whole grid) gives every
-    /// vertex a δ gradient, so flagging δ would only cost; σα and SH stay per-vertex flagged.
+    /// Whether δ is updated at every vertex this step: Lδ over the whole grid gives every vertex
+    /// a δ gradient, so flagging δ would only cost; σα and SH stay per-vertex flagged.
     pub fn dense_delta(&self) -> bool {
-        self.regs.delta_tv.is_some()
+        self.regs.delta_tv.is_some_and(|c| c.dense())
     }
 }
 

@@ -26,7 +26,7 @@ pub struct NormalRegBuffers {
 }
 
 /// A buffer holding `v`, or one zero element when `v` is empty.
-fn upload_nonempty<T: bytemuck::Pod>(gpu: &Gpu, v: &[T]) -> Result<GpuBuffer> {
+pub(super) fn upload_nonempty<T: bytemuck::Pod>(gpu: &Gpu, v: &[T]) -> Result<GpuBuffer> {
     if v.is_empty() {
         gpu.zeros::<T>(1)
     } else {

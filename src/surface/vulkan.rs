@@ -6,7 +6,8 @@
 //! δ of every row when Lδ is on, then (optim_args → indirect) the flagged groups of the touched
 //! vertices.
 
-use super::normal_reg::{record_normal_reg, NormalRegBuffers, NormalRegIo};
+use super::delta_tv::{record_delta_tv, DeltaTvIo};
+use super::normal_reg::{record_normal_reg, upload_nonempty, NormalRegBuffers, NormalRegIo};
 use super::skip::{record_skip_structure, SkipIo};
 use super::{
     batch_loss, surface_params, BlockRefresh, SurfaceBackend, SurfaceState, SurfaceStepParams,
@@ -14,7 +15,7 @@ use super::{
 };
 use crate::cpu::step::{STEP_COUNT, STEP_FLAGS, STEP_N, TOUCH_OPACITY, TOUCH_SH, TOUCH_SURFACE};
 use crate::cpu::surface_blocks::complete_cells;
-use crate::cpu::surface_delta_tv::axis_neighbours;
+use crate::cpu::surface_delta_tv::{axis_neighbours, forward_reach};
 use crate::cpu::surface_fwd::{SurfCounts, SurfaceParams};
 use crate::cpu::surface_reg::{row_slots, NormalPrefix};
 use crate::cpu::surface_train::{RayLoss, SurfaceLoss, TrainCounts, SURF_MAX_HITS};
@@ -91,8 +92,10 @@ pub struct VulkanSurface {
     levels: GpuBuffer,
     /// Counters: 7 of surface_train, or 5 of surface_fwd.
     stats: GpuBuffer,
-    /// Lδ's axis-neighbour table (6 rows per row) and its per-row directions q (3 floats).
+    /// Lδ's axis-neighbour table (6 rows per row), its forward reach in rows
+    /// (`forward_reach`), and its per-row directions q (3 floats).
     axis_nbrs: GpuBuffer,
+    axis_reach: u32,
     tv_dirs: GpuBuffer,
     /// The normal regulariser's per-grid data (neighbour table, prefix count).
     normal_prefix: NormalPrefix,
@@ -104,15 +107,6 @@ pub struct VulkanSurface {
     /// Per-batch rays, targets and per-ray output: `RayLoss` (16 bytes) for training, `SurfOut`
     /// (20 bytes) for rendering.
     rays: RayBuffers,
-}
-
-/// A buffer holding `v`, or one zero when `v` is empty.
-fn upload_nonempty(gpu: &Gpu, v: &[f32]) -> Result<GpuBuffer> {
-    if v.is_empty() {
-        gpu.zeros::<f32>(1)
-    } else {
-        gpu.upload(v)
-    }
 }
 
 impl VulkanSurface {
@@ -141,6 +135,7 @@ impl VulkanSurface {
         };
         let row_slot = row_slots(&grid.links, n);
         let normal_prefix = NormalPrefix::new(&grid.links, &row_slot, grid.res);
+        let axis_nbrs = axis_neighbours(&grid.links, &row_slot, grid.res);
         Ok(VulkanSurface {
             gpu: gpu.clone(),
             rows: n,
@@ -171,11 +166,8 @@ impl VulkanSurface {
             params: gpu.zeros::<f32>(PARAMS_LEN)?,
             levels: gpu.upload(&levels)?,
             stats: gpu.zeros::<u32>(8)?,
-            axis_nbrs: if n == 0 {
-                gpu.zeros::<i32>(1)?
-            } else {
-                gpu.upload(&axis_neighbours(&grid.links, &row_slot, grid.res))?
-            },
+            axis_nbrs: upload_nonempty(gpu, &axis_nbrs)?,
+            axis_reach: forward_reach(&axis_nbrs),
             tv_dirs: gpu.zeros::<f32>(3 * n.max(1))?,
             normal_bufs: NormalRegBuffers::new(gpu, &normal_prefix)?,
             normal_prefix,
@@ -285,32 +277,22 @@ impl VulkanSurface {
         )
     }
 
+    /// The addresses Lδ's passes work on.
+    fn delta_tv_io(&self) -> DeltaTvIo {
+        DeltaTvIo {
+            nbr: self.axis_nbrs.address(),
+            delta: self.delta.address(),
+            q: self.tv_dirs.address(),
+            grad: self.grad[0].address(),
+            step: self.step.address(),
+        }
+    }
+
     /// Record the per-vertex regularisers (the same chunks and scales as `CpuSurface`).
     fn record_regularisers(&self, b: &mut Batch, p: &SurfaceStepParams) -> Result<()> {
         let res = self.meta.res;
-        let slots: u32 = res.iter().product();
         if let (Some(c), true) = (p.regs.delta_tv, self.rows > 0) {
-            ensure!(
-                c.res == res && c.start == 0 && c.count >= slots && c.channels == 1,
-                "Lδ is a TV over the whole grid (delta_tv_chunk)"
-            );
-            let rows = self.rows as u32;
-            for stage in 0..2 {
-                b.dispatch_1d(
-                    &kernels::surface_delta_tv::INFO,
-                    &kernels::surface_delta_tv::Push {
-                        nbr: self.axis_nbrs.address(),
-                        delta: self.delta.address(),
-                        q: self.tv_dirs.address(),
-                        grad: self.grad[0].address(),
-                        rows,
-                        stage,
-                        scale: c.scale,
-                        ..Default::default()
-                    },
-                    rows,
-                )?;
-            }
+            record_delta_tv(b, &self.delta_tv_io(), &c, self.axis_reach)?;
         }
         // TVα's chunk is dispatched over its intersection with the span of allocated slots: a
         // slot outside it holds no vertex, and every term of the chunk (a vertex and its forward

@@ -78,14 +78,14 @@ pub fn resume(backend: &mut dyn SurfaceBackend, path: &Path) -> Result<(u32, Sur
 
 /// The scheduled parameters of step `step`, with truncation `a`, for a grid of resolution `res`
 /// with `rows` allocated vertices; `draws` place the random regulariser chunks (Lα's start, Ln's
-/// start, TVα's draw).
+/// start, TVα's draw, Lδ's start).
 pub fn step_params(
     cfg: &SurfaceConfig,
     res: [u32; 3],
     rows: u32,
     step: u32,
     a: f32,
-    draws: [u64; 3],
+    draws: [u64; 4],
 ) -> SurfaceStepParams {
     let row_chunk = |fraction: f32, draw: u64| {
         let count = ((rows as f32 * fraction) as u32).clamp(1, rows.max(1));
@@ -110,8 +110,9 @@ pub fn step_params(
             0.0
         },
         regs: SurfaceRegs {
-            delta_tv: (cfg.lambda_delta > 0.0)
-                .then(|| delta_tv_chunk(res, rows as usize, cfg.lambda_delta)),
+            delta_tv: (cfg.lambda_delta > 0.0 && rows > 0).then(|| {
+                delta_tv_chunk(res, rows, cfg.delta_fraction, cfg.lambda_delta, draws[3])
+            }),
             opacity_tv: (cfg.lambda_tv_alpha > 0.0).then(|| {
                 opacity_tv_chunk(res, cfg.tv_alpha_fraction, cfg.lambda_tv_alpha, tv_draw)
             }),
@@ -172,6 +173,7 @@ pub fn train(
             rng.random::<u32>().into(),
             rng.random::<u32>().into(),
             rng.random(),
+            rng.random::<u32>().into(),
         ];
         let p = step_params(cfg, res, rows, step, cfg.a.at(step), draws);
         let stats = backend.step(&batch.flat_rays(), &batch.flat_targets(), &p)?;

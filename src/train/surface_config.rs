@@ -53,8 +53,10 @@ pub struct SurfaceConfig {
     /// Depth-consistency weight Lc, switched off from step `lambda_c_until` on.
     pub lambda_c: f32,
     pub lambda_c_until: u32,
-    /// Lδ: TV on δ over every allocated vertex.
+    /// Lδ: TV on δ, a mean over a random chunk of this fraction of the vertex rows (1: every
+    /// allocated vertex, as the paper).
     pub lambda_delta: f32,
+    pub delta_fraction: f32,
     /// TVα on a random chunk of this fraction of the slots.
     pub lambda_tv_alpha: f32,
     pub tv_alpha_fraction: f32,
@@ -112,6 +114,7 @@ impl SurfaceConfig {
             lambda_c: 1e-6,
             lambda_c_until: 10_000,
             lambda_delta: 1e-3,
+            delta_fraction: 1.0,
             lambda_tv_alpha: 1e-5,
             tv_alpha_fraction: 0.01,
             lambda_alpha: 1e-9,
@@ -206,6 +209,7 @@ impl SurfaceConfig {
             );
         }
         for (name, v) in [
+            ("delta_fraction", self.delta_fraction),
             ("tv_alpha_fraction", self.tv_alpha_fraction),
             ("alpha_fraction", self.alpha_fraction),
             ("normal_fraction", self.normal_fraction),
