@@ -4,11 +4,16 @@
 // status of every cell. A cell is named by its lower corner vertex v (row r); it exists when it
 // lies inside the grid and its 8 corners are allocated (nbr[r][j] ≥ 0 for j = 1..7). Its normal
 // is n = (Σ_{b,c} δ_1bc − Σ_{b,c} δ_0bc, likewise for y and z)/4 (corner b = 4·x + 2·y + z bits).
-// Every existing cell, not only the chunk's: the pairs pass reads the neighbours of the chunk's
-// cells. The cells that do not exist keep normals[r] = 0 (status 0) from the buffer's creation.
-// Thread mapping: flat id = i < n_cells, one existing cell each, row r = cell_rows[i] (a static
-// list, built once per grid on the host: NormalPrefix::cell_rows); one owner per written element.
-// Inputs: cell_rows, n_cells, nbr (rows of the corners, k), delta.
+// The cells of the chunk's window (its rows and the cells' forward reach after them,
+// cpu::surface_reg::NormalChunk::window), not only the chunk's: the pairs pass reads the forward
+// neighbours of the chunk's cells. The other cells' entries are left as they were (the pairs
+// pass reads none of them); the cells that do not exist keep normals[r] = 0 (status 0) from the
+// buffer's creation.
+// Thread mapping: flat id = i < work, one existing cell each, row r = cell_rows[work_index(first,
+// i, n_cells)] (cell_rows: a static ascending list of the existing cells, built once per grid on
+// the host: NormalPrefix::cell_rows; (first, work): the window's range of it, NormalChunk::
+// cells_work); one owner per written element.
+// Inputs: cell_rows, n_cells, first, work, nbr (rows of the corners, k), delta.
 // Outputs: normals[r] = (n, status + 4·k) (plain stores).
 // CPU twin: cpu::surface_reg::normal_cells.
 #include "common.glsl"
@@ -22,12 +27,14 @@ layout(push_constant, scalar) uniform Push {
     F32Buf delta;
     Vec4Buf normals;
     uint n_cells;
+    uint first;
+    uint work;
 } pc;
 
 void main() {
     uint i = flat_id();
-    if (i >= pc.n_cells) return;
-    uint r = pc.cell_rows.v[i];
+    if (i >= pc.work) return;
+    uint r = pc.cell_rows.v[work_index(pc.first, i, pc.n_cells)];
     // l[b] = the row of corner b.
     int l[8];
     uint k = 0u;

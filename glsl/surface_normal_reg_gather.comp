@@ -3,14 +3,17 @@
 // §3.4; definition in surface_normal_reg_pairs, layouts in normal_reg.glsl): each vertex gathers
 // ∂L/∂δ from the cells it is a corner of. Vertex v (row r) is corner b (b = 4·x + 2·y + z bits)
 // of the cell v − b: sum = Σ_{b = 0..7 in order} corners[8·(v − b) + b] over the cells v − b that
-// are rows (nbr ≥ 0) and in a kept pair (their corners are not +∞).
+// are rows (nbr ≥ 0) among the `window` rows from start (the cells the pairs pass wrote this
+// time) and in a kept pair (their corners are not +∞).
 // Touched semantics (as the single-pass kernel had them): v is touched exactly when one of its
 // cells is in a kept pair (either cell of a pair whose normals both have a direction), even if
 // the sum is 0 (e.g. L1 alone with identical normals).
-// Thread mapping: flat id = i < n_corners, one vertex each, row r = corner_rows[i] (static list of
-// the corners of the existing cells, NormalPrefix::corner_rows); one owner per gradient element,
-// no atomics.
-// Inputs: corner_rows, n_corners, nbr (rows of v − b), corners (pass 2), touch_bits.
+// Thread mapping: flat id = i < work, one vertex each, row r = corner_rows[work_index(first, i,
+// n_corners)] (static ascending list of the corners of the existing cells, NormalPrefix::
+// corner_rows; (first, work): the range of the corners of the window's cells, NormalChunk::
+// corners_work); one owner per gradient element, no atomics.
+// Inputs: corner_rows, n_corners, first, work, nbr (rows of v − b), corners (pass 2), rows,
+// start (< rows), window (≤ rows), touch_bits.
 // Outputs: for each touched v: grad[r] += sum (plain read-modify-write) and touch_mask(r,
 // touch_bits) (step.glsl; touch_bits = 0 sets nothing).
 // CPU twin: cpu::surface_reg::normal_gather.
@@ -26,6 +29,11 @@ layout(push_constant, scalar) uniform Push {
     F32Buf grad;
     U32Buf step;
     uint n_corners;
+    uint first;
+    uint work;
+    uint rows;
+    uint start;
+    uint window;
     uint touch_bits;
 } pc;
 
@@ -33,8 +41,8 @@ layout(push_constant, scalar) uniform Push {
 
 void main() {
     uint i = flat_id();
-    if (i >= pc.n_corners) return;
-    uint r = pc.corner_rows.v[i];
+    if (i >= pc.work) return;
+    uint r = pc.corner_rows.v[work_index(pc.first, i, pc.n_corners)];
     // l[b] = the row of v − b.
     int l[8];
     [[unroll]] for (uint w = 0u; w < 4u; w++) {
@@ -47,6 +55,8 @@ void main() {
     bool touched = false;
     [[unroll]] for (uint b = 0u; b < 8u; b++) {
         if (l[b] < 0) continue;
+        uint lb = uint(l[b]);
+        if ((lb >= pc.start ? lb - pc.start : lb + (pc.rows - pc.start)) >= pc.window) continue;
         float c = pc.corners.v[8u * uint(l[b]) + b];
         if (floatBitsToUint(c) == NO_PAIR_BITS) continue;
         touched = true;

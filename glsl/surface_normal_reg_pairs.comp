@@ -19,11 +19,14 @@
 // ∂L/∂n_c = (G − N·(N·G))/|n_c|.
 // The cell's corners then get ∂L/∂δ_b = corner_grad(b, ∂L/∂n_c) = Σ_a (∂L/∂n_c)_a·(bit_a(b) ?
 // +¼ : −¼) (∂n/∂δ_b contracted), gathered per vertex by surface_normal_reg_gather.
-// Thread mapping: flat id = i < n_cells, one existing cell each, row r = cell_rows[i] (static
-// list, NormalPrefix::cell_rows); one owner per written element. The cells that do not exist are
-// in no pair and keep corners = +∞ from the buffer's creation.
-// Inputs: cell_rows, n_cells, nbr (rows of the face neighbours), normals (pass 1), rows, start
-// (< rows), count (≤ rows), cells, lambda1, lambda2.
+// Thread mapping: flat id = i < work, one existing cell of the chunk's window each (as the cells
+// pass: row r = cell_rows[work_index(first, i, n_cells)]); one owner per written element. Every
+// cell in a pair with a chunk cell is in the window; the other cells' corners are left as they
+// were (the gather reads only the window's). The cells that do not exist are in no pair and keep
+// corners = +∞ from the buffer's creation.
+// Inputs: cell_rows, n_cells, first, work, nbr (rows of the face neighbours), normals (pass 1;
+// an entry outside the window is read only for a backward neighbour outside the chunk, and that
+// pair is dropped), rows, start (< rows), count (≤ rows), cells, lambda1, lambda2.
 // Outputs: corners[8·r + b] = corner_grad(b, ∂L/∂n_c) for a cell in a kept pair, else +∞
 // (plain stores, as 4 words); loss[0] += loss and skipped[0] += skipped pairs (atomic adds, one
 // per subgroup; the host zeroes both).
@@ -44,6 +47,8 @@ layout(push_constant, scalar) uniform Push {
     F32Buf loss;
     U32Buf skipped;
     uint n_cells;
+    uint first;
+    uint work;
     uint rows;
     uint start;
     uint count;
@@ -157,7 +162,7 @@ float cell_term(uint r, out uint skipped) {
 void main() {
     uint i = flat_id();
     uint skipped = 0u;
-    float l = i < pc.n_cells ? cell_term(pc.cell_rows.v[i], skipped) : 0.0;
+    float l = i < pc.work ? cell_term(pc.cell_rows.v[work_index(pc.first, i, pc.n_cells)], skipped) : 0.0;
     uint sk = subgroupAdd(skipped);
     float sl = subgroupAdd(l);
     if (subgroupElect()) {

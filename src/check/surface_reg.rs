@@ -119,12 +119,15 @@ pub const NORMAL_REG_KERNELS: [&str; 3] = [
 ];
 
 /// Run the normal regularisers' passes on the device (`ns`: their total), also returning the
-/// per-row arrays they passed on.
+/// per-row arrays they passed on. With `prior`, that chunk's passes run first on the same
+/// per-row arrays (into outputs of their own), so `c`'s passes start from what another chunk
+/// left there, as in training.
 pub fn gpu_normal_reg_scratch(
     gpu: &Gpu,
     g: &RegGrid,
     grad0: &[f32],
     c: &NormalChunk,
+    prior: Option<&NormalChunk>,
 ) -> Result<(GpuRegOut, NormalScratch)> {
     let n = g.allocated();
     let prefix = NormalPrefix::new(&g.links, &row_slots(&g.links, n), g.res);
@@ -141,7 +144,23 @@ pub fn gpu_normal_reg_scratch(
         loss: loss.address(),
         skipped: skipped.address(),
     };
+    let prior_out = [
+        gpu.zeros::<f32>(n.max(1))?,
+        gpu.upload(&empty_step(n))?,
+        gpu.zeros::<f32>(1)?,
+        gpu.zeros::<u32>(1)?,
+    ];
     let mut b = gpu.batch()?;
+    if let Some(p) = prior {
+        let io = NormalRegIo {
+            delta: delta.address(),
+            grad: prior_out[0].address(),
+            step: prior_out[1].address(),
+            loss: prior_out[2].address(),
+            skipped: prior_out[3].address(),
+        };
+        record_normal_reg(&mut b, &bufs, &io, p)?;
+    }
     record_normal_reg(&mut b, &bufs, &io, c)?;
     let t = b.submit()?;
     let out = GpuRegOut {
@@ -160,7 +179,7 @@ pub fn gpu_normal_reg_scratch(
 
 /// Run the normal regularisers' passes on the device.
 pub fn gpu_normal_reg(gpu: &Gpu, g: &RegGrid, grad0: &[f32], c: &NormalChunk) -> Result<GpuRegOut> {
-    Ok(gpu_normal_reg_scratch(gpu, g, grad0, c)?.0)
+    Ok(gpu_normal_reg_scratch(gpu, g, grad0, c, None)?.0)
 }
 
 /// Run surface_opacity_reg on the device.
@@ -344,8 +363,9 @@ pub fn check_opacity_reg(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
 }
 
 /// The parity rows of the three normal-regulariser passes, from the same runs: each compares
-/// its pass's output (cells: normals; pairs: each cell's corner gradients, loss, skipped pairs;
-/// gather: the gradient and the touched flags) on three chunks. No atomics in the gradient:
+/// its pass's output (cells: normals; pairs: each cell's corner gradients, loss, skipped pairs —
+/// both within the chunk's window; gather: the gradient and the touched flags) on four chunks,
+/// each run after another chunk on the same per-row arrays. No atomics in the gradient:
 /// lavapipe matches the twin bit for bit; the tolerances leave room for devices whose division
 /// and square root are not correctly rounded (the normals are sums and ×¼ only: exact).
 fn normal_reg_rows(gpu: &Gpu, seed: u64) -> Result<Vec<CheckRow>> {
@@ -355,17 +375,22 @@ fn normal_reg_rows(gpu: &Gpu, seed: u64) -> Result<Vec<CheckRow>> {
     let prefix = NormalPrefix::new(&g.links, &row_slots(&g.links, n), g.res);
     let mut rng = Pcg64::seed_from_u64(seed ^ 0xa11);
     let grad0 = random_vec(&mut rng, n, 1e-4);
+    // Each chunk after another one on the same per-row arrays (whose entries outside the
+    // chunk's window the passes must not read): the whole grid, then chunks of 10 % and 25 %
+    // inside and one wrapping past the end.
     let cases = [
-        (0, rows),
-        (rows / 3, rows / 4),
-        (rows - rows / 10, rows / 3),
+        (0, rows, (rows / 2, rows / 10)),
+        (rows / 3, rows / 10, (0, rows)),
+        (rows / 2, rows / 4, (rows / 3, rows / 4)),
+        (rows - rows / 10, rows / 3, (rows / 5, rows / 10)),
     ];
     let mut runs = Vec::new();
-    for &(start, count) in &cases {
+    for &(start, count, (p_start, p_count)) in &cases {
         let c = prefix.chunk(start, count, 1e-2, 1e-3);
+        let prior = prefix.chunk(p_start, p_count, 3e-2, 2e-3);
         let (mut want, mut want_t) = (grad0.clone(), vec![0u32; n]);
         let (st, ws) = normal_reg_passes(&prefix, &g.delta, &mut want, &mut want_t, &c);
-        let (out, gs) = gpu_normal_reg_scratch(gpu, &g, &grad0, &c)?;
+        let (out, gs) = gpu_normal_reg_scratch(gpu, &g, &grad0, &c, Some(&prior))?;
         runs.push((start, count, c, st, ws, want, want_t, out, gs));
     }
     // Scales of the elementwise tolerances: the largest finite corner gradient, the largest
@@ -395,6 +420,10 @@ fn normal_reg_rows(gpu: &Gpu, seed: u64) -> Result<Vec<CheckRow>> {
         .enumerate()
         {
             for (i, (&a, &b)) in got.iter().zip(want.iter()).enumerate() {
+                // The per-row arrays hold what the passes wrote only within the window.
+                if k < 2 && !c.within(i / stride, c.window) {
+                    continue;
+                }
                 cmp[k].value(a as f64, b as f64, || {
                     format!(
                         "chunk {start}+{count} {name}[{}][{}]",
@@ -421,8 +450,9 @@ fn normal_reg_rows(gpu: &Gpu, seed: u64) -> Result<Vec<CheckRow>> {
             .count();
         worst_loss = worst_loss.max((out.loss as f64 - st.loss).abs() / st.loss.abs().max(1e-30));
         notes.push(format!(
-            "chunk {start}+{count}: {} cells, {} skipped pairs, {} touched",
+            "chunk {start}+{count}: {} cells ({} in its window), {} skipped pairs, {} touched",
             c.cells,
+            c.cells_work.1,
             st.skipped,
             want_t.iter().filter(|&&t| t != 0).count()
         ));
@@ -433,7 +463,7 @@ fn normal_reg_rows(gpu: &Gpu, seed: u64) -> Result<Vec<CheckRow>> {
     let mut cells = c0.row(
         "surface_normal_reg_cells",
         cases.len(),
-        format!("cell normals, status and k, every row; {notes}"),
+        format!("cell normals, status and k, the window's rows; {notes}"),
     );
     cells.tolerance = "exact (sums and ×¼ only)".into();
     let mut pairs = c1.row(

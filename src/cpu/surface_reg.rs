@@ -63,6 +63,43 @@ pub struct NormalChunk {
     pub lambda2: f32,
     /// Touched-flag bits set on the vertices given a gradient (0: none; step.glsl).
     pub touch: u32,
+    /// The rows from start whose cells the cells and pairs passes visit: the chunk's rows and
+    /// the cells' forward reach after them (at most all rows); every cell in a pair with a chunk
+    /// cell is among them.
+    pub window: u32,
+    /// The passes' work as (first, n) ranges of the ascending work lists (wrapping past the
+    /// end): the cells of the window (`NormalPrefix::cell_rows`) and the corners of those cells
+    /// (`NormalPrefix::corner_rows`, the window widened by the corners' reach).
+    pub cells_work: (u32, u32),
+    pub corners_work: (u32, u32),
+}
+
+impl NormalChunk {
+    /// Whether row r is among the `len` rows from the chunk's start (wrapping).
+    pub fn within(&self, r: usize, len: u32) -> bool {
+        let (rows, start) = (self.rows as usize, (self.start % self.rows.max(1)) as usize);
+        let i = if r >= start { r - start } else { r + (rows - start) };
+        i < len as usize
+    }
+}
+
+/// Entry i of a work range (first, n) of `list` (wrapping past its end).
+fn work_item(list: &[u32], work: (u32, u32), i: u32) -> u32 {
+    let k = work.0 as usize + i as usize;
+    list[if k >= list.len() { k - list.len() } else { k }]
+}
+
+/// The (first, n) range of the entries of the ascending `list` in rows [start, start + len) mod
+/// rows (start < rows, len ≤ rows).
+fn list_range(list: &[u32], rows: u32, start: u32, len: u32) -> (u32, u32) {
+    let below = |r: u32| list.partition_point(|&x| x < r) as u32;
+    let first = below(start);
+    let n = if start + len <= rows {
+        below(start + len) - first
+    } else {
+        (list.len() as u32 - first) + below(start + len - rows)
+    };
+    (first, n)
 }
 
 /// What one call of [`surface_normal_reg`] found.
@@ -145,6 +182,10 @@ pub struct NormalPrefix {
     corner_rows: Vec<u32>,
     /// prefix[r] = number of such rows below r (rows + 1 entries).
     prefix: Vec<u32>,
+    /// The largest row distance (mod rows) from a cell to a forward face neighbour, and from a
+    /// corner row v to a cell v − b it is a corner of: the windows of the passes.
+    cell_reach: u32,
+    corner_reach: u32,
 }
 
 impl NormalPrefix {
@@ -163,15 +204,39 @@ impl NormalPrefix {
                 }
             }
         }
-        let corner_rows = (0..row_slot.len() as u32)
+        let corner_rows: Vec<u32> = (0..row_slot.len() as u32)
             .filter(|&r| corner[r as usize])
             .collect();
+        let rows = row_slot.len();
+        let dist = |from: usize, to: i32| (to as usize + rows - from) % rows;
+        let cell_reach = cell_rows
+            .iter()
+            .flat_map(|&r| {
+                let t = &nbr[NBR_STRIDE * r as usize..][..NBR_STRIDE];
+                (1..4).map(move |j| dist(r as usize, t[j]))
+            })
+            .max()
+            .unwrap_or(0) as u32;
+        let is_cell = |l: i32| l >= 0 && nbr[NBR_STRIDE * l as usize + 1..][..7].iter().all(|&x| x >= 0);
+        let corner_reach = corner_rows
+            .iter()
+            .flat_map(|&v| {
+                let t = &nbr[NBR_STRIDE * v as usize..][..NBR_STRIDE];
+                (1..8)
+                    .map(move |j| t[8 + j])
+                    .filter(|&l| is_cell(l))
+                    .map(move |l| dist(l as usize, v as i32))
+            })
+            .max()
+            .unwrap_or(0) as u32;
         NormalPrefix {
             res,
             nbr,
             cell_rows,
             corner_rows,
             prefix,
+            cell_reach,
+            corner_reach,
         }
     }
 
@@ -207,6 +272,8 @@ impl NormalPrefix {
         } else {
             (p(rows) - p(s0)) + p(s0 + n - rows)
         };
+        let window = n.saturating_add(self.cell_reach).min(rows);
+        let corner_window = window.saturating_add(self.corner_reach).min(rows);
         NormalChunk {
             res: self.res,
             rows,
@@ -216,6 +283,9 @@ impl NormalPrefix {
             lambda1,
             lambda2,
             touch: TOUCH_DELTA,
+            window,
+            cells_work: list_range(&self.cell_rows, rows, s0, window),
+            corners_work: list_range(&self.corner_rows, rows, s0, corner_window),
         }
     }
 }
@@ -242,13 +312,15 @@ fn sign0(x: f32) -> f32 {
     }
 }
 
-/// Pass 1, twin of `surface_normal_reg_cells`: normals[r] = (n, status + 4·k) of every row's
-/// cell, computed for the existing cells (`p.cell_rows()`), 0 for the others (as the kernel's
-/// buffer holds from its creation on).
-pub fn normal_cells(p: &NormalPrefix, delta: &[f32]) -> Vec<f32> {
+/// Pass 1, twin of `surface_normal_reg_cells`: normals[r] = (n, status + 4·k) of the cells of
+/// the chunk's window (`c.cells_work`), 0 for the others (the kernel leaves them as they were;
+/// the pairs pass reads only the window's).
+pub fn normal_cells(p: &NormalPrefix, delta: &[f32], c: &NormalChunk) -> Vec<f32> {
     let rows = p.rows() as usize;
-    let computed: Vec<[f32; NORMALS_STRIDE]> = p
-        .cell_rows
+    let work: Vec<u32> = (0..c.cells_work.1)
+        .map(|i| work_item(&p.cell_rows, c.cells_work, i))
+        .collect();
+    let computed: Vec<[f32; NORMALS_STRIDE]> = work
         .par_iter()
         .map(|&r| {
             let r = r as usize;
@@ -267,7 +339,7 @@ pub fn normal_cells(p: &NormalPrefix, delta: &[f32]) -> Vec<f32> {
         })
         .collect();
     let mut normals = vec![0f32; NORMALS_STRIDE * rows];
-    for (&r, v) in p.cell_rows.iter().zip(&computed) {
+    for (&r, v) in work.iter().zip(&computed) {
         normals[NORMALS_STRIDE * r as usize..][..NORMALS_STRIDE].copy_from_slice(v);
     }
     normals
@@ -376,17 +448,19 @@ fn cell_pairs(
     (loss, skipped)
 }
 
-/// Pass 2, twin of `surface_normal_reg_pairs`: every row's corners (∂L/∂δ of the cell's 8
-/// corners from its kept pairs, +∞ for a cell in none), computed for the existing cells, +∞ for
-/// the others (as the kernel's buffer holds from its creation on); returns the loss and the
-/// skipped pairs.
+/// Pass 2, twin of `surface_normal_reg_pairs`: the corners (∂L/∂δ of the cell's 8 corners from
+/// its kept pairs, +∞ for a cell in none) of the cells of the chunk's window, +∞ for the others
+/// (the kernel leaves them as they were; the gather reads only the window's); returns the loss
+/// and the skipped pairs.
 pub fn normal_pairs(
     p: &NormalPrefix,
     normals: &[f32],
     c: &NormalChunk,
 ) -> (Vec<f32>, NormalRegStats) {
-    let computed: Vec<([f32; CORNERS_STRIDE], f64, u32)> = p
-        .cell_rows
+    let work: Vec<u32> = (0..c.cells_work.1)
+        .map(|i| work_item(&p.cell_rows, c.cells_work, i))
+        .collect();
+    let computed: Vec<([f32; CORNERS_STRIDE], f64, u32)> = work
         .par_iter()
         .map(|&r| {
             let mut out = [0f32; CORNERS_STRIDE];
@@ -396,7 +470,7 @@ pub fn normal_pairs(
         .collect();
     let mut corners = vec![f32::INFINITY; CORNERS_STRIDE * p.rows() as usize];
     let mut st = NormalRegStats::default();
-    for (&r, (v, loss, skipped)) in p.cell_rows.iter().zip(&computed) {
+    for (&r, (v, loss, skipped)) in work.iter().zip(&computed) {
         corners[CORNERS_STRIDE * r as usize..][..CORNERS_STRIDE].copy_from_slice(v);
         st.loss += loss;
         st.skipped += skipped;
@@ -404,18 +478,21 @@ pub fn normal_pairs(
     (corners, st)
 }
 
-/// Pass 3, twin of `surface_normal_reg_gather`: each vertex v (row r) of `p.corner_rows()` sums
-/// corner b of its cells v − b (b = 0..7 in order; those that are rows and in a kept pair, i.e.
-/// not +∞); where it has such a cell, grad[r] += the sum and touched[r] |= `touch`.
+/// Pass 3, twin of `surface_normal_reg_gather`: each vertex v (row r) of the chunk's corner work
+/// (`c.corners_work`) sums corner b of its cells v − b (b = 0..7 in order; those that are rows in
+/// the chunk's window and in a kept pair, i.e. not +∞); where it has such a cell, grad[r] += the
+/// sum and touched[r] |= `c.touch`.
 pub fn normal_gather(
     p: &NormalPrefix,
     corners: &[f32],
     grad: &mut [f32],
     touched: &mut [u32],
-    touch: u32,
+    c: &NormalChunk,
 ) {
-    let sums: Vec<Option<f32>> = p
-        .corner_rows
+    let work: Vec<u32> = (0..c.corners_work.1)
+        .map(|i| work_item(&p.corner_rows, c.corners_work, i))
+        .collect();
+    let sums: Vec<Option<f32>> = work
         .par_iter()
         .map(|&r| {
             let r = r as usize;
@@ -427,7 +504,7 @@ pub fn normal_gather(
                 l[NBR_B[j]] = nb[8 + j];
             }
             for (b, &l) in l.iter().enumerate() {
-                if l < 0 {
+                if l < 0 || !c.within(l as usize, c.window) {
                     continue;
                 }
                 let c = corners[CORNERS_STRIDE * l as usize + b];
@@ -440,10 +517,10 @@ pub fn normal_gather(
             hit.then_some(sum)
         })
         .collect();
-    for (&r, sum) in p.corner_rows.iter().zip(sums) {
+    for (&r, sum) in work.iter().zip(sums) {
         if let Some(sum) = sum {
             grad[r as usize] += sum;
-            touched[r as usize] |= touch;
+            touched[r as usize] |= c.touch;
         }
     }
 }
@@ -463,9 +540,9 @@ pub fn normal_reg_passes(
     touched: &mut [u32],
     c: &NormalChunk,
 ) -> (NormalRegStats, NormalScratch) {
-    let normals = normal_cells(p, delta);
+    let normals = normal_cells(p, delta, c);
     let (corners, st) = normal_pairs(p, &normals, c);
-    normal_gather(p, &corners, grad, touched, c.touch);
+    normal_gather(p, &corners, grad, touched, c);
     (st, NormalScratch { normals, corners })
 }
 

@@ -74,9 +74,9 @@ pub struct NormalRegIo {
 }
 
 /// Record the three passes for chunk `c` of the grid of `bufs` (nothing for an empty chunk or a
-/// grid without cells). The cells and pairs passes run over every existing cell, the gather
-/// over every corner of one: the pairs pass gathers the pairs of the chunk's cells from both of
-/// their cells.
+/// grid without cells). The cells and pairs passes run over the cells of the chunk's window, the
+/// gather over their corners (`NormalChunk::cells_work`, `corners_work`): the pairs pass gathers
+/// the pairs of the chunk's cells from both of their cells.
 pub fn record_normal_reg(
     b: &mut Batch,
     bufs: &NormalRegBuffers,
@@ -95,9 +95,11 @@ pub fn record_normal_reg(
             delta: io.delta,
             normals: bufs.normals.address(),
             n_cells: bufs.n_cells,
+            first: c.cells_work.0,
+            work: c.cells_work.1,
             ..Default::default()
         },
-        bufs.n_cells,
+        c.cells_work.1,
     )?;
     b.dispatch_1d(
         &kernels::surface_normal_reg_pairs::INFO,
@@ -109,6 +111,8 @@ pub fn record_normal_reg(
             loss: io.loss,
             skipped: io.skipped,
             n_cells: bufs.n_cells,
+            first: c.cells_work.0,
+            work: c.cells_work.1,
             rows,
             start: c.start % rows,
             count: c.count.min(rows),
@@ -117,7 +121,7 @@ pub fn record_normal_reg(
             lambda2: c.lambda2,
             ..Default::default()
         },
-        bufs.n_cells,
+        c.cells_work.1,
     )?;
     b.dispatch_1d(
         &kernels::surface_normal_reg_gather::INFO,
@@ -128,8 +132,14 @@ pub fn record_normal_reg(
             grad: io.grad,
             step: io.step,
             n_corners: bufs.n_corners,
+            first: c.corners_work.0,
+            work: c.corners_work.1,
+            rows,
+            start: c.start % rows,
+            window: c.window,
             touch_bits: c.touch,
+            ..Default::default()
         },
-        bufs.n_corners,
+        c.corners_work.1,
     )
 }
