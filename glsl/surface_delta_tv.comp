@@ -10,14 +10,13 @@
 // - stage 1, i < window, v = row i from start (the chunk and the rows its vertices' forward
 //   neighbours can be, cpu::surface_delta_tv::forward_reach): grad[v] += scale·(Σ_a q[v − e_a][a]
 //   − (q[v].x + q[v].y + q[v].z)), each sum over its terms whose vertex (v − e_a, or v) is in the
-//   chunk; a row with a term is flagged touch_bits (plain read-modify-write of grad: one owner
-//   per element).
+//   chunk (plain read-modify-write of grad: one owner per element).
 // That is ∂(scale·Σ_{v in chunk} √(|d_v|² + 1e-9))/∂δ (scale = λ·κ/count,
-// cpu::surface_reg::delta_tv_chunk). A whole-grid chunk flags nothing (touch_bits = 0): every
-// vertex gets a δ gradient, and δ is then updated by surface_rmsprop's dense pass.
+// cpu::surface_reg::delta_tv_chunk). Nothing is flagged touched: surface_rmsprop's range pass
+// updates δ on every row of the window.
 // Thread mapping: one invocation per chunk row (stage 0) or window row (stage 1).
 // Inputs: nbr, delta, q (stage 1), rows, stage, start (< rows), count, window (≤ rows), scale.
-// Outputs: q (stage 0, 3 floats per row), grad and the step record's flags (stage 1).
+// Outputs: q (stage 0, 3 floats per row), grad (stage 1).
 // CPU twin: cpu::surface_delta_tv.
 #include "common.glsl"
 layout(local_size_x = 64) in;
@@ -27,17 +26,13 @@ layout(push_constant, scalar) uniform Push {
     F32Buf delta;
     F32Buf q;
     F32Buf grad;
-    U32Buf step;
     uint rows;
     uint stage;
     uint start;
     uint count;
     uint window;
     float scale;
-    uint touch_bits;
 } pc;
-
-#include "step.glsl"
 
 // Row i from the chunk's start (i < rows).
 uint chunk_row(uint i) {
@@ -86,5 +81,4 @@ void main() {
     if (!any) return;
     precise float g = pc.grad.v[v] + pc.scale * (back - own);
     pc.grad.v[v] = g;
-    touch_mask(v, pc.touch_bits);
 }

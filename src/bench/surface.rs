@@ -81,7 +81,7 @@ fn step_params(
     step: u32,
 ) -> SurfaceStepParams {
     let draw = (step as u64 + 1).wrapping_mul(0x9e37_79b9_7f4a_7c15);
-    stage2::step_params(cfg, res, rows, 0, a, [draw, draw >> 17, draw >> 7, draw >> 29])
+    stage2::step_params(cfg, res, rows, 0, a, [draw, draw >> 17, draw >> 7])
 }
 
 /// One backend step: rays, targets, parameters.

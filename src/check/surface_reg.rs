@@ -6,7 +6,7 @@
 
 use super::{rel_l2, CheckRow, Compare};
 use crate::cpu::step::{
-    optim_args, STEP_COUNT, STEP_FLAGS, STEP_N, TOUCH_OPACITY, TOUCH_SH, TOUCH_SURFACE,
+    optim_args, STEP_COUNT, STEP_FLAGS, STEP_N,
 };
 use crate::cpu::surface_delta_tv::{axis_neighbours, delta_tv, forward_reach, DeltaTvChunk};
 use crate::cpu::surface_reg::delta_tv_chunk;
@@ -15,10 +15,12 @@ use crate::cpu::surface_reg::{
     OpacityChunk, CORNERS_STRIDE, NORMALS_STRIDE,
 };
 use crate::cpu::{surface_rmsprop_sparse, tv, Stage2Params, SurfaceRmsProp, TvChunk};
-use crate::gpu::{record_optim_args, Gpu, GpuBuffer};
+use crate::gpu::{Gpu, GpuBuffer};
 use crate::grid::SH_DIM;
 use crate::kernels;
+use crate::cpu::step::RowRange;
 use crate::surface::delta_tv::{record_delta_tv, DeltaTvIo};
+use crate::surface::rmsprop::{record_surface_rmsprop, SurfaceOptimIo};
 use crate::surface::normal_reg::{record_normal_reg, NormalRegBuffers, NormalRegIo};
 use anyhow::Result;
 use rand::{Rng, SeedableRng};
@@ -218,14 +220,13 @@ pub fn gpu_opacity_reg(
 }
 
 /// Runs both surface_delta_tv stages on the device for each chunk in turn, on the same buffers
-/// (q left over from a chunk must not leak into the next): grad0 + the Lδ gradients, and the
-/// touched flags.
+/// (q left over from a chunk must not leak into the next): grad0 + the Lδ gradients.
 pub fn gpu_delta_tv(
     gpu: &Gpu,
     g: &RegGrid,
     grad0: &[f32],
     chunks: &[DeltaTvChunk],
-) -> Result<(Vec<f32>, Vec<u32>)> {
+) -> Result<Vec<f32>> {
     let n = g.allocated();
     let nbr = axis_neighbours(&g.links, &row_slots(&g.links, n), g.res);
     let reach = forward_reach(&nbr);
@@ -233,26 +234,24 @@ pub fn gpu_delta_tv(
     let db = gpu.upload(&g.delta)?;
     let qb = gpu.upload(&vec![f32::NAN; 3 * n])?;
     let gb = gpu.upload(grad0)?;
-    let sb = gpu.upload(&empty_step(n))?;
     let io = DeltaTvIo {
         nbr: nb.address(),
         delta: db.address(),
         q: qb.address(),
         grad: gb.address(),
-        step: sb.address(),
     };
     let mut b = gpu.batch()?;
     for c in chunks {
         record_delta_tv(&mut b, &io, c, reach)?;
     }
     b.submit()?;
-    Ok((gb.download()?, sb.download_range(STEP_FLAGS, n)?))
+    gb.download()
 }
 
 /// Lδ on the random grid (band with holes, a slab on the grid's faces), on chunks inside, past
 /// the end (wrapping) and whole, run one after another: the device against the twin
-/// elementwise (touched flags exact), and the whole chunk's twin against `tv` over the whole
-/// grid (the definition Lδ shares with TVα) in aggregate.
+/// elementwise, and the whole chunk's twin against `tv` over the whole grid (the definition Lδ
+/// shares with TVα) in aggregate.
 pub fn check_delta_tv(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
     let g = reg_grid(seed, 24, 0.15);
     let n = g.allocated();
@@ -267,23 +266,21 @@ pub fn check_delta_tv(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
         delta_tv_chunk(g.res, rows, 0.1, 5e-3, (rows - rows / 30) as u64),
         whole,
     ];
-    let (mut want, mut want_t) = (grad0.clone(), vec![0u32; n]);
+    let mut want = grad0.clone();
     for c in &chunks {
-        delta_tv(&nbr, &g.delta, &mut want, &mut want_t, c, reach);
+        delta_tv(&nbr, &g.delta, &mut want, c, reach);
     }
-    let (got, got_t) = gpu_delta_tv(gpu, &g, &grad0, &chunks)?;
+    let got = gpu_delta_tv(gpu, &g, &grad0, &chunks)?;
     let added = |v: &[f32]| -> Vec<f32> { v.iter().zip(&grad0).map(|(a, b)| a - b).collect() };
     let scale = added(&want).iter().fold(0f32, |m, x| m.max(x.abs())) as f64;
     let mut cmp = Compare::new(1e-6 * scale, 1e-5);
     for (i, (&a, &b)) in got.iter().zip(&want).enumerate() {
         cmp.value(a as f64, b as f64, || format!("δ gradient {i}"));
     }
-    let flags_diff = got_t.iter().zip(&want_t).filter(|(a, b)| a != b).count();
-    cmp.value(flags_diff as f64, 0.0, || "touched flags differing".into());
     // The slot-walking TV twin over the whole grid: the same derivative, other rounding.
     let (mut by_rows, mut by_slots) = (grad0.clone(), grad0.clone());
     let mut touched = vec![0u32; n];
-    delta_tv(&nbr, &g.delta, &mut by_rows, &mut touched, &whole, reach);
+    delta_tv(&nbr, &g.delta, &mut by_rows, &whole, reach);
     let all_slots = TvChunk {
         res: g.res,
         start: 0,
@@ -299,8 +296,8 @@ pub fn check_delta_tv(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
         n,
         format!(
             "24³ band with holes and faces; chunks of 10 % inside and wrapping, then the whole \
-             grid, on the same buffers; touched flags exact; whole grid against `tv`: rel L2 \
-             {l2:.1e} (≤ 1e-5 required)"
+             grid, on the same buffers; whole grid against `tv`: rel L2 {l2:.1e} (≤ 1e-5 \
+             required)"
         ),
     );
     row.tolerance = "|Δ| ≤ 1e-6·max|Δgrad| + 1e-5·|cpu| elementwise".into();
@@ -421,7 +418,7 @@ fn normal_reg_rows(gpu: &Gpu, seed: u64) -> Result<Vec<CheckRow>> {
         {
             for (i, (&a, &b)) in got.iter().zip(want.iter()).enumerate() {
                 // The per-row arrays hold what the passes wrote only within the window.
-                if k < 2 && !c.within(i / stride, c.window) {
+                if k < 2 && !c.rows_from_start(c.window).contains(i / stride) {
                     continue;
                 }
                 cmp[k].value(a as f64, b as f64, || {
@@ -509,27 +506,37 @@ pub fn check_normal_gather(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
 
 pub fn check_rmsprop(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
     let mut cmp = Compare::new(1e-7, 1e-5);
-    let n = 20_000;
-    for dense_delta in [false, true] {
-        rmsprop_case(gpu, seed, n, dense_delta, &mut cmp)?;
+    let n = 20_000u32;
+    let ranges = [
+        RowRange::default(),
+        RowRange::all(n),
+        RowRange {
+            rows: n,
+            start: n - 1234,
+            len: 3001,
+        },
+    ];
+    for r in ranges {
+        rmsprop_case(gpu, seed, n as usize, r, &mut cmp)?;
     }
     Ok(cmp.row(
         "surface_rmsprop",
-        2 * n,
+        ranges.len() * n as usize,
         "δ, σα, 27 SH; 2/3 of vertices touched in scrambled order with every combination of \
-         group bits; list pass alone, and dense δ pass + list pass without δ; fresh state, zero \
-         and 1e-8..1e4 gradients; untouched groups unchanged, gradients and flags cleared"
+         group bits; list pass alone, and the δ range pass (every row; 3001 rows wrapping past \
+         the end) + list pass; fresh state, zero and 1e-8..1e4 gradients; untouched groups \
+         unchanged, gradients and flags cleared"
             .into(),
     ))
 }
 
-/// One RMSProp step on random state, GPU (dense δ pass when `dense_delta`, then the list pass)
+/// One RMSProp step on random state, GPU (range pass over `delta_rows`, then the list pass)
 /// against the twin; every array, flag and indirect argument compared into `cmp`.
 fn rmsprop_case(
     gpu: &Gpu,
     seed: u64,
     n: usize,
-    dense_delta: bool,
+    delta_rows: RowRange,
     cmp: &mut Compare,
 ) -> Result<()> {
     let mut rng = Pcg64::seed_from_u64(seed);
@@ -579,47 +586,19 @@ fn rmsprop_case(
         lr_sh: 1e-3,
         beta: 0.95,
         eps: 1e-8,
-        dense_delta,
+        delta_rows: RowRange {
+            rows: n as u32,
+            ..delta_rows
+        },
     };
     let a = |i: usize| bufs[i].address();
-    let push = kernels::surface_rmsprop::Push {
-        delta: a(0),
-        opacity: a(1),
-        sh: a(2),
-        grad_delta: a(3),
-        grad_opacity: a(4),
-        grad_sh: a(5),
-        state_delta: a(6),
-        state_opacity: a(7),
-        state_sh: a(8),
-        step: sb.address(),
-        lr_delta: h.lr_delta,
-        lr_opacity: h.lr_opacity,
-        lr_sh: h.lr_sh,
-        beta: h.beta,
-        eps: h.eps,
-        groups: TOUCH_SURFACE,
-        ..Default::default()
+    let io = SurfaceOptimIo {
+        params: [a(0), a(1), a(2)],
+        grads: [a(3), a(4), a(5)],
+        states: [a(6), a(7), a(8)],
     };
     let mut b = gpu.batch()?;
-    if dense_delta {
-        let dense = kernels::surface_rmsprop::Push {
-            dense_rows: n as u32,
-            ..push
-        };
-        b.dispatch_1d(&kernels::surface_rmsprop::INFO, &dense, n as u32)?;
-    }
-    record_optim_args(&mut b, &sb, &args)?;
-    let groups = if dense_delta {
-        TOUCH_OPACITY | TOUCH_SH
-    } else {
-        TOUCH_SURFACE
-    };
-    b.dispatch_indirect(
-        &kernels::surface_rmsprop::INFO,
-        &kernels::surface_rmsprop::Push { groups, ..push },
-        &args,
-    )?;
+    record_surface_rmsprop(&mut b, &io, &sb, &args, &h)?;
     b.submit()?;
     let got_args: Vec<u32> = args.download()?;
     surface_rmsprop_sparse(Stage2Params::from_arrays(&mut p), &mut flags, &h);
@@ -638,7 +617,7 @@ fn rmsprop_case(
         let got: Vec<f32> = buf.download()?;
         for (i, (&x, &y)) in got.iter().zip(w).enumerate() {
             cmp.value(x as f64, y as f64, || {
-                format!("{name}[{i}] (dense δ {dense_delta})")
+                format!("{name}[{i}] (δ rows {delta_rows:?})")
             });
         }
     }

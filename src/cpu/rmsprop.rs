@@ -1,8 +1,8 @@
 //! Twins of `glsl/lib/rmsprop.glsl` (one scalar), `glsl/rmsprop_sparse.comp` (σ and 27 SH of
 //! every touched vertex, then the flag cleared) and `glsl/surface_rmsprop.comp` (the same for the
-//! stage-2 groups δ, σα and SH, each only where it was touched, or δ densely).
+//! stage-2 groups δ, σα and SH, each only where it was touched, and δ on a range of rows).
 
-use super::step::{TOUCH_DELTA, TOUCH_OPACITY, TOUCH_SH};
+use super::step::{RowRange, TOUCH_DELTA, TOUCH_OPACITY, TOUCH_SH};
 use crate::grid::SH_DIM;
 use rayon::prelude::*;
 
@@ -68,9 +68,9 @@ pub struct SurfaceRmsProp {
     pub lr_sh: f32,
     pub beta: f32,
     pub eps: f32,
-    /// δ of every vertex is updated, flagged or not (a regulariser gave every vertex a δ
-    /// gradient: Lδ); otherwise δ only where its flag bit is set.
-    pub dense_delta: bool,
+    /// The rows whose δ is updated flagged or not (those the step's δ regularisers reach: Lδ's
+    /// window, every row for a whole-grid Lδ); elsewhere δ only where its flag bit is set.
+    pub delta_rows: RowRange,
 }
 
 /// Parameters, gradients and RMS state of the stage-2 grid (per allocated vertex: δ, raw
@@ -105,9 +105,9 @@ impl<'a> Stage2Params<'a> {
     }
 }
 
-/// Update, per vertex, each group whose touched bit (step.rs TOUCH_*) is set — δ everywhere when
-/// `dense_delta` — clearing the updated gradients, and clear the flags (surface_rmsprop.comp's
-/// dense and list passes in one).
+/// Update, per vertex, each group whose touched bit (step.rs TOUCH_*) is set — δ also on every row
+/// of `delta_rows` — clearing the updated gradients, and clear the flags (surface_rmsprop.comp's
+/// range and list passes in one).
 pub fn surface_rmsprop_sparse(p: Stage2Params, touched: &mut [u32], h: &SurfaceRmsProp) {
     let scalars = p
         .delta
@@ -122,8 +122,9 @@ pub fn surface_rmsprop_sparse(p: Stage2Params, touched: &mut [u32], h: &SurfaceR
         .zip(p.grad_sh.par_chunks_mut(SH_DIM))
         .zip(p.state_sh.par_chunks_mut(SH_DIM))
         .zip(touched.par_iter_mut())
-        .for_each(|(((((((((d, gd), sd), o), go), so), sh), gs), ss), t)| {
-            if h.dense_delta || *t & TOUCH_DELTA != 0 {
+        .enumerate()
+        .for_each(|(v, (((((((((d, gd), sd), o), go), so), sh), gs), ss), t))| {
+            if h.delta_rows.contains(v) || *t & TOUCH_DELTA != 0 {
                 rmsprop_one(d, gd, sd, h.lr_delta, h.beta, h.eps);
             }
             if *t & TOUCH_OPACITY != 0 {

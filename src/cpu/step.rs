@@ -18,6 +18,38 @@ pub const TOUCH_SH: u32 = 4;
 /// Every stage-2 group.
 pub const TOUCH_SURFACE: u32 = TOUCH_DELTA | TOUCH_OPACITY | TOUCH_SH;
 
+/// The vertex rows (start + i) mod rows, i < len (start < rows, len ≤ rows; len = 0: none) —
+/// the chunks of the stage-2 regularisers and the rows whose δ RMSProp updates densely.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct RowRange {
+    pub rows: u32,
+    pub start: u32,
+    pub len: u32,
+}
+
+impl RowRange {
+    /// Every row.
+    pub fn all(rows: u32) -> Self {
+        RowRange {
+            rows,
+            start: 0,
+            len: rows,
+        }
+    }
+
+    /// Whether row v is in the range.
+    pub fn contains(&self, v: usize) -> bool {
+        let (rows, start) = (self.rows as usize, self.start as usize);
+        let i = if v >= start { v - start } else { v + rows - start };
+        i < self.len as usize
+    }
+
+    /// Row i of the range (i < len; wraps past the last row).
+    pub fn row(&self, i: u32) -> usize {
+        ((self.start as u64 + i as u64) % self.rows.max(1) as u64) as usize
+    }
+}
+
 /// Set the bits `m` of vertex v's flag.
 pub fn touch_mask(flags: &[AtomicU32], v: usize, m: u32) {
     if m != 0 {

@@ -6,11 +6,13 @@
 //!   unallocated);
 //! - pass 1: over the chunk's window (its rows and the [`forward_reach`] rows after them),
 //!   grad_v += scale·(Σ_a q_{v−e_a}[a] − (q_v.x + q_v.y + q_v.z)), each sum over its terms whose
-//!   vertex (v − e_a, or v) is in the chunk; a row with a term is flagged with the chunk's bits.
+//!   vertex (v − e_a, or v) is in the chunk. Nothing is flagged: RMSProp updates δ on every row
+//!   of the window (`SurfaceRmsProp::delta_rows`).
 //!
 //! This is ∂(scale·Σ_{v in chunk} TV_v)/∂δ with TV_v = √(|d_v|² + 1e-9); over the whole grid, the
 //! value `tv` differentiates (up to rounding: q divides each difference once).
 
+use super::step::RowRange;
 use rayon::prelude::*;
 
 /// Entries per row of the axis-neighbour table: +x, +y, +z, −x, −y, −z.
@@ -39,9 +41,8 @@ pub fn axis_neighbours(links: &[i32], row_slot: &[u32], res: [u32; 3]) -> Vec<i3
         .collect()
 }
 
-/// Lδ on the vertex rows (start + i) mod rows, i < count (≤ rows): every vertex's TV term once
-/// the chunk is the whole grid ([`DeltaTvChunk::dense`]), a random chunk otherwise. Make it with
-/// `surface_reg::delta_tv_chunk`.
+/// Lδ on the vertex rows (start + i) mod rows, i < count (≤ rows): every vertex's TV term when
+/// count = rows, a random chunk otherwise. Make it with `surface_reg::delta_tv_chunk`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct DeltaTvChunk {
     pub rows: u32,
@@ -50,32 +51,25 @@ pub struct DeltaTvChunk {
     /// Rows in the chunk, ≤ rows.
     pub count: u32,
     pub scale: f32,
-    /// Touched-flag bits set on the rows given a gradient: 0 for a dense chunk (δ is then updated
-    /// at every row), TOUCH_DELTA otherwise (step.glsl).
-    pub touch: u32,
 }
 
 impl DeltaTvChunk {
-    /// Whether the chunk is every row: the backends then update δ densely.
-    pub fn dense(&self) -> bool {
-        self.count >= self.rows
+    /// The chunk's rows.
+    pub fn chunk(&self) -> RowRange {
+        RowRange {
+            rows: self.rows,
+            start: self.start,
+            len: self.count,
+        }
     }
 
-    /// Whether row v is in the chunk.
-    pub fn contains(&self, v: usize) -> bool {
-        let (rows, start) = (self.rows as usize, self.start as usize);
-        let i = if v >= start { v - start } else { v + rows - start };
-        i < self.count as usize
-    }
-
-    /// Rows of pass 1's window: the chunk's rows and the `reach` rows after them, at most all.
-    pub fn window(&self, reach: u32) -> u32 {
-        self.count.saturating_add(reach).min(self.rows)
-    }
-
-    /// Row i of the chunk or of its window.
-    pub fn row(&self, i: u32) -> usize {
-        ((self.start as u64 + i as u64) % self.rows.max(1) as u64) as usize
+    /// Pass 1's window: the chunk's rows and the `reach` rows after them, at most all; every row
+    /// the chunk gives a gradient is in it.
+    pub fn window(&self, reach: u32) -> RowRange {
+        RowRange {
+            len: self.count.saturating_add(reach).min(self.rows),
+            ..self.chunk()
+        }
     }
 }
 
@@ -101,10 +95,11 @@ pub fn forward_reach(nbr: &[i32]) -> u32 {
 /// Pass 0: q (3 floats per row) of the chunk's rows, 0 for the others (the kernel leaves them as
 /// they were; pass 1 reads only the chunk's).
 pub fn delta_tv_dirs(nbr: &[i32], delta: &[f32], c: &DeltaTvChunk) -> Vec<f32> {
-    let computed: Vec<[f32; 3]> = (0..c.count.min(c.rows))
+    let chunk = c.chunk();
+    let computed: Vec<[f32; 3]> = (0..chunk.len)
         .into_par_iter()
         .map(|i| {
-            let v = c.row(i);
+            let v = chunk.row(i);
             let d0 = delta[v];
             let n = &nbr[AXIS_NBRS * v..AXIS_NBRS * v + 3];
             let d: [f32; 3] = std::array::from_fn(|a| {
@@ -120,35 +115,29 @@ pub fn delta_tv_dirs(nbr: &[i32], delta: &[f32], c: &DeltaTvChunk) -> Vec<f32> {
         .collect();
     let mut q = vec![0f32; 3 * delta.len()];
     for (i, qv) in computed.iter().enumerate() {
-        q[3 * c.row(i as u32)..][..3].copy_from_slice(qv);
+        q[3 * chunk.row(i as u32)..][..3].copy_from_slice(qv);
     }
     q
 }
 
 /// Pass 1 over the chunk's window (`reach`: [`forward_reach`]): grad += scale·(Σ backward q[a] −
-/// Σ own q), each over the terms of the chunk's vertices; rows with a term flagged `c.touch`.
-pub fn delta_tv_gather(
-    nbr: &[i32],
-    q: &[f32],
-    grad: &mut [f32],
-    touched: &mut [u32],
-    c: &DeltaTvChunk,
-    reach: u32,
-) {
-    let adds: Vec<Option<f32>> = (0..c.window(reach))
+/// Σ own q), each over the terms of the chunk's vertices.
+pub fn delta_tv_gather(nbr: &[i32], q: &[f32], grad: &mut [f32], c: &DeltaTvChunk, reach: u32) {
+    let (chunk, window) = (c.chunk(), c.window(reach));
+    let adds: Vec<Option<f32>> = (0..window.len)
         .into_par_iter()
         .map(|i| {
-            let v = c.row(i);
+            let v = window.row(i);
             let mut back = 0.0f32;
             let mut any = false;
             for a in 0..3 {
                 let m = nbr[AXIS_NBRS * v + 3 + a];
-                if m >= 0 && c.contains(m as usize) {
+                if m >= 0 && chunk.contains(m as usize) {
                     back += q[3 * m as usize + a];
                     any = true;
                 }
             }
-            let own = if c.contains(v) {
+            let own = if chunk.contains(v) {
                 any = true;
                 (q[3 * v] + q[3 * v + 1]) + q[3 * v + 2]
             } else {
@@ -159,22 +148,13 @@ pub fn delta_tv_gather(
         .collect();
     for (i, add) in adds.into_iter().enumerate() {
         if let Some(add) = add {
-            let v = c.row(i as u32);
-            grad[v] += add;
-            touched[v] |= c.touch;
+            grad[window.row(i as u32)] += add;
         }
     }
 }
 
-/// Both passes: grad += ∂(scale·Σ_{chunk} TV)/∂δ, `touched` flagged.
-pub fn delta_tv(
-    nbr: &[i32],
-    delta: &[f32],
-    grad: &mut [f32],
-    touched: &mut [u32],
-    c: &DeltaTvChunk,
-    reach: u32,
-) {
+/// Both passes: grad += ∂(scale·Σ_{chunk} TV)/∂δ.
+pub fn delta_tv(nbr: &[i32], delta: &[f32], grad: &mut [f32], c: &DeltaTvChunk, reach: u32) {
     let q = delta_tv_dirs(nbr, delta, c);
-    delta_tv_gather(nbr, &q, grad, touched, c, reach);
+    delta_tv_gather(nbr, &q, grad, c, reach);
 }

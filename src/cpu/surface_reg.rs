@@ -6,7 +6,7 @@
 //! function ADDS its gradient and flags every vertex it gives a gradient in `touched` (the twin
 //! of step.glsl's `touch_mask`).
 
-use super::step::{TOUCH_DELTA, TOUCH_OPACITY};
+use super::step::{RowRange, TOUCH_DELTA, TOUCH_OPACITY};
 use super::surface_delta_tv::DeltaTvChunk;
 use super::TvChunk;
 use rayon::prelude::*;
@@ -67,6 +67,9 @@ pub struct NormalChunk {
     /// the cells' forward reach after them (at most all rows); every cell in a pair with a chunk
     /// cell is among them.
     pub window: u32,
+    /// The rows from start of the corners of those cells (the window widened by the corners'
+    /// reach): every row the chunk gives a gradient is among them.
+    pub corner_window: u32,
     /// The passes' work as (first, n) ranges of the ascending work lists (wrapping past the
     /// end): the cells of the window (`NormalPrefix::cell_rows`) and the corners of those cells
     /// (`NormalPrefix::corner_rows`, the window widened by the corners' reach).
@@ -75,11 +78,13 @@ pub struct NormalChunk {
 }
 
 impl NormalChunk {
-    /// Whether row r is among the `len` rows from the chunk's start (wrapping).
-    pub fn within(&self, r: usize, len: u32) -> bool {
-        let (rows, start) = (self.rows as usize, (self.start % self.rows.max(1)) as usize);
-        let i = if r >= start { r - start } else { r + (rows - start) };
-        i < len as usize
+    /// The `len` rows from the chunk's start.
+    pub fn rows_from_start(&self, len: u32) -> RowRange {
+        RowRange {
+            rows: self.rows,
+            start: self.start % self.rows.max(1),
+            len,
+        }
     }
 }
 
@@ -284,6 +289,7 @@ impl NormalPrefix {
             lambda2,
             touch: TOUCH_DELTA,
             window,
+            corner_window,
             cells_work: list_range(&self.cell_rows, rows, s0, window),
             corners_work: list_range(&self.corner_rows, rows, s0, corner_window),
         }
@@ -504,7 +510,7 @@ pub fn normal_gather(
                 l[NBR_B[j]] = nb[8 + j];
             }
             for (b, &l) in l.iter().enumerate() {
-                if l < 0 || !c.within(l as usize, c.window) {
+                if l < 0 || !c.rows_from_start(c.window).contains(l as usize) {
                     continue;
                 }
                 let c = corners[CORNERS_STRIDE * l as usize + b];
@@ -592,13 +598,15 @@ pub fn delta_tv_chunk(
 ) -> DeltaTvChunk {
     let kappa = res.iter().copied().max().unwrap_or(0) as f32 / 256.0;
     let count = ((rows as f64 * fraction as f64).round() as u32).clamp(1, rows.max(1));
-    let dense = count >= rows;
     DeltaTvChunk {
         rows,
-        start: if dense { 0 } else { (draw % rows as u64) as u32 },
+        start: if count >= rows {
+            0
+        } else {
+            (draw % rows as u64) as u32
+        },
         count,
         scale: lambda * kappa / count as f32,
-        touch: if dense { 0 } else { TOUCH_DELTA },
     }
 }
 

@@ -1,7 +1,7 @@
 //! The CPU stage-2 backend: the kernels' twins on a host-resident surface grid.
 
 use super::{
-    batch_loss, surface_params, BlockRefresh, SurfaceBackend, SurfaceState, SurfaceStepParams,
+    batch_loss, surface_params, RegPlan, BlockRefresh, SurfaceBackend, SurfaceState, SurfaceStepParams,
     SurfaceStepStats,
 };
 use crate::cpu::surface_blocks::build_blocks;
@@ -58,7 +58,7 @@ impl CpuSurface {
     }
 
     /// The per-vertex regularisers' gradients; returns the Lα + Ln loss.
-    fn regularise(&mut self, p: &SurfaceStepParams) -> Result<f64> {
+    fn regularise(&mut self, p: &SurfaceStepParams, plan: &RegPlan) -> Result<f64> {
         let g = &self.grid;
         let [gd, go, _] = &mut self.grad;
         if let Some(c) = p.regs.delta_tv {
@@ -70,7 +70,7 @@ impl CpuSurface {
                 g.delta.len()
             );
             let reach = self.axis_reach;
-            delta_tv(&self.axis_nbrs, &g.delta, gd, &mut self.touched, &c, reach);
+            delta_tv(&self.axis_nbrs, &g.delta, gd, &c, reach);
         }
         if let Some(c) = p.regs.opacity_tv {
             tv(&g.links, &g.opacity, go, &mut self.touched, &c);
@@ -79,28 +79,22 @@ impl CpuSurface {
         if let Some(c) = p.regs.opacity_log {
             loss += surface_opacity_reg(&g.opacity, &mut self.grad[1], &mut self.touched, &c);
         }
-        if let Some((start, count, l1, l2)) = p.regs.normals {
-            let mut chunk = self.normals.chunk(start, count, l1, l2);
-            if p.dense_delta() {
-                chunk.touch = 0;
-            }
-            if chunk.count.min(chunk.rows) > 0 {
-                let (st, _) = normal_reg_passes(
-                    &self.normals,
-                    &g.delta,
-                    &mut self.grad[0],
-                    &mut self.touched,
-                    &chunk,
-                );
-                loss += st.loss;
-            }
+        if let Some(chunk) = &plan.normals {
+            let (st, _) = normal_reg_passes(
+                &self.normals,
+                &g.delta,
+                &mut self.grad[0],
+                &mut self.touched,
+                chunk,
+            );
+            loss += st.loss;
         }
         Ok(loss)
     }
 
-    /// RMSProp on the touched groups of every vertex (δ everywhere under Lδ), then clear flags
-    /// and gradients.
-    fn optimise(&mut self, p: &SurfaceStepParams) {
+    /// RMSProp on the touched groups of every vertex (δ on every row of the plan's δ rows too),
+    /// then clear flags and gradients.
+    fn optimise(&mut self, p: &SurfaceStepParams, plan: &RegPlan) {
         let [gd, go, gs] = &mut self.grad;
         let [sd, so, ss] = &mut self.state;
         let g = &mut self.grid;
@@ -123,7 +117,7 @@ impl CpuSurface {
                 lr_sh: p.lr_sh,
                 beta: p.beta,
                 eps: p.eps,
-                dense_delta: p.dense_delta(),
+                delta_rows: plan.delta_rows,
             },
         );
     }
@@ -158,8 +152,9 @@ impl SurfaceBackend for CpuSurface {
                 touched: &mut self.touched,
             },
         )?;
-        let reg_loss = self.regularise(p)?;
-        self.optimise(p);
+        let plan = RegPlan::new(p, &self.normals, self.axis_reach);
+        let reg_loss = self.regularise(p, &plan)?;
+        self.optimise(p, &plan);
         self.refresh.after_update(p.lr_delta, p.beta);
         let nf = n.max(1) as f64;
         Ok(SurfaceStepStats {

@@ -17,8 +17,6 @@ pub struct DeltaTvIo {
     pub q: u64,
     /// ∂/∂δ, added to.
     pub grad: u64,
-    /// The step record (touched flags and list).
-    pub step: u64,
 }
 
 /// Record both stages for chunk `c` (`reach`: the table's `forward_reach`): stage 0 over the
@@ -31,7 +29,7 @@ pub fn record_delta_tv(b: &mut Batch, io: &DeltaTvIo, c: &DeltaTvChunk, reach: u
         c.start,
         c.rows
     );
-    let window = c.window(reach);
+    let window = c.window(reach).len;
     for (stage, n) in [(0, c.count), (1, window)] {
         b.dispatch_1d(
             &kernels::surface_delta_tv::INFO,
@@ -40,14 +38,12 @@ pub fn record_delta_tv(b: &mut Batch, io: &DeltaTvIo, c: &DeltaTvChunk, reach: u
                 delta: io.delta,
                 q: io.q,
                 grad: io.grad,
-                step: io.step,
                 rows: c.rows,
                 stage,
                 start: c.start,
                 count: c.count,
                 window,
                 scale: c.scale,
-                touch_bits: c.touch,
                 ..Default::default()
             },
             n,

@@ -9,26 +9,25 @@
 use super::delta_tv::{record_delta_tv, DeltaTvIo};
 use super::normal_reg::{record_normal_reg, upload_nonempty, NormalRegBuffers, NormalRegIo};
 use super::skip::{record_skip_structure, SkipIo};
+use super::rmsprop::{record_surface_rmsprop, SurfaceOptimIo};
 use super::{
-    batch_loss, surface_params, BlockRefresh, SurfaceBackend, SurfaceState, SurfaceStepParams,
+    batch_loss, RegPlan, surface_params, BlockRefresh, SurfaceBackend, SurfaceState, SurfaceStepParams,
     SurfaceStepStats,
 };
-use crate::cpu::step::{STEP_COUNT, STEP_FLAGS, STEP_N, TOUCH_OPACITY, TOUCH_SH, TOUCH_SURFACE};
+use crate::cpu::step::{STEP_COUNT, STEP_FLAGS, STEP_N};
 use crate::cpu::surface_blocks::complete_cells;
 use crate::cpu::surface_delta_tv::{axis_neighbours, forward_reach};
 use crate::cpu::surface_fwd::{SurfCounts, SurfaceParams};
 use crate::cpu::surface_reg::{row_slots, NormalPrefix};
 use crate::cpu::surface_train::{RayLoss, SurfaceLoss, TrainCounts, SURF_MAX_HITS};
-use crate::gpu::{record_optim_args, Batch, BatchTimes, Gpu, GpuBuffer, RayBuffers};
+use crate::cpu::SurfaceRmsProp;
+use crate::gpu::{Batch, BatchTimes, Gpu, GpuBuffer, RayBuffers};
 use crate::grid::surface::SurfaceGrid;
 use crate::grid::SH_DIM;
 use crate::kernels;
 use crate::math::surface::{SurfOut, SURF_MAX_LEVELS};
 use crate::math::surface_blocks::{surf_blocks_per_axis, surf_live_words};
 use anyhow::{ensure, Result};
-
-/// Rows per invocation of surface_rmsprop's dense pass (its DENSE_ROWS).
-const SURFACE_RMSPROP_DENSE_ROWS: u32 = 16;
 
 /// Floats in the params buffer of `surface_train` (layout in the kernel's header).
 const PARAMS_LEN: usize = 12 + SURF_MAX_LEVELS;
@@ -284,12 +283,16 @@ impl VulkanSurface {
             delta: self.delta.address(),
             q: self.tv_dirs.address(),
             grad: self.grad[0].address(),
-            step: self.step.address(),
         }
     }
 
     /// Record the per-vertex regularisers (the same chunks and scales as `CpuSurface`).
-    fn record_regularisers(&self, b: &mut Batch, p: &SurfaceStepParams) -> Result<()> {
+    fn record_regularisers(
+        &self,
+        b: &mut Batch,
+        p: &SurfaceStepParams,
+        plan: &RegPlan,
+    ) -> Result<()> {
         let res = self.meta.res;
         if let (Some(c), true) = (p.regs.delta_tv, self.rows > 0) {
             record_delta_tv(b, &self.delta_tv_io(), &c, self.axis_reach)?;
@@ -348,12 +351,7 @@ impl VulkanSurface {
                 c.count.min(rows),
             )?;
         }
-        if let (Some((start, count, lambda1, lambda2)), true) = (p.regs.normals, rows > 0) {
-            // A row chunk (the kernels' convention), with its mean's denominator.
-            let mut c = self.normal_prefix.chunk(start, count, lambda1, lambda2);
-            if p.dense_delta() {
-                c.touch = 0;
-            }
+        if let Some(c) = &plan.normals {
             let io = NormalRegIo {
                 delta: self.delta.address(),
                 grad: self.grad[0].address(),
@@ -361,59 +359,32 @@ impl VulkanSurface {
                 loss: self.reg_loss.address() + 4,
                 skipped: self.reg_skipped.address(),
             };
-            record_normal_reg(b, &self.normal_bufs, &io, &c)?;
+            record_normal_reg(b, &self.normal_bufs, &io, c)?;
         }
         Ok(())
     }
 
-    /// Record the RMSProp step: δ of every row first when it is dense this step, then the
-    /// flagged groups of the vertices touched this step.
-    fn record_rmsprop(&self, b: &mut Batch, p: &SurfaceStepParams) -> Result<()> {
-        let push = kernels::surface_rmsprop::Push {
-            delta: self.delta.address(),
-            opacity: self.opacity.address(),
-            sh: self.sh.address(),
-            grad_delta: self.grad[0].address(),
-            grad_opacity: self.grad[1].address(),
-            grad_sh: self.grad[2].address(),
-            state_delta: self.state[0].address(),
-            state_opacity: self.state[1].address(),
-            state_sh: self.state[2].address(),
-            step: self.step.address(),
+    /// Record the RMSProp step: δ on the plan's δ rows, then the flagged groups of the vertices
+    /// touched this step.
+    fn record_rmsprop(&self, b: &mut Batch, p: &SurfaceStepParams, plan: &RegPlan) -> Result<()> {
+        let io = SurfaceOptimIo {
+            params: [
+                self.delta.address(),
+                self.opacity.address(),
+                self.sh.address(),
+            ],
+            grads: self.grad.each_ref().map(|g| g.address()),
+            states: self.state.each_ref().map(|g| g.address()),
+        };
+        let h = SurfaceRmsProp {
             lr_delta: p.lr_delta,
             lr_opacity: p.lr_opacity,
             lr_sh: p.lr_sh,
             beta: p.beta,
             eps: p.eps,
-            groups: TOUCH_SURFACE,
-            dense_rows: 0,
-            ..Default::default()
+            delta_rows: plan.delta_rows,
         };
-        let dense = p.dense_delta() && self.rows > 0;
-        if dense {
-            let rows = self.rows as u32;
-            b.dispatch_1d(
-                &kernels::surface_rmsprop::INFO,
-                &kernels::surface_rmsprop::Push {
-                    dense_rows: rows,
-                    ..push
-                },
-                rows.div_ceil(SURFACE_RMSPROP_DENSE_ROWS),
-            )?;
-        }
-        record_optim_args(b, &self.step, &self.args)?;
-        b.dispatch_indirect(
-            &kernels::surface_rmsprop::INFO,
-            &kernels::surface_rmsprop::Push {
-                groups: if dense {
-                    TOUCH_OPACITY | TOUCH_SH
-                } else {
-                    TOUCH_SURFACE
-                },
-                ..push
-            },
-            &self.args,
-        )
+        record_surface_rmsprop(b, &io, &self.step, &self.args, &h)
     }
 
     fn read_train_counts(&self) -> Result<TrainCounts> {
@@ -468,8 +439,9 @@ impl VulkanSurface {
     ) -> Result<(SurfaceStepStats, BatchTimes)> {
         let n = rays.len() / 6;
         let mut b = self.record_train(rays, targets, p)?;
-        self.record_regularisers(&mut b, p)?;
-        self.record_rmsprop(&mut b, p)?;
+        let plan = RegPlan::new(p, &self.normal_prefix, self.axis_reach);
+        self.record_regularisers(&mut b, p, &plan)?;
+        self.record_rmsprop(&mut b, p, &plan)?;
         let times = b.submit()?;
         self.refresh.after_update(p.lr_delta, p.beta);
         let loss = self.ray_loss(n)?;

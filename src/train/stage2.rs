@@ -78,14 +78,15 @@ pub fn resume(backend: &mut dyn SurfaceBackend, path: &Path) -> Result<(u32, Sur
 
 /// The scheduled parameters of step `step`, with truncation `a`, for a grid of resolution `res`
 /// with `rows` allocated vertices; `draws` place the random regulariser chunks (Lα's start, Ln's
-/// start, TVα's draw, Lδ's start).
+/// and Lδ's start — one row for both, so that the δ rows RMSProp updates densely cover both —
+/// and TVα's draw).
 pub fn step_params(
     cfg: &SurfaceConfig,
     res: [u32; 3],
     rows: u32,
     step: u32,
     a: f32,
-    draws: [u64; 4],
+    draws: [u64; 3],
 ) -> SurfaceStepParams {
     let row_chunk = |fraction: f32, draw: u64| {
         let count = ((rows as f32 * fraction) as u32).clamp(1, rows.max(1));
@@ -111,7 +112,7 @@ pub fn step_params(
         },
         regs: SurfaceRegs {
             delta_tv: (cfg.lambda_delta > 0.0 && rows > 0).then(|| {
-                delta_tv_chunk(res, rows, cfg.delta_fraction, cfg.lambda_delta, draws[3])
+                delta_tv_chunk(res, rows, cfg.delta_fraction, cfg.lambda_delta, draws[1])
             }),
             opacity_tv: (cfg.lambda_tv_alpha > 0.0).then(|| {
                 opacity_tv_chunk(res, cfg.tv_alpha_fraction, cfg.lambda_tv_alpha, tv_draw)
@@ -173,7 +174,6 @@ pub fn train(
             rng.random::<u32>().into(),
             rng.random::<u32>().into(),
             rng.random(),
-            rng.random::<u32>().into(),
         ];
         let p = step_params(cfg, res, rows, step, cfg.a.at(step), draws);
         let stats = backend.step(&batch.flat_rays(), &batch.flat_targets(), &p)?;

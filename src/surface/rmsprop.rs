@@ -1,0 +1,65 @@
+//! Recording of `surface_rmsprop` on the Vulkan device (twin `cpu::surface_rmsprop_sparse`): the
+//! range pass over the rows whose δ is updated flagged or not, then the list pass over the
+//! touched vertices; shared by `VulkanSurface` and the parity checks.
+
+use crate::cpu::SurfaceRmsProp;
+use crate::gpu::{record_optim_args, Batch, GpuBuffer};
+use crate::kernels;
+use anyhow::Result;
+
+/// Rows per invocation of surface_rmsprop's range pass (its RANGE_ROWS).
+const RANGE_ROWS: u32 = 16;
+
+/// Device addresses of the parameter groups δ, σα, SH: values, gradients, RMS states.
+#[derive(Clone, Copy, Debug)]
+pub struct SurfaceOptimIo {
+    pub params: [u64; 3],
+    pub grads: [u64; 3],
+    pub states: [u64; 3],
+}
+
+/// Record one RMSProp step: the range pass (when `h.delta_rows` holds rows), optim_args on
+/// `step`'s touched count into `args`, and the indirect list pass.
+pub fn record_surface_rmsprop(
+    b: &mut Batch,
+    io: &SurfaceOptimIo,
+    step: &GpuBuffer,
+    args: &GpuBuffer,
+    h: &SurfaceRmsProp,
+) -> Result<()> {
+    let r = h.delta_rows;
+    let push = kernels::surface_rmsprop::Push {
+        delta: io.params[0],
+        opacity: io.params[1],
+        sh: io.params[2],
+        grad_delta: io.grads[0],
+        grad_opacity: io.grads[1],
+        grad_sh: io.grads[2],
+        state_delta: io.states[0],
+        state_opacity: io.states[1],
+        state_sh: io.states[2],
+        step: step.address(),
+        lr_delta: h.lr_delta,
+        lr_opacity: h.lr_opacity,
+        lr_sh: h.lr_sh,
+        beta: h.beta,
+        eps: h.eps,
+        rows: r.rows,
+        range_start: r.start,
+        range_len: r.len,
+        range_pass: 0,
+        ..Default::default()
+    };
+    if r.len > 0 {
+        b.dispatch_1d(
+            &kernels::surface_rmsprop::INFO,
+            &kernels::surface_rmsprop::Push {
+                range_pass: 1,
+                ..push
+            },
+            r.len.div_ceil(RANGE_ROWS),
+        )?;
+    }
+    record_optim_args(b, step, args)?;
+    b.dispatch_indirect(&kernels::surface_rmsprop::INFO, &push, args)
+}
