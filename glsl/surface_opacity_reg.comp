@@ -1,30 +1,30 @@
 #version 460
 // surface_opacity_reg — gradient and value of the stage-2 opacity regulariser Lα (method.md §3.4):
 // Lα = λ·Σ log σα over the rows r of a contiguous chunk of allocated vertices with σα_r > 0;
-// ∂Lα/∂σα = λ/max(σα, 1e-8) where σα > 0, 0 otherwise (no gradient, no touch).
+// ∂Lα/∂σα = λ/max(σα, 1e-8) where σα > 0, 0 otherwise. Nothing is flagged touched:
+// surface_rmsprop's σα range pass updates σα on every row of the chunk.
 // The chunk is rows (start + i) mod rows for i < min(count, rows): this kernel wraps, so the
 // caller may draw start uniformly in [0, rows) (the 10 % chunk of the spec).
 // Thread mapping: flat id = i (one row each; one owner per gradient element, no atomics).
 // Inputs: opacity (raw σα per allocated vertex), rows, start, count, lambda.
-// Outputs: grad += (plain read-modify-write) and touch_mask(r, TOUCH_OPACITY) for each row with σα > 0;
+// Outputs: grad += (plain read-modify-write) for each row with σα > 0;
 // loss[0] += λ·Σ log σα (float atomic add, one per subgroup; the host zeroes it).
 // CPU twin: cpu::surface_opacity_reg.
 #include "common.glsl"
 #extension GL_EXT_shader_atomic_float : require
+#extension GL_KHR_shader_subgroup_arithmetic : require
+#extension GL_KHR_shader_subgroup_basic : require
 layout(local_size_x = 256) in;
 
 layout(push_constant, scalar) uniform Push {
     F32Buf opacity;
     F32Buf grad;
-    U32Buf step;
     F32Buf loss;
     uint rows;
     uint start;
     uint count;
     float lambda;
 } pc;
-
-#include "step.glsl"
 
 void main() {
     uint id = flat_id();
@@ -36,7 +36,6 @@ void main() {
             l = pc.lambda * log(a);
             precise float g = pc.grad.v[r] + pc.lambda / max(a, 1e-8);
             pc.grad.v[r] = g;
-            touch_mask(r, TOUCH_OPACITY);
         }
     }
     float s = subgroupAdd(l);

@@ -294,8 +294,7 @@ fn opacity_reg_fd_and_adversarial() {
         lambda: 1e-3,
     };
     let mut grad = vec![0.5f32; 200];
-    let mut touched = vec![0u32; 200];
-    let loss = surface_opacity_reg(&op, &mut grad, &mut touched, &c);
+    let loss = surface_opacity_reg(&op, &mut grad, &c);
     let x: Vec<f64> = op.iter().map(|&v| v as f64).collect();
     assert!((loss - opacity_reg_f64(&x, &c)).abs() <= 1e-6 * loss.abs());
     // FD away from σα = 0 and the 1e-8 floor (h = 1e-6 relative to σα ≥ 0.01).
@@ -308,14 +307,13 @@ fn opacity_reg_fd_and_adversarial() {
     );
     println!("Lα gradient vs FD: rel L2 {e:.1e}");
     assert!(e <= 1e-3, "Lα gradient vs FD: rel L2 {e:e}");
+    // The chunk's rows, whose σα RMSProp then updates.
+    let range = c.range();
+    assert_eq!((range.start, range.len), (190, 40));
     for i in 0..200 {
         let in_chunk = !(30..190).contains(&i);
+        assert_eq!(range.contains(i), in_chunk, "row {i}");
         let positive = op[i] > 0.0;
-        assert_eq!(
-            touched[i],
-            (in_chunk && positive) as u32 * TOUCH_OPACITY,
-            "touched[{i}]"
-        );
         if !(in_chunk && positive) {
             assert_eq!(grad[i], 0.5, "grad[{i}] changed");
         }
@@ -328,8 +326,16 @@ fn opacity_reg_fd_and_adversarial() {
         count: 1000,
         lambda: 1.0,
     };
-    let (mut g1, mut t1) = (vec![0f32; 200], vec![0u32; 200]);
-    let l1 = surface_opacity_reg(&op, &mut g1, &mut t1, &all);
+    let mut g1 = vec![0f32; 200];
+    let l1 = surface_opacity_reg(&op, &mut g1, &all);
+    assert_eq!(
+        all.range(),
+        RowRange {
+            rows: 200,
+            start: 77,
+            len: 200
+        }
+    );
     let l_ref = opacity_reg_f64(
         &x,
         &OpacityChunk {
@@ -644,7 +650,10 @@ fn surface_rmsprop_twin_updates_touched_groups_only() {
             vec![0.0; n * 27],
         ]
     };
-    let run = |p: &mut [Vec<f32>; 9], touched: &mut Vec<u32>, delta_rows: RowRange| {
+    let run = |p: &mut [Vec<f32>; 9],
+               touched: &mut Vec<u32>,
+               delta_rows: RowRange,
+               opacity_rows: RowRange| {
         let h = SurfaceRmsProp {
             lr_delta: 0.1,
             lr_opacity: 0.01,
@@ -652,13 +661,14 @@ fn surface_rmsprop_twin_updates_touched_groups_only() {
             beta: 0.9,
             eps: 1e-8,
             delta_rows,
+            opacity_rows,
         };
         surface_rmsprop_sparse(Stage2Params::from_arrays(p), touched, &h);
     };
     // Vertices 0, 1 touched in every group, 2 not at all, 3 in σα only.
     let mut p = fresh();
     let mut touched = vec![TOUCH_SURFACE, TOUCH_SURFACE, 0, TOUCH_OPACITY];
-    run(&mut p, &mut touched, RowRange::default());
+    run(&mut p, &mut touched, RowRange::default(), RowRange::default());
     assert_eq!(touched, vec![0; n]);
     // Vertex 0: fresh state → r = g², step lr·sign(g).
     assert!((p[0][0] - 0.9).abs() < 1e-6 && (p[6][0] - 0.01).abs() < 1e-9);
@@ -684,7 +694,7 @@ fn surface_rmsprop_twin_updates_touched_groups_only() {
         start: 3,
         len: 3,
     };
-    run(&mut p, &mut touched, rows);
+    run(&mut p, &mut touched, rows, RowRange::default());
     assert!((p[0][3] - 0.9).abs() < 1e-6 && p[3][3] == 0.0);
     assert!((p[0][1] - 0.9).abs() < 1e-6, "unflagged vertex 1's δ moves");
     assert_eq!((p[1][1], p[4][1]), (2.0, -0.3), "but not its σα");
@@ -696,9 +706,17 @@ fn surface_rmsprop_twin_updates_touched_groups_only() {
     let mut p = fresh();
     p[6][2] = 0.5;
     let mut touched = vec![0; n];
-    run(&mut p, &mut touched, rows);
+    // σα rows 2: vertex 2's σα moves unflagged (fresh state: step lr·sign(g)), vertex 1's not.
+    let opacity_rows = RowRange {
+        rows: 4,
+        start: 2,
+        len: 1,
+    };
+    run(&mut p, &mut touched, rows, opacity_rows);
     assert_eq!(p[6][2], 0.5);
     assert!((p[6][1] - 0.9 * 0.04 - 0.1 * 0.04).abs() < 1e-9);
+    assert!((p[1][2] - 2.01).abs() < 1e-6 && p[4][2] == 0.0);
+    assert_eq!((p[1][1], p[4][1]), (2.0, -0.3));
 }
 
 #[test]

@@ -1,6 +1,6 @@
 //! Twins of `glsl/lib/rmsprop.glsl` (one scalar), `glsl/rmsprop_sparse.comp` (σ and 27 SH of
 //! every touched vertex, then the flag cleared) and `glsl/surface_rmsprop.comp` (the same for the
-//! stage-2 groups δ, σα and SH, each only where it was touched, and δ on a range of rows).
+//! stage-2 groups δ, σα and SH, each only where it was touched, and δ and σα on ranges of rows).
 
 use super::step::{RowRange, TOUCH_DELTA, TOUCH_OPACITY, TOUCH_SH};
 use crate::grid::SH_DIM;
@@ -71,6 +71,8 @@ pub struct SurfaceRmsProp {
     /// The rows whose δ is updated flagged or not (those the step's δ regularisers reach: Lδ's
     /// window, every row for a whole-grid Lδ); elsewhere δ only where its flag bit is set.
     pub delta_rows: RowRange,
+    /// Likewise for σα: the rows of Lα's chunk.
+    pub opacity_rows: RowRange,
 }
 
 /// Parameters, gradients and RMS state of the stage-2 grid (per allocated vertex: δ, raw
@@ -106,8 +108,8 @@ impl<'a> Stage2Params<'a> {
 }
 
 /// Update, per vertex, each group whose touched bit (step.rs TOUCH_*) is set — δ also on every row
-/// of `delta_rows` — clearing the updated gradients, and clear the flags (surface_rmsprop.comp's
-/// range and list passes in one).
+/// of `delta_rows`, σα on every row of `opacity_rows` — clearing the updated gradients, and clear
+/// the flags (surface_rmsprop.comp's range and list passes in one).
 pub fn surface_rmsprop_sparse(p: Stage2Params, touched: &mut [u32], h: &SurfaceRmsProp) {
     let scalars = p
         .delta
@@ -127,7 +129,7 @@ pub fn surface_rmsprop_sparse(p: Stage2Params, touched: &mut [u32], h: &SurfaceR
             if h.delta_rows.contains(v) || *t & TOUCH_DELTA != 0 {
                 rmsprop_one(d, gd, sd, h.lr_delta, h.beta, h.eps);
             }
-            if *t & TOUCH_OPACITY != 0 {
+            if h.opacity_rows.contains(v) || *t & TOUCH_OPACITY != 0 {
                 rmsprop_one(o, go, so, h.lr_opacity, h.beta, h.eps);
             }
             if *t & TOUCH_SH != 0 {

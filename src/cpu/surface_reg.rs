@@ -3,8 +3,8 @@
 //! Ln2; with `glsl/lib/normal_reg.glsl`), same formulation and operation order as the kernels;
 //! the [`TvChunk`] with which `glsl/tv.comp` (twin [`super::tv`]) computes TVα and the
 //! [`DeltaTvChunk`] of Lδ (`glsl/surface_delta_tv.comp`). Each
-//! function ADDS its gradient and flags every vertex it gives a gradient in `touched` (the twin
-//! of step.glsl's `touch_mask`).
+//! function ADDS its gradient; the normal regularisers flag the vertices they give a gradient in
+//! `touched` (the twin of step.glsl's `touch_mask`) unless RMSProp's δ rows cover them.
 
 use super::step::{RowRange, TOUCH_DELTA, TOUCH_OPACITY};
 use super::surface_delta_tv::DeltaTvChunk;
@@ -21,14 +21,21 @@ pub struct OpacityChunk {
     pub lambda: f32,
 }
 
-/// Lα = λ·Σ log σα over the chunk's rows with σα > 0; grad += λ/max(σα, 1e-8) there (and those
-/// rows' σα group touched). Returns Lα (f64 sum of the f32 terms λ·ln σα).
-pub fn surface_opacity_reg(
-    opacity: &[f32],
-    grad: &mut [f32],
-    touched: &mut [u32],
-    c: &OpacityChunk,
-) -> f64 {
+impl OpacityChunk {
+    /// The chunk's rows.
+    pub fn range(&self) -> RowRange {
+        RowRange {
+            rows: self.rows,
+            start: self.start % self.rows.max(1),
+            len: self.count.min(self.rows),
+        }
+    }
+}
+
+/// Lα = λ·Σ log σα over the chunk's rows with σα > 0; grad += λ/max(σα, 1e-8) there. Nothing is
+/// flagged: RMSProp updates σα on every row of the chunk (`SurfaceRmsProp::opacity_rows`).
+/// Returns Lα (f64 sum of the f32 terms λ·ln σα).
+pub fn surface_opacity_reg(opacity: &[f32], grad: &mut [f32], c: &OpacityChunk) -> f64 {
     let rows = c.rows as usize;
     if rows == 0 {
         return 0.0;
@@ -42,7 +49,6 @@ pub fn surface_opacity_reg(
         if a > 0.0 {
             loss += (c.lambda * a.ln()) as f64;
             grad[r] += c.lambda / a.max(1e-8);
-            touched[r] |= TOUCH_OPACITY;
         }
     }
     loss

@@ -77,7 +77,7 @@ impl CpuSurface {
         }
         let mut loss = 0.0;
         if let Some(c) = p.regs.opacity_log {
-            loss += surface_opacity_reg(&g.opacity, &mut self.grad[1], &mut self.touched, &c);
+            loss += surface_opacity_reg(&g.opacity, &mut self.grad[1], &c);
         }
         if let Some(chunk) = &plan.normals {
             let (st, _) = normal_reg_passes(
@@ -118,6 +118,7 @@ impl CpuSurface {
                 beta: p.beta,
                 eps: p.eps,
                 delta_rows: plan.delta_rows,
+            opacity_rows: plan.opacity_rows,
             },
         );
     }

@@ -81,11 +81,13 @@ pub fn delta_rows(
     (range.unwrap_or_default(), inside)
 }
 
-/// Where a step's δ regularisers work: the normal regularisers' chunk (None when off or empty),
-/// flagging δ only where the δ rows do not cover it, and the δ rows ([`delta_rows`]).
+/// Where a step's regularisers work: the normal regularisers' chunk (None when off or empty),
+/// flagging δ only where the δ rows do not cover it; the δ rows ([`delta_rows`]); the σα rows
+/// (Lα's chunk; RMSProp updates σα there flagged or not).
 pub struct RegPlan {
     pub normals: Option<NormalChunk>,
     pub delta_rows: RowRange,
+    pub opacity_rows: RowRange,
 }
 
 impl RegPlan {
@@ -104,6 +106,7 @@ impl RegPlan {
         RegPlan {
             normals,
             delta_rows,
+            opacity_rows: p.regs.opacity_log.map(|c| c.range()).unwrap_or_default(),
         }
     }
 }

@@ -1,6 +1,6 @@
 //! Recording of `surface_rmsprop` on the Vulkan device (twin `cpu::surface_rmsprop_sparse`): the
-//! range pass over the rows whose δ is updated flagged or not, then the list pass over the
-//! touched vertices; shared by `VulkanSurface` and the parity checks.
+//! range passes over the rows whose δ or σα is updated flagged or not, then the list pass over
+//! the touched vertices; shared by `VulkanSurface` and the parity checks.
 
 use crate::cpu::SurfaceRmsProp;
 use crate::gpu::{record_optim_args, Batch, GpuBuffer};
@@ -18,8 +18,8 @@ pub struct SurfaceOptimIo {
     pub states: [u64; 3],
 }
 
-/// Record one RMSProp step: the range pass (when `h.delta_rows` holds rows), optim_args on
-/// `step`'s touched count into `args`, and the indirect list pass.
+/// Record one RMSProp step: the range passes (of `h.delta_rows` and `h.opacity_rows`, when they
+/// hold rows), optim_args on `step`'s touched count into `args`, and the indirect list pass.
 pub fn record_surface_rmsprop(
     b: &mut Batch,
     io: &SurfaceOptimIo,
@@ -27,7 +27,7 @@ pub fn record_surface_rmsprop(
     args: &GpuBuffer,
     h: &SurfaceRmsProp,
 ) -> Result<()> {
-    let r = h.delta_rows;
+    let (d, o) = (h.delta_rows, h.opacity_rows);
     let push = kernels::surface_rmsprop::Push {
         delta: io.params[0],
         opacity: io.params[1],
@@ -44,21 +44,25 @@ pub fn record_surface_rmsprop(
         lr_sh: h.lr_sh,
         beta: h.beta,
         eps: h.eps,
-        rows: r.rows,
-        range_start: r.start,
-        range_len: r.len,
+        rows: d.rows.max(o.rows),
+        delta_start: d.start,
+        delta_len: d.len,
+        opacity_start: o.start,
+        opacity_len: o.len,
         range_pass: 0,
         ..Default::default()
     };
-    if r.len > 0 {
-        b.dispatch_1d(
-            &kernels::surface_rmsprop::INFO,
-            &kernels::surface_rmsprop::Push {
-                range_pass: 1,
-                ..push
-            },
-            r.len.div_ceil(RANGE_ROWS),
-        )?;
+    for (pass, len) in [(1, d.len), (2, o.len)] {
+        if len > 0 {
+            b.dispatch_1d(
+                &kernels::surface_rmsprop::INFO,
+                &kernels::surface_rmsprop::Push {
+                    range_pass: pass,
+                    ..push
+                },
+                len.div_ceil(RANGE_ROWS),
+            )?;
+        }
     }
     record_optim_args(b, step, args)?;
     b.dispatch_indirect(&kernels::surface_rmsprop::INFO, &push, args)

@@ -341,7 +341,6 @@ impl VulkanSurface {
                 &kernels::surface_opacity_reg::Push {
                     opacity: self.opacity.address(),
                     grad: self.grad[1].address(),
-                    step: self.step.address(),
                     loss: self.reg_loss.address(),
                     rows,
                     start: c.start,
@@ -383,6 +382,7 @@ impl VulkanSurface {
             beta: p.beta,
             eps: p.eps,
             delta_rows: plan.delta_rows,
+            opacity_rows: plan.opacity_rows,
         };
         record_surface_rmsprop(b, &io, &self.step, &self.args, &h)
     }
