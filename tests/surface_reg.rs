@@ -201,12 +201,17 @@ fn delta_tv_chunks_match_definition_fd_cpu_and_gpu() {
         // This grid has a pair with |d| = 1.2e-4, where the kernel's ε (κ²·1e-9, see
         // `delta_tv_chunk`) and the definition's 1e-9 differ visibly (rel L2 6.6e-2 with 1e-9):
         // the reference takes the kernel's, and a step well inside its smoothing width.
-        let want = fd(&x, 1e-6, |x| delta_chunk_f64(&g, x, &members, lambda, kappa));
+        let want = fd(&x, 1e-6, |x| {
+            delta_chunk_f64(&g, x, &members, lambda, kappa)
+        });
         let mut grad = vec![0f32; g.allocated()];
         delta_tv(&nbr, &g.delta, &mut grad, c, reach);
         let got: Vec<f64> = grad.iter().map(|&v| v as f64).collect();
         let e = rel_l2(&got, &want);
-        println!("Lδ chunk from {}: CPU gradient vs FD rel L2 {e:.1e}", c.start);
+        println!(
+            "Lδ chunk from {}: CPU gradient vs FD rel L2 {e:.1e}",
+            c.start
+        );
         assert!(e <= 1e-3, "Lδ chunk CPU gradient vs FD: rel L2 {e:e}");
         // Written: only rows of the window (which RMSProp's δ rows then cover), and the window
         // is much shorter than the grid.
@@ -668,7 +673,12 @@ fn surface_rmsprop_twin_updates_touched_groups_only() {
     // Vertices 0, 1 touched in every group, 2 not at all, 3 in σα only.
     let mut p = fresh();
     let mut touched = vec![TOUCH_SURFACE, TOUCH_SURFACE, 0, TOUCH_OPACITY];
-    run(&mut p, &mut touched, RowRange::default(), RowRange::default());
+    run(
+        &mut p,
+        &mut touched,
+        RowRange::default(),
+        RowRange::default(),
+    );
     assert_eq!(touched, vec![0; n]);
     // Vertex 0: fresh state → r = g², step lr·sign(g).
     assert!((p[0][0] - 0.9).abs() < 1e-6 && (p[6][0] - 0.01).abs() < 1e-9);

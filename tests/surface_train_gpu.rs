@@ -33,7 +33,7 @@ fn params(g: &SurfaceGrid, step: u32) -> SurfaceStepParams {
             delta_tv: Some(delta_tv_chunk(
                 g.res,
                 rows,
-                if step % 2 == 0 { 1.0 } else { 0.3 },
+                if step.is_multiple_of(2) { 1.0 } else { 0.3 },
                 1e-3,
                 step as u64 * 4099,
             )),
@@ -48,7 +48,11 @@ fn params(g: &SurfaceGrid, step: u32) -> SurfaceStepParams {
             // window, over per-row arrays another chunk wrote before.
             normals: Some((
                 rows / 2 + step * 777,
-                if step % 2 == 0 { rows * 3 / 5 } else { rows / 8 },
+                if step.is_multiple_of(2) {
+                    rows * 3 / 5
+                } else {
+                    rows / 8
+                },
                 1e-2,
                 1e-3,
             )),

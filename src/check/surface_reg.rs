@@ -5,9 +5,8 @@
 //! σα, and chunks inside, whole and wrapping past the end.
 
 use super::{rel_l2, CheckRow, Compare};
-use crate::cpu::step::{
-    optim_args, STEP_COUNT, STEP_FLAGS, STEP_N,
-};
+use crate::cpu::step::RowRange;
+use crate::cpu::step::{optim_args, STEP_COUNT, STEP_FLAGS, STEP_N};
 use crate::cpu::surface_delta_tv::{axis_neighbours, delta_tv, forward_reach, DeltaTvChunk};
 use crate::cpu::surface_reg::delta_tv_chunk;
 use crate::cpu::surface_reg::{
@@ -18,10 +17,9 @@ use crate::cpu::{surface_rmsprop_sparse, tv, Stage2Params, SurfaceRmsProp, TvChu
 use crate::gpu::{Gpu, GpuBuffer};
 use crate::grid::SH_DIM;
 use crate::kernels;
-use crate::cpu::step::RowRange;
 use crate::surface::delta_tv::{record_delta_tv, DeltaTvIo};
-use crate::surface::rmsprop::{record_surface_rmsprop, SurfaceOptimIo};
 use crate::surface::normal_reg::{record_normal_reg, NormalRegBuffers, NormalRegIo};
+use crate::surface::rmsprop::{record_surface_rmsprop, SurfaceOptimIo};
 use anyhow::Result;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;

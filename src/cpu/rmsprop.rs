@@ -125,18 +125,20 @@ pub fn surface_rmsprop_sparse(p: Stage2Params, touched: &mut [u32], h: &SurfaceR
         .zip(p.state_sh.par_chunks_mut(SH_DIM))
         .zip(touched.par_iter_mut())
         .enumerate()
-        .for_each(|(v, (((((((((d, gd), sd), o), go), so), sh), gs), ss), t))| {
-            if h.delta_rows.contains(v) || *t & TOUCH_DELTA != 0 {
-                rmsprop_one(d, gd, sd, h.lr_delta, h.beta, h.eps);
-            }
-            if h.opacity_rows.contains(v) || *t & TOUCH_OPACITY != 0 {
-                rmsprop_one(o, go, so, h.lr_opacity, h.beta, h.eps);
-            }
-            if *t & TOUCH_SH != 0 {
-                for k in 0..SH_DIM {
-                    rmsprop_one(&mut sh[k], &mut gs[k], &mut ss[k], h.lr_sh, h.beta, h.eps);
+        .for_each(
+            |(v, (((((((((d, gd), sd), o), go), so), sh), gs), ss), t))| {
+                if h.delta_rows.contains(v) || *t & TOUCH_DELTA != 0 {
+                    rmsprop_one(d, gd, sd, h.lr_delta, h.beta, h.eps);
                 }
-            }
-            *t = 0;
-        });
+                if h.opacity_rows.contains(v) || *t & TOUCH_OPACITY != 0 {
+                    rmsprop_one(o, go, so, h.lr_opacity, h.beta, h.eps);
+                }
+                if *t & TOUCH_SH != 0 {
+                    for k in 0..SH_DIM {
+                        rmsprop_one(&mut sh[k], &mut gs[k], &mut ss[k], h.lr_sh, h.beta, h.eps);
+                    }
+                }
+                *t = 0;
+            },
+        );
 }

@@ -40,7 +40,11 @@ impl RowRange {
     /// Whether row v is in the range.
     pub fn contains(&self, v: usize) -> bool {
         let (rows, start) = (self.rows as usize, self.start as usize);
-        let i = if v >= start { v - start } else { v + rows - start };
+        let i = if v >= start {
+            v - start
+        } else {
+            v + rows - start
+        };
         i < self.len as usize
     }
 

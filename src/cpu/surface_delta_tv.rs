@@ -143,7 +143,7 @@ pub fn delta_tv_gather(nbr: &[i32], q: &[f32], grad: &mut [f32], c: &DeltaTvChun
             } else {
                 0.0
             };
-            any.then(|| c.scale * (back - own))
+            any.then_some(c.scale * (back - own))
         })
         .collect();
     for (i, add) in adds.into_iter().enumerate() {

@@ -228,7 +228,12 @@ impl NormalPrefix {
             })
             .max()
             .unwrap_or(0) as u32;
-        let is_cell = |l: i32| l >= 0 && nbr[NBR_STRIDE * l as usize + 1..][..7].iter().all(|&x| x >= 0);
+        let is_cell = |l: i32| {
+            l >= 0
+                && nbr[NBR_STRIDE * l as usize + 1..][..7]
+                    .iter()
+                    .all(|&x| x >= 0)
+        };
         let corner_reach = corner_rows
             .iter()
             .flat_map(|&v| {

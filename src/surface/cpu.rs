@@ -1,8 +1,8 @@
 //! The CPU stage-2 backend: the kernels' twins on a host-resident surface grid.
 
 use super::{
-    batch_loss, surface_params, RegPlan, BlockRefresh, SurfaceBackend, SurfaceState, SurfaceStepParams,
-    SurfaceStepStats,
+    batch_loss, surface_params, BlockRefresh, RegPlan, SurfaceBackend, SurfaceState,
+    SurfaceStepParams, SurfaceStepStats,
 };
 use crate::cpu::surface_blocks::build_blocks;
 use crate::cpu::surface_delta_tv::{axis_neighbours, delta_tv, forward_reach};
@@ -118,7 +118,7 @@ impl CpuSurface {
                 beta: p.beta,
                 eps: p.eps,
                 delta_rows: plan.delta_rows,
-            opacity_rows: plan.opacity_rows,
+                opacity_rows: plan.opacity_rows,
             },
         );
     }

@@ -44,7 +44,6 @@ pub fn record_delta_tv(b: &mut Batch, io: &DeltaTvIo, c: &DeltaTvChunk, reach: u
                 count: c.count,
                 window,
                 scale: c.scale,
-                ..Default::default()
             },
             n,
         )?;

@@ -8,11 +8,11 @@
 
 use super::delta_tv::{record_delta_tv, DeltaTvIo};
 use super::normal_reg::{record_normal_reg, upload_nonempty, NormalRegBuffers, NormalRegIo};
-use super::skip::{record_skip_structure, SkipIo};
 use super::rmsprop::{record_surface_rmsprop, SurfaceOptimIo};
+use super::skip::{record_skip_structure, SkipIo};
 use super::{
-    batch_loss, RegPlan, surface_params, BlockRefresh, SurfaceBackend, SurfaceState, SurfaceStepParams,
-    SurfaceStepStats,
+    batch_loss, surface_params, BlockRefresh, RegPlan, SurfaceBackend, SurfaceState,
+    SurfaceStepParams, SurfaceStepStats,
 };
 use crate::cpu::step::{STEP_COUNT, STEP_FLAGS, STEP_N};
 use crate::cpu::surface_blocks::complete_cells;

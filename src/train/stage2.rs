@@ -111,9 +111,8 @@ pub fn step_params(
             0.0
         },
         regs: SurfaceRegs {
-            delta_tv: (cfg.lambda_delta > 0.0 && rows > 0).then(|| {
-                delta_tv_chunk(res, rows, cfg.delta_fraction, cfg.lambda_delta, draws[1])
-            }),
+            delta_tv: (cfg.lambda_delta > 0.0 && rows > 0)
+                .then(|| delta_tv_chunk(res, rows, cfg.delta_fraction, cfg.lambda_delta, draws[1])),
             opacity_tv: (cfg.lambda_tv_alpha > 0.0).then(|| {
                 opacity_tv_chunk(res, cfg.tv_alpha_fraction, cfg.lambda_tv_alpha, tv_draw)
             }),
