@@ -2,9 +2,9 @@
 //! (Lα) and the three passes `glsl/surface_normal_reg_{cells,pairs,gather}.comp` (Ln1 +
 //! Ln2; with `glsl/lib/normal_reg.glsl`), same formulation and operation order as the kernels;
 //! the [`TvChunk`] with which `glsl/tv.comp` (twin [`super::tv`]) computes TVα and the
-//! [`DeltaTvChunk`] of Lδ (`glsl/surface_delta_tv.comp`). Each
-//! function ADDS its gradient; the normal regularisers flag the vertices they give a gradient in
-//! `touched` (the twin of step.glsl's `touch_mask`) unless RMSProp's δ rows cover them.
+//! [`DeltaTvChunk`] of Lδ (`glsl/surface_delta_tv.comp`). Each function ADDS its gradient; the
+//! normal regularisers flag the vertices they give a gradient in `touched` (the twin of
+//! step.glsl's `touch_mask`) unless RMSProp's δ rows cover them.
 
 use super::step::{RowRange, TOUCH_DELTA, TOUCH_OPACITY};
 use super::surface_delta_tv::DeltaTvChunk;
@@ -94,10 +94,14 @@ impl NormalChunk {
     }
 }
 
-/// Entry i of a work range (first, n) of `list` (wrapping past its end).
-fn work_item(list: &[u32], work: (u32, u32), i: u32) -> u32 {
-    let k = work.0 as usize + i as usize;
-    list[if k >= list.len() { k - list.len() } else { k }]
+/// The entries of a work range (first, n) of `list` (wrapping past its end), in order.
+fn work_rows(list: &[u32], work: (u32, u32)) -> Vec<u32> {
+    list.iter()
+        .cycle()
+        .skip(work.0 as usize)
+        .take(work.1 as usize)
+        .copied()
+        .collect()
 }
 
 /// The (first, n) range of the entries of the ascending `list` in rows [start, start + len) mod
@@ -334,9 +338,7 @@ fn sign0(x: f32) -> f32 {
 /// the pairs pass reads only the window's).
 pub fn normal_cells(p: &NormalPrefix, delta: &[f32], c: &NormalChunk) -> Vec<f32> {
     let rows = p.rows() as usize;
-    let work: Vec<u32> = (0..c.cells_work.1)
-        .map(|i| work_item(&p.cell_rows, c.cells_work, i))
-        .collect();
+    let work = work_rows(&p.cell_rows, c.cells_work);
     let computed: Vec<[f32; NORMALS_STRIDE]> = work
         .par_iter()
         .map(|&r| {
@@ -474,9 +476,7 @@ pub fn normal_pairs(
     normals: &[f32],
     c: &NormalChunk,
 ) -> (Vec<f32>, NormalRegStats) {
-    let work: Vec<u32> = (0..c.cells_work.1)
-        .map(|i| work_item(&p.cell_rows, c.cells_work, i))
-        .collect();
+    let work = work_rows(&p.cell_rows, c.cells_work);
     let computed: Vec<([f32; CORNERS_STRIDE], f64, u32)> = work
         .par_iter()
         .map(|&r| {
@@ -506,9 +506,8 @@ pub fn normal_gather(
     touched: &mut [u32],
     c: &NormalChunk,
 ) {
-    let work: Vec<u32> = (0..c.corners_work.1)
-        .map(|i| work_item(&p.corner_rows, c.corners_work, i))
-        .collect();
+    let work = work_rows(&p.corner_rows, c.corners_work);
+    let window = c.rows_from_start(c.window);
     let sums: Vec<Option<f32>> = work
         .par_iter()
         .map(|&r| {
@@ -521,7 +520,7 @@ pub fn normal_gather(
                 l[NBR_B[j]] = nb[8 + j];
             }
             for (b, &l) in l.iter().enumerate() {
-                if l < 0 || !c.rows_from_start(c.window).contains(l as usize) {
+                if l < 0 || !window.contains(l as usize) {
                     continue;
                 }
                 let c = corners[CORNERS_STRIDE * l as usize + b];

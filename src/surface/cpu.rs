@@ -69,8 +69,7 @@ impl CpuSurface {
                 c.start,
                 g.delta.len()
             );
-            let reach = self.axis_reach;
-            delta_tv(&self.axis_nbrs, &g.delta, gd, &c, reach);
+            delta_tv(&self.axis_nbrs, &g.delta, gd, &c, self.axis_reach);
         }
         if let Some(c) = p.regs.opacity_tv {
             tv(&g.links, &g.opacity, go, &mut self.touched, &c);

@@ -2,9 +2,9 @@
 //! training step is one batch and one submission: step reset → (surface_live_cells and
 //! surface_blocks when δ may have drifted past their margin) → surface_train → regularisers (Lδ
 //! through the two surface_delta_tv passes, TVα through `tv`, Lα through
-//! surface_opacity_reg, Ln1/Ln2 through the three surface_normal_reg_* passes) → surface_rmsprop:
-//! δ of every row when Lδ is on, then (optim_args → indirect) the flagged groups of the touched
-//! vertices.
+//! surface_opacity_reg, Ln1/Ln2 through the three surface_normal_reg_* passes, each over its
+//! chunk's window) → surface_rmsprop: δ and σα on the rows the regularisers' chunks cover
+//! ([`RegPlan`]), then (optim_args → indirect) the flagged groups of the touched vertices.
 
 use super::delta_tv::{record_delta_tv, DeltaTvIo};
 use super::normal_reg::{record_normal_reg, upload_nonempty, NormalRegBuffers, NormalRegIo};
