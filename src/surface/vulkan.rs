@@ -363,8 +363,8 @@ impl VulkanSurface {
         Ok(())
     }
 
-    /// Record the RMSProp step: δ on the plan's δ rows, then the flagged groups of the vertices
-    /// touched this step.
+    /// Record the RMSProp step: δ and σα on the plan's rows, then the flagged groups of the
+    /// vertices touched this step.
     fn record_rmsprop(&self, b: &mut Batch, p: &SurfaceStepParams, plan: &RegPlan) -> Result<()> {
         let io = SurfaceOptimIo {
             params: [
