@@ -1,11 +1,13 @@
 #version 460
-// surface_blocks — per 8³-cell block of the stage-2 grid, the levels it can contain (coarse
+// surface_blocks — per 2^block_shift-cell block of the stage-2 grid, the levels it can contain (coarse
 // empty-space skipping for the surface walk; glsl/lib/surface_blocks.glsl has the conventions).
-// Thread mapping: one invocation per block, flat index (bx·nb + by)·nb + bz, nb = ceil((n−1)/8).
+// Thread mapping: one invocation per block, flat index (bx·nb + by)·nb + bz, nb = ceil((n−1)/B),
+// B = 2^block_shift.
 // (A workgroup per block with a shared-memory reduction ran ~5× slower on lavapipe: barriers.)
 // Inputs: links (n³ i32, < 0 unallocated), delta (per allocated vertex), levels[n_levels ≤ 8],
-// margin ≥ 0. Output: blocks[b] = bit i set iff τ_i ∈ [bmin − margin, bmax + margin], bmin/bmax
-// over the allocated vertices of the block's vertex range [8b, min(8b+8, n−1)]³ (0 if none).
+// margin ≥ 0, block_shift. Output: blocks[b] = bit i set iff τ_i ∈ [bmin − margin, bmax + margin],
+// bmin/bmax over the allocated vertices of the block's vertex range [Bb, min(Bb+B, n−1)]³ (0 if
+// none).
 // min/max are exact, so the scan order does not matter (signed zeros aside, which compare alike).
 // CPU twin: cpu::surface_blocks::build_blocks (src/cpu/surface_blocks.rs).
 #include "common.glsl"
@@ -20,16 +22,18 @@ layout(push_constant, scalar) uniform Push {
     uint n;
     uint n_levels;
     float margin;
+    uint block_shift;
 } pc;
 
 void main() {
     uint b = flat_id();
     uint n = pc.n;
-    uint nb = surf_blocks_per_axis(n);
+    uint shift = pc.block_shift;
+    uint nb = surf_blocks_per_axis(n, shift);
     if (b >= nb * nb * nb) return;
-    ivec3 l = ivec3(int(b / (nb * nb)), int((b / nb) % nb), int(b % nb)) << SURF_BLOCK_SHIFT;
+    ivec3 l = ivec3(int(b / (nb * nb)), int((b / nb) % nb), int(b % nb)) << int(shift);
     vec3 lo, hi;
-    surf_block_box(l, int(n), lo, hi);
+    surf_block_box(l, int(n), shift, lo, hi);
     ivec3 v0 = ivec3(lo);
     ivec3 v1 = ivec3(hi);
     float bmin = SURF_BLOCK_BIG;

@@ -9,7 +9,7 @@
 // scene direction), α̃ = α·γ_a(j); C = Σ w_j c_j + T·1. The ray stops at the first hit with j ≥ a
 // (γ = 0, not shaded, counted as cut) or once T < stop_thresh.
 // Skipping (block_skip ≠ 0) with the skip structure `blocks` (glsl/lib/surface_blocks.glsl): a
-// cell whose 8³-cell block has level mask 0 (kernel surface_blocks) is not read and the walk
+// cell whose 2^block_shift-cell block has level mask 0 (kernel surface_blocks) is not read and the walk
 // restarts at the block's exit (surf_block_skip: the same pieces as the continuous walk, so the
 // same hits); a cell whose live bit is clear (kernel surface_live_cells) is passed over unread.
 // Inputs: links (n³ i32, < 0 unallocated), per allocated vertex delta, opacity (raw σα) and sh
@@ -44,6 +44,7 @@ layout(push_constant, scalar) uniform Push {
     float a;
     float stop_thresh;
     uint block_skip;
+    uint block_shift;
 } pc;
 
 void add_surf_stats(uvec4 c, uint cut, uint skips) {
@@ -78,7 +79,7 @@ void main() {
     uvec4 cnt = uvec4(0u); // cells, solves, culled, hits
     uint cut = 0u;
     uint skips = 0u;
-    uint nb = surf_blocks_per_axis(n);
+    uint nb = surf_blocks_per_axis(n, pc.block_shift);
     uint words = surf_live_words(n);
     uint skipped = SURF_NO_BLOCK;
     bool done = false;
@@ -96,8 +97,9 @@ void main() {
         while (dda_next(w, l, t0, t1)) {
             uint base = dda_cell_index(l, n);
             if (pc.block_skip != 0u) {
-                uint bi = surf_block_index(l, nb);
-                if (pc.blocks.v[words + bi] == 0u && surf_block_skip(w, dn, int(n), l, bi, skipped)) {
+                uint bi = surf_block_index(l, nb, pc.block_shift);
+                if (pc.blocks.v[words + bi] == 0u
+                    && surf_block_skip(w, dn, int(n), l, bi, skipped, pc.block_shift)) {
                     skips++;
                     continue;
                 }

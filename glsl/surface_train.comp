@@ -17,9 +17,9 @@
 // Inputs: links (n³, < 0 unallocated), skip: the skip structure (glsl/lib/surface_blocks.glsl):
 // words [0, W = ⌈n³/32⌉) the live-cell bits of surface_live_cells (a cell with its bit clear has
 // an unallocated corner or no level within its δ range: one bit read instead of 8 links and 8 δ),
-// words [W, W + nb³) the 8³-cell block level masks of surface_blocks (a cell in a mask-0 block
-// cannot hold a hit: the walk restarts past the block, surf_block_skip); both built for the
-// current δ or with a margin bounding its drift since (exact), delta, opacity (raw σα), sh (27) per allocated vertex;
+// words [W, W + nb³) the 2^block_shift-cell block level masks of surface_blocks (a cell in a
+// mask-0 block cannot hold a hit: the walk restarts past the block, surf_block_skip); both built
+// for the current δ or with a margin bounding its drift since (exact), delta, opacity (raw σα), sh (27) per allocated vertex;
 // params (floats): scale[3], offset[3], a, stop_thresh, grad_scale, lambda_h, lambda_c, (pad),
 // levels[8] (n_levels used); rays (6 floats), targets (3 floats).
 // Outputs: grad_delta, grad_opacity, grad_sh += (float atomics), touched list (step buffer);
@@ -61,6 +61,7 @@ layout(push_constant, scalar) uniform Push {
     uint n;
     uint n_rays;
     uint n_levels;
+    uint block_shift;
 } pc;
 
 #include "step.glsl"
@@ -204,15 +205,16 @@ void main() {
     int lk[8];
     float c[8];
     uint mask = 0u;
-    uint nb = surf_blocks_per_axis(n);
+    uint nb = surf_blocks_per_axis(n, pc.block_shift);
     uint bbase = surf_live_words(n);
     uint skipped = SURF_NO_BLOCK;
     while (!done) {
         // Walk on to the next cell where some level can cross before solving (as surface_fwd).
         bool found = false;
         while (dda_next(w, l, t0, t1)) {
-            uint bi = surf_block_index(l, nb);
-            if (pc.skip.v[bbase + bi] == 0u && surf_block_skip(w, dn, int(n), l, bi, skipped)) {
+            uint bi = surf_block_index(l, nb, pc.block_shift);
+            if (pc.skip.v[bbase + bi] == 0u
+                && surf_block_skip(w, dn, int(n), l, bi, skipped, pc.block_shift)) {
                 cnt2.w++;
                 continue;
             }

@@ -13,9 +13,31 @@ use alphasurf::cpu::surface_blocks::build_blocks;
 use alphasurf::cpu::surface_fwd::render;
 use alphasurf::gpu::test_gpu;
 use alphasurf::math::surface::SurfOut;
-use alphasurf::math::surface_blocks::surf_live_words;
+use alphasurf::math::surface_blocks::{
+    surf_blocks_per_axis, surf_live_words, SkipRef, SURF_BLOCK_SHIFT_CPU, SURF_BLOCK_SHIFT_VULKAN,
+};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
+
+/// The block edge these tests skip with: the Vulkan backend's (4³; the 8³ of the CPU backend is
+/// covered by the parity rows and `math::surface_blocks`' walk test).
+const SHIFT: u32 = SURF_BLOCK_SHIFT_VULKAN;
+
+/// A skip structure with 8³ blocks (the CPU backend's).
+fn sk8(words: &[u32]) -> SkipRef<'_> {
+    SkipRef {
+        words,
+        shift: SURF_BLOCK_SHIFT_CPU,
+    }
+}
+
+/// A skip structure with [`SHIFT`].
+fn sk(words: &[u32]) -> SkipRef<'_> {
+    SkipRef {
+        words,
+        shift: SHIFT,
+    }
+}
 
 // ---------------------------------------------------------------------------------------------
 // The float64 reference.
@@ -372,9 +394,9 @@ fn backends_match_f64_reference() {
         }
         let rays = test_rays(&sc, seed, 1200);
         let p = sc.params(a, stop);
-        let blocks = build_blocks(&sc.grid(), &sc.levels, 0.0).unwrap();
-        let (cpu, counts) = render(&sc.grid(), &rays, &p, Some(&blocks)).unwrap();
-        let (gpu, _, _) = render_gpu(test_gpu(), &sc.grid(), &rays, &p, Some(&blocks)).unwrap();
+        let blocks = build_blocks(&sc.grid(), &sc.levels, 0.0, SHIFT).unwrap();
+        let (cpu, counts) = render(&sc.grid(), &rays, &p, Some(sk(&blocks))).unwrap();
+        let (gpu, _, _) = render_gpu(test_gpu(), &sc.grid(), &rays, &p, Some(sk(&blocks))).unwrap();
         let want = ref_render(&sc, &rays, a, stop);
         let n = want.len();
         let hits: u32 = want.iter().map(|w| w.hits).sum();
@@ -423,9 +445,10 @@ fn backends_match_f64_reference() {
 /// in a block face plane and at a grazing angle to one, starting on a block corner.
 fn block_rays(n: u32, blocks: &[u32], seed: u64, count: usize) -> Vec<([f32; 3], [f32; 3])> {
     let mut rng = Pcg64::seed_from_u64(seed);
-    let nb = n.div_ceil(8) as usize;
+    let nb = surf_blocks_per_axis(n, SHIFT) as usize;
+    let bs = (1u32 << SHIFT) as f32;
     let nf = n as f32;
-    let bf = |rng: &mut Pcg64| (rng.random_range(0..=nb) * 8).min(n as usize - 1) as f32;
+    let bf = |rng: &mut Pcg64| ((rng.random_range(0..=nb) << SHIFT).min(n as usize - 1)) as f32;
     let unit = |d: [f32; 3]| {
         let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
         d.map(|x| x / l)
@@ -457,7 +480,7 @@ fn block_rays(n: u32, blocks: &[u32], seed: u64, count: usize) -> Vec<([f32; 3],
                     dead[rng.random_range(0..dead.len())]
                 };
                 let bc = [b / (nb * nb), (b / nb) % nb, b % nb];
-                let g = bc.map(|k| (8.0 * k as f32 + rng.random_range(0.0..8.0f32)).min(nf - 1.0));
+                let g = bc.map(|k| (bs * k as f32 + rng.random_range(0.0..bs)).min(nf - 1.0));
                 (
                     g,
                     unit(std::array::from_fn(|_| rng.random_range(-1.0..1.0))),
@@ -509,7 +532,7 @@ fn block_skipping_is_exact_and_saves_cells() {
                 *l = -1;
             }
         }
-        let blocks = build_blocks(&sc.grid(), &sc.levels, 0.0).unwrap();
+        let blocks = build_blocks(&sc.grid(), &sc.levels, 0.0, SHIFT).unwrap();
         let live = vec![u32::MAX; blocks.len()];
         let mut rays = test_rays(&sc, seed, 1500);
         for (g, d) in block_rays(n, &blocks, seed, 1500) {
@@ -520,13 +543,14 @@ fn block_skipping_is_exact_and_saves_cells() {
         for (a, stop) in [(100.0f32, 1e-4f32), (2.5, 1e-3)] {
             let p = sc.params(a, stop);
             let (base, bc) = render(&sc.grid(), &rays, &p, None).unwrap();
-            let (all, ac) = render(&sc.grid(), &rays, &p, Some(&live)).unwrap();
-            let (skip, sk) = render(&sc.grid(), &rays, &p, Some(&blocks)).unwrap();
+            let (all, ac) = render(&sc.grid(), &rays, &p, Some(sk(&live))).unwrap();
+            let (skip, skc) = render(&sc.grid(), &rays, &p, Some(sk(&blocks))).unwrap();
             let (gbase, gbc, _) = render_gpu(gpu, &sc.grid(), &rays, &p, None).unwrap();
-            let (gall, gac, _) = render_gpu(gpu, &sc.grid(), &rays, &p, Some(&live)).unwrap();
-            let (gskip, gsk, _) = render_gpu(gpu, &sc.grid(), &rays, &p, Some(&blocks)).unwrap();
+            let (gall, gac, _) = render_gpu(gpu, &sc.grid(), &rays, &p, Some(sk(&live))).unwrap();
+            let (gskip, gsk, _) =
+                render_gpu(gpu, &sc.grid(), &rays, &p, Some(sk(&blocks))).unwrap();
             eprintln!(
-                "n {n} holes {holes} a {a}: {dead} of {} blocks dead; counters cpu {bc:?} → {sk:?}, gpu {gbc:?} → {gsk:?}",
+                "n {n} holes {holes} a {a}: {dead} of {} blocks dead; counters cpu {bc:?} → {skc:?}, gpu {gbc:?} → {gsk:?}",
                 blocks.len()
             );
             for (what, b, x, y) in [("cpu", &base, &all, &skip), ("gpu", &gbase, &gall, &gskip)] {
@@ -536,7 +560,7 @@ fn block_skipping_is_exact_and_saves_cells() {
                     assert_eq!(b, y, "{what} skipping n {n} ray {i} {r:?}");
                 }
             }
-            for (b, x, y) in [(bc, ac, sk), (gbc, gac, gsk)] {
+            for (b, x, y) in [(bc, ac, skc), (gbc, gac, gsk)] {
                 assert_eq!(b, x);
                 assert_eq!([b[1], b[3], b[4]], [y[1], y[3], y[4]]);
                 assert!(y[0] * 3 < b[0] * 2, "cells {} → {}", b[0], y[0]);
@@ -582,7 +606,8 @@ fn planar_field_one_live_block() {
         sh[18] = v[2] / (n as f32 * y0);
         sc.sh.extend_from_slice(&sh);
     }
-    let blocks = build_blocks(&sc.grid(), &sc.levels, 0.0).unwrap();
+    // 8³ blocks: the patch lies in one.
+    let blocks = build_blocks(&sc.grid(), &sc.levels, 0.0, SURF_BLOCK_SHIFT_CPU).unwrap();
     let words = surf_live_words(n) as usize;
     let masks = &blocks[words..];
     let live: Vec<usize> = (0..masks.len()).filter(|&b| masks[b] != 0).collect();
@@ -623,9 +648,9 @@ fn planar_field_one_live_block() {
     }
     let p = sc.params(5.0, 0.0);
     let (cpu0, c0) = render(&sc.grid(), &rays, &p, None).unwrap();
-    let (cpu, cc) = render(&sc.grid(), &rays, &p, Some(&blocks)).unwrap();
+    let (cpu, cc) = render(&sc.grid(), &rays, &p, Some(sk8(&blocks))).unwrap();
     let (gpu0, _, _) = render_gpu(test_gpu(), &sc.grid(), &rays, &p, None).unwrap();
-    let (gpu, gc, _) = render_gpu(test_gpu(), &sc.grid(), &rays, &p, Some(&blocks)).unwrap();
+    let (gpu, gc, _) = render_gpu(test_gpu(), &sc.grid(), &rays, &p, Some(sk8(&blocks))).unwrap();
     assert_eq!(cpu0, cpu);
     assert_eq!(gpu0, gpu);
     eprintln!("counters without blocks {c0:?}, with: cpu {cc:?} gpu {gc:?}");
@@ -741,9 +766,9 @@ fn planar_field_one_hit_at_the_right_depth() {
             rays.extend_from_slice(&d.map(|x| x / l));
         }
         let p = sc.params(5.0, 0.0);
-        let blocks = build_blocks(&sc.grid(), &sc.levels, 0.0).unwrap();
-        let (cpu, _) = render(&sc.grid(), &rays, &p, Some(&blocks)).unwrap();
-        let (gpu, _, _) = render_gpu(test_gpu(), &sc.grid(), &rays, &p, Some(&blocks)).unwrap();
+        let blocks = build_blocks(&sc.grid(), &sc.levels, 0.0, SHIFT).unwrap();
+        let (cpu, _) = render(&sc.grid(), &rays, &p, Some(sk(&blocks))).unwrap();
+        let (gpu, _, _) = render_gpu(test_gpu(), &sc.grid(), &rays, &p, Some(sk(&blocks))).unwrap();
         for (backend, out) in [("cpu", &cpu), ("gpu", &gpu)] {
             for (i, o) in out.iter().enumerate() {
                 let r = &rays[6 * i..6 * i + 6];
@@ -831,9 +856,10 @@ fn truncated_compositing() {
     let alpha = 1.0 - (-(sigma as f64)).exp();
     for a in [1.0f32, 5.0, 2.5, 3.25, 0.5, 8.0] {
         let p = sc.params(a, 0.0);
-        let blocks = build_blocks(&sc.grid(), &sc.levels, 0.0).unwrap();
-        let (cpu, counts) = render(&sc.grid(), &rays, &p, Some(&blocks)).unwrap();
-        let (gpu, gc, _) = render_gpu(test_gpu(), &sc.grid(), &rays, &p, Some(&blocks)).unwrap();
+        let blocks = build_blocks(&sc.grid(), &sc.levels, 0.0, SHIFT).unwrap();
+        let (cpu, counts) = render(&sc.grid(), &rays, &p, Some(sk(&blocks))).unwrap();
+        let (gpu, gc, _) =
+            render_gpu(test_gpu(), &sc.grid(), &rays, &p, Some(sk(&blocks))).unwrap();
         // Expected, in f64.
         let (mut col, mut t, mut used) = ([0.0f64; 3], 1.0f64, 0u32);
         for (j, &x) in planes.iter().enumerate() {
@@ -894,9 +920,9 @@ fn missing_rays_and_bad_input() {
     ]
     .concat();
     let p = sc.params(5.0, 1e-4);
-    let blocks = build_blocks(&sc.grid(), &sc.levels, 0.0).unwrap();
-    let (o, counts) = render(&sc.grid(), &rays, &p, Some(&blocks)).unwrap();
-    let (og, gc, _) = render_gpu(test_gpu(), &sc.grid(), &rays, &p, Some(&blocks)).unwrap();
+    let blocks = build_blocks(&sc.grid(), &sc.levels, 0.0, SHIFT).unwrap();
+    let (o, counts) = render(&sc.grid(), &rays, &p, Some(sk(&blocks))).unwrap();
+    let (og, gc, _) = render_gpu(test_gpu(), &sc.grid(), &rays, &p, Some(sk(&blocks))).unwrap();
     let white = SurfOut {
         rgb: [1.0; 3],
         transmittance: 1.0,
@@ -912,10 +938,10 @@ fn missing_rays_and_bad_input() {
     let mut bad = sc.clone();
     bad.links[0] = bad.delta.len() as i32;
     assert!(render(&bad.grid(), &rays, &p, None).is_err());
-    assert!(build_blocks(&bad.grid(), &sc.levels, 0.0).is_err());
+    assert!(build_blocks(&bad.grid(), &sc.levels, 0.0, SHIFT).is_err());
     // Block masks of the wrong count, too many levels or a negative margin: errors.
-    assert!(render(&sc.grid(), &rays, &p, Some(&blocks[1..])).is_err());
-    assert!(render_gpu(test_gpu(), &sc.grid(), &rays, &p, Some(&[0; 2])).is_err());
-    assert!(build_blocks(&sc.grid(), &[0.0; 9], 0.0).is_err());
-    assert!(build_blocks(&sc.grid(), &sc.levels, -1.0).is_err());
+    assert!(render(&sc.grid(), &rays, &p, Some(sk(&blocks[1..]))).is_err());
+    assert!(render_gpu(test_gpu(), &sc.grid(), &rays, &p, Some(sk(&[0; 2]))).is_err());
+    assert!(build_blocks(&sc.grid(), &[0.0; 9], 0.0, SHIFT).is_err());
+    assert!(build_blocks(&sc.grid(), &sc.levels, -1.0, SHIFT).is_err());
 }

@@ -1,9 +1,10 @@
 // surface_blocks.glsl — coarse empty-space skipping for the stage-2 (αSurf) cell walk
 // (method.md §3.2, §5). Rust twin: src/math/surface_blocks.rs (same operations in the same order).
 //
-// A block is 8³ cells: block b (per axis) covers the cells [8b, 8b+8) ∩ [0, n−2], i.e. the vertex
-// range [8b, min(8b+8, n−1)]; there are nb = ceil((n−1)/8) blocks per axis, indexed x-major
-// (bx·nb + by)·nb + bz. Its level mask (kernel surface_blocks) has bit i set iff τ_i lies within
+// A block is B³ cells, B = 2^shift (the backend's choice, passed to the kernels: Rust
+// SURF_BLOCK_SHIFT_CPU / _VULKAN): block b (per axis) covers the cells [Bb, Bb+B) ∩ [0, n−2],
+// i.e. the vertex range [Bb, min(Bb+B, n−1)]; there are nb = ceil((n−1)/B) blocks per axis,
+// indexed x-major (bx·nb + by)·nb + bz. Its level mask (kernel surface_blocks) has bit i set iff τ_i lies within
 // [bmin − margin, bmax + margin], bmin/bmax the min/max of δ over the block's ALLOCATED vertices;
 // a block without any allocated vertex gets mask 0. A cell the walk can solve has all 8 corners
 // allocated and inside its block's vertex range, so its min/max culling range lies within the
@@ -12,8 +13,8 @@
 // Skipping in a walk loop (surface_fwd.comp is the reference use):
 //     uint skipped = SURF_NO_BLOCK;
 //     while (dda_next(w, l, t0, t1)) {
-//         uint bi = surf_block_index(l, nb);
-//         if (<block mask of bi> == 0u && surf_block_skip(w, dn, int(n), l, bi, skipped))
+//         uint bi = surf_block_index(l, nb, shift);
+//         if (<block mask of bi> == 0u && surf_block_skip(w, dn, int(n), l, bi, skipped, shift))
 //             continue;   // w now restarts at the block's exit
 //         if (!<cell live bit>) continue;   // no level can cross it: no corner is read
 //         ... the cell as before ...
@@ -35,15 +36,12 @@
 
 #include "dda.glsl"
 
-// Block edge in cells, and its log2.
-const int SURF_BLOCK = 8;
-const int SURF_BLOCK_SHIFT = 3;
 // "No block skipped yet" (an index no block has).
 const uint SURF_NO_BLOCK = 0xffffffffu;
 
-// Blocks per axis of an n³-vertex grid (n ≥ 2): ceil((n − 1)/8).
-uint surf_blocks_per_axis(uint n) {
-    return (n + uint(SURF_BLOCK - 2)) >> SURF_BLOCK_SHIFT;
+// Blocks per axis of an n³-vertex grid (n ≥ 2) with 2^shift-cell blocks: ceil((n − 1)/2^shift).
+uint surf_blocks_per_axis(uint n, uint shift) {
+    return (n + (1u << shift) - 2u) >> shift;
 }
 
 // Words of live-cell bits of an n³-vertex grid: ⌈n³/32⌉ (at least 1). The walks' skip structure
@@ -58,16 +56,16 @@ uint surf_live_words(uint n) {
 #define SURF_CELL_LIVE(SKIP, CI) ((SKIP.v[(CI) >> 5u] & (1u << ((CI) & 31u))) != 0u)
 
 // Linear index of the block holding cell l.
-uint surf_block_index(ivec3 l, uint nb) {
-    uvec3 b = uvec3(l >> SURF_BLOCK_SHIFT);
+uint surf_block_index(ivec3 l, uint nb, uint shift) {
+    uvec3 b = uvec3(l >> int(shift));
     return (b.x * nb + b.y) * nb + b.z;
 }
 
 // Vertex box [lo, hi] of the block holding cell l (grid of n³ vertices).
-void surf_block_box(ivec3 l, int n, out vec3 lo, out vec3 hi) {
-    ivec3 b0 = (l >> SURF_BLOCK_SHIFT) << SURF_BLOCK_SHIFT;
+void surf_block_box(ivec3 l, int n, uint shift, out vec3 lo, out vec3 hi) {
+    ivec3 b0 = (l >> int(shift)) << int(shift);
     lo = vec3(b0);
-    hi = vec3(min(b0 + SURF_BLOCK, ivec3(n - 1)));
+    hi = vec3(min(b0 + (1 << int(shift)), ivec3(n - 1)));
 }
 
 // Start of a block's δ range scan (the largest float): bmin = SURF_BLOCK_BIG and
@@ -91,9 +89,9 @@ uint surf_block_mask(float bmin, float bmax, float margin, float lv[8], uint nl)
 // crossing (k − o)·(1/d) (o, 1/d as stored in w) — bit-identical to ray_box(og, dn, block box,
 // ·).y, since for 1/d > 0 the far crossing is the larger of the two (rounding is monotone), and a
 // still axis lies inside the box (no constraint).
-float surf_block_exit(Dda w, ivec3 l, int n) {
+float surf_block_exit(Dda w, ivec3 l, int n, uint shift) {
     vec3 lo, hi;
-    surf_block_box(l, n, lo, hi);
+    surf_block_box(l, n, shift, lo, hi);
     float t = DDA_BIG;
     for (int a = 0; a < 3; a++) {
         if (w.step[a] == 0) continue;
@@ -130,9 +128,9 @@ void surf_dda_restart(inout Dda w, vec3 dn, int n, float t) {
 // whose block bi has mask 0: unless bi is the block skipped last, restarts w at the block's exit,
 // records bi in `skipped` and returns true (the caller drops the cell and continues with
 // dda_next); returns false (walk the cell as usual) when bi == skipped.
-bool surf_block_skip(inout Dda w, vec3 dn, int n, ivec3 l, uint bi, inout uint skipped) {
+bool surf_block_skip(inout Dda w, vec3 dn, int n, ivec3 l, uint bi, inout uint skipped, uint shift) {
     if (bi == skipped) return false;
-    surf_dda_restart(w, dn, n, surf_block_exit(w, l, n));
+    surf_dda_restart(w, dn, n, surf_block_exit(w, l, n, shift));
     skipped = bi;
     return true;
 }

@@ -9,7 +9,9 @@ use super::surface_fwd::test_scene;
 use super::{CheckRow, Compare};
 use crate::cpu::surface_blocks::{build_blocks, complete_cells};
 use crate::gpu::Gpu;
-use crate::math::surface_blocks::{surf_blocks_per_axis, surf_live_words};
+use crate::math::surface_blocks::{
+    surf_blocks_per_axis, surf_live_words, SURF_BLOCK_SHIFT_CPU, SURF_BLOCK_SHIFT_VULKAN,
+};
 use crate::surface::skip::{record_skip_structure, SkipIo};
 use anyhow::Result;
 use rand::{Rng, SeedableRng};
@@ -24,8 +26,9 @@ pub fn build_blocks_gpu(
     delta: &[f32],
     levels: &[f32],
     margin: f32,
+    shift: u32,
 ) -> Result<(Vec<u32>, f64)> {
-    let nb = surf_blocks_per_axis(n);
+    let nb = surf_blocks_per_axis(n, shift);
     let words = surf_live_words(n);
     let count = nb * nb * nb;
     let mut lv = levels.to_vec();
@@ -46,6 +49,7 @@ pub fn build_blocks_gpu(
             skip: out.address(),
             n,
             n_levels: levels.len() as u32,
+            shift,
         },
         margin,
     )?;
@@ -92,12 +96,19 @@ fn compare(gpu: &Gpu, seed: u64, live_part: bool) -> Result<CheckRow> {
                     }
                 }
             }
-            for (levels, margin) in [
-                (sc.levels.clone(), 0.0f32),
-                ((0..8).map(|i| (i as f32 - 3.5) * 0.1).collect(), 0.05),
+            // Both backends' block edges, 8 and 4 cells.
+            for (levels, margin, shift) in [
+                (sc.levels.clone(), 0.0f32, SURF_BLOCK_SHIFT_CPU),
+                (sc.levels.clone(), 0.0f32, SURF_BLOCK_SHIFT_VULKAN),
+                (
+                    (0..8).map(|i| (i as f32 - 3.5) * 0.1).collect(),
+                    0.05,
+                    SURF_BLOCK_SHIFT_VULKAN,
+                ),
             ] {
-                let want = build_blocks(&sc.grid(), &levels, margin)?;
-                let (got, _) = build_blocks_gpu(gpu, n, &sc.links, &sc.delta, &levels, margin)?;
+                let want = build_blocks(&sc.grid(), &levels, margin, shift)?;
+                let (got, _) =
+                    build_blocks_gpu(gpu, n, &sc.links, &sc.delta, &levels, margin, shift)?;
                 let words = surf_live_words(n) as usize;
                 if got.len() != want.len() {
                     cmp.failures += 1;
@@ -113,7 +124,8 @@ fn compare(gpu: &Gpu, seed: u64, live_part: bool) -> Result<CheckRow> {
                     cmp.value(g as f64, w as f64, || {
                         let what = if live_part { "live word" } else { "block" };
                         format!(
-                            "n {n} holes {holes} margin {margin} {what} {i}: gpu {g:#b} cpu {w:#b}"
+                            "n {n} holes {holes} margin {margin} shift {shift} {what} {i}: gpu \
+                             {g:#b} cpu {w:#b}"
                         )
                     });
                 }

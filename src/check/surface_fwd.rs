@@ -20,7 +20,9 @@ use crate::cpu::surface_fwd::{
 use crate::gpu::Gpu;
 use crate::kernels::surface_fwd::{Push, INFO};
 use crate::math::surface::{SurfOut, SURF_MAX_LEVELS};
-use crate::math::surface_blocks::surf_live_words;
+use crate::math::surface_blocks::{
+    surf_live_words, SkipRef, SURF_BLOCK_SHIFT_CPU, SURF_BLOCK_SHIFT_VULKAN,
+};
 use anyhow::Result;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
@@ -212,7 +214,7 @@ pub fn render_gpu(
     g: &SurfaceGridRef,
     rays: &[f32],
     p: &SurfaceParams,
-    blocks: Option<&[u32]>,
+    blocks: Option<SkipRef>,
 ) -> Result<(Vec<SurfOut>, SurfCounts, f64)> {
     validate_inputs(g, rays, p)?;
     validate_blocks(g, blocks)?;
@@ -233,7 +235,7 @@ pub fn render_gpu(
     let lv = gpu.upload(&levels)?;
     let rb = gpu.upload(&one(rays))?;
     let out = gpu.zeros::<SurfOut>(n_rays.max(1))?;
-    let bb = gpu.upload(blocks.unwrap_or(&[0]))?;
+    let bb = gpu.upload(blocks.map_or(&[0][..], |b| b.words))?;
     let stats = gpu.zeros::<u32>(6)?;
     let times = gpu.run_1d(
         &INFO,
@@ -255,6 +257,8 @@ pub fn render_gpu(
             a: p.a,
             stop_thresh: p.stop_thresh,
             block_skip: u32::from(blocks.is_some()),
+            block_shift: blocks.map_or(0, |b| b.shift),
+            ..Default::default()
         },
         n_rays as u32,
     )?;
@@ -276,12 +280,13 @@ pub fn check(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
     let mut cmp = Compare::new(1e-4, 1e-4);
     let mut excused = 0usize;
     let mut notes = Vec::new();
-    // Block masks of the scene (exact skipping), and random ones (~60 % dead: not the scene's,
-    // they drop hits, but both backends must skip alike).
-    let real = build_blocks(&scene.grid(), &scene.levels, 0.0)?;
+    // Block masks of the scene (exact skipping; the Vulkan backend's 4³ blocks), and random ones
+    // (~60 % dead: not the scene's, they drop hits, but both backends must skip alike; 8³).
+    let real = build_blocks(&scene.grid(), &scene.levels, 0.0, SURF_BLOCK_SHIFT_VULKAN)?;
+    let real8 = build_blocks(&scene.grid(), &scene.levels, 0.0, SURF_BLOCK_SHIFT_CPU)?;
     let mut rng = Pcg64::seed_from_u64(seed ^ 0xb10c);
     let words = surf_live_words(scene.n) as usize;
-    let random: Vec<u32> = real
+    let random: Vec<u32> = real8
         .iter()
         .enumerate()
         .map(|(i, &w)| {
@@ -292,10 +297,15 @@ pub fn check(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
             }
         })
         .collect();
-    for (a, stop, blocks) in [(3.5f32, 1e-4f32, &real), (100.0, 1e-3, &random)] {
+    let skips = [
+        (3.5f32, 1e-4f32, &real, SURF_BLOCK_SHIFT_VULKAN),
+        (100.0, 1e-3, &random, SURF_BLOCK_SHIFT_CPU),
+    ];
+    for (a, stop, words, shift) in skips {
         let p = scene.params(a, stop);
-        let (want, wc) = render(&scene.grid(), &rays, &p, Some(blocks))?;
-        let (got, gc, _) = render_gpu(gpu, &scene.grid(), &rays, &p, Some(blocks))?;
+        let blocks = Some(SkipRef { words, shift });
+        let (want, wc) = render(&scene.grid(), &rays, &p, blocks)?;
+        let (got, gc, _) = render_gpu(gpu, &scene.grid(), &rays, &p, blocks)?;
         for (i, (g, w)) in got.iter().zip(&want).enumerate() {
             if g.hits != w.hits {
                 excused += 1;

@@ -34,6 +34,7 @@ use crate::cpu::surface_train::{hit_point, trace_ray, train, RayLoss, SurfaceGra
 use crate::gpu::Gpu;
 use crate::grid::surface::SurfaceGrid;
 use crate::grid::SH_DIM;
+use crate::math::surface_blocks::{SkipRef, SURF_BLOCK_SHIFT_VULKAN};
 use crate::math::trilerp::trilerp_grad;
 use crate::surface::{
     batch_loss, surface_params, SurfaceGradients, SurfaceStepParams, VulkanSurface,
@@ -95,14 +96,18 @@ pub fn cpu_train(
     let mut grads = [vec![0.0; rows], vec![0.0; rows], vec![0.0; rows * SH_DIM]];
     let mut touched = vec![0u32; rows];
     let [gd, go, gs] = &mut grads;
-    let blocks = build_blocks(&grid.as_ref(), &grid.levels, 0.0)?;
+    // The skip structure the Vulkan backend walks with (its block edge).
+    let blocks = build_blocks(&grid.as_ref(), &grid.levels, 0.0, SURF_BLOCK_SHIFT_VULKAN)?;
     let (ray_loss, counts) = train(
         &grid.as_ref(),
         rays,
         targets,
         &surface_params(grid, p.a, p.stop_thresh),
         &batch_loss(rays.len() / 6, p),
-        Some(&blocks),
+        Some(SkipRef {
+            words: &blocks,
+            shift: SURF_BLOCK_SHIFT_VULKAN,
+        }),
         SurfaceGrads {
             delta: gd,
             opacity: go,

@@ -1,13 +1,12 @@
 //! Twins of `glsl/surface_live_cells.comp` and `glsl/surface_blocks.comp`: the skip structure of
 //! the stage-2 walks (`math::surface_blocks` has the conventions) — a live bit per cell (all 8
 //! corners allocated and some level within its corners' δ range ± margin), then the level mask
-//! of every 8³-cell block; one rayon task per bit word and per block.
+//! of every 2^shift-cell block; one rayon task per bit word and per block.
 
 use super::surface_fwd::SurfaceGridRef;
 use crate::math::surface::SURF_MAX_LEVELS;
 use crate::math::surface_blocks::{
     surf_block_box, surf_block_mask, surf_blocks_per_axis, surf_live_words, SURF_BLOCK_BIG,
-    SURF_BLOCK_SHIFT,
 };
 use anyhow::{ensure, Result};
 use rayon::prelude::*;
@@ -15,10 +14,15 @@ use rayon::prelude::*;
 /// The skip structure of grid `g` for `levels` (at most 8), ranges widened by `margin` ≥ 0:
 /// `surf_live_words(n)` words of live-cell bits (bit i of word i/32: the cell with lower-corner
 /// slot i has its 8 corners allocated and a level τ in [cmin − margin, cmax + margin] of their
-/// δ), then the `nb`³ block masks, `nb = ceil((n−1)/8)`, x-major: bit i set iff
-/// τ_i ∈ [bmin − margin, bmax + margin] over the block's allocated vertices (0 if none). Pass
-/// `margin = 0` for the structure of the current δ.
-pub fn build_blocks(g: &SurfaceGridRef, levels: &[f32], margin: f32) -> Result<Vec<u32>> {
+/// δ), then the `nb`³ block masks of 2^shift-cell blocks, `nb = ceil((n−1)/2^shift)`, x-major:
+/// bit i set iff τ_i ∈ [bmin − margin, bmax + margin] over the block's allocated vertices (0 if
+/// none). Pass `margin = 0` for the structure of the current δ.
+pub fn build_blocks(
+    g: &SurfaceGridRef,
+    levels: &[f32],
+    margin: f32,
+    shift: u32,
+) -> Result<Vec<u32>> {
     g.validate()?;
     ensure!(
         levels.len() <= SURF_MAX_LEVELS,
@@ -30,15 +34,18 @@ pub fn build_blocks(g: &SurfaceGridRef, levels: &[f32], margin: f32) -> Result<V
         "block margin must be finite and ≥ 0, got {margin}"
     );
     let n = g.n;
-    let nb = surf_blocks_per_axis(n);
+    ensure!(
+        (1..=8).contains(&shift),
+        "block shift {shift}: want 2 to 256 cells per block edge"
+    );
+    let nb = surf_blocks_per_axis(n, shift);
     let mut out = live_cells(g, levels, margin);
     out.extend(
         (0..nb * nb * nb)
             .into_par_iter()
             .map(|b| {
-                let l =
-                    [b / (nb * nb), (b / nb) % nb, b % nb].map(|x| (x as i32) << SURF_BLOCK_SHIFT);
-                let (lo, hi) = surf_block_box(l, n as i32);
+                let l = [b / (nb * nb), (b / nb) % nb, b % nb].map(|x| (x as i32) << shift);
+                let (lo, hi) = surf_block_box(l, n as i32, shift);
                 let (v0, v1) = (lo.map(|x| x as u32), hi.map(|x| x as u32));
                 let (mut bmin, mut bmax) = (SURF_BLOCK_BIG, -SURF_BLOCK_BIG);
                 for x in v0[0]..=v1[0] {
@@ -134,6 +141,7 @@ pub fn complete_cells(links: &[i32], n: u32) -> Vec<u32> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::math::surface_blocks::SURF_BLOCK_SHIFT_CPU;
 
     /// A 3³-vertex grid (8 cells), every vertex allocated with δ = its slot index.
     fn ramp() -> (Vec<i32>, Vec<f32>) {
@@ -149,7 +157,7 @@ mod tests {
             opacity: &o,
             sh: &sh,
         };
-        build_blocks(&g, levels, margin).unwrap()[0]
+        build_blocks(&g, levels, margin, SURF_BLOCK_SHIFT_CPU).unwrap()[0]
     }
 
     #[test]

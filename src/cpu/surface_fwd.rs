@@ -9,7 +9,8 @@ use crate::math::surface::{
     SURF_MAX_LEVELS,
 };
 use crate::math::surface_blocks::{
-    surf_block_index, surf_block_skip, surf_blocks_per_axis, surf_live_words, SURF_NO_BLOCK,
+    surf_block_index, surf_block_skip, surf_blocks_per_axis, surf_live_words, SkipRef,
+    SURF_NO_BLOCK,
 };
 use crate::math::trilerp::trilerp_weights;
 use anyhow::{ensure, Result};
@@ -89,7 +90,7 @@ pub struct WalkCell {
 pub struct CellWalk<'a> {
     g: &'a SurfaceGridRef<'a>,
     levels: &'a [f32],
-    blocks: Option<&'a [u32]>,
+    blocks: Option<SkipRef<'a>>,
     dn: [f32; 3],
     w: Dda,
     skipped: u32,
@@ -102,7 +103,7 @@ impl<'a> CellWalk<'a> {
         og: [f32; 3],
         dn: [f32; 3],
         levels: &'a [f32],
-        blocks: Option<&'a [u32]>,
+        blocks: Option<SkipRef<'a>>,
     ) -> Self {
         CellWalk {
             g,
@@ -123,15 +124,23 @@ impl Iterator for CellWalk<'_> {
         let g = self.g;
         let n = g.n as usize;
         let (nz, nyz) = (n, n * n);
-        let nb = surf_blocks_per_axis(g.n);
         let words = surf_live_words(g.n) as usize;
         while let Some(piece) = dda_next(&mut self.w) {
             let l = piece.cell;
             let base = dda_cell_index(l, g.n) as usize;
-            if let Some(skip) = self.blocks {
-                let bi = surf_block_index(l, nb);
+            if let Some(SkipRef { words: skip, shift }) = self.blocks {
+                let nb = surf_blocks_per_axis(g.n, shift);
+                let bi = surf_block_index(l, nb, shift);
                 if skip[words + bi as usize] == 0
-                    && surf_block_skip(&mut self.w, self.dn, g.n as i32, l, bi, &mut self.skipped)
+                    && surf_block_skip(
+                        &mut self.w,
+                        self.dn,
+                        g.n as i32,
+                        l,
+                        bi,
+                        &mut self.skipped,
+                        shift,
+                    )
                 {
                     self.counts[3] += 1;
                     continue;
@@ -173,7 +182,7 @@ pub fn render_ray(
     ro: [f32; 3],
     rd: [f32; 3],
     p: &SurfaceParams,
-    blocks: Option<&[u32]>,
+    blocks: Option<SkipRef>,
 ) -> (SurfOut, SurfCounts) {
     let levels = &p.levels[..p.levels.len().min(SURF_MAX_LEVELS)];
     let (og, dn) = surf_ray(ro, rd, p.scale, p.offset);
@@ -237,9 +246,13 @@ pub fn render_ray(
 }
 
 /// The block-mask count must match the grid (`nb`³, `math::surface_blocks`).
-pub fn validate_blocks(g: &SurfaceGridRef, blocks: Option<&[u32]>) -> Result<()> {
-    if let Some(b) = blocks {
-        let nb = surf_blocks_per_axis(g.n) as usize;
+pub fn validate_blocks(g: &SurfaceGridRef, blocks: Option<SkipRef>) -> Result<()> {
+    if let Some(SkipRef { words: b, shift }) = blocks {
+        ensure!(
+            (1..=8).contains(&shift),
+            "skip structure with 2^{shift}-cell blocks (want 2 to 256 cells)"
+        );
+        let nb = surf_blocks_per_axis(g.n, shift) as usize;
         let words = surf_live_words(g.n) as usize;
         ensure!(
             b.len() == words + nb * nb * nb,
@@ -270,7 +283,7 @@ pub fn render(
     g: &SurfaceGridRef,
     rays: &[f32],
     p: &SurfaceParams,
-    blocks: Option<&[u32]>,
+    blocks: Option<SkipRef>,
 ) -> Result<(Vec<SurfOut>, SurfCounts)> {
     validate_inputs(g, rays, p)?;
     validate_blocks(g, blocks)?;

@@ -31,6 +31,7 @@ use crate::math::sh::sh_basis;
 use crate::math::surface::{
     surf_alpha, surf_cell_hits, surf_gamma, surf_local, surf_ray, SURF_MAX_LEVELS,
 };
+use crate::math::surface_blocks::SkipRef;
 use crate::math::trilerp::trilerp_weights;
 use anyhow::{ensure, Result};
 use rayon::prelude::*;
@@ -43,7 +44,7 @@ pub const FPRIME_GUARD: f32 = 1e-3;
 
 /// Counters summed over rays: cells read (live cells: corners loaded), cubic solves, solves skipped by min/max culling,
 /// hits composited, hits cut off by truncation, hits whose δ gradient was dropped by the f′ guard,
-/// gradient atomic adds, 8³-cell blocks skipped.
+/// gradient atomic adds, empty-space blocks skipped.
 pub type TrainCounts = [u32; 8];
 
 /// Loss weights of the fused per-ray terms (per-ray coefficients: the batch mean is the caller's).
@@ -107,7 +108,7 @@ pub fn trace_ray(
     ro: [f32; 3],
     rd: [f32; 3],
     p: &SurfaceParams,
-    blocks: Option<&[u32]>,
+    blocks: Option<SkipRef>,
     cnt: &mut TrainCounts,
 ) -> Trace {
     let levels = &p.levels[..p.levels.len().min(SURF_MAX_LEVELS)];
@@ -239,7 +240,7 @@ pub fn train(
     targets: &[f32],
     p: &SurfaceParams,
     loss: &SurfaceLoss,
-    blocks: Option<&[u32]>,
+    blocks: Option<SkipRef>,
     grads: SurfaceGrads,
 ) -> Result<(Vec<RayLoss>, TrainCounts)> {
     validate_inputs(g, rays, p)?;
@@ -422,7 +423,7 @@ fn train_ray(
     target: [f32; 3],
     p: &SurfaceParams,
     loss: &SurfaceLoss,
-    blocks: Option<&[u32]>,
+    blocks: Option<SkipRef>,
     out: &Scatter,
 ) -> (RayLoss, TrainCounts) {
     let mut cnt: TrainCounts = [0; 8];

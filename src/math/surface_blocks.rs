@@ -2,18 +2,21 @@
 //! `glsl/lib/surface_blocks.glsl` (same operations in the same order; that file has the
 //! conventions and the exactness argument).
 //!
-//! A block is 8³ cells: block b (per axis) covers cells [8b, 8b+8) ∩ [0, n−2], i.e. the vertex
-//! range [8b, min(8b+8, n−1)]; `nb = ceil((n−1)/8)` blocks per axis, x-major. A block's level mask
-//! has bit i set iff τ_i ∈ [bmin − margin, bmax + margin] over its allocated vertices (0 if none):
-//! a block with mask 0 holds no hit, and the walk jumps over it with [`surf_block_skip`].
+//! A block is B³ cells, B = 2^shift (the backend's choice: [`SURF_BLOCK_SHIFT_CPU`],
+//! [`SURF_BLOCK_SHIFT_VULKAN`]): block b (per axis) covers cells [Bb, Bb+B) ∩ [0, n−2], i.e. the
+//! vertex range [Bb, min(Bb+B, n−1)]; `nb = ceil((n−1)/B)` blocks per axis, x-major. A block's
+//! level mask has bit i set iff τ_i ∈ [bmin − margin, bmax + margin] over its allocated vertices
+//! (0 if none): a block with mask 0 holds no hit, and the walk jumps over it with
+//! [`surf_block_skip`].
 //!
-//! Use in a walk loop (as in `cpu::surface_fwd::render_ray`):
+//! Use in a walk loop (as in `cpu::surface_fwd::CellWalk`):
 //! ```text
 //! let mut w = dda_init(og, dn, n, 0.0);
 //! let mut skipped = SURF_NO_BLOCK;
 //! while let Some(piece) = dda_next(&mut w) {
-//!     let bi = surf_block_index(piece.cell, nb);
-//!     if blocks[bi as usize] == 0 && surf_block_skip(&mut w, dn, n, piece.cell, bi, &mut skipped)
+//!     let bi = surf_block_index(piece.cell, nb, shift);
+//!     if blocks[bi as usize] == 0
+//!         && surf_block_skip(&mut w, dn, n, piece.cell, bi, &mut skipped, shift)
 //!     {
 //!         continue; // w restarts at the block's exit
 //!     }
@@ -23,15 +26,26 @@
 
 use super::dda::{dda_flush, Dda, DDA_BIG};
 
-/// Block edge in cells, and its log2.
-pub const SURF_BLOCK: i32 = 8;
-pub const SURF_BLOCK_SHIFT: i32 = 3;
+/// log2 of the block edge each backend skips with, measured with `bench surface` (128³ thin
+/// scene, rays/s): the CPU twins 222–236k with 8³ blocks against 203–208k with 4³ (a restart costs
+/// a scalar walk more than the cells it jumps); lavapipe 75–78k with 4³ against 69–70k with 8³ and
+/// 63–66k with 2³ (a walk step costs its SIMD lanes more than a restart).
+pub const SURF_BLOCK_SHIFT_CPU: u32 = 3;
+pub const SURF_BLOCK_SHIFT_VULKAN: u32 = 2;
 /// "No block skipped yet" (an index no block has).
 pub const SURF_NO_BLOCK: u32 = u32::MAX;
 
-/// Blocks per axis of an `n`³-vertex grid (n ≥ 2): ceil((n − 1)/8).
-pub fn surf_blocks_per_axis(n: u32) -> u32 {
-    (n + (SURF_BLOCK - 2) as u32) >> SURF_BLOCK_SHIFT
+/// A walk's skip structure (`cpu::surface_blocks::build_blocks`): the live-cell words, then the
+/// nb³ block masks of 2^shift-cell blocks.
+#[derive(Clone, Copy, Debug)]
+pub struct SkipRef<'a> {
+    pub words: &'a [u32],
+    pub shift: u32,
+}
+
+/// Blocks per axis of an `n`³-vertex grid (n ≥ 2) with 2^shift-cell blocks: ceil((n − 1)/2^shift).
+pub fn surf_blocks_per_axis(n: u32, shift: u32) -> u32 {
+    (n + (1 << shift) - 2) >> shift
 }
 
 /// Words of live-cell bits of an `n`³-vertex grid: ⌈n³/32⌉ (at least 1). The walks' skip
@@ -42,17 +56,17 @@ pub fn surf_live_words(n: u32) -> u32 {
 }
 
 /// Linear index of the block holding cell `l`.
-pub fn surf_block_index(l: [i32; 3], nb: u32) -> u32 {
-    let b = l.map(|x| (x >> SURF_BLOCK_SHIFT) as u32);
+pub fn surf_block_index(l: [i32; 3], nb: u32, shift: u32) -> u32 {
+    let b = l.map(|x| (x >> shift) as u32);
     (b[0] * nb + b[1]) * nb + b[2]
 }
 
 /// Vertex box `(lo, hi)` of the block holding cell `l` (grid of `n`³ vertices).
-pub fn surf_block_box(l: [i32; 3], n: i32) -> ([f32; 3], [f32; 3]) {
-    let b0 = l.map(|x| (x >> SURF_BLOCK_SHIFT) << SURF_BLOCK_SHIFT);
+pub fn surf_block_box(l: [i32; 3], n: i32, shift: u32) -> ([f32; 3], [f32; 3]) {
+    let b0 = l.map(|x| (x >> shift) << shift);
     (
         b0.map(|x| x as f32),
-        b0.map(|x| (x + SURF_BLOCK).min(n - 1) as f32),
+        b0.map(|x| (x + (1 << shift)).min(n - 1) as f32),
     )
 }
 
@@ -77,8 +91,8 @@ pub fn surf_block_mask(bmin: f32, bmax: f32, margin: f32, levels: &[f32]) -> u32
 /// t at which walk `w` leaves the block holding cell `l`: min over moving axes of the block's
 /// far-plane crossing `(k − o)·(1/d)` (o, 1/d as stored in `w`), bit-identical to
 /// `ray_box(og, dn, block box, ·)[1]` (see the GLSL).
-pub fn surf_block_exit(w: &Dda, l: [i32; 3], n: i32) -> f32 {
-    let (lo, hi) = surf_block_box(l, n);
+pub fn surf_block_exit(w: &Dda, l: [i32; 3], n: i32, shift: u32) -> f32 {
+    let (lo, hi) = surf_block_box(l, n, shift);
     let mut t = DDA_BIG;
     for a in 0..3 {
         if w.step[a] == 0 {
@@ -127,11 +141,12 @@ pub fn surf_block_skip(
     l: [i32; 3],
     bi: u32,
     skipped: &mut u32,
+    shift: u32,
 ) -> bool {
     if bi == *skipped {
         return false;
     }
-    let t = surf_block_exit(w, l, n);
+    let t = surf_block_exit(w, l, n, shift);
     surf_dda_restart(w, dn, n, t);
     *skipped = bi;
     true
@@ -145,24 +160,33 @@ mod tests {
     use rand_pcg::Pcg64;
 
     /// The skipping walk's pieces, and the number of skips.
-    fn skip_walk(og: [f32; 3], dn: [f32; 3], n: i32, blocks: &[u32]) -> (Vec<DdaPiece>, usize) {
-        let nb = surf_blocks_per_axis(n as u32);
+    fn skip_walk(
+        og: [f32; 3],
+        dn: [f32; 3],
+        n: i32,
+        blocks: &[u32],
+        shift: u32,
+    ) -> (Vec<DdaPiece>, usize) {
+        let nb = surf_blocks_per_axis(n as u32, shift);
         let mut w = dda_init(og, dn, n, 0.0);
         let mut skipped = SURF_NO_BLOCK;
         let mut out = Vec::new();
         let mut skips = 0;
         while let Some(p) = dda_next(&mut w) {
-            let bi = surf_block_index(p.cell, nb);
+            let bi = surf_block_index(p.cell, nb, shift);
             if blocks[bi as usize] == 0 {
                 // The cheap exit and restart are the slab test and dda_init, bit for bit.
-                let (lo, hi) = surf_block_box(p.cell, n);
+                let (lo, hi) = surf_block_box(p.cell, n, shift);
                 let t_exit = ray_box(og, dn, lo, hi, p.t0)[1];
-                assert_eq!(surf_block_exit(&w, p.cell, n).to_bits(), t_exit.to_bits());
+                assert_eq!(
+                    surf_block_exit(&w, p.cell, n, shift).to_bits(),
+                    t_exit.to_bits()
+                );
                 let mut r = w;
                 surf_dda_restart(&mut r, dn, n, t_exit);
                 let want = dda_init(og, dn, n, t_exit);
                 assert_eq!(format!("{r:?}"), format!("{want:?}"), "restart at {t_exit}");
-                if surf_block_skip(&mut w, dn, n, p.cell, bi, &mut skipped) {
+                if surf_block_skip(&mut w, dn, n, p.cell, bi, &mut skipped, shift) {
                     skips += 1;
                     continue;
                 }
@@ -174,20 +198,28 @@ mod tests {
 
     #[test]
     fn sizes_and_boxes() {
-        assert_eq!(surf_blocks_per_axis(2), 1);
-        assert_eq!(surf_blocks_per_axis(9), 1);
-        assert_eq!(surf_blocks_per_axis(10), 2);
-        assert_eq!(surf_blocks_per_axis(129), 16);
-        assert_eq!(surf_blocks_per_axis(128), 16);
+        assert_eq!(surf_blocks_per_axis(2, 3), 1);
+        assert_eq!(surf_blocks_per_axis(9, 3), 1);
+        assert_eq!(surf_blocks_per_axis(10, 3), 2);
+        assert_eq!(surf_blocks_per_axis(129, 3), 16);
+        assert_eq!(surf_blocks_per_axis(128, 3), 16);
+        assert_eq!(surf_blocks_per_axis(5, 2), 1);
+        assert_eq!(surf_blocks_per_axis(6, 2), 2);
+        assert_eq!(surf_blocks_per_axis(128, 2), 32);
         assert_eq!(
-            surf_block_box([9, 0, 15], 20),
+            surf_block_box([9, 0, 15], 20, 3),
             ([8.0, 0.0, 8.0], [16.0, 8.0, 16.0])
         );
         assert_eq!(
-            surf_block_box([17, 16, 18], 20),
+            surf_block_box([17, 16, 18], 20, 3),
             ([16.0, 16.0, 16.0], [19.0, 19.0, 19.0])
         );
-        assert_eq!(surf_block_index([17, 3, 9], 3), 19);
+        assert_eq!(
+            surf_block_box([9, 0, 15], 20, 2),
+            ([8.0, 0.0, 12.0], [12.0, 4.0, 16.0])
+        );
+        assert_eq!(surf_block_index([17, 3, 9], 3, 3), 19);
+        assert_eq!(surf_block_index([17, 3, 9], 5, 2), (4 * 5) * 5 + 2);
         assert_eq!(
             surf_block_mask(SURF_BLOCK_BIG, -SURF_BLOCK_BIG, 1.0, &[0.0]),
             0
@@ -204,15 +236,18 @@ mod tests {
     fn skipping_walk_reproduces_the_live_pieces() {
         let mut rng = Pcg64::seed_from_u64(3);
         let mut total_skips = 0;
-        for case in 0..4000 {
+        for case in 0..8000 {
             let n = [2, 9, 10, 17, 20, 33, 40][case % 7];
-            let nb = surf_blocks_per_axis(n as u32) as usize;
+            // Both backends' block edges, 8 and 4.
+            let shift = [SURF_BLOCK_SHIFT_CPU, SURF_BLOCK_SHIFT_VULKAN][(case / 7) % 2];
+            let nb = surf_blocks_per_axis(n as u32, shift) as usize;
             let p_dead = [0.3, 0.7, 0.95][case % 3];
             let blocks: Vec<u32> = (0..nb * nb * nb)
                 .map(|_| u32::from(rng.random::<f64>() >= p_dead))
                 .collect();
             let nf = n as f32;
-            let bf = |rng: &mut Pcg64| (rng.random_range(0..=nb) * 8).min(n as usize - 1) as f32;
+            let bf =
+                |rng: &mut Pcg64| (rng.random_range(0..=nb) << shift).min(n as usize - 1) as f32;
             let (og, d): ([f32; 3], [f32; 3]) = match case % 6 {
                 // Axis-aligned along block faces / edges.
                 0 => {
@@ -234,7 +269,7 @@ mod tests {
                     std::array::from_fn(|_| rng.random_range(0.0..nf - 1.0)),
                     std::array::from_fn(|_| rng.random_range(-1.0..1.0)),
                 ),
-                // Grazing a block face: in the plane x = 8k, tilted in y and z.
+                // Grazing a block face: in the plane x = Bk, tilted in y and z.
                 3 => {
                     let mut g = [bf(&mut rng), -1.0, rng.random_range(0.0..nf - 1.0)];
                     g[1] = -1.5;
@@ -255,12 +290,12 @@ mod tests {
             };
             let dn = ray_unit(d);
             let want: Vec<DdaPiece> = dda_init(og, dn, n, 0.0)
-                .filter(|p| blocks[surf_block_index(p.cell, nb as u32) as usize] != 0)
+                .filter(|p| blocks[surf_block_index(p.cell, nb as u32, shift) as usize] != 0)
                 .collect();
-            let (got, skips) = skip_walk(og, dn, n, &blocks);
+            let (got, skips) = skip_walk(og, dn, n, &blocks, shift);
             assert_eq!(got, want, "case {case}: n {n} og {og:?} dn {dn:?}");
             total_skips += skips;
         }
-        assert!(total_skips > 5000, "only {total_skips} skips");
+        assert!(total_skips > 10000, "only {total_skips} skips");
     }
 }

@@ -12,6 +12,7 @@ use crate::cpu::surface_train::{train, SurfaceGrads};
 use crate::cpu::{surface_rmsprop_sparse, tv, Stage2Params, SurfaceRmsProp};
 use crate::grid::surface::SurfaceGrid;
 use crate::grid::SH_DIM;
+use crate::math::surface_blocks::{SkipRef, SURF_BLOCK_SHIFT_CPU};
 use anyhow::{ensure, Result};
 
 /// Host-resident stage-2 state.
@@ -52,7 +53,12 @@ impl CpuSurface {
     /// Rebuild the block masks when δ may have drifted past their margin.
     fn refresh_blocks(&mut self, lr_delta: f32, beta: f32) -> Result<()> {
         if let Some(margin) = self.refresh.before_pass(lr_delta, beta) {
-            self.blocks = build_blocks(&self.grid.as_ref(), &self.grid.levels, margin)?;
+            self.blocks = build_blocks(
+                &self.grid.as_ref(),
+                &self.grid.levels,
+                margin,
+                SURF_BLOCK_SHIFT_CPU,
+            )?;
         }
         Ok(())
     }
@@ -144,7 +150,10 @@ impl SurfaceBackend for CpuSurface {
             targets,
             &sp,
             &batch_loss(n, p),
-            Some(&self.blocks),
+            Some(SkipRef {
+                words: &self.blocks,
+                shift: SURF_BLOCK_SHIFT_CPU,
+            }),
             SurfaceGrads {
                 delta: gd,
                 opacity: go,
@@ -170,7 +179,11 @@ impl SurfaceBackend for CpuSurface {
     fn render(&mut self, rays: &[f32], a: f32, stop_thresh: f32) -> Result<(Vec<f32>, SurfCounts)> {
         let sp = surface_params(&self.grid, a, stop_thresh);
         self.refresh_blocks(0.0, 0.0)?;
-        let (out, counts) = render(&self.grid.as_ref(), rays, &sp, Some(&self.blocks))?;
+        let skip = SkipRef {
+            words: &self.blocks,
+            shift: SURF_BLOCK_SHIFT_CPU,
+        };
+        let (out, counts) = render(&self.grid.as_ref(), rays, &sp, Some(skip))?;
         Ok((out.iter().flat_map(|o| o.rgb).collect(), counts))
     }
 

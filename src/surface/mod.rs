@@ -151,7 +151,7 @@ pub trait SurfaceBackend {
     fn load(&mut self, grid: SurfaceGrid, state: Option<SurfaceState>) -> Result<()>;
 }
 
-/// Passes between rebuilds of the 8³-cell block masks the walks skip with (see [`BlockRefresh`]).
+/// Passes between rebuilds of the block masks the walks skip with (see [`BlockRefresh`]).
 pub const BLOCK_REFRESH_STEPS: f32 = 16.0;
 
 /// When the block masks (`surface_blocks`) must be rebuilt. Masks built with margin M stay exact

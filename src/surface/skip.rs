@@ -19,12 +19,14 @@ pub struct SkipIo {
     pub skip: u64,
     pub n: u32,
     pub n_levels: u32,
+    /// log2 of the block edge in cells.
+    pub shift: u32,
 }
 
 /// Record both kernels for δ ranges widened by `margin`.
 pub fn record_skip_structure(b: &mut Batch, io: &SkipIo, margin: f32) -> Result<()> {
     let words = surf_live_words(io.n);
-    let nb = surf_blocks_per_axis(io.n);
+    let nb = surf_blocks_per_axis(io.n, io.shift);
     b.dispatch_1d(
         &kernels::surface_live_cells::INFO,
         &kernels::surface_live_cells::Push {
@@ -50,7 +52,7 @@ pub fn record_skip_structure(b: &mut Batch, io: &SkipIo, margin: f32) -> Result<
             n: io.n,
             n_levels: io.n_levels,
             margin,
-            ..Default::default()
+            block_shift: io.shift,
         },
         nb * nb * nb,
     )

@@ -26,7 +26,7 @@ use crate::grid::surface::SurfaceGrid;
 use crate::grid::SH_DIM;
 use crate::kernels;
 use crate::math::surface::{SurfOut, SURF_MAX_LEVELS};
-use crate::math::surface_blocks::{surf_blocks_per_axis, surf_live_words};
+use crate::math::surface_blocks::{surf_blocks_per_axis, surf_live_words, SURF_BLOCK_SHIFT_VULKAN};
 use anyhow::{ensure, Result};
 
 /// Floats in the params buffer of `surface_train` (layout in the kernel's header).
@@ -141,7 +141,7 @@ impl VulkanSurface {
             links: gpu.upload(&grid.links)?,
             complete: {
                 let mut words = complete_cells(&grid.links, grid.res[0]);
-                let nb = surf_blocks_per_axis(grid.res[0]) as usize;
+                let nb = surf_blocks_per_axis(grid.res[0], SURF_BLOCK_SHIFT_VULKAN) as usize;
                 words.resize(2 * words.len() + nb * nb * nb, 0);
                 gpu.upload(&words)?
             },
@@ -245,7 +245,7 @@ impl VulkanSurface {
                 n: self.meta.res[0],
                 n_rays: n as u32,
                 n_levels: self.meta.levels.len() as u32,
-                ..Default::default()
+                block_shift: SURF_BLOCK_SHIFT_VULKAN,
             },
             n as u32,
         )?;
@@ -258,7 +258,7 @@ impl VulkanSurface {
     }
 
     /// Record `surface_live_cells` and `surface_blocks`: the skip structure of the current δ
-    /// (live-cell bits, and level masks per 8³-cell block), ranges widened by `margin` (see
+    /// (live-cell bits, and level masks per 4³-cell block), ranges widened by `margin` (see
     /// `BlockRefresh`), so the walks skip only cells and blocks that cannot hold a hit.
     fn record_blocks(&self, b: &mut Batch, margin: f32) -> Result<()> {
         record_skip_structure(
@@ -271,6 +271,7 @@ impl VulkanSurface {
                 skip: self.skip_address(),
                 n: self.meta.res[0],
                 n_levels: self.meta.levels.len() as u32,
+                shift: SURF_BLOCK_SHIFT_VULKAN,
             },
             margin,
         )
@@ -501,6 +502,8 @@ impl SurfaceBackend for VulkanSurface {
                 stop_thresh,
                 blocks: self.skip_address(),
                 block_skip: 1,
+                block_shift: SURF_BLOCK_SHIFT_VULKAN,
+                ..Default::default()
             },
             n as u32,
         )?;

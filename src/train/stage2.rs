@@ -37,7 +37,7 @@ pub struct Stage2Report {
     pub final_mse: f64,
     pub test_psnr: f64,
     /// Per training ray: cells read (live cells), cubic solves, solves skipped by min/max culling, hits,
-    /// hits cut by truncation, hits with a guarded δ gradient, gradient atomic adds, 8³-cell
+    /// hits cut by truncation, hits with a guarded δ gradient, gradient atomic adds, empty-space
     /// blocks skipped.
     pub per_ray: [f64; 8],
     pub vertices_before_prune: usize,
