@@ -102,7 +102,15 @@ fn vulkan_steps_match_cpu_steps() {
             );
         }
         assert_eq!(sv.counts[3], sc.counts[3], "step {step} hits");
-        for i in [0, 1, 2, 4, 5, 6, 7] {
+        // Counter 7 counts skipped blocks, whose edge differs by backend (SURF_BLOCK_SHIFT_*:
+        // 4³ on Vulkan, 8³ on the CPU): more, smaller ones on Vulkan.
+        assert!(
+            sv.counts[7] > sc.counts[7] && sc.counts[7] > 0,
+            "step {step} blocks skipped: vulkan {} cpu {}",
+            sv.counts[7],
+            sc.counts[7]
+        );
+        for i in [0, 1, 2, 4, 5, 6] {
             let (v, c) = (sv.counts[i] as f64, sc.counts[i] as f64);
             assert!(
                 (v - c).abs() <= 1e-3 * c + 2.0,
