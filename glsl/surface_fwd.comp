@@ -83,7 +83,14 @@ void main() {
     uint words = surf_live_words(n);
     uint skipped = SURF_NO_BLOCK;
     bool done = false;
-    Dda w = dda_init(og, dn, int(n), 0.0);
+    // With the skip structure, only the span inside the allocated box (surface_blocks.glsl).
+    vec2 span = vec2(0.0, DDA_BIG);
+    if (pc.block_skip != 0u) {
+        uint bx = words + nb * nb * nb;
+        span = surf_box_span(og, dn, uvec3(pc.blocks.v[bx], pc.blocks.v[bx + 1u], pc.blocks.v[bx + 2u]),
+                             uvec3(pc.blocks.v[bx + 3u], pc.blocks.v[bx + 4u], pc.blocks.v[bx + 5u]));
+    }
+    Dda w = dda_init(og, dn, int(n), span.x < span.y ? span.x : DDA_BIG);
     ivec3 l;
     float t0, t1;
     int lk[8];
@@ -95,6 +102,7 @@ void main() {
         // one solving while the others idle through empty cells.
         bool found = false;
         while (dda_next(w, l, t0, t1)) {
+            if (t0 >= span.y) break; // past the allocated box
             uint base = dda_cell_index(l, n);
             if (pc.block_skip != 0u) {
                 uint bi = surf_block_index(l, nb, pc.block_shift);

@@ -199,7 +199,6 @@ void main() {
     float T = 1.0;
     uint j = 0u;
     bool done = false;
-    Dda w = dda_init(og, dn, int(n), 0.0);
     ivec3 l;
     float t0, t1;
     int lk[8];
@@ -208,10 +207,16 @@ void main() {
     uint nb = surf_blocks_per_axis(n, pc.block_shift);
     uint bbase = surf_live_words(n);
     uint skipped = SURF_NO_BLOCK;
+    // Only the span inside the allocated box (surface_blocks.glsl).
+    uint bx = bbase + nb * nb * nb;
+    vec2 span = surf_box_span(og, dn, uvec3(pc.skip.v[bx], pc.skip.v[bx + 1u], pc.skip.v[bx + 2u]),
+                              uvec3(pc.skip.v[bx + 3u], pc.skip.v[bx + 4u], pc.skip.v[bx + 5u]));
+    Dda w = dda_init(og, dn, int(n), span.x < span.y ? span.x : DDA_BIG);
     while (!done) {
         // Walk on to the next cell where some level can cross before solving (as surface_fwd).
         bool found = false;
         while (dda_next(w, l, t0, t1)) {
+            if (t0 >= span.y) break; // past the allocated box
             uint bi = surf_block_index(l, nb, pc.block_shift);
             if (pc.skip.v[bbase + bi] == 0u
                 && surf_block_skip(w, dn, int(n), l, bi, skipped, pc.block_shift)) {

@@ -15,6 +15,7 @@ use alphasurf::gpu::test_gpu;
 use alphasurf::math::surface::SurfOut;
 use alphasurf::math::surface_blocks::{
     surf_blocks_per_axis, surf_live_words, SkipRef, SURF_BLOCK_SHIFT_CPU, SURF_BLOCK_SHIFT_VULKAN,
+    SURF_BOX_WORDS,
 };
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
@@ -533,7 +534,10 @@ fn block_skipping_is_exact_and_saves_cells() {
             }
         }
         let blocks = build_blocks(&sc.grid(), &sc.levels, 0.0, SHIFT).unwrap();
-        let live = vec![u32::MAX; blocks.len()];
+        // Every cell and block live; the allocated box kept.
+        let mut live = vec![u32::MAX; blocks.len()];
+        let bw = blocks.len() - SURF_BOX_WORDS;
+        live[bw..].copy_from_slice(&blocks[bw..]);
         let mut rays = test_rays(&sc, seed, 1500);
         for (g, d) in block_rays(n, &blocks, seed, 1500) {
             rays.extend_from_slice(&sc.grid_to_scene(g));
@@ -609,7 +613,7 @@ fn planar_field_one_live_block() {
     // 8³ blocks: the patch lies in one.
     let blocks = build_blocks(&sc.grid(), &sc.levels, 0.0, SURF_BLOCK_SHIFT_CPU).unwrap();
     let words = surf_live_words(n) as usize;
-    let masks = &blocks[words..];
+    let masks = &blocks[words..blocks.len() - SURF_BOX_WORDS];
     let live: Vec<usize> = (0..masks.len()).filter(|&b| masks[b] != 0).collect();
     assert_eq!(live, vec![(4 + 1) * 4 + 1], "{masks:?}");
     // Live cells: the complete cells of the patch whose x extent holds the plane x = c (δ's

@@ -124,6 +124,21 @@ void surf_dda_restart(inout Dda w, vec3 dn, int n, float t) {
     }
 }
 
+// Words after the block masks in a skip structure: the box of the allocated vertices, lo x, y, z
+// then hi x, y, z (vertex coordinates; lo > hi when nothing is allocated; written once per grid,
+// Rust cpu::surface_blocks::alloc_box). A cell the walk can solve has its 8 corners allocated, so
+// it lies inside: a walk runs from dda_init(og, dn, n, t_in) and ends at the first piece entered
+// at t_out or later. Exact: t_in is a plane crossing computed with the DDA's own formula
+// (ray_box), and dda_init at such a t is the continuous walk's state there (as for a block exit).
+const uint SURF_BOX_WORDS = 6u;
+
+// The span (t_in, t_out) of the ray inside the allocated box [lo, hi]; t_in ≥ t_out (or NaN) when
+// it misses it.
+vec2 surf_box_span(vec3 og, vec3 dn, uvec3 lo, uvec3 hi) {
+    if (any(greaterThan(lo, hi))) return vec2(DDA_BIG, -DDA_BIG);
+    return ray_box(og, dn, vec3(lo), vec3(hi), 0.0);
+}
+
 // Called when the walk w (started as dda_init(og, dn, n, ·)) has just produced the piece of cell l
 // whose block bi has mask 0: unless bi is the block skipped last, restarts w at the block's exit,
 // records bi in `skipped` and returns true (the caller drops the cell and continues with

@@ -7,7 +7,7 @@
 
 use super::surface_fwd::test_scene;
 use super::{CheckRow, Compare};
-use crate::cpu::surface_blocks::{build_blocks, complete_cells};
+use crate::cpu::surface_blocks::{alloc_box, build_blocks, complete_cells};
 use crate::gpu::Gpu;
 use crate::math::surface_blocks::{
     surf_blocks_per_axis, surf_live_words, SURF_BLOCK_SHIFT_CPU, SURF_BLOCK_SHIFT_VULKAN,
@@ -18,7 +18,8 @@ use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
 
 /// Runs `surface_live_cells` and `surface_blocks` on the device: the skip structure (live-cell
-/// words, then the `nb`³ block masks) and the device time of both (ns).
+/// words, then the `nb`³ block masks, then the host's allocated box) and the device time of both
+/// (ns).
 pub fn build_blocks_gpu(
     gpu: &Gpu,
     n: u32,
@@ -37,7 +38,10 @@ pub fn build_blocks_gpu(
     let lb = gpu.upload(links)?;
     let db = gpu.upload(if delta.is_empty() { &[0.0] } else { delta })?;
     let vb = gpu.upload(&lv)?;
-    let out = gpu.zeros::<u32>((words + count) as usize)?;
+    // The allocated box after the masks is written once per grid by the host (as VulkanSurface).
+    let mut init = vec![0u32; (words + count) as usize];
+    init.extend(alloc_box(links, n));
+    let out = gpu.upload(&init)?;
     let mut b = gpu.batch()?;
     record_skip_structure(
         &mut b,
@@ -114,10 +118,11 @@ fn compare(gpu: &Gpu, seed: u64, live_part: bool) -> Result<CheckRow> {
                     cmp.failures += 1;
                     continue;
                 }
+                let nb = surf_blocks_per_axis(n, shift) as usize;
                 let part = if live_part {
                     0..words
                 } else {
-                    words..want.len()
+                    words..words + nb * nb * nb
                 };
                 for i in part.clone() {
                     let (g, w) = (got[i], want[i]);
@@ -129,7 +134,7 @@ fn compare(gpu: &Gpu, seed: u64, live_part: bool) -> Result<CheckRow> {
                         )
                     });
                 }
-                live += want[words..].iter().filter(|&&m| m != 0).count();
+                live += want[part.clone()].iter().filter(|&&m| m != 0).count();
                 live_cells += want[..words]
                     .iter()
                     .map(|w| w.count_ones() as usize)

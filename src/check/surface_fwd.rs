@@ -21,7 +21,7 @@ use crate::gpu::Gpu;
 use crate::kernels::surface_fwd::{Push, INFO};
 use crate::math::surface::{SurfOut, SURF_MAX_LEVELS};
 use crate::math::surface_blocks::{
-    surf_live_words, SkipRef, SURF_BLOCK_SHIFT_CPU, SURF_BLOCK_SHIFT_VULKAN,
+    surf_live_words, SkipRef, SURF_BLOCK_SHIFT_CPU, SURF_BLOCK_SHIFT_VULKAN, SURF_BOX_WORDS,
 };
 use anyhow::Result;
 use rand::{Rng, SeedableRng};
@@ -286,12 +286,13 @@ pub fn check(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
     let real8 = build_blocks(&scene.grid(), &scene.levels, 0.0, SURF_BLOCK_SHIFT_CPU)?;
     let mut rng = Pcg64::seed_from_u64(seed ^ 0xb10c);
     let words = surf_live_words(scene.n) as usize;
+    let masks_end = real8.len() - SURF_BOX_WORDS;
     let random: Vec<u32> = real8
         .iter()
         .enumerate()
         .map(|(i, &w)| {
-            if i < words {
-                w // live-cell bits (exact), random block masks
+            if i < words || i >= masks_end {
+                w // live-cell bits and allocated box (exact), random block masks
             } else {
                 u32::from(rng.random::<f32>() < 0.4)
             }

@@ -7,6 +7,7 @@ use super::surface_fwd::SurfaceGridRef;
 use crate::math::surface::SURF_MAX_LEVELS;
 use crate::math::surface_blocks::{
     surf_block_box, surf_block_mask, surf_blocks_per_axis, surf_live_words, SURF_BLOCK_BIG,
+    SURF_BOX_WORDS,
 };
 use anyhow::{ensure, Result};
 use rayon::prelude::*;
@@ -16,7 +17,8 @@ use rayon::prelude::*;
 /// slot i has its 8 corners allocated and a level τ in [cmin − margin, cmax + margin] of their
 /// δ), then the `nb`³ block masks of 2^shift-cell blocks, `nb = ceil((n−1)/2^shift)`, x-major:
 /// bit i set iff τ_i ∈ [bmin − margin, bmax + margin] over the block's allocated vertices (0 if
-/// none). Pass `margin = 0` for the structure of the current δ.
+/// none), then the allocated box ([`alloc_box`]). Pass `margin = 0` for the structure of the
+/// current δ.
 pub fn build_blocks(
     g: &SurfaceGridRef,
     levels: &[f32],
@@ -66,7 +68,36 @@ pub fn build_blocks(
             })
             .collect::<Vec<u32>>(),
     );
+    out.extend(alloc_box(g.links, n));
     Ok(out)
+}
+
+/// The box of the allocated vertices (`math::surface_blocks::SURF_BOX_WORDS`): lo x, y, z, hi x,
+/// y, z in vertex coordinates of the `n`³ grid; [1, 1, 1, 0, 0, 0] when nothing is allocated.
+/// Depends on the allocation only.
+pub fn alloc_box(links: &[i32], n: u32) -> [u32; SURF_BOX_WORDS] {
+    let n = n as usize;
+    let (lo, hi) = links
+        .par_iter()
+        .enumerate()
+        .filter(|(_, &l)| l >= 0)
+        .map(|(s, _)| {
+            let v = [s / (n * n), (s / n) % n, s % n].map(|x| x as u32);
+            (v, v)
+        })
+        .reduce(
+            || ([u32::MAX; 3], [0; 3]),
+            |(a0, a1), (b0, b1)| {
+                (
+                    std::array::from_fn(|i| a0[i].min(b0[i])),
+                    std::array::from_fn(|i| a1[i].max(b1[i])),
+                )
+            },
+        );
+    if lo[0] == u32::MAX {
+        return [1, 1, 1, 0, 0, 0];
+    }
+    [lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]]
 }
 
 /// The live-cell words of [`build_blocks`] (as `surface_live_cells.comp`, which reads the cells'

@@ -2,15 +2,15 @@
 //! the same DDA walk (`math::dda`) with the same block skipping (`math::surface_blocks`), per-cell
 //! hits (`math::surface`) and compositing arithmetic.
 
-use crate::math::dda::{dda_cell_index, dda_init, dda_next, ray_unit, Dda, DdaPiece};
+use crate::math::dda::{dda_cell_index, dda_init, dda_next, ray_unit, Dda, DdaPiece, DDA_BIG};
 use crate::math::sh::sh_basis;
 use crate::math::surface::{
     surf_alpha, surf_cell_hits, surf_gamma, surf_level_mask, surf_local, surf_ray, SurfOut,
     SURF_MAX_LEVELS,
 };
 use crate::math::surface_blocks::{
-    surf_block_index, surf_block_skip, surf_blocks_per_axis, surf_live_words, SkipRef,
-    SURF_NO_BLOCK,
+    surf_block_index, surf_block_skip, surf_blocks_per_axis, surf_box_span, surf_live_words,
+    SkipRef, SURF_BOX_WORDS, SURF_NO_BLOCK,
 };
 use crate::math::trilerp::trilerp_weights;
 use anyhow::{ensure, Result};
@@ -83,8 +83,9 @@ pub struct WalkCell {
 }
 
 /// The cell walk both surface kernels share: DDA front to back from t = 0; with a skip structure
-/// (`blocks`, `cpu::surface_blocks::build_blocks`) cells of mask-0 blocks are skipped and cells
-/// whose live bit is clear are passed over unread; cells with an unallocated corner and cells no
+/// (`blocks`, `cpu::surface_blocks::build_blocks`) only over the ray's span inside the allocated
+/// box (`surf_box_span`), cells of mask-0 blocks are skipped and cells whose live bit is clear
+/// are passed over unread; cells with an unallocated corner and cells no
 /// level crosses are passed over. `counts` = cells read (corners loaded), cubic solves, solves
 /// culled, blocks skipped.
 pub struct CellWalk<'a> {
@@ -93,6 +94,9 @@ pub struct CellWalk<'a> {
     blocks: Option<SkipRef<'a>>,
     dn: [f32; 3],
     w: Dda,
+    /// With a skip structure: the walk ends at the first piece entered at this t (the ray's exit
+    /// from the allocated box).
+    t_out: f32,
     skipped: u32,
     pub counts: [u32; 4],
 }
@@ -105,12 +109,24 @@ impl<'a> CellWalk<'a> {
         levels: &'a [f32],
         blocks: Option<SkipRef<'a>>,
     ) -> Self {
+        // With a skip structure, only the span inside the allocated box (SURF_BOX_WORDS).
+        let [t_in, t_out] = match blocks {
+            Some(b) => surf_box_span(og, dn, &b.words[b.words.len() - SURF_BOX_WORDS..]),
+            None => [0.0, DDA_BIG],
+        };
         CellWalk {
             g,
             levels,
             blocks,
             dn,
-            w: dda_init(og, dn, g.n as i32, 0.0),
+            // A miss (t_in ≥ t_out, or NaN) starts past every grid: the walk ends at once.
+            w: dda_init(
+                og,
+                dn,
+                g.n as i32,
+                if t_in < t_out { t_in } else { DDA_BIG },
+            ),
+            t_out,
             skipped: SURF_NO_BLOCK,
             counts: [0; 4],
         }
@@ -126,6 +142,11 @@ impl Iterator for CellWalk<'_> {
         let (nz, nyz) = (n, n * n);
         let words = surf_live_words(g.n) as usize;
         while let Some(piece) = dda_next(&mut self.w) {
+            // Past the allocated box nothing can be hit (t0 only grows: every later call ends
+            // here too).
+            if piece.t0 >= self.t_out {
+                break;
+            }
             let l = piece.cell;
             let base = dda_cell_index(l, g.n) as usize;
             if let Some(SkipRef { words: skip, shift }) = self.blocks {
@@ -255,9 +276,9 @@ pub fn validate_blocks(g: &SurfaceGridRef, blocks: Option<SkipRef>) -> Result<()
         let nb = surf_blocks_per_axis(g.n, shift) as usize;
         let words = surf_live_words(g.n) as usize;
         ensure!(
-            b.len() == words + nb * nb * nb,
-            "skip structure of {} words, want {words} live-cell words + {nb}³ block masks for \
-             n = {}",
+            b.len() == words + nb * nb * nb + SURF_BOX_WORDS,
+            "skip structure of {} words, want {words} live-cell words + {nb}³ block masks + \
+             {SURF_BOX_WORDS} box words for n = {}",
             b.len(),
             g.n
         );

@@ -15,7 +15,7 @@ use super::{
     SurfaceStepParams, SurfaceStepStats,
 };
 use crate::cpu::step::{STEP_COUNT, STEP_FLAGS, STEP_N};
-use crate::cpu::surface_blocks::complete_cells;
+use crate::cpu::surface_blocks::{alloc_box, complete_cells};
 use crate::cpu::surface_delta_tv::{axis_neighbours, forward_reach};
 use crate::cpu::surface_fwd::{SurfCounts, SurfaceParams};
 use crate::cpu::surface_reg::{row_slots, NormalPrefix};
@@ -69,7 +69,8 @@ pub struct VulkanSurface {
     links: GpuBuffer,
     /// Complete-cell bits ([`complete_cells`], `complete_words` words, static), then the walks'
     /// skip structure: as many live-cell words (`surface_live_cells`) and the nb³ block level
-    /// masks (`surface_blocks`), rebuilt whenever δ may have drifted past their margin.
+    /// masks (`surface_blocks`), rebuilt whenever δ may have drifted past their margin, and the
+    /// allocated box (`alloc_box`, static).
     complete: GpuBuffer,
     complete_words: u64,
     /// When the block masks must be rebuilt.
@@ -143,6 +144,8 @@ impl VulkanSurface {
                 let mut words = complete_cells(&grid.links, grid.res[0]);
                 let nb = surf_blocks_per_axis(grid.res[0], SURF_BLOCK_SHIFT_VULKAN) as usize;
                 words.resize(2 * words.len() + nb * nb * nb, 0);
+                // The allocated box after the block masks: static, written once.
+                words.extend(alloc_box(&grid.links, grid.res[0]));
                 gpu.upload(&words)?
             },
             complete_words: surf_live_words(grid.res[0]) as u64,
