@@ -179,6 +179,14 @@ mod tests {
     use rand::{Rng, SeedableRng};
     use rand_pcg::Pcg64;
 
+    /// A ray from far outside an `nf`-vertex grid towards a random point inside it: (origin,
+    /// direction, not normalised).
+    fn far_ray(rng: &mut Pcg64, nf: f32) -> ([f32; 3], [f32; 3]) {
+        let o: [f32; 3] = std::array::from_fn(|_| rng.random_range(-3.0 * nf..4.0 * nf));
+        let at: [f32; 3] = std::array::from_fn(|_| rng.random_range(0.0..nf - 1.0));
+        (o, std::array::from_fn(|i| at[i] - o[i]))
+    }
+
     /// The skipping walk's pieces, and the number of skips.
     fn skip_walk(
         og: [f32; 3],
@@ -301,12 +309,7 @@ mod tests {
                     std::array::from_fn(|_| rng.random_range(-1.0..1.0)),
                 ),
                 // From far away.
-                _ => {
-                    let o: [f32; 3] =
-                        std::array::from_fn(|_| rng.random_range(-3.0 * nf..4.0 * nf));
-                    let at: [f32; 3] = std::array::from_fn(|_| rng.random_range(0.0..nf - 1.0));
-                    (o, std::array::from_fn(|i| at[i] - o[i]))
-                }
+                _ => far_ray(&mut rng, nf),
             };
             let dn = ray_unit(d);
             let want: Vec<DdaPiece> = dda_init(og, dn, n, 0.0)
@@ -370,12 +373,7 @@ mod tests {
                     std::array::from_fn(|_| rng.random_range(-1.0..1.0)),
                 ),
                 // From far away.
-                _ => {
-                    let o: [f32; 3] =
-                        std::array::from_fn(|_| rng.random_range(-3.0 * nf..4.0 * nf));
-                    let at: [f32; 3] = std::array::from_fn(|_| rng.random_range(0.0..nf - 1.0));
-                    (o, std::array::from_fn(|i| at[i] - o[i]))
-                }
+                _ => far_ray(&mut rng, nf),
             };
             let dn = ray_unit(d);
             let inside = |p: &DdaPiece| {
