@@ -8,13 +8,15 @@
 // hit j: α = 1 − exp(−max(σα, 0)), colour max(0, SH + 0.5) (trilerped at the hit, basis on the unit
 // scene direction), α̃ = α·γ_a(j); C = Σ w_j c_j + T·1. The ray stops at the first hit with j ≥ a
 // (γ = 0, not shaded, counted as cut) or once T < stop_thresh.
-// Skipping (block_skip ≠ 0) with the skip structure `blocks` (glsl/lib/surface_blocks.glsl): a
-// cell whose 2^block_shift-cell block has level mask 0 (kernel surface_blocks) is not read and the walk
+// Skipping (block_skip ≠ 0) with the skip structure `blocks` (glsl/lib/surface_blocks.glsl): the
+// walk covers only the ray's span inside the allocated box (surf_box_span); a cell whose
+// 2^block_shift-cell block has level mask 0 (kernel surface_blocks) is not read and the walk
 // restarts at the block's exit (surf_block_skip: the same pieces as the continuous walk, so the
 // same hits); a cell whose live bit is clear (kernel surface_live_cells) is passed over unread.
 // Inputs: links (n³ i32, < 0 unallocated), per allocated vertex delta, opacity (raw σα) and sh
 // (27), levels[n_levels ≤ 8], rays (6 floats: scene origin, direction), a, stop_thresh, blocks
-// (live-cell words, then nb³ u32 level masks; read only when block_skip ≠ 0).
+// (live-cell words, nb³ u32 level masks, the allocated box; read only when block_skip ≠ 0),
+// block_shift.
 // Outputs: out[r] = (rgb, transmittance, hits composited); stats (6 u32) += cells read (live
 // cells: links read), cubic solves, solves skipped by min/max culling, hits composited, hits cut by
 // truncation, blocks skipped (subgroup-reduced atomics).

@@ -18,8 +18,10 @@
 // words [0, W = ⌈n³/32⌉) the live-cell bits of surface_live_cells (a cell with its bit clear has
 // an unallocated corner or no level within its δ range: one bit read instead of 8 links and 8 δ),
 // words [W, W + nb³) the 2^block_shift-cell block level masks of surface_blocks (a cell in a
-// mask-0 block cannot hold a hit: the walk restarts past the block, surf_block_skip); both built
-// for the current δ or with a margin bounding its drift since (exact), delta, opacity (raw σα), sh (27) per allocated vertex;
+// mask-0 block cannot hold a hit: the walk restarts past the block, surf_block_skip), both built
+// for the current δ or with a margin bounding its drift since (exact), then the allocated box
+// (static: the walk covers only the ray's span inside it, surf_box_span); block_shift; delta,
+// opacity (raw σα), sh (27) per allocated vertex;
 // params (floats): scale[3], offset[3], a, stop_thresh, grad_scale, lambda_h, lambda_c, (pad),
 // levels[8] (n_levels used); rays (6 floats), targets (3 floats).
 // Outputs: grad_delta, grad_opacity, grad_sh += (float atomics), touched list (step buffer);
