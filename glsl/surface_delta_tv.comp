@@ -34,14 +34,13 @@ layout(push_constant, scalar) uniform Push {
     float scale;
 } pc;
 
-// Row i from the chunk's start (i < rows).
+// Row i from the chunk's start (i < rows), and whether row v is in the chunk.
 uint chunk_row(uint i) {
-    uint v = pc.start + i;
-    return v >= pc.rows ? v - pc.rows : v;
+    return range_row(pc.start, i, pc.rows);
 }
 
 bool in_chunk(uint v) {
-    return (v >= pc.start ? v - pc.start : v + (pc.rows - pc.start)) < pc.count;
+    return range_contains(pc.start, pc.count, pc.rows, v);
 }
 
 void main() {

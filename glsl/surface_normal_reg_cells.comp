@@ -9,7 +9,7 @@
 // neighbours of the chunk's cells. The other cells' entries are left as they were (the pairs
 // pass reads none of them); the cells that do not exist keep normals[r] = 0 (status 0) from the
 // buffer's creation.
-// Thread mapping: flat id = i < work, one existing cell each, row r = cell_rows[work_index(first,
+// Thread mapping: flat id = i < work, one existing cell each, row r = cell_rows[range_row(first,
 // i, n_cells)] (cell_rows: a static ascending list of the existing cells, built once per grid on
 // the host: NormalPrefix::cell_rows; (first, work): the window's range of it, NormalChunk::
 // cells_work); one owner per written element.
@@ -34,7 +34,7 @@ layout(push_constant, scalar) uniform Push {
 void main() {
     uint i = flat_id();
     if (i >= pc.work) return;
-    uint r = pc.cell_rows.v[work_index(pc.first, i, pc.n_cells)];
+    uint r = pc.cell_rows.v[range_row(pc.first, i, pc.n_cells)];
     // l[b] = the row of corner b.
     int l[8];
     uint k = 0u;

@@ -8,7 +8,7 @@
 // Touched semantics (as the single-pass kernel had them): v is touched exactly when one of its
 // cells is in a kept pair (either cell of a pair whose normals both have a direction), even if
 // the sum is 0 (e.g. L1 alone with identical normals).
-// Thread mapping: flat id = i < work, one vertex each, row r = corner_rows[work_index(first, i,
+// Thread mapping: flat id = i < work, one vertex each, row r = corner_rows[range_row(first, i,
 // n_corners)] (static ascending list of the corners of the existing cells, NormalPrefix::
 // corner_rows; (first, work): the range of the corners of the window's cells, NormalChunk::
 // corners_work); one owner per gradient element, no atomics.
@@ -42,7 +42,7 @@ layout(push_constant, scalar) uniform Push {
 void main() {
     uint i = flat_id();
     if (i >= pc.work) return;
-    uint r = pc.corner_rows.v[work_index(pc.first, i, pc.n_corners)];
+    uint r = pc.corner_rows.v[range_row(pc.first, i, pc.n_corners)];
     // l[b] = the row of v − b.
     int l[8];
     [[unroll]] for (uint w = 0u; w < 4u; w++) {
@@ -56,7 +56,7 @@ void main() {
     [[unroll]] for (uint b = 0u; b < 8u; b++) {
         if (l[b] < 0) continue;
         uint lb = uint(l[b]);
-        if ((lb >= pc.start ? lb - pc.start : lb + (pc.rows - pc.start)) >= pc.window) continue;
+        if (!range_contains(pc.start, pc.window, pc.rows, lb)) continue;
         float c = pc.corners.v[8u * uint(l[b]) + b];
         if (floatBitsToUint(c) == NO_PAIR_BITS) continue;
         touched = true;

@@ -20,7 +20,7 @@
 // The cell's corners then get ∂L/∂δ_b = corner_grad(b, ∂L/∂n_c) = Σ_a (∂L/∂n_c)_a·(bit_a(b) ?
 // +¼ : −¼) (∂n/∂δ_b contracted), gathered per vertex by surface_normal_reg_gather.
 // Thread mapping: flat id = i < work, one existing cell of the chunk's window each (as the cells
-// pass: row r = cell_rows[work_index(first, i, n_cells)]); one owner per written element. Every
+// pass: row r = cell_rows[range_row(first, i, n_cells)]); one owner per written element. Every
 // cell in a pair with a chunk cell is in the window; the other cells' corners are left as they
 // were (the gather reads only the window's). The cells that do not exist are in no pair and keep
 // corners = +∞ from the buffer's creation.
@@ -68,8 +68,7 @@ float sign0(float x) {
 
 // Whether row r is in the chunk (start < rows, count ≤ rows).
 bool in_chunk(uint r) {
-    uint i = r >= pc.start ? r - pc.start : r + (pc.rows - pc.start);
-    return i < pc.count;
+    return range_contains(pc.start, pc.count, pc.rows, r);
 }
 
 // ∂n/∂δ_b contracted with gn: Σ_a gn_a·(bit_a(b) ? +¼ : −¼).
@@ -162,7 +161,7 @@ float cell_term(uint r, out uint skipped) {
 void main() {
     uint i = flat_id();
     uint skipped = 0u;
-    float l = i < pc.work ? cell_term(pc.cell_rows.v[work_index(pc.first, i, pc.n_cells)], skipped) : 0.0;
+    float l = i < pc.work ? cell_term(pc.cell_rows.v[range_row(pc.first, i, pc.n_cells)], skipped) : 0.0;
     uint sk = subgroupAdd(skipped);
     float sl = subgroupAdd(l);
     if (subgroupElect()) {

@@ -53,11 +53,6 @@ layout(push_constant, scalar) uniform Push {
 const uint RANGE_ROWS = 16u;
 #include "step.glsl"
 
-// Whether row v is in the range (start, len).
-bool in_range(uint v, uint start, uint len) {
-    return (v >= start ? v - start : v + (pc.rows - start)) < len;
-}
-
 void main() {
     uint i = flat_id();
     if (pc.range_pass != 0u) {
@@ -69,8 +64,7 @@ void main() {
         for (uint k = 0u; k < RANGE_ROWS; k++) {
             uint j = i + k * stride;
             if (j >= len) break;
-            uint v = start + j;
-            if (v >= pc.rows) v -= pc.rows;
+            uint v = range_row(start, j, pc.rows);
             if (delta) {
                 RMSPROP_UPDATE(pc.delta, pc.grad_delta, pc.state_delta, v, pc.lr_delta);
             } else {
@@ -82,8 +76,8 @@ void main() {
     if (i >= pc.step.v[STEP_COUNT]) return;
     uint v = pc.step.v[STEP_FLAGS + pc.step.v[STEP_N] + i];
     uint m = pc.step.v[STEP_FLAGS + v];
-    if (in_range(v, pc.delta_start, pc.delta_len)) m &= ~TOUCH_DELTA;
-    if (in_range(v, pc.opacity_start, pc.opacity_len)) m &= ~TOUCH_OPACITY;
+    if (range_contains(pc.delta_start, pc.delta_len, pc.rows, v)) m &= ~TOUCH_DELTA;
+    if (range_contains(pc.opacity_start, pc.opacity_len, pc.rows, v)) m &= ~TOUCH_OPACITY;
     if ((m & TOUCH_DELTA) != 0u) RMSPROP_UPDATE(pc.delta, pc.grad_delta, pc.state_delta, v, pc.lr_delta);
     if ((m & TOUCH_OPACITY) != 0u) {
         RMSPROP_UPDATE(pc.opacity, pc.grad_opacity, pc.state_opacity, v, pc.lr_opacity);

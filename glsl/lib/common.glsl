@@ -16,3 +16,16 @@ layout(buffer_reference, scalar, buffer_reference_align = 4) buffer I32Buf { int
 // before the kernel's `layout(local_size_x = …)`, where it would still read 1.
 const uint DISPATCH_ROW_GROUPS = 32768u;
 #define flat_id() (gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * (DISPATCH_ROW_GROUPS * gl_WorkGroupSize.x))
+
+// Cyclic row ranges (Rust twin: cpu::step::RowRange): the rows (start + i) mod n for i < len,
+// start < n, len ≤ n.
+// Row i (< n) of the range starting at `start`.
+uint range_row(uint start, uint i, uint n) {
+    uint k = start + i;
+    return k >= n ? k - n : k;
+}
+
+// Whether row v (< n) is among the `len` rows from `start`.
+bool range_contains(uint start, uint len, uint n, uint v) {
+    return (v >= start ? v - start : v + (n - start)) < len;
+}

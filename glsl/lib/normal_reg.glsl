@@ -39,13 +39,6 @@ u64vec2 pack4(vec4 x) {
     return u64vec2(packUint2x32(floatBitsToUint(x.xy)), packUint2x32(floatBitsToUint(x.zw)));
 }
 
-// Entry i of a pass's work range (first, work) of a work list of n entries, wrapping past its
-// end (cpu::surface_reg::NormalChunk's cells_work and corners_work; first < n, work ≤ n).
-uint work_index(uint first, uint i, uint n) {
-    uint k = first + i;
-    return k >= n ? k - n : k;
-}
-
 // Entries 2w and 2w + 1 of row r's neighbour table (needs a push block `pc` with `U64Buf nbr`).
 #define nbr_word(r, w) ivec2(unpackUint2x32(pc.nbr.v[NBR_WORDS * (r) + (w)]))
 

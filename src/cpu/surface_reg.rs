@@ -385,16 +385,8 @@ fn cell_pairs(
     r: usize,
     out: &mut [f32],
 ) -> (f64, u32) {
-    let (rows, start) = (c.rows as usize, (c.start % c.rows) as usize);
-    let count = (c.count as usize).min(rows);
-    let in_chunk = |r: usize| {
-        let i = if r >= start {
-            r - start
-        } else {
-            r + (rows - start)
-        };
-        i < count
-    };
+    let chunk = c.rows_from_start(c.count.min(c.rows));
+    let in_chunk = |r: usize| chunk.contains(r);
     let t = &nbr[NBR_STRIDE * r..][..NBR_STRIDE];
     let (nc, st, k) = read_normal(normals, r);
     let rc = norm3(nc);
