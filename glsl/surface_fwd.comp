@@ -22,6 +22,8 @@
 // truncation, blocks skipped (subgroup-reduced atomics).
 // CPU twin: cpu::surface_fwd::render (src/cpu/surface_fwd.rs).
 #include "common.glsl"
+// Every hit of a cell: a is not bounded here (surface.glsl).
+#define SURF_CELL_KEEP 16u
 #include "surface.glsl"
 #include "surface_blocks.glsl"
 #extension GL_KHR_shader_subgroup_arithmetic : require
@@ -139,7 +141,7 @@ void main() {
         vec3 q0 = surf_local(og, dn, t0, l);
         vec3 q1 = surf_local(og, dn, t1, l);
         precise float L = t1 - t0;
-        float hs[SURF_MAX_CELL_HITS];
+        float hs[SURF_CELL_KEEP];
         uint nh = surf_cell_hits(c, q0, q1, dn, L, lv, mask, hs);
         for (uint h = 0u; h < nh; h++) {
             if (float(j) >= pc.a) {
@@ -147,7 +149,7 @@ void main() {
                 done = true;
                 break;
             }
-            precise vec3 p = clamp(q0 + hs[h] * dn, 0.0, 1.0);
+            precise vec3 p = clamp(q0 + surf_pop(hs) * dn, 0.0, 1.0);
             float wt[8];
             trilerp_weights(p, wt);
             precise float sa = 0.0;

@@ -82,6 +82,37 @@ const uint P_LAMBDA_H = 9u;
 const uint P_LAMBDA_C = 10u;
 const uint P_LEVELS = 12u;
 
+// What the backward pass needs of a composited hit (surface_train records ≤ SURF_MAX_HITS).
+struct HitRec {
+    ivec3 cell;
+    vec3 p;      // local hit point
+    float depth; // t0 + s (voxels)
+    float sa;    // σα
+    float at;    // α̃
+    vec3 raw;    // raw colour
+    vec3 draw;   // ∂raw/∂s
+    float dsa;   // ∂σα/∂s
+    float f1;    // f′(s)
+    bool guard;  // the f′ guard drops the δ gradient
+};
+
+// rec[j] = v and rec[k] with a data-dependent slot, through constant indices: the records stay in
+// registers (an indexed local array is kept in memory and gathered lane by lane on SIMD-per-lane
+// drivers such as lavapipe).
+void set_hit(inout HitRec rec[SURF_MAX_HITS], uint j, HitRec v) {
+    [[unroll]] for (uint q = 0u; q < SURF_MAX_HITS; q++) {
+        if (q == j) rec[q] = v;
+    }
+}
+
+HitRec get_hit(HitRec rec[SURF_MAX_HITS], uint k) {
+    HitRec v = rec[0];
+    [[unroll]] for (uint q = 1u; q < SURF_MAX_HITS; q++) {
+        if (q == k) v = rec[q];
+    }
+    return v;
+}
+
 // Corner links of cell l (paper order).
 void cell_links(ivec3 l, out int lk[8]) {
     uint base = dda_cell_index(l, pc.n);
@@ -187,17 +218,8 @@ void main() {
     uvec4 cnt = uvec4(0u); // cells, solves, culled, hits
     uvec4 cnt2 = uvec4(0u); // cut, guarded, atomic adds, blocks skipped
 
-    // Forward walk, recording the composited hits.
-    ivec3 h_cell[SURF_MAX_HITS];
-    vec3 h_p[SURF_MAX_HITS];
-    float h_depth[SURF_MAX_HITS]; // t0 + s (voxels)
-    float h_sa[SURF_MAX_HITS];
-    float h_at[SURF_MAX_HITS];
-    vec3 h_raw[SURF_MAX_HITS];
-    vec3 h_draw[SURF_MAX_HITS]; // ∂raw/∂s
-    float h_dsa[SURF_MAX_HITS]; // ∂σα/∂s
-    float h_f1[SURF_MAX_HITS]; // f′(s)
-    bool h_guard[SURF_MAX_HITS];
+    // Forward walk, recording the composited hits (registers: HitRec, set_hit).
+    HitRec rec[SURF_MAX_HITS];
     float T = 1.0;
     uint j = 0u;
     bool done = false;
@@ -228,7 +250,7 @@ void main() {
             if (!SURF_CELL_LIVE(pc.skip, dda_cell_index(l, n))) continue;
             cnt.x++;
             cell_links(l, lk);
-            for (int i = 0; i < 8; i++) c[i] = pc.delta.v[lk[i]];
+            [[unroll]] for (int i = 0; i < 8; i++) c[i] = pc.delta.v[lk[i]];
             mask = surf_level_mask(c, lv, nl);
             uint ns = uint(bitCount(mask));
             cnt.y += ns;
@@ -242,7 +264,7 @@ void main() {
         vec3 q0 = surf_local(og, dn, t0, l);
         vec3 q1 = surf_local(og, dn, t1, l);
         precise float L = t1 - t0;
-        float hs[SURF_MAX_CELL_HITS];
+        float hs[SURF_CELL_KEEP];
         uint nh = surf_cell_hits(c, q0, q1, dn, L, lv, mask, hs);
         float cmin = min(min(min(c[0], c[1]), min(c[2], c[3])), min(min(c[4], c[5]), min(c[6], c[7])));
         float cmax = max(max(max(c[0], c[1]), max(c[2], c[3])), max(max(c[4], c[5]), max(c[6], c[7])));
@@ -252,42 +274,45 @@ void main() {
                 done = true;
                 break;
             }
-            precise vec3 p = clamp(q0 + hs[h] * dn, 0.0, 1.0);
+            precise float s_hit = surf_pop(hs);
+            precise vec3 p = clamp(q0 + s_hit * dn, 0.0, 1.0);
             float wt[8];
             trilerp_weights(p, wt);
             float dw[8];
             trilerp_dwds(p, dn, dw);
             precise float sa = 0.0;
-            for (int i = 0; i < 8; i++) sa += wt[i] * pc.opacity.v[lk[i]];
+            [[unroll]] for (int i = 0; i < 8; i++) sa += wt[i] * pc.opacity.v[lk[i]];
             precise float at = surf_alpha(sa) * surf_gamma(a, j);
             // Shading and the derivatives along the ray the backward pass needs.
             precise vec3 raw = vec3(0.5);
             precise vec3 draw = vec3(0.0);
             precise float dsa = 0.0;
             precise float f1 = 0.0;
-            for (int i = 0; i < 8; i++) {
+            [[unroll]] for (int i = 0; i < 8; i++) {
                 uint row = uint(lk[i]);
                 dsa += dw[i] * pc.opacity.v[row];
                 f1 += dw[i] * c[i];
-                for (uint ch = 0u; ch < 3u; ch++) {
+                [[unroll]] for (uint ch = 0u; ch < 3u; ch++) {
                     precise float v = 0.0;
                     uint base = row * 27u + ch * 9u;
-                    for (uint k = 0u; k < 9u; k++) v += y[k] * pc.sh.v[base + k];
+                    [[unroll]] for (uint k = 0u; k < 9u; k++) v += y[k] * pc.sh.v[base + k];
                     raw[ch] += wt[i] * v;
                     draw[ch] += dw[i] * v;
                 }
             }
-            h_cell[j] = l;
-            h_p[j] = p;
-            precise float depth = t0 + hs[h];
-            h_depth[j] = depth;
-            h_sa[j] = sa;
-            h_at[j] = at;
-            h_raw[j] = raw;
-            h_draw[j] = draw;
-            h_dsa[j] = dsa;
-            h_f1[j] = f1;
-            h_guard[j] = abs(f1) <= FPRIME_GUARD * (cmax - cmin);
+            HitRec hr;
+            hr.cell = l;
+            hr.p = p;
+            precise float depth = t0 + s_hit;
+            hr.depth = depth;
+            hr.sa = sa;
+            hr.at = at;
+            hr.raw = raw;
+            hr.draw = draw;
+            hr.dsa = dsa;
+            hr.f1 = f1;
+            hr.guard = abs(f1) <= FPRIME_GUARD * (cmax - cmin);
+            set_hit(rec, j, hr);
             j++;
             cnt.w++;
             precise float tn = T * (1.0 - at);
@@ -300,19 +325,24 @@ void main() {
     }
     uint nh = j;
 
-    // Compositing from the records, and the squared error.
+    // Compositing from the records, and the squared error. Loops over the records run over all
+    // SURF_MAX_HITS slots with a guard, unrolled, so that every index is a constant.
     float tr[SURF_MAX_HITS + 1u];
     float wj[SURF_MAX_HITS];
     tr[0] = 1.0;
     precise vec3 color = vec3(0.0);
-    for (uint k = 0u; k < nh; k++) {
-        precise float wk = tr[k] * h_at[k];
+    [[unroll]] for (uint k = 0u; k < SURF_MAX_HITS; k++) {
+        wj[k] = 0.0;
+        tr[k + 1u] = tr[k];
+        if (k >= nh) continue;
+        precise float wk = tr[k] * rec[k].at;
         wj[k] = wk;
-        color += wk * max(h_raw[k], vec3(0.0));
-        precise float tn = tr[k] * (1.0 - h_at[k]);
+        color += wk * max(rec[k].raw, vec3(0.0));
+        precise float tn = tr[k] * (1.0 - rec[k].at);
         tr[k + 1u] = tn;
     }
-    precise vec3 total = color + vec3(tr[nh]);
+    float t_last = tr[SURF_MAX_HITS]; // = tr[nh]: the slots past nh copy it
+    precise vec3 total = color + vec3(t_last);
     precise vec3 diff = total - target;
     SurfTrainOut o;
     precise float sq = diff.x * diff.x + diff.y * diff.y + diff.z * diff.z;
@@ -325,92 +355,117 @@ void main() {
     // Entropy of the normalised weights and ∂(λH·LH)/∂w_j.
     float lambda_h = pc.params.v[P_LAMBDA_H];
     float e[SURF_MAX_HITS];
-    for (uint k = 0u; k < SURF_MAX_HITS; k++) e[k] = 0.0;
+    [[unroll]] for (uint k = 0u; k < SURF_MAX_HITS; k++) e[k] = 0.0;
     precise float wsum = 0.0;
-    for (uint k = 0u; k < nh; k++) wsum += wj[k];
+    [[unroll]] for (uint k = 0u; k < SURF_MAX_HITS; k++) {
+        if (k < nh) wsum += wj[k];
+    }
     if (lambda_h != 0.0 && wsum > 1e-8) {
         precise float H = 0.0;
-        for (uint k = 0u; k < nh; k++) {
-            if (wj[k] > 0.0) {
+        [[unroll]] for (uint k = 0u; k < SURF_MAX_HITS; k++) {
+            if (k < nh && wj[k] > 0.0) {
                 precise float pk = wj[k] / wsum;
                 H -= pk * log(pk);
             }
         }
         o.entropy = H;
-        for (uint k = 0u; k < nh; k++) {
-            if (wj[k] > 0.0) {
+        [[unroll]] for (uint k = 0u; k < SURF_MAX_HITS; k++) {
+            if (k < nh && wj[k] > 0.0) {
                 precise float ek = -lambda_h * (log(wj[k] / wsum) + H) / wsum;
                 e[k] = ek;
             }
         }
     }
-    // Lc: depths in scene units, mode = first largest weight.
+    // Lc: depths in scene units, mode m = first largest weight; ∂/∂t_m is summed apart (the same
+    // additions in the same order) and stored after the loop.
     float lambda_c = pc.params.v[P_LAMBDA_C];
     float d_t[SURF_MAX_HITS];
-    for (uint k = 0u; k < SURF_MAX_HITS; k++) d_t[k] = 0.0;
+    [[unroll]] for (uint k = 0u; k < SURF_MAX_HITS; k++) d_t[k] = 0.0;
     if (lambda_c != 0.0 && nh > 1u) {
         uint m = 0u;
-        for (uint k = 1u; k < nh; k++) {
-            if (wj[k] > wj[m]) m = k;
+        float wm = wj[0];
+        float dm_depth = rec[0].depth;
+        [[unroll]] for (uint k = 1u; k < SURF_MAX_HITS; k++) {
+            if (k < nh && wj[k] > wm) {
+                m = k;
+                wm = wj[k];
+                dm_depth = rec[k].depth;
+            }
         }
-        precise float tm = h_depth[m] * inv_len;
+        precise float tm = dm_depth * inv_len;
         precise float lc = 0.0;
-        for (uint k = 0u; k < nh; k++) {
-            if (k == m) continue;
-            precise float dk = h_depth[k] * inv_len - tm;
+        precise float dtm = 0.0;
+        [[unroll]] for (uint k = 0u; k < SURF_MAX_HITS; k++) {
+            if (k >= nh || k == m) continue;
+            precise float dk = rec[k].depth * inv_len - tm;
             lc += abs(dk);
             float sg = dk > 0.0 ? 1.0 : (dk < 0.0 ? -1.0 : 0.0);
-            precise float a1 = d_t[k] + lambda_c * sg;
+            precise float a1 = lambda_c * sg;
             d_t[k] = a1;
-            precise float a2 = d_t[m] - lambda_c * sg;
-            d_t[m] = a2;
+            precise float a2 = dtm - lambda_c * sg;
+            dtm = a2;
+        }
+        [[unroll]] for (uint k = 0u; k < SURF_MAX_HITS; k++) {
+            if (k == m) d_t[k] = dtm;
         }
         o.consistency = lc;
     }
     pc.out_rays.v[r] = o;
 
     // Reverse pass: colour and entropy seen from behind each hit; the gradients of consecutive
-    // hits in one cell are summed per corner and flushed when the cell changes.
+    // hits in one cell are summed per corner and flushed when the cell changes. Unrolled over the
+    // slots (constant indices) with the flush outside: a slot whose cell differs from the running
+    // one hands the running sums over first.
     precise vec3 s_c = vec3(1.0);
     precise float s_e = 0.0;
     ivec3 cur = ivec3(-1);
     float acc_d[8];
     float acc_a[8];
     vec3 acc_c[8];
-    for (uint i = 0u; i < 8u; i++) {
+    [[unroll]] for (uint i = 0u; i < 8u; i++) {
         acc_d[i] = 0.0;
         acc_a[i] = 0.0;
         acc_c[i] = vec3(0.0);
     }
     for (int jj = int(nh) - 1; jj >= 0; jj--) {
         uint k = uint(jj);
-        float at = h_at[k];
-        vec3 raw = h_raw[k];
+        HitRec hk = get_hit(rec, k);
+        float trk = 1.0, wk = 0.0, ek = 0.0, dtk = 0.0;
+        [[unroll]] for (uint q = 0u; q < SURF_MAX_HITS; q++) {
+            if (q == k) {
+                trk = tr[q];
+                wk = wj[q];
+                ek = e[q];
+                dtk = d_t[q];
+            }
+        }
+        float at = hk.at;
+        vec3 raw = hk.raw;
         vec3 col = max(raw, vec3(0.0));
-        precise float d_at = tr[k] * (e[k] - s_e);
-        for (uint ch = 0u; ch < 3u; ch++) {
-            precise float term = d_c[ch] * tr[k] * (col[ch] - s_c[ch]);
+        precise float d_at = trk * (ek - s_e);
+        [[unroll]] for (uint ch = 0u; ch < 3u; ch++) {
+            precise float term = d_c[ch] * trk * (col[ch] - s_c[ch]);
             d_at += term;
         }
-        precise vec3 d_raw = mix(vec3(0.0), d_c * wj[k], greaterThan(raw, vec3(0.0)));
+        precise vec3 d_raw = mix(vec3(0.0), d_c * wk, greaterThan(raw, vec3(0.0)));
         s_c = at * col + (1.0 - at) * s_c;
-        s_e = at * e[k] + (1.0 - at) * s_e;
+        s_e = at * ek + (1.0 - at) * s_e;
         // ∂L/∂σα, and ∂L/∂s: opacity and colour move with the hit point, and the depth (Lc).
-        float sa = h_sa[k];
+        float sa = hk.sa;
         float ex = exp(-max(sa, 0.0));
         precise float d_sa = sa > 0.0 ? d_at * surf_gamma(a, k) * ex : 0.0;
-        precise float dl_ds = d_sa * h_dsa[k] + d_t[k] * inv_len;
-        for (uint ch = 0u; ch < 3u; ch++) dl_ds += d_raw[ch] * h_draw[k][ch];
-        bool guarded = h_guard[k];
+        precise float dl_ds = d_sa * hk.dsa + dtk * inv_len;
+        [[unroll]] for (uint ch = 0u; ch < 3u; ch++) dl_ds += d_raw[ch] * hk.draw[ch];
+        bool guarded = hk.guard;
         if (guarded) cnt2.y++;
-        precise float dds = (guarded || dl_ds == 0.0) ? 0.0 : -dl_ds / h_f1[k];
-        if (h_cell[k] != cur) {
+        precise float dds = (guarded || dl_ds == 0.0) ? 0.0 : -dl_ds / hk.f1;
+        if (hk.cell != cur) {
             cnt2.z += flush(cur, y, acc_d, acc_a, acc_c);
-            cur = h_cell[k];
+            cur = hk.cell;
         }
         float wt[8];
-        trilerp_weights(h_p[k], wt);
-        for (uint i = 0u; i < 8u; i++) {
+        trilerp_weights(hk.p, wt);
+        [[unroll]] for (uint i = 0u; i < 8u; i++) {
             precise float gd = acc_d[i] + wt[i] * dds;
             acc_d[i] = gd;
             precise float ga = acc_a[i] + wt[i] * d_sa;

@@ -20,8 +20,6 @@
 
 // At most this many levels τ_i.
 const uint SURF_MAX_LEVELS = 8u;
-// Bound of a cell's hit list: ≤ 3 crossings per level.
-const uint SURF_MAX_CELL_HITS = 24u;
 const float SURF_PI = 3.14159265358979;
 
 // Per-ray output of surface_fwd (scalar layout, 20 bytes): rgb on white, final transmittance
@@ -49,15 +47,37 @@ vec3 surf_local(vec3 og, vec3 dn, float t, ivec3 l) {
     return cubic_exit_point(q, dn, 0.0);
 }
 
-// Sorted insert of s into hs[0..n) (ties keep insertion order).
-void surf_insert(inout float hs[SURF_MAX_CELL_HITS], inout uint n, float s) {
-    uint i = n;
-    while (i > 0u && hs[i - 1u] > s) {
-        hs[i] = hs[i - 1u];
-        i--;
+// Hits a cell's list keeps: its SURF_CELL_KEEP smallest (the count still covers them all). A kernel
+// that composites at most K hits per ray may define it as K before including this file
+// (surface_train: its SURF_MAX_HITS = 8, the default); surface_fwd, with no bound on a, keeps
+// every hit: 16 (≤ 2 rising crossings per level, as crossings alternate, × 8 levels).
+#ifndef SURF_CELL_KEEP
+#define SURF_CELL_KEEP 8u
+#endif
+// An empty slot of a hit list (above every s < L).
+const float SURF_NO_HIT = 3.402823466e38;
+
+// Inserts s into the ascending list hs (empty slots SURF_NO_HIT, the largest value dropped when
+// all SURF_CELL_KEEP are taken) by one branchless compare-exchange pass over constant indices: hs
+// stays in registers. (A data-dependent index, as in a shifting insert, makes SIMD-per-lane
+// drivers such as lavapipe keep the array in memory and gather lane by lane: it cost
+// surface_train 5 of its 33 ms per step.) Equal values are interchangeable, so ties need no rule.
+void surf_insert(inout float hs[SURF_CELL_KEEP], inout uint n, float s) {
+    float v = s;
+    [[unroll]] for (uint k = 0u; k < SURF_CELL_KEEP; k++) {
+        float lo = min(hs[k], v);
+        v = max(hs[k], v);
+        hs[k] = lo;
     }
-    hs[i] = s;
     n++;
+}
+
+// The smallest hit of the list, removed (the others shift down; constant indices).
+float surf_pop(inout float hs[SURF_CELL_KEEP]) {
+    float s = hs[0];
+    [[unroll]] for (uint k = 0u; k + 1u < SURF_CELL_KEEP; k++) hs[k] = hs[k + 1u];
+    hs[SURF_CELL_KEEP - 1u] = SURF_NO_HIT;
+    return s;
 }
 
 // Min/max culling: bit i set when level lv[i] (i < nl) lies within [min c, max c]; only those
@@ -72,14 +92,14 @@ uint surf_level_mask(float c[8], float lv[SURF_MAX_LEVELS], uint nl) {
     return m;
 }
 
-// Front-face (rising) crossings in one cell of the levels in `mask` (from surf_level_mask), sorted
-// by s ∈ [0, L): corners c (paper order), entry/exit points q0/q1, unit direction d. The cubic's
+// Front-face (rising) crossings in one cell of the levels in `mask` (from surf_level_mask): their
+// count, and the SURF_CELL_KEEP smallest s ∈ [0, L) in ascending order in hs (read them with surf_pop): corners c (paper order), entry/exit points q0/q1, unit direction d. The cubic's
 // C1..C3 are formed once; each level solves with its own exact end values.
 uint surf_cell_hits(float c[8], vec3 q0, vec3 q1, vec3 d, float L, float lv[SURF_MAX_LEVELS],
-                    uint mask, out float hs[SURF_MAX_CELL_HITS]) {
+                    uint mask, out float hs[SURF_CELL_KEEP]) {
     vec3 cc = cubic_cell(c, q0, d);
     uint n = 0u;
-    for (uint i = 0u; i < SURF_MAX_CELL_HITS; i++) hs[i] = 0.0;
+    [[unroll]] for (uint i = 0u; i < SURF_CELL_KEEP; i++) hs[i] = SURF_NO_HIT;
     while (mask != 0u) {
         uint i = uint(findLSB(mask));
         mask &= mask - 1u;
