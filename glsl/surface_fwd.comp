@@ -3,8 +3,8 @@
 // Thread mapping: one invocation per ray.
 // Per ray: grid = p·scale + offset (direction normalised in grid space, so s is in voxels); DDA
 // walk over the cells of [0, n−1]³ front to back from t = 0; a cell with an unallocated corner is
-// skipped; cubic coefficients once per cell; per level τ_i (min/max culling) the crossings of
-// δ − τ_i on [0, L); only rising (front-face) crossings are hits, sorted by s within the cell; at
+// skipped; cubic coefficients once per cell; per level τ_i that passes min/max, then segment
+// culling (surf_segment_mask) the crossings of δ − τ_i on [0, L); only rising (front-face) crossings are hits, sorted by s within the cell; at
 // hit j: α = 1 − exp(−max(σα, 0)), colour max(0, SH + 0.5) (trilerped at the hit, basis on the unit
 // scene direction), α̃ = α·γ_a(j); C = Σ w_j c_j + T·1. The ray stops at the first hit with j ≥ a
 // (γ = 0, not shaded, counted as cut) or once T < stop_thresh.
@@ -18,8 +18,8 @@
 // (live-cell words, nb³ u32 level masks, the allocated box; read only when block_skip ≠ 0),
 // block_shift.
 // Outputs: out[r] = (rgb, transmittance, hits composited); stats (6 u32) += cells read (live
-// cells: links read), cubic solves, solves skipped by min/max culling, hits composited, hits cut by
-// truncation, blocks skipped (subgroup-reduced atomics).
+// cells: links read), cubic solves, solves skipped by min/max or segment culling, hits composited,
+// hits cut by truncation, blocks skipped (subgroup-reduced atomics).
 // CPU twin: cpu::surface_fwd::render (src/cpu/surface_fwd.rs).
 #include "common.glsl"
 // Every hit of a cell: a is not bounded here (surface.glsl).
@@ -100,9 +100,10 @@ void main() {
     int lk[8];
     float c[8];
     uint mask = 0u;
+    vec3 q0, q1, cc; // the found cell's entry/exit points and cubic C1..C3
     while (!done) {
-        // Walk on to the next cell where some level can cross (all corners allocated, min/max
-        // culling passed) before solving: lanes then reach the cubic solver together instead of
+        // Walk on to the next cell where some level can cross (all corners allocated, min/max and
+        // segment culling passed) before solving: lanes then reach the cubic solver together instead of
         // one solving while the others idle through empty cells.
         bool found = false;
         while (dda_next(w, l, t0, t1)) {
@@ -129,6 +130,12 @@ void main() {
             if (min(min(min(lk[0], lk[1]), min(lk[2], lk[3])), min(min(lk[4], lk[5]), min(lk[6], lk[7]))) < 0) continue;
             for (int i = 0; i < 8; i++) c[i] = pc.delta.v[lk[i]];
             mask = surf_level_mask(c, lv, nl);
+            if (mask != 0u) {
+                q0 = surf_local(og, dn, t0, l);
+                q1 = surf_local(og, dn, t1, l);
+                cc = cubic_cell(c, q0, dn);
+                mask = surf_segment_mask(c, cc, q0, q1, t1 - t0, lv, mask);
+            }
             uint ns = uint(bitCount(mask));
             cnt.y += ns;
             cnt.z += nl - ns;
@@ -138,11 +145,9 @@ void main() {
             }
         }
         if (!found) break;
-        vec3 q0 = surf_local(og, dn, t0, l);
-        vec3 q1 = surf_local(og, dn, t1, l);
         precise float L = t1 - t0;
         float hs[SURF_CELL_KEEP];
-        uint nh = surf_cell_hits(c, q0, q1, dn, L, lv, mask, hs);
+        uint nh = surf_cell_hits(c, cc, q0, q1, L, lv, mask, hs);
         for (uint h = 0u; h < nh; h++) {
             if (float(j) >= pc.a) {
                 cut++;

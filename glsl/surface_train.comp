@@ -26,7 +26,7 @@
 // levels[8] (n_levels used); rays (6 floats), targets (3 floats).
 // Outputs: grad_delta, grad_opacity, grad_sh += (float atomics), touched list (step buffer);
 // out_rays[r] = (squared error, entropy, consistency, hits composited); stats (8 u32) += cells
-// read (live cells: links and δ loaded), cubic solves, solves culled by min/max, hits
+// read (live cells: links and δ loaded), cubic solves, solves culled (min/max or segment), hits
 // composited, hits cut by truncation, guarded hits, gradient atomic adds, blocks skipped
 // (subgroup-reduced).
 // CPU twin: cpu::surface_train::train (src/cpu/surface_train.rs).
@@ -228,6 +228,7 @@ void main() {
     int lk[8];
     float c[8];
     uint mask = 0u;
+    vec3 q0, q1, cc; // the found cell's entry/exit points and cubic C1..C3
     uint nb = surf_blocks_per_axis(n, pc.block_shift);
     uint bbase = surf_live_words(n);
     uint skipped = SURF_NO_BLOCK;
@@ -252,6 +253,12 @@ void main() {
             cell_links(l, lk);
             [[unroll]] for (int i = 0; i < 8; i++) c[i] = pc.delta.v[lk[i]];
             mask = surf_level_mask(c, lv, nl);
+            if (mask != 0u) {
+                q0 = surf_local(og, dn, t0, l);
+                q1 = surf_local(og, dn, t1, l);
+                cc = cubic_cell(c, q0, dn);
+                mask = surf_segment_mask(c, cc, q0, q1, t1 - t0, lv, mask);
+            }
             uint ns = uint(bitCount(mask));
             cnt.y += ns;
             cnt.z += nl - ns;
@@ -261,11 +268,9 @@ void main() {
             }
         }
         if (!found) break;
-        vec3 q0 = surf_local(og, dn, t0, l);
-        vec3 q1 = surf_local(og, dn, t1, l);
         precise float L = t1 - t0;
         float hs[SURF_CELL_KEEP];
-        uint nh = surf_cell_hits(c, q0, q1, dn, L, lv, mask, hs);
+        uint nh = surf_cell_hits(c, cc, q0, q1, L, lv, mask, hs);
         float cmin = min(min(min(c[0], c[1]), min(c[2], c[3])), min(min(c[4], c[5]), min(c[6], c[7])));
         float cmax = max(max(max(c[0], c[1]), max(c[2], c[3])), max(max(c[4], c[5]), max(c[6], c[7])));
         for (uint h = 0u; h < nh; h++) {

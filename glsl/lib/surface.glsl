@@ -92,12 +92,54 @@ uint surf_level_mask(float c[8], float lv[SURF_MAX_LEVELS], uint nl) {
     return m;
 }
 
-// Front-face (rising) crossings in one cell of the levels in `mask` (from surf_level_mask): their
-// count, and the SURF_CELL_KEEP smallest s ∈ [0, L) in ascending order in hs (read them with surf_pop): corners c (paper order), entry/exit points q0/q1, unit direction d. The cubic's
-// C1..C3 are formed once; each level solves with its own exact end values.
-uint surf_cell_hits(float c[8], vec3 q0, vec3 q1, vec3 d, float L, float lv[SURF_MAX_LEVELS],
+// Relative margin of segment culling (surf_segment_mask): about 80 times the rounding of the
+// quantities it compares.
+const float SURF_SEGMENT_MARGIN = 1e-5;
+
+// Segment culling: the levels of `mask` (from surf_level_mask) that can cross the ray's piece of
+// the cell, corners c, entry/exit points q0/q1, cc = cubic_cell(c, q0, d), length L. Along the piece
+// δ − τ is the cubic f(s) = b0 + C1·s + C2·s² + C3·s³, bounded by its Bernstein coefficients on
+// [0, L] (convex hull): b0 = f(0), b1 = b0 + C1L/3, b2 = b0 + (2·C1L + C2L²)/3,
+// b3 = b0 + C1L + C2L² + C3L³; the solver also reads the exit value e = δ(q1) − τ. A level is
+// dropped when b0..b3 and e all exceed m or all lie below −m,
+// m = SURF_SEGMENT_MARGIN·(|b0| + |C1L| + |C2L²| + |C3L³| + max|c| + |τ|): f then stays that far
+// from 0 on the piece, and the solver's own values (its f(0) and e, f at the critical points,
+// snapped to 0 within 2^-22 of their magnitude) differ from these by a few rounding units of the
+// same magnitudes, so it would find no crossing (tested against the solver in the twin). A level
+// dropped here saves its solve; a cell left without levels is walked past like an empty one.
+uint surf_segment_mask(float c[8], vec3 cc, vec3 q0, vec3 q1, float L, float lv[SURF_MAX_LEVELS],
+                       uint mask) {
+    float v0 = trilerp(c, q0);
+    float v1 = trilerp(c, q1);
+    precise float a1 = cc.x * L;
+    precise float a2 = (cc.y * L) * L;
+    precise float a3 = ((cc.z * L) * L) * L;
+    float cabs = 0.0;
+    for (int i = 0; i < 8; i++) cabs = max(cabs, abs(c[i]));
+    precise float size = ((abs(a1) + abs(a2)) + abs(a3)) + cabs;
+    uint keep = 0u;
+    [[unroll]] for (uint i = 0u; i < SURF_MAX_LEVELS; i++) {
+        if ((mask & (1u << i)) == 0u) continue;
+        float tau = lv[i];
+        precise float b0 = v0 - tau;
+        precise float b1 = b0 + a1 / 3.0;
+        precise float b2 = b0 + (2.0 * a1 + a2) / 3.0;
+        precise float b3 = ((b0 + a1) + a2) + a3;
+        precise float e = v1 - tau;
+        precise float m = SURF_SEGMENT_MARGIN * ((abs(b0) + size) + abs(tau));
+        float lo = min(min(min(b0, b1), min(b2, b3)), e);
+        float hi = max(max(max(b0, b1), max(b2, b3)), e);
+        if (!(lo > m || hi < -m)) keep |= 1u << i;
+    }
+    return keep;
+}
+
+// Front-face (rising) crossings in one cell of the levels in `mask` (from surf_segment_mask):
+// their count, and the SURF_CELL_KEEP smallest s ∈ [0, L) in ascending order in hs (read them with
+// surf_pop); corners c (paper order), cc = cubic_cell(c, q0, d) (C1..C3, formed once per cell),
+// entry/exit points q0/q1. Each level solves with its own exact end values.
+uint surf_cell_hits(float c[8], vec3 cc, vec3 q0, vec3 q1, float L, float lv[SURF_MAX_LEVELS],
                     uint mask, out float hs[SURF_CELL_KEEP]) {
-    vec3 cc = cubic_cell(c, q0, d);
     uint n = 0u;
     [[unroll]] for (uint i = 0u; i < SURF_CELL_KEEP; i++) hs[i] = SURF_NO_HIT;
     while (mask != 0u) {

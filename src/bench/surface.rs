@@ -6,7 +6,7 @@
 //! (the thin category's fast-preset weights and regulariser chunks at step 0: LH, Lc, Lδ over
 //! every vertex, TVα, Lα and Ln1/Ln2 on random chunks). Reported per backend: training rays/s (wall
 //! time, after one untimed step), mean MSE, and per ray: cells read (live cells), cubic solves, solves
-//! skipped by min/max culling, hits composited, hits cut by truncation, hits whose δ gradient the
+//! skipped by min/max or segment culling, hits composited, hits cut by truncation, hits whose δ gradient the
 //! f′ guard dropped, gradient atomic adds; the Vulkan/CPU ratio; the Vulkan device time per kernel
 //! (timestamps). The Vulkan backend is also timed without the regularisers (the data term, its
 //! scatter and RMSProp over the vertices the rays touched): `bench plenoxels` times stage-1 steps

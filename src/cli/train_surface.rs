@@ -155,7 +155,7 @@ pub fn run(args: &TrainArgs, gpu: Option<&Gpu>) -> Result<()> {
     let r = report.per_ray;
     println!(
         "per training ray: {:.1} cells read ({:.1} empty blocks skipped), {:.2} cubic solves \
-         ({:.1} skipped by min/max culling), {:.2} hits, {:.2} cut by truncation, {:.3} guarded, \
+         ({:.1} skipped by min/max or segment culling), {:.2} hits, {:.2} cut by truncation, {:.3} guarded, \
          {:.1} gradient atomic adds",
         r[0], r[7], r[1], r[2], r[3], r[4], r[5], r[6]
     );

@@ -2,11 +2,12 @@
 //! the same DDA walk (`math::dda`) with the same block skipping (`math::surface_blocks`), per-cell
 //! hits (`math::surface`) and compositing arithmetic.
 
+use crate::math::cubic::{cell_cubic, CellCubic};
 use crate::math::dda::{dda_cell_index, dda_init, dda_next, ray_unit, Dda, DdaPiece, DDA_BIG};
 use crate::math::sh::sh_basis;
 use crate::math::surface::{
-    surf_alpha, surf_cell_hits, surf_gamma, surf_level_mask, surf_local, surf_ray, SurfOut,
-    SURF_MAX_LEVELS,
+    surf_alpha, surf_cell_hits, surf_gamma, surf_level_mask, surf_local, surf_ray,
+    surf_segment_mask, SurfOut, SURF_MAX_LEVELS,
 };
 use crate::math::surface_blocks::{
     surf_block_index, surf_block_skip, surf_blocks_per_axis, surf_box_span, surf_live_words,
@@ -16,8 +17,8 @@ use crate::math::trilerp::trilerp_weights;
 use anyhow::{ensure, Result};
 use rayon::prelude::*;
 
-/// Counters summed over rays: cells read (links read: live cells when skipping), cubic solves, solves skipped by min/max
-/// culling, hits composited, hits cut off by truncation, blocks skipped (the kernel's `stats`
+/// Counters summed over rays: cells read (links read: live cells when skipping), cubic solves,
+/// solves skipped by min/max or segment culling, hits composited, hits cut off by truncation, blocks skipped (the kernel's `stats`
 /// buffer).
 pub type SurfCounts = [u32; 6];
 
@@ -73,12 +74,16 @@ pub struct SurfaceParams {
     pub stop_thresh: f32,
 }
 
-/// A cell of the walk that some level can cross: its DDA piece, corner links and δ values, and the
-/// levels that pass min/max culling.
+/// A cell of the walk that some level can cross: its DDA piece, corner links and δ values, the
+/// piece's entry/exit points q0/q1 in the cell, its cubic's C1..C3, and the levels that pass
+/// min/max and segment culling.
 pub struct WalkCell {
     pub piece: DdaPiece,
     pub lk: [i32; 8],
     pub c: [f32; 8],
+    pub q0: [f32; 3],
+    pub q1: [f32; 3],
+    pub cc: CellCubic,
     pub mask: u32,
 }
 
@@ -86,12 +91,14 @@ pub struct WalkCell {
 /// (`blocks`, `cpu::surface_blocks::build_blocks`) only over the ray's span inside the allocated
 /// box (`surf_box_span`), cells of mask-0 blocks are skipped and cells whose live bit is clear
 /// are passed over unread; cells with an unallocated corner and cells no
-/// level crosses are passed over. `counts` = cells read (corners loaded), cubic solves, solves
-/// culled, blocks skipped.
+/// level can cross (min/max culling, then segment culling on the ray's piece) are passed over.
+/// `counts` = cells read (corners loaded), cubic solves, solves culled (levels dropped by either
+/// culling), blocks skipped.
 pub struct CellWalk<'a> {
     g: &'a SurfaceGridRef<'a>,
     levels: &'a [f32],
     blocks: Option<SkipRef<'a>>,
+    og: [f32; 3],
     dn: [f32; 3],
     w: Dda,
     /// With a skip structure: the walk ends at the first piece entered at this t (the ray's exit
@@ -118,6 +125,7 @@ impl<'a> CellWalk<'a> {
             g,
             levels,
             blocks,
+            og,
             dn,
             // A miss (t_in ≥ t_out, or NaN) starts past every grid: the walk ends at once.
             w: dda_init(
@@ -185,11 +193,27 @@ impl Iterator for CellWalk<'_> {
                 continue;
             }
             let c = lk.map(|k| g.delta[k as usize]);
-            let mask = surf_level_mask(&c, self.levels);
+            let mut mask = surf_level_mask(&c, self.levels);
+            let (mut q0, mut q1, mut cc) = ([0.0; 3], [0.0; 3], CellCubic::default());
+            if mask != 0 {
+                q0 = surf_local(self.og, self.dn, piece.t0, l);
+                q1 = surf_local(self.og, self.dn, piece.t1, l);
+                cc = cell_cubic(&c, q0, self.dn);
+                let len = piece.t1 - piece.t0;
+                mask = surf_segment_mask(&c, cc, q0, q1, len, self.levels, mask);
+            }
             self.counts[1] += mask.count_ones();
             self.counts[2] += self.levels.len() as u32 - mask.count_ones();
             if mask != 0 {
-                return Some(WalkCell { piece, lk, c, mask });
+                return Some(WalkCell {
+                    piece,
+                    lk,
+                    c,
+                    q0,
+                    q1,
+                    cc,
+                    mask,
+                });
             }
         }
         None
@@ -214,12 +238,9 @@ pub fn render_ray(
     let mut cnt: SurfCounts = [0; 6];
     let mut walk = CellWalk::new(g, og, dn, levels, blocks);
     'walk: for cell in walk.by_ref() {
-        let (piece, l, c, mask) = (cell.piece, cell.piece.cell, cell.c, cell.mask);
-        let lk = cell.lk;
-        let q0 = surf_local(og, dn, piece.t0, l);
-        let q1 = surf_local(og, dn, piece.t1, l);
+        let (piece, c, q0, lk) = (cell.piece, cell.c, cell.q0, cell.lk);
         let len = piece.t1 - piece.t0;
-        let hits = surf_cell_hits(&c, q0, q1, dn, len, levels, mask);
+        let hits = surf_cell_hits(&c, cell.cc, q0, cell.q1, len, levels, cell.mask);
         for &s in hits.as_slice() {
             if j as f32 >= p.a {
                 cnt[4] += 1;

@@ -28,9 +28,7 @@ use super::surface_fwd::{
 };
 use crate::math::dda::ray_unit;
 use crate::math::sh::sh_basis;
-use crate::math::surface::{
-    surf_alpha, surf_cell_hits, surf_gamma, surf_local, surf_ray, SURF_MAX_LEVELS,
-};
+use crate::math::surface::{surf_alpha, surf_cell_hits, surf_gamma, surf_ray, SURF_MAX_LEVELS};
 use crate::math::surface_blocks::SkipRef;
 use crate::math::trilerp::trilerp_weights;
 use anyhow::{ensure, Result};
@@ -42,7 +40,7 @@ pub const SURF_MAX_HITS: usize = 8;
 /// Relative guard on the implicit derivative's denominator f′(s).
 pub const FPRIME_GUARD: f32 = 1e-3;
 
-/// Counters summed over rays: cells read (live cells: corners loaded), cubic solves, solves skipped by min/max culling,
+/// Counters summed over rays: cells read (live cells: corners loaded), cubic solves, solves skipped by min/max or segment culling,
 /// hits composited, hits cut off by truncation, hits whose δ gradient was dropped by the f′ guard,
 /// gradient atomic adds, empty-space blocks skipped.
 pub type TrainCounts = [u32; 8];
@@ -124,10 +122,9 @@ pub fn trace_ray(
     let mut t_acc = 1.0f32;
     let mut walk = CellWalk::new(g, og, dn, levels, blocks);
     'walk: for cell in walk.by_ref() {
-        let (piece, l, c, mask, lk) = (cell.piece, cell.piece.cell, cell.c, cell.mask, cell.lk);
-        let q0 = surf_local(og, dn, piece.t0, l);
-        let q1 = surf_local(og, dn, piece.t1, l);
-        let hits = surf_cell_hits(&c, q0, q1, dn, piece.t1 - piece.t0, levels, mask);
+        let (piece, l, c, q0, lk) = (cell.piece, cell.piece.cell, cell.c, cell.q0, cell.lk);
+        let len = piece.t1 - piece.t0;
+        let hits = surf_cell_hits(&c, cell.cc, q0, cell.q1, len, levels, cell.mask);
         for (&s, &lv) in hits.as_slice().iter().zip(hits.levels()) {
             let j = tr.n;
             if j as f32 >= p.a {
