@@ -7,7 +7,7 @@
 // Inputs: links (n³ i32, < 0 unallocated), delta (per allocated vertex), levels[n_levels ≤ 8],
 // margin ≥ 0, block_shift. Output: blocks[b] = bit i set iff τ_i ∈ [bmin − margin, bmax + margin],
 // bmin/bmax over the allocated vertices of the block's vertex range [Bb, min(Bb+B, n−1)]³ (0 if
-// none).
+// none); the empty radii are added by surface_block_radius.
 // min/max are exact, so the scan order does not matter (signed zeros aside, which compare alike).
 // CPU twin: cpu::surface_blocks::build_blocks (src/cpu/surface_blocks.rs).
 #include "common.glsl"
@@ -33,7 +33,7 @@ void main() {
     if (b >= nb * nb * nb) return;
     ivec3 l = ivec3(int(b / (nb * nb)), int((b / nb) % nb), int(b % nb)) << int(shift);
     vec3 lo, hi;
-    surf_block_box(l, int(n), shift, lo, hi);
+    surf_block_box(l, int(n), shift, 0u, lo, hi);
     ivec3 v0 = ivec3(lo);
     ivec3 v1 = ivec3(hi);
     float bmin = SURF_BLOCK_BIG;

@@ -11,8 +11,9 @@
 // Skipping (block_skip ≠ 0) with the skip structure `blocks` (glsl/lib/surface_blocks.glsl): the
 // walk covers only the ray's span inside the allocated box (surf_box_span); a cell whose
 // 2^block_shift-cell block has level mask 0 (kernel surface_blocks) is not read and the walk
-// restarts at the block's exit (surf_block_skip: the same pieces as the continuous walk, so the
-// same hits); a cell whose live bit is clear (kernel surface_live_cells) is passed over unread.
+// restarts at the exit of the cube of empty blocks around it (its radius: kernel
+// surface_block_radius; surf_block_skip: the same pieces as the continuous walk, so the same
+// hits); a cell whose live bit is clear (kernel surface_live_cells) is passed over unread.
 // Inputs: links (n³ i32, < 0 unallocated), per allocated vertex delta, opacity (raw σα) and sh
 // (27), levels[n_levels ≤ 8], rays (6 floats: scene origin, direction), a, stop_thresh, blocks
 // (live-cell words, nb³ u32 level masks, the allocated box; read only when block_skip ≠ 0),
@@ -111,8 +112,10 @@ void main() {
             uint base = dda_cell_index(l, n);
             if (pc.block_skip != 0u) {
                 uint bi = surf_block_index(l, nb, pc.block_shift);
-                if (pc.blocks.v[words + bi] == 0u
-                    && surf_block_skip(w, dn, int(n), l, bi, skipped, pc.block_shift)) {
+                uint word = pc.blocks.v[words + bi];
+                if ((word & SURF_MASK_BITS) == 0u
+                    && surf_block_skip(w, dn, int(n), l, bi, skipped, pc.block_shift,
+                                       word >> SURF_RADIUS_SHIFT)) {
                     skips++;
                     continue;
                 }

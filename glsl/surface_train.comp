@@ -17,8 +17,9 @@
 // Inputs: links (n³, < 0 unallocated), skip: the skip structure (glsl/lib/surface_blocks.glsl):
 // words [0, W = ⌈n³/32⌉) the live-cell bits of surface_live_cells (a cell with its bit clear has
 // an unallocated corner or no level within its δ range: one bit read instead of 8 links and 8 δ),
-// words [W, W + nb³) the 2^block_shift-cell block level masks of surface_blocks (a cell in a
-// mask-0 block cannot hold a hit: the walk restarts past the block, surf_block_skip), both built
+// words [W, W + nb³) the 2^block_shift-cell block level masks of surface_blocks with the empty
+// radii of surface_block_radius (a cell in a mask-0 block cannot hold a hit: the walk restarts
+// past the cube of empty blocks around it, surf_block_skip), both built
 // for the current δ or with a margin bounding its drift since (exact), then the allocated box
 // (static: the walk covers only the ray's span inside it, surf_box_span); block_shift; delta,
 // opacity (raw σα), sh (27) per allocated vertex;
@@ -243,8 +244,10 @@ void main() {
         while (dda_next(w, l, t0, t1)) {
             if (t0 >= span.y) break; // past the allocated box
             uint bi = surf_block_index(l, nb, pc.block_shift);
-            if (pc.skip.v[bbase + bi] == 0u
-                && surf_block_skip(w, dn, int(n), l, bi, skipped, pc.block_shift)) {
+            uint word = pc.skip.v[bbase + bi];
+            if ((word & SURF_MASK_BITS) == 0u
+                && surf_block_skip(w, dn, int(n), l, bi, skipped, pc.block_shift,
+                                   word >> SURF_RADIUS_SHIFT)) {
                 cnt2.w++;
                 continue;
             }

@@ -15,7 +15,7 @@ use alphasurf::gpu::test_gpu;
 use alphasurf::math::surface::SurfOut;
 use alphasurf::math::surface_blocks::{
     surf_blocks_per_axis, surf_live_words, SkipRef, SURF_BLOCK_SHIFT_CPU, SURF_BLOCK_SHIFT_VULKAN,
-    SURF_BOX_WORDS,
+    SURF_BOX_WORDS, SURF_MASK_BITS,
 };
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
@@ -441,20 +441,30 @@ fn backends_match_f64_reference() {
 // ---------------------------------------------------------------------------------------------
 // Block skipping (math::surface_blocks).
 
-/// Rays (grid origin, unit direction) aimed at the block structure of an `n`³ grid: along block
-/// faces and edges, diagonals through block corners, starting inside a dead block of `blocks`,
-/// in a block face plane and at a grazing angle to one, starting on a block corner.
-fn block_rays(n: u32, blocks: &[u32], seed: u64, count: usize) -> Vec<([f32; 3], [f32; 3])> {
+/// Rays (grid origin, unit direction) aimed at the skip structure `blocks` of an `n`³ grid with
+/// 2^`shift`-cell blocks: along block faces and edges, diagonals through block corners, starting
+/// inside a block without levels, in a block face plane and at a grazing angle to one, starting on
+/// a block corner.
+fn block_rays(
+    n: u32,
+    blocks: &[u32],
+    shift: u32,
+    seed: u64,
+    count: usize,
+) -> Vec<([f32; 3], [f32; 3])> {
     let mut rng = Pcg64::seed_from_u64(seed);
-    let nb = surf_blocks_per_axis(n, SHIFT) as usize;
-    let bs = (1u32 << SHIFT) as f32;
+    let nb = surf_blocks_per_axis(n, shift) as usize;
+    let bs = (1u32 << shift) as f32;
     let nf = n as f32;
-    let bf = |rng: &mut Pcg64| ((rng.random_range(0..=nb) << SHIFT).min(n as usize - 1)) as f32;
+    let bf = |rng: &mut Pcg64| ((rng.random_range(0..=nb) << shift).min(n as usize - 1)) as f32;
     let unit = |d: [f32; 3]| {
         let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
         d.map(|x| x / l)
     };
-    let dead: Vec<usize> = (0..blocks.len()).filter(|&b| blocks[b] == 0).collect();
+    let masks = &blocks[surf_live_words(n) as usize..][..nb * nb * nb];
+    let dead: Vec<usize> = (0..masks.len())
+        .filter(|&b| masks[b] & SURF_MASK_BITS == 0)
+        .collect();
     (0..count)
         .map(|r| match r % 7 {
             0 => {
@@ -539,11 +549,12 @@ fn block_skipping_is_exact_and_saves_cells() {
         let bw = blocks.len() - SURF_BOX_WORDS;
         live[bw..].copy_from_slice(&blocks[bw..]);
         let mut rays = test_rays(&sc, seed, 1500);
-        for (g, d) in block_rays(n, &blocks, seed, 1500) {
+        for (g, d) in block_rays(n, &blocks, SHIFT, seed, 1500) {
             rays.extend_from_slice(&sc.grid_to_scene(g));
             rays.extend_from_slice(&d);
         }
-        let dead = blocks.iter().filter(|&&m| m == 0).count();
+        let masks = &blocks[surf_live_words(n) as usize..bw];
+        let dead = masks.iter().filter(|&&m| m & SURF_MASK_BITS == 0).count();
         for (a, stop) in [(100.0f32, 1e-4f32), (2.5, 1e-3)] {
             let p = sc.params(a, stop);
             let (base, bc) = render(&sc.grid(), &rays, &p, None).unwrap();
@@ -555,7 +566,7 @@ fn block_skipping_is_exact_and_saves_cells() {
                 render_gpu(gpu, &sc.grid(), &rays, &p, Some(sk(&blocks))).unwrap();
             eprintln!(
                 "n {n} holes {holes} a {a}: {dead} of {} blocks dead; counters cpu {bc:?} → {skc:?}, gpu {gbc:?} → {gsk:?}",
-                blocks.len()
+                masks.len()
             );
             for (what, b, x, y) in [("cpu", &base, &all, &skip), ("gpu", &gbase, &gall, &gskip)] {
                 for (i, ((b, x), y)) in b.iter().zip(x).zip(y).enumerate() {
@@ -614,7 +625,9 @@ fn planar_field_one_live_block() {
     let blocks = build_blocks(&sc.grid(), &sc.levels, 0.0, SURF_BLOCK_SHIFT_CPU).unwrap();
     let words = surf_live_words(n) as usize;
     let masks = &blocks[words..blocks.len() - SURF_BOX_WORDS];
-    let live: Vec<usize> = (0..masks.len()).filter(|&b| masks[b] != 0).collect();
+    let live: Vec<usize> = (0..masks.len())
+        .filter(|&b| masks[b] & SURF_MASK_BITS != 0)
+        .collect();
     assert_eq!(live, vec![(4 + 1) * 4 + 1], "{masks:?}");
     // Live cells: the complete cells of the patch whose x extent holds the plane x = c (δ's
     // range over a cell is its x extent's), x = 12, y, z ∈ [9, 15) — none other.
@@ -646,7 +659,7 @@ fn planar_field_one_live_block() {
         rays.extend_from_slice(&sc.grid_to_scene(g));
         rays.extend_from_slice(&d.map(|x| x / l));
     }
-    for (g, d) in block_rays(n, &blocks, 9, 1000) {
+    for (g, d) in block_rays(n, &blocks, SURF_BLOCK_SHIFT_CPU, 9, 1000) {
         rays.extend_from_slice(&sc.grid_to_scene(g));
         rays.extend_from_slice(&d);
     }

@@ -10,21 +10,28 @@
 // allocated and inside its block's vertex range, so its min/max culling range lies within the
 // block's: a block with mask 0 holds no hit (margin ≥ 0; min/max are exact, no rounding).
 //
+// A block word holds the level mask in its low SURF_MASK_BITS and, for a mask-0 block, its empty
+// radius r from bit SURF_RADIUS_SHIFT on (kernel surface_block_radius): every block within
+// Chebyshev distance r of it (inside the grid) has mask 0 too, so the walk may jump to the exit of
+// that cube of blocks, which is a box of the same kind (integer planes, no hit inside).
+//
 // Skipping in a walk loop (surface_fwd.comp is the reference use):
 //     uint skipped = SURF_NO_BLOCK;
 //     while (dda_next(w, l, t0, t1)) {
 //         uint bi = surf_block_index(l, nb, shift);
-//         if (<block mask of bi> == 0u && surf_block_skip(w, dn, int(n), l, bi, skipped, shift))
-//             continue;   // w now restarts at the block's exit
+//         uint word = <block word of bi>;
+//         if ((word & SURF_MASK_BITS) == 0u
+//             && surf_block_skip(w, dn, int(n), l, bi, skipped, shift, word >> SURF_RADIUS_SHIFT))
+//             continue;   // w now restarts at the exit of the empty cube around the block
 //         if (!<cell live bit>) continue;   // no level can cross it: no corner is read
 //         ... the cell as before ...
 //     }
 // A live bit is the same test per cell (its corners' δ range), so it too only drops cells that
 // cannot hold a hit.
 // dn: the direction the walk was started with (dda_init(og, dn, n, ·)).
-// Exactness: the block exit t_exit (surf_block_exit) is the far-plane crossing (k − o)·(1/d) with
-// dda.glsl's own formula, hence bit-identical to the t at which the continuous walk leaves the
-// block; the restart (surf_dda_restart, = dda_init(og, dn, n, t_exit)) settles the cell with
+// Exactness: the exit t_exit (surf_block_exit) of the cube of empty blocks is the far-plane
+// crossing (k − o)·(1/d) with dda.glsl's own formula, hence bit-identical to the t at which the
+// continuous walk leaves it; the restart (surf_dda_restart, = dda_init(og, dn, n, t_exit)) settles the cell with
 // those same crossings and recomputes t_next with the same formula, so the pieces (cell, t0, t1)
 // after the block are exactly the ones the continuous walk would produce (tested piece by piece
 // in src/math/surface_blocks.rs). Should rounding ever settle the restart back inside the skipped
@@ -55,17 +62,25 @@ uint surf_live_words(uint n) {
 // Whether the cell with lower-corner slot ci is live in the skip structure `words`.
 #define SURF_CELL_LIVE(SKIP, CI) ((SKIP.v[(CI) >> 5u] & (1u << ((CI) & 31u))) != 0u)
 
+// Low bits of a block word: the level mask (≤ 8 levels); bits from SURF_RADIUS_SHIFT on: the
+// empty radius of a mask-0 block (0 ≤ r ≤ SURF_MAX_RADIUS; 0 for a block with levels).
+const uint SURF_MASK_BITS = 0xffu;
+const uint SURF_RADIUS_SHIFT = 8u;
+const uint SURF_MAX_RADIUS = 8u;
+
 // Linear index of the block holding cell l.
 uint surf_block_index(ivec3 l, uint nb, uint shift) {
     uvec3 b = uvec3(l >> int(shift));
     return (b.x * nb + b.y) * nb + b.z;
 }
 
-// Vertex box [lo, hi] of the block holding cell l (grid of n³ vertices).
-void surf_block_box(ivec3 l, int n, uint shift, out vec3 lo, out vec3 hi) {
-    ivec3 b0 = (l >> int(shift)) << int(shift);
-    lo = vec3(b0);
-    hi = vec3(min(b0 + (1 << int(shift)), ivec3(n - 1)));
+// Vertex box [lo, hi] of the blocks within Chebyshev distance r of the block holding cell l (the
+// block itself for r = 0), clipped to the grid of n³ vertices.
+void surf_block_box(ivec3 l, int n, uint shift, uint r, out vec3 lo, out vec3 hi) {
+    ivec3 b = l >> int(shift);
+    int ri = int(r);
+    lo = vec3(max(b - ri, ivec3(0)) << int(shift));
+    hi = vec3(min((b + ri + 1) << int(shift), ivec3(n - 1)));
 }
 
 // Start of a block's δ range scan (the largest float): bmin = SURF_BLOCK_BIG and
@@ -85,13 +100,14 @@ uint surf_block_mask(float bmin, float bmax, float margin, float lv[8], uint nl)
     return m;
 }
 
-// t at which walk w leaves the block holding cell l: min over moving axes of the block's far-plane
-// crossing (k − o)·(1/d) (o, 1/d as stored in w) — bit-identical to ray_box(og, dn, block box,
-// ·).y, since for 1/d > 0 the far crossing is the larger of the two (rounding is monotone), and a
-// still axis lies inside the box (no constraint).
-float surf_block_exit(Dda w, ivec3 l, int n, uint shift) {
+// t at which walk w leaves the box of the blocks within r of the block holding cell l
+// (surf_block_box): min over moving axes of the box's far-plane crossing (k − o)·(1/d) (o, 1/d as
+// stored in w) — bit-identical to ray_box(og, dn, box, ·).y, since for 1/d > 0 the far crossing
+// is the larger of the two (rounding is monotone), and a still axis lies inside the box (no
+// constraint).
+float surf_block_exit(Dda w, ivec3 l, int n, uint shift, uint r) {
     vec3 lo, hi;
-    surf_block_box(l, n, shift, lo, hi);
+    surf_block_box(l, n, shift, r, lo, hi);
     float t = DDA_BIG;
     for (int a = 0; a < 3; a++) {
         if (w.step[a] == 0) continue;
@@ -140,12 +156,14 @@ vec2 surf_box_span(vec3 og, vec3 dn, uvec3 lo, uvec3 hi) {
 }
 
 // Called when the walk w (started as dda_init(og, dn, n, ·)) has just produced the piece of cell l
-// whose block bi has mask 0: unless bi is the block skipped last, restarts w at the block's exit,
-// records bi in `skipped` and returns true (the caller drops the cell and continues with
-// dda_next); returns false (walk the cell as usual) when bi == skipped.
-bool surf_block_skip(inout Dda w, vec3 dn, int n, ivec3 l, uint bi, inout uint skipped, uint shift) {
+// whose block bi has mask 0 and empty radius r: unless bi is the block skipped last, restarts w at
+// the exit of the cube of blocks within r of it, records bi in `skipped` and returns true (the
+// caller drops the cell and continues with dda_next); returns false (walk the cell as usual) when
+// bi == skipped.
+bool surf_block_skip(inout Dda w, vec3 dn, int n, ivec3 l, uint bi, inout uint skipped, uint shift,
+                     uint r) {
     if (bi == skipped) return false;
-    surf_dda_restart(w, dn, n, surf_block_exit(w, l, n, shift));
+    surf_dda_restart(w, dn, n, surf_block_exit(w, l, n, shift, r));
     skipped = bi;
     return true;
 }

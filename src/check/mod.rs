@@ -53,6 +53,7 @@ pub const CHECKS: &[(&str, CheckFn)] = &[
     ("cubic_solve", cubic_solve::check),
     ("extract_points", extract_points::check),
     ("surface_blocks", surface_blocks::check),
+    ("surface_block_radius", surface_blocks::check_radius),
     ("surface_live_cells", surface_blocks::check_live),
     ("surface_fwd", surface_fwd::check),
     ("surface_train", surface_train::check),

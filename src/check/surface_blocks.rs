@@ -1,5 +1,6 @@
-//! Parity of `glsl/surface_live_cells.comp` and `glsl/surface_blocks.comp` (the stage-2 walks'
-//! skip structure: live-cell bits and block level masks) with
+//! Parity of `glsl/surface_live_cells.comp`, `glsl/surface_blocks.comp` and
+//! `glsl/surface_block_radius.comp` (the stage-2 walks' skip structure: live-cell bits, block
+//! level masks and empty radii) with
 //! `cpu::surface_blocks::build_blocks`: exact equality of every word, on random
 //! test scenes at sizes that are and are not 8k+1 vertices (n = 40, 24, 17, 9, 2), with 3 % and 60 %
 //! of the vertices unallocated (whole blocks without an allocated vertex included), 5 and 8
@@ -11,15 +12,16 @@ use crate::cpu::surface_blocks::{alloc_box, build_blocks, complete_cells};
 use crate::gpu::Gpu;
 use crate::math::surface_blocks::{
     surf_blocks_per_axis, surf_live_words, SURF_BLOCK_SHIFT_CPU, SURF_BLOCK_SHIFT_VULKAN,
+    SURF_MASK_BITS, SURF_RADIUS_SHIFT,
 };
 use crate::surface::skip::{record_skip_structure, SkipIo};
 use anyhow::Result;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
 
-/// Runs `surface_live_cells` and `surface_blocks` on the device: the skip structure (live-cell
-/// words, then the `nb`³ block masks, then the host's allocated box) and the device time of both
-/// (ns).
+/// Runs `surface_live_cells`, `surface_blocks` and `surface_block_radius` on the device: the skip
+/// structure (live-cell words, then the `nb`³ block words, then the host's allocated box) and the
+/// device time of all (ns).
 pub fn build_blocks_gpu(
     gpu: &Gpu,
     n: u32,
@@ -42,6 +44,7 @@ pub fn build_blocks_gpu(
     let mut init = vec![0u32; (words + count) as usize];
     init.extend(alloc_box(links, n));
     let out = gpu.upload(&init)?;
+    let scratch = gpu.zeros::<u32>(2 * count as usize)?;
     let mut b = gpu.batch()?;
     record_skip_structure(
         &mut b,
@@ -51,6 +54,7 @@ pub fn build_blocks_gpu(
             delta: db.address(),
             levels: vb.address(),
             skip: out.address(),
+            scratch: scratch.address(),
             n,
             n_levels: levels.len() as u32,
             shift,
@@ -60,28 +64,45 @@ pub fn build_blocks_gpu(
     let times = b.submit()?;
     Ok((
         out.download()?,
-        times.kernel_ns("surface_live_cells") + times.kernel_ns("surface_blocks"),
+        times.kernel_ns("surface_live_cells")
+            + times.kernel_ns("surface_blocks")
+            + times.kernel_ns("surface_block_radius"),
     ))
 }
 
 /// The parity row of the block masks (`surface_blocks`).
 pub fn check(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
-    compare(gpu, seed, false)
+    compare(gpu, seed, Part::Masks)
+}
+
+/// The parity row of the empty radii (`surface_block_radius`).
+pub fn check_radius(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
+    compare(gpu, seed, Part::Radii)
 }
 
 /// The parity row of the live-cell bits (`surface_live_cells`).
 pub fn check_live(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
-    compare(gpu, seed, true)
+    compare(gpu, seed, Part::Live)
 }
 
-/// Both parts built on the device and on the CPU for every case; `live`: compare the live-cell
-/// words, else the block masks.
-fn compare(gpu: &Gpu, seed: u64, live_part: bool) -> Result<CheckRow> {
+/// What a row compares: the live-cell words, or the level masks or the empty radii of the block
+/// words.
+#[derive(Clone, Copy, PartialEq)]
+enum Part {
+    Live,
+    Masks,
+    Radii,
+}
+
+/// The skip structure built on the device and on the CPU for every case; `part`: what to compare
+/// (exactly).
+fn compare(gpu: &Gpu, seed: u64, part: Part) -> Result<CheckRow> {
     let mut cmp = Compare::new(0.0, 0.0);
     let mut rng = Pcg64::seed_from_u64(seed ^ 0xb10c_5eed);
     let mut cases = 0;
     let mut live = 0;
     let mut live_cells = 0;
+    let (mut wide, mut widest) = (0, 0);
     for (k, n) in [40u32, 24, 17, 9, 2].into_iter().enumerate() {
         for holes in [0.0f32, 0.6] {
             let mut sc = test_scene(seed + k as u64, n);
@@ -119,45 +140,65 @@ fn compare(gpu: &Gpu, seed: u64, live_part: bool) -> Result<CheckRow> {
                     continue;
                 }
                 let nb = surf_blocks_per_axis(n, shift) as usize;
-                let part = if live_part {
+                let range = if part == Part::Live {
                     0..words
                 } else {
                     words..words + nb * nb * nb
                 };
-                for i in part.clone() {
-                    let (g, w) = (got[i], want[i]);
+                // The compared field of a word.
+                let field = |w: u32| match part {
+                    Part::Live => w,
+                    Part::Masks => w & SURF_MASK_BITS,
+                    Part::Radii => w >> SURF_RADIUS_SHIFT,
+                };
+                for i in range.clone() {
+                    let (g, w) = (field(got[i]), field(want[i]));
                     cmp.value(g as f64, w as f64, || {
-                        let what = if live_part { "live word" } else { "block" };
+                        let what = ["live word", "block mask", "block radius"][part as usize];
                         format!(
                             "n {n} holes {holes} margin {margin} shift {shift} {what} {i}: gpu \
                              {g:#b} cpu {w:#b}"
                         )
                     });
                 }
-                live += want[part.clone()].iter().filter(|&&m| m != 0).count();
+                live += want[range.clone()]
+                    .iter()
+                    .filter(|&&m| m & SURF_MASK_BITS != 0)
+                    .count();
+                let radii = want[range.clone()].iter().map(|&m| m >> SURF_RADIUS_SHIFT);
+                wide += radii.clone().filter(|&r| r > 0).count();
+                widest = widest.max(radii.max().unwrap_or(0));
                 live_cells += want[..words]
                     .iter()
                     .map(|w| w.count_ones() as usize)
                     .sum::<usize>();
-                cases += if live_part {
+                cases += if part == Part::Live {
                     (n as usize).pow(3)
                 } else {
-                    part.len()
+                    range.len()
                 };
             }
         }
     }
-    Ok(if live_part {
-        cmp.row(
+    Ok(match part {
+        Part::Live => cmp.row(
             "surface_live_cells",
             cases,
             format!("live-cell bits exact; {live_cells} of {cases} cells live"),
-        )
-    } else {
-        cmp.row(
+        ),
+        Part::Masks => cmp.row(
             "surface_blocks",
             cases,
             format!("masks exact; {live} of {cases} blocks live"),
-        )
+        ),
+        Part::Radii => cmp.row(
+            "surface_block_radius",
+            cases,
+            format!(
+                "empty radii exact; {} blocks without levels, {wide} of them with a radius ≥ 1 \
+                 (largest {widest})",
+                cases - live
+            ),
+        ),
     })
 }

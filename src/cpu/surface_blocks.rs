@@ -6,8 +6,8 @@
 use super::surface_fwd::SurfaceGridRef;
 use crate::math::surface::SURF_MAX_LEVELS;
 use crate::math::surface_blocks::{
-    surf_block_box, surf_block_mask, surf_blocks_per_axis, surf_live_words, SURF_BLOCK_BIG,
-    SURF_BOX_WORDS,
+    surf_block_box, surf_block_mask, surf_block_radii, surf_blocks_per_axis, surf_live_words,
+    SURF_BLOCK_BIG, SURF_BOX_WORDS,
 };
 use anyhow::{ensure, Result};
 use rayon::prelude::*;
@@ -17,7 +17,7 @@ use rayon::prelude::*;
 /// slot i has its 8 corners allocated and a level τ in [cmin − margin, cmax + margin] of their
 /// δ), then the `nb`³ block masks of 2^shift-cell blocks, `nb = ceil((n−1)/2^shift)`, x-major:
 /// bit i set iff τ_i ∈ [bmin − margin, bmax + margin] over the block's allocated vertices (0 if
-/// none), then the allocated box ([`alloc_box`]). Pass `margin = 0` for the structure of the
+/// none), with the empty radius of a mask-0 block above (`surf_block_radii`), then the allocated box ([`alloc_box`]). Pass `margin = 0` for the structure of the
 /// current δ.
 pub fn build_blocks(
     g: &SurfaceGridRef,
@@ -42,12 +42,13 @@ pub fn build_blocks(
     );
     let nb = surf_blocks_per_axis(n, shift);
     let mut out = live_cells(g, levels, margin);
+    let words = out.len();
     out.extend(
         (0..nb * nb * nb)
             .into_par_iter()
             .map(|b| {
                 let l = [b / (nb * nb), (b / nb) % nb, b % nb].map(|x| (x as i32) << shift);
-                let (lo, hi) = surf_block_box(l, n as i32, shift);
+                let (lo, hi) = surf_block_box(l, n as i32, shift, 0);
                 let (v0, v1) = (lo.map(|x| x as u32), hi.map(|x| x as u32));
                 let (mut bmin, mut bmax) = (SURF_BLOCK_BIG, -SURF_BLOCK_BIG);
                 for x in v0[0]..=v1[0] {
@@ -68,6 +69,7 @@ pub fn build_blocks(
             })
             .collect::<Vec<u32>>(),
     );
+    surf_block_radii(&mut out[words..], nb);
     out.extend(alloc_box(g.links, n));
     Ok(out)
 }

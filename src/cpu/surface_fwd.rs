@@ -11,7 +11,7 @@ use crate::math::surface::{
 };
 use crate::math::surface_blocks::{
     surf_block_index, surf_block_skip, surf_blocks_per_axis, surf_box_span, surf_live_words,
-    SkipRef, SURF_BOX_WORDS, SURF_NO_BLOCK,
+    SkipRef, SURF_BOX_WORDS, SURF_MASK_BITS, SURF_NO_BLOCK, SURF_RADIUS_SHIFT,
 };
 use crate::math::trilerp::trilerp_weights;
 use anyhow::{ensure, Result};
@@ -160,7 +160,8 @@ impl Iterator for CellWalk<'_> {
             if let Some(SkipRef { words: skip, shift }) = self.blocks {
                 let nb = surf_blocks_per_axis(g.n, shift);
                 let bi = surf_block_index(l, nb, shift);
-                if skip[words + bi as usize] == 0
+                let word = skip[words + bi as usize];
+                if word & SURF_MASK_BITS == 0
                     && surf_block_skip(
                         &mut self.w,
                         self.dn,
@@ -169,6 +170,7 @@ impl Iterator for CellWalk<'_> {
                         bi,
                         &mut self.skipped,
                         shift,
+                        word >> SURF_RADIUS_SHIFT,
                     )
                 {
                     self.counts[3] += 1;

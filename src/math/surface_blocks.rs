@@ -6,8 +6,9 @@
 //! [`SURF_BLOCK_SHIFT_VULKAN`]): block b (per axis) covers cells [Bb, Bb+B) ∩ [0, n−2], i.e. the
 //! vertex range [Bb, min(Bb+B, n−1)]; `nb = ceil((n−1)/B)` blocks per axis, x-major. A block's
 //! level mask has bit i set iff τ_i ∈ [bmin − margin, bmax + margin] over its allocated vertices
-//! (0 if none): a block with mask 0 holds no hit, and the walk jumps over it with
-//! [`surf_block_skip`].
+//! (0 if none): a block with mask 0 holds no hit. Its word also holds its empty radius r
+//! ([`surf_block_radii`]): the blocks within Chebyshev distance r of it have mask 0 too, and the
+//! walk jumps to the exit of that cube of blocks with [`surf_block_skip`].
 //!
 //! Use in a walk loop (as in `cpu::surface_fwd::CellWalk`):
 //! ```text
@@ -15,10 +16,12 @@
 //! let mut skipped = SURF_NO_BLOCK;
 //! while let Some(piece) = dda_next(&mut w) {
 //!     let bi = surf_block_index(piece.cell, nb, shift);
-//!     if blocks[bi as usize] == 0
-//!         && surf_block_skip(&mut w, dn, n, piece.cell, bi, &mut skipped, shift)
+//!     let word = blocks[bi as usize];
+//!     if word & SURF_MASK_BITS == 0
+//!         && surf_block_skip(&mut w, dn, n, piece.cell, bi, &mut skipped, shift,
+//!                            word >> SURF_RADIUS_SHIFT)
 //!     {
-//!         continue; // w restarts at the block's exit
+//!         continue; // w restarts at the exit of the empty cube around the block
 //!     }
 //!     // ... the cell as before ...
 //! }
@@ -81,13 +84,80 @@ pub fn surf_block_index(l: [i32; 3], nb: u32, shift: u32) -> u32 {
     (b[0] * nb + b[1]) * nb + b[2]
 }
 
-/// Vertex box `(lo, hi)` of the block holding cell `l` (grid of `n`³ vertices).
-pub fn surf_block_box(l: [i32; 3], n: i32, shift: u32) -> ([f32; 3], [f32; 3]) {
-    let b0 = l.map(|x| (x >> shift) << shift);
+/// Bits of a block word holding its level mask (at most 8 levels).
+pub const SURF_MASK_BITS: u32 = 0xff;
+/// A mask-0 block's word holds its empty radius r from this bit on: every block within Chebyshev
+/// distance r of it (in blocks, inside the grid) has mask 0 as well, so a walk in it may jump to
+/// the exit of that cube of blocks. 0 ≤ r ≤ [`SURF_MAX_RADIUS`]; 0 for a block with levels.
+pub const SURF_RADIUS_SHIFT: u32 = 8;
+/// Largest empty radius recorded (each of the three passes that find it reads 2·this + 1 words
+/// per block).
+pub const SURF_MAX_RADIUS: u32 = 8;
+
+/// Vertex box `(lo, hi)` of the blocks within Chebyshev distance `r` of the block holding cell `l`
+/// (the block itself for r = 0), clipped to the grid of `n`³ vertices.
+pub fn surf_block_box(l: [i32; 3], n: i32, shift: u32, r: u32) -> ([f32; 3], [f32; 3]) {
+    let b = l.map(|x| x >> shift);
+    let r = r as i32;
     (
-        b0.map(|x| x as f32),
-        b0.map(|x| (x + (1 << shift)).min(n - 1) as f32),
+        b.map(|x| ((x - r).max(0) << shift) as f32),
+        b.map(|x| ((x + r + 1) << shift).min(n - 1) as f32),
     )
+}
+
+/// One block's value in pass `pass` (0, 1, 2: along x, y, z) of the empty-radius computation
+/// (twin of the kernel `surface_block_radius`), over the nb³ values `src`: pass 0 reads the block
+/// words (a block with levels counts 0, one without [`SURF_MAX_RADIUS`] + 1), later passes the
+/// previous pass's values; the value is min over |k| ≤ [`SURF_MAX_RADIUS`] (blocks inside the
+/// grid) of max(|k|, value at b + k along the axis). After the three passes it is the Chebyshev
+/// distance from b to the nearest block with levels, capped at [`SURF_MAX_RADIUS`] + 1 (min and
+/// max compose separably for that distance).
+pub fn surf_radius_value(src: &[u32], nb: u32, pass: u32, b: u32) -> u32 {
+    let far = SURF_MAX_RADIUS + 1;
+    let stride = [nb * nb, nb, 1][pass as usize];
+    let pos = (b / stride) % nb;
+    let value = |i: u32| {
+        let v = src[i as usize];
+        match pass {
+            0 if v & SURF_MASK_BITS != 0 => 0,
+            0 => far,
+            _ => v,
+        }
+    };
+    let mut best = far;
+    // max(k, ·) ≥ k: nothing at k ≥ best can lower it.
+    for k in 0..=SURF_MAX_RADIUS {
+        if k >= best {
+            break;
+        }
+        if pos >= k {
+            best = best.min(k.max(value(b - k * stride)));
+        }
+        if pos + k < nb {
+            best = best.min(k.max(value(b + k * stride)));
+        }
+    }
+    best
+}
+
+/// Adds the empty radius to the nb³ block `words` (level masks): a block without levels at
+/// Chebyshev distance d from the nearest block with levels gets r = min(d, [`SURF_MAX_RADIUS`] +
+/// 1) − 1 in its bits from [`SURF_RADIUS_SHIFT`] on (the three passes of [`surf_radius_value`]).
+pub fn surf_block_radii(words: &mut [u32], nb: u32) {
+    let count = nb * nb * nb;
+    let x: Vec<u32> = (0..count)
+        .map(|b| surf_radius_value(words, nb, 0, b))
+        .collect();
+    let y: Vec<u32> = (0..count)
+        .map(|b| surf_radius_value(&x, nb, 1, b))
+        .collect();
+    for b in 0..count {
+        let d = surf_radius_value(&y, nb, 2, b);
+        let w = &mut words[b as usize];
+        if *w & SURF_MASK_BITS == 0 {
+            *w |= (d - 1) << SURF_RADIUS_SHIFT;
+        }
+    }
 }
 
 /// Start of a block's δ range scan: `bmin = SURF_BLOCK_BIG`, `bmax = −SURF_BLOCK_BIG` (an empty
@@ -108,11 +178,11 @@ pub fn surf_block_mask(bmin: f32, bmax: f32, margin: f32, levels: &[f32]) -> u32
         .fold(0, |m, (i, _)| m | 1 << i)
 }
 
-/// t at which walk `w` leaves the block holding cell `l`: min over moving axes of the block's
-/// far-plane crossing `(k − o)·(1/d)` (o, 1/d as stored in `w`), bit-identical to
-/// `ray_box(og, dn, block box, ·)[1]` (see the GLSL).
-pub fn surf_block_exit(w: &Dda, l: [i32; 3], n: i32, shift: u32) -> f32 {
-    let (lo, hi) = surf_block_box(l, n, shift);
+/// t at which walk `w` leaves the box of the blocks within `r` of the block holding cell `l`
+/// ([`surf_block_box`]): min over moving axes of the box's far-plane crossing `(k − o)·(1/d)`
+/// (o, 1/d as stored in `w`), bit-identical to `ray_box(og, dn, box, ·)[1]` (see the GLSL).
+pub fn surf_block_exit(w: &Dda, l: [i32; 3], n: i32, shift: u32, r: u32) -> f32 {
+    let (lo, hi) = surf_block_box(l, n, shift, r);
     let mut t = DDA_BIG;
     for a in 0..3 {
         if w.step[a] == 0 {
@@ -151,9 +221,11 @@ pub fn surf_dda_restart(w: &mut Dda, dn: [f32; 3], n: i32, t: f32) {
 }
 
 /// Called when the walk `w` (started as `dda_init(og, dn, n, ·)`) has just produced the piece of
-/// cell `l` whose block `bi` has mask 0: unless `bi` is the block skipped last, restarts `w` at
-/// the block's exit, records `bi` in `skipped` and returns true (drop the cell and continue with
-/// `dda_next`); returns false (walk the cell as usual) when `bi == *skipped`.
+/// cell `l` whose block `bi` has mask 0 and empty radius `r`: unless `bi` is the block skipped
+/// last, restarts `w` at the exit of the cube of blocks within `r` of it, records `bi` in
+/// `skipped` and returns true (drop the cell and continue with `dda_next`); returns false (walk
+/// the cell as usual) when `bi == *skipped`.
+#[allow(clippy::too_many_arguments)]
 pub fn surf_block_skip(
     w: &mut Dda,
     dn: [f32; 3],
@@ -162,11 +234,12 @@ pub fn surf_block_skip(
     bi: u32,
     skipped: &mut u32,
     shift: u32,
+    r: u32,
 ) -> bool {
     if bi == *skipped {
         return false;
     }
-    let t = surf_block_exit(w, l, n, shift);
+    let t = surf_block_exit(w, l, n, shift, r);
     surf_dda_restart(w, dn, n, t);
     *skipped = bi;
     true
@@ -202,19 +275,21 @@ mod tests {
         let mut skips = 0;
         while let Some(p) = dda_next(&mut w) {
             let bi = surf_block_index(p.cell, nb, shift);
-            if blocks[bi as usize] == 0 {
+            let word = blocks[bi as usize];
+            if word & SURF_MASK_BITS == 0 {
                 // The cheap exit and restart are the slab test and dda_init, bit for bit.
-                let (lo, hi) = surf_block_box(p.cell, n, shift);
+                let radius = word >> SURF_RADIUS_SHIFT;
+                let (lo, hi) = surf_block_box(p.cell, n, shift, radius);
                 let t_exit = ray_box(og, dn, lo, hi, p.t0)[1];
                 assert_eq!(
-                    surf_block_exit(&w, p.cell, n, shift).to_bits(),
+                    surf_block_exit(&w, p.cell, n, shift, radius).to_bits(),
                     t_exit.to_bits()
                 );
                 let mut r = w;
                 surf_dda_restart(&mut r, dn, n, t_exit);
                 let want = dda_init(og, dn, n, t_exit);
                 assert_eq!(format!("{r:?}"), format!("{want:?}"), "restart at {t_exit}");
-                if surf_block_skip(&mut w, dn, n, p.cell, bi, &mut skipped, shift) {
+                if surf_block_skip(&mut w, dn, n, p.cell, bi, &mut skipped, shift, radius) {
                     skips += 1;
                     continue;
                 }
@@ -235,16 +310,25 @@ mod tests {
         assert_eq!(surf_blocks_per_axis(6, 2), 2);
         assert_eq!(surf_blocks_per_axis(128, 2), 32);
         assert_eq!(
-            surf_block_box([9, 0, 15], 20, 3),
+            surf_block_box([9, 0, 15], 20, 3, 0),
             ([8.0, 0.0, 8.0], [16.0, 8.0, 16.0])
         );
         assert_eq!(
-            surf_block_box([17, 16, 18], 20, 3),
+            surf_block_box([17, 16, 18], 20, 3, 0),
             ([16.0, 16.0, 16.0], [19.0, 19.0, 19.0])
         );
         assert_eq!(
-            surf_block_box([9, 0, 15], 20, 2),
+            surf_block_box([9, 0, 15], 20, 2, 0),
             ([8.0, 0.0, 12.0], [12.0, 4.0, 16.0])
+        );
+        // Radius 1 and 2: clipped to the grid on both sides.
+        assert_eq!(
+            surf_block_box([9, 0, 15], 20, 2, 1),
+            ([4.0, 0.0, 8.0], [16.0, 8.0, 19.0])
+        );
+        assert_eq!(
+            surf_block_box([9, 5, 15], 40, 2, 2),
+            ([0.0, 0.0, 4.0], [20.0, 16.0, 24.0])
         );
         assert_eq!(surf_block_index([17, 3, 9], 3, 3), 19);
         assert_eq!(surf_block_index([17, 3, 9], 5, 2), (4 * 5) * 5 + 2);
@@ -256,6 +340,51 @@ mod tests {
             surf_block_mask(-1.0, 2.0, 0.5, &[-1.5, -1.6, 2.5, 2.6, 0.0]),
             0b10101
         );
+    }
+
+    /// The separable passes give each block without levels the largest cube of blocks without
+    /// levels around it (brute force over every cube), capped, and leave the masks alone.
+    #[test]
+    fn block_radii_are_the_largest_empty_cubes() {
+        let mut rng = Pcg64::seed_from_u64(5);
+        for case in 0..300 {
+            let nb = [1u32, 2, 3, 7, 12, 20][case % 6];
+            let p_dead = [0.5, 0.9, 0.99, 1.0][case % 4];
+            let masks: Vec<u32> = (0..nb * nb * nb)
+                .map(|_| {
+                    if rng.random::<f64>() >= p_dead {
+                        rng.random_range(1..256)
+                    } else {
+                        0
+                    }
+                })
+                .collect();
+            let mut words = masks.clone();
+            surf_block_radii(&mut words, nb);
+            let at = |x: i64, y: i64, z: i64| masks[((x * nb as i64 + y) * nb as i64 + z) as usize];
+            for b in 0..nb * nb * nb {
+                let w = words[b as usize];
+                assert_eq!(w & SURF_MASK_BITS, masks[b as usize]);
+                if masks[b as usize] != 0 {
+                    assert_eq!(w >> SURF_RADIUS_SHIFT, 0);
+                    continue;
+                }
+                let c = [b / (nb * nb), (b / nb) % nb, b % nb].map(|v| v as i64);
+                let empty = |r: i64| {
+                    let rng_of = |a: usize| (c[a] - r).max(0)..=(c[a] + r).min(nb as i64 - 1);
+                    rng_of(0).all(|x| rng_of(1).all(|y| rng_of(2).all(|z| at(x, y, z) == 0)))
+                };
+                let want = (0..=SURF_MAX_RADIUS as i64)
+                    .take_while(|&r| empty(r))
+                    .last()
+                    .unwrap();
+                assert_eq!(
+                    (w >> SURF_RADIUS_SHIFT) as i64,
+                    want,
+                    "case {case}: nb {nb} block {c:?}"
+                );
+            }
+        }
     }
 
     /// Random dead-block patterns (not derived from any field) and adversarial rays: the skipping
@@ -270,9 +399,10 @@ mod tests {
             let shift = [SURF_BLOCK_SHIFT_CPU, SURF_BLOCK_SHIFT_VULKAN][(case / 7) % 2];
             let nb = surf_blocks_per_axis(n as u32, shift) as usize;
             let p_dead = [0.3, 0.7, 0.95][case % 3];
-            let blocks: Vec<u32> = (0..nb * nb * nb)
+            let mut blocks: Vec<u32> = (0..nb * nb * nb)
                 .map(|_| u32::from(rng.random::<f64>() >= p_dead))
                 .collect();
+            surf_block_radii(&mut blocks, nb as u32);
             let nf = n as f32;
             let bf =
                 |rng: &mut Pcg64| (rng.random_range(0..=nb) << shift).min(n as usize - 1) as f32;
@@ -312,9 +442,10 @@ mod tests {
                 _ => far_ray(&mut rng, nf),
             };
             let dn = ray_unit(d);
-            let want: Vec<DdaPiece> = dda_init(og, dn, n, 0.0)
-                .filter(|p| blocks[surf_block_index(p.cell, nb as u32, shift) as usize] != 0)
-                .collect();
+            let live = |p: &DdaPiece| {
+                blocks[surf_block_index(p.cell, nb as u32, shift) as usize] & SURF_MASK_BITS != 0
+            };
+            let want: Vec<DdaPiece> = dda_init(og, dn, n, 0.0).filter(live).collect();
             let (got, skips) = skip_walk(og, dn, n, &blocks, shift);
             assert_eq!(got, want, "case {case}: n {n} og {og:?} dn {dn:?}");
             total_skips += skips;

@@ -1,5 +1,6 @@
 //! Recording of the stage-2 walks' skip structure on the device (glsl/lib/surface_blocks.glsl):
-//! `surface_live_cells` writes the live-cell words, `surface_blocks` the block masks after them.
+//! `surface_live_cells` writes the live-cell words, `surface_blocks` the block masks after them,
+//! and three passes of `surface_block_radius` add the empty radii of the mask-0 blocks.
 //! Shared by `VulkanSurface` and the parity check; CPU twin: `cpu::surface_blocks::build_blocks`.
 
 use crate::gpu::Batch;
@@ -15,15 +16,17 @@ pub struct SkipIo {
     pub delta: u64,
     /// 8 floats, zero-padded.
     pub levels: u64,
-    /// Output: `surf_live_words(n)` live-cell words, then the nb³ block masks.
+    /// Output: `surf_live_words(n)` live-cell words, then the nb³ block words (masks and radii).
     pub skip: u64,
+    /// 2·nb³ u32 of scratch for the radius passes.
+    pub scratch: u64,
     pub n: u32,
     pub n_levels: u32,
     /// log2 of the block edge in cells.
     pub shift: u32,
 }
 
-/// Record both kernels for δ ranges widened by `margin`.
+/// Record the kernels for δ ranges widened by `margin`.
 pub fn record_skip_structure(b: &mut Batch, io: &SkipIo, margin: f32) -> Result<()> {
     let words = surf_live_words(io.n);
     let nb = surf_blocks_per_axis(io.n, io.shift);
@@ -55,5 +58,18 @@ pub fn record_skip_structure(b: &mut Batch, io: &SkipIo, margin: f32) -> Result<
             block_shift: io.shift,
         },
         nb * nb * nb,
-    )
+    )?;
+    for pass in 0..3 {
+        b.dispatch_1d(
+            &kernels::surface_block_radius::INFO,
+            &kernels::surface_block_radius::Push {
+                blocks: io.skip + 4 * words as u64,
+                scratch: io.scratch,
+                nb,
+                pass,
+            },
+            nb * nb * nb,
+        )?;
+    }
+    Ok(())
 }

@@ -26,7 +26,9 @@ use crate::grid::surface::SurfaceGrid;
 use crate::grid::SH_DIM;
 use crate::kernels;
 use crate::math::surface::{SurfOut, SURF_MAX_LEVELS};
-use crate::math::surface_blocks::{surf_blocks_per_axis, surf_live_words, SURF_BLOCK_SHIFT_VULKAN};
+use crate::math::surface_blocks::{
+    surf_blocks_per_axis, surf_live_words, SURF_BLOCK_SHIFT_VULKAN, SURF_BOX_WORDS,
+};
 use anyhow::{ensure, Result};
 
 /// Floats in the params buffer of `surface_train` (layout in the kernel's header).
@@ -68,9 +70,10 @@ pub struct VulkanSurface {
     rows: usize,
     links: GpuBuffer,
     /// Complete-cell bits ([`complete_cells`], `complete_words` words, static), then the walks'
-    /// skip structure: as many live-cell words (`surface_live_cells`) and the nb³ block level
-    /// masks (`surface_blocks`), rebuilt whenever δ may have drifted past their margin, and the
-    /// allocated box (`alloc_box`, static).
+    /// skip structure: as many live-cell words (`surface_live_cells`) and the nb³ block words
+    /// (level masks, `surface_blocks`, and empty radii, `surface_block_radius`), rebuilt whenever
+    /// δ may have drifted past their margin, and the allocated box (`alloc_box`, static); then
+    /// 2·nb³ words of scratch for the radius passes.
     complete: GpuBuffer,
     complete_words: u64,
     /// When the block masks must be rebuilt.
@@ -146,6 +149,8 @@ impl VulkanSurface {
                 words.resize(2 * words.len() + nb * nb * nb, 0);
                 // The allocated box after the block masks: static, written once.
                 words.extend(alloc_box(&grid.links, grid.res[0]));
+                // Scratch of the radius passes.
+                words.resize(words.len() + 2 * nb * nb * nb, 0);
                 gpu.upload(&words)?
             },
             complete_words: surf_live_words(grid.res[0]) as u64,
@@ -264,6 +269,7 @@ impl VulkanSurface {
     /// (live-cell bits, and level masks per 4³-cell block), ranges widened by `margin` (see
     /// `BlockRefresh`), so the walks skip only cells and blocks that cannot hold a hit.
     fn record_blocks(&self, b: &mut Batch, margin: f32) -> Result<()> {
+        let nb = surf_blocks_per_axis(self.meta.res[0], SURF_BLOCK_SHIFT_VULKAN) as u64;
         record_skip_structure(
             b,
             &SkipIo {
@@ -272,6 +278,8 @@ impl VulkanSurface {
                 delta: self.delta.address(),
                 levels: self.levels.address(),
                 skip: self.skip_address(),
+                scratch: self.skip_address()
+                    + 4 * (self.complete_words + nb * nb * nb + SURF_BOX_WORDS as u64),
                 n: self.meta.res[0],
                 n_levels: self.meta.levels.len() as u32,
                 shift: SURF_BLOCK_SHIFT_VULKAN,
