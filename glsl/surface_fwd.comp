@@ -166,10 +166,11 @@ void main() {
             precise float at = alpha * surf_gamma(pc.a, j);
             float sh[27];
             for (int k = 0; k < 27; k++) sh[k] = 0.0;
-            for (int i = 0; i < 8; i++) {
-                uint row = uint(lk[i]) * 27u;
-                for (int k = 0; k < 27; k++) {
-                    precise float acc = sh[k] + wt[i] * pc.sh.v[row + uint(k)];
+            [[unroll]] for (int i = 0; i < 8; i++) {
+                float shv[27];
+                SH27_LOAD(pc.sh, uint(lk[i]), shv);
+                [[unroll]] for (int k = 0; k < 27; k++) {
+                    precise float acc = sh[k] + wt[i] * shv[k];
                     sh[k] = acc;
                 }
             }

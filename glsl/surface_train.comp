@@ -300,10 +300,11 @@ void main() {
                 uint row = uint(lk[i]);
                 dsa += dw[i] * pc.opacity.v[row];
                 f1 += dw[i] * c[i];
+                float shv[27];
+                SH27_LOAD(pc.sh, row, shv);
                 [[unroll]] for (uint ch = 0u; ch < 3u; ch++) {
                     precise float v = 0.0;
-                    uint base = row * 27u + ch * 9u;
-                    [[unroll]] for (uint k = 0u; k < 9u; k++) v += y[k] * pc.sh.v[base + k];
+                    [[unroll]] for (uint k = 0u; k < 9u; k++) v += y[k] * shv[ch * 9u + k];
                     raw[ch] += wt[i] * v;
                     draw[ch] += dw[i] * v;
                 }

@@ -22,7 +22,6 @@
 #define NORMAL_REG_GLSL
 
 layout(buffer_reference, scalar, buffer_reference_align = 16) buffer Vec4Buf { u64vec2 v[]; };
-layout(buffer_reference, scalar, buffer_reference_align = 8) buffer U64Buf { uint64_t v[]; };
 
 const uint NBR_WORDS = 8u;
 // The corner offset b of table entry j (and 8 + j).

@@ -20,15 +20,14 @@
 // and one float (the first for odd V, the last for even V): lavapipe loads and stores memory one
 // component at a time, so pairs halve the memory operations; per float the update is
 // RMSPROP_UPDATE's (the same operations, componentwise). Needs the buffers 8-byte aligned.
-layout(buffer_reference, scalar, buffer_reference_align = 8) buffer W64Buf { uint64_t v[]; };
 
 #define RMSPROP_UPDATE_SH27(PARAM, GRAD, STATE, V, LR) {                                  \
     uint b_ = 27u * (V);                                                                \
     uint p0_ = (b_ & 1u) != 0u ? b_ + 1u : b_;                                          \
     RMSPROP_UPDATE(PARAM, GRAD, STATE, (b_ & 1u) != 0u ? b_ : b_ + 26u, LR);            \
-    W64Buf th_ = W64Buf(uint64_t(PARAM) + 4ul * uint64_t(p0_));                         \
-    W64Buf gr_ = W64Buf(uint64_t(GRAD) + 4ul * uint64_t(p0_));                          \
-    W64Buf st_ = W64Buf(uint64_t(STATE) + 4ul * uint64_t(p0_));                         \
+    U64Buf th_ = U64Buf(uint64_t(PARAM) + 4ul * uint64_t(p0_));                         \
+    U64Buf gr_ = U64Buf(uint64_t(GRAD) + 4ul * uint64_t(p0_));                          \
+    U64Buf st_ = U64Buf(uint64_t(STATE) + 4ul * uint64_t(p0_));                         \
     for (uint k_ = 0u; k_ < 13u; k_++) {                                                \
         vec2 g_ = uintBitsToFloat(unpack32(gr_.v[k_]));                                 \
         vec2 r_ = uintBitsToFloat(unpack32(st_.v[k_]));                                 \

@@ -46,4 +46,21 @@ float sh_channel(float y[9], float c[9]) {
     return max(v, 0.0);
 }
 
+// S[k] = the 27 SH of vertex ROW in buffer BUF (F32Buf, 8-byte aligned), k < 27, moved as 13
+// aligned 64-bit words (U64Buf, common.glsl) and one float — the first for odd ROW, the last for
+// even ROW, as RMSPROP_UPDATE_SH27 — then placed with constant indices (S stays in registers).
+#define SH27_LOAD(BUF, ROW, S) {                                                          \
+    uint b_ = 27u * (ROW);                                                              \
+    bool odd_ = (b_ & 1u) != 0u;                                                        \
+    U64Buf w_ = U64Buf(uint64_t(BUF) + 4ul * uint64_t(odd_ ? b_ + 1u : b_));            \
+    float one_ = BUF.v[odd_ ? b_ : b_ + 26u];                                           \
+    vec2 pr_[13];                                                                       \
+    [[unroll]] for (uint j_ = 0u; j_ < 13u; j_++) pr_[j_] = uintBitsToFloat(unpack32(w_.v[j_])); \
+    [[unroll]] for (uint k_ = 0u; k_ < 27u; k_++) {                                     \
+        float e_ = k_ == 26u ? one_ : ((k_ & 1u) == 0u ? pr_[k_ >> 1u].x : pr_[k_ >> 1u].y); \
+        float o_ = k_ == 0u ? one_ : ((k_ & 1u) == 1u ? pr_[k_ >> 1u].x : pr_[(k_ >> 1u) - 1u].y); \
+        S[k_] = odd_ ? o_ : e_;                                                         \
+    }                                                                                   \
+}
+
 #endif
