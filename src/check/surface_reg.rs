@@ -499,27 +499,29 @@ pub fn check_normal_gather(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
 
 pub fn check_rmsprop(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
     let mut cmp = Compare::new(1e-7, 1e-5);
-    let n = 20_000u32;
-    let part = |start: u32, len: u32| RowRange {
-        rows: n,
-        start,
-        len,
-    };
-    // (δ rows, σα rows).
+    let part = |rows: u32, start: u32, len: u32| RowRange { rows, start, len };
+    let (n, odd) = (20_000u32, 19_999u32);
+    // (δ rows, σα rows), on grids of an even and an odd row count: the range passes take rows in
+    // aligned pairs, so odd starts, odd lengths, wraps and the last, single row are all here.
     let ranges = [
-        (RowRange::default(), RowRange::default()),
-        (RowRange::all(n), RowRange::default()),
-        (part(n - 1234, 3001), part(5000, 6000)),
+        (n, RowRange::default(), RowRange::default()),
+        (n, RowRange::all(n), RowRange::default()),
+        (n, part(n, n - 1234, 3001), part(n, 5000, 6000)),
+        (n, part(n, n - 1233, 3000), part(n, 4999, 6001)),
+        (n, part(n, 7, n), part(n, n - 1, 1)),
+        (odd, part(odd, odd - 1, 2), part(odd, 3, odd - 1)),
+        (odd, part(odd, 1, odd), part(odd, odd - 3, 3)),
     ];
-    for (d, o) in ranges {
-        rmsprop_case(gpu, seed, n as usize, d, o, &mut cmp)?;
+    for (rows, d, o) in ranges {
+        rmsprop_case(gpu, seed, rows as usize, d, o, &mut cmp)?;
     }
     Ok(cmp.row(
         "surface_rmsprop",
-        ranges.len() * n as usize,
+        ranges.iter().map(|r| r.0 as usize).sum(),
         "δ, σα, 27 SH; 2/3 of vertices touched in scrambled order with every combination of \
-         group bits; list pass alone; δ range pass over every row + list pass; δ range of 3001 \
-         rows wrapping past the end and σα range of 6000 + list pass; fresh state, zero and \
+         group bits; list pass alone; δ range pass over every row + list pass; ranges in pairs \
+         from even and odd starts, of even and odd lengths, wrapping, whole from an odd start, \
+         the last row alone, on 20000 and 19999 rows + list pass; fresh state, zero and \
          1e-8..1e4 gradients; untouched groups unchanged, gradients and flags cleared"
             .into(),
     ))

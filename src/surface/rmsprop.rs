@@ -7,8 +7,14 @@ use crate::gpu::{record_optim_args, Batch, GpuBuffer};
 use crate::kernels;
 use anyhow::Result;
 
-/// Rows per invocation of surface_rmsprop's range pass (its RANGE_ROWS).
+/// Row pairs per invocation of surface_rmsprop's range pass (its RANGE_ROWS).
 const RANGE_ROWS: u32 = 16;
+
+/// The aligned row pairs (2m, 2m + 1) surface_rmsprop's range pass visits for the `len` rows from
+/// `start` of a grid with `rows` rows (the kernel's count).
+fn range_pairs(start: u32, len: u32, rows: u32) -> u32 {
+    ((start & 1) + len).div_ceil(2).min(rows.div_ceil(2))
+}
 
 /// Device addresses of the parameter groups δ, σα, SH: values, gradients, RMS states.
 #[derive(Clone, Copy, Debug)]
@@ -52,7 +58,7 @@ pub fn record_surface_rmsprop(
         range_pass: 0,
         ..Default::default()
     };
-    for (pass, len) in [(1, d.len), (2, o.len)] {
+    for (pass, start, len) in [(1, d.start, d.len), (2, o.start, o.len)] {
         if len > 0 {
             b.dispatch_1d(
                 &kernels::surface_rmsprop::INFO,
@@ -60,7 +66,7 @@ pub fn record_surface_rmsprop(
                     range_pass: pass,
                     ..push
                 },
-                len.div_ceil(RANGE_ROWS),
+                range_pairs(start, len, push.rows).div_ceil(RANGE_ROWS),
             )?;
         }
     }
