@@ -16,7 +16,9 @@
 // updates δ on every row of the window.
 // Thread mapping: one invocation per chunk row (stage 0) or window row (stage 1).
 // Inputs: nbr, delta, q (stage 1), rows, stage, start (< rows), count, window (≤ rows), scale.
-// Outputs: q (stage 0, 3 floats per row), grad (stage 1).
+// Outputs: q (stage 0, Q_FLOATS = 4 floats per row: x, y, z, 0), grad (stage 1).
+// The table (6 entries per row) and q (4 floats per row) are read and written as aligned 64-bit
+// words where a pair is wanted (lavapipe moves memory one component at a time).
 // CPU twin: cpu::surface_delta_tv.
 #include "common.glsl"
 layout(local_size_x = 64) in;
@@ -34,6 +36,9 @@ layout(push_constant, scalar) uniform Push {
     float scale;
 } pc;
 
+// Floats per row of q.
+const uint Q_FLOATS = 4u;
+
 // Row i from the chunk's start (i < rows), and whether row v is in the chunk.
 uint chunk_row(uint i) {
     return range_row(pc.start, i, pc.rows);
@@ -45,36 +50,45 @@ bool in_chunk(uint v) {
 
 void main() {
     uint i = flat_id();
+    // The table's 6 entries of a row as 3 aligned 64-bit words, q's row as 2 (U64Buf).
+    U64Buf nbr2 = U64Buf(uint64_t(pc.nbr));
+    U64Buf q2 = U64Buf(uint64_t(pc.q));
     if (pc.stage == 0u) {
         if (i >= pc.count) return;
         uint v = chunk_row(i);
         float d0 = pc.delta.v[v];
+        uvec2 fxy = unpack32(nbr2.v[3u * v]);
+        ivec3 fwd = ivec3(int(fxy.x), int(fxy.y), int(unpack32(nbr2.v[3u * v + 1u]).x));
         vec3 d;
         for (uint a = 0u; a < 3u; a++) {
-            int n = pc.nbr.v[6u * v + a];
+            int n = fwd[a];
             d[a] = n >= 0 ? pc.delta.v[uint(n)] - d0 : 0.0;
         }
         precise float tv = sqrt(((d.x * d.x + d.y * d.y) + d.z * d.z) + 1e-9);
-        for (uint a = 0u; a < 3u; a++) {
-            precise float qa = d[a] / tv;
-            pc.q.v[3u * v + a] = qa;
-        }
+        precise vec3 q = d / tv;
+        q2.v[2u * v] = pack64(floatBitsToUint(q.xy));
+        q2.v[2u * v + 1u] = pack64(uvec2(floatBitsToUint(q.z), 0u));
         return;
     }
     if (i >= pc.window) return;
     uint v = chunk_row(i);
+    uvec2 zx = unpack32(nbr2.v[3u * v + 1u]);
+    uvec2 yz = unpack32(nbr2.v[3u * v + 2u]);
+    ivec3 back_rows = ivec3(int(zx.y), int(yz.x), int(yz.y));
     precise float back = 0.0;
     bool any = false;
     for (uint a = 0u; a < 3u; a++) {
-        int m = pc.nbr.v[6u * v + 3u + a];
+        int m = back_rows[a];
         if (m >= 0 && in_chunk(uint(m))) {
-            back += pc.q.v[3u * uint(m) + a];
+            back += pc.q.v[Q_FLOATS * uint(m) + a];
             any = true;
         }
     }
     precise float own = 0.0;
     if (in_chunk(v)) {
-        own = (pc.q.v[3u * v] + pc.q.v[3u * v + 1u]) + pc.q.v[3u * v + 2u];
+        vec2 qxy = uintBitsToFloat(unpack32(q2.v[2u * v]));
+        float qz = pc.q.v[Q_FLOATS * v + 2u];
+        own = (qxy.x + qxy.y) + qz;
         any = true;
     }
     if (!any) return;

@@ -17,7 +17,7 @@ use crate::cpu::{surface_rmsprop_sparse, tv, Stage2Params, SurfaceRmsProp, TvChu
 use crate::gpu::{Gpu, GpuBuffer};
 use crate::grid::SH_DIM;
 use crate::kernels;
-use crate::surface::delta_tv::{record_delta_tv, DeltaTvIo};
+use crate::surface::delta_tv::{record_delta_tv, DeltaTvIo, Q_FLOATS};
 use crate::surface::normal_reg::{record_normal_reg, NormalRegBuffers, NormalRegIo};
 use crate::surface::rmsprop::{record_surface_rmsprop, SurfaceOptimIo};
 use anyhow::Result;
@@ -227,7 +227,7 @@ pub fn gpu_delta_tv(
     let reach = forward_reach(&nbr);
     let nb = gpu.upload(&nbr)?;
     let db = gpu.upload(&g.delta)?;
-    let qb = gpu.upload(&vec![f32::NAN; 3 * n])?;
+    let qb = gpu.upload(&vec![f32::NAN; Q_FLOATS * n])?;
     let gb = gpu.upload(grad0)?;
     let io = DeltaTvIo {
         nbr: nb.address(),

@@ -7,13 +7,17 @@ use crate::gpu::Batch;
 use crate::kernels;
 use anyhow::{ensure, Result};
 
+/// Floats per row of the directions scratch `q` (x, y, z and a pad: two aligned 64-bit words,
+/// the kernel's Q_FLOATS).
+pub const Q_FLOATS: usize = 4;
+
 /// Device addresses of the inputs and outputs of the passes.
 #[derive(Clone, Copy, Debug)]
 pub struct DeltaTvIo {
     /// The axis-neighbour table (`axis_neighbours`).
     pub nbr: u64,
     pub delta: u64,
-    /// Per-row directions, 3 floats per row (scratch).
+    /// Per-row directions, [`Q_FLOATS`] floats per row (scratch).
     pub q: u64,
     /// ∂/∂δ, added to.
     pub grad: u64,

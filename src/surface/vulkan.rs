@@ -6,7 +6,7 @@
 //! chunk's window) → surface_rmsprop: δ and σα on the rows the regularisers' chunks cover
 //! ([`RegPlan`]), then (optim_args → indirect) the flagged groups of the touched vertices.
 
-use super::delta_tv::{record_delta_tv, DeltaTvIo};
+use super::delta_tv::{record_delta_tv, DeltaTvIo, Q_FLOATS};
 use super::normal_reg::{record_normal_reg, upload_nonempty, NormalRegBuffers, NormalRegIo};
 use super::rmsprop::{record_surface_rmsprop, SurfaceOptimIo};
 use super::skip::{record_skip_structure, SkipIo};
@@ -175,7 +175,7 @@ impl VulkanSurface {
             stats: gpu.zeros::<u32>(8)?,
             axis_nbrs: upload_nonempty(gpu, &axis_nbrs)?,
             axis_reach: forward_reach(&axis_nbrs),
-            tv_dirs: gpu.zeros::<f32>(3 * n.max(1))?,
+            tv_dirs: gpu.zeros::<f32>(Q_FLOATS * n.max(1))?,
             normal_bufs: NormalRegBuffers::new(gpu, &normal_prefix)?,
             normal_prefix,
             reg_loss: gpu.zeros::<f32>(2)?,
