@@ -33,6 +33,10 @@
 // CPU twin: cpu::surface_train::train (src/cpu/surface_train.rs).
 #extension GL_EXT_shader_atomic_float : require
 #include "common.glsl"
+// Composited hits recorded per ray (the truncation parameter a may not exceed this); a cell's hit
+// list keeps as many (surface.glsl), all a ray can composite.
+#define SURF_MAX_HITS 8u
+#define SURF_CELL_KEEP SURF_MAX_HITS
 #include "surface.glsl"
 #include "surface_blocks.glsl"
 layout(local_size_x = 64) in;
@@ -69,8 +73,6 @@ layout(push_constant, scalar) uniform Push {
 
 #include "step.glsl"
 
-// Composited hits recorded per ray (the truncation parameter a may not exceed this).
-const uint SURF_MAX_HITS = 8u;
 // Relative guard on the implicit derivative's denominator f′(s).
 const float FPRIME_GUARD = 1e-3;
 // Layout of the params buffer.

@@ -49,7 +49,7 @@ vec3 surf_local(vec3 og, vec3 dn, float t, ivec3 l) {
 
 // Hits a cell's list keeps: its SURF_CELL_KEEP smallest (the count still covers them all). A kernel
 // that composites at most K hits per ray may define it as K before including this file
-// (surface_train: its SURF_MAX_HITS = 8, the default); surface_fwd, with no bound on a, keeps
+// (surface_train: its SURF_MAX_HITS; 8 by default); surface_fwd, with no bound on a, keeps
 // every hit: 16 (≤ 2 rising crossings per level, as crossings alternate, × 8 levels).
 #ifndef SURF_CELL_KEEP
 #define SURF_CELL_KEEP 8u

@@ -1,7 +1,9 @@
-//! Twins of `glsl/surface_live_cells.comp` and `glsl/surface_blocks.comp`: the skip structure of
-//! the stage-2 walks (`math::surface_blocks` has the conventions) — a live bit per cell (all 8
-//! corners allocated and some level within its corners' δ range ± margin), then the level mask
-//! of every 2^shift-cell block; one rayon task per bit word and per block.
+//! Twins of `glsl/surface_live_cells.comp`, `glsl/surface_blocks.comp` and
+//! `glsl/surface_block_radius.comp`: the skip structure of the stage-2 walks (`math::surface_blocks`
+//! has the conventions) — a live bit per cell (all 8 corners allocated and some level within its
+//! corners' δ range ± margin), then the level mask of every 2^shift-cell block (one rayon task per
+//! bit word and per block) with the empty radius of the blocks without levels
+//! (`math::surface_blocks::surf_block_radii`, the kernel's three passes).
 
 use super::surface_fwd::SurfaceGridRef;
 use crate::math::surface::SURF_MAX_LEVELS;
