@@ -3,6 +3,7 @@
 // Coefficients per vertex: 27 floats [R0..R8, G0..G8, B0..B8]. Rust twin: src/math/sh.rs.
 #ifndef SH_GLSL
 #define SH_GLSL
+#extension GL_EXT_control_flow_attributes : require
 
 const float SH_C0 = 0.28209479;
 const float SH_C1 = 0.48860251;
