@@ -1,6 +1,7 @@
 //! Stage 2 end to end at a small size: `train --stage all` (stage 1, then αSurf from it) →
 //! `extract` of the surfaces → `eval`; `--resume` extends a finished run; a diverging
-//! configuration stops with a message and leaves the last good checkpoint intact.
+//! configuration stops with a message and leaves the last good checkpoint intact; `bench surface
+//! --json` at a small size reports consistent figures.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -227,4 +228,65 @@ fn diverging_surface_training_stops_and_keeps_the_checkpoint() {
         .arg("--out")
         .arg(dir.path().join("s3")));
     assert!(!ok && text.contains("plenoxels.npz"), "{text}");
+}
+
+/// `bench surface --json` at 32³: both backends' rays/s and counters, the kernels' device times,
+/// and the stage-1 figures the ratios are taken against (their mean, before and after).
+#[test]
+fn bench_surface_json_is_consistent() {
+    let out = run_ok(bin().args([
+        "bench",
+        "surface",
+        "--json",
+        "--res",
+        "32",
+        "--stage1-steps",
+        "100",
+        "--warm-steps",
+        "2",
+        "--steps",
+        "2",
+        "--batch",
+        "512",
+    ]));
+    let line = out
+        .lines()
+        .find(|l| l.starts_with('{'))
+        .unwrap_or_else(|| panic!("no JSON line:\n{out}"));
+    let j: serde_json::Value = serde_json::from_str(line).unwrap();
+    let f = |v: &serde_json::Value| v.as_f64().unwrap_or_else(|| panic!("not a number: {v}"));
+    let (before, after) = (
+        f(&j["stage1_vulkan_rays_per_s_before"]),
+        f(&j["stage1_vulkan_rays_per_s_after"]),
+    );
+    let stage1 = f(&j["stage1_vulkan_rays_per_s"]);
+    assert!(before > 0.0 && after > 0.0 && before.is_finite() && after.is_finite());
+    assert!((stage1 - 0.5 * (before + after)).abs() <= 1e-9 * stage1);
+    for (rate, ratio) in [
+        ("vulkan", "ratio_surface_over_stage1_vulkan"),
+        (
+            "vulkan_data_term_only",
+            "ratio_surface_data_term_over_stage1_vulkan",
+        ),
+    ] {
+        let r = f(&j[rate]["rays_per_s"]);
+        assert!(r > 0.0 && r.is_finite(), "{rate}: {r}");
+        assert!(
+            (f(&j[ratio]) - r / stage1).abs() <= 1e-9 * r / stage1,
+            "{ratio}"
+        );
+    }
+    for k in ["cells", "solves", "culled", "hits", "skips"] {
+        let v = f(&j["vulkan"]["per_ray"][k]);
+        assert!(v >= 0.0 && v.is_finite(), "{k}: {v}");
+    }
+    // Both backends train the same batches from the same state: the same hits (up to the
+    // near-degenerate rays the parity checks excuse, ≤ 0.5 %).
+    let (hv, hc) = (
+        f(&j["vulkan"]["per_ray"]["hits"]),
+        f(&j["cpu"]["per_ray"]["hits"]),
+    );
+    assert!((hv - hc).abs() <= 5e-3 * hc.max(1.0), "hits {hv} vs {hc}");
+    assert!(f(&j["vulkan"]["per_ray"]["hits"]) > 0.0, "no hits: {line}");
+    assert!(f(&j["vulkan"]["device_ms_per_step"]["surface_train"]) > 0.0);
 }
