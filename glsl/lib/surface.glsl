@@ -97,9 +97,9 @@ uint surf_level_mask(float c[8], float lv[SURF_MAX_LEVELS], uint nl) {
 const float SURF_SEGMENT_MARGIN = 1e-5;
 
 // Segment culling: the levels of `mask` (from surf_level_mask) that can cross the ray's piece of
-// the cell, corners c, entry/exit points q0/q1, cc = cubic_cell(c, q0, d), length L. Along the piece
-// δ − τ is the cubic f(s) = b0 + C1·s + C2·s² + C3·s³, bounded by its Bernstein coefficients on
-// [0, L] (convex hull): b0 = f(0), b1 = b0 + C1L/3, b2 = b0 + (2·C1L + C2L²)/3,
+// the cell, corners c, entry/exit points q0/q1, cc = cubic_cell(c, q0, d), length L. Along the
+// piece δ − τ is the cubic f(s) = b0 + C1·s + C2·s² + C3·s³, bounded by its Bernstein
+// coefficients on [0, L] (convex hull): b0 = f(0), b1 = b0 + C1L/3, b2 = b0 + (2·C1L + C2L²)/3,
 // b3 = b0 + C1L + C2L² + C3L³; the solver also reads the exit value e = δ(q1) − τ. A level is
 // dropped when b0..b3 and e all exceed m or all lie below −m,
 // m = SURF_SEGMENT_MARGIN·(|b0| + |C1L| + |C2L²| + |C3L³| + max|c| + |τ|): f then stays that far

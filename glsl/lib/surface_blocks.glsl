@@ -31,11 +31,13 @@
 // dn: the direction the walk was started with (dda_init(og, dn, n, ·)).
 // Exactness: the exit t_exit (surf_block_exit) of the cube of empty blocks is the far-plane
 // crossing (k − o)·(1/d) with dda.glsl's own formula, hence bit-identical to the t at which the
-// continuous walk leaves it; the restart (surf_dda_restart, = dda_init(og, dn, n, t_exit)) settles the cell with
-// those same crossings and recomputes t_next with the same formula, so the pieces (cell, t0, t1)
-// after the block are exactly the ones the continuous walk would produce (tested piece by piece
-// in src/math/surface_blocks.rs). Should rounding ever settle the restart back inside the skipped
-// block, `skipped` makes the walk go through it cell by cell (never a loop).
+// continuous walk leaves it; the restart (surf_dda_restart, = dda_init(og, dn, n, t_exit))
+// settles the cell with those same crossings and recomputes t_next with the same formula, so the
+// pieces (cell, t0, t1) after the cube are exactly the ones the continuous walk would produce
+// (tested piece by piece in src/math/surface_blocks.rs). Should rounding ever settle the restart
+// back inside the skipped block, `skipped` makes the walk go through it cell by cell; back inside
+// the cube but in another block, that block skips on from a later t (the exit lies at or past the
+// current piece's end, same formula, rounding monotone): never a loop.
 // The masks must describe the current δ: rebuild them after every δ update (or use a margin that
 // bounds the drift since they were built).
 #ifndef SURFACE_BLOCKS_GLSL

@@ -3,17 +3,17 @@
 //! fast-preset stage-1 run on the CPU backend brings a density grid to `--res`³, the stage-2 grid
 //! is initialised from it (method.md §3.1, `SurfaceGrid::from_density`) and trained for
 //! `--warm-steps` CPU steps, then each backend trains the same `--steps` batches from that state
-//! (the thin category's fast-preset weights and regulariser chunks at step 0: LH, Lc, Lδ over
-//! every vertex, TVα, Lα and Ln1/Ln2 on random chunks). Reported per backend: training rays/s (wall
-//! time, after one untimed step), mean MSE, and per ray: cells read (live cells), cubic solves, solves
-//! skipped by min/max or segment culling, hits composited, hits cut by truncation, hits whose δ gradient the
-//! f′ guard dropped, gradient atomic adds; the Vulkan/CPU ratio; the Vulkan device time per kernel
-//! (timestamps). The Vulkan backend is also timed without the regularisers (the data term, its
-//! scatter and RMSProp over the vertices the rays touched): `bench plenoxels` times stage-1 steps
-//! without TV, and Lδ alone touches every vertex each step. For the target it times
-//! stage-1 training on the Vulkan device at the same resolution, from the stage-1 grid, the way
-//! `bench plenoxels` does, before and after stage 2's Vulkan timing (the machine's speed drifts),
-//! and prints the ratios of the Vulkan rates to their mean.
+//! (the thin category's fast-preset weights and regulariser chunks at step 0: LH, Lc, Lδ over every
+//! vertex, TVα, Lα and Ln1/Ln2 on random chunks). Reported per backend: training rays/s (wall time,
+//! after one untimed step), mean MSE, and per ray: cells read (live cells), cubic solves, solves
+//! skipped by min/max or segment culling, hits composited, hits cut by truncation, hits whose δ
+//! gradient the f′ guard dropped, gradient atomic adds; the Vulkan/CPU ratio; the Vulkan device
+//! time per kernel (timestamps). The Vulkan backend is also timed without the regularisers (the
+//! data term, its scatter and RMSProp over the vertices the rays touched): `bench plenoxels` times
+//! stage-1 steps without TV, and Lδ alone touches every vertex each step. For the target it
+//! times stage-1 training on the Vulkan device at the same resolution, from the stage-1 grid, the
+//! way `bench plenoxels` does, before and after stage 2's Vulkan timing (the machine's speed
+//! drifts), and prints the ratios of the Vulkan rates to their mean.
 
 use super::stage1::{thin_scene, time_steps, warm_config};
 use crate::data::{Dataset, RaySampler};
@@ -165,12 +165,14 @@ fn run_in(gpu: &Gpu, args: &SurfaceBenchArgs, dir: &std::path::Path) -> Result<(
     // Stage 1 on the Vulkan device from the same grid, timed before and again after stage 2's
     // Vulkan timing (each from the grid as trained on the CPU): the ratio uses their mean, and a
     // machine whose speed drifts between them shows it.
-    let time_stage1 = || -> Result<f64> {
-        eprintln!("bench surface: stage-1 training on the Vulkan device at the same resolution");
+    let time_stage1 = |when: &str| -> Result<f64> {
+        eprintln!(
+            "bench surface: stage-1 training on the Vulkan device at the same resolution ({when})"
+        );
         let mut vk = VulkanPlenoxels::new(gpu, density.clone())?;
         Ok(time_steps(&mut vk, &data, &cfg, args.steps, args.batch)?.rays_per_s)
     };
-    let stage1_before = time_stage1()?;
+    let stage1_before = time_stage1("before stage 2")?;
 
     let scfg = SurfaceConfig::preset("fast", "thin")?;
     let init_grid = SurfaceGrid::from_density(&density, &scfg.init)?;
@@ -227,7 +229,7 @@ fn run_in(gpu: &Gpu, args: &SurfaceBenchArgs, dir: &std::path::Path) -> Result<(
     }
     let fd = vulkan.pop().expect("two runs");
     let fv = vulkan.pop().expect("two runs");
-    let stage1_after = time_stage1()?;
+    let stage1_after = time_stage1("after stage 2")?;
     let stage1_vk = 0.5 * (stage1_before + stage1_after);
     eprintln!("bench surface: timing the CPU backend");
     let mut cpu = CpuSurface::new(grid.clone());

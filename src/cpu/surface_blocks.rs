@@ -16,11 +16,11 @@ use rayon::prelude::*;
 
 /// The skip structure of grid `g` for `levels` (at most 8), ranges widened by `margin` ≥ 0:
 /// `surf_live_words(n)` words of live-cell bits (bit i of word i/32: the cell with lower-corner
-/// slot i has its 8 corners allocated and a level τ in [cmin − margin, cmax + margin] of their
-/// δ), then the `nb`³ block masks of 2^shift-cell blocks, `nb = ceil((n−1)/2^shift)`, x-major:
-/// bit i set iff τ_i ∈ [bmin − margin, bmax + margin] over the block's allocated vertices (0 if
-/// none), with the empty radius of a mask-0 block above (`surf_block_radii`), then the allocated box ([`alloc_box`]). Pass `margin = 0` for the structure of the
-/// current δ.
+/// slot i has its 8 corners allocated and a level τ in [cmin − margin, cmax + margin] of their δ),
+/// then the `nb`³ block masks of 2^shift-cell blocks, `nb = ceil((n−1)/2^shift)`, x-major: bit i
+/// set iff τ_i ∈ [bmin − margin, bmax + margin] over the block's allocated vertices (0 if none),
+/// with the empty radius of a mask-0 block above (`surf_block_radii`), then the allocated box
+/// ([`alloc_box`]). Pass `margin = 0` for the structure of the current δ.
 pub fn build_blocks(
     g: &SurfaceGridRef,
     levels: &[f32],

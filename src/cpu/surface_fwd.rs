@@ -18,8 +18,8 @@ use anyhow::{ensure, Result};
 use rayon::prelude::*;
 
 /// Counters summed over rays: cells read (links read: live cells when skipping), cubic solves,
-/// solves skipped by min/max or segment culling, hits composited, hits cut off by truncation, blocks skipped (the kernel's `stats`
-/// buffer).
+/// solves skipped by min/max or segment culling, hits composited, hits cut off by truncation,
+/// blocks skipped (the kernel's `stats` buffer).
 pub type SurfCounts = [u32; 6];
 
 /// Borrowed stage-2 grid: `n`³ vertices (x-major links, < 0 unallocated) and per allocated vertex

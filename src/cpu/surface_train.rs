@@ -40,9 +40,9 @@ pub const SURF_MAX_HITS: usize = 8;
 /// Relative guard on the implicit derivative's denominator f′(s).
 pub const FPRIME_GUARD: f32 = 1e-3;
 
-/// Counters summed over rays: cells read (live cells: corners loaded), cubic solves, solves skipped by min/max or segment culling,
-/// hits composited, hits cut off by truncation, hits whose δ gradient was dropped by the f′ guard,
-/// gradient atomic adds, empty-space blocks skipped.
+/// Counters summed over rays: cells read (live cells: corners loaded), cubic solves, solves skipped
+/// by min/max or segment culling, hits composited, hits cut off by truncation, hits whose δ
+/// gradient was dropped by the f′ guard, gradient atomic adds, empty-space blocks skipped.
 pub type TrainCounts = [u32; 8];
 
 /// Loss weights of the fused per-ray terms (per-ray coefficients: the batch mean is the caller's).

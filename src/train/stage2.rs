@@ -36,9 +36,9 @@ pub struct Stage2Report {
     pub train_rays_per_s: f64,
     pub final_mse: f64,
     pub test_psnr: f64,
-    /// Per training ray: cells read (live cells), cubic solves, solves skipped by min/max or segment culling, hits,
-    /// hits cut by truncation, hits with a guarded δ gradient, gradient atomic adds, empty-space
-    /// blocks skipped.
+    /// Per training ray: cells read (live cells), cubic solves, solves skipped by min/max or
+    /// segment culling, hits, hits cut by truncation, hits with a guarded δ gradient, gradient
+    /// atomic adds, empty-space blocks skipped.
     pub per_ray: [f64; 8],
     pub vertices_before_prune: usize,
     pub allocated_vertices: usize,
