@@ -1,9 +1,12 @@
 //! `alphasurf eval`: Chamfer distance and F-score of a predicted point cloud against the ground
 //! truth (method.md §4), both read from PLY. Both clouds are first thinned with `--downsample`
 //! (the paper downsamples predicted and GT points at 0.001); an extraction is already thinned at
-//! that radius, so this only changes an unthinned cloud.
+//! that radius, so this only changes an unthinned cloud. With the scene's `scene.json` (found next
+//! to the GT cloud, or `--scene`) the figures are also split over its objects
+//! ([`crate::eval::objects`]).
 
-use crate::eval::{evaluate, thin, EvalOptions, Metrics};
+use crate::eval::objects::{load_groups, GtGroups};
+use crate::eval::{evaluate_groups, thin, EvalOptions, Metrics};
 use crate::io::read_points;
 use anyhow::{ensure, Result};
 use serde_json::json;
@@ -28,17 +31,62 @@ pub struct EvalArgs {
     /// Thin both clouds with this radius before measuring; 0 = off.
     #[arg(long, default_value_t = 0.001)]
     pub downsample: f64,
+    /// The scene's scene.json (objects and their GT point ranges, as `make-scene` writes it): split
+    /// the figures over its objects. Default: the scene.json next to --gt, when there is one.
+    #[arg(long)]
+    pub scene: Option<PathBuf>,
     /// Print one JSON object with every figure as the last stdout line.
     #[arg(long)]
     pub json: bool,
 }
 
-/// Read a cloud and thin it; returns (points, count before thinning).
-fn load(path: &Path, radius: f64) -> Result<(Vec<[f32; 3]>, usize)> {
+/// Read a cloud and thin it; returns (points, indices kept, count before thinning).
+fn load(path: &Path, radius: f64) -> Result<(Vec<[f32; 3]>, Vec<usize>, usize)> {
     let pts = read_points(path)?;
     let n = pts.len();
     let kept = thin(&pts, radius)?;
-    Ok((kept.into_iter().map(|i| pts[i]).collect(), n))
+    Ok((kept.iter().map(|&i| pts[i]).collect(), kept, n))
+}
+
+/// The GT cloud's object groups: from `--scene` (an error there is the command's error), else
+/// from a scene.json next to the GT cloud (a problem there is reported and the split skipped).
+fn groups(args: &EvalArgs, n_gt: usize) -> Result<Option<GtGroups>> {
+    if let Some(p) = &args.scene {
+        return load_groups(p, n_gt).map(Some);
+    }
+    let auto = args.gt.with_file_name("scene.json");
+    if !auto.is_file() {
+        return Ok(None);
+    }
+    match load_groups(&auto, n_gt) {
+        Ok(g) => Ok(Some(g)),
+        Err(e) => {
+            println!("no split over objects: {e:#}");
+            Ok(None)
+        }
+    }
+}
+
+/// The per-group table, largest share of the Chamfer distance first.
+fn print_groups(m: &Metrics, scene: &str) {
+    let mut rows: Vec<_> = m.objects.iter().collect();
+    rows.sort_by(|a, b| b.chamfer_share.total_cmp(&a.chamfer_share));
+    println!("per object group ({scene}; ×10⁻², the shares add up to the Chamfer distance):");
+    println!(
+        "  {:<16} {:>9} {:>9} {:>9} {:>9} {:>9}",
+        "group", "GT pts", "pred pts", "mean s2d", "mean d2s", "share"
+    );
+    for g in rows {
+        println!(
+            "  {:<16} {:>9} {:>9} {:>9.4} {:>9.4} {:>9.4}",
+            g.name,
+            g.n_gt,
+            g.n_pred,
+            g.mean_s2d * 100.0,
+            g.mean_d2s * 100.0,
+            g.chamfer_share * 100.0
+        );
+    }
 }
 
 /// Run the command; returns the metrics it printed (for `demo` and `bench time-vs-error`).
@@ -52,14 +100,23 @@ pub fn run(args: &EvalArgs) -> Result<Metrics> {
         || load(&args.pred, args.downsample),
         || load(&args.gt, args.downsample),
     );
-    let ((pred, n_pred_raw), (gt, n_gt_raw)) = (pred?, gt?);
+    let ((pred, _, n_pred_raw), (gt, gt_kept, n_gt_raw)) = (pred?, gt?);
+    let groups = groups(args, n_gt_raw)?;
+    let labels: Option<Vec<u32>> = groups
+        .as_ref()
+        .map(|g| gt_kept.iter().map(|&i| g.of_point[i]).collect());
     let t_load = t0.elapsed().as_secs_f64();
     let opts = EvalOptions {
         max_dist: args.max_dist,
         threshold: args.threshold,
     };
     let t1 = Instant::now();
-    let m = evaluate(&pred, &gt, &opts)?;
+    let m = evaluate_groups(
+        &pred,
+        &gt,
+        groups.as_ref().zip(labels.as_deref()).map(|(g, l)| (g.names.as_slice(), l)),
+        &opts,
+    )?;
     let t_eval = t1.elapsed().as_secs_f64();
     println!(
         "pred {}: {} points ({} after downsampling at {})",
@@ -97,6 +154,10 @@ pub fn run(args: &EvalArgs) -> Result<Metrics> {
             q[1] * 100.0,
             q[2] * 100.0
         );
+    }
+    if !m.objects.is_empty() {
+        let scene = args.scene.clone().unwrap_or(args.gt.with_file_name("scene.json"));
+        print_groups(&m, &scene.display().to_string());
     }
     println!(
         "(means over distances < {}: {} of {} pred, {} of {} gt; read+thin {:.2} s, NN {:.2} s)",

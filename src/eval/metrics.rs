@@ -6,6 +6,7 @@
 //! F1 = 2PR / (P + R) (0 when both are 0). Means are summed in point order (deterministic).
 
 use super::knn::PointIndex;
+use super::objects::{group_errors, GroupError};
 use anyhow::Result;
 
 /// Protocol parameters.
@@ -49,6 +50,9 @@ pub struct Metrics {
     /// with a high mean means outliers).
     pub d2s_quantiles: [f64; 3],
     pub s2d_quantiles: [f64; 3],
+    /// Per object group, when the GT cloud's objects are known ([`super::objects`]).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub objects: Vec<GroupError>,
 }
 
 /// The 50th, 90th and 99th percentiles (nearest rank; NaN for no values).
@@ -104,16 +108,38 @@ pub fn from_distances(d2s: &[f64], s2d: &[f64], opts: &EvalOptions) -> Metrics {
         threshold: opts.threshold,
         d2s_quantiles: quantiles(d2s),
         s2d_quantiles: quantiles(s2d),
+        objects: Vec::new(),
     }
 }
 
 /// Nearest-neighbour distances both ways through k-d trees (parallel queries), then the metrics.
 /// Both clouds must be non-empty.
 pub fn evaluate(pred: &[[f32; 3]], gt: &[[f32; 3]], opts: &EvalOptions) -> Result<Metrics> {
+    evaluate_groups(pred, gt, None, opts)
+}
+
+/// [`evaluate`], and with `groups` = (group names, group of each GT point) the per-group errors
+/// in [`Metrics::objects`].
+pub fn evaluate_groups(
+    pred: &[[f32; 3]],
+    gt: &[[f32; 3]],
+    groups: Option<(&[String], &[u32])>,
+    opts: &EvalOptions,
+) -> Result<Metrics> {
     anyhow::ensure!(!pred.is_empty(), "the predicted point cloud is empty");
     anyhow::ensure!(!gt.is_empty(), "the ground-truth point cloud is empty");
     let (gt_index, pred_index) = rayon::join(|| PointIndex::new(gt), || PointIndex::new(pred));
-    let d2s = gt_index?.nearest_distances(pred);
+    let (d2s, nearest_gt) = gt_index?.nearest_with_index(pred);
     let s2d = pred_index?.nearest_distances(gt);
-    Ok(from_distances(&d2s, &s2d, opts))
+    let mut m = from_distances(&d2s, &s2d, opts);
+    if let Some((names, of_gt)) = groups {
+        anyhow::ensure!(
+            of_gt.len() == gt.len(),
+            "{} group labels for {} GT points",
+            of_gt.len(),
+            gt.len()
+        );
+        m.objects = group_errors(names, of_gt, &d2s, &nearest_gt, &s2d, opts.max_dist);
+    }
+    Ok(m)
 }

@@ -1,12 +1,14 @@
 //! Extraction and evaluation of point clouds: level-set point extraction with dense virtual rays
 //! ([`extract`]), nearest neighbours through a k-d tree ([`knn`]), greedy radius thinning
-//! ([`thin`]) and the Chamfer / F-score metrics of method.md §4 ([`metrics`]).
+//! ([`thin`]), the Chamfer / F-score metrics of method.md §4 ([`metrics`]) and their split over
+//! a scene's objects ([`objects`]).
 
 pub mod extract;
 pub mod knn;
 pub mod metrics;
+pub mod objects;
 pub mod thin;
 
 pub use knn::PointIndex;
-pub use metrics::{evaluate, EvalOptions, Metrics};
+pub use metrics::{evaluate, evaluate_groups, EvalOptions, Metrics};
 pub use thin::{thin, thin_levels};
