@@ -412,6 +412,82 @@ fn eval_rejects_unreadable_and_empty_ply() {
 }
 
 #[test]
+fn eval_splits_the_chamfer_distance_over_the_scene_objects() {
+    let dir = tempfile::tempdir().unwrap();
+    // GT: a rod (x axis, 4 points) and a post (z axis, 3 points); scene.json lists them out of
+    // order. The prediction sits 0.1 off the rod and 0.3 off the post.
+    let gt_pts: Vec<[f32; 3]> = (0..4)
+        .map(|i| [i as f32, 0.0, 0.0])
+        .chain((0..3).map(|i| [10.0, 0.0, i as f32]))
+        .collect();
+    let gt = dir.path().join("gt_points.ply");
+    write_points(&gt, &gt_pts).unwrap();
+    let pred_pts: Vec<[f32; 3]> = (0..4)
+        .map(|i| [i as f32, 0.1, 0.0])
+        .chain((0..3).map(|i| [10.0, 0.3, i as f32]))
+        .collect();
+    let pred = dir.path().join("pred.ply");
+    write_points(&pred, &pred_pts).unwrap();
+    let scene = |post: usize| {
+        format!(
+            r#"{{"objects": [{{"name": "post_0", "point_start": 4, "point_count": {post}}},
+                {{"name": "rod", "point_start": 0, "point_count": 4}}]}}"#
+        )
+    };
+    std::fs::write(dir.path().join("scene.json"), scene(3)).unwrap();
+    let out = eval_cmd(&pred, &gt);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{text}");
+    let j: serde_json::Value = serde_json::from_str(text.lines().last().unwrap()).unwrap();
+    let objects = j["metrics"]["objects"].as_array().unwrap();
+    let group = |name: &str| objects.iter().find(|o| o["name"] == name).unwrap().clone();
+    let (rod, post) = (group("rod"), group("post"));
+    let f = |v: &serde_json::Value| v.as_f64().unwrap();
+    assert_eq!(
+        (rod["n_gt"].as_u64(), post["n_gt"].as_u64()),
+        (Some(4), Some(3))
+    );
+    assert_eq!(
+        (rod["n_pred"].as_u64(), post["n_pred"].as_u64()),
+        (Some(4), Some(3))
+    );
+    for (g, d) in [(&rod, 0.1), (&post, 0.3)] {
+        assert!((f(&g["mean_d2s"]) - d).abs() < 1e-6 && (f(&g["mean_s2d"]) - d).abs() < 1e-6);
+    }
+    let chamfer = f(&j["metrics"]["chamfer"]);
+    assert!((f(&rod["chamfer_share"]) + f(&post["chamfer_share"]) - chamfer).abs() < 1e-9);
+    assert!((f(&rod["chamfer_share"]) - 0.4 / 7.0).abs() < 1e-6, "{rod}");
+    assert!(text.contains("per object group"), "{text}");
+
+    // A scene.json next to the GT that does not match it: reported, the split skipped.
+    std::fs::write(dir.path().join("scene.json"), scene(2)).unwrap();
+    let out = eval_cmd(&pred, &gt);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{text}");
+    assert!(
+        text.contains("no split over objects") && text.contains("scene.json"),
+        "{text}"
+    );
+    assert!(!text.contains("\"objects\""), "{text}");
+    // The same file named with --scene is an error naming it.
+    let bad = dir.path().join("scene.json");
+    let out = bin()
+        .args(["eval", "--pred"])
+        .arg(&pred)
+        .arg("--gt")
+        .arg(&gt)
+        .arg("--scene")
+        .arg(&bad)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("scene.json") && err.contains("cover 6"),
+        "{err}"
+    );
+}
+
+#[test]
 fn extract_then_eval_end_to_end() {
     let dir = tempfile::tempdir().unwrap();
     // Density 100 at the centre falling off with distance: σ = 50 on a sphere of radius 5 voxel.

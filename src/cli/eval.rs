@@ -114,7 +114,10 @@ pub fn run(args: &EvalArgs) -> Result<Metrics> {
     let m = evaluate_groups(
         &pred,
         &gt,
-        groups.as_ref().zip(labels.as_deref()).map(|(g, l)| (g.names.as_slice(), l)),
+        groups
+            .as_ref()
+            .zip(labels.as_deref())
+            .map(|(g, l)| (g.names.as_slice(), l)),
         &opts,
     )?;
     let t_eval = t1.elapsed().as_secs_f64();
@@ -156,7 +159,10 @@ pub fn run(args: &EvalArgs) -> Result<Metrics> {
         );
     }
     if !m.objects.is_empty() {
-        let scene = args.scene.clone().unwrap_or(args.gt.with_file_name("scene.json"));
+        let scene = args
+            .scene
+            .clone()
+            .unwrap_or(args.gt.with_file_name("scene.json"));
         print_groups(&m, &scene.display().to_string());
     }
     println!(

@@ -64,10 +64,7 @@ impl PointIndex {
 
     /// Nearest-neighbour distance of every query point and the index of that neighbour (rayon).
     pub fn nearest_with_index(&self, queries: &[[f32; 3]]) -> (Vec<f64>, Vec<usize>) {
-        queries
-            .par_iter()
-            .map(|q| self.nearest(&to_f64(q)))
-            .unzip()
+        queries.par_iter().map(|q| self.nearest(&to_f64(q))).unzip()
     }
 
     /// Indices of the indexed points within distance `radius` of `q` (inclusive), unsorted.

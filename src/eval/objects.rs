@@ -33,8 +33,7 @@ pub struct GtGroups {
 /// must tile 0..n_gt without gaps or overlaps (in any order).
 pub fn load_groups(scene_json: &Path, n_gt: usize) -> Result<GtGroups> {
     let name = scene_json.display();
-    let text =
-        std::fs::read_to_string(scene_json).with_context(|| format!("reading {name}"))?;
+    let text = std::fs::read_to_string(scene_json).with_context(|| format!("reading {name}"))?;
     let v: serde_json::Value =
         serde_json::from_str(&text).with_context(|| format!("{name}: not valid JSON"))?;
     let objects = v
@@ -52,7 +51,10 @@ pub fn load_groups(scene_json: &Path, n_gt: usize) -> Result<GtGroups> {
             .get("name")
             .and_then(|x| x.as_str())
             .with_context(|| format!("{name}: objects[{i}] has no \"name\""))?;
-        let (start, count) = (field("point_start")? as usize, field("point_count")? as usize);
+        let (start, count) = (
+            field("point_start")? as usize,
+            field("point_count")? as usize,
+        );
         ranges.push((start, count, group_name(label).to_string()));
     }
     ranges.sort_by_key(|r| r.0);
@@ -208,21 +210,40 @@ mod tests {
     #[test]
     fn bad_scene_files_are_errors_naming_the_file() {
         for (objects, n, want) in [
-            (r#"[{"name": "a", "point_start": 0, "point_count": 2}]"#, 3, "cover 2 GT points"),
+            (
+                r#"[{"name": "a", "point_start": 0, "point_count": 2}]"#,
+                3,
+                "cover 2 GT points",
+            ),
             (
                 r#"[{"name": "a", "point_start": 0, "point_count": 2},
                     {"name": "b", "point_start": 1, "point_count": 2}]"#,
                 3,
                 "overlap at 1",
             ),
-            (r#"[{"name": "a", "point_start": 1, "point_count": 2}]"#, 3, "0..1 unassigned"),
-            (r#"[{"name": "a", "point_count": 2}]"#, 2, "no integer \"point_start\""),
-            (r#"[{"point_start": 0, "point_count": 2}]"#, 2, "no \"name\""),
+            (
+                r#"[{"name": "a", "point_start": 1, "point_count": 2}]"#,
+                3,
+                "0..1 unassigned",
+            ),
+            (
+                r#"[{"name": "a", "point_count": 2}]"#,
+                2,
+                "no integer \"point_start\"",
+            ),
+            (
+                r#"[{"point_start": 0, "point_count": 2}]"#,
+                2,
+                "no \"name\"",
+            ),
             ("3", 2, "no \"objects\" list"),
         ] {
             let (_d, p) = scene(objects);
             let e = format!("{:#}", load_groups(&p, n).unwrap_err());
-            assert!(e.contains("scene.json") && e.contains(want), "{objects}: {e}");
+            assert!(
+                e.contains("scene.json") && e.contains(want),
+                "{objects}: {e}"
+            );
         }
         let (_d, p) = scene("[");
         let e = format!("{:#}", load_groups(&p, 1).unwrap_err());

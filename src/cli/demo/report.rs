@@ -3,7 +3,7 @@
 //! each run's `train_log.csv`), and Chamfer against the Plenoxels level.
 
 use super::steps::TrainedRun;
-use super::{table, Row};
+use super::{objects_table, table, Row};
 use crate::eval::PointIndex;
 use crate::io::read_points;
 use crate::report::canvas::{load_rgb_on_white, side_by_side, Canvas, WHITE};
@@ -92,6 +92,15 @@ pub fn write(r: &Inputs) -> Result<Vec<PathBuf>> {
             )
         }
         _ => md += "αSurf's point cloud could not be evaluated (see the table).\n\n",
+    }
+    if let Some(t) = best.zip(surf).and_then(|(b, a)| objects_table(b, a, true)) {
+        md += "### Where the Chamfer distance comes from\n\n";
+        md += "Each object group's share of the Chamfer distance ×10⁻² (`alphasurf eval` splits \
+               it over the scene's objects: a GT point counts for its object, a predicted point \
+               for the object of its nearest GT point; the shares add up to the Chamfer \
+               distance).\n\n";
+        md += &t;
+        md += "\n";
     }
 
     let figs: [(&str, Figure); 4] = [
