@@ -416,18 +416,17 @@ fn eval_splits_the_chamfer_distance_over_the_scene_objects() {
     let dir = tempfile::tempdir().unwrap();
     // GT: a rod (x axis, 4 points) and a post (z axis, 3 points); scene.json lists them out of
     // order. The prediction sits 0.1 off the rod and 0.3 off the post.
-    let gt_pts: Vec<[f32; 3]> = (0..4)
-        .map(|i| [i as f32, 0.0, 0.0])
-        .chain((0..3).map(|i| [10.0, 0.0, i as f32]))
-        .collect();
-    let gt = dir.path().join("gt_points.ply");
-    write_points(&gt, &gt_pts).unwrap();
-    let pred_pts: Vec<[f32; 3]> = (0..4)
-        .map(|i| [i as f32, 0.1, 0.0])
-        .chain((0..3).map(|i| [10.0, 0.3, i as f32]))
-        .collect();
-    let pred = dir.path().join("pred.ply");
-    write_points(&pred, &pred_pts).unwrap();
+    let cloud = |name: &str, rod_y: f32, post_y: f32| {
+        let pts: Vec<[f32; 3]> = (0..4)
+            .map(|i| [i as f32, rod_y, 0.0])
+            .chain((0..3).map(|i| [10.0, post_y, i as f32]))
+            .collect();
+        let path = dir.path().join(name);
+        write_points(&path, &pts).unwrap();
+        path
+    };
+    let gt = cloud("gt_points.ply", 0.0, 0.0);
+    let pred = cloud("pred.ply", 0.1, 0.3);
     let scene = |post: usize| {
         format!(
             r#"{{"objects": [{{"name": "post_0", "point_start": 4, "point_count": {post}}},
