@@ -48,22 +48,38 @@ fn load(path: &Path, radius: f64) -> Result<(Vec<[f32; 3]>, Vec<usize>, usize)> 
     Ok((kept.iter().map(|&i| pts[i]).collect(), kept, n))
 }
 
-/// The GT cloud's object groups: from `--scene` (an error there is the command's error), else
-/// from a scene.json next to the GT cloud (a problem there is reported and the split skipped).
-fn groups(args: &EvalArgs, n_gt: usize) -> Result<Option<GtGroups>> {
-    if let Some(p) = &args.scene {
-        return load_groups(p, n_gt).map(Some);
-    }
-    let auto = args.gt.with_file_name("scene.json");
-    if !auto.is_file() {
+/// The GT cloud's object groups: their names, the group of each kept GT point, and the scene.json
+/// they came from.
+struct ObjectSplit {
+    names: Vec<String>,
+    labels: Vec<u32>,
+    path: PathBuf,
+}
+
+/// The object groups from `--scene` (an error there is the command's error), else from a
+/// scene.json next to the GT cloud (a problem there is reported and the split skipped).
+fn groups(args: &EvalArgs, n_gt: usize, kept: &[usize]) -> Result<Option<ObjectSplit>> {
+    let (path, explicit) = match &args.scene {
+        Some(p) => (p.clone(), true),
+        None => (args.gt.with_file_name("scene.json"), false),
+    };
+    if !explicit && !path.is_file() {
         return Ok(None);
     }
-    match load_groups(&auto, n_gt) {
-        Ok(g) => Ok(Some(g)),
-        Err(e) => {
+    match load_groups(&path, n_gt) {
+        Ok(GtGroups { names, of_point }) => {
+            let labels = kept.iter().map(|&i| of_point[i]).collect();
+            Ok(Some(ObjectSplit {
+                names,
+                labels,
+                path,
+            }))
+        }
+        Err(e) if !explicit => {
             println!("no split over objects: {e:#}");
             Ok(None)
         }
+        Err(e) => Err(e),
     }
 }
 
@@ -101,10 +117,7 @@ pub fn run(args: &EvalArgs) -> Result<Metrics> {
         || load(&args.gt, args.downsample),
     );
     let ((pred, _, n_pred_raw), (gt, gt_kept, n_gt_raw)) = (pred?, gt?);
-    let groups = groups(args, n_gt_raw)?;
-    let labels: Option<Vec<u32>> = groups
-        .as_ref()
-        .map(|g| gt_kept.iter().map(|&i| g.of_point[i]).collect());
+    let groups = groups(args, n_gt_raw, &gt_kept)?;
     let t_load = t0.elapsed().as_secs_f64();
     let opts = EvalOptions {
         max_dist: args.max_dist,
@@ -116,8 +129,7 @@ pub fn run(args: &EvalArgs) -> Result<Metrics> {
         &gt,
         groups
             .as_ref()
-            .zip(labels.as_deref())
-            .map(|(g, l)| (g.names.as_slice(), l)),
+            .map(|g| (g.names.as_slice(), g.labels.as_slice())),
         &opts,
     )?;
     let t_eval = t1.elapsed().as_secs_f64();
@@ -158,12 +170,8 @@ pub fn run(args: &EvalArgs) -> Result<Metrics> {
             q[2] * 100.0
         );
     }
-    if !m.objects.is_empty() {
-        let scene = args
-            .scene
-            .clone()
-            .unwrap_or(args.gt.with_file_name("scene.json"));
-        print_groups(&m, &scene.display().to_string());
+    if let Some(g) = &groups {
+        print_groups(&m, &g.path.display().to_string());
     }
     println!(
         "(means over distances < {}: {} of {} pred, {} of {} gt; read+thin {:.2} s, NN {:.2} s)",
