@@ -86,7 +86,8 @@ fn demo_fast_writes_table_report_and_figures() {
             ])
             .arg(&out)
             .args(TINY_SCENE)
-            .args(["--grid-res", "32", "--iters", "60", "--surface-iters", "30"]),
+            .args(["--grid-res", "32", "--iters", "60", "--surface-iters", "30"])
+            .args(["--rays-per-axis", "3"]),
     );
     // The table: header, one row per level, the best level.
     let header = stdout
@@ -121,6 +122,33 @@ fn demo_fast_writes_table_report_and_figures() {
     let chamfer = best["chamfer_e2"].as_f64().expect("best Chamfer");
     assert!(chamfer > 0.0 && chamfer.is_finite());
     assert!(results["stage1"]["test_psnr"].as_f64().unwrap() > 10.0);
+    // Every extraction used the requested lattice: the σ = 10 cloud is the one `extract` writes
+    // with the same option (and differs from the default lattice's).
+    assert_eq!(results["rays_per_axis"], 3);
+    assert!(report.contains("--rays-per-axis 3`"), "report command");
+    let sigma10 = out.join("plenoxels/points_sigma10.ply");
+    let points = |r: &str| {
+        let ply = dir.path().join(format!("r{r}.ply"));
+        run_ok(
+            bin()
+                .args([
+                    "extract",
+                    "--backend",
+                    "cpu",
+                    "--levels",
+                    "10",
+                    "--rays-per-axis",
+                    r,
+                    "--run",
+                ])
+                .arg(out.join("plenoxels"))
+                .arg("--out")
+                .arg(&ply),
+        );
+        std::fs::read(ply).unwrap()
+    };
+    assert_eq!(std::fs::read(&sigma10).unwrap(), points("3"));
+    assert_ne!(std::fs::read(&sigma10).unwrap(), points("5"));
     check_stage2(&stdout, &report, rows);
 
     // Renderings and colour-mapped clouds have many colours; line plots have white, black, grid

@@ -16,6 +16,9 @@ use serde_json::json;
 use std::path::PathBuf;
 use std::time::Instant;
 
+/// Virtual rays per axis and cell face by default: method.md's 75 rays per cell (5 × 5 per axis).
+pub const DEFAULT_RAYS_PER_AXIS: u32 = 5;
+
 /// Arguments of `extract`.
 #[derive(clap::Args, Debug)]
 pub struct ExtractArgs {
@@ -39,7 +42,7 @@ pub struct ExtractArgs {
     #[arg(long, default_value_t = 0.1)]
     pub min_alpha: f32,
     /// R: R² virtual rays per axis and cell (origins on the lattice 0, 1/(R−1), …, 1).
-    #[arg(long, default_value_t = 5)]
+    #[arg(long, default_value_t = DEFAULT_RAYS_PER_AXIS)]
     pub rays_per_axis: u32,
     #[arg(long, value_enum, default_value = "auto")]
     pub backend: Backend,

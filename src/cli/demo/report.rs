@@ -4,6 +4,7 @@
 
 use super::steps::TrainedRun;
 use super::{objects_table, table, Row};
+use crate::cli::extract::DEFAULT_RAYS_PER_AXIS;
 use crate::eval::PointIndex;
 use crate::io::read_points;
 use crate::report::canvas::{load_rgb_on_white, side_by_side, Canvas, WHITE};
@@ -32,6 +33,8 @@ pub struct Inputs<'a> {
     pub rows: &'a [Row],
     pub fast: bool,
     pub backend: &'a str,
+    /// `extract --rays-per-axis` of every extraction.
+    pub rays_per_axis: u32,
     pub elapsed_s: f64,
 }
 
@@ -43,10 +46,15 @@ pub fn write(r: &Inputs) -> Result<Vec<PathBuf>> {
     let mut md = String::new();
     let mut pngs = Vec::new();
     let cmd = format!(
-        "alphasurf demo --scene {}{} --backend {}",
+        "alphasurf demo --scene {}{} --backend {}{}",
         r.scene.name(),
         if r.fast { " --fast" } else { "" },
-        r.backend
+        r.backend,
+        if r.rays_per_axis == DEFAULT_RAYS_PER_AXIS {
+            String::new()
+        } else {
+            format!(" --rays-per-axis {}", r.rays_per_axis)
+        }
     );
     md += &format!("# αSurf demo: the built-in `{}` scene\n\n", r.scene.name());
     md += &format!(
@@ -129,6 +137,7 @@ pub fn write(r: &Inputs) -> Result<Vec<PathBuf>> {
         "command": cmd,
         "scene": r.scene.name(),
         "backend": r.backend,
+        "rays_per_axis": r.rays_per_axis,
         "elapsed_s": r.elapsed_s,
         "stage1": { "dir": r.s1.dir, "wall_s": r.s1.wall_s, "test_psnr": r.s1.test_psnr, "train_rays_per_s": r.s1.train_rays_per_s },
         "stage2": match &r.s2 {

@@ -5,6 +5,7 @@
 //! (`metrics.json`) or, for `eval`, from the metrics its handler returns.
 
 use super::super::{backend_gpu, run as dispatch, Cli, Command};
+use crate::cli::extract::DEFAULT_RAYS_PER_AXIS;
 use crate::cli::train::Backend;
 use crate::eval::Metrics;
 use crate::scene::SceneKind;
@@ -21,6 +22,8 @@ pub struct Invoker {
     /// The backend passed to every training/extraction command.
     pub backend: &'static str,
     device: Option<usize>,
+    /// `extract --rays-per-axis` for every extraction.
+    pub rays_per_axis: u32,
 }
 
 /// Size of a generated scene (`make-scene` arguments).
@@ -71,7 +74,16 @@ impl Invoker {
         Ok(Invoker {
             backend: name,
             device: cli.device,
+            rays_per_axis: DEFAULT_RAYS_PER_AXIS,
         })
+    }
+
+    /// The same invoker, extracting with R² virtual rays per axis and cell.
+    pub fn with_rays_per_axis(self, rays_per_axis: u32) -> Invoker {
+        Invoker {
+            rays_per_axis,
+            ..self
+        }
     }
 
     /// An invoker that passes `--backend cpu` (`vulkan: false`) or `--backend vulkan`.
@@ -79,6 +91,7 @@ impl Invoker {
         Invoker {
             backend: if vulkan { "vulkan" } else { "cpu" },
             device: cli.device,
+            rays_per_axis: DEFAULT_RAYS_PER_AXIS,
         }
     }
 
@@ -214,6 +227,8 @@ impl Invoker {
             os(ply),
             os("--backend"),
             os(self.backend),
+            os("--rays-per-axis"),
+            os(self.rays_per_axis.to_string()),
         ];
         if let Some(l) = levels {
             let list: Vec<String> = l.iter().map(|v| v.to_string()).collect();
