@@ -117,7 +117,8 @@ mod tests {
     fn parallel_pass_keeps_what_the_sequential_greedy_keeps() {
         let mut rng = rand_pcg::Pcg64::seed_from_u64(11);
         // Several chunks of points in clusters (chains of near neighbours, where the order of
-        // the decisions matters), with exact duplicates and points exactly `radius` apart.
+        // the decisions matters), with exact duplicates and points at the radius from a centre
+        // (just inside or outside it after f32 rounding).
         let radius = 0.01;
         let mut pts: Vec<[f32; 3]> = Vec::new();
         while pts.len() < 3 * CHUNK + 777 {
