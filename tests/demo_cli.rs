@@ -126,6 +126,8 @@ fn demo_fast_writes_table_report_and_figures() {
     // with the same option (and differs from the default lattice's).
     assert_eq!(results["rays_per_axis"], 3);
     assert!(report.contains("--rays-per-axis 3`"), "report command");
+    assert!(report.contains(" --grid-res 32 "), "report command");
+    assert_eq!(results["grid_res"], 32);
     let sigma10 = out.join("plenoxels/points_sigma10.ply");
     let points = |r: &str| {
         let ply = dir.path().join(format!("r{r}.ply"));

@@ -40,8 +40,11 @@ fn load_init(path: &Path) -> Result<Grid> {
     npz::load_svox2(&file).with_context(|| format!("--init {}", path.display()))
 }
 
-fn config(args: &TrainArgs) -> Result<SurfaceConfig> {
+/// The stage-2 configuration for a stage-1 grid of `grid_n`³ vertices: the preset fitted to the
+/// grid, then the command line's overrides.
+fn config(args: &TrainArgs, grid_n: u32) -> Result<SurfaceConfig> {
     let mut cfg = SurfaceConfig::preset(&args.preset, &args.category)?;
+    cfg.fit_grid(grid_n);
     cfg.seed = args.seed;
     if let Some(n) = args.surface_iters.or(args.iters) {
         ensure!(n > 0, "the number of stage-2 steps must be at least 1");
@@ -114,24 +117,25 @@ pub fn run(args: &TrainArgs, gpu: Option<&Gpu>) -> Result<()> {
             None => return Ok(()),
         }
     } else {
-        let cfg = config(args)?;
         let init = args
             .init
             .as_ref()
             .context("stage 2 needs --init STAGE1_RUN_DIR or --init ckpt.npz")?;
         let density = load_init(init)?;
+        let cfg = config(args, density.res.into_iter().max().unwrap_or(0))?;
         let grid = SurfaceGrid::from_density(&density, &cfg.init)
             .with_context(|| format!("initialising the surfaces from {}", init.display()))?;
         eprintln!(
             "initialised from {}: {}³ grid, {} of {} vertices kept (σ > {}, dilated twice), \
-             mean |∇σ| {:.4}, levels τ = {:?}",
+             mean |∇σ| {:.4}, levels τ = {:?}, σα = {}·σ",
             init.display(),
             grid.res[0],
             grid.delta.len(),
             density.allocated(),
             cfg.init.density_levels[0] / 2.0,
             grid.gradient_scale,
-            grid.levels
+            grid.levels,
+            cfg.init.alpha_init_scale
         );
         (make_backend(gpu, grid)?, cfg, 0)
     };

@@ -99,35 +99,43 @@ pub fn upsample(g: &Grid, new_res: u32, keep_old: &[bool]) -> Grid {
         density: Vec::new(),
         sh: Vec::new(),
     };
-    let slots = out.slots();
-    let rows: Vec<Option<[f32; 1 + SH_DIM]>> = (0..slots)
+    // Any kept old vertex among the 8 around new vertex `s`? Only the kept slots are listed and
+    // only their rows are sampled, so memory stays at the two grids' rows (a per-slot row of
+    // the whole 512³ grid would take 15 GB).
+    let n = new_res as usize;
+    let position = |s: usize| {
+        let v = [s / (n * n), s / n % n, s % n].map(|j| j as u32);
+        [coord(0, v[0]), coord(1, v[1]), coord(2, v[2])]
+    };
+    let kept: Vec<usize> = (0..out.slots())
         .into_par_iter()
-        .map(|s| {
-            let v = out.vertex(s);
-            let p = [coord(0, v[0]), coord(1, v[1]), coord(2, v[2])];
-            // Any kept old vertex among the 8 around p?
-            let kept = (0..8u32).any(|corner| {
+        .filter(|&s| {
+            let p = position(s);
+            (0..8u32).any(|corner| {
                 let o: [u32; 3] = std::array::from_fn(|i| {
                     let l = (p[i].clamp(0.0, (g.res[i] - 1) as f32).floor() as u32)
                         .min(g.res[i].saturating_sub(2));
                     (l + (corner >> (2 - i) & 1)).min(g.res[i] - 1)
                 });
                 keep_old[g.slot(o[0], o[1], o[2])]
-            });
-            kept.then(|| {
-                let mut vals = [0f32; 1 + SH_DIM];
-                sample(g, p, &mut vals);
-                vals
             })
         })
         .collect();
-    for (s, row) in rows.into_iter().enumerate() {
-        if let Some(vals) = row {
-            out.links[s] = out.density.len() as i32;
-            out.density.push(vals[0]);
-            out.sh.extend_from_slice(&vals[1..]);
-        }
+    for (row, &s) in kept.iter().enumerate() {
+        out.links[s] = row as i32;
     }
+    out.density = vec![0.0; kept.len()];
+    out.sh = vec![0.0; kept.len() * SH_DIM];
+    out.density
+        .par_iter_mut()
+        .zip(out.sh.par_chunks_mut(SH_DIM))
+        .zip(&kept)
+        .for_each(|((d, sh), &s)| {
+            let mut vals = [0f32; 1 + SH_DIM];
+            sample(g, position(s), &mut vals);
+            *d = vals[0];
+            sh.copy_from_slice(&vals[1..]);
+        });
     out
 }
 

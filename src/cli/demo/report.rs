@@ -35,6 +35,8 @@ pub struct Inputs<'a> {
     pub backend: &'a str,
     /// `extract --rays-per-axis` of every extraction.
     pub rays_per_axis: u32,
+    /// `--grid-res`, when given.
+    pub grid_res: Option<u32>,
     pub elapsed_s: f64,
 }
 
@@ -46,10 +48,12 @@ pub fn write(r: &Inputs) -> Result<Vec<PathBuf>> {
     let mut md = String::new();
     let mut pngs = Vec::new();
     let cmd = format!(
-        "alphasurf demo --scene {}{} --backend {}{}",
+        "alphasurf demo --scene {}{} --backend {}{}{}",
         r.scene.name(),
         if r.fast { " --fast" } else { "" },
         r.backend,
+        r.grid_res
+            .map_or(String::new(), |n| format!(" --grid-res {n}")),
         if r.rays_per_axis == DEFAULT_RAYS_PER_AXIS {
             String::new()
         } else {
@@ -138,6 +142,7 @@ pub fn write(r: &Inputs) -> Result<Vec<PathBuf>> {
         "scene": r.scene.name(),
         "backend": r.backend,
         "rays_per_axis": r.rays_per_axis,
+        "grid_res": r.grid_res,
         "elapsed_s": r.elapsed_s,
         "stage1": { "dir": r.s1.dir, "wall_s": r.s1.wall_s, "test_psnr": r.s1.test_psnr, "train_rays_per_s": r.s1.train_rays_per_s },
         "stage2": match &r.s2 {
