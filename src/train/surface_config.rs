@@ -285,7 +285,8 @@ impl SurfaceConfig {
     /// resolution, Chamfer ×10⁻² (test PSNR):
     /// 128³: s 0.002 / 0.005 / 0.01 → 0.577 / 0.579 / 0.584 (23.1 dB at 0.005);
     /// 256³: s 0.005 / 0.015 / 0.03 / 0.05 → 0.457 (18.9 dB) / 0.450 (23.1 dB) / 0.466 / 0.478;
-    /// 512³: s 0.005 / 0.015 / 0.05 → 0.787 (12.0 dB) / 0.416 (15.7 dB) / 0.423 (23.3 dB).
+    /// 512³: s 0.005 / 0.015 / 0.04 / 0.05 → 0.787 (12.0 dB) / 0.416 (15.7 dB) / 0.420 (22.1 dB)
+    /// / 0.423 (23.3 dB), against the best Plenoxels level set's 0.645.
     /// The `paper` preset keeps the released code's 0.005 (its 50k steps raise σα themselves).
     pub fn fit_grid(&mut self, n: u32) {
         if self.preset == "fast" {
