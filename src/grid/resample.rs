@@ -91,23 +91,23 @@ pub fn upsample(g: &Grid, new_res: u32, keep_old: &[bool]) -> Grid {
             lo + (hi - lo) * j as f32 / (new_res - 1) as f32
         }
     };
-    let mut out = Grid {
+    // The new grid's shape; its arrays are filled below.
+    let shape = Grid {
         res,
         center: g.center,
         radius: g.radius,
-        links: vec![-1; (new_res as usize).pow(3)],
+        links: Vec::new(),
         density: Vec::new(),
         sh: Vec::new(),
     };
     // Any kept old vertex among the 8 around new vertex `s`? Only the kept slots are listed and
     // only their rows are sampled, so memory stays at the two grids' rows (a per-slot row of
     // the whole 512³ grid would take 15 GB).
-    let n = new_res as usize;
     let position = |s: usize| {
-        let v = [s / (n * n), s / n % n, s % n].map(|j| j as u32);
+        let v = shape.vertex(s);
         [coord(0, v[0]), coord(1, v[1]), coord(2, v[2])]
     };
-    let kept: Vec<usize> = (0..out.slots())
+    let kept: Vec<usize> = (0..shape.slots())
         .into_par_iter()
         .filter(|&s| {
             let p = position(s);
@@ -121,14 +121,11 @@ pub fn upsample(g: &Grid, new_res: u32, keep_old: &[bool]) -> Grid {
             })
         })
         .collect();
-    for (row, &s) in kept.iter().enumerate() {
-        out.links[s] = row as i32;
-    }
-    out.density = vec![0.0; kept.len()];
-    out.sh = vec![0.0; kept.len() * SH_DIM];
-    out.density
+    let mut density = vec![0.0; kept.len()];
+    let mut sh = vec![0.0; kept.len() * SH_DIM];
+    density
         .par_iter_mut()
-        .zip(out.sh.par_chunks_mut(SH_DIM))
+        .zip(sh.par_chunks_mut(SH_DIM))
         .zip(&kept)
         .for_each(|((d, sh), &s)| {
             let mut vals = [0f32; 1 + SH_DIM];
@@ -136,7 +133,16 @@ pub fn upsample(g: &Grid, new_res: u32, keep_old: &[bool]) -> Grid {
             *d = vals[0];
             sh.copy_from_slice(&vals[1..]);
         });
-    out
+    let mut links = vec![-1; shape.slots()];
+    for (row, &s) in kept.iter().enumerate() {
+        links[s] = row as i32;
+    }
+    Grid {
+        links,
+        density,
+        sh,
+        ..shape
+    }
 }
 
 #[cfg(test)]
@@ -180,5 +186,28 @@ mod tests {
         }
         // Round trip of the world box: the new grid covers the same scene box.
         assert_eq!(up.center, g.center);
+    }
+
+    #[test]
+    fn upsampling_allocates_only_around_kept_vertices() {
+        let g = Grid::sphere(8, [0.0; 3], [1.0; 3], 10.0, 0.0);
+        let mut keep = vec![false; g.slots()];
+        keep[g.slot(3, 4, 5)] = true;
+        let up = upsample(&g, 16, &keep);
+        // New vertex j sits at old coordinate j/2 − 0.25: the vertices whose surrounding old
+        // cell has (3, 4, 5) as a corner are x 5..=8, y 7..=10, z 9..=12 (4³ = 64).
+        assert_eq!(up.allocated(), 64);
+        let mut rows = Vec::new();
+        for s in 0..up.slots() {
+            let v = up.vertex(s);
+            let inside =
+                (5..=8).contains(&v[0]) && (7..=10).contains(&v[1]) && (9..=12).contains(&v[2]);
+            assert_eq!(up.links[s] >= 0, inside, "{v:?}");
+            if inside {
+                rows.push(up.links[s]);
+            }
+        }
+        // Rows follow the slot order, one per allocated vertex.
+        assert_eq!(rows, (0..64).collect::<Vec<i32>>());
     }
 }
