@@ -263,7 +263,7 @@ pub fn check_delta_tv(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
     ];
     let mut want = grad0.clone();
     for c in &chunks {
-        delta_tv(&nbr, &g.delta, &mut want, c, reach);
+        delta_tv(&nbr, &g.delta, &mut want, c, reach, &mut Vec::new());
     }
     let got = gpu_delta_tv(gpu, &g, &grad0, &chunks)?;
     let added = |v: &[f32]| -> Vec<f32> { v.iter().zip(&grad0).map(|(a, b)| a - b).collect() };
@@ -275,7 +275,7 @@ pub fn check_delta_tv(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
     // The slot-walking TV twin over the whole grid: the same derivative, other rounding.
     let (mut by_rows, mut by_slots) = (grad0.clone(), grad0.clone());
     let mut touched = vec![0u32; n];
-    delta_tv(&nbr, &g.delta, &mut by_rows, &whole, reach);
+    delta_tv(&nbr, &g.delta, &mut by_rows, &whole, reach, &mut Vec::new());
     let all_slots = TvChunk {
         res: g.res,
         start: 0,
@@ -379,7 +379,8 @@ fn normal_reg_rows(gpu: &Gpu, seed: u64) -> Result<Vec<CheckRow>> {
         let c = prefix.chunk(start, count, 1e-2, 1e-3);
         let prior = prefix.chunk(p_start, p_count, 3e-2, 2e-3);
         let (mut want, mut want_t) = (grad0.clone(), vec![0u32; n]);
-        let (st, ws) = normal_reg_passes(&prefix, &g.delta, &mut want, &mut want_t, &c);
+        let mut ws = NormalScratch::default();
+        let st = normal_reg_passes(&prefix, &g.delta, &mut want, &mut want_t, &c, &mut ws);
         let (out, gs) = gpu_normal_reg_scratch(gpu, &g, &grad0, &c, Some(&prior))?;
         runs.push((start, count, c, st, ws, want, want_t, out, gs));
     }

@@ -1,6 +1,8 @@
 //! Twin of `glsl/lib/step.glsl`: the per-step touched-vertex flags (the CPU keeps only the flags;
 //! the list order of the GPU is irrelevant to the result) and the kernel `optim_args`.
 
+use rayon::prelude::*;
+use std::ops::Range;
 use std::sync::atomic::{AtomicU32, Ordering};
 
 /// Step-buffer layout (u32 indices), as in step.glsl: touched count, 4 counters (samples shaded,
@@ -52,6 +54,30 @@ impl RowRange {
     pub fn row(&self, i: u32) -> usize {
         ((self.start as u64 + i as u64) % self.rows.max(1) as u64) as usize
     }
+
+    /// The range as two disjoint spans of rows, in order: the rows from start, then those
+    /// wrapped past the last row (empty unless it wraps).
+    pub fn spans(&self) -> [Range<usize>; 2] {
+        let (rows, start) = (self.rows as usize, self.start as usize);
+        let end = start + self.len as usize;
+        [start..end.min(rows), 0..end.saturating_sub(rows)]
+    }
+
+    /// `f(row, item)` in parallel for every row of the range, item = the row's `stride` entries
+    /// of `data`.
+    pub fn par_for_each_mut<T: Send>(
+        &self,
+        data: &mut [T],
+        stride: usize,
+        f: impl Fn(usize, &mut [T]) + Sync,
+    ) {
+        for span in self.spans() {
+            data[stride * span.start..stride * span.end]
+                .par_chunks_mut(stride)
+                .enumerate()
+                .for_each(|(i, item)| f(span.start + i, item));
+        }
+    }
 }
 
 /// Set the bits `m` of vertex v's flag.
@@ -71,4 +97,33 @@ pub fn optim_args(count: u32) -> [u32; 3] {
     let groups = count.div_ceil(64);
     let gx = groups.min(32768);
     [gx, if gx == 0 { 0 } else { groups.div_ceil(gx) }, 1]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn row_ranges_visit_each_row_once() {
+        // Inside, wrapping past the last row, every row, none.
+        for (start, len) in [(2, 5), (7, 6), (0, 10), (4, 10), (3, 0)] {
+            let r = RowRange {
+                rows: 10,
+                start,
+                len,
+            };
+            let mut seen = vec![0u32; 20];
+            r.par_for_each_mut(&mut seen, 2, |v, item| {
+                item[0] += 1;
+                item[1] = v as u32;
+            });
+            for v in 0..10 {
+                let want = u32::from(r.contains(v) && len > 0);
+                assert_eq!(seen[2 * v], want, "{start}+{len}: row {v}");
+                assert_eq!(seen[2 * v + 1], if want == 1 { v as u32 } else { 0 });
+            }
+            let n: usize = r.spans().iter().map(|s| s.len()).sum();
+            assert_eq!(n, len as usize);
+        }
+    }
 }

@@ -92,69 +92,63 @@ pub fn forward_reach(nbr: &[i32]) -> u32 {
         .unwrap_or(0)
 }
 
-/// Pass 0: q (3 floats per row) of the chunk's rows, 0 for the others (the kernel leaves them as
-/// they were; pass 1 reads only the chunk's).
-pub fn delta_tv_dirs(nbr: &[i32], delta: &[f32], c: &DeltaTvChunk) -> Vec<f32> {
-    let chunk = c.chunk();
-    let computed: Vec<[f32; 3]> = (0..chunk.len)
-        .into_par_iter()
-        .map(|i| {
-            let v = chunk.row(i);
-            let d0 = delta[v];
-            let n = &nbr[AXIS_NBRS * v..AXIS_NBRS * v + 3];
-            let d: [f32; 3] = std::array::from_fn(|a| {
-                if n[a] >= 0 {
-                    delta[n[a] as usize] - d0
-                } else {
-                    0.0
-                }
-            });
-            let tv = (((d[0] * d[0] + d[1] * d[1]) + d[2] * d[2]) + 1e-9).sqrt();
-            d.map(|x| x / tv)
-        })
-        .collect();
-    let mut q = vec![0f32; 3 * delta.len()];
-    for (i, qv) in computed.iter().enumerate() {
-        q[3 * chunk.row(i as u32)..][..3].copy_from_slice(qv);
-    }
-    q
+/// Pass 0: q (3 floats per row) of the chunk's rows; the other rows keep what they held, as in
+/// the kernel (pass 1 reads only the chunk's).
+pub fn delta_tv_dirs(nbr: &[i32], delta: &[f32], c: &DeltaTvChunk, q: &mut [f32]) {
+    c.chunk().par_for_each_mut(q, 3, |v, qv| {
+        let d0 = delta[v];
+        let n = &nbr[AXIS_NBRS * v..AXIS_NBRS * v + 3];
+        let d: [f32; 3] = std::array::from_fn(|a| {
+            if n[a] >= 0 {
+                delta[n[a] as usize] - d0
+            } else {
+                0.0
+            }
+        });
+        let tv = (((d[0] * d[0] + d[1] * d[1]) + d[2] * d[2]) + 1e-9).sqrt();
+        for a in 0..3 {
+            qv[a] = d[a] / tv;
+        }
+    });
 }
 
 /// Pass 1 over the chunk's window (`reach`: [`forward_reach`]): grad += scale·(Σ backward q[a] −
 /// Σ own q), each over the terms of the chunk's vertices.
 pub fn delta_tv_gather(nbr: &[i32], q: &[f32], grad: &mut [f32], c: &DeltaTvChunk, reach: u32) {
-    let (chunk, window) = (c.chunk(), c.window(reach));
-    let adds: Vec<Option<f32>> = (0..window.len)
-        .into_par_iter()
-        .map(|i| {
-            let v = window.row(i);
-            let mut back = 0.0f32;
-            let mut any = false;
-            for a in 0..3 {
-                let m = nbr[AXIS_NBRS * v + 3 + a];
-                if m >= 0 && chunk.contains(m as usize) {
-                    back += q[3 * m as usize + a];
-                    any = true;
-                }
-            }
-            let own = if chunk.contains(v) {
+    let chunk = c.chunk();
+    c.window(reach).par_for_each_mut(grad, 1, |v, g| {
+        let mut back = 0.0f32;
+        let mut any = false;
+        for a in 0..3 {
+            let m = nbr[AXIS_NBRS * v + 3 + a];
+            if m >= 0 && chunk.contains(m as usize) {
+                back += q[3 * m as usize + a];
                 any = true;
-                (q[3 * v] + q[3 * v + 1]) + q[3 * v + 2]
-            } else {
-                0.0
-            };
-            any.then_some(c.scale * (back - own))
-        })
-        .collect();
-    for (i, add) in adds.into_iter().enumerate() {
-        if let Some(add) = add {
-            grad[window.row(i as u32)] += add;
+            }
         }
-    }
+        let own = if chunk.contains(v) {
+            any = true;
+            (q[3 * v] + q[3 * v + 1]) + q[3 * v + 2]
+        } else {
+            0.0
+        };
+        if any {
+            g[0] += c.scale * (back - own);
+        }
+    });
 }
 
-/// Both passes: grad += ∂(scale·Σ_{chunk} TV)/∂δ.
-pub fn delta_tv(nbr: &[i32], delta: &[f32], grad: &mut [f32], c: &DeltaTvChunk, reach: u32) {
-    let q = delta_tv_dirs(nbr, delta, c);
-    delta_tv_gather(nbr, &q, grad, c, reach);
+/// Both passes: grad += ∂(scale·Σ_{chunk} TV)/∂δ. `q`: pass 0's per-row array (3 floats per
+/// row, sized here), kept between steps by the CPU backend as the device buffer is.
+pub fn delta_tv(
+    nbr: &[i32],
+    delta: &[f32],
+    grad: &mut [f32],
+    c: &DeltaTvChunk,
+    reach: u32,
+    q: &mut Vec<f32>,
+) {
+    q.resize(3 * delta.len(), 0.0);
+    delta_tv_dirs(nbr, delta, c, q);
+    delta_tv_gather(nbr, q, grad, c, reach);
 }

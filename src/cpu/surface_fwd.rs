@@ -53,7 +53,7 @@ impl SurfaceGridRef<'_> {
             self.sh.len()
         );
         ensure!(
-            self.links.iter().all(|&l| l < rows as i32),
+            self.links.par_iter().all(|&l| l < rows as i32),
             "a link points past the {rows} vertex rows"
         );
         Ok(())

@@ -334,10 +334,9 @@ fn sign0(x: f32) -> f32 {
 }
 
 /// Pass 1, twin of `surface_normal_reg_cells`: normals[r] = (n, status + 4·k) of the cells of
-/// the chunk's window (`c.cells_work`), 0 for the others (the kernel leaves them as they were;
-/// the pairs pass reads only the window's).
-pub fn normal_cells(p: &NormalPrefix, delta: &[f32], c: &NormalChunk) -> Vec<f32> {
-    let rows = p.rows() as usize;
+/// the chunk's window (`c.cells_work`); the other rows keep what they held, as in the kernel
+/// (the pairs pass reads only the window's).
+pub fn normal_cells(p: &NormalPrefix, delta: &[f32], c: &NormalChunk, normals: &mut [f32]) {
     let work = work_rows(&p.cell_rows, c.cells_work);
     let computed: Vec<[f32; NORMALS_STRIDE]> = work
         .par_iter()
@@ -357,11 +356,9 @@ pub fn normal_cells(p: &NormalPrefix, delta: &[f32], c: &NormalChunk) -> Vec<f32
             [n[0], n[1], n[2], (status + 4 * t[0] as u32) as f32]
         })
         .collect();
-    let mut normals = vec![0f32; NORMALS_STRIDE * rows];
     for (&r, v) in work.iter().zip(&computed) {
         normals[NORMALS_STRIDE * r as usize..][..NORMALS_STRIDE].copy_from_slice(v);
     }
-    normals
 }
 
 /// A normals entry: (n, status, k).
@@ -460,14 +457,15 @@ fn cell_pairs(
 }
 
 /// Pass 2, twin of `surface_normal_reg_pairs`: the corners (∂L/∂δ of the cell's 8 corners from
-/// its kept pairs, +∞ for a cell in none) of the cells of the chunk's window, +∞ for the others
-/// (the kernel leaves them as they were; the gather reads only the window's); returns the loss
+/// its kept pairs, +∞ for a cell in none) of the cells of the chunk's window; the other rows
+/// keep what they held, as in the kernel (the gather reads only the window's). Returns the loss
 /// and the skipped pairs.
 pub fn normal_pairs(
     p: &NormalPrefix,
     normals: &[f32],
     c: &NormalChunk,
-) -> (Vec<f32>, NormalRegStats) {
+    corners: &mut [f32],
+) -> NormalRegStats {
     let work = work_rows(&p.cell_rows, c.cells_work);
     let computed: Vec<([f32; CORNERS_STRIDE], f64, u32)> = work
         .par_iter()
@@ -477,14 +475,13 @@ pub fn normal_pairs(
             (out, loss, skipped)
         })
         .collect();
-    let mut corners = vec![f32::INFINITY; CORNERS_STRIDE * p.rows() as usize];
     let mut st = NormalRegStats::default();
     for (&r, (v, loss, skipped)) in work.iter().zip(&computed) {
         corners[CORNERS_STRIDE * r as usize..][..CORNERS_STRIDE].copy_from_slice(v);
         st.loss += loss;
         st.skipped += skipped;
     }
-    (corners, st)
+    st
 }
 
 /// Pass 3, twin of `surface_normal_reg_gather`: each vertex v (row r) of the chunk's corner work
@@ -533,25 +530,38 @@ pub fn normal_gather(
     }
 }
 
-/// The per-row arrays the passes leave behind (layouts in glsl/lib/normal_reg.glsl).
+/// The per-row arrays the passes leave behind (layouts in glsl/lib/normal_reg.glsl), kept
+/// between steps as the device buffers are: each pass writes only its window's rows.
+#[derive(Default)]
 pub struct NormalScratch {
     pub normals: Vec<f32>,
     pub corners: Vec<f32>,
 }
 
-/// The three passes with the grid's [`NormalPrefix`] (neighbour table, work lists): as
-/// [`surface_normal_reg`], also returning the per-row arrays (for the parity checks).
+impl NormalScratch {
+    /// Sized for `rows` vertex rows; new entries start at 0 (normals) and +∞ (corners).
+    fn fit(&mut self, rows: usize) {
+        self.normals.resize(NORMALS_STRIDE * rows, 0.0);
+        self.corners.resize(CORNERS_STRIDE * rows, f32::INFINITY);
+    }
+}
+
+/// The three passes with the grid's [`NormalPrefix`] (neighbour table, work lists) on the
+/// per-row arrays `scratch` (sized here): as [`surface_normal_reg`], also leaving the arrays
+/// (for the parity checks).
 pub fn normal_reg_passes(
     p: &NormalPrefix,
     delta: &[f32],
     grad: &mut [f32],
     touched: &mut [u32],
     c: &NormalChunk,
-) -> (NormalRegStats, NormalScratch) {
-    let normals = normal_cells(p, delta, c);
-    let (corners, st) = normal_pairs(p, &normals, c);
-    normal_gather(p, &corners, grad, touched, c);
-    (st, NormalScratch { normals, corners })
+    scratch: &mut NormalScratch,
+) -> NormalRegStats {
+    scratch.fit(p.rows() as usize);
+    normal_cells(p, delta, c, &mut scratch.normals);
+    let st = normal_pairs(p, &scratch.normals, c, &mut scratch.corners);
+    normal_gather(p, &scratch.corners, grad, touched, c);
+    st
 }
 
 /// Ln1 + Ln2 (definition in `glsl/surface_normal_reg_pairs.comp`) in the kernels' three passes,
@@ -571,7 +581,7 @@ pub fn surface_normal_reg(
         return NormalRegStats::default();
     }
     let p = NormalPrefix::new(links, row_slot, c.res);
-    normal_reg_passes(&p, delta, grad, touched, c).0
+    normal_reg_passes(&p, delta, grad, touched, c, &mut NormalScratch::default())
 }
 
 /// The slot of each allocated vertex row (the inverse of `links`), for [`surface_normal_reg`].

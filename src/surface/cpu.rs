@@ -7,7 +7,9 @@ use super::{
 use crate::cpu::surface_blocks::build_blocks;
 use crate::cpu::surface_delta_tv::{axis_neighbours, delta_tv, forward_reach};
 use crate::cpu::surface_fwd::{render, SurfCounts};
-use crate::cpu::surface_reg::{normal_reg_passes, row_slots, surface_opacity_reg, NormalPrefix};
+use crate::cpu::surface_reg::{
+    normal_reg_passes, row_slots, surface_opacity_reg, NormalPrefix, NormalScratch,
+};
 use crate::cpu::surface_train::{train, SurfaceGrads};
 use crate::cpu::{surface_rmsprop_sparse, tv, Stage2Params, SurfaceRmsProp};
 use crate::grid::surface::SurfaceGrid;
@@ -26,6 +28,10 @@ pub struct CpuSurface {
     axis_nbrs: Vec<i32>,
     axis_reach: u32,
     normals: NormalPrefix,
+    /// The regularisers' per-row arrays, kept between steps (each pass writes only its
+    /// chunk's rows): Lδ's q, the normal regularisers' normals and corners.
+    delta_dirs: Vec<f32>,
+    normal_scratch: NormalScratch,
     /// The block masks the walks skip with, and when to rebuild them.
     blocks: Vec<u32>,
     refresh: BlockRefresh,
@@ -41,6 +47,8 @@ impl CpuSurface {
             axis_reach: forward_reach(&axis_nbrs),
             axis_nbrs,
             normals,
+            delta_dirs: Vec::new(),
+            normal_scratch: NormalScratch::default(),
             blocks: Vec::new(),
             refresh: BlockRefresh::default(),
             grid,
@@ -75,7 +83,14 @@ impl CpuSurface {
                 c.start,
                 g.delta.len()
             );
-            delta_tv(&self.axis_nbrs, &g.delta, gd, &c, self.axis_reach);
+            delta_tv(
+                &self.axis_nbrs,
+                &g.delta,
+                gd,
+                &c,
+                self.axis_reach,
+                &mut self.delta_dirs,
+            );
         }
         if let Some(c) = p.regs.opacity_tv {
             tv(&g.links, &g.opacity, go, &mut self.touched, &c);
@@ -85,12 +100,13 @@ impl CpuSurface {
             loss += surface_opacity_reg(&g.opacity, &mut self.grad[1], &c);
         }
         if let Some(chunk) = &plan.normals {
-            let (st, _) = normal_reg_passes(
+            let st = normal_reg_passes(
                 &self.normals,
                 &g.delta,
                 &mut self.grad[0],
                 &mut self.touched,
                 chunk,
+                &mut self.normal_scratch,
             );
             loss += st.loss;
         }
