@@ -37,6 +37,7 @@ impl Scene {
             delta: &self.delta,
             opacity: &self.opacity,
             sh: &self.sh,
+            links_checked: false,
         }
     }
 }

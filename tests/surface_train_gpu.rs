@@ -76,7 +76,7 @@ fn vulkan_steps_match_cpu_steps() {
     let scene = test_scene(11, 24);
     let g0 = scene_grid(&scene);
     let mut vk = VulkanSurface::new(gpu, g0.clone()).unwrap();
-    let mut cpu = CpuSurface::new(g0.clone());
+    let mut cpu = CpuSurface::new(g0.clone()).unwrap();
     let mut rng = Pcg64::seed_from_u64(5);
     for step in 0..5u32 {
         let rays = test_rays(&scene, 100 + step as u64, 2000);
@@ -166,7 +166,7 @@ fn vulkan_render_and_load_round_trip() {
     let g0 = scene_grid(&scene);
     let rays = test_rays(&scene, 9, 1500);
     let mut vk = VulkanSurface::new(gpu, g0.clone()).unwrap();
-    let mut cpu = CpuSurface::new(g0.clone());
+    let mut cpu = CpuSurface::new(g0.clone()).unwrap();
     let (rv, cv) = vk.render(&rays, 3.5, 1e-4).unwrap();
     let (rc, cc) = cpu.render(&rays, 3.5, 1e-4).unwrap();
     assert_eq!(rv.len(), rc.len());
@@ -200,4 +200,27 @@ fn vulkan_render_and_load_round_trip() {
     assert!(vk.step(&rays[..60], &[0.5; 29], &params(&g0, 0)).is_err());
     let msgs = gpu.validation_messages();
     assert!(msgs.is_empty(), "validation messages: {msgs:#?}");
+}
+
+/// A link past the vertex rows is an error when the CPU backend is made, not a panic; its passes,
+/// which skip the range check (the links never change), give the same result each time.
+#[test]
+fn cpu_backend_checks_links_when_made() {
+    let scene = test_scene(11, 24);
+    let g0 = scene_grid(&scene);
+    let rays = test_rays(&scene, 7, 200);
+    let mut bad = g0.clone();
+    let s = bad.links.iter().position(|&l| l >= 0).unwrap();
+    bad.links[s] = bad.delta.len() as i32;
+    let err = CpuSurface::new(bad).err().expect("a bad link is an error");
+    assert!(format!("{err:#}").contains("link"), "{err:#}");
+    let mut cpu = CpuSurface::new(g0).unwrap();
+    let first = cpu.render(&rays, 5.0, 1e-4).unwrap();
+    let again = cpu.render(&rays, 5.0, 1e-4).unwrap();
+    assert!(
+        first.1[4] + first.1[0] > 0,
+        "the rays walk cells: {:?}",
+        first.1
+    );
+    assert_eq!(first, again);
 }

@@ -177,7 +177,7 @@ fn run_in(gpu: &Gpu, args: &SurfaceBenchArgs, dir: &std::path::Path) -> Result<(
     let scfg = SurfaceConfig::preset("fast", "thin")?;
     let init_grid = SurfaceGrid::from_density(&density, &scfg.init)?;
     let (res, rows) = (init_grid.res, init_grid.delta.len() as u32);
-    let mut cpu = CpuSurface::new(init_grid);
+    let mut cpu = CpuSurface::new(init_grid)?;
     eprintln!(
         "bench surface: {} stage-2 warm-up steps (CPU)",
         args.warm_steps
@@ -232,7 +232,7 @@ fn run_in(gpu: &Gpu, args: &SurfaceBenchArgs, dir: &std::path::Path) -> Result<(
     let stage1_after = time_stage1("after stage 2")?;
     let stage1_vk = 0.5 * (stage1_before + stage1_after);
     eprintln!("bench surface: timing the CPU backend");
-    let mut cpu = CpuSurface::new(grid.clone());
+    let mut cpu = CpuSurface::new(grid.clone())?;
     cpu.load(grid.clone(), Some(state))?;
     let fc = time_surface(
         &mut |r, t, p| cpu.step(r, t, p),

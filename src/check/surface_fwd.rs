@@ -54,6 +54,7 @@ impl SurfaceScene {
             delta: &self.delta,
             opacity: &self.opacity,
             sh: &self.sh,
+            links_checked: false,
         }
     }
 

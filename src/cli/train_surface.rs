@@ -16,10 +16,12 @@ use std::time::Instant;
 
 /// The Vulkan backend on `gpu`, or the CPU backend when there is none.
 fn make_backend(gpu: Option<&Gpu>, grid: SurfaceGrid) -> Result<Box<dyn SurfaceBackend>> {
-    grid.validate()?;
     Ok(match gpu {
-        Some(gpu) => Box::new(VulkanSurface::new(gpu, grid)?),
-        None => Box::new(CpuSurface::new(grid)),
+        Some(gpu) => {
+            grid.validate()?;
+            Box::new(VulkanSurface::new(gpu, grid)?)
+        }
+        None => Box::new(CpuSurface::new(grid)?),
     })
 }
 

@@ -191,6 +191,7 @@ mod tests {
             delta,
             opacity: &o,
             sh: &sh,
+            links_checked: false,
         };
         build_blocks(&g, levels, margin, SURF_BLOCK_SHIFT_CPU).unwrap()[0]
     }

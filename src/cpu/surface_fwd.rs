@@ -31,10 +31,14 @@ pub struct SurfaceGridRef<'a> {
     pub delta: &'a [f32],
     pub opacity: &'a [f32],
     pub sh: &'a [f32],
+    /// The links are known to be below the row count (a caller that checked them once and keeps
+    /// them unchanged); `validate` then skips its O(n³) scan.
+    pub links_checked: bool,
 }
 
 impl SurfaceGridRef<'_> {
-    /// Checks the array sizes against each other (user input never panics in the kernels).
+    /// Checks the array sizes against each other and, unless `links_checked`, that every link is
+    /// below the row count (user input never panics in the kernels).
     pub fn validate(&self) -> Result<()> {
         let n = self.n as usize;
         ensure!(self.n >= 2, "surface grid needs n ≥ 2, got {}", self.n);
@@ -53,7 +57,7 @@ impl SurfaceGridRef<'_> {
             self.sh.len()
         );
         ensure!(
-            self.links.par_iter().all(|&l| l < rows as i32),
+            self.links_checked || self.links.par_iter().all(|&l| l < rows as i32),
             "a link points past the {rows} vertex rows"
         );
         Ok(())

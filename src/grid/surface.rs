@@ -65,6 +65,7 @@ impl SurfaceGrid {
             delta: &self.delta,
             opacity: &self.opacity,
             sh: &self.sh,
+            links_checked: false,
         }
     }
 

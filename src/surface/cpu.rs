@@ -6,7 +6,7 @@ use super::{
 };
 use crate::cpu::surface_blocks::build_blocks;
 use crate::cpu::surface_delta_tv::{axis_neighbours, delta_tv, forward_reach};
-use crate::cpu::surface_fwd::{render, SurfCounts};
+use crate::cpu::surface_fwd::{render, SurfCounts, SurfaceGridRef};
 use crate::cpu::surface_reg::{
     normal_reg_passes, row_slots, surface_opacity_reg, NormalPrefix, NormalScratch,
 };
@@ -16,6 +16,15 @@ use crate::grid::surface::SurfaceGrid;
 use crate::grid::SH_DIM;
 use crate::math::surface_blocks::{SkipRef, SURF_BLOCK_SHIFT_CPU};
 use anyhow::{ensure, Result};
+
+/// The grid for the kernels' twins, whose links [`CpuSurface::new`] checked (they never change
+/// here): the passes skip the O(n³) range check.
+fn grid_ref(grid: &SurfaceGrid) -> SurfaceGridRef<'_> {
+    SurfaceGridRef {
+        links_checked: true,
+        ..grid.as_ref()
+    }
+}
 
 /// Host-resident stage-2 state.
 pub struct CpuSurface {
@@ -38,12 +47,14 @@ pub struct CpuSurface {
 }
 
 impl CpuSurface {
-    pub fn new(grid: SurfaceGrid) -> Self {
+    /// The backend on `grid`, after checking it (`SurfaceGrid::validate`).
+    pub fn new(grid: SurfaceGrid) -> Result<Self> {
+        grid.validate()?;
         let n = grid.delta.len();
         let row_slot = row_slots(&grid.links, n);
         let normals = NormalPrefix::new(&grid.links, &row_slot, grid.res);
         let axis_nbrs = axis_neighbours(&grid.links, &row_slot, grid.res);
-        CpuSurface {
+        Ok(CpuSurface {
             axis_reach: forward_reach(&axis_nbrs),
             axis_nbrs,
             normals,
@@ -55,14 +66,14 @@ impl CpuSurface {
             grad: [vec![0.0; n], vec![0.0; n], vec![0.0; n * SH_DIM]],
             state: [vec![0.0; n], vec![0.0; n], vec![0.0; n * SH_DIM]],
             touched: vec![0; n],
-        }
+        })
     }
 
     /// Rebuild the block masks when δ may have drifted past their margin.
     fn refresh_blocks(&mut self, lr_delta: f32, beta: f32) -> Result<()> {
         if let Some(margin) = self.refresh.before_pass(lr_delta, beta) {
             self.blocks = build_blocks(
-                &self.grid.as_ref(),
+                &grid_ref(&self.grid),
                 &self.grid.levels,
                 margin,
                 SURF_BLOCK_SHIFT_CPU,
@@ -161,7 +172,7 @@ impl SurfaceBackend for CpuSurface {
         self.refresh_blocks(p.lr_delta, p.beta)?;
         let [gd, go, gs] = &mut self.grad;
         let (losses, counts) = train(
-            &self.grid.as_ref(),
+            &grid_ref(&self.grid),
             rays,
             targets,
             &sp,
@@ -199,7 +210,7 @@ impl SurfaceBackend for CpuSurface {
             words: &self.blocks,
             shift: SURF_BLOCK_SHIFT_CPU,
         };
-        let (out, counts) = render(&self.grid.as_ref(), rays, &sp, Some(skip))?;
+        let (out, counts) = render(&grid_ref(&self.grid), rays, &sp, Some(skip))?;
         Ok((out.iter().flat_map(|o| o.rgb).collect(), counts))
     }
 
@@ -218,7 +229,7 @@ impl SurfaceBackend for CpuSurface {
             state[0].len() == n && state[1].len() == n && state[2].len() == n * SH_DIM,
             "optimizer state does not match the surface grid"
         );
-        *self = CpuSurface::new(grid);
+        *self = CpuSurface::new(grid)?;
         self.state = state;
         Ok(())
     }
