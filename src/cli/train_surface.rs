@@ -143,7 +143,7 @@ pub fn run(args: &TrainArgs, gpu: Option<&Gpu>) -> Result<()> {
     };
     create_run_dir(args, &[("init", json!(args.init))])?;
     eprintln!(
-        "stage 2 on {} ({}): preset {}, category {}, {} steps of {} rays, a {} → {}",
+        "stage 2 on {} ({}): preset {}, category {}, {} steps of {} rays, a {} → {}, δ rate {:e}",
         backend.name(),
         gpu.map_or("rayon".to_string(), |g| g.info().name.clone()),
         cfg.preset,
@@ -151,7 +151,8 @@ pub fn run(args: &TrainArgs, gpu: Option<&Gpu>) -> Result<()> {
         cfg.iters,
         cfg.batch,
         cfg.a.start,
-        cfg.a.end
+        cfg.a.end,
+        cfg.lr_delta.init
     );
     let (report, rendered) =
         stage2::train(backend.as_mut(), &data, &cfg, &args.out, start, !args.quiet)?;
