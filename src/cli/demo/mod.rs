@@ -70,7 +70,7 @@ pub struct SizeArgs {
     /// 512 is the paper's grid: on the thin scene its `train` commands took 23 min (stage 1) and
     /// 7 min (stage 2) on 2 cores, and αSurf measured 35 % below the best Plenoxels level set
     /// (16 % at 128³); its stage 1 at 512³ peaks at 17.3 GB of memory. On the translucent scene
-    /// 512³ took 32 min (stage 1) and 13 min (stage 2), 22.6 % below (16.7 % at 128³).
+    /// 512³ took 32 min (stage 1) and 13 min (stage 2), 22.6 % below (19.8 % at 128³).
     #[arg(long, value_parser = clap::value_parser!(u32).range(8..=1024))]
     pub grid_res: Option<u32>,
     /// Stage-1 steps.
