@@ -143,7 +143,7 @@ pub fn run(args: &TrainArgs, gpu: Option<&Gpu>) -> Result<()> {
     };
     create_run_dir(args, &[("init", json!(args.init))])?;
     eprintln!(
-        "stage 2 on {} ({}): preset {}, category {}, {} steps of {} rays, a {} → {}, δ rate {:e}",
+        "stage 2 on {} ({}): preset {}, category {}, {} steps of {} rays, a {} → {}, δ rate {:.1e}",
         backend.name(),
         gpu.map_or("rayon".to_string(), |g| g.info().name.clone()),
         cfg.preset,
