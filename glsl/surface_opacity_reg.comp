@@ -5,7 +5,8 @@
 // surface_rmsprop's σα range pass updates σα on every row of the chunk.
 // The chunk is rows (start + i) mod rows for i < min(count, rows): this kernel wraps, so the
 // caller may draw start uniformly in [0, rows) (the 10 % chunk of the spec).
-// Thread mapping: flat id = i (one row each; one owner per gradient element, no atomics).
+// Thread mapping: invocation i < S = ⌈min(count, rows)/16⌉ handles chunk rows i + k·S, k < 16
+// (one owner per gradient element, no atomics).
 // Inputs: opacity (raw σα per allocated vertex), rows, start, count, lambda.
 // Outputs: grad += (plain read-modify-write) for each row with σα > 0;
 // loss[0] += λ·Σ log σα (float atomic add, one per subgroup; the host zeroes it).
@@ -26,16 +27,25 @@ layout(push_constant, scalar) uniform Push {
     float lambda;
 } pc;
 
+// Rows per invocation (lavapipe's cost per invocation is larger than one row's work).
+const uint ROWS_PER_INVOCATION = 16u;
+
 void main() {
     uint id = flat_id();
+    uint len = min(pc.count, pc.rows);
+    uint stride = (len + ROWS_PER_INVOCATION - 1u) / ROWS_PER_INVOCATION;
     float l = 0.0;
-    if (id < min(pc.count, pc.rows)) {
-        uint r = (pc.start % pc.rows + id) % pc.rows;
-        float a = pc.opacity.v[r];
-        if (a > 0.0) {
-            l = pc.lambda * log(a);
-            precise float g = pc.grad.v[r] + pc.lambda / max(a, 1e-8);
-            pc.grad.v[r] = g;
+    if (id < stride) {
+        for (uint k = 0u; k < ROWS_PER_INVOCATION; k++) {
+            uint i = id + k * stride;
+            if (i >= len) break;
+            uint r = (pc.start % pc.rows + i) % pc.rows;
+            float a = pc.opacity.v[r];
+            if (a > 0.0) {
+                l += pc.lambda * log(a);
+                precise float g = pc.grad.v[r] + pc.lambda / max(a, 1e-8);
+                pc.grad.v[r] = g;
+            }
         }
     }
     float s = subgroupAdd(l);

@@ -19,6 +19,7 @@ use crate::grid::SH_DIM;
 use crate::kernels;
 use crate::surface::delta_tv::{record_delta_tv, DeltaTvIo, Q_FLOATS};
 use crate::surface::normal_reg::{record_normal_reg, NormalRegBuffers, NormalRegIo};
+use crate::surface::opacity_reg_invocations;
 use crate::surface::rmsprop::{record_surface_rmsprop, SurfaceOptimIo};
 use anyhow::Result;
 use rand::{Rng, SeedableRng};
@@ -203,7 +204,7 @@ pub fn gpu_opacity_reg(
             count: c.count,
             lambda: c.lambda,
         },
-        c.count.min(c.rows),
+        opacity_reg_invocations(c),
     )?;
     Ok(GpuRegOut {
         grad: grad.download()?,

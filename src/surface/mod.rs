@@ -111,6 +111,12 @@ impl RegPlan {
     }
 }
 
+/// Invocations of surface_opacity_reg for chunk `c` (16 rows each, the kernel's
+/// ROWS_PER_INVOCATION).
+pub fn opacity_reg_invocations(c: &OpacityChunk) -> u32 {
+    c.count.min(c.rows).div_ceil(16)
+}
+
 /// What a step reports back.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct SurfaceStepStats {

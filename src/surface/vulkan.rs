@@ -11,8 +11,8 @@ use super::normal_reg::{record_normal_reg, upload_nonempty, NormalRegBuffers, No
 use super::rmsprop::{record_surface_rmsprop, SurfaceOptimIo};
 use super::skip::{record_skip_structure, SkipIo};
 use super::{
-    batch_loss, surface_params, BlockRefresh, RegPlan, SurfaceBackend, SurfaceState,
-    SurfaceStepParams, SurfaceStepStats,
+    batch_loss, opacity_reg_invocations, surface_params, BlockRefresh, RegPlan, SurfaceBackend,
+    SurfaceState, SurfaceStepParams, SurfaceStepStats,
 };
 use crate::cpu::step::{STEP_COUNT, STEP_FLAGS, STEP_N};
 use crate::cpu::surface_blocks::{alloc_box, complete_cells};
@@ -359,7 +359,7 @@ impl VulkanSurface {
                     count: c.count,
                     lambda: c.lambda,
                 },
-                c.count.min(rows),
+                opacity_reg_invocations(&c),
             )?;
         }
         if let Some(c) = &plan.normals {
