@@ -12,8 +12,8 @@
 //! data term, its scatter and RMSProp over the vertices the rays touched): `bench plenoxels` times
 //! stage-1 steps without TV, and Lδ alone touches every vertex each step. For the issue's target it
 //! times stage-1 training on the Vulkan device at the same resolution, from the stage-1 grid, the
-//! way `bench plenoxels` does, before and after stage 2's Vulkan timing (the machine's speed
-//! drifts), and prints the ratios of the Vulkan rates to their mean.
+//! way `bench plenoxels` does, in `--rounds` rounds of stage 1 then stage 2 back to back (the
+//! machine's speed drifts), and reports every round's ratio and the round with the median one.
 
 use super::stage1::{thin_scene, time_steps, warm_config};
 use crate::data::{Dataset, RaySampler};
@@ -48,6 +48,10 @@ pub struct SurfaceBenchArgs {
     /// Timed steps per backend.
     #[arg(long, default_value_t = 20)]
     pub steps: u32,
+    /// Rounds of stage-1 then stage-2 Vulkan timing (odd: the round with the median ratio is
+    /// reported).
+    #[arg(long, default_value_t = 3)]
+    pub rounds: u32,
     /// Rays per batch.
     #[arg(long, default_value_t = 4096)]
     pub batch: u32,
@@ -138,6 +142,11 @@ pub fn run(gpu: &Gpu, args: &SurfaceBenchArgs) -> Result<()> {
         "--steps and --batch must be at least 1, --stage1-steps at least 3"
     );
     ensure!(
+        args.rounds % 2 == 1,
+        "--rounds must be odd (the round with the median ratio is reported), got {}",
+        args.rounds
+    );
+    ensure!(
         args.a > 0.0 && args.a <= 8.0,
         "--a must be in (0, 8], got {}",
         args.a
@@ -162,17 +171,11 @@ fn run_in(gpu: &Gpu, args: &SurfaceBenchArgs, dir: &std::path::Path) -> Result<(
     );
     stage1::train(&mut s1, &data, &cfg, &dir.join("stage1"), 0, false)?;
     let density = s1.grid()?;
-    // Stage 1 on the Vulkan device from the same grid, timed before and again after stage 2's
-    // Vulkan timing (each from the grid as trained on the CPU): the ratio uses their mean, and a
-    // machine whose speed drifts between them shows it.
-    let time_stage1 = |when: &str| -> Result<f64> {
-        eprintln!(
-            "bench surface: stage-1 training on the Vulkan device at the same resolution ({when})"
-        );
+    // Stage 1 on the Vulkan device from the same grid (a fresh backend each time).
+    let time_stage1 = || -> Result<f64> {
         let mut vk = VulkanPlenoxels::new(gpu, density.clone())?;
         Ok(time_steps(&mut vk, &data, &cfg, args.steps, args.batch)?.rays_per_s)
     };
-    let stage1_before = time_stage1("before stage 2")?;
 
     let scfg = SurfaceConfig::preset("fast", "thin")?;
     let init_grid = SurfaceGrid::from_density(&density, &scfg.init)?;
@@ -194,13 +197,8 @@ fn run_in(gpu: &Gpu, args: &SurfaceBenchArgs, dir: &std::path::Path) -> Result<(
     let grid = cpu.grid()?;
     let state = cpu.optimizer_state()?;
 
-    // The Vulkan backend with and without the regularisers, each from the same state.
-    let mut vulkan = Vec::new();
-    for regs in [true, false] {
-        eprintln!(
-            "bench surface: timing the Vulkan backend{}",
-            if regs { "" } else { " (data term only)" }
-        );
+    // The Vulkan backend from that state, with the regularisers or the data term alone.
+    let time_vulkan = |regs: bool| -> Result<Figures> {
         let mut vk = VulkanSurface::new(gpu, grid.clone())?;
         vk.load(grid.clone(), Some(state.clone()))?;
         let mut kernel_ns: BTreeMap<&'static str, f64> = BTreeMap::new();
@@ -225,12 +223,31 @@ fn run_in(gpu: &Gpu, args: &SurfaceBenchArgs, dir: &std::path::Path) -> Result<(
             .into_iter()
             .map(|(k, ns)| (k, ns / 1e6 / args.steps as f64))
             .collect();
-        vulkan.push(f);
+        Ok(f)
+    };
+    // Rounds of stage 1 then stage 2 back to back: the machine's speed drifts (stage 1 has read
+    // 27–45k rays/s at 128³ from run to run, and within one), so each ratio pairs two timings
+    // taken seconds apart, and the round with the median ratio is reported.
+    let mut rounds = Vec::new();
+    for r in 1..=args.rounds {
+        eprintln!(
+            "bench surface: round {r}/{}: stage-1 then stage-2 training on the Vulkan device",
+            args.rounds
+        );
+        let stage1 = time_stage1()?;
+        rounds.push((stage1, time_vulkan(true)?));
     }
-    let fd = vulkan.pop().expect("two runs");
-    let fv = vulkan.pop().expect("two runs");
-    let stage1_after = time_stage1("after stage 2")?;
-    let stage1_vk = 0.5 * (stage1_before + stage1_after);
+    // Per round: stage-1 rays/s, stage-2 rays/s, their ratio.
+    let paired: Vec<[f64; 3]> = rounds
+        .iter()
+        .map(|(s1, f)| [*s1, f.rays_per_s, f.rays_per_s / s1])
+        .collect();
+    let mut order: Vec<usize> = (0..paired.len()).collect();
+    order.sort_by(|&i, &j| paired[i][2].total_cmp(&paired[j][2]));
+    let median = order[order.len() / 2];
+    eprintln!("bench surface: timing the Vulkan backend (data term only)");
+    let fd = time_vulkan(false)?;
+    let (stage1_vk, fv) = rounds.swap_remove(median);
     eprintln!("bench surface: timing the CPU backend");
     let mut cpu = CpuSurface::new(grid.clone())?;
     cpu.load(grid.clone(), Some(state))?;
@@ -278,12 +295,25 @@ fn run_in(gpu: &Gpu, args: &SurfaceBenchArgs, dir: &std::path::Path) -> Result<(
     }
     let vs_stage1 = fv.rays_per_s / stage1_vk;
     let data_vs_stage1 = fd.rays_per_s / stage1_vk;
+    let column = |k: usize, fmt: fn(f64) -> String| {
+        paired
+            .iter()
+            .map(|r| fmt(r[k]))
+            .collect::<Vec<_>>()
+            .join(" / ")
+    };
     println!(
-        "stage-1 training on the Vulkan device at {}³ (no TV, as `bench plenoxels`): \
-         {stage1_before:.0} rays/s before stage 2's timing, {stage1_after:.0} after, mean \
-         {stage1_vk:.0}; stage 2 / stage 1: {vs_stage1:.2}× with the regularisers, \
-         {data_vs_stage1:.2}× data term only (target ≥ 3×)",
-        args.res
+        "stage-1 training on the Vulkan device at {}³ (no TV, as `bench plenoxels`), {} rounds of \
+         stage 1 then stage 2: stage 1 {} rays/s, stage 2 {}, ratios {}",
+        args.res,
+        paired.len(),
+        column(0, |v| format!("{v:.0}")),
+        column(1, |v| format!("{v:.0}")),
+        column(2, |v| format!("{v:.2}×")),
+    );
+    println!(
+        "stage 2 / stage 1 (the median round; the table's Vulkan row is that round's): \
+         {vs_stage1:.2}× with the regularisers, {data_vs_stage1:.2}× data term only (target ≥ 3×)"
     );
     if args.json {
         println!(
@@ -302,8 +332,14 @@ fn run_in(gpu: &Gpu, args: &SurfaceBenchArgs, dir: &std::path::Path) -> Result<(
                 "cpu": fc,
                 "ratio_vulkan_over_cpu": ratio,
                 "stage1_vulkan_rays_per_s": stage1_vk,
-                "stage1_vulkan_rays_per_s_before": stage1_before,
-                "stage1_vulkan_rays_per_s_after": stage1_after,
+                "rounds": paired
+                    .iter()
+                    .map(|r| json!({
+                        "stage1_rays_per_s": r[0],
+                        "surface_rays_per_s": r[1],
+                        "ratio": r[2],
+                    }))
+                    .collect::<Vec<_>>(),
                 "ratio_surface_over_stage1_vulkan": vs_stage1,
                 "ratio_surface_data_term_over_stage1_vulkan": data_vs_stage1,
             })
