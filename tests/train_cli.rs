@@ -1,6 +1,7 @@
 //! End to end at a small size: make-scene → train (Vulkan and CPU backends) → render → export →
 //! import, and a run killed with SIGKILL that resumes from its last checkpoint.
 
+use alphasurf::grid::checkpoint::optim_refs;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
@@ -190,7 +191,7 @@ fn sigkill_loses_at_most_the_steps_since_the_last_checkpoint() {
     let mut cfg = ck.meta["config"].clone();
     cfg["iters"] = serde_json::json!(step + 10);
     let meta = serde_json::json!({ "stage": "plenoxels", "step": step, "config": cfg });
-    alphasurf::grid::checkpoint::save(&ckpt, &ck.grid, &ck.optim, &meta).unwrap();
+    alphasurf::grid::checkpoint::save(&ckpt, &ck.grid, &optim_refs(&ck.optim), &meta).unwrap();
     let out = run_ok(
         bin()
             .args(["train", "--data"])

@@ -414,8 +414,8 @@ pub fn run_import(args: &ImportArgs) -> Result<()> {
         &stage1::checkpoint_path(&args.out),
         &grid,
         &[
-            ("rms_density".into(), vec![0.0; n]),
-            ("rms_sh".into(), vec![0.0; n * crate::grid::SH_DIM]),
+            ("rms_density", &vec![0.0; n]),
+            ("rms_sh", &vec![0.0; n * crate::grid::SH_DIM]),
         ],
         &meta,
     )?;

@@ -34,23 +34,17 @@ fn check_name(name: &str) -> Result<()> {
     Ok(())
 }
 
+/// Named optimiser-state arrays to write, borrowed (a checkpoint of a 512³ grid would otherwise
+/// copy gigabytes).
+pub type OptimRefs<'a> = [(&'a str, &'a [f32])];
+
 /// Write a checkpoint atomically to `path`. Refuses (leaving any previous checkpoint intact) an
 /// invalid or non-finite grid, non-finite optimiser state, or bad/duplicate names.
-pub fn save(
-    path: &Path,
-    grid: &Grid,
-    optim: &[(String, Vec<f32>)],
-    meta: &serde_json::Value,
-) -> Result<()> {
+pub fn save(path: &Path, grid: &Grid, optim: &OptimRefs, meta: &serde_json::Value) -> Result<()> {
     write(path, grid, optim, meta).with_context(|| format!("saving checkpoint {}", path.display()))
 }
 
-fn write(
-    path: &Path,
-    grid: &Grid,
-    optim: &[(String, Vec<f32>)],
-    meta: &serde_json::Value,
-) -> Result<()> {
+fn write(path: &Path, grid: &Grid, optim: &OptimRefs, meta: &serde_json::Value) -> Result<()> {
     check_optim(optim)?;
     let meta = serde_json::to_vec(meta)?;
     npz::write_atomic(path, |w| {
@@ -60,7 +54,7 @@ fn write(
 }
 
 /// Refuse bad or duplicate optimiser-array names and non-finite optimiser state.
-pub(crate) fn check_optim(optim: &[(String, Vec<f32>)]) -> Result<()> {
+pub(crate) fn check_optim(optim: &OptimRefs) -> Result<()> {
     for (i, (name, v)) in optim.iter().enumerate() {
         check_name(name)?;
         ensure!(
@@ -77,7 +71,7 @@ pub(crate) fn check_optim(optim: &[(String, Vec<f32>)]) -> Result<()> {
 /// Add the optimiser arrays and the metadata (JSON bytes) to an npz being written.
 pub(crate) fn write_extras<W: std::io::Write + std::io::Seek>(
     w: &mut npz::NpzWriter<W>,
-    optim: &[(String, Vec<f32>)],
+    optim: &OptimRefs,
     meta: &[u8],
 ) -> Result<()> {
     for (name, v) in optim {
@@ -105,6 +99,11 @@ fn read(r: &mut NpzReader) -> Result<Checkpoint> {
 
 /// Named optimiser-state arrays, in file order.
 pub type OptimArrays = Vec<(String, Vec<f32>)>;
+
+/// Borrow loaded arrays for writing them again.
+pub fn optim_refs(optim: &OptimArrays) -> Vec<(&str, &[f32])> {
+    optim.iter().map(|(n, v)| (n.as_str(), &v[..])).collect()
+}
 
 /// The optimiser arrays (validated 1-D and finite) and the metadata of an open checkpoint.
 pub(crate) fn read_extras(r: &mut NpzReader) -> Result<(OptimArrays, serde_json::Value)> {

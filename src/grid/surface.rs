@@ -3,7 +3,7 @@
 //! dilated twice over the 26-neighbourhood; rescale δ and τ by the mean forward-difference
 //! gradient norm so δ is SDF-like; raw opacity σα = s·σ; SH copied.
 
-use super::checkpoint::{check_optim, read_extras, write_extras, META};
+use super::checkpoint::{check_optim, read_extras, write_extras, OptimRefs, META};
 use super::npz::{self, Data, NpzReader};
 use super::{dilate, Grid, SH_DIM};
 use crate::cpu::surface_fwd::SurfaceGridRef;
@@ -153,12 +153,7 @@ impl SurfaceGrid {
 
     /// Write a checkpoint atomically (temp file, fsync, rename): the grid, named optimiser arrays
     /// and JSON metadata. Refuses invalid or non-finite data, leaving the previous file intact.
-    pub fn save(
-        &self,
-        path: &Path,
-        optim: &[(String, Vec<f32>)],
-        meta: &serde_json::Value,
-    ) -> Result<()> {
+    pub fn save(&self, path: &Path, optim: &OptimRefs, meta: &serde_json::Value) -> Result<()> {
         (|| -> Result<()> {
             self.validate()?;
             check_optim(optim)?;
@@ -389,8 +384,12 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("surface.npz");
         let optim = vec![("rms_delta".to_string(), vec![0.5; s.delta.len()])];
-        s.save(&path, &optim, &serde_json::json!({"step": 3}))
-            .unwrap();
+        s.save(
+            &path,
+            &[("rms_delta", &optim[0].1)],
+            &serde_json::json!({"step": 3}),
+        )
+        .unwrap();
         let ck = SurfaceGrid::load(&path).unwrap();
         assert_eq!(ck.grid, s);
         assert_eq!(ck.optim, optim);

@@ -1,6 +1,6 @@
 //! The CPU stage-1 backend: the kernels' rayon twins over host arrays.
 
-use super::{march_params, Gradients, Plenoxels, StepParams, StepStats};
+use super::{march_params, Gradients, Plenoxels, StateFn, StepParams, StepStats};
 use crate::cpu::plenoxel::{self as twin, TrainGrads};
 use crate::cpu::step::TOUCH_ALL;
 use crate::cpu::{rmsprop_sparse, tv, RmsProp, Stage1Params, TvChunk};
@@ -186,6 +186,10 @@ impl Plenoxels for CpuPlenoxels {
 
     fn optimizer_state(&self) -> Result<(Vec<f32>, Vec<f32>)> {
         Ok((self.state_density.clone(), self.state_sh.clone()))
+    }
+
+    fn with_state(&self, f: &mut StateFn) -> Result<()> {
+        f(&self.grid, [&self.state_density, &self.state_sh])
     }
 
     fn load(&mut self, grid: Grid, state: Option<(Vec<f32>, Vec<f32>)>) -> Result<()> {

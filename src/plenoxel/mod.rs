@@ -52,6 +52,9 @@ pub struct Gradients {
     pub counts: Counts,
 }
 
+/// What [`Plenoxels::with_state`] calls: the grid and the running averages (σ, SH).
+pub type StateFn<'a> = dyn FnMut(&Grid, [&[f32]; 2]) -> Result<()> + 'a;
+
 /// A stage-1 compute backend holding the grid and its optimiser state.
 pub trait Plenoxels {
     /// Backend name for logs ("vulkan" or "cpu").
@@ -69,6 +72,12 @@ pub trait Plenoxels {
     fn grid(&self) -> Result<Grid>;
     /// RMSProp running averages (σ, SH).
     fn optimizer_state(&self) -> Result<(Vec<f32>, Vec<f32>)>;
+    /// Call `f` with the grid and the running averages (σ, SH): borrowed where the backend holds
+    /// them in host memory (checkpoints of large grids copy nothing), else downloaded.
+    fn with_state(&self, f: &mut StateFn) -> Result<()> {
+        let (sd, ss) = self.optimizer_state()?;
+        f(&self.grid()?, [&sd, &ss])
+    }
     /// Replace grid and optimiser state (after resampling, or when resuming).
     fn load(&mut self, grid: Grid, state: Option<(Vec<f32>, Vec<f32>)>) -> Result<()>;
 }

@@ -2,7 +2,7 @@
 
 use super::{
     batch_loss, surface_params, BlockRefresh, RegPlan, SurfaceBackend, SurfaceState,
-    SurfaceStepParams, SurfaceStepStats,
+    SurfaceStateFn, SurfaceStepParams, SurfaceStepStats,
 };
 use crate::cpu::surface_blocks::build_blocks;
 use crate::cpu::surface_delta_tv::{axis_neighbours, delta_tv, forward_reach};
@@ -220,6 +220,11 @@ impl SurfaceBackend for CpuSurface {
 
     fn optimizer_state(&self) -> Result<SurfaceState> {
         Ok(self.state.clone())
+    }
+
+    fn with_state(&self, f: &mut SurfaceStateFn) -> Result<()> {
+        let [sd, so, ss] = &self.state;
+        f(&self.grid, [sd, so, ss])
     }
 
     fn load(&mut self, grid: SurfaceGrid, state: Option<SurfaceState>) -> Result<()> {

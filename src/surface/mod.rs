@@ -136,6 +136,9 @@ pub struct SurfaceStepStats {
 /// The optimiser's running averages: δ, σα, SH.
 pub type SurfaceState = [Vec<f32>; 3];
 
+/// What [`SurfaceBackend::with_state`] calls: the grid and the running averages (δ, σα, SH).
+pub type SurfaceStateFn<'a> = dyn FnMut(&SurfaceGrid, [&[f32]; 3]) -> Result<()> + 'a;
+
 /// A stage-2 compute backend holding the surface grid and its optimiser state.
 pub trait SurfaceBackend {
     /// Backend name for logs ("vulkan" or "cpu").
@@ -153,6 +156,12 @@ pub trait SurfaceBackend {
     fn grid(&self) -> Result<SurfaceGrid>;
     /// RMSProp running averages.
     fn optimizer_state(&self) -> Result<SurfaceState>;
+    /// Call `f` with the grid and the running averages (δ, σα, SH): borrowed where the backend
+    /// holds them in host memory (checkpoints of large grids copy nothing), else downloaded.
+    fn with_state(&self, f: &mut SurfaceStateFn) -> Result<()> {
+        let [sd, so, ss] = self.optimizer_state()?;
+        f(&self.grid()?, [&sd, &so, &ss])
+    }
     /// Replace grid and optimiser state (after pruning, or when resuming).
     fn load(&mut self, grid: SurfaceGrid, state: Option<SurfaceState>) -> Result<()>;
 }

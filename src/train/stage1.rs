@@ -132,16 +132,16 @@ fn check_finite(grid: &Grid, step: u32) -> Result<()> {
 
 /// Write the checkpoint of `step` atomically.
 fn save(backend: &dyn Plenoxels, cfg: &Stage1Config, out: &Path, step: u32) -> Result<()> {
-    let grid = backend.grid()?;
-    check_finite(&grid, step)?;
-    let (sd, ss) = backend.optimizer_state()?;
     let meta = json!({ "stage": "plenoxels", "step": step, "config": cfg });
-    checkpoint::save(
-        &out.join(CHECKPOINT),
-        &grid,
-        &[("rms_density".into(), sd), ("rms_sh".into(), ss)],
-        &meta,
-    )
+    backend.with_state(&mut |grid, [sd, ss]| {
+        check_finite(grid, step)?;
+        checkpoint::save(
+            &out.join(CHECKPOINT),
+            grid,
+            &[("rms_density", sd), ("rms_sh", ss)],
+            &meta,
+        )
+    })
 }
 
 /// Restore grid, optimiser state and step from a run's checkpoint; returns the next step.

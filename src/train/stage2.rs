@@ -51,19 +51,16 @@ pub fn checkpoint_path(run: &Path) -> PathBuf {
 
 /// Write the checkpoint of `step` atomically (refuses non-finite values).
 fn save(backend: &dyn SurfaceBackend, cfg: &SurfaceConfig, out: &Path, step: u32) -> Result<()> {
-    let grid = backend.grid()?;
-    let [sd, so, ss] = backend.optimizer_state()?;
     let meta = json!({ "stage": "surface", "step": step, "config": cfg });
-    grid.save(
-        &out.join(CHECKPOINT),
-        &[
-            ("rms_delta".into(), sd),
-            ("rms_opacity".into(), so),
-            ("rms_sh".into(), ss),
-        ],
-        &meta,
-    )
-    .with_context(|| format!("after step {step}"))
+    backend
+        .with_state(&mut |grid, [sd, so, ss]| {
+            grid.save(
+                &out.join(CHECKPOINT),
+                &[("rms_delta", sd), ("rms_opacity", so), ("rms_sh", ss)],
+                &meta,
+            )
+        })
+        .with_context(|| format!("after step {step}"))
 }
 
 /// Restore grid, optimiser state and step from a stage-2 checkpoint; returns the next step.
