@@ -111,10 +111,12 @@ impl RegPlan {
     }
 }
 
-/// Invocations of surface_opacity_reg for chunk `c` (16 rows each, the kernel's
-/// ROWS_PER_INVOCATION).
+/// Chunk rows per invocation of surface_opacity_reg (its ROWS_PER_INVOCATION).
+const OPACITY_REG_ROWS: u32 = 16;
+
+/// Invocations of surface_opacity_reg for chunk `c`.
 pub fn opacity_reg_invocations(c: &OpacityChunk) -> u32 {
-    c.count.min(c.rows).div_ceil(16)
+    c.count.min(c.rows).div_ceil(OPACITY_REG_ROWS)
 }
 
 /// What a step reports back.

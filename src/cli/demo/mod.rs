@@ -68,9 +68,10 @@ pub struct SizeArgs {
     /// Final grid resolution N (stage 1 `train --res N`: preset `fast`'s 3000 steps, upsampling
     /// to N³ at step 1000; stage 2 then starts from that grid). Default 128 (64 with `--fast`).
     /// 512 is the paper's grid: on the thin scene its `train` commands took 23 min (stage 1) and
-    /// 7 min (stage 2) on 2 cores, and αSurf measured 35 % below the best Plenoxels level set
-    /// (16 % at 128³); its stage 1 at 512³ peaks at 17.3 GB of memory. On the translucent scene
-    /// 512³ took 32 min (stage 1) and 13 min (stage 2), 22.6 % below (19.8 % at 128³).
+    /// 2.5 min (stage 2) on 2 cores, and αSurf measured 35 % below the best Plenoxels level set
+    /// (16 % at 128³); its stage 1 at 512³ peaked at 17.3 GB of memory. On the translucent scene
+    /// the whole 512³ demo took 47 min (stage 1 30 min, stage 2 10 min) and αSurf measured
+    /// 22.5 % below (19.8 % at 128³); its stage 1 peaks at 12.6 GB.
     #[arg(long, value_parser = clap::value_parser!(u32).range(8..=1024))]
     pub grid_res: Option<u32>,
     /// Stage-1 steps.
