@@ -1,5 +1,6 @@
 //! Benchmarks behind `alphasurf bench …`: they print figures (and a JSON line with --json).
 
+pub mod accuracy;
 pub mod cubic;
 pub mod dda;
 pub mod plenoxels;

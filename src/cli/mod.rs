@@ -10,6 +10,7 @@ pub mod inspect;
 pub mod make_scene;
 mod resume;
 mod train;
+pub use train::Backend;
 mod train_surface;
 
 use crate::gpu::{Gpu, GpuOptions};
@@ -92,6 +93,10 @@ pub enum BenchKind {
     /// solves, culled solves, hits, cut and guarded hits, atomic adds per ray) from the same grid,
     /// and the ratio to stage-1 training on the Vulkan device at the same resolution.
     Surface(crate::bench::surface::SurfaceBenchArgs),
+    /// Accuracy on scenes with ground truth (the development set): per scene stage 1, the
+    /// Plenoxels level sweep, stage 2, extract and eval; one table of αSurf against the scene's
+    /// best level and the category's fixed level, with test PSNR; category means. Resumable.
+    Accuracy(crate::bench::accuracy::AccuracyArgs),
 }
 
 /// Entry point of the binary: parse, run, map errors to a message and exit code 1.
@@ -209,6 +214,10 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             }
             BenchKind::TimeVsError(args) => {
                 crate::bench::time_vs_error::run(args, &cli)?;
+                ExitCode::SUCCESS
+            }
+            BenchKind::Accuracy(args) => {
+                crate::bench::accuracy::run(args, &cli)?;
                 ExitCode::SUCCESS
             }
             BenchKind::Surface(args) => {

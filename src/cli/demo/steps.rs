@@ -24,6 +24,10 @@ pub struct Invoker {
     device: Option<usize>,
     /// `extract --rays-per-axis` for every extraction.
     pub rays_per_axis: u32,
+    /// `train --preset` for both stages.
+    pub preset: String,
+    /// `train --seed` for both stages.
+    pub seed: u64,
 }
 
 /// Size of a generated scene (`make-scene` arguments).
@@ -75,6 +79,8 @@ impl Invoker {
             backend: name,
             device: cli.device,
             rays_per_axis: DEFAULT_RAYS_PER_AXIS,
+            preset: "fast".into(),
+            seed: 0,
         })
     }
 
@@ -92,6 +98,17 @@ impl Invoker {
             backend: if vulkan { "vulkan" } else { "cpu" },
             device: cli.device,
             rays_per_axis: DEFAULT_RAYS_PER_AXIS,
+            preset: "fast".into(),
+            seed: 0,
+        }
+    }
+
+    /// The same invoker, training with `--preset preset --seed seed`.
+    pub fn with_schedule(self, preset: &str, seed: u64) -> Invoker {
+        Invoker {
+            preset: preset.into(),
+            seed,
+            ..self
         }
     }
 
@@ -141,7 +158,7 @@ impl Invoker {
         ])
     }
 
-    /// `train --stage plenoxels --preset fast` (with the size overrides).
+    /// `train --stage plenoxels --preset P --seed S` (with the size overrides).
     pub fn train_plenoxels(
         &self,
         data: &Path,
@@ -158,9 +175,11 @@ impl Invoker {
             os("--out"),
             os(out),
             os("--preset"),
-            os("fast"),
+            os(&self.preset),
             os("--backend"),
             os(self.backend),
+            os("--seed"),
+            os(self.seed.to_string()),
         ];
         push_size(&mut a, size);
         if !progress {
@@ -196,9 +215,11 @@ impl Invoker {
             os("--category"),
             os(category),
             os("--preset"),
-            os("fast"),
+            os(&self.preset),
             os("--backend"),
             os(self.backend),
+            os("--seed"),
+            os(self.seed.to_string()),
         ];
         push_size(
             &mut a,

@@ -1,0 +1,645 @@
+//! `alphasurf bench accuracy`: the method scored on a set of scenes with ground truth (the
+//! development set). For each scene: stage 1, the Plenoxels level-set sweep (extract + eval at
+//! every level of [`LEVELS`]), stage 2, αSurf's extraction and eval — the user-facing commands run
+//! in-process (`cli::demo::steps`). Then one table: scene, category, αSurf's Chamfer, the best
+//! Plenoxels level of that scene, Plenoxels at the category's fixed level (the paper's protocol:
+//! one level per category, the one with the best mean over the set's scenes of that category),
+//! αSurf / best level, F1 of both, stage-1 and stage-2 test PSNR and wall time; then the category
+//! means. Each finished scene leaves `OUT/SCENE/result.json`; a rerun with the same settings
+//! reuses it. A finished stage-1 run is reused while its settings hold, also from another output
+//! (`--stage1-from`), so stage-2 changes are compared on the same stage-1 grids.
+
+use crate::cli::demo::steps::{Invoker, TrainSize, TrainedRun};
+use crate::cli::demo::{alphasurf_row, best_plenoxels, plenoxels_levels, Row, LEVELS};
+use crate::cli::Backend;
+use crate::cli::Cli;
+use crate::train::surface_config::CATEGORIES;
+use anyhow::{bail, ensure, Context, Result};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Arguments of `bench accuracy`.
+#[derive(clap::Args, Debug)]
+pub struct AccuracyArgs {
+    /// Scene folders (NeRF-synthetic layout with `gt_points.ply`), e.g. the development set
+    /// `../shared/fixtures/*/`. Each scene's category comes from its folder name's first word
+    /// (`thin_lyre` → thin) unless `--category` is given.
+    #[arg(long, required = true, num_args = 1..)]
+    pub data: Vec<PathBuf>,
+    /// Stage-2 category for every scene (thin, translucent, synthetic, real, dtu).
+    #[arg(long)]
+    pub category: Option<String>,
+    /// Final stage-1 grid resolution N (default: the preset's).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(8..=1024))]
+    pub res: Option<u32>,
+    /// Stage-1 steps (default: the preset's).
+    #[arg(long)]
+    pub iters: Option<u32>,
+    /// Rays per batch of both stages (default: the presets').
+    #[arg(long)]
+    pub batch: Option<u32>,
+    /// Schedule of both stages: fast or paper.
+    #[arg(long, default_value = "fast")]
+    pub preset: String,
+    /// Seed of both stages (the ray batches, the regularisers' chunks).
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Stage-2 steps (default: the preset's).
+    #[arg(long)]
+    pub surface_iters: Option<u32>,
+    /// Stage-2 configuration override, passed on as `train --set KEY=VALUE`. Repeatable.
+    #[arg(long, value_name = "KEY=VALUE")]
+    pub surface_set: Vec<String>,
+    /// Where the kernels run (resolved once).
+    #[arg(long, value_enum, default_value = "auto")]
+    pub backend: Backend,
+    /// Output directory: one folder per scene (its runs, clouds and result.json) and
+    /// accuracy.json. Default: runs/accuracy-N-PRESET-sSEED.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Reuse the stage-1 runs of an earlier `bench accuracy` output (DIR/SCENE/plenoxels) with
+    /// the same data, resolution, preset and backend, instead of training stage 1.
+    #[arg(long, value_name = "DIR")]
+    pub stage1_from: Option<PathBuf>,
+    /// Print one JSON object with every scene as the last stdout line.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// What a stage-1 run depends on (`plenoxels/stage1.json`, with its wall time).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Stage1Settings {
+    pub data: PathBuf,
+    pub res: Option<u32>,
+    pub iters: Option<u32>,
+    pub batch: Option<u32>,
+    pub preset: String,
+    pub seed: u64,
+    pub backend: String,
+}
+
+/// A finished stage-1 run and its level sweep (`plenoxels/stage1.json`).
+#[derive(Serialize, Deserialize)]
+struct Stage1Record {
+    settings: Stage1Settings,
+    wall_s: f64,
+    levels: Vec<LevelScore>,
+    best_level: Option<f32>,
+}
+
+impl Stage1Record {
+    fn best(&self) -> Option<&LevelScore> {
+        self.levels
+            .iter()
+            .find(|l| Some(l.level) == self.best_level)
+    }
+}
+
+/// What a scene's figures depend on; a stored result is reused only when this matches.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Settings {
+    pub stage1: Stage1Settings,
+    pub category: String,
+    /// Stage 2's seed.
+    pub seed: u64,
+    pub surface_iters: Option<u32>,
+    pub surface_set: Vec<String>,
+}
+
+/// One Plenoxels level of a scene.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct LevelScore {
+    pub level: f32,
+    pub chamfer_e2: Option<f64>,
+    pub f1: Option<f64>,
+}
+
+/// One scene's figures (`OUT/SCENE/result.json`).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct SceneResult {
+    pub scene: String,
+    pub settings: Settings,
+    /// Every level of the sweep.
+    pub levels: Vec<LevelScore>,
+    pub best_level: Option<f32>,
+    pub best_chamfer_e2: Option<f64>,
+    pub best_f1: Option<f64>,
+    pub alphasurf_chamfer_e2: Option<f64>,
+    pub alphasurf_f1: Option<f64>,
+    pub stage1_psnr: f64,
+    pub stage2_psnr: Option<f64>,
+    /// Stage 1 + stage 2 training wall time.
+    pub train_wall_s: f64,
+    /// The whole scene: training, every extraction and eval.
+    pub wall_s: f64,
+    /// Why stage 2 or its evaluation failed.
+    pub error: Option<String>,
+}
+
+impl SceneResult {
+    /// αSurf's Chamfer over the best level's.
+    pub fn ratio(&self) -> Option<f64> {
+        Some(self.alphasurf_chamfer_e2? / self.best_chamfer_e2?)
+    }
+
+    fn level(&self, l: f32) -> Option<f64> {
+        self.levels
+            .iter()
+            .find(|s| s.level == l)
+            .and_then(|s| s.chamfer_e2)
+    }
+}
+
+/// The set's figures: every scene, and per category the fixed level and the means.
+#[derive(Clone, Debug, Serialize)]
+pub struct Summary {
+    pub scenes: Vec<SceneResult>,
+    pub categories: Vec<CategoryMean>,
+}
+
+/// Means over one category's scenes.
+#[derive(Clone, Debug, Serialize)]
+pub struct CategoryMean {
+    pub category: String,
+    pub scenes: usize,
+    /// The level with the lowest mean Chamfer over these scenes (the paper's fixed level).
+    pub fixed_level: Option<f32>,
+    pub fixed_level_chamfer_e2: Option<f64>,
+    pub best_chamfer_e2: Option<f64>,
+    pub alphasurf_chamfer_e2: Option<f64>,
+    pub ratio: Option<f64>,
+    pub stage1_psnr: f64,
+    pub stage2_psnr: Option<f64>,
+}
+
+/// The category of a scene folder: `--category`, else its name's first word.
+pub fn scene_category(dir: &Path, given: Option<&str>) -> Result<String> {
+    if let Some(c) = given {
+        ensure!(
+            CATEGORIES.contains(&c),
+            "--category {c:?}: expected one of {}",
+            CATEGORIES.join(", ")
+        );
+        return Ok(c.into());
+    }
+    let name = scene_name(dir);
+    let first = name.split(['_', '-']).next().unwrap_or("");
+    match CATEGORIES.iter().find(|c| **c == first) {
+        Some(c) => Ok(c.to_string()),
+        None => bail!(
+            "{}: cannot tell the scene's category from its folder name (expected it to start \
+             with one of {} and '_'); pass --category",
+            dir.display(),
+            CATEGORIES.join(", ")
+        ),
+    }
+}
+
+fn scene_name(dir: &Path) -> String {
+    dir.file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| dir.display().to_string())
+}
+
+/// Mean of the values when every one is present.
+fn mean_all(v: impl Iterator<Item = Option<f64>>) -> Option<f64> {
+    let v: Option<Vec<f64>> = v.collect();
+    let v = v?;
+    (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
+}
+
+/// Category means and fixed levels over the scenes.
+pub fn summarise(scenes: Vec<SceneResult>) -> Summary {
+    let mut by_cat: BTreeMap<String, Vec<&SceneResult>> = BTreeMap::new();
+    for s in &scenes {
+        by_cat
+            .entry(s.settings.category.clone())
+            .or_default()
+            .push(s);
+    }
+    let categories = by_cat
+        .into_iter()
+        .map(|(category, ss)| {
+            let fixed = LEVELS
+                .iter()
+                .filter_map(|&l| Some((l, mean_all(ss.iter().map(|s| s.level(l)))?)))
+                .min_by(|a, b| a.1.total_cmp(&b.1));
+            CategoryMean {
+                scenes: ss.len(),
+                fixed_level: fixed.map(|f| f.0),
+                fixed_level_chamfer_e2: fixed.map(|f| f.1),
+                best_chamfer_e2: mean_all(ss.iter().map(|s| s.best_chamfer_e2)),
+                alphasurf_chamfer_e2: mean_all(ss.iter().map(|s| s.alphasurf_chamfer_e2)),
+                ratio: mean_all(ss.iter().map(|s| s.ratio())),
+                stage1_psnr: ss.iter().map(|s| s.stage1_psnr).sum::<f64>() / ss.len() as f64,
+                stage2_psnr: mean_all(ss.iter().map(|s| s.stage2_psnr)),
+                category,
+            }
+        })
+        .collect();
+    Summary { scenes, categories }
+}
+
+fn num(v: Option<f64>, prec: usize) -> String {
+    match v {
+        Some(x) if x.is_finite() => format!("{x:.prec$}"),
+        _ => "—".into(),
+    }
+}
+
+/// The table: one row per scene, then one per category (markdown).
+pub fn table(s: &Summary) -> String {
+    let fixed: BTreeMap<&str, Option<f32>> = s
+        .categories
+        .iter()
+        .map(|c| (c.category.as_str(), c.fixed_level))
+        .collect();
+    let mut t = String::from(
+        "| scene | category | αSurf | best Plen (σ) | Plen at the category's σ | ratio | F1 αSurf / best | PSNR stage 1 → 2 | wall |\n\
+         |---|---|---:|---:|---:|---:|---:|---:|---:|\n",
+    );
+    for r in &s.scenes {
+        let fl = fixed.get(r.settings.category.as_str()).copied().flatten();
+        t += &format!(
+            "| {} | {} | {} | {} ({}) | {} ({}) | {}× | {} / {} | {:.2} → {} dB | {:.0} s |\n",
+            r.scene,
+            r.settings.category,
+            num(r.alphasurf_chamfer_e2, 4),
+            num(r.best_chamfer_e2, 4),
+            r.best_level.map_or("—".into(), |l| l.to_string()),
+            num(fl.and_then(|l| r.level(l)), 4),
+            fl.map_or("—".into(), |l| l.to_string()),
+            num(r.ratio(), 3),
+            num(r.alphasurf_f1, 3),
+            num(r.best_f1, 3),
+            r.stage1_psnr,
+            num(r.stage2_psnr, 2),
+            r.wall_s,
+        );
+    }
+    for c in &s.categories {
+        t += &format!(
+            "| **mean** ({} scenes) | {} | {} | {} | {} ({}) | {}× | | {:.2} → {} dB | |\n",
+            c.scenes,
+            c.category,
+            num(c.alphasurf_chamfer_e2, 4),
+            num(c.best_chamfer_e2, 4),
+            num(c.fixed_level_chamfer_e2, 4),
+            c.fixed_level.map_or("—".into(), |l| l.to_string()),
+            num(c.ratio, 3),
+            c.stage1_psnr,
+            num(c.stage2_psnr, 2),
+        );
+    }
+    t
+}
+
+/// A stored result for these settings, if there is one.
+fn stored(path: &Path, settings: &Settings) -> Result<Option<SceneResult>> {
+    if !path.exists() {
+        return Ok(None);
+    }
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let r: SceneResult =
+        serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))?;
+    if &r.settings != settings {
+        eprintln!(
+            "  {} holds a result for other settings: computing it again",
+            path.display()
+        );
+        return Ok(None);
+    }
+    Ok(Some(r))
+}
+
+/// Write `value` as JSON through a temporary file and a rename.
+fn write_json(path: &Path, value: &impl Serialize) -> Result<()> {
+    let tmp = path.with_extension("json.tmp");
+    std::fs::write(&tmp, serde_json::to_string_pretty(value)?)
+        .with_context(|| format!("writing {}", tmp.display()))?;
+    std::fs::rename(&tmp, path).with_context(|| format!("renaming to {}", path.display()))
+}
+
+/// The stage-1 record in `dir`, if its run finished.
+fn read_stage1(dir: &Path) -> Result<Option<Stage1Record>> {
+    let rec = dir.join("stage1.json");
+    if !(dir.join("metrics.json").is_file() && rec.is_file()) {
+        return Ok(None);
+    }
+    let text =
+        std::fs::read_to_string(&rec).with_context(|| format!("reading {}", rec.display()))?;
+    serde_json::from_str(&text)
+        .with_context(|| format!("parsing {}", rec.display()))
+        .map(Some)
+}
+
+/// Stage 1 of a scene and its level sweep in `dir`: reused when it finished with `settings`,
+/// else trained and swept.
+fn stage1(
+    inv: &Invoker,
+    settings: &Stage1Settings,
+    dir: &Path,
+) -> Result<(TrainedRun, Stage1Record)> {
+    if let Some(r) = read_stage1(dir)?.filter(|r| &r.settings == settings) {
+        eprintln!("  stage 1: reusing {}", dir.display());
+        return Ok((crate::cli::demo::steps::read_run(dir, r.wall_s)?, r));
+    }
+    if dir.exists() {
+        std::fs::remove_dir_all(dir)
+            .with_context(|| format!("removing the unfinished or outdated {}", dir.display()))?;
+    }
+    let size = TrainSize {
+        res: settings.res,
+        iters: settings.iters,
+        batch: settings.batch,
+    };
+    let run = inv.train_plenoxels(&settings.data, dir, &size, true)?;
+    let gt = settings.data.join("gt_points.ply");
+    let rows = plenoxels_levels(inv, &run, &gt, &LEVELS);
+    let rec = Stage1Record {
+        settings: settings.clone(),
+        wall_s: run.wall_s,
+        levels: LEVELS.iter().map(|&l| score(&rows, l)).collect(),
+        best_level: best_plenoxels(&rows).and_then(|b| b.level),
+    };
+    write_json(&dir.join("stage1.json"), &rec)?;
+    Ok((run, rec))
+}
+
+fn score(rows: &[Row], level: f32) -> LevelScore {
+    let r = rows.iter().find(|r| r.level == Some(level));
+    LevelScore {
+        level,
+        chamfer_e2: r.and_then(|r| r.chamfer_e2),
+        f1: r.and_then(|r| r.f1),
+    }
+}
+
+/// Where a scene's stage-1 run lives: under `--stage1-from` or this output.
+fn stage1_dir(args: &AccuracyArgs, out: &Path) -> PathBuf {
+    match &args.stage1_from {
+        Some(from) => from
+            .join(out.file_name().unwrap_or_default())
+            .join("plenoxels"),
+        None => out.join("plenoxels"),
+    }
+}
+
+/// One scene, end to end.
+fn scene(
+    inv: &Invoker,
+    args: &AccuracyArgs,
+    out: &Path,
+    settings: Settings,
+) -> Result<SceneResult> {
+    let t0 = Instant::now();
+    let data = &settings.stage1.data;
+    let gt = data.join("gt_points.ply");
+    ensure!(
+        gt.is_file(),
+        "{}: no gt_points.ply (bench accuracy needs ground truth)",
+        data.display()
+    );
+    let (s1, rec) = stage1(inv, &settings.stage1, &stage1_dir(args, out))?;
+    let best = rec.best();
+    let s2_dir = out.join("alphasurf");
+    if s2_dir.exists() {
+        // A stage-2 run without result.json was interrupted: start it again.
+        std::fs::remove_dir_all(&s2_dir)
+            .with_context(|| format!("removing the unfinished {}", s2_dir.display()))?;
+    }
+    let mut set = args.surface_set.clone();
+    set.extend(args.batch.map(|b| format!("batch={b}")));
+    let s2 = inv.train_surface(
+        &s1.dir,
+        data,
+        &s2_dir,
+        &settings.category,
+        args.surface_iters,
+        &set,
+        true,
+    );
+    let (surf, s2_wall, error) = match &s2 {
+        Ok(s2) => {
+            let r = alphasurf_row(inv, &s1, s2, &gt);
+            let e = r.error.clone();
+            (Some(r), s2.wall_s, e)
+        }
+        Err(e) => (None, 0.0, Some(format!("{e:#}"))),
+    };
+    Ok(SceneResult {
+        scene: scene_name(data),
+        best_level: best.map(|b| b.level),
+        best_chamfer_e2: best.and_then(|b| b.chamfer_e2),
+        best_f1: best.and_then(|b| b.f1),
+        levels: rec.levels,
+        alphasurf_chamfer_e2: surf.as_ref().and_then(|r| r.chamfer_e2),
+        alphasurf_f1: surf.as_ref().and_then(|r| r.f1),
+        stage1_psnr: s1.test_psnr,
+        stage2_psnr: s2.as_ref().ok().map(|r| r.test_psnr),
+        train_wall_s: s1.wall_s + s2_wall,
+        wall_s: t0.elapsed().as_secs_f64(),
+        error,
+        settings,
+    })
+}
+
+/// Run `bench accuracy`.
+pub fn run(args: &AccuracyArgs, cli: &Cli) -> Result<()> {
+    let inv = Invoker::new(args.backend, cli)?.with_schedule(&args.preset, args.seed);
+    let out = args.out.clone().unwrap_or_else(|| {
+        PathBuf::from(format!(
+            "runs/accuracy-{}-{}-s{}",
+            args.res.map_or("preset".into(), |r| r.to_string()),
+            args.preset,
+            args.seed
+        ))
+    });
+    // Every scene's category is known before the first one trains.
+    let mut todo = Vec::new();
+    for d in &args.data {
+        ensure!(d.is_dir(), "{}: not a directory", d.display());
+        let name = scene_name(d);
+        ensure!(
+            todo.iter().all(|(_, n, _)| n != &name),
+            "two scenes are named {name:?}: their folders would collide under --out"
+        );
+        todo.push((
+            d.clone(),
+            name,
+            scene_category(d, args.category.as_deref())?,
+        ));
+    }
+    let mut results = Vec::new();
+    for (i, (data, name, category)) in todo.into_iter().enumerate() {
+        let dir = out.join(&name);
+        std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+        let mut stage1 = Stage1Settings {
+            data: data.clone(),
+            res: args.res,
+            iters: args.iters,
+            batch: args.batch,
+            preset: args.preset.clone(),
+            seed: args.seed,
+            backend: inv.backend.into(),
+        };
+        if args.stage1_from.is_some() {
+            // Another output's stage 1, whatever its seed, as long as the rest matches.
+            let from = stage1_dir(args, &dir);
+            let rec = read_stage1(&from)?.with_context(|| {
+                format!(
+                    "--stage1-from: {} holds no finished stage-1 run",
+                    from.display()
+                )
+            })?;
+            stage1.seed = rec.settings.seed;
+            ensure!(
+                rec.settings == stage1,
+                "--stage1-from: {} was trained with other settings ({:?}, here {:?})",
+                from.display(),
+                rec.settings,
+                stage1
+            );
+        }
+        let settings = Settings {
+            stage1,
+            category,
+            seed: args.seed,
+            surface_iters: args.surface_iters,
+            surface_set: args.surface_set.clone(),
+        };
+        let path = dir.join("result.json");
+        eprintln!(
+            "\n=== bench accuracy [{}/{}] {name} ({}) → {}",
+            i + 1,
+            args.data.len(),
+            settings.category,
+            dir.display()
+        );
+        let r = match stored(&path, &settings)? {
+            Some(r) => {
+                eprintln!("  finished before: {}", path.display());
+                r
+            }
+            None => {
+                let r = scene(&inv, args, &dir, settings)?;
+                write_json(&path, &r)?;
+                r
+            }
+        };
+        eprintln!(
+            "  αSurf {} vs best Plen {} (σ = {}), PSNR {:.2} → {} dB",
+            num(r.alphasurf_chamfer_e2, 4),
+            num(r.best_chamfer_e2, 4),
+            r.best_level.map_or("—".into(), |l| l.to_string()),
+            r.stage1_psnr,
+            num(r.stage2_psnr, 2)
+        );
+        results.push(r);
+    }
+    let summary = summarise(results);
+    write_json(&out.join("accuracy.json"), &summary)?;
+    println!("\n{}", table(&summary));
+    println!("Chamfer ×10⁻²; ratio = αSurf / the scene's best Plenoxels level.");
+    if args.json {
+        println!("{}", serde_json::to_string(&summary)?);
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn result(scene: &str, category: &str, levels: &[(f32, f64)], surf: f64) -> SceneResult {
+        let best = levels.iter().min_by(|a, b| a.1.total_cmp(&b.1)).unwrap();
+        SceneResult {
+            scene: scene.into(),
+            settings: Settings {
+                stage1: Stage1Settings {
+                    data: scene.into(),
+                    res: Some(64),
+                    iters: None,
+                    batch: None,
+                    preset: "fast".into(),
+                    seed: 0,
+                    backend: "cpu".into(),
+                },
+                category: category.into(),
+                seed: 0,
+                surface_iters: None,
+                surface_set: vec![],
+            },
+            levels: levels
+                .iter()
+                .map(|&(level, c)| LevelScore {
+                    level,
+                    chamfer_e2: Some(c),
+                    f1: Some(0.5),
+                })
+                .collect(),
+            best_level: Some(best.0),
+            best_chamfer_e2: Some(best.1),
+            best_f1: Some(0.5),
+            alphasurf_chamfer_e2: Some(surf),
+            alphasurf_f1: Some(0.6),
+            stage1_psnr: 30.0,
+            stage2_psnr: Some(28.0),
+            train_wall_s: 1.0,
+            wall_s: 2.0,
+            error: None,
+        }
+    }
+
+    #[test]
+    fn categories_come_from_folder_names_or_the_flag() {
+        let c = |p: &str, g: Option<&str>| scene_category(Path::new(p), g);
+        assert_eq!(c("fixtures/thin_lyre", None).unwrap(), "thin");
+        assert_eq!(c("x/translucent_lampshade/", None).unwrap(), "translucent");
+        assert_eq!(c("x/lyre", Some("thin")).unwrap(), "thin");
+        let e = c("x/lyre", None).unwrap_err().to_string();
+        assert!(e.contains("x/lyre") && e.contains("--category"), "{e}");
+        assert!(c("x/thin_lyre", Some("shiny")).is_err());
+        assert!(c("x/thinner_lyre", None).is_err());
+    }
+
+    #[test]
+    fn fixed_level_is_the_best_mean_of_the_category() {
+        // Scene a is best at 30, scene b at 50; the mean is best at 50 (0.9 vs 1.0).
+        let a = result("a", "thin", &[(30.0, 0.5), (50.0, 0.6)], 0.4);
+        let b = result("b", "thin", &[(30.0, 1.5), (50.0, 1.2)], 1.5);
+        let t = result("t", "translucent", &[(10.0, 2.0), (30.0, 3.0)], 1.0);
+        let s = summarise(vec![a, b, t]);
+        let thin = &s.categories[0];
+        assert_eq!((thin.category.as_str(), thin.scenes), ("thin", 2));
+        assert_eq!(thin.fixed_level, Some(50.0));
+        assert!((thin.fixed_level_chamfer_e2.unwrap() - 0.9).abs() < 1e-12);
+        assert!((thin.best_chamfer_e2.unwrap() - 0.85).abs() < 1e-12);
+        // Ratios 0.8 and 1.25: the mean of the per-scene ratios.
+        assert!((thin.ratio.unwrap() - 1.025).abs() < 1e-12);
+        assert_eq!(s.categories[1].fixed_level, Some(10.0));
+        let t = table(&s);
+        assert_eq!(t.lines().count(), 2 + 3 + 2, "{t}");
+        assert!(
+            t.contains("| a | thin | 0.4000 | 0.5000 (30) | 0.6000 (50) | 0.800× |"),
+            "{t}"
+        );
+        assert!(
+            t.contains("| b | thin | 1.5000 | 1.2000 (50) | 1.2000 (50) | 1.250× |"),
+            "{t}"
+        );
+    }
+
+    #[test]
+    fn a_missing_figure_leaves_the_mean_empty() {
+        let mut a = result("a", "thin", &[(30.0, 0.5)], 0.4);
+        a.alphasurf_chamfer_e2 = None;
+        let s = summarise(vec![a, result("b", "thin", &[(30.0, 0.7)], 0.6)]);
+        assert_eq!(s.categories[0].alphasurf_chamfer_e2, None);
+        assert_eq!(s.categories[0].ratio, None);
+        assert!(table(&s).contains("| a | thin | — |"));
+    }
+}

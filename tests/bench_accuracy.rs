@@ -1,0 +1,152 @@
+//! `alphasurf bench accuracy` end to end on two tiny generated scenes (one thin, one translucent):
+//! the table, accuracy.json with per-scene and per-category figures, and a rerun that reuses every
+//! finished scene instead of training again.
+
+use std::path::Path;
+use std::process::Command;
+
+fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_alphasurf"))
+}
+
+fn run_ok(cmd: &mut Command) -> (String, String) {
+    let out = cmd.output().expect("spawn alphasurf");
+    let (o, e) = (
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    );
+    assert!(out.status.success(), "{cmd:?} failed:\n{o}\n{e}");
+    (o, e)
+}
+
+fn make_scene(kind: &str, out: &Path) {
+    run_ok(
+        bin()
+            .args(["make-scene", "--kind", kind, "--out"])
+            .arg(out)
+            .args([
+                "--res",
+                "32",
+                "--views",
+                "12",
+                "--spp",
+                "1",
+                "--gt-spacing",
+                "0.02",
+            ]),
+    );
+}
+
+fn bench(scenes: &[&Path], out: &Path, extra: &[&str]) -> (String, String) {
+    let mut c = bin();
+    c.args([
+        "bench",
+        "accuracy",
+        "--backend",
+        "cpu",
+        "--res",
+        "16",
+        "--iters",
+        "60",
+    ])
+    .args([
+        "--surface-iters",
+        "20",
+        "--batch",
+        "1024",
+        "--json",
+        "--out",
+    ])
+    .arg(out)
+    .arg("--data")
+    .args(scenes)
+    .args(extra);
+    run_ok(&mut c)
+}
+
+#[test]
+fn bench_accuracy_scores_each_scene_and_resumes() {
+    let dir = tempfile::tempdir().unwrap();
+    let (thin, tr) = (dir.path().join("thin_a"), dir.path().join("translucent_b"));
+    make_scene("thin", &thin);
+    make_scene("translucent", &tr);
+    let out = dir.path().join("acc");
+    let (stdout, _) = bench(&[&thin, &tr], &out, &[]);
+    assert!(stdout.contains("| thin_a | thin |"), "{stdout}");
+    assert!(
+        stdout.contains("| translucent_b | translucent |"),
+        "{stdout}"
+    );
+    let json: serde_json::Value =
+        serde_json::from_str(stdout.lines().last().unwrap()).expect("--json line");
+    let scenes = json["scenes"].as_array().unwrap();
+    assert_eq!(scenes.len(), 2);
+    for s in scenes {
+        let name = s["scene"].as_str().unwrap();
+        assert_eq!(s["levels"].as_array().unwrap().len(), 6, "{name}");
+        let best = s["best_chamfer_e2"].as_f64().unwrap();
+        let surf = s["alphasurf_chamfer_e2"].as_f64().unwrap();
+        assert!(
+            best.is_finite() && best > 0.0 && surf.is_finite() && surf > 0.0,
+            "{s}"
+        );
+        // The best level is the minimum of the sweep.
+        let min = s["levels"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter_map(|l| l["chamfer_e2"].as_f64())
+            .fold(f64::INFINITY, f64::min);
+        assert_eq!(best, min, "{name}");
+        assert!(s["stage1_psnr"].as_f64().unwrap() > 10.0, "{s}");
+        assert!(s["stage2_psnr"].as_f64().unwrap() > 10.0, "{s}");
+        assert!(out.join(name).join("result.json").is_file());
+    }
+    let cats: Vec<&str> = json["categories"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| c["category"].as_str().unwrap())
+        .collect();
+    assert_eq!(cats, ["thin", "translucent"]);
+
+    // A rerun with the same settings trains nothing and gives the same table.
+    let (again, err) = bench(&[&thin, &tr], &out, &[]);
+    assert_eq!(err.matches("finished before").count(), 2, "{err}");
+    assert!(!err.contains("stage 1 on"), "{err}");
+    // The same table (the JSON line's floats pass through a text round trip, so compare the table).
+    let table = |s: &str| {
+        s.lines()
+            .filter(|l| l.starts_with('|'))
+            .map(String::from)
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(table(&again), table(&stdout));
+    assert_eq!(table(&stdout).len(), 2 + 2 + 2, "{stdout}");
+
+    // A stage-2 change on the same stage-1 runs: stage 1 is reused, stage 2 runs again.
+    let out2 = dir.path().join("acc2");
+    let (_, err) = bench(
+        &[&thin],
+        &out2,
+        &["--stage1-from", out.to_str().unwrap(), "--seed", "1"],
+    );
+    assert!(err.contains("stage 1: reusing"), "{err}");
+    assert!(out2.join("thin_a/alphasurf/metrics.json").is_file());
+    assert!(!out2.join("thin_a/plenoxels").exists());
+}
+
+#[test]
+fn bench_accuracy_needs_a_category_it_can_tell() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("lyre");
+    std::fs::create_dir_all(&scene).unwrap();
+    let out = bin()
+        .args(["bench", "accuracy", "--backend", "cpu", "--data"])
+        .arg(&scene)
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("lyre") && err.contains("--category"), "{err}");
+}
