@@ -11,8 +11,9 @@
 // ∂L/∂σα = ∂L/∂α̃·γ·e^{−σα} (σα > 0), ∂L/∂SH = ∂L/∂raw·Y (ReLU-gated), and δ through the hit
 // position: ∂L/∂δ_i = −w_i·(∂L/∂s)/f′(s), no δ gradient where |f′| ≤ FPRIME_GUARD·(max − min of
 // the cell's δ) (counted). Per-corner gradients of consecutive hits in the same cell are summed
-// in registers (in the reverse order) and flushed with one float atomic per corner, parameter and
-// non-zero sum when the cell changes (SH: 3 accumulators per corner, times Y_k at the flush);
+// in registers (in the reverse order) and flushed with one float atomic per corner and parameter
+// that received a non-zero term when the cell changes (SH: 3 accumulators per corner, times Y_k at
+// the flush);
 // every vertex that receives a gradient is touched in all three groups (step.glsl).
 // Inputs: links (n³, < 0 unallocated), skip: the skip structure (glsl/lib/surface_blocks.glsl):
 // words [0, W = ⌈n³/32⌉) the live-cell bits of surface_live_cells (a cell with its bit clear has
@@ -149,9 +150,13 @@ void trilerp_dwds(vec3 p, vec3 d, out float dw[8]) {
     }
 }
 
-// Adds a cell's per-corner gradient sums (one atomic per corner, parameter and non-zero sum),
-// touches the corners that get one, clears the sums; returns the atomic adds.
-uint flush(ivec3 cell, float y[9], inout float acc_d[8], inout float acc_a[8], inout vec3 acc_c[8]) {
+// Adds a cell's per-corner gradient sums (one atomic per corner and parameter that received a
+// non-zero term), touches the corners that get one, clears the sums and masks; returns the atomic
+// adds. Which corners and parameters get an add is read from the masks of non-zero terms (bit i
+// of nz_d / nz_a, bit 3i + ch of nz_c), set from single products: a sum's exact zero could
+// depend on whether the compiler fused its additions, a product's cannot.
+uint flush(ivec3 cell, float y[9], inout float acc_d[8], inout float acc_a[8], inout vec3 acc_c[8],
+           inout uint nz_d, inout uint nz_a, inout uint nz_c) {
     if (cell.x < 0) return 0u;
     int lk[8];
     cell_links(cell, lk);
@@ -163,19 +168,22 @@ uint flush(ivec3 cell, float y[9], inout float acc_d[8], inout float acc_a[8], i
         acc_d[i] = 0.0;
         acc_a[i] = 0.0;
         acc_c[i] = vec3(0.0);
-        if (gd == 0.0 && ga == 0.0 && gc == vec3(0.0)) continue;
+        bool bd = ((nz_d >> i) & 1u) != 0u;
+        bool ba = ((nz_a >> i) & 1u) != 0u;
+        uint bc = (nz_c >> (3u * i)) & 7u;
+        if (!bd && !ba && bc == 0u) continue;
         uint row = uint(lk[i]);
         touch_mask(row, TOUCH_SURFACE);
-        if (gd != 0.0) {
+        if (bd) {
             atomicAdd(pc.grad_delta.v[row], gd);
             adds++;
         }
-        if (ga != 0.0) {
+        if (ba) {
             atomicAdd(pc.grad_opacity.v[row], ga);
             adds++;
         }
         for (uint ch = 0u; ch < 3u; ch++) {
-            if (gc[ch] == 0.0) continue;
+            if (((bc >> ch) & 1u) == 0u) continue;
             uint base = row * 27u + ch * 9u;
             for (uint k = 0u; k < 9u; k++) {
                 precise float g = gc[ch] * y[k];
@@ -184,6 +192,9 @@ uint flush(ivec3 cell, float y[9], inout float acc_d[8], inout float acc_a[8], i
             adds += 9u;
         }
     }
+    nz_d = 0u;
+    nz_a = 0u;
+    nz_c = 0u;
     return adds;
 }
 
@@ -438,6 +449,7 @@ void main() {
         acc_a[i] = 0.0;
         acc_c[i] = vec3(0.0);
     }
+    uint nz_d = 0u, nz_a = 0u, nz_c = 0u;
     for (int jj = int(nh) - 1; jj >= 0; jj--) {
         uint k = uint(jj);
         HitRec hk = get_hit(rec, k);
@@ -471,20 +483,26 @@ void main() {
         if (guarded) cnt2.y++;
         precise float dds = (guarded || dl_ds == 0.0) ? 0.0 : -dl_ds / hk.f1;
         if (hk.cell != cur) {
-            cnt2.z += flush(cur, y, acc_d, acc_a, acc_c);
+            cnt2.z += flush(cur, y, acc_d, acc_a, acc_c, nz_d, nz_a, nz_c);
             cur = hk.cell;
         }
         float wt[8];
         trilerp_weights(hk.p, wt);
         [[unroll]] for (uint i = 0u; i < 8u; i++) {
-            precise float gd = acc_d[i] + wt[i] * dds;
+            precise float td = wt[i] * dds;
+            precise float ta = wt[i] * d_sa;
+            precise vec3 tc = wt[i] * d_raw;
+            precise float gd = acc_d[i] + td;
             acc_d[i] = gd;
-            precise float ga = acc_a[i] + wt[i] * d_sa;
+            precise float ga = acc_a[i] + ta;
             acc_a[i] = ga;
-            precise vec3 gc = acc_c[i] + wt[i] * d_raw;
+            precise vec3 gc = acc_c[i] + tc;
             acc_c[i] = gc;
+            nz_d |= uint(td != 0.0) << i;
+            nz_a |= uint(ta != 0.0) << i;
+            nz_c |= (uint(tc.x != 0.0) | (uint(tc.y != 0.0) << 1u) | (uint(tc.z != 0.0) << 2u)) << (3u * i);
         }
     }
-    cnt2.z += flush(cur, y, acc_d, acc_a, acc_c);
+    cnt2.z += flush(cur, y, acc_d, acc_a, acc_c, nz_d, nz_a, nz_c);
     add_train_stats(cnt, cnt2);
 }

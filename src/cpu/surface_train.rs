@@ -478,10 +478,15 @@ fn train_ray(
         }
         for i in 0..8 {
             let wi = s.wt[i];
-            acc.delta[i] += wi * d_delta_scale;
-            acc.opacity[i] += wi * d_sa;
+            let (td, ta) = (wi * d_delta_scale, wi * d_sa);
+            acc.delta[i] += td;
+            acc.opacity[i] += ta;
+            acc.nz_d |= u32::from(td != 0.0) << i;
+            acc.nz_a |= u32::from(ta != 0.0) << i;
             for ch in 0..3 {
-                acc.color[i][ch] += wi * gr.d_raw[ch];
+                let tc = wi * gr.d_raw[ch];
+                acc.color[i][ch] += tc;
+                acc.nz_c |= u32::from(tc != 0.0) << (3 * i + ch);
             }
         }
     }
@@ -497,11 +502,17 @@ struct CellAcc {
     delta: [f32; 8],
     opacity: [f32; 8],
     color: [[f32; 3]; 8],
+    /// Bit i (δ, σα) or 3i + ch (colour): corner i received a non-zero term. The adds follow these
+    /// single products, not the sums being zero: a sum's exact zero could depend on whether a GPU
+    /// compiler fused its additions.
+    nz_d: u32,
+    nz_a: u32,
+    nz_c: u32,
 }
 
 impl CellAcc {
-    /// One atomic add per corner, parameter and non-zero sum; corners that get one are touched.
-    /// Clears the sums and returns the number of adds.
+    /// One atomic add per corner and parameter that received a non-zero term; corners that get one
+    /// are touched. Clears the sums and masks and returns the number of adds.
     fn flush(&mut self, out: &Scatter, y: &[f32; 9]) -> u32 {
         if self.cell.is_none() {
             return 0;
@@ -510,21 +521,23 @@ impl CellAcc {
         for i in 0..8 {
             let (dd, dsa, dcol) = (self.delta[i], self.opacity[i], self.color[i]);
             (self.delta[i], self.opacity[i], self.color[i]) = (0.0, 0.0, [0.0; 3]);
-            if dd == 0.0 && dsa == 0.0 && dcol == [0.0; 3] {
+            let (bd, ba) = ((self.nz_d >> i) & 1 != 0, (self.nz_a >> i) & 1 != 0);
+            let bc = (self.nz_c >> (3 * i)) & 7;
+            if !bd && !ba && bc == 0 {
                 continue;
             }
             let row = self.lk[i] as usize;
             touch_mask(out.touched, row, TOUCH_SURFACE);
-            if dd != 0.0 {
+            if bd {
                 atomic::add(&out.delta[row], dd);
                 adds += 1;
             }
-            if dsa != 0.0 {
+            if ba {
                 atomic::add(&out.opacity[row], dsa);
                 adds += 1;
             }
             for ch in 0..3 {
-                if dcol[ch] == 0.0 {
+                if (bc >> ch) & 1 == 0 {
                     continue;
                 }
                 for k in 0..9 {
@@ -533,6 +546,7 @@ impl CellAcc {
                 adds += 9;
             }
         }
+        (self.nz_d, self.nz_a, self.nz_c) = (0, 0, 0);
         adds
     }
 }
