@@ -16,11 +16,83 @@
 const float DDA_BIG = 3.402823466e38;
 // Components of o and d with magnitude < DDA_TINY count as zero (denormal-safe on every device).
 const float DDA_TINY = 1e-30;
+// A ray with a direction component of magnitude ≥ DDA_HUGE = 2^26 misses: every nonzero plane
+// distance |k − o| ≥ DDA_TINY times 1/d then stays a normal float (no subnormal t, which some
+// devices flush to zero).
+const float DDA_HUGE = 67108864.0;
 
-// d / |d|.
+// Division and sqrt are not correctly rounded on every device (Vulkan allows 2.5 ulp for x/y, and
+// sqrt inherits the error of 1/inversesqrt), and fma() need not be fused (lavapipe's is a multiply
+// then an add): a DDA whose 1/d is one ulp off on a GPU takes another branch than the twin
+// wherever two plane crossings tie or nearly tie. dda_rcp and dda_sqrt round correctly from any
+// start within a few ulps using only multiplies, adds and comparisons, which every device rounds
+// correctly (`precise`: no contraction). Domain: normal inputs with normal results (the DDA keeps
+// its direction components in [DDA_TINY, DDA_HUGE)).
+
+// The float adjacent to y > 0 on the side `up` (one step of its bit pattern).
+float dda_adjacent(float y, bool up) {
+    return uintBitsToFloat(floatBitsToUint(y) + (up ? 1u : 0xffffffffu));
+}
+
+// The exact product a·b = p + q (Dekker's product with Veltkamp's split, 4097 = 2^12 + 1).
+void dda_two_prod(float a, float b, out float p, out float q) {
+    precise float pp = a * b;
+    precise float ta = 4097.0 * a;
+    precise float ah = ta - (ta - a);
+    precise float al = a - ah;
+    precise float tb = 4097.0 * b;
+    precise float bh = tb - (tb - b);
+    precise float bl = b - bh;
+    precise float qq = (((ah * bh - pp) + ah * bl) + al * bh) + al * bl;
+    p = pp;
+    q = qq;
+}
+
+// c − a·b, exact when the result is representable (c − p is exact by Sterbenz for a·b ≈ c).
+float dda_residual(float c, float a, float b) {
+    float p, q;
+    dda_two_prod(a, b, p, q);
+    precise float r = (c - p) - q;
+    return r;
+}
+
+// Correctly rounded 1/x. One Newton step makes y faithful; then 1 − b·y is representable, so
+// exact, as it is for the neighbour z across 1/b, and the nearer of the two has the smaller
+// residual (no ties: 1/b is never a midpoint).
+float dda_rcp(float x) {
+    float b = abs(x);
+    float y0 = 1.0 / b;
+    float e0 = dda_residual(1.0, b, y0);
+    precise float y = y0 + y0 * e0;
+    float e = dda_residual(1.0, b, y);
+    float z = dda_adjacent(y, e > 0.0);
+    float ez = dda_residual(1.0, b, z);
+    float r = e != 0.0 && abs(ez) < abs(e) ? z : y;
+    return x < 0.0 ? -r : r;
+}
+
+// Correctly rounded sqrt(x), x > 0. One Newton step makes s faithful; r = x − s² is then exact.
+// The neighbour z = s + u across sqrt(x) is nearer iff x lies beyond the midpoint's square
+// s² + s·u + u²/4; r and s·u are multiples of u², so that is the sign of r − s·u (> 0 for u > 0,
+// ≤ 0 for u < 0).
+float dda_sqrt(float x) {
+    float s0 = sqrt(x);
+    float r0 = dda_residual(x, s0, s0);
+    precise float s = s0 + r0 * (0.5 / s0);
+    float r = dda_residual(x, s, s);
+    bool up = r > 0.0;
+    float z = dda_adjacent(s, up);
+    precise float u = z - s;
+    precise float su = s * u;
+    precise float dm = r - su;
+    bool take = r != 0.0 && (up ? dm > 0.0 : dm <= 0.0);
+    return take ? z : s;
+}
+
+// d / |d| (|d|² as plain products and sums: identical on every device).
 vec3 ray_unit(vec3 d) {
-    precise float l2 = fma(d.z, d.z, fma(d.y, d.y, d.x * d.x));
-    precise float r = 1.0 / sqrt(l2);
+    precise float l2 = (d.x * d.x + d.y * d.y) + d.z * d.z;
+    float r = dda_rcp(dda_sqrt(l2));
     precise vec3 u = d * r;
     return u;
 }
@@ -30,16 +102,19 @@ vec3 dda_flush(vec3 d) {
     return mix(d, vec3(0.0), lessThan(abs(d), vec3(DDA_TINY)));
 }
 
-// 1/d per axis, 1 where d == 0 (those axes never use it).
+// 1/d per axis, correctly rounded (dda_rcp); 1 where d == 0 (those axes never use it) or where
+// |d| ≥ DDA_HUGE (those rays miss).
 vec3 dda_inv(vec3 d) {
-    precise vec3 r = vec3(1.0) / mix(d, vec3(1.0), equal(d, vec3(0.0)));
-    return r;
+    vec3 x = mix(d, vec3(1.0), equal(d, vec3(0.0)));
+    x = mix(x, vec3(1.0), greaterThanEqual(abs(d), vec3(DDA_HUGE)));
+    return vec3(dda_rcp(x.x), dda_rcp(x.y), dda_rcp(x.z));
 }
 
 // Slab clip of o + t·d against [lo, hi]: (t_enter, t_exit) with t_enter = max(slab entries, t_min).
 // Hit iff t_enter < t_exit (a ray grazing an edge or corner in one point misses). A zero direction
 // component with o outside that slab misses; inside (faces included) it adds no constraint. A
-// zero direction vector, or a NaN or infinite component in o or d, misses.
+// zero direction vector, a NaN or infinite component in o or d, or a component of d with magnitude
+// ≥ DDA_HUGE, misses.
 vec2 ray_box(vec3 o, vec3 d, vec3 lo, vec3 hi, float t_min) {
     o = dda_flush(o);
     d = dda_flush(d);
@@ -56,8 +131,8 @@ vec2 ray_box(vec3 o, vec3 d, vec3 lo, vec3 hi, float t_min) {
         t1 = min(t1, tf);
     }
     if (t1 == DDA_BIG) t1 = -DDA_BIG;  // zero direction: miss
-    bool finite = all(lessThan(abs(o), vec3(DDA_BIG))) && all(lessThan(abs(d), vec3(DDA_BIG)));
-    if (!finite) {  // NaN or infinite input: miss
+    bool finite = all(lessThan(abs(o), vec3(DDA_BIG))) && all(lessThan(abs(d), vec3(DDA_HUGE)));
+    if (!finite) {  // NaN, infinite or huge input: miss
         t0 = DDA_BIG;
         t1 = -DDA_BIG;
     }

@@ -10,10 +10,78 @@ pub const DDA_TINY: f32 = 1e-30;
 /// Initial value of the walk checksum ([`dda_hash`]).
 pub const DDA_HASH0: u32 = 2_166_136_261;
 
-/// `d / |d|`.
+/// A ray with a direction component of magnitude ≥ `DDA_HUGE` (2^26) misses: every nonzero plane
+/// distance `|k − o| ≥ DDA_TINY` times `1/d` then stays a normal float.
+pub const DDA_HUGE: f32 = 67_108_864.0;
+
+/// The float adjacent to `y > 0` on the side `up`.
+fn adjacent(y: f32, up: bool) -> f32 {
+    f32::from_bits(if up { y.to_bits() + 1 } else { y.to_bits() - 1 })
+}
+
+/// The exact product `a·b = p + q` (Dekker's product with Veltkamp's split, 4097 = 2^12 + 1):
+/// multiplies and adds only, as in the GLSL, where `fma()` need not be fused.
+fn two_prod(a: f32, b: f32) -> (f32, f32) {
+    let p = a * b;
+    let split = |x: f32| {
+        let t = 4097.0 * x;
+        let h = t - (t - x);
+        (h, x - h)
+    };
+    let ((ah, al), (bh, bl)) = (split(a), split(b));
+    (p, (((ah * bh - p) + ah * bl) + al * bh) + al * bl)
+}
+
+/// `c − a·b`, exact when the result is representable and `a·b ≈ c`.
+fn residual(c: f32, a: f32, b: f32) -> f32 {
+    let (p, q) = two_prod(a, b);
+    (c - p) - q
+}
+
+/// Correctly rounded `1/x` from a start `y0` within a few ulps of `1/|x|` (GLSL `dda_rcp`, which
+/// starts from the device's division: Vulkan lets it be 2.5 ulp off; the twin starts from its own,
+/// exact one). One Newton step makes it faithful; then the residual `1 − b·y` is exact for it and
+/// its neighbour across `1/b`, and the nearer one has the smaller residual.
+pub fn rcp_rn(x: f32, y0: f32) -> f32 {
+    let b = x.abs();
+    let e0 = residual(1.0, b, y0);
+    let y = y0 + y0 * e0;
+    let e = residual(1.0, b, y);
+    let z = adjacent(y, e > 0.0);
+    let ez = residual(1.0, b, z);
+    let r = if e != 0.0 && ez.abs() < e.abs() { z } else { y };
+    if x < 0.0 {
+        -r
+    } else {
+        r
+    }
+}
+
+/// Correctly rounded `sqrt(x)` (x > 0, normal) from a start `s0` within a few ulps (GLSL
+/// `dda_sqrt`). After one Newton step `r = x − s²` is exact; the neighbour `z = s + u` across
+/// `sqrt(x)` is nearer iff `x` lies beyond the midpoint's square `s² + s·u + u²/4`, and as `r` and
+/// `s·u` are multiples of `u²` that is the sign of `r − s·u` (> 0 for u > 0, ≤ 0 for u < 0).
+pub fn sqrt_rn(x: f32, s0: f32) -> f32 {
+    let r0 = residual(x, s0, s0);
+    let s = s0 + r0 * (0.5 / s0);
+    let r = residual(x, s, s);
+    let up = r > 0.0;
+    let z = adjacent(s, up);
+    let dm = r - s * (z - s);
+    let take = r != 0.0 && if up { dm > 0.0 } else { dm <= 0.0 };
+    if take {
+        z
+    } else {
+        s
+    }
+}
+
+/// `d / |d|`, with a correctly rounded sqrt and reciprocal ([`sqrt_rn`], [`rcp_rn`]); `|d|²` as
+/// plain products and sums (identical on every device).
 pub fn ray_unit(d: [f32; 3]) -> [f32; 3] {
-    let l2 = d[2].mul_add(d[2], d[1].mul_add(d[1], d[0] * d[0]));
-    let r = 1.0 / l2.sqrt();
+    let l2 = (d[0] * d[0] + d[1] * d[1]) + d[2] * d[2];
+    let s = sqrt_rn(l2, l2.sqrt());
+    let r = rcp_rn(s, 1.0 / s);
     [d[0] * r, d[1] * r, d[2] * r]
 }
 
@@ -22,16 +90,24 @@ pub fn dda_flush(d: [f32; 3]) -> [f32; 3] {
     d.map(|x| if x.abs() < DDA_TINY { 0.0 } else { x })
 }
 
-/// `1/d` per axis, 1 where `d == 0` (those axes never use it).
+/// `1/d` per axis, correctly rounded ([`rcp_rn`]); 1 where `d == 0` (those axes never use it) or
+/// `|d| ≥ DDA_HUGE` (those rays miss).
 pub fn dda_inv(d: [f32; 3]) -> [f32; 3] {
-    d.map(|x| 1.0 / if x == 0.0 { 1.0 } else { x })
+    d.map(|x| {
+        let x = if x == 0.0 || x.abs() >= DDA_HUGE {
+            1.0
+        } else {
+            x
+        };
+        rcp_rn(x, 1.0 / x.abs())
+    })
 }
 
 /// Slab clip of `o + t·d` against `[lo, hi]`: `[t_enter, t_exit]` with
 /// `t_enter = max(slab entries, t_min)`. Hit iff `t_enter < t_exit` (touching an edge or corner in
 /// one point misses). A zero direction component with `o` outside that slab misses; inside (faces
-/// included) it adds no constraint. A zero direction vector, or a NaN or infinite component in
-/// `o` or `d`, misses.
+/// included) it adds no constraint. A zero direction vector, a NaN or infinite component in `o`
+/// or `d`, or a component of `d` with magnitude ≥ [`DDA_HUGE`], misses.
 pub fn ray_box(o: [f32; 3], d: [f32; 3], lo: [f32; 3], hi: [f32; 3], t_min: f32) -> [f32; 2] {
     let o = dda_flush(o);
     let d = dda_flush(d);
@@ -57,7 +133,7 @@ pub fn ray_box(o: [f32; 3], d: [f32; 3], lo: [f32; 3], hi: [f32; 3], t_min: f32)
     if t1 == DDA_BIG {
         t1 = -DDA_BIG;
     }
-    let finite = o.iter().chain(&d).all(|x| x.abs() < DDA_BIG);
+    let finite = o.iter().all(|x| x.abs() < DDA_BIG) && d.iter().all(|x| x.abs() < DDA_HUGE);
     if !finite {
         t0 = DDA_BIG;
         t1 = -DDA_BIG;
@@ -208,6 +284,39 @@ mod tests {
             .collect()
     }
 
+    /// From starts up to 3 ulps off (beyond Vulkan's 2.5-ulp division), rcp_rn and sqrt_rn return
+    /// the correctly rounded result, over mantissas near 1, near 2, and random ones at many scales.
+    #[test]
+    fn reciprocal_and_sqrt_round_correctly_from_inexact_starts() {
+        let nudge = |v: f32, k: i32| f32::from_bits((v.to_bits() as i64 + k as i64) as u32);
+        let mut xs: Vec<f32> = Vec::new();
+        for k in 0..2000u32 {
+            xs.push(f32::from_bits(0x3f80_0000 + k));
+            xs.push(f32::from_bits(0x3fff_ffff - k));
+            xs.push(f32::from_bits(
+                0x3f80_0000 + k.wrapping_mul(2_654_435_761) % 0x0080_0000,
+            ));
+        }
+        let mut checked = 0;
+        for &m in &xs {
+            for e in [-90, -20, -1, 0, 1, 7, 25] {
+                let x = m * 2f32.powi(e);
+                let (want_r, want_s) = (1.0 / x, x.sqrt());
+                for k in -3..=3 {
+                    assert_eq!(rcp_rn(x, nudge(want_r, k)), want_r, "1/{x:e} from {k} ulp");
+                    assert_eq!(rcp_rn(-x, nudge(want_r, k)), -want_r, "1/-{x:e}");
+                    assert_eq!(
+                        sqrt_rn(x, nudge(want_s, k)),
+                        want_s,
+                        "sqrt {x:e} from {k} ulp"
+                    );
+                    checked += 1;
+                }
+            }
+        }
+        assert_eq!(checked, 6000 * 7 * 7);
+    }
+
     #[test]
     fn box_clip_rules() {
         let lo = [0.0; 3];
@@ -230,6 +339,11 @@ mod tests {
         // Zero direction: miss.
         let [a, b] = ray_box([1.0; 3], [0.0; 3], lo, hi, 0.0);
         assert!(a >= b);
+        // A direction component at DDA_HUGE: miss; just below it: the walk's usual clip.
+        let [a, b] = ray_box([1.0; 3], [DDA_HUGE, 1.0, 0.0], lo, hi, 0.0);
+        assert!(a >= b);
+        let [a, b] = ray_box([1.0; 3], [DDA_HUGE / 2.0, 0.0, 0.0], lo, hi, 0.0);
+        assert!(a < b, "{a} {b}");
     }
 
     #[test]
