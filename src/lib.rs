@@ -1,10 +1,7 @@
 //! alphasurf — αSurf surface reconstruction on Vulkan compute (ash + gpu-allocator), with a CPU
 //! twin for every kernel. See README.md.
 
-// The CPU twins mirror GLSL loops index for index; iterator rewrites would hide that.
-// `!(a < b)` is deliberate where NaN must take the same branch as on the GPU.
-#![allow(clippy::needless_range_loop, clippy::neg_cmp_op_on_partial_ord)]
-
+pub mod abi;
 pub mod bench;
 pub mod check;
 pub mod cli;

@@ -2,7 +2,8 @@
 //! hand-built adversarial cases, the f32 twin against the oracle on every stress class, and the
 //! Vulkan kernel against its CPU twin.
 
-use alphasurf::bench::cubic::{gen_cases, score_case, CaseClass, OracleCase, DS_TARGET, FLOOR};
+use alphasurf::bench::cubic::{score_case, DS_TARGET};
+use alphasurf::check::cases::{gen_cases, CaseClass, OracleCase, FLOOR};
 use alphasurf::cpu::cubic_solve::CubicCase;
 use alphasurf::math::cubic::{cell_cubic, crossings, level_ends, Crossings, MERGE_EPS};
 use alphasurf::math::cubic_oracle::{eval64, oracle_coefs, oracle_crossings, oracle_solve};

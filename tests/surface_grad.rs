@@ -11,7 +11,8 @@
 // Index loops mirror the formulas; the f64 forward takes the whole ray context.
 #![allow(clippy::needless_range_loop, clippy::too_many_arguments)]
 
-use alphasurf::cpu::surface_fwd::{SurfaceGridRef, SurfaceParams};
+use alphasurf::abi::surface_grid::SurfaceGridRef;
+use alphasurf::cpu::surface_fwd::SurfaceParams;
 use alphasurf::cpu::surface_train::{
     hit_point, trace_ray, train, SurfaceGrads, SurfaceLoss, Trace,
 };

@@ -1,5 +1,5 @@
 //! Parity of `glsl/cubic_solve.comp` with `cpu::cubic_solve::cubic_solve`, over the stress suite's
-//! case classes (`bench::cubic`), 500 cases each.
+//! case classes (`check::cases`), 500 cases each.
 //!
 //! Crossing counts and directions must agree exactly, and each s within 1e-5 + 1e-5·|s|. A case
 //! whose disagreement the f64 oracle excuses (every differing crossing is near-tangent, |f′|·L
@@ -10,8 +10,8 @@
 //! face), so their excused cases are counted but not capped; every one must still be excused by
 //! the oracle.
 
+use super::cases::{gen_cases, CaseClass, OracleCase};
 use super::{CheckRow, Compare};
-use crate::bench::cubic::{gen_cases, CaseClass, OracleCase};
 use crate::cpu::cubic_solve::{cubic_solve, CubicCase, CubicSolveOut};
 use crate::gpu::Gpu;
 use crate::kernels::cubic_solve::{Push, INFO};

@@ -13,9 +13,10 @@
 //! capped at [`EXCUSED_CAP_FRAC`] of the rays. The summed counters must agree within 0.5 % + 4.
 
 use super::{CheckRow, Compare};
+use crate::abi::surface_grid::SurfaceGridRef;
 use crate::cpu::surface_blocks::build_blocks;
 use crate::cpu::surface_fwd::{
-    render, validate_blocks, validate_inputs, SurfCounts, SurfaceGridRef, SurfaceParams,
+    render, validate_blocks, validate_inputs, SurfCounts, SurfaceParams,
 };
 use crate::gpu::Gpu;
 use crate::kernels::surface_fwd::{Push, INFO};

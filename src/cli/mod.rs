@@ -156,6 +156,33 @@ fn exit(pass: bool) -> ExitCode {
     }
 }
 
+/// Run `train`: the stage(s) asked for.
+fn run_train(args: &train::TrainArgs, gpu: Option<&Gpu>) -> anyhow::Result<()> {
+    match args.stage {
+        train::Stage::Plenoxels => train::run_stage1(args, gpu),
+        train::Stage::Surface => train_surface::run(args, gpu),
+        train::Stage::All => {
+            let stage1_dir = args.out.join("plenoxels");
+            train::run_stage1(
+                &train::TrainArgs {
+                    out: stage1_dir.clone(),
+                    ..args.clone()
+                },
+                gpu,
+            )?;
+            train_surface::run(
+                &train::TrainArgs {
+                    out: args.out.join("surface"),
+                    init: Some(stage1_dir),
+                    iters: args.surface_iters,
+                    ..args.clone()
+                },
+                gpu,
+            )
+        }
+    }
+}
+
 fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     let mut gpu_used = None;
     let code = match &cli.command {
@@ -177,7 +204,7 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         }
         Command::Train(a) => {
             let gpu = backend_gpu(a.backend, &cli, &mut gpu_used)?;
-            train::run_train(a, gpu)?;
+            run_train(a, gpu)?;
             ExitCode::SUCCESS
         }
         Command::Render(a) => {

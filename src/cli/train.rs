@@ -165,35 +165,8 @@ fn config(args: &TrainArgs) -> Result<Stage1Config> {
     Ok(cfg)
 }
 
-/// Run `train`: the stage(s) asked for.
-pub fn run_train(args: &TrainArgs, gpu: Option<&Gpu>) -> Result<()> {
-    match args.stage {
-        Stage::Plenoxels => run_stage1(args, gpu),
-        Stage::Surface => super::train_surface::run(args, gpu),
-        Stage::All => {
-            let stage1_dir = args.out.join("plenoxels");
-            run_stage1(
-                &TrainArgs {
-                    out: stage1_dir.clone(),
-                    ..args.clone()
-                },
-                gpu,
-            )?;
-            super::train_surface::run(
-                &TrainArgs {
-                    out: args.out.join("surface"),
-                    init: Some(stage1_dir),
-                    iters: args.surface_iters,
-                    ..args.clone()
-                },
-                gpu,
-            )
-        }
-    }
-}
-
 /// Run stage 1.
-fn run_stage1(args: &TrainArgs, gpu: Option<&Gpu>) -> Result<()> {
+pub(super) fn run_stage1(args: &TrainArgs, gpu: Option<&Gpu>) -> Result<()> {
     let t_all = Instant::now();
     let data = load_data(args)?;
     let load_s = t_all.elapsed().as_secs_f64();

@@ -5,7 +5,7 @@
 //! bit word and per block) with the empty radius of the blocks without levels
 //! (`math::surface_blocks::surf_block_radii`, the kernel's three passes).
 
-use super::surface_fwd::SurfaceGridRef;
+use crate::abi::surface_grid::SurfaceGridRef;
 use crate::math::surface::SURF_MAX_LEVELS;
 use crate::math::surface_blocks::{
     surf_block_box, surf_block_mask, surf_block_radii, surf_blocks_per_axis, surf_live_words,

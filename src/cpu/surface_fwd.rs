@@ -2,6 +2,7 @@
 //! the same DDA walk (`math::dda`) with the same block skipping (`math::surface_blocks`), per-cell
 //! hits (`math::surface`) and compositing arithmetic.
 
+use crate::abi::surface_grid::SurfaceGridRef;
 use crate::math::cubic::{cell_cubic, CellCubic};
 use crate::math::dda::{dda_cell_index, dda_init, dda_next, ray_unit, Dda, DdaPiece, DDA_BIG};
 use crate::math::sh::sh_basis;
@@ -21,48 +22,6 @@ use rayon::prelude::*;
 /// solves skipped by min/max or segment culling, hits composited, hits cut off by truncation,
 /// blocks skipped (the kernel's `stats` buffer).
 pub type SurfCounts = [u32; 6];
-
-/// Borrowed stage-2 grid: `n`³ vertices (x-major links, < 0 unallocated) and per allocated vertex
-/// δ, raw opacity σα and 27 SH coefficients.
-#[derive(Clone, Copy, Debug)]
-pub struct SurfaceGridRef<'a> {
-    pub n: u32,
-    pub links: &'a [i32],
-    pub delta: &'a [f32],
-    pub opacity: &'a [f32],
-    pub sh: &'a [f32],
-    /// The links are known to be below the row count (a caller that checked them once and keeps
-    /// them unchanged); `validate` then skips its O(n³) scan.
-    pub links_checked: bool,
-}
-
-impl SurfaceGridRef<'_> {
-    /// Checks the array sizes against each other and, unless `links_checked`, that every link is
-    /// below the row count (user input never panics in the kernels).
-    pub fn validate(&self) -> Result<()> {
-        let n = self.n as usize;
-        ensure!(self.n >= 2, "surface grid needs n ≥ 2, got {}", self.n);
-        ensure!(
-            self.links.len() == n * n * n,
-            "links has {} entries, want {}",
-            self.links.len(),
-            n * n * n
-        );
-        let rows = self.delta.len();
-        ensure!(
-            self.opacity.len() == rows && self.sh.len() == 27 * rows,
-            "per-vertex arrays disagree: {} δ, {} σα, {} SH",
-            rows,
-            self.opacity.len(),
-            self.sh.len()
-        );
-        ensure!(
-            self.links_checked || self.links.par_iter().all(|&l| l < rows as i32),
-            "a link points past the {rows} vertex rows"
-        );
-        Ok(())
-    }
-}
 
 /// How rays map into the grid, the levels, truncation and early termination.
 #[derive(Clone, Debug)]

@@ -23,9 +23,8 @@
 
 use super::atomic;
 use super::step::{touch_mask, TOUCH_SURFACE};
-use super::surface_fwd::{
-    validate_blocks, validate_inputs, CellWalk, SurfaceGridRef, SurfaceParams,
-};
+use super::surface_fwd::{validate_blocks, validate_inputs, CellWalk, SurfaceParams};
+use crate::abi::surface_grid::SurfaceGridRef;
 use crate::math::dda::ray_unit;
 use crate::math::sh::sh_basis;
 use crate::math::surface::{surf_alpha, surf_cell_hits, surf_gamma, surf_ray, SURF_MAX_LEVELS};

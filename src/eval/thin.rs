@@ -18,7 +18,7 @@ const CHUNK: usize = 16384;
 /// costly part, each point's earlier neighbours, is found in parallel (one k-d tree query per
 /// point), and one sequential pass over those short lists makes the decisions in order.
 pub fn thin(points: &[[f32; 3]], radius: f64) -> Result<Vec<usize>> {
-    if points.is_empty() || !(radius > 0.0) {
+    if points.is_empty() || radius.is_nan() || radius <= 0.0 {
         return Ok((0..points.len()).collect());
     }
     let index = PointIndex::new(points)?;

@@ -6,7 +6,7 @@
 use super::checkpoint::{check_optim, read_extras, write_extras, OptimRefs, META};
 use super::npz::{self, Data, NpzReader};
 use super::{dilate, Grid, SH_DIM};
-use crate::cpu::surface_fwd::SurfaceGridRef;
+use crate::abi::surface_grid::SurfaceGridRef;
 use anyhow::{bail, ensure, Context, Result};
 use std::path::Path;
 
@@ -210,8 +210,8 @@ impl SurfaceGrid {
             levels: levels.iter().map(|l| l - sigma0).collect(),
             gradient_scale: 1.0,
         };
-        for s in 0..g.slots() {
-            let (Some(v), true) = (sigma(s), keep[s]) else {
+        for (s, &kept) in keep.iter().enumerate() {
+            let (Some(v), true) = (sigma(s), kept) else {
                 continue;
             };
             let row = g.links[s] as usize;

@@ -1,5 +1,9 @@
 //! Numerics shared by the CPU twins and the f64 oracles: the Rust twins of `glsl/lib/`.
 
+// These twins of `glsl/lib/` mirror its loops index for index; iterator rewrites would hide that.
+// `!(a < b)` is deliberate where NaN must take the same branch as on the GPU.
+#![allow(clippy::needless_range_loop, clippy::neg_cmp_op_on_partial_ord)]
+
 pub mod cubic;
 pub mod cubic_oracle;
 pub mod dda;

@@ -4,9 +4,10 @@ use super::{
     batch_loss, surface_params, BlockRefresh, RegPlan, SurfaceBackend, SurfaceState,
     SurfaceStateFn, SurfaceStepParams, SurfaceStepStats,
 };
+use crate::abi::surface_grid::SurfaceGridRef;
 use crate::cpu::surface_blocks::build_blocks;
 use crate::cpu::surface_delta_tv::{axis_neighbours, delta_tv, forward_reach};
-use crate::cpu::surface_fwd::{render, SurfCounts, SurfaceGridRef};
+use crate::cpu::surface_fwd::{render, SurfCounts};
 use crate::cpu::surface_reg::{
     normal_reg_passes, row_slots, surface_opacity_reg, NormalPrefix, NormalScratch,
 };

@@ -224,8 +224,8 @@ pub fn train(
         writeln!(log, "{},{mse:e},{:.4},{elapsed:.3}", step + 1, psnr(mse))
             .with_context(|| format!("writing {}", out.join(TRAIN_LOG).display()))?;
         throughput.add(step, batch.len(), secs);
-        for i in 0..4 {
-            sample_totals[i] += stats.counts[i] as u64;
+        for (total, &c) in sample_totals.iter_mut().zip(&stats.counts) {
+            *total += c as u64;
         }
         progress.step(step as u64 + 1, mse, throughput.rays_per_s());
         report.train_seconds += secs;
