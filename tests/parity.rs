@@ -1,25 +1,78 @@
-//! Every registered kernel against its CPU twin on lavapipe (the rows of `check-kernels`).
+//! Every registered kernel against its CPU twin on lavapipe (the rows of `check-kernels`): one
+//! test per row, named after it (`cargo test --test parity surface_fwd` runs that row alone), and
+//! a test that no registered row is left without one.
 
 use alphasurf::check::CHECKS;
 use alphasurf::gpu::test_gpu;
 
-#[test]
-fn every_kernel_matches_its_cpu_twin() {
+/// Runs the row `name` of `CHECKS` with seeds 1 and 2; fails naming the seed and the row.
+fn row_matches(name: &str) {
     let gpu = test_gpu();
+    let (_, check) = CHECKS
+        .iter()
+        .find(|(n, _)| *n == name)
+        .unwrap_or_else(|| panic!("{name} is not a registered parity row"));
     let mut failures = Vec::new();
     for seed in [1u64, 2] {
-        for (name, check) in CHECKS {
-            let row = check(gpu, seed).unwrap_or_else(|e| panic!("{name}: {e:#}"));
-            if !row.pass {
-                failures.push(format!("{row:?}"));
-            }
+        let row = check(gpu, seed).unwrap_or_else(|e| panic!("{name} seed {seed}: {e:#}"));
+        if !row.pass {
+            failures.push(format!("seed {seed}: {row:?}"));
         }
     }
     assert!(
         failures.is_empty(),
-        "parity failures:\n{}",
+        "{name} parity failures:\n{}",
         failures.join("\n")
     );
     let msgs = gpu.validation_messages();
     assert!(msgs.is_empty(), "validation messages: {msgs:#?}");
+}
+
+/// One `#[test]` per row name, plus the list of the names the tests cover.
+macro_rules! rows {
+    ($($row:ident),* $(,)?) => {
+        $(
+            #[test]
+            fn $row() {
+                row_matches(stringify!($row));
+            }
+        )*
+        const TESTED: &[&str] = &[$(stringify!($row)),*];
+    };
+}
+
+rows!(
+    fill_pattern,
+    dda_walk,
+    trilerp_eval,
+    sh_eval,
+    occupancy,
+    plenoxel_fwd,
+    plenoxel_train,
+    plenoxel_weights,
+    optim_args,
+    rmsprop_sparse,
+    tv,
+    cubic_solve,
+    extract_points,
+    surface_blocks,
+    surface_block_radius,
+    surface_live_cells,
+    surface_fwd,
+    surface_train,
+    surface_delta_tv,
+    surface_opacity_reg,
+    surface_normal_reg_cells,
+    surface_normal_reg_pairs,
+    surface_normal_reg_gather,
+    surface_rmsprop,
+);
+
+#[test]
+fn every_registered_row_has_a_test() {
+    let registered: Vec<&str> = CHECKS.iter().map(|(n, _)| *n).collect();
+    assert_eq!(
+        registered, TESTED,
+        "tests/parity.rs must list every row of check::CHECKS, in table order"
+    );
 }
