@@ -2,6 +2,7 @@
 //! twin for every kernel. See README.md.
 
 pub mod abi;
+pub mod backend;
 pub mod bench;
 pub mod check;
 pub mod cli;

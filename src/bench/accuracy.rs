@@ -9,12 +9,13 @@
 //! reuses it. A finished stage-1 run is reused while its settings hold, also from another output
 //! (`--stage1-from`), so stage-2 changes are compared on the same stage-1 grids.
 
+use crate::backend::Backend;
 use crate::cli::demo::steps::{Invoker, TrainSize, TrainedRun};
 use crate::cli::demo::{alphasurf_row, best_plenoxels, plenoxels_levels, Row, LEVELS};
-use crate::cli::Backend;
 use crate::cli::Cli;
-use crate::train::surface_config::CATEGORIES;
+use crate::train::{Category, Preset};
 use anyhow::{bail, ensure, Context, Result};
+use clap::ValueEnum;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -28,9 +29,9 @@ pub struct AccuracyArgs {
     /// (`thin_lyre` → thin) unless `--category` is given.
     #[arg(long, required = true, num_args = 1..)]
     pub data: Vec<PathBuf>,
-    /// Stage-2 category for every scene (thin, translucent, synthetic, real, dtu).
-    #[arg(long)]
-    pub category: Option<String>,
+    /// Stage-2 category for every scene.
+    #[arg(long, value_enum)]
+    pub category: Option<Category>,
     /// Final stage-1 grid resolution N (default: the preset's).
     #[arg(long, value_parser = clap::value_parser!(u32).range(8..=1024))]
     pub res: Option<u32>,
@@ -40,9 +41,9 @@ pub struct AccuracyArgs {
     /// Rays per batch of both stages (default: the presets').
     #[arg(long)]
     pub batch: Option<u32>,
-    /// Schedule of both stages: fast or paper.
-    #[arg(long, default_value = "fast")]
-    pub preset: String,
+    /// Schedule of both stages.
+    #[arg(long, value_enum, default_value_t = Preset::Fast)]
+    pub preset: Preset,
     /// Seed of both stages (the ray batches, the regularisers' chunks).
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -53,7 +54,7 @@ pub struct AccuracyArgs {
     #[arg(long, value_name = "KEY=VALUE")]
     pub surface_set: Vec<String>,
     /// Where the kernels run (resolved once).
-    #[arg(long, value_enum, default_value = "auto")]
+    #[arg(long, value_enum, default_value_t = Backend::Auto)]
     pub backend: Backend,
     /// Output directory: one folder per scene (its runs, clouds and result.json) and
     /// accuracy.json. Default: runs/accuracy-N-PRESET-sSEED.
@@ -75,9 +76,9 @@ pub struct Stage1Settings {
     pub res: Option<u32>,
     pub iters: Option<u32>,
     pub batch: Option<u32>,
-    pub preset: String,
+    pub preset: Preset,
     pub seed: u64,
-    pub backend: String,
+    pub backend: Backend,
 }
 
 /// A finished stage-1 run and its level sweep (`plenoxels/stage1.json`).
@@ -101,7 +102,7 @@ impl Stage1Record {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Settings {
     pub stage1: Stage1Settings,
-    pub category: String,
+    pub category: Category,
     /// Stage 2's seed.
     pub seed: u64,
     pub surface_iters: Option<u32>,
@@ -162,7 +163,7 @@ pub struct Summary {
 /// Means over one category's scenes.
 #[derive(Clone, Debug, Serialize)]
 pub struct CategoryMean {
-    pub category: String,
+    pub category: Category,
     pub scenes: usize,
     /// The level with the lowest mean Chamfer over these scenes (the paper's fixed level).
     pub fixed_level: Option<f32>,
@@ -175,24 +176,26 @@ pub struct CategoryMean {
 }
 
 /// The category of a scene folder: `--category`, else its name's first word.
-pub fn scene_category(dir: &Path, given: Option<&str>) -> Result<String> {
+pub fn scene_category(dir: &Path, given: Option<Category>) -> Result<Category> {
     if let Some(c) = given {
-        ensure!(
-            CATEGORIES.contains(&c),
-            "--category {c:?}: expected one of {}",
-            CATEGORIES.join(", ")
-        );
-        return Ok(c.into());
+        return Ok(c);
     }
     let name = scene_name(dir);
     let first = name.split(['_', '-']).next().unwrap_or("");
-    match CATEGORIES.iter().find(|c| **c == first) {
-        Some(c) => Ok(c.to_string()),
+    match Category::value_variants()
+        .iter()
+        .find(|c| c.name() == first)
+    {
+        Some(&c) => Ok(c),
         None => bail!(
             "{}: cannot tell the scene's category from its folder name (expected it to start \
              with one of {} and '_'); pass --category",
             dir.display(),
-            CATEGORIES.join(", ")
+            Category::value_variants()
+                .iter()
+                .map(|c| c.name())
+                .collect::<Vec<_>>()
+                .join(", ")
         ),
     }
 }
@@ -212,12 +215,9 @@ fn mean_all(v: impl Iterator<Item = Option<f64>>) -> Option<f64> {
 
 /// Category means and fixed levels over the scenes.
 pub fn summarise(scenes: Vec<SceneResult>) -> Summary {
-    let mut by_cat: BTreeMap<String, Vec<&SceneResult>> = BTreeMap::new();
+    let mut by_cat: BTreeMap<Category, Vec<&SceneResult>> = BTreeMap::new();
     for s in &scenes {
-        by_cat
-            .entry(s.settings.category.clone())
-            .or_default()
-            .push(s);
+        by_cat.entry(s.settings.category).or_default().push(s);
     }
     let categories = by_cat
         .into_iter()
@@ -251,17 +251,17 @@ fn num(v: Option<f64>, prec: usize) -> String {
 
 /// The table: one row per scene, then one per category (markdown).
 pub fn table(s: &Summary) -> String {
-    let fixed: BTreeMap<&str, Option<f32>> = s
+    let fixed: BTreeMap<Category, Option<f32>> = s
         .categories
         .iter()
-        .map(|c| (c.category.as_str(), c.fixed_level))
+        .map(|c| (c.category, c.fixed_level))
         .collect();
     let mut t = String::from(
         "| scene | category | αSurf | best Plen (σ) | Plen at the category's σ | ratio | F1 αSurf / best | PSNR stage 1 → 2 | wall |\n\
          |---|---|---:|---:|---:|---:|---:|---:|---:|\n",
     );
     for r in &s.scenes {
-        let fl = fixed.get(r.settings.category.as_str()).copied().flatten();
+        let fl = fixed.get(&r.settings.category).copied().flatten();
         t += &format!(
             "| {} | {} | {} | {} ({}) | {} ({}) | {}× | {} / {} | {:.2} → {} dB | {:.0} s |\n",
             r.scene,
@@ -417,7 +417,7 @@ fn scene(
         &s1.dir,
         data,
         &s2_dir,
-        &settings.category,
+        settings.category,
         args.surface_iters,
         &set,
         true,
@@ -449,7 +449,7 @@ fn scene(
 
 /// Run `bench accuracy`.
 pub fn run(args: &AccuracyArgs, cli: &Cli) -> Result<()> {
-    let inv = Invoker::new(args.backend, cli)?.with_schedule(&args.preset, args.seed);
+    let inv = Invoker::new(args.backend, cli)?.with_schedule(args.preset, args.seed);
     let out = args.out.clone().unwrap_or_else(|| {
         PathBuf::from(format!(
             "runs/accuracy-{}-{}-s{}",
@@ -467,11 +467,7 @@ pub fn run(args: &AccuracyArgs, cli: &Cli) -> Result<()> {
             todo.iter().all(|(_, n, _)| n != &name),
             "two scenes are named {name:?}: their folders would collide under --out"
         );
-        todo.push((
-            d.clone(),
-            name,
-            scene_category(d, args.category.as_deref())?,
-        ));
+        todo.push((d.clone(), name, scene_category(d, args.category)?));
     }
     let mut results = Vec::new();
     for (i, (data, name, category)) in todo.into_iter().enumerate() {
@@ -482,9 +478,9 @@ pub fn run(args: &AccuracyArgs, cli: &Cli) -> Result<()> {
             res: args.res,
             iters: args.iters,
             batch: args.batch,
-            preset: args.preset.clone(),
+            preset: args.preset,
             seed: args.seed,
-            backend: inv.backend.into(),
+            backend: inv.backend,
         };
         if args.stage1_from.is_some() {
             // Another output's stage 1, whatever its seed, as long as the rest matches.
@@ -554,7 +550,7 @@ pub fn run(args: &AccuracyArgs, cli: &Cli) -> Result<()> {
 mod tests {
     use super::*;
 
-    fn result(scene: &str, category: &str, levels: &[(f32, f64)], surf: f64) -> SceneResult {
+    fn result(scene: &str, category: Category, levels: &[(f32, f64)], surf: f64) -> SceneResult {
         let best = levels.iter().min_by(|a, b| a.1.total_cmp(&b.1)).unwrap();
         SceneResult {
             scene: scene.into(),
@@ -564,11 +560,11 @@ mod tests {
                     res: Some(64),
                     iters: None,
                     batch: None,
-                    preset: "fast".into(),
+                    preset: Preset::Fast,
                     seed: 0,
-                    backend: "cpu".into(),
+                    backend: Backend::Cpu,
                 },
-                category: category.into(),
+                category,
                 seed: 0,
                 surface_iters: None,
                 surface_set: vec![],
@@ -596,25 +592,27 @@ mod tests {
 
     #[test]
     fn categories_come_from_folder_names_or_the_flag() {
-        let c = |p: &str, g: Option<&str>| scene_category(Path::new(p), g);
-        assert_eq!(c("fixtures/thin_lyre", None).unwrap(), "thin");
-        assert_eq!(c("x/translucent_lampshade/", None).unwrap(), "translucent");
-        assert_eq!(c("x/lyre", Some("thin")).unwrap(), "thin");
+        let c = |p: &str, g: Option<Category>| scene_category(Path::new(p), g);
+        assert_eq!(c("fixtures/thin_lyre", None).unwrap(), Category::Thin);
+        assert_eq!(
+            c("x/translucent_lampshade/", None).unwrap(),
+            Category::Translucent
+        );
+        assert_eq!(c("x/lyre", Some(Category::Thin)).unwrap(), Category::Thin);
         let e = c("x/lyre", None).unwrap_err().to_string();
         assert!(e.contains("x/lyre") && e.contains("--category"), "{e}");
-        assert!(c("x/thin_lyre", Some("shiny")).is_err());
         assert!(c("x/thinner_lyre", None).is_err());
     }
 
     #[test]
     fn fixed_level_is_the_best_mean_of_the_category() {
         // Scene a is best at 30, scene b at 50; the mean is best at 50 (0.9 vs 1.0).
-        let a = result("a", "thin", &[(30.0, 0.5), (50.0, 0.6)], 0.4);
-        let b = result("b", "thin", &[(30.0, 1.5), (50.0, 1.2)], 1.5);
-        let t = result("t", "translucent", &[(10.0, 2.0), (30.0, 3.0)], 1.0);
+        let a = result("a", Category::Thin, &[(30.0, 0.5), (50.0, 0.6)], 0.4);
+        let b = result("b", Category::Thin, &[(30.0, 1.5), (50.0, 1.2)], 1.5);
+        let t = result("t", Category::Translucent, &[(10.0, 2.0), (30.0, 3.0)], 1.0);
         let s = summarise(vec![a, b, t]);
         let thin = &s.categories[0];
-        assert_eq!((thin.category.as_str(), thin.scenes), ("thin", 2));
+        assert_eq!((thin.category, thin.scenes), (Category::Thin, 2));
         assert_eq!(thin.fixed_level, Some(50.0));
         assert!((thin.fixed_level_chamfer_e2.unwrap() - 0.9).abs() < 1e-12);
         assert!((thin.best_chamfer_e2.unwrap() - 0.85).abs() < 1e-12);
@@ -635,9 +633,9 @@ mod tests {
 
     #[test]
     fn a_missing_figure_leaves_the_mean_empty() {
-        let mut a = result("a", "thin", &[(30.0, 0.5)], 0.4);
+        let mut a = result("a", Category::Thin, &[(30.0, 0.5)], 0.4);
         a.alphasurf_chamfer_e2 = None;
-        let s = summarise(vec![a, result("b", "thin", &[(30.0, 0.7)], 0.6)]);
+        let s = summarise(vec![a, result("b", Category::Thin, &[(30.0, 0.7)], 0.6)]);
         assert_eq!(s.categories[0].alphasurf_chamfer_e2, None);
         assert_eq!(s.categories[0].ratio, None);
         assert!(table(&s).contains("| a | thin | — |"));

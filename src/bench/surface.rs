@@ -24,7 +24,7 @@ use crate::surface::{
     CpuSurface, SurfaceBackend, SurfaceRegs, SurfaceStepParams, SurfaceStepStats, VulkanSurface,
 };
 use crate::train::surface_config::SurfaceConfig;
-use crate::train::{stage1, stage2};
+use crate::train::{stage1, stage2, Category, Preset};
 use anyhow::{ensure, Result};
 use serde_json::json;
 use std::collections::BTreeMap;
@@ -177,7 +177,7 @@ fn run_in(gpu: &Gpu, args: &SurfaceBenchArgs, dir: &std::path::Path) -> Result<(
         Ok(time_steps(&mut vk, &data, &cfg, args.steps, args.batch)?.rays_per_s)
     };
 
-    let scfg = SurfaceConfig::preset("fast", "thin")?;
+    let scfg = SurfaceConfig::preset(Preset::Fast, Category::Thin)?;
     let init_grid = SurfaceGrid::from_density(&density, &scfg.init)?;
     let (res, rows) = (init_grid.res, init_grid.delta.len() as u32);
     let mut cpu = CpuSurface::new(init_grid)?;

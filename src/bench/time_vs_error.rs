@@ -6,6 +6,7 @@
 //! `time_vs_error.csv` and `time_vs_error.png` (Chamfer against wall time), prints a table, and
 //! with `--json` one JSON line last.
 
+use crate::backend::Backend;
 use crate::cli::demo::steps::Invoker;
 use crate::cli::demo::{
     alphasurf_row, best_plenoxels, first_line, plenoxels_levels, stage2, Row, SizeArgs, LEVELS,
@@ -22,7 +23,7 @@ use std::time::Instant;
 /// One sweep point: where stage 1 runs, its final grid resolution and its step count.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 pub struct SweepPoint {
-    pub backend: &'static str,
+    pub backend: Backend,
     pub res: u32,
     pub iters: u32,
 }
@@ -37,8 +38,8 @@ impl SweepPoint {
             ));
         };
         let backend = match b {
-            "cpu" => "cpu",
-            "vulkan" => "vulkan",
+            "cpu" => Backend::Cpu,
+            "vulkan" => Backend::Vulkan,
             _ => return Err(format!("{s:?}: backend must be cpu or vulkan")),
         };
         let res: u32 = r
@@ -96,7 +97,7 @@ pub struct TimeVsErrorArgs {
 /// One measured method at one sweep point.
 #[derive(Clone, Debug, Serialize)]
 pub struct BenchRow {
-    pub backend: &'static str,
+    pub backend: Backend,
     pub res: u32,
     pub iters: u32,
     /// "plenoxels_best" or "alphasurf".
@@ -246,7 +247,7 @@ pub fn plot_png(rows: &[BenchRow], path: &Path) -> Result<()> {
         ("plenoxels_best", "PLENOXELS (BEST σ)"),
         ("alphasurf", "αSURF"),
     ] {
-        for backend in ["cpu", "vulkan"] {
+        for backend in [Backend::Cpu, Backend::Vulkan] {
             let pts: Vec<&BenchRow> = rows
                 .iter()
                 .filter(|r| r.method == method && r.backend == backend && r.chamfer_e2.is_some())
@@ -255,7 +256,7 @@ pub fn plot_png(rows: &[BenchRow], path: &Path) -> Result<()> {
                 continue;
             }
             series.push(Series {
-                label: format!("{label} {}", backend.to_uppercase()),
+                label: format!("{label} {}", backend.name().to_uppercase()),
                 points: pts
                     .iter()
                     .map(|r| (r.wall_s, r.chamfer_e2.unwrap()))
@@ -321,7 +322,11 @@ pub fn run(args: &TimeVsErrorArgs, cli: &Cli) -> Result<()> {
     let mut rows = Vec::new();
     let mut surface_error: Option<String> = args.no_surface.then(|| "--no-surface".to_string());
     for (k, p) in args.points.iter().enumerate() {
-        let inv = if p.backend == "vulkan" { &vk } else { &cpu };
+        let inv = if p.backend == Backend::Vulkan {
+            &vk
+        } else {
+            &cpu
+        };
         let dir = out.join(p.name());
         eprintln!(
             "\n=== time-vs-error [{}/{}] {}: stage 1 at {}³, {} steps",
@@ -426,12 +431,15 @@ mod tests {
         assert_eq!(
             SweepPoint::parse("cpu:128:3000").unwrap(),
             SweepPoint {
-                backend: "cpu",
+                backend: Backend::Cpu,
                 res: 128,
                 iters: 3000
             }
         );
-        assert_eq!(SweepPoint::parse(" vulkan:64:5").unwrap().backend, "vulkan");
+        assert_eq!(
+            SweepPoint::parse(" vulkan:64:5").unwrap().backend,
+            Backend::Vulkan
+        );
         for bad in [
             "cpu:128",
             "gpu:64:10",

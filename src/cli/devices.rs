@@ -1,6 +1,6 @@
 //! `alphasurf devices`: every Vulkan device and the CPU backend.
 
-use crate::gpu::{list_devices, DeviceInfo};
+use crate::gpu::{list_devices, DeviceInfo, DeviceKind};
 use anyhow::Result;
 
 fn mib(b: u64) -> String {
@@ -35,7 +35,7 @@ fn describe(d: &DeviceInfo, default: Option<usize>) -> String {
         d.timestamp_period_ns
             .map(|p| format!("{p} ns/tick"))
             .unwrap_or_else(|| "no".into()),
-        if d.kind == "cpu" { " (CPU implementation, e.g. Mesa lavapipe)" } else { "" },
+        if d.kind == DeviceKind::Cpu { " (CPU implementation, e.g. Mesa lavapipe)" } else { "" },
     )
 }
 

@@ -3,7 +3,7 @@
 //! by raw opacity σα ≥ `--min-alpha`. For a stage-1 density grid this is the Plenoxels baseline
 //! "Plen (σ = τ)": the surfaces σ = τ for each `--levels` value, with no opacity trimming.
 
-use super::train::Backend;
+use crate::backend::Backend;
 use crate::cpu::extract_points::ExtractInput;
 use crate::data::SceneBox;
 use crate::eval::extract::{allocated_cells, extract_sorted, to_cloud, ExtractBackend, GridFrame};
@@ -44,7 +44,8 @@ pub struct ExtractArgs {
     /// R: R² virtual rays per axis and cell (origins on the lattice 0, 1/(R−1), …, 1).
     #[arg(long, default_value_t = DEFAULT_RAYS_PER_AXIS)]
     pub rays_per_axis: u32,
-    #[arg(long, value_enum, default_value = "auto")]
+    /// Where the kernels run.
+    #[arg(long, value_enum, default_value_t = Backend::Auto)]
     pub backend: Backend,
     /// Thinning radius in Blender units (per level, then on the union); 0 keeps every point.
     #[arg(long, default_value_t = 0.001)]

@@ -10,10 +10,10 @@ pub mod inspect;
 pub mod make_scene;
 mod resume;
 mod train;
-pub use train::Backend;
 mod train_surface;
 
-use crate::gpu::{Gpu, GpuOptions};
+use crate::backend::Backend;
+use crate::gpu::{DeviceKind, Gpu, GpuOptions};
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
@@ -123,15 +123,15 @@ fn open_gpu(cli: &Cli) -> anyhow::Result<Gpu> {
 /// The Vulkan device a training/rendering command should use, or `None` for the CPU backend.
 /// `auto` takes the Vulkan device unless it is a CPU implementation (lavapipe) or missing.
 fn backend_gpu<'a>(
-    kind: train::Backend,
+    kind: Backend,
     cli: &Cli,
     slot: &'a mut Option<Gpu>,
 ) -> anyhow::Result<Option<&'a Gpu>> {
     match kind {
-        train::Backend::Cpu => Ok(None),
-        train::Backend::Vulkan => Ok(Some(slot.insert(open_gpu(cli)?))),
-        train::Backend::Auto => match open_gpu(cli) {
-            Ok(gpu) if gpu.info().kind != "cpu" => Ok(Some(slot.insert(gpu))),
+        Backend::Cpu => Ok(None),
+        Backend::Vulkan => Ok(Some(slot.insert(open_gpu(cli)?))),
+        Backend::Auto => match open_gpu(cli) {
+            Ok(gpu) if gpu.info().kind != DeviceKind::Cpu => Ok(Some(slot.insert(gpu))),
             Ok(gpu) => {
                 eprintln!(
                     "backend auto: {} is a CPU implementation of Vulkan; using the CPU backend, \
@@ -271,4 +271,49 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         }
     }
     Ok(code)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::train::{Category, Preset};
+
+    fn train_args(extra: &[&str]) -> Result<train::TrainArgs, clap::Error> {
+        let mut argv = vec!["alphasurf", "train", "--data", "d", "--out", "o"];
+        argv.extend(extra);
+        match Cli::try_parse_from(argv)?.command {
+            Command::Train(a) => Ok(a),
+            other => panic!("parsed as {other:?}"),
+        }
+    }
+
+    #[test]
+    fn typed_choices_keep_their_command_line_names() {
+        let a = train_args(&[]).unwrap();
+        assert_eq!(
+            (a.preset, a.category, a.backend),
+            (Preset::Fast, Category::Thin, Backend::Auto)
+        );
+        let a =
+            train_args(&["--preset", "paper", "--category", "dtu", "--backend", "cpu"]).unwrap();
+        assert_eq!(
+            (a.preset, a.category, a.backend),
+            (Preset::Paper, Category::Dtu, Backend::Cpu)
+        );
+        for (flag, value) in [
+            ("--category", "translucent"),
+            ("--category", "synthetic"),
+            ("--category", "real"),
+            ("--backend", "vulkan"),
+        ] {
+            assert!(train_args(&[flag, value]).is_ok(), "{flag} {value}");
+        }
+        for (flag, value) in [
+            ("--category", "shiny"),
+            ("--preset", "imported"),
+            ("--backend", "gpu"),
+        ] {
+            assert!(train_args(&[flag, value]).is_err(), "{flag} {value}");
+        }
+    }
 }

@@ -1,11 +1,12 @@
 //! `alphasurf train` and `alphasurf render`: wire the dataset, a backend and the trainer.
 
 use super::resume::resume;
+use crate::backend::Backend;
 use crate::data::{dataset::peak_rss_bytes, Dataset, LoadOptions};
 use crate::gpu::Gpu;
 use crate::grid::Grid;
 use crate::plenoxel::{CpuPlenoxels, Plenoxels, VulkanPlenoxels};
-use crate::train::{render_split, stage1, Stage1Config};
+use crate::train::{render_split, stage1, Category, Preset, Stage1Config};
 use anyhow::{bail, Context, Result};
 use serde_json::json;
 use std::path::{Path, PathBuf};
@@ -22,18 +23,6 @@ pub enum Stage {
     All,
 }
 
-/// Where the kernels run.
-#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Backend {
-    /// Vulkan on a GPU; the CPU twins when the only Vulkan device is a CPU implementation
-    /// (lavapipe), where they run stage 1 about 6× faster (measured, 2 cores).
-    Auto,
-    /// GLSL kernels on the Vulkan device (`--device`).
-    Vulkan,
-    /// Their CPU twins (rayon).
-    Cpu,
-}
-
 /// Arguments of `train`.
 #[derive(clap::Args, Debug, Clone)]
 pub struct TrainArgs {
@@ -47,10 +36,10 @@ pub struct TrainArgs {
     /// initialise from (required unless resuming).
     #[arg(long)]
     pub init: Option<PathBuf>,
-    /// Stage 2 hyper-parameters from the paper's supplement: thin, translucent, synthetic
-    /// (= thin), real or dtu (levels, learning rates, regulariser weights, truncation schedule).
-    #[arg(long, default_value = "thin")]
-    pub category: String,
+    /// Stage 2: the data category whose hyper-parameters from the paper's supplement apply
+    /// (levels, learning rates, regulariser weights, truncation schedule).
+    #[arg(long, value_enum, default_value_t = Category::Thin)]
+    pub category: Category,
     /// Stage 2: initial raw opacity σα = s·σ. Default 0.005 (the released code; the supplement's
     /// 0.05 measured a higher Chamfer distance at 128³), and with preset `fast` on a stage-1 grid
     /// finer than 128³, 0.005·(N/128)^1.5 (0.014 at 256³, 0.04 at 512³): its short schedule cannot
@@ -67,12 +56,11 @@ pub struct TrainArgs {
     /// Run directory: checkpoints, test renders, metrics.json.
     #[arg(long)]
     pub out: PathBuf,
-    /// Schedule: `paper` (svox2's synthetic schedule, 256³→512³, 128k steps; stage 2: 50k steps
-    /// of 5000 rays) or `fast` (sized for a 2-core CPU: 64³→128³, 3000 steps; stage 2: 1500 steps
-    /// of 4096 rays, every schedule scaled alike).
-    #[arg(long, default_value = "fast")]
-    pub preset: String,
-    #[arg(long, value_enum, default_value = "auto")]
+    /// The schedule of both stages.
+    #[arg(long, value_enum, default_value_t = Preset::Fast)]
+    pub preset: Preset,
+    /// Where the kernels run.
+    #[arg(long, value_enum, default_value_t = Backend::Auto)]
     pub backend: Backend,
     /// Number of steps (overrides the preset; stage 1's learning-rate decays keep their length,
     /// stage 2's schedules scale with it).
@@ -115,7 +103,8 @@ pub struct RenderArgs {
     /// Dataset directory (default: the one the run was trained on).
     #[arg(long)]
     pub data: Option<PathBuf>,
-    #[arg(long, value_enum, default_value = "auto")]
+    /// Where the kernels run.
+    #[arg(long, value_enum, default_value_t = Backend::Auto)]
     pub backend: Backend,
 }
 
@@ -128,7 +117,7 @@ fn make_backend(gpu: Option<&Gpu>, grid: Grid) -> Result<Box<dyn Plenoxels>> {
 }
 
 fn config(args: &TrainArgs) -> Result<Stage1Config> {
-    let mut cfg = Stage1Config::preset(&args.preset)?;
+    let mut cfg = Stage1Config::preset(args.preset)?;
     cfg.seed = args.seed;
     if let Some(n) = args.iters {
         if n == 0 {
@@ -176,7 +165,7 @@ pub(super) fn run_stage1(args: &TrainArgs, gpu: Option<&Gpu>) -> Result<()> {
             let probe = crate::grid::checkpoint::load(&ckpt)?;
             let mut b = make_backend(gpu, probe.grid)?;
             let (step, cfg) = stage1::resume(b.as_mut(), &ckpt)?;
-            if args.res.is_some() || args.batch.is_some() || args.preset != "fast" {
+            if args.res.is_some() || args.batch.is_some() || args.preset != Preset::Fast {
                 eprintln!(
                     "--resume: the checkpoint's configuration wins; --res/--batch/--preset ignored"
                 );
@@ -374,7 +363,7 @@ pub fn run_export(args: &ExportArgs) -> Result<()> {
 pub fn run_import(args: &ImportArgs) -> Result<()> {
     let grid = crate::grid::npz::load_svox2(&args.ckpt)?;
     let mut cfg = Stage1Config::paper();
-    cfg.preset = "imported".into();
+    cfg.preset = Preset::Imported;
     cfg.res = grid.res[0];
     cfg.upsample.clear();
     cfg.iters = 0;

@@ -45,12 +45,12 @@ fn load_init(path: &Path) -> Result<Grid> {
 /// The stage-2 configuration for a stage-1 grid of `grid_n`³ vertices: the preset fitted to the
 /// grid, then the command line's overrides.
 fn config(args: &TrainArgs, grid_n: u32) -> Result<SurfaceConfig> {
-    let mut cfg = SurfaceConfig::preset(&args.preset, &args.category)?;
+    let mut cfg = SurfaceConfig::preset(args.preset, args.category)?;
     cfg.fit_grid(grid_n);
     cfg.seed = args.seed;
     if let Some(n) = args.surface_iters.or(args.iters) {
         ensure!(n > 0, "the number of stage-2 steps must be at least 1");
-        let preset = cfg.preset.clone();
+        let preset = cfg.preset;
         cfg = cfg.scaled(n);
         cfg.preset = preset;
     }

@@ -10,8 +10,7 @@ pub struct DeviceInfo {
     /// Index in Vulkan's enumeration order (what `--device N` selects).
     pub index: usize,
     pub name: String,
-    /// "discrete", "integrated", "virtual", "cpu" or "other".
-    pub kind: String,
+    pub kind: DeviceKind,
     pub driver: String,
     pub api_version: String,
     /// Sum of device-local heap sizes in bytes.
@@ -54,23 +53,54 @@ impl DeviceInfo {
     }
 
     fn preference(&self) -> u32 {
-        match self.kind.as_str() {
-            "discrete" => 0,
-            "integrated" => 1,
-            "virtual" => 2,
-            "cpu" => 3,
-            _ => 4,
+        match self.kind {
+            DeviceKind::Discrete => 0,
+            DeviceKind::Integrated => 1,
+            DeviceKind::Virtual => 2,
+            DeviceKind::Cpu => 3,
+            DeviceKind::Other => 4,
         }
     }
 }
 
-fn kind_name(t: vk::PhysicalDeviceType) -> &'static str {
-    match t {
-        vk::PhysicalDeviceType::DISCRETE_GPU => "discrete",
-        vk::PhysicalDeviceType::INTEGRATED_GPU => "integrated",
-        vk::PhysicalDeviceType::VIRTUAL_GPU => "virtual",
-        vk::PhysicalDeviceType::CPU => "cpu",
-        _ => "other",
+/// A Vulkan physical device's type; serialised as its lowercase variant name.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum DeviceKind {
+    Discrete,
+    Integrated,
+    Virtual,
+    /// A CPU implementation of Vulkan (Mesa lavapipe).
+    Cpu,
+    Other,
+}
+
+impl DeviceKind {
+    fn of(t: vk::PhysicalDeviceType) -> DeviceKind {
+        match t {
+            vk::PhysicalDeviceType::DISCRETE_GPU => DeviceKind::Discrete,
+            vk::PhysicalDeviceType::INTEGRATED_GPU => DeviceKind::Integrated,
+            vk::PhysicalDeviceType::VIRTUAL_GPU => DeviceKind::Virtual,
+            vk::PhysicalDeviceType::CPU => DeviceKind::Cpu,
+            _ => DeviceKind::Other,
+        }
+    }
+
+    /// The lowercase name `devices` prints.
+    pub fn name(self) -> &'static str {
+        match self {
+            DeviceKind::Discrete => "discrete",
+            DeviceKind::Integrated => "integrated",
+            DeviceKind::Virtual => "virtual",
+            DeviceKind::Cpu => "cpu",
+            DeviceKind::Other => "other",
+        }
+    }
+}
+
+impl std::fmt::Display for DeviceKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.pad(self.name())
     }
 }
 
@@ -133,7 +163,7 @@ pub fn query(instance: &ash::Instance, pd: vk::PhysicalDevice, index: usize) -> 
             .device_name_as_c_str()
             .map(|s| s.to_string_lossy().into_owned())
             .unwrap_or_default(),
-        kind: kind_name(props.device_type).into(),
+        kind: DeviceKind::of(props.device_type),
         driver: format!(
             "{} {}",
             driver

@@ -15,7 +15,7 @@ mod ray_buffers;
 pub use batch::{Batch, BatchTimes};
 pub use buffer::GpuBuffer;
 pub use context::{list_devices, Gpu, GpuOptions};
-pub use device::{pick_default, DeviceInfo};
+pub use device::{pick_default, DeviceInfo, DeviceKind};
 pub use optim_args::record_optim_args;
 pub use profile::Profile;
 pub use ray_buffers::RayBuffers;

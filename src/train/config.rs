@@ -1,13 +1,14 @@
 //! Stage-1 configuration and its presets: `paper` (the svox2 synthetic schedule) and `fast` (a
 //! schedule sized for a 2-core CPU running lavapipe). Both go through the same trainer.
 
+use super::preset::Preset;
 use super::schedule::DelayedExp;
 use serde::{Deserialize, Serialize};
 
 /// Everything that shapes a stage-1 run; stored in checkpoints and metrics.json.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Stage1Config {
-    pub preset: String,
+    pub preset: Preset,
     /// Grid resolution at the start.
     pub res: u32,
     /// (step, new resolution): upsample with weight pruning at these steps.
@@ -44,7 +45,7 @@ impl Stage1Config {
     /// svox2's synthetic schedule: 256³ → 512³ at 38.4k steps, 128k steps of 5000 rays.
     pub fn paper() -> Self {
         Stage1Config {
-            preset: "paper".into(),
+            preset: Preset::Paper,
             res: 256,
             upsample: vec![(38_400, 512)],
             iters: 128_000,
@@ -82,7 +83,7 @@ impl Stage1Config {
     /// A CPU-sized schedule: 64³ → 128³, a few thousand steps, faster decays.
     pub fn fast() -> Self {
         Stage1Config {
-            preset: "fast".into(),
+            preset: Preset::Fast,
             res: 64,
             upsample: vec![(1000, 128)],
             iters: 3000,
@@ -117,12 +118,12 @@ impl Stage1Config {
         }
     }
 
-    /// A preset by name.
-    pub fn preset(name: &str) -> anyhow::Result<Self> {
-        match name {
-            "paper" => Ok(Self::paper()),
-            "fast" => Ok(Self::fast()),
-            other => anyhow::bail!("unknown preset {other:?} (expected fast or paper)"),
+    /// The schedule of `preset`; `imported` names no schedule.
+    pub fn preset(preset: Preset) -> anyhow::Result<Self> {
+        match preset {
+            Preset::Paper => Ok(Self::paper()),
+            Preset::Fast => Ok(Self::fast()),
+            Preset::Imported => anyhow::bail!("preset `imported` has no stage-1 schedule"),
         }
     }
 

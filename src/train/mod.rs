@@ -2,6 +2,7 @@
 //! loop with checkpoints, progress, rendering and metrics.
 
 pub mod config;
+pub mod preset;
 pub mod progress;
 pub mod render;
 pub mod schedule;
@@ -10,6 +11,7 @@ pub mod stage2;
 pub mod surface_config;
 
 pub use config::Stage1Config;
+pub use preset::{Category, Preset};
 pub use render::{psnr, render_split, render_split_with, RenderedSplit};
 pub use schedule::DelayedExp;
 pub use surface_config::SurfaceConfig;

@@ -2,6 +2,7 @@
 //! (method.md §3.4–3.5) combined with a size preset — `paper` (50k steps of 5000 rays) or `fast`
 //! (a CPU-sized schedule with every step-count scaled by the same factor). One trainer runs both.
 
+use super::preset::{Category, Preset};
 use super::schedule::DelayedExp;
 use crate::grid::surface::SurfaceInit;
 use anyhow::{bail, ensure, Result};
@@ -37,8 +38,8 @@ impl Linear {
 /// Everything that shapes a stage-2 run; stored in checkpoints and metrics.json.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct SurfaceConfig {
-    pub preset: String,
-    pub category: String,
+    pub preset: Preset,
+    pub category: Category,
     pub init: SurfaceInit,
     pub iters: u32,
     /// Rays per batch.
@@ -86,16 +87,13 @@ fn every_row() -> f32 {
 /// The largest δ rate `SurfaceConfig::fit_grid` gives the fast translucent preset.
 pub const FAST_TRANSLUCENT_MAX_LR_DELTA: f32 = 3e-3;
 
-/// The categories `--category` accepts.
-pub const CATEGORIES: [&str; 5] = ["thin", "translucent", "synthetic", "real", "dtu"];
-
 impl SurfaceConfig {
     /// The paper's set-up for `category` (50k steps × 5000 rays).
-    pub fn paper(category: &str) -> Result<Self> {
+    pub fn paper(category: Category) -> Self {
         // Synthetic / thin values (supplement B.2), then the per-category changes.
         let mut c = SurfaceConfig {
-            preset: "paper".into(),
-            category: category.into(),
+            preset: Preset::Paper,
+            category,
             init: SurfaceInit::default(),
             iters: 50_000,
             batch: 5000,
@@ -139,8 +137,8 @@ impl SurfaceConfig {
             seed: 0,
         };
         match category {
-            "thin" | "synthetic" => {}
-            "translucent" => {
+            Category::Thin | Category::Synthetic => {}
+            Category::Translucent => {
                 c.lambda_delta = 1e-5;
                 c.lambda_alpha = 1e-11;
                 c.lambda_n1 = Linear {
@@ -150,7 +148,7 @@ impl SurfaceConfig {
                 };
                 c.lambda_n2 = 1e-4;
             }
-            "real" | "dtu" => {
+            Category::Real | Category::Dtu => {
                 c.init.density_levels = vec![10.0, 30.0, 50.0];
                 c.lr_delta.init = 1e-4;
                 c.lr_delta.last = 1e-4;
@@ -161,7 +159,7 @@ impl SurfaceConfig {
                     steps: c.iters,
                 };
                 c.lambda_n2 = 1e-3;
-                if category == "dtu" {
+                if category == Category::Dtu {
                     c.lambda_delta = 0.05;
                     c.lambda_h = 1e-3;
                     c.lambda_alpha = 1e-8;
@@ -169,12 +167,8 @@ impl SurfaceConfig {
                     c.a = Linear::constant(5.0);
                 }
             }
-            other => bail!(
-                "unknown category {other:?} (expected one of {})",
-                CATEGORIES.join(", ")
-            ),
         }
-        Ok(c)
+        c
     }
 
     /// Reject values no run can use (after `--set` overrides): negative or non-finite rates,
@@ -242,13 +236,13 @@ impl SurfaceConfig {
     }
 
     /// `preset` (paper or fast) for `category`.
-    pub fn preset(preset: &str, category: &str) -> Result<Self> {
-        let paper = Self::paper(category)?;
+    pub fn preset(preset: Preset, category: Category) -> Result<Self> {
+        let paper = Self::paper(category);
         match preset {
-            "paper" => Ok(paper),
-            "fast" => {
+            Preset::Paper => Ok(paper),
+            Preset::Fast => {
                 let mut c = paper.scaled(1500);
-                c.preset = "fast".into();
+                c.preset = Preset::Fast;
                 c.batch = 4096;
                 c.checkpoint_every = 500;
                 // Lα is what fades surfaces no ray sees (inside solids); with 33× fewer steps it
@@ -260,7 +254,11 @@ impl SurfaceConfig {
                 // 24.95 dB; at 64³ (demo --fast's stage 1) 3.45 → 3.43 (3e-8 → 1e-7). It fades
                 // the inner sheets of the shells' level sets that truncation hides from every ray,
                 // at the price of 1 dB. Chosen on the only translucent scene there is.
-                c.lambda_alpha *= if category == "translucent" { 1e4 } else { 1e3 };
+                c.lambda_alpha *= if category == Category::Translucent {
+                    1e4
+                } else {
+                    1e3
+                };
                 // RMSProp leaves a vertex's σα alone in steps that give it no gradient (per-group
                 // sparse updates), so its RMS state no longer decays between Lα visits and each
                 // visit moves σα less; three times the chunk restores the fading: thin scene
@@ -276,7 +274,7 @@ impl SurfaceConfig {
                 c.normal_fraction = 0.1;
                 Ok(c)
             }
-            other => bail!("unknown preset {other:?} (expected fast or paper)"),
+            Preset::Imported => bail!("preset `imported` has no stage-2 schedule"),
         }
     }
 
@@ -307,12 +305,12 @@ impl SurfaceConfig {
     /// 512³ (2.036): 1e-5 / 3e-4 / 1e-3 / 3e-3 → 2.086 / 1.984 / 1.922 / **1.576** (−22.6 %).
     /// The thin scene wants the paper's rate: at 128³, 3e-5 gives 0.691 against 0.579.
     pub fn fit_grid(&mut self, n: u32) {
-        if self.preset != "fast" {
+        if self.preset != Preset::Fast {
             return;
         }
         let f = (n as f32 / 128.0).max(1.0);
         self.init.alpha_init_scale = SurfaceInit::default().alpha_init_scale * f * f.sqrt();
-        if self.category == "translucent" {
+        if self.category == Category::Translucent {
             let lr = (3e-5 * 10f32.powf(f.log2())).min(FAST_TRANSLUCENT_MAX_LR_DELTA);
             self.lr_delta.init = lr;
             self.lr_delta.last = lr;
@@ -343,22 +341,21 @@ mod tests {
 
     #[test]
     fn categories_and_scaling() {
-        let thin = SurfaceConfig::paper("thin").unwrap();
+        let thin = SurfaceConfig::paper(Category::Thin);
         assert_eq!(thin.a.at(0), 5.0);
         assert_eq!(thin.a.at(5000), 3.5);
         assert_eq!(thin.a.at(20_000), 2.0);
-        let tr = SurfaceConfig::paper("translucent").unwrap();
+        let tr = SurfaceConfig::paper(Category::Translucent);
         assert_eq!(tr.lambda_n1.at(0), 1e-2);
         assert!((tr.lambda_n1.at(50_000) - 1e-4).abs() < 1e-9);
-        assert_eq!(SurfaceConfig::paper("dtu").unwrap().a.at(30_000), 5.0);
-        assert!(SurfaceConfig::paper("shiny").is_err());
-        let fast = SurfaceConfig::preset("fast", "thin").unwrap();
+        assert_eq!(SurfaceConfig::paper(Category::Dtu).a.at(30_000), 5.0);
+        let fast = SurfaceConfig::preset(Preset::Fast, Category::Thin).unwrap();
         assert_eq!(fast.iters, 1500);
         assert_eq!(fast.a.steps, 300);
         assert_eq!(fast.lr_opacity.delay_steps, 750);
         assert_eq!(fast.lambda_c_until, 300);
         assert!((fast.lambda_alpha - 1e-6).abs() < 1e-12);
-        let fast_tr = SurfaceConfig::preset("fast", "translucent").unwrap();
+        let fast_tr = SurfaceConfig::preset(Preset::Fast, Category::Translucent).unwrap();
         assert!((fast_tr.lambda_alpha - 1e-7).abs() < 1e-14);
         assert_eq!((fast.normal_fraction, fast.delta_fraction), (0.1, 1.0));
         assert_eq!((thin.normal_fraction, thin.delta_fraction), (1.0, 1.0));
@@ -371,25 +368,29 @@ mod tests {
 
     #[test]
     fn fast_opacity_init_follows_the_grid() {
-        let at = |preset: &str, n: u32| {
-            let mut c = SurfaceConfig::preset(preset, "thin").unwrap();
+        let at = |preset: Preset, n: u32| {
+            let mut c = SurfaceConfig::preset(preset, Category::Thin).unwrap();
             c.fit_grid(n);
             c.init.alpha_init_scale
         };
         let close = |a: f32, b: f32| (a - b).abs() <= 1e-6 * b;
         // Unchanged up to 128³ (the demos, CI), then ×(n/128)^1.5.
         for n in [32, 64, 128] {
-            assert!(close(at("fast", n), 0.005), "{n}: {}", at("fast", n));
+            assert!(
+                close(at(Preset::Fast, n), 0.005),
+                "{n}: {}",
+                at(Preset::Fast, n)
+            );
         }
-        assert!(close(at("fast", 256), 0.005 * 8f32.sqrt()));
-        assert!(close(at("fast", 512), 0.04));
+        assert!(close(at(Preset::Fast, 256), 0.005 * 8f32.sqrt()));
+        assert!(close(at(Preset::Fast, 512), 0.04));
         // The paper preset keeps the released code's value at every size.
-        assert!(close(at("paper", 512), 0.005));
+        assert!(close(at(Preset::Paper, 512), 0.005));
     }
 
     #[test]
     fn fast_translucent_delta_rate_follows_the_grid() {
-        let rate = |preset: &str, category: &str, n: u32| {
+        let rate = |preset: Preset, category: Category, n: u32| {
             let mut c = SurfaceConfig::preset(preset, category).unwrap();
             c.fit_grid(n);
             assert_eq!(c.lr_delta.init, c.lr_delta.last);
@@ -397,17 +398,20 @@ mod tests {
         };
         let close = |a: f32, b: f32| (a - b).abs() <= 1e-5 * b;
         for n in [64, 128] {
-            assert!(close(rate("fast", "translucent", n), 3e-5));
+            assert!(close(rate(Preset::Fast, Category::Translucent, n), 3e-5));
         }
-        assert!(close(rate("fast", "translucent", 256), 3e-4));
-        assert!(close(rate("fast", "translucent", 512), 3e-3));
+        assert!(close(rate(Preset::Fast, Category::Translucent, 256), 3e-4));
+        assert!(close(rate(Preset::Fast, Category::Translucent, 512), 3e-3));
         assert!(close(
-            rate("fast", "translucent", 1024),
+            rate(Preset::Fast, Category::Translucent, 1024),
             FAST_TRANSLUCENT_MAX_LR_DELTA
         ));
         assert_eq!(FAST_TRANSLUCENT_MAX_LR_DELTA, 3e-3);
         // Other categories and the paper preset keep the supplement's rate.
-        for (preset, category) in [("fast", "thin"), ("paper", "translucent")] {
+        for (preset, category) in [
+            (Preset::Fast, Category::Thin),
+            (Preset::Paper, Category::Translucent),
+        ] {
             assert!(close(rate(preset, category, 512), 1e-5));
         }
     }

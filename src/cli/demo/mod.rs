@@ -9,10 +9,11 @@ pub mod report;
 pub mod steps;
 
 use super::extract::DEFAULT_RAYS_PER_AXIS;
-use super::train::Backend;
 use super::Cli;
+use crate::backend::Backend;
 use crate::eval::Metrics;
 use crate::scene::SceneKind;
+use crate::train::Category;
 use anyhow::{Context, Result};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -37,7 +38,7 @@ pub struct DemoArgs {
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Where the kernels run (resolved once, then passed to every step).
-    #[arg(long, value_enum, default_value = "auto")]
+    #[arg(long, value_enum, default_value_t = Backend::Auto)]
     pub backend: Backend,
     /// Virtual rays per axis and cell for every extraction (`extract --rays-per-axis`, the same
     /// for both methods). 5 is method.md's 75 rays per cell; 17 on the 128³ grid samples as
@@ -240,9 +241,9 @@ pub fn stage2(
     progress: bool,
 ) -> Result<TrainedRun> {
     let category = match scene {
-        SceneKind::Thin => "thin",
-        SceneKind::Translucent => "translucent",
-        SceneKind::Solid => "synthetic",
+        SceneKind::Thin => Category::Thin,
+        SceneKind::Translucent => Category::Translucent,
+        SceneKind::Solid => Category::Synthetic,
     };
     inv.train_surface(&s1.dir, data, out, category, iters, set, progress)
 }

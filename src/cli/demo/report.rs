@@ -4,6 +4,7 @@
 
 use super::steps::TrainedRun;
 use super::{objects_table, table, Row};
+use crate::backend::Backend;
 use crate::cli::extract::DEFAULT_RAYS_PER_AXIS;
 use crate::eval::PointIndex;
 use crate::io::read_points;
@@ -32,7 +33,7 @@ pub struct Inputs<'a> {
     pub s2: Result<&'a TrainedRun, String>,
     pub rows: &'a [Row],
     pub fast: bool,
-    pub backend: &'a str,
+    pub backend: Backend,
     /// `extract --rays-per-axis` of every extraction.
     pub rays_per_axis: u32,
     /// `--grid-res`, when given.

@@ -5,10 +5,11 @@
 //! (`metrics.json`) or, for `eval`, from the metrics its handler returns.
 
 use super::super::{backend_gpu, run as dispatch, Cli, Command};
+use crate::backend::Backend;
 use crate::cli::extract::DEFAULT_RAYS_PER_AXIS;
-use crate::cli::train::Backend;
 use crate::eval::Metrics;
 use crate::scene::SceneKind;
+use crate::train::{Category, Preset};
 use anyhow::{anyhow, bail, Context, Result};
 use clap::Parser;
 use std::ffi::OsString;
@@ -20,12 +21,12 @@ use std::time::Instant;
 #[derive(Clone, Debug)]
 pub struct Invoker {
     /// The backend passed to every training/extraction command.
-    pub backend: &'static str,
+    pub backend: Backend,
     device: Option<usize>,
     /// `extract --rays-per-axis` for every extraction.
     pub rays_per_axis: u32,
     /// `train --preset` for both stages.
-    pub preset: String,
+    pub preset: Preset,
     /// `train --seed` for both stages.
     pub seed: u64,
 }
@@ -67,19 +68,18 @@ impl Invoker {
     /// twins on lavapipe or without a device), so the steps do not each probe the device.
     pub fn new(backend: Backend, cli: &Cli) -> Result<Invoker> {
         let mut slot = None;
-        let name = match backend {
-            Backend::Cpu => "cpu",
-            Backend::Vulkan => "vulkan",
+        let resolved = match backend {
             Backend::Auto => match backend_gpu(Backend::Auto, cli, &mut slot)? {
-                Some(_) => "vulkan",
-                None => "cpu",
+                Some(_) => Backend::Vulkan,
+                None => Backend::Cpu,
             },
+            chosen => chosen,
         };
         Ok(Invoker {
-            backend: name,
+            backend: resolved,
             device: cli.device,
             rays_per_axis: DEFAULT_RAYS_PER_AXIS,
-            preset: "fast".into(),
+            preset: Preset::Fast,
             seed: 0,
         })
     }
@@ -95,18 +95,22 @@ impl Invoker {
     /// An invoker that passes `--backend cpu` (`vulkan: false`) or `--backend vulkan`.
     pub fn fixed(vulkan: bool, cli: &Cli) -> Invoker {
         Invoker {
-            backend: if vulkan { "vulkan" } else { "cpu" },
+            backend: if vulkan {
+                Backend::Vulkan
+            } else {
+                Backend::Cpu
+            },
             device: cli.device,
             rays_per_axis: DEFAULT_RAYS_PER_AXIS,
-            preset: "fast".into(),
+            preset: Preset::Fast,
             seed: 0,
         }
     }
 
     /// The same invoker, training with `--preset preset --seed seed`.
-    pub fn with_schedule(self, preset: &str, seed: u64) -> Invoker {
+    pub fn with_schedule(self, preset: Preset, seed: u64) -> Invoker {
         Invoker {
-            preset: preset.into(),
+            preset,
             seed,
             ..self
         }
@@ -175,9 +179,9 @@ impl Invoker {
             os("--out"),
             os(out),
             os("--preset"),
-            os(&self.preset),
+            os(self.preset.name()),
             os("--backend"),
-            os(self.backend),
+            os(self.backend.name()),
             os("--seed"),
             os(self.seed.to_string()),
         ];
@@ -197,7 +201,7 @@ impl Invoker {
         init: &Path,
         data: &Path,
         out: &Path,
-        category: &str,
+        category: Category,
         iters: Option<u32>,
         set: &[String],
         progress: bool,
@@ -213,11 +217,11 @@ impl Invoker {
             os("--out"),
             os(out),
             os("--category"),
-            os(category),
+            os(category.name()),
             os("--preset"),
-            os(&self.preset),
+            os(self.preset.name()),
             os("--backend"),
-            os(self.backend),
+            os(self.backend.name()),
             os("--seed"),
             os(self.seed.to_string()),
         ];
@@ -247,7 +251,7 @@ impl Invoker {
             os("--out"),
             os(ply),
             os("--backend"),
-            os(self.backend),
+            os(self.backend.name()),
             os("--rays-per-axis"),
             os(self.rays_per_axis.to_string()),
         ];
