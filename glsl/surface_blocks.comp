@@ -3,7 +3,8 @@
 // empty-space skipping for the surface walk; glsl/lib/surface_blocks.glsl has the conventions).
 // Thread mapping: one invocation per block, flat index (bx·nb + by)·nb + bz, nb = ceil((n−1)/B),
 // B = 2^block_shift.
-// (A workgroup per block with a shared-memory reduction ran ~5× slower on lavapipe: barriers.)
+// (A workgroup per block with a shared-memory reduction ran slower on lavapipe: its barriers;
+// docs/tuning.md.)
 // Inputs: links (n³ i32, < 0 unallocated), delta (per allocated vertex), levels[n_levels ≤ 8],
 // margin ≥ 0, block_shift. Output: blocks[b] = bit i set iff τ_i ∈ [bmin − margin, bmax + margin],
 // bmin/bmax over the allocated vertices of the block's vertex range [Bb, min(Bb+B, n−1)]³ (0 if

@@ -11,15 +11,14 @@
 //   invocation i < ⌈count/16⌉ updates that group alone on pairs j = i + k·⌈count/16⌉ < count,
 //   k < 16: both rows as one 64-bit word each when both are in the range (RMSPROP_UPDATE_PAIR),
 //   else the one that is. (16 pairs per invocation: lavapipe's cost per invocation is larger than
-//   one update's; one row each took 3× as long, measured. Pairs halve the memory operations.)
+//   one update's, docs/tuning.md. Pairs halve the memory operations.)
 // - list (range_pass = 0): one invocation per entry of the touched list (indirect dispatch with
 //   the arguments optim_args writes); vertex v updates the groups whose bits are set in its flag
 //   (step.glsl TOUCH_*), δ and σα only outside their ranges, then its flag is cleared.
 //   A group that received no gradient this step is left alone, its RMS state included (svox2's
 //   sparse update, per group). The regularisers need not flag the rows of the ranges, which
 //   keeps the list (one invocation each) short.
-// SH through RMSPROP_UPDATE_SH27 (64-bit pairs; measured: the list pass 6.3 → 4.7 ms per bench
-// surface step).
+// SH through RMSPROP_UPDATE_SH27 (64-bit pairs: lavapipe moves memory one component at a time).
 // Inputs/outputs: delta, opacity, sh, their gradients and RMS states; rows, the ranges; the step
 // buffer (list pass: the list; its flags are cleared, the host resets the count). CPU twin:
 // cpu::surface_rmsprop_sparse (both passes at once).

@@ -3,7 +3,7 @@
 # thin scene: make-scene → stage 1 (Plenoxels, preset fast) → Plenoxels level-set sweep → stage 2
 # (αSurf) → extraction → evaluation, then a table and runs/demo-thin/report.md with PNGs.
 # On a GPU the kernels run through Vulkan; on a machine without one, the CPU twins (faster than
-# lavapipe there; `--backend vulkan` forces lavapipe). About 2 minutes on 2 CPU cores once built.
+# lavapipe there; `--backend vulkan` forces lavapipe).
 # Extra arguments go to `alphasurf demo` (e.g. --fast, --scene translucent, --backend cpu).
 set -euo pipefail
 cd "$(dirname "$0")/.."

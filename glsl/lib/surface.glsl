@@ -60,8 +60,8 @@ const float SURF_NO_HIT = 3.402823466e38;
 // Inserts s into the ascending list hs (empty slots SURF_NO_HIT, the largest value dropped when
 // all SURF_CELL_KEEP are taken) by one branchless compare-exchange pass over constant indices: hs
 // stays in registers. (A data-dependent index, as in a shifting insert, makes SIMD-per-lane
-// drivers such as lavapipe keep the array in memory and gather lane by lane: it cost
-// surface_train 5 of its 33 ms per step.) Equal values are interchangeable, so ties need no rule.
+// drivers such as lavapipe keep the array in memory and gather lane by lane, docs/tuning.md.)
+// Equal values are interchangeable, so ties need no rule.
 void surf_insert(inout float hs[SURF_CELL_KEEP], inout uint n, float s) {
     float v = s;
     [[unroll]] for (uint k = 0u; k < SURF_CELL_KEEP; k++) {

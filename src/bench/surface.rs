@@ -225,9 +225,9 @@ fn run_in(gpu: &Gpu, args: &SurfaceBenchArgs, dir: &std::path::Path) -> Result<(
             .collect();
         Ok(f)
     };
-    // Rounds of stage 1 then stage 2 back to back: the machine's speed drifts (stage 1 has read
-    // 27–45k rays/s at 128³ from run to run, and within one), so each ratio pairs two timings
-    // taken seconds apart, and the round with the median ratio is reported.
+    // Rounds of stage 1 then stage 2 back to back: the machine's speed drifts from run to run and
+    // within one (docs/results.md), so each ratio pairs two timings taken seconds apart, and the
+    // round with the median ratio is reported.
     let mut rounds = Vec::new();
     for r in 1..=args.rounds {
         eprintln!(

@@ -72,8 +72,7 @@ pub struct TimeVsErrorArgs {
     /// Sweep points BACKEND:RES:ITERS: backend, final grid resolution and stage-1 steps (preset
     /// `fast` otherwise; stage 2 runs half as many steps, as in the preset, on the same backend).
     /// The default sweeps resolution (64³ vs 128³ at 1000 steps), steps (1000 vs 3000 at 128³)
-    /// and backend (the CPU twins vs Vulkan at the small 64³/1000 point: lavapipe is slow);
-    /// about 15 minutes on a busy 2-core machine.
+    /// and backend (the CPU twins vs Vulkan at the small 64³/1000 point: lavapipe is slow).
     #[arg(
         long,
         value_delimiter = ',',

@@ -87,8 +87,7 @@ impl RaySampler {
 
     /// The next `n` pixels, drawn independently, then ordered by view and Z-order within the
     /// view: neighbouring invocations of a kernel then trace nearby rays (the walks diverge less;
-    /// measured, `bench surface`: surface_train −1 to −2 ms of ~36 per step). The order changes no
-    /// loss: a batch's gradient is a sum over its rays.
+    /// docs/tuning.md). The order changes no loss: a batch's gradient is a sum over its rays.
     pub fn sample_pixels(&mut self, n: usize) -> Vec<PixelRef> {
         let per_view = self.width as u64 * self.height as u64;
         let mut px: Vec<PixelRef> = (0..n)

@@ -29,10 +29,9 @@
 
 use super::dda::{dda_flush, ray_box, Dda, DDA_BIG};
 
-/// log2 of the block edge each backend skips with, measured with `bench surface` (128³ thin
-/// scene, rays/s): the CPU twins 222–236k with 8³ blocks against 203–208k with 4³ (a restart costs
-/// a scalar walk more than the cells it jumps); lavapipe 75–78k with 4³ against 69–70k with 8³ and
-/// 63–66k with 2³ (a walk step costs its SIMD lanes more than a restart).
+/// log2 of the block edge each backend skips with, the faster in `bench surface`
+/// (docs/tuning.md): 8³ on the CPU twins (a restart costs a scalar walk more than the cells it
+/// jumps), 4³ on lavapipe (a walk step costs its SIMD lanes more than a restart).
 pub const SURF_BLOCK_SHIFT_CPU: u32 = 3;
 pub const SURF_BLOCK_SHIFT_VULKAN: u32 = 2;
 /// "No block skipped yet" (an index no block has).

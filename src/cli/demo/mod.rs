@@ -29,9 +29,8 @@ pub struct DemoArgs {
     /// Which built-in scene.
     #[arg(long, value_enum, default_value = "thin")]
     pub scene: SceneKind,
-    /// A smaller run (128² images, 40 views, 64³ grid, 1000 + 600 steps; a few minutes on 2 cores)
-    /// instead of the default (256² images, 100 views, stage-1 preset `fast`: 128³, 3000 steps;
-    /// about 15 minutes at most on 2 cores).
+    /// A smaller run (128² images, 40 views, 64³ grid, 1000 + 600 steps) instead of the default
+    /// (256² images, 100 views, stage-1 preset `fast`: 128³, 3000 steps).
     #[arg(long)]
     pub fast: bool,
     /// Output directory (default: runs/demo-SCENE, or runs/demo-SCENE-fast with --fast).
@@ -41,10 +40,9 @@ pub struct DemoArgs {
     #[arg(long, value_enum, default_value_t = Backend::Auto)]
     pub backend: Backend,
     /// Virtual rays per axis and cell for every extraction (`extract --rays-per-axis`, the same
-    /// for both methods). 5 is method.md's 75 rays per cell; 17 on the 128³ grid samples as
-    /// densely as the paper's 5 on its 512³ grid (a quarter of a 512³ voxel, 1.5 mm). Denser
-    /// clouds lower both methods' Chamfer distance (thin scene, ×10⁻²: best Plen 0.691 → 0.639,
-    /// αSurf 0.579 → 0.516) at about twice the demo's time.
+    /// for both methods), 1 ..= 64. 5 is method.md's 75 rays per cell; 17 on the 128³ grid
+    /// samples as densely as the paper's 5 on its 512³ grid (a quarter of a 512³ voxel). Denser
+    /// clouds lower both methods' Chamfer distance and take longer to extract and evaluate.
     #[arg(long, default_value_t = DEFAULT_RAYS_PER_AXIS, value_parser = clap::value_parser!(u32).range(1..=64))]
     pub rays_per_axis: u32,
     #[command(flatten)]
@@ -67,12 +65,9 @@ pub struct SizeArgs {
     #[arg(long, hide = true)]
     pub gt_spacing: Option<f64>,
     /// Final grid resolution N (stage 1 `train --res N`: preset `fast`'s 3000 steps, upsampling
-    /// to N³ at step 1000; stage 2 then starts from that grid). Default 128 (64 with `--fast`).
-    /// 512 is the paper's grid: on the thin scene its `train` commands took 23 min (stage 1) and
-    /// 2.5 min (stage 2) on 2 cores, and αSurf measured 35 % below the best Plenoxels level set
-    /// (16 % at 128³); its stage 1 at 512³ peaked at 17.3 GB of memory. On the translucent scene
-    /// the whole 512³ demo took 47 min (stage 1 30 min, stage 2 10 min) and αSurf measured
-    /// 22.5 % below (19.8 % at 128³); its stage 1 peaks at 12.6 GB.
+    /// to N³ at step 1000; stage 2 then starts from that grid), 8 ..= 1024. Default 128 (64 with
+    /// `--fast`). 512 is the paper's grid; time and memory grow with N³ (docs/results.md has
+    /// measured runs).
     #[arg(long, value_parser = clap::value_parser!(u32).range(8..=1024))]
     pub grid_res: Option<u32>,
     /// Stage-1 steps.
