@@ -16,6 +16,7 @@ pub mod kernels;
 pub mod math;
 pub mod plenoxel;
 pub mod report;
+pub mod run;
 pub mod scene;
 pub mod surface;
 pub mod train;

@@ -76,6 +76,25 @@ fn reads_ascii_and_double_and_skips_leading_elements() {
 }
 
 #[test]
+fn other_vertex_properties_are_skipped() {
+    // Issue 24: a PLY with int, double and list properties beside x, y, z was rejected although
+    // eval needs only the positions.
+    let d = tempfile::tempdir().unwrap();
+    let p = d.path().join("mixed.ply");
+    std::fs::write(
+        &p,
+        "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty int label\nproperty float y\nproperty double q\nproperty float z\nproperty list uchar int idx\nproperty float w\nproperty uchar c\nend_header\n1 7 2 0.5 3 2 4 5 0.25 9\n-1 8 -2 1.5 -3 0 0.75 10\n",
+    )
+    .unwrap();
+    let c = read_ply(&p).unwrap();
+    assert_eq!(c.points, vec![[1.0, 2.0, 3.0], [-1.0, -2.0, -3.0]]);
+    let names: Vec<&str> = c.extras.iter().map(|e| e.name.as_str()).collect();
+    assert_eq!(names, ["w", "c"]);
+    assert_eq!(c.extras[0].values, ExtraValues::Float(vec![0.25, 0.75]));
+    assert_eq!(c.extras[1].values, ExtraValues::UChar(vec![9, 10]));
+}
+
+#[test]
 fn rejects_bad_files_with_the_file_name() {
     let d = tempfile::tempdir().unwrap();
     let path = |n: &str| d.path().join(n);
@@ -142,17 +161,15 @@ fn rejects_bad_files_with_the_file_name() {
         "{msg}"
     );
 
+    // x/y/z must be float or double.
     std::fs::write(
-        path("list.ply"),
-        hdr(
-            1,
-            "property float x\nproperty float y\nproperty float z\nproperty list uchar int idx\n",
-        ),
+        path("intxyz.ply"),
+        "ply\nformat ascii 1.0\nelement vertex 1\nproperty int x\nproperty float y\nproperty float z\nend_header\n1 2 3\n",
     )
     .unwrap();
-    let msg = err(&path("list.ply"));
+    let msg = err(&path("intxyz.ply"));
     assert!(
-        msg.contains("list.ply") && msg.contains("unsupported"),
+        msg.contains("intxyz.ply") && msg.contains("unsupported"),
         "{msg}"
     );
 

@@ -205,6 +205,17 @@ fn sigkill_loses_at_most_the_steps_since_the_last_checkpoint() {
     assert_eq!(m["config"]["iters"].as_u64().unwrap(), step + 10);
     let done = alphasurf::grid::checkpoint::load(&ckpt).unwrap();
     assert_eq!(done.meta["step"].as_u64().unwrap(), step + 10);
+    // The log was cut back to the checkpoint: every step once, no torn row (issue 24).
+    let log = std::fs::read_to_string(run.join("train_log.csv")).unwrap();
+    let steps: Vec<u64> = log
+        .lines()
+        .skip(1)
+        .map(|l| {
+            assert_eq!(l.split(',').count(), 4, "malformed row {l:?}");
+            l.split(',').next().unwrap().parse().unwrap()
+        })
+        .collect();
+    assert_eq!(steps, (1..=step + 10).collect::<Vec<_>>());
 }
 
 #[test]

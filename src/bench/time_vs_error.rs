@@ -388,8 +388,7 @@ pub fn run(args: &TimeVsErrorArgs, cli: &Cli) -> Result<()> {
         }
     }
     let csv_path = out.join("time_vs_error.csv");
-    std::fs::write(&csv_path, csv(args.scene.name(), &rows))
-        .with_context(|| format!("writing {}", csv_path.display()))?;
+    crate::io::atomic::write_bytes(&csv_path, csv(args.scene.name(), &rows).as_bytes())?;
     let png_path = out.join("time_vs_error.png");
     let png = plot_png(&rows, &png_path);
     if let Err(e) = &png {

@@ -105,7 +105,13 @@ pub fn run(args: &ExtractArgs, gpu: Option<&Gpu>) -> Result<()> {
         scene_scale > 0.0 && scene_scale.is_finite(),
         "--scene-scale must be positive"
     );
+    ensure!(
+        args.min_alpha.is_finite(),
+        "--min-alpha must be a finite number, got {}",
+        args.min_alpha
+    );
     let (field, path) = load_grid(args)?;
+    crate::run::outputs::check_output_file(&args.out, &[&path])?;
     let t_load = t0.elapsed().as_secs_f64() * 1e3;
     let (res, center, radius, links) = match &field {
         Field::Density(g) => (g.res, g.center, g.radius, &g.links),

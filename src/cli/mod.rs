@@ -14,6 +14,7 @@ mod train_surface;
 
 use crate::backend::Backend;
 use crate::gpu::{DeviceKind, Gpu, GpuOptions};
+use crate::run::{RunDir, RunStage};
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
@@ -158,29 +159,72 @@ fn exit(pass: bool) -> ExitCode {
 
 /// Run `train`: the stage(s) asked for.
 fn run_train(args: &train::TrainArgs, gpu: Option<&Gpu>) -> anyhow::Result<()> {
+    train::check_stage_flags(args)?;
     match args.stage {
-        train::Stage::Plenoxels => train::run_stage1(args, gpu),
-        train::Stage::Surface => train_surface::run(args, gpu),
-        train::Stage::All => {
-            let stage1_dir = args.out.join("plenoxels");
-            train::run_stage1(
-                &train::TrainArgs {
-                    out: stage1_dir.clone(),
-                    ..args.clone()
-                },
-                gpu,
-            )?;
-            train_surface::run(
-                &train::TrainArgs {
-                    out: args.out.join("surface"),
-                    init: Some(stage1_dir),
-                    iters: args.surface_iters,
-                    ..args.clone()
-                },
-                gpu,
-            )
-        }
+        train::Stage::Plenoxels => train::run_stage1(args, &train::load_data(args)?, gpu),
+        train::Stage::Surface => train_surface::run(args, &train::load_data(args)?, gpu),
+        train::Stage::All => run_all(args, gpu),
     }
+}
+
+/// `--stage all`: a parent run holding stage 1 in `plenoxels/` and stage 2 in `surface/`. With
+/// `--resume` it continues whichever stage was interrupted: stage 1 (then stage 2 from scratch),
+/// or stage 2 once stage 1 is done. Extending a finished stage 1 (`--iters`) under an existing
+/// stage 2 is refused: that stage 2 was built on the old grid.
+fn run_all(args: &train::TrainArgs, gpu: Option<&Gpu>) -> anyhow::Result<()> {
+    let mut parent = RunDir::claim(
+        &args.out,
+        RunStage::All,
+        train::open_mode(args),
+        &[&args.data],
+    )?;
+    let data = train::load_data(args)?;
+    parent.write_info(&train::run_info(args, None)?)?;
+    let s1_dir = parent.file(crate::run::dir::ALL_STAGE1);
+    let s2_dir = parent.file(crate::run::dir::ALL_STAGE2);
+    let s1_ckpt = crate::train::stage1::checkpoint_path(&s1_dir);
+    let s2_ckpt = crate::train::stage2::checkpoint_path(&s2_dir);
+    let stage1_args = train::TrainArgs {
+        stage: train::Stage::Plenoxels,
+        out: s1_dir.clone(),
+        resume: args.resume && s1_ckpt.exists(),
+        overwrite: args.resume && !s1_ckpt.exists(),
+        category: crate::train::Category::Thin,
+        set: Vec::new(),
+        alpha_init_scale: None,
+        surface_iters: None,
+        ..args.clone()
+    };
+    let stage2_args = train::TrainArgs {
+        stage: train::Stage::Surface,
+        out: s2_dir.clone(),
+        init: Some(s1_dir.clone()),
+        iters: args.surface_iters,
+        res: None,
+        resume: args.resume && s2_ckpt.exists(),
+        overwrite: args.resume && !s2_ckpt.exists(),
+        surface_iters: None,
+        ..args.clone()
+    };
+    if args.resume && s2_ckpt.exists() {
+        let s1 = crate::grid::checkpoint::load(&s1_ckpt)?;
+        let step = s1.meta["step"].as_u64().unwrap_or(0);
+        if args.iters.is_some_and(|n| n as u64 > step) {
+            anyhow::bail!(
+                "--resume --iters {}: stage 1 ({}) finished at step {step} and stage 2 ({}) was                  built on that grid; extending stage 1 would leave stage 2 stale. Extend stage 1                  alone (train --stage plenoxels --resume --iters N --out {}), then restart stage                  2 (train --stage surface --init {} --out {} --overwrite)",
+                args.iters.unwrap_or(0),
+                s1_dir.display(),
+                s2_dir.display(),
+                s1_dir.display(),
+                s1_dir.display(),
+                s2_dir.display()
+            );
+        }
+        eprintln!("--stage all --resume: stage 1 is done; resuming stage 2");
+    } else {
+        train::run_stage1(&stage1_args, &data, gpu)?;
+    }
+    train_surface::run(&stage2_args, &data, gpu)
 }
 
 fn run(cli: Cli) -> anyhow::Result<ExitCode> {

@@ -6,10 +6,11 @@ use crate::data::{dataset::peak_rss_bytes, Dataset, LoadOptions};
 use crate::gpu::Gpu;
 use crate::grid::Grid;
 use crate::plenoxel::{CpuPlenoxels, Plenoxels, VulkanPlenoxels};
+use crate::run::{self, read_info, Open, RunDir, RunInfo, RunStage};
 use crate::train::{render_split, stage1, Category, Preset, Stage1Config};
 use anyhow::{bail, Context, Result};
 use serde_json::json;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
 /// Which stage to train.
@@ -81,8 +82,12 @@ pub struct TrainArgs {
     #[arg(long)]
     pub checkpoint_every: Option<u32>,
     /// Continue from the run directory's checkpoint (its configuration wins).
-    #[arg(long)]
+    #[arg(long, conflicts_with = "overwrite")]
     pub resume: bool,
+    /// Replace the run already in `--out` (only a run: a folder that is not one is never
+    /// overwritten).
+    #[arg(long)]
+    pub overwrite: bool,
     /// Hide the progress bar.
     #[arg(long)]
     pub quiet: bool,
@@ -154,22 +159,112 @@ fn config(args: &TrainArgs) -> Result<Stage1Config> {
     Ok(cfg)
 }
 
+/// How `args` open their run directory.
+pub(super) fn open_mode(args: &TrainArgs) -> Open {
+    match (args.resume, args.overwrite) {
+        (true, _) => Open::Resume,
+        (false, true) => Open::Overwrite,
+        (false, false) => Open::Fresh,
+    }
+}
+
+/// Refuse flags the stage asked for would ignore.
+pub(super) fn check_stage_flags(args: &TrainArgs) -> Result<()> {
+    let mut ignored = Vec::new();
+    if args.stage == Stage::Plenoxels {
+        let stage2_only = [
+            ("--init", args.init.is_some()),
+            ("--category", args.category != Category::Thin),
+            ("--set", !args.set.is_empty()),
+            ("--alpha-init-scale", args.alpha_init_scale.is_some()),
+            ("--surface-iters", args.surface_iters.is_some()),
+        ];
+        ignored.extend(stage2_only.iter().filter(|f| f.1).map(|f| f.0));
+    }
+    if args.stage == Stage::Surface && args.res.is_some() {
+        ignored.push("--res");
+    }
+    if args.stage == Stage::All && args.init.is_some() {
+        ignored.push("--init");
+    }
+    if !ignored.is_empty() {
+        bail!(
+            "{} {} not used by --stage {} ({}); leave {} out",
+            ignored.join(", "),
+            if ignored.len() == 1 { "is" } else { "are" },
+            match args.stage {
+                Stage::Plenoxels => "plenoxels",
+                Stage::Surface => "surface",
+                Stage::All => "all",
+            },
+            match args.stage {
+                Stage::Plenoxels => "they configure stage 2",
+                Stage::Surface => "the grid resolution comes from --init",
+                Stage::All => "stage 2 starts from this run's own stage 1",
+            },
+            if ignored.len() == 1 { "it" } else { "them" }
+        );
+    }
+    for (name, v) in [
+        ("--iters", args.iters),
+        ("--surface-iters", args.surface_iters),
+    ] {
+        if v == Some(0) {
+            bail!("{name} must be at least 1");
+        }
+    }
+    if let Some(b) = args.batch {
+        check_batch_memory(b)?;
+    }
+    Ok(())
+}
+
+/// Bytes a training step holds per ray of its batch: the sampled batch, its flat copies handed
+/// to the backend and the backend's per-ray buffers. Peak RSS grows by about 100 B per ray on the
+/// CPU backend (stage 1, `--batch` 2000 against 400000); the Vulkan backend also stages its
+/// copies, hence the margin.
+const BYTES_PER_BATCH_RAY: f64 = 256.0;
+
+/// Refuse a `--batch` whose per-step buffers cannot fit in the memory available.
+fn check_batch_memory(batch: u32) -> Result<()> {
+    crate::run::memory::ensure_fits(
+        &format!("--batch {batch}"),
+        batch as f64 * BYTES_PER_BATCH_RAY,
+    )
+}
+
 /// Run stage 1.
-pub(super) fn run_stage1(args: &TrainArgs, gpu: Option<&Gpu>) -> Result<()> {
+pub(super) fn run_stage1(args: &TrainArgs, data: &Loaded, gpu: Option<&Gpu>) -> Result<()> {
     let t_all = Instant::now();
-    let data = load_data(args)?;
-    let load_s = t_all.elapsed().as_secs_f64();
+    // A new run's flags are checked before its folder is claimed.
+    let fresh_cfg = if args.resume {
+        None
+    } else {
+        Some(config(args)?)
+    };
+    let mut run = RunDir::claim(
+        &args.out,
+        RunStage::Plenoxels,
+        open_mode(args),
+        &[&args.data],
+    )?;
+    let (load_s, data) = (data.seconds, &data.data);
     let ckpt = stage1::checkpoint_path(&args.out);
-    let (mut backend, cfg, start) = if args.resume {
+    let (mut backend, cfg, start) = if let Some(cfg) = fresh_cfg {
+        let grid = Grid::sphere(
+            cfg.res,
+            data.scene.centre.to_array(),
+            [data.scene.radius; 3],
+            1.0,
+            cfg.init_sigma,
+        );
+        (make_backend(gpu, grid)?, cfg, 0)
+    } else {
         let restore = || {
             let probe = crate::grid::checkpoint::load(&ckpt)?;
             let mut b = make_backend(gpu, probe.grid)?;
             let (step, cfg) = stage1::resume(b.as_mut(), &ckpt)?;
-            if args.res.is_some() || args.batch.is_some() || args.preset != Preset::Fast {
-                eprintln!(
-                    "--resume: the checkpoint's configuration wins; --res/--batch/--preset ignored"
-                );
-            }
+            check_resume_flags(args, &cfg)?;
             Ok((b, step, cfg))
         };
         match resume(
@@ -181,18 +276,8 @@ pub(super) fn run_stage1(args: &TrainArgs, gpu: Option<&Gpu>) -> Result<()> {
             Some(resumed) => resumed,
             None => return Ok(()),
         }
-    } else {
-        let cfg = config(args)?;
-        let grid = Grid::sphere(
-            cfg.res,
-            data.scene.centre.to_array(),
-            [data.scene.radius; 3],
-            1.0,
-            cfg.init_sigma,
-        );
-        (make_backend(gpu, grid)?, cfg, 0)
     };
-    create_run_dir(args, &[])?;
+    run.write_info(&run_info(args, None)?)?;
     eprintln!(
         "stage 1 on {} ({}): preset {}, {} steps of {} rays, grid {}³{}",
         backend.name(),
@@ -207,7 +292,7 @@ pub(super) fn run_stage1(args: &TrainArgs, gpu: Option<&Gpu>) -> Result<()> {
             .collect::<String>()
     );
     let (report, rendered) =
-        stage1::train(backend.as_mut(), &data, &cfg, &args.out, start, !args.quiet)?;
+        stage1::train(backend.as_mut(), data, &cfg, &args.out, start, !args.quiet)?;
     for (i, p) in rendered.psnr.iter().enumerate() {
         println!("test view {i:>3}: PSNR {p:.2} dB");
     }
@@ -222,7 +307,7 @@ pub(super) fn run_stage1(args: &TrainArgs, gpu: Option<&Gpu>) -> Result<()> {
         report.train_rays_per_s,
         report.allocated_vertices,
         report.bytes_per_vertex,
-        t_all.elapsed().as_secs_f64()
+        load_s + t_all.elapsed().as_secs_f64()
     );
     let metrics = json!({
         "stage": "plenoxels",
@@ -234,7 +319,7 @@ pub(super) fn run_stage1(args: &TrainArgs, gpu: Option<&Gpu>) -> Result<()> {
             "upsample": report.upsample_seconds,
             "checkpoint": report.checkpoint_seconds,
             "render_test": report.render_seconds,
-            "total": t_all.elapsed().as_secs_f64(),
+            "total": load_s + t_all.elapsed().as_secs_f64(),
         },
         "train_rays_per_s": report.train_rays_per_s,
         "final_train_mse": report.final_mse,
@@ -247,55 +332,79 @@ pub(super) fn run_stage1(args: &TrainArgs, gpu: Option<&Gpu>) -> Result<()> {
         "peak_rss_bytes": peak_rss_bytes(),
         "config": cfg,
     });
-    write_json(&args.out.join("metrics.json"), &metrics)
+    run.write_metrics(&metrics)
 }
 
-/// The dataset `--data` names, at `--downscale`.
-pub(super) fn load_data(args: &TrainArgs) -> Result<Dataset> {
-    Dataset::load(
+/// On `--resume` the checkpoint's configuration wins: a flag that asks for something else is an
+/// error rather than silently ignored.
+fn check_resume_flags(args: &TrainArgs, cfg: &Stage1Config) -> Result<()> {
+    let final_res = cfg.upsample.last().map_or(cfg.res, |u| u.1);
+    let clashes = [
+        ("--res", args.res.is_some_and(|r| r != final_res)),
+        ("--batch", args.batch.is_some_and(|b| b != cfg.batch)),
+        (
+            "--preset",
+            args.preset != Preset::Fast && args.preset != cfg.preset,
+        ),
+    ];
+    let named: Vec<&str> = clashes.iter().filter(|c| c.1).map(|c| c.0).collect();
+    if !named.is_empty() {
+        bail!(
+            "--resume continues the checkpoint's configuration (grid {final_res}³, batch {},              preset {}); {} cannot change it (only --iters can)",
+            cfg.batch,
+            cfg.preset,
+            named.join(", ")
+        );
+    }
+    Ok(())
+}
+
+/// A dataset loaded for training, and the seconds its loading took.
+pub(super) struct Loaded {
+    pub data: Dataset,
+    pub seconds: f64,
+}
+
+/// The dataset `--data` names, at `--downscale`; `inspect`'s warnings are repeated on stderr.
+pub(super) fn load_data(args: &TrainArgs) -> Result<Loaded> {
+    let t = Instant::now();
+    let data = Dataset::load(
         &args.data,
         &LoadOptions {
             downscale: args.downscale,
             ..Default::default()
         },
-    )
-}
-
-/// Creates the run directory `--out` and writes its run.json: the dataset's absolute path, the
-/// downscale factor and the `extra` fields.
-pub(super) fn create_run_dir(args: &TrainArgs, extra: &[(&str, serde_json::Value)]) -> Result<()> {
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("creating run directory {}", args.out.display()))?;
-    let mut run_info =
-        json!({ "data": std::fs::canonicalize(&args.data)?, "downscale": args.downscale });
-    for (key, value) in extra {
-        run_info[*key] = value.clone();
+    )?;
+    for w in crate::data::inspect::inspect(&data).warnings {
+        eprintln!("warning: {}: {w}", args.data.display());
     }
-    write_json(&args.out.join("run.json"), &run_info)
+    Ok(Loaded {
+        data,
+        seconds: t.elapsed().as_secs_f64(),
+    })
 }
 
-pub(super) fn write_json(path: &Path, v: &serde_json::Value) -> Result<()> {
-    std::fs::write(path, serde_json::to_vec_pretty(v)?)
-        .with_context(|| format!("writing {}", path.display()))
+/// The `run.json` of a training run: the dataset's absolute path, the downscale factor and
+/// (stage 2) the grid it started from.
+pub(super) fn run_info(args: &TrainArgs, init: Option<PathBuf>) -> Result<RunInfo> {
+    Ok(RunInfo {
+        stage: None,
+        data: std::fs::canonicalize(&args.data)
+            .with_context(|| format!("dataset {}", args.data.display()))?,
+        downscale: args.downscale,
+        init,
+        imported_from: None,
+    })
 }
 
 /// Run `render`.
 pub fn run_render(args: &RenderArgs, gpu: Option<&Gpu>) -> Result<()> {
+    let ckpt_path = run::dir::stage1_checkpoint(&args.run, "render")?;
     let data_dir = match &args.data {
         Some(d) => d.clone(),
-        None => {
-            let p = args.run.join("run.json");
-            let text = std::fs::read_to_string(&p)
-                .with_context(|| format!("reading {} (or pass --data)", p.display()))?;
-            let v: serde_json::Value =
-                serde_json::from_str(&text).with_context(|| format!("parsing {}", p.display()))?;
-            PathBuf::from(
-                v["data"]
-                    .as_str()
-                    .with_context(|| format!("{}: no \"data\" path", p.display()))?,
-            )
-        }
+        None => read_info(&args.run).context("(or pass --data)")?.data,
     };
+    run::outputs::check_output_dir(&args.out, &[&ckpt_path, &data_dir])?;
     let data = Dataset::load(&data_dir, &LoadOptions::default())?;
     let split = match args.split.as_str() {
         "train" => &data.train,
@@ -303,7 +412,7 @@ pub fn run_render(args: &RenderArgs, gpu: Option<&Gpu>) -> Result<()> {
         "test" => &data.test,
         s => bail!("--split {s}: expected train, val or test"),
     };
-    let ckpt = crate::grid::checkpoint::load(&stage1::checkpoint_path(&args.run))?;
+    let ckpt = crate::grid::checkpoint::load(&ckpt_path)?;
     let stop = serde_json::from_value::<Stage1Config>(ckpt.meta["config"].clone())
         .map(|c| c.stop_thresh)
         .unwrap_or(1e-7);
@@ -344,11 +453,17 @@ pub struct ImportArgs {
     /// Run directory to create.
     #[arg(long)]
     pub out: PathBuf,
+    /// Replace the run already in `--out` (only a run: a folder that is not one is never
+    /// overwritten).
+    #[arg(long)]
+    pub overwrite: bool,
 }
 
 /// Run `export`: the run's stage-1 grid as an svox2 checkpoint (written atomically).
 pub fn run_export(args: &ExportArgs) -> Result<()> {
-    let ck = crate::grid::checkpoint::load(&stage1::checkpoint_path(&args.run))?;
+    let ckpt_path = run::dir::stage1_checkpoint(&args.run, "export")?;
+    run::outputs::check_output_file(&args.out, &[&ckpt_path])?;
+    let ck = crate::grid::checkpoint::load(&ckpt_path)?;
     crate::grid::npz::save_svox2(&ck.grid, &args.out)?;
     println!(
         "exported {}³ grid ({} vertices) to {}",
@@ -362,18 +477,24 @@ pub fn run_export(args: &ExportArgs) -> Result<()> {
 /// Run `import`: an svox2 checkpoint becomes a finished stage-1 run directory.
 pub fn run_import(args: &ImportArgs) -> Result<()> {
     let grid = crate::grid::npz::load_svox2(&args.ckpt)?;
+    let data = std::fs::canonicalize(&args.data)
+        .with_context(|| format!("dataset {}", args.data.display()))?;
+    let open = if args.overwrite {
+        Open::Overwrite
+    } else {
+        Open::Fresh
+    };
+    let mut run = RunDir::claim(&args.out, RunStage::Plenoxels, open, &[&args.ckpt, &data])?;
     let mut cfg = Stage1Config::paper();
     cfg.preset = Preset::Imported;
     cfg.res = grid.res[0];
     cfg.upsample.clear();
     cfg.iters = 0;
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("creating run directory {}", args.out.display()))?;
     let meta =
         json!({ "stage": "plenoxels", "step": 0, "config": cfg, "imported_from": args.ckpt });
     let n = grid.allocated();
     crate::grid::checkpoint::save(
-        &stage1::checkpoint_path(&args.out),
+        &run.file(run::dir::STAGE1_CHECKPOINT),
         &grid,
         &[
             ("rms_density", &vec![0.0; n]),
@@ -381,9 +502,13 @@ pub fn run_import(args: &ImportArgs) -> Result<()> {
         ],
         &meta,
     )?;
-    let run_info = json!({ "data": std::fs::canonicalize(&args.data)
-        .with_context(|| format!("dataset {}", args.data.display()))?, "downscale": 1 });
-    write_json(&args.out.join("run.json"), &run_info)?;
+    run.write_info(&RunInfo {
+        stage: None,
+        data,
+        downscale: 1,
+        init: None,
+        imported_from: Some(args.ckpt.clone()),
+    })?;
     println!(
         "imported {} ({:?} grid, {n} vertices) into {}",
         args.ckpt.display(),

@@ -2,13 +2,14 @@
 //! checkpoint (method.md §3.1), or resume a stage-2 run, and train it.
 
 use super::resume::resume;
-use super::train::{create_run_dir, load_data, write_json, TrainArgs};
+use super::train::{open_mode, run_info, Loaded, TrainArgs};
 use crate::data::dataset::peak_rss_bytes;
 use crate::gpu::Gpu;
 use crate::grid::surface::SurfaceGrid;
 use crate::grid::{npz, Grid};
+use crate::run::{RunDir, RunStage};
 use crate::surface::{CpuSurface, SurfaceBackend, VulkanSurface};
-use crate::train::{stage1, stage2, SurfaceConfig};
+use crate::train::{stage1, stage2, Category, Preset, SurfaceConfig};
 use anyhow::{ensure, Context, Result};
 use serde_json::json;
 use std::path::Path;
@@ -100,48 +101,63 @@ fn set_field(cfg: &SurfaceConfig, kv: &str) -> Result<SurfaceConfig> {
     serde_json::from_value(v).with_context(|| format!("--set {kv}: invalid value for {key}"))
 }
 
+/// A new stage-2 grid and its configuration from `--init` and the flags.
+fn fresh_start(args: &TrainArgs) -> Result<(SurfaceGrid, SurfaceConfig)> {
+    let init = args
+        .init
+        .as_ref()
+        .context("stage 2 needs --init STAGE1_RUN_DIR or --init ckpt.npz")?;
+    let density = load_init(init)?;
+    let cfg = config(args, density.res.into_iter().max().unwrap_or(0))?;
+    let grid = SurfaceGrid::from_density(&density, &cfg.init)
+        .with_context(|| format!("initialising the surfaces from {}", init.display()))?;
+    eprintln!(
+        "initialised from {}: {}³ grid, {} of {} vertices kept (σ > {}, dilated twice), \
+         mean |∇σ| {:.4}, levels τ = {:?}, σα = {}·σ",
+        init.display(),
+        grid.res[0],
+        grid.delta.len(),
+        density.allocated(),
+        cfg.init.density_levels[0] / 2.0,
+        grid.gradient_scale,
+        grid.levels,
+        cfg.init.alpha_init_scale
+    );
+    Ok((grid, cfg))
+}
+
 /// Run stage 2.
-pub fn run(args: &TrainArgs, gpu: Option<&Gpu>) -> Result<()> {
+pub fn run(args: &TrainArgs, data: &Loaded, gpu: Option<&Gpu>) -> Result<()> {
     let t_all = Instant::now();
-    let data = load_data(args)?;
-    let load_s = t_all.elapsed().as_secs_f64();
-    let ckpt = stage2::checkpoint_path(&args.out);
-    let (mut backend, cfg, start) = if args.resume {
-        let restore = || {
-            let probe = SurfaceGrid::load(&ckpt)?;
-            let mut b = make_backend(gpu, probe.grid)?;
-            let (step, cfg) = stage2::resume(b.as_mut(), &ckpt)?;
-            Ok((b, step, cfg))
-        };
-        let iters = args.surface_iters.or(args.iters);
-        match resume(&ckpt, iters, |c: &mut SurfaceConfig| &mut c.iters, restore)? {
-            Some(resumed) => resumed,
-            None => return Ok(()),
-        }
+    // A new run's inputs and flags are checked before its folder is claimed.
+    let fresh = if args.resume {
+        None
     } else {
-        let init = args
-            .init
-            .as_ref()
-            .context("stage 2 needs --init STAGE1_RUN_DIR or --init ckpt.npz")?;
-        let density = load_init(init)?;
-        let cfg = config(args, density.res.into_iter().max().unwrap_or(0))?;
-        let grid = SurfaceGrid::from_density(&density, &cfg.init)
-            .with_context(|| format!("initialising the surfaces from {}", init.display()))?;
-        eprintln!(
-            "initialised from {}: {}³ grid, {} of {} vertices kept (σ > {}, dilated twice), \
-             mean |∇σ| {:.4}, levels τ = {:?}, σα = {}·σ",
-            init.display(),
-            grid.res[0],
-            grid.delta.len(),
-            density.allocated(),
-            cfg.init.density_levels[0] / 2.0,
-            grid.gradient_scale,
-            grid.levels,
-            cfg.init.alpha_init_scale
-        );
-        (make_backend(gpu, grid)?, cfg, 0)
+        Some(fresh_start(args)?)
     };
-    create_run_dir(args, &[("init", json!(args.init))])?;
+    let mut inputs = vec![args.data.as_path()];
+    inputs.extend(args.init.as_deref());
+    let mut run = RunDir::claim(&args.out, RunStage::Surface, open_mode(args), &inputs)?;
+    let (load_s, data) = (data.seconds, &data.data);
+    let ckpt = stage2::checkpoint_path(&args.out);
+    let (mut backend, cfg, start) = match fresh {
+        Some((grid, cfg)) => (make_backend(gpu, grid)?, cfg, 0),
+        None => {
+            let restore = || {
+                let probe = SurfaceGrid::load(&ckpt)?;
+                let mut b = make_backend(gpu, probe.grid)?;
+                let (step, cfg) = stage2::resume(b.as_mut(), &ckpt)?;
+                check_resume_flags(args, &cfg)?;
+                Ok((b, step, cfg))
+            };
+            let iters = args.surface_iters.or(args.iters);
+            match resume(&ckpt, iters, |c: &mut SurfaceConfig| &mut c.iters, restore)? {
+                Some(resumed) => resumed,
+                None => return Ok(()),
+            }
+        }
+    };
+    run.write_info(&run_info(args, args.init.clone())?)?;
     eprintln!(
         "stage 2 on {} ({}): preset {}, category {}, {} steps of {} rays, a {} → {}, δ rate {:.1e}",
         backend.name(),
@@ -155,7 +171,7 @@ pub fn run(args: &TrainArgs, gpu: Option<&Gpu>) -> Result<()> {
         cfg.lr_delta.init
     );
     let (report, rendered) =
-        stage2::train(backend.as_mut(), &data, &cfg, &args.out, start, !args.quiet)?;
+        stage2::train(backend.as_mut(), data, &cfg, &args.out, start, !args.quiet)?;
     for (i, p) in rendered.psnr.iter().enumerate() {
         println!("test view {i:>3}: PSNR {p:.2} dB");
     }
@@ -174,7 +190,7 @@ pub fn run(args: &TrainArgs, gpu: Option<&Gpu>) -> Result<()> {
         report.allocated_vertices,
         cfg.prune_alpha,
         report.vertices_before_prune,
-        t_all.elapsed().as_secs_f64()
+        load_s + t_all.elapsed().as_secs_f64()
     );
     let metrics = json!({
         "stage": "surface",
@@ -185,7 +201,7 @@ pub fn run(args: &TrainArgs, gpu: Option<&Gpu>) -> Result<()> {
             "train": report.train_seconds,
             "checkpoint": report.checkpoint_seconds,
             "render_test": report.render_seconds,
-            "total": t_all.elapsed().as_secs_f64(),
+            "total": load_s + t_all.elapsed().as_secs_f64(),
         },
         "train_rays_per_s": report.train_rays_per_s,
         "final_train_mse": report.final_mse,
@@ -200,5 +216,33 @@ pub fn run(args: &TrainArgs, gpu: Option<&Gpu>) -> Result<()> {
         "peak_rss_bytes": peak_rss_bytes(),
         "config": cfg,
     });
-    write_json(&args.out.join("metrics.json"), &metrics)
+    run.write_metrics(&metrics)
+}
+
+/// On `--resume` the checkpoint's configuration wins: a flag that asks for something else is an
+/// error rather than silently ignored.
+fn check_resume_flags(args: &TrainArgs, cfg: &SurfaceConfig) -> Result<()> {
+    let clashes = [
+        ("--batch", args.batch.is_some_and(|b| b != cfg.batch)),
+        (
+            "--category",
+            args.category != Category::Thin && args.category != cfg.category,
+        ),
+        (
+            "--preset",
+            args.preset != Preset::Fast && args.preset != cfg.preset,
+        ),
+        ("--set", !args.set.is_empty()),
+        ("--alpha-init-scale", args.alpha_init_scale.is_some()),
+    ];
+    let named: Vec<&str> = clashes.iter().filter(|c| c.1).map(|c| c.0).collect();
+    ensure!(
+        named.is_empty(),
+        "--resume continues the checkpoint's configuration (batch {}, category {}, preset {});          {} cannot change it (only --surface-iters / --iters can)",
+        cfg.batch,
+        cfg.category,
+        cfg.preset,
+        named.join(", ")
+    );
+    Ok(())
 }

@@ -323,6 +323,22 @@ fn load_frame(
         path: json.to_path_buf(),
         msg: format!("frame {i}: {msg}"),
     };
+    // An angle at or past π (or in degrees) gives a zero or negative focal, and f32 rounding
+    // can turn an f64 angle just below π into one past it: checked on the f32 focal used.
+    for (angle, name, size) in [
+        (intr.camera_angle_x, "camera_angle_x", w),
+        (intr.camera_angle_y, "camera_angle_y", h),
+    ] {
+        if let Some(a) = angle {
+            let f = super::camera::focal_from_angle(size, a as f32);
+            if !(a > 0.0 && a < std::f64::consts::PI && f > 0.0 && f.is_finite()) {
+                return Err(fmt(format!(
+                    "{name} = {a} rad: expected a field of view in (0, π) radians whose focal \
+                     length is positive in single precision (got {f} px)"
+                )));
+            }
+        }
+    }
     let fx = match (intr.fl_x, intr.camera_angle_x) {
         (Some(f), _) => f,
         (None, Some(a)) => 0.5 * w as f64 / (0.5 * a).tan(),

@@ -73,6 +73,22 @@ pub fn inspect(ds: &Dataset) -> Inspection {
             })
             .map(|(i, _)| i)
             .collect();
+        let mirrored: Vec<usize> = s
+            .frames
+            .iter()
+            .enumerate()
+            .filter(|(_, f)| glam::Mat3::from_mat4(f.camera.c2w).determinant() < 0.0)
+            .map(|(i, _)| i)
+            .collect();
+        if !mirrored.is_empty() {
+            warnings.push(format!(
+                "{}: {} cameras are left-handed (rotation determinant < 0: a mirrored view), \
+                 e.g. view {}",
+                s.name,
+                mirrored.len(),
+                mirrored[0]
+            ));
+        }
         if !off.is_empty() {
             warnings.push(format!(
                 "{}: {} cameras do not look at the scene box (their optical axis misses it), e.g. view {}",

@@ -67,6 +67,17 @@ impl PointIndex {
         queries.par_iter().map(|q| self.nearest(&to_f64(q))).unzip()
     }
 
+    /// How many indexed points lie within distance `radius` of `q` (inclusive), counting at
+    /// most `cap` (the query stops there, so a large radius stays cheap).
+    pub fn count_within(&self, q: &[f64; 3], radius: f64, cap: std::num::NonZeroUsize) -> usize {
+        self.tree
+            .query(q)
+            .nearest_n::<SquaredEuclidean<f64>>(cap)
+            .within(radius * radius)
+            .execute()
+            .len()
+    }
+
     /// Indices of the indexed points within distance `radius` of `q` (inclusive), unsorted.
     pub fn within(&self, q: &[f64; 3], radius: f64) -> Vec<usize> {
         self.tree
@@ -103,6 +114,10 @@ mod tests {
             got.sort_unstable();
             let want: Vec<usize> = (0..pts.len()).filter(|&j| d(q, &pts[j]) <= 0.05).collect();
             assert_eq!(got, want);
+            for cap in [1, 3, 1000] {
+                let n = index.count_within(&to_f64(q), 0.05, cap.try_into().unwrap());
+                assert_eq!(n, want.len().min(cap));
+            }
             let (dist, i) = index.nearest(&to_f64(&q.map(|x| x + 0.001)));
             assert!((dist - d(&q.map(|x| x + 0.001), &pts[i])).abs() < 1e-12);
         }

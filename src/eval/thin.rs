@@ -1,27 +1,54 @@
 //! Greedy radius thinning (method.md §4): visit the points in order, keep a point unless an
 //! earlier kept point lies within the radius, and drop every point within the radius of a kept
 //! one. Afterwards no two kept points are within the radius (distance ≤ r) of each other and every
-//! dropped point is within the radius of a kept point. Neighbourhoods come from a k-d tree
-//! ([`super::PointIndex`]), so the cost is O(n log n + Σ neighbourhood sizes), not O(n²).
+//! dropped point is within the radius of a kept point.
+//!
+//! Two exact strategies, picked by the neighbourhood size measured on a sample of points:
+//! - few neighbours (the usual radius, about the point spacing): each point's earlier
+//!   neighbours are found in parallel (one k-d tree query per point, [`super::PointIndex`]) and
+//!   one sequential pass over those short lists makes the decisions in order;
+//! - many (a radius far above the spacing, where those lists make the cost quadratic): the kept
+//!   points are held in a hash grid of cells one radius wide, and each decision looks at the kept
+//!   points of 27 cells. Kept points are more than a radius apart, so a cell holds a bounded
+//!   number of them: O(n) at any radius.
 
 use super::knn::{to_f64, PointIndex};
 use anyhow::Result;
 use rayon::prelude::*;
+use std::collections::HashMap;
 
-/// Points per rayon task in [`thin`]'s neighbour pass.
+/// Points per rayon task in the neighbour-list pass.
 const CHUNK: usize = 16384;
+/// Points sampled to measure the mean neighbourhood size.
+const SAMPLES: usize = 256;
+/// Mean neighbours per point above which the hash grid is used: 27 cell look-ups per point
+/// cost about as much as a list this long.
+const DENSE_NEIGHBOURS: f64 = 64.0;
 
 /// Indices of the points kept by greedy thinning with `radius`, in input order. `radius ≤ 0`
 /// keeps every point.
-///
-/// The greedy keeps point i exactly when no earlier *kept* point lies within the radius. So the
-/// costly part, each point's earlier neighbours, is found in parallel (one k-d tree query per
-/// point), and one sequential pass over those short lists makes the decisions in order.
 pub fn thin(points: &[[f32; 3]], radius: f64) -> Result<Vec<usize>> {
     if points.is_empty() || radius.is_nan() || radius <= 0.0 {
         return Ok((0..points.len()).collect());
     }
     let index = PointIndex::new(points)?;
+    let step = (points.len() / SAMPLES).max(1);
+    let sampled: Vec<usize> = (0..points.len()).step_by(step).collect();
+    let cap = std::num::NonZeroUsize::new(4 * DENSE_NEIGHBOURS as usize).expect("non-zero");
+    let mean = sampled
+        .par_iter()
+        .map(|&i| index.count_within(&to_f64(&points[i]), radius, cap) as f64)
+        .sum::<f64>()
+        / sampled.len() as f64;
+    Ok(if mean > DENSE_NEIGHBOURS {
+        thin_hash_grid(points, radius)
+    } else {
+        thin_neighbour_lists(points, &index, radius)
+    })
+}
+
+/// The greedy from each point's earlier neighbours, found in parallel.
+fn thin_neighbour_lists(points: &[[f32; 3]], index: &PointIndex, radius: f64) -> Vec<usize> {
     // Per chunk: the earlier neighbours of its points, concatenated, and where each point's ends.
     let chunks: Vec<(Vec<u32>, Vec<u32>)> = points
         .par_chunks(CHUNK)
@@ -55,7 +82,48 @@ pub fn thin(points: &[[f32; 3]], radius: f64) -> Result<Vec<usize>> {
             i += 1;
         }
     }
-    Ok(kept)
+    kept
+}
+
+/// The greedy with the kept points in a hash grid of cells one radius wide.
+fn thin_hash_grid(points: &[[f32; 3]], radius: f64) -> Vec<usize> {
+    let r2 = radius * radius;
+    // Coordinates beyond i64 saturate into the same edge cell: still compared exactly.
+    let cell = |p: &[f64; 3]| p.map(|v| (v / radius).floor() as i64);
+    let mut kept_in: HashMap<[i64; 3], Vec<u32>> = HashMap::new();
+    let mut kept = Vec::new();
+    for (i, p) in points.iter().enumerate() {
+        let q = to_f64(p);
+        let c = cell(&q);
+        let mut near = false;
+        'cells: for dx in -1..=1i64 {
+            for dy in -1..=1i64 {
+                for dz in -1..=1i64 {
+                    let key = [
+                        c[0].saturating_add(dx),
+                        c[1].saturating_add(dy),
+                        c[2].saturating_add(dz),
+                    ];
+                    let Some(list) = kept_in.get(&key) else {
+                        continue;
+                    };
+                    if list.iter().any(|&j| {
+                        let o = to_f64(&points[j as usize]);
+                        let d = [q[0] - o[0], q[1] - o[1], q[2] - o[2]];
+                        d[0] * d[0] + d[1] * d[1] + d[2] * d[2] <= r2
+                    }) {
+                        near = true;
+                        break 'cells;
+                    }
+                }
+            }
+        }
+        if !near {
+            kept_in.entry(c).or_default().push(i as u32);
+            kept.push(i);
+        }
+    }
+    kept
 }
 
 /// Thinning per level, then on the union (method.md §4). `level[i]` is point i's level index
@@ -114,7 +182,7 @@ mod tests {
     }
 
     #[test]
-    fn parallel_pass_keeps_what_the_sequential_greedy_keeps() {
+    fn both_strategies_keep_what_the_sequential_greedy_keeps() {
         let mut rng = rand_pcg::Pcg64::seed_from_u64(11);
         // Several chunks of points in clusters (chains of near neighbours, where the order of
         // the decisions matters), with exact duplicates and points at the radius from a centre
@@ -139,6 +207,27 @@ mod tests {
             kept.len(),
             pts.len()
         );
-        assert_eq!(kept, sequential(&pts, radius));
+        let want = sequential(&pts, radius);
+        assert_eq!(kept, want);
+        // Both strategies, whichever `thin` picked here.
+        let index = PointIndex::new(&pts).unwrap();
+        assert_eq!(thin_neighbour_lists(&pts, &index, radius), want);
+        assert_eq!(thin_hash_grid(&pts, radius), want);
+    }
+
+    #[test]
+    fn a_large_radius_stays_fast_and_exact() {
+        // 130k points in a unit cube at radius 0.5: each point has ~40 % of the cloud as
+        // neighbours, which took 23 s with a neighbour list per point.
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(3);
+        let pts: Vec<[f32; 3]> = (0..130_000)
+            .map(|_| std::array::from_fn(|_| rng.random_range(0.0f32..1.0)))
+            .collect();
+        let t = std::time::Instant::now();
+        let kept = thin(&pts, 0.5).unwrap();
+        assert!(t.elapsed().as_secs_f64() < 2.0, "{:?}", t.elapsed());
+        assert!(kept.len() < 100, "{} kept", kept.len());
+        // The stated greedy queries only the kept points, so it is quick here too.
+        assert_eq!(kept, sequential(&pts, 0.5));
     }
 }

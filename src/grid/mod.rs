@@ -138,8 +138,13 @@ impl Grid {
 
     /// Check the invariants a loaded grid must satisfy; the error says which one fails.
     pub fn validate(&self) -> Result<(), String> {
-        if self.res.contains(&0) {
-            return Err(format!("resolution {:?} has a zero axis", self.res));
+        // One cell needs two vertices per axis; the renderers and their twins index a cell's
+        // far corner, which does not exist on a 1-vertex axis.
+        if self.res.iter().any(|&r| r < 2) {
+            return Err(format!(
+                "resolution {:?}: every axis needs at least 2 vertices (one cell)",
+                self.res
+            ));
         }
         if self.links.len() != self.slots() {
             return Err(format!(

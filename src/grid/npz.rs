@@ -10,7 +10,7 @@
 //! Every read is validated: dtype, shape, C order, entry size, CRC, link range and uniqueness,
 //! finiteness; errors name the file and the array.
 
-use std::fs::{self, File};
+use std::fs::File;
 use std::io::{self, BufReader, BufWriter, Read, Seek, Write};
 use std::path::Path;
 
@@ -238,41 +238,18 @@ impl<W: Write + Seek> NpzWriter<W> {
     }
 }
 
-/// Write an npz atomically: fill `<path>.tmp` in the same directory, fsync it, rename it over
-/// `path`, fsync the directory. On any error the temporary is removed and `path` is untouched, so
-/// a crash mid-write leaves the previous file (and at worst a stale `.tmp`, overwritten next time).
+/// Write an npz atomically (see [`crate::io::atomic`]): on any error `path` is untouched, so a
+/// crash mid-write leaves the previous file.
 pub fn write_atomic(
     path: &Path,
-    fill: impl FnOnce(&mut NpzWriter<BufWriter<File>>) -> Result<()>,
+    fill: impl FnOnce(&mut NpzWriter<&mut BufWriter<File>>) -> Result<()>,
 ) -> Result<()> {
-    let name = path
-        .file_name()
-        .with_context(|| format!("{} has no file name", path.display()))?;
-    let mut tmp_name = name.to_os_string();
-    tmp_name.push(".tmp");
-    let tmp = path.with_file_name(tmp_name);
-    let result = (|| -> Result<()> {
-        let file =
-            File::create(&tmp).with_context(|| format!("cannot create {}", tmp.display()))?;
-        let mut npz = NpzWriter::new(BufWriter::with_capacity(1 << 20, file));
+    crate::io::atomic::write_atomic(path, |w| {
+        let mut npz = NpzWriter::new(w);
         fill(&mut npz)?;
-        let file = npz.finish()?.into_inner().map_err(|e| e.into_error())?;
-        file.sync_all()?;
-        fs::rename(&tmp, path)
-            .with_context(|| format!("cannot rename {} over it", tmp.display()))?;
+        npz.finish()?.flush()?;
         Ok(())
-    })();
-    if result.is_err() {
-        let _ = fs::remove_file(&tmp);
-    }
-    result.with_context(|| format!("writing {}", path.display()))?;
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
-    File::open(dir)
-        .and_then(|d| d.sync_all())
-        .with_context(|| format!("syncing directory {}", dir.display()))
+    })
 }
 
 /// Finite-value, link-range and link-uniqueness checks on top of [`Grid::validate`].

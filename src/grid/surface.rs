@@ -76,6 +76,11 @@ impl SurfaceGrid {
             "surface grids are cubic, got {:?}",
             self.res
         );
+        ensure!(
+            self.res[0] >= 2,
+            "resolution {:?}: every axis needs at least 2 vertices (one cell)",
+            self.res
+        );
         self.as_ref().validate()?;
         let mut seen = vec![false; self.delta.len()];
         for &l in &self.links {

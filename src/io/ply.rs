@@ -2,8 +2,9 @@
 //! float/uchar properties. Writing is always binary little-endian with float xyz.
 //!
 //! Reading uses `ply-rs-bw` (header grammar, ascii/binary payloads, bounded preallocation) with a
-//! custom row type, so no per-point maps are built. Files that cannot be read, have no vertices,
-//! lack x/y/z, carry unsupported vertex property types, end early or hold non-finite coordinates
+//! custom row type, so no per-point maps are built. Vertex properties other than x, y, z and
+//! float/uchar extras (ints, doubles, lists) are read past and dropped. Files that cannot be
+//! read, have no vertices, lack x/y/z (float or double), end early or hold non-finite coordinates
 //! are rejected with an error naming the file.
 
 use anyhow::{bail, Context};
@@ -12,7 +13,7 @@ use ply_rs_bw::ply::{
     Addable, ElementDef, Encoding, Header, PropertyAccess, PropertyAccessResult, PropertyDef,
     PropertyType, ScalarType,
 };
-use std::io::{BufReader, BufWriter, Write};
+use std::io::{BufReader, Write};
 use std::path::Path;
 
 /// Values of one extra per-vertex property.
@@ -80,7 +81,11 @@ impl PropertyAccess for Row {
         self.set(name, v)
     }
     fn set_double(&mut self, name: &str, v: f64) -> PropertyAccessResult {
-        self.set(name, v as f32)
+        // Double extras are skipped (see `read_inner`); only x, y, z may be double.
+        match name {
+            "x" | "y" | "z" => self.set(name, v as f32),
+            _ => PropertyAccessResult::Ignored,
+        }
     }
     fn set_uchar(&mut self, name: &str, v: u8) -> PropertyAccessResult {
         self.set(name, v as f32)
@@ -118,7 +123,9 @@ fn read_inner(path: &Path) -> anyhow::Result<PointCloud> {
             (PropertyType::Scalar(ScalarType::Float | ScalarType::Double), true) => {}
             (PropertyType::Scalar(ScalarType::Float), false) => extra_defs.push((pname.clone(), false)),
             (PropertyType::Scalar(ScalarType::UChar), false) => extra_defs.push((pname.clone(), true)),
-            (t, _) => bail!("{name}: vertex property '{pname}' has unsupported type {t:?} (x/y/z: float or double; extras: float or uchar)"),
+            (t, true) => bail!("{name}: vertex property '{pname}' has unsupported type {t:?} (x/y/z: float or double)"),
+            // Other properties (ints, doubles, lists) are not needed here: skipped.
+            (_, false) => {}
         }
     }
     for axis in ["x", "y", "z"] {
@@ -171,7 +178,7 @@ fn read_inner(path: &Path) -> anyhow::Result<PointCloud> {
     Ok(PointCloud { points, extras })
 }
 
-/// Writes a binary little-endian PLY with float x, y, z and the extras.
+/// Writes a binary little-endian PLY with float x, y, z and the extras, atomically.
 pub fn write_ply(path: &Path, cloud: &PointCloud) -> anyhow::Result<()> {
     let name = path.display();
     for e in &cloud.extras {
@@ -204,28 +211,27 @@ pub fn write_ply(path: &Path, cloud: &PointCloud) -> anyhow::Result<()> {
             .add(PropertyDef::new(e.name.clone(), PropertyType::Scalar(t)));
     }
     header.elements.add(el);
-    let f = std::fs::File::create(path).with_context(|| format!("{name}: cannot create"))?;
-    let mut w = BufWriter::new(f);
-    ply_rs_bw::writer::Writer::<Row>::new()
-        .write_header(&mut w, &header)
-        .with_context(|| format!("{name}: writing header"))?;
-    let mut buf = Vec::with_capacity(64);
-    for (i, p) in cloud.points.iter().enumerate() {
-        buf.clear();
-        for v in p {
-            buf.extend_from_slice(&v.to_le_bytes());
-        }
-        for e in &cloud.extras {
-            match &e.values {
-                ExtraValues::Float(a) => buf.extend_from_slice(&a[i].to_le_bytes()),
-                ExtraValues::UChar(a) => buf.push(a[i]),
+    super::atomic::write_atomic(path, |w| {
+        ply_rs_bw::writer::Writer::<Row>::new()
+            .write_header(w, &header)
+            .with_context(|| format!("{name}: writing header"))?;
+        let mut buf = Vec::with_capacity(64);
+        for (i, p) in cloud.points.iter().enumerate() {
+            buf.clear();
+            for v in p {
+                buf.extend_from_slice(&v.to_le_bytes());
             }
+            for e in &cloud.extras {
+                match &e.values {
+                    ExtraValues::Float(a) => buf.extend_from_slice(&a[i].to_le_bytes()),
+                    ExtraValues::UChar(a) => buf.push(a[i]),
+                }
+            }
+            w.write_all(&buf)
+                .with_context(|| format!("{name}: write failed"))?;
         }
-        w.write_all(&buf)
-            .with_context(|| format!("{name}: write failed"))?;
-    }
-    w.flush().with_context(|| format!("{name}: write failed"))?;
-    Ok(())
+        Ok(())
+    })
 }
 
 /// Writes positions only.

@@ -138,11 +138,15 @@ impl Canvas {
         }
     }
 
-    /// Write the canvas as PNG.
+    /// Write the canvas as PNG (atomically).
     pub fn save(&self, path: &Path) -> Result<()> {
-        self.img
-            .save_with_format(path, image::ImageFormat::Png)
-            .with_context(|| format!("writing {}", path.display()))
+        crate::io::atomic::write_png(
+            path,
+            self.img.as_raw(),
+            self.img.width(),
+            self.img.height(),
+            image::ExtendedColorType::Rgb8,
+        )
     }
 }
 

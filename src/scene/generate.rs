@@ -124,6 +124,7 @@ pub fn generate(out: &Path, opts: &GenerateOptions) -> anyhow::Result<GenerateRe
             scene.name
         );
     }
+    check_memory(&scene, opts)?;
     std::fs::create_dir_all(out)
         .with_context(|| format!("{}: cannot create directory", out.display()))?;
     let splits = opts.split_views();
@@ -149,8 +150,13 @@ pub fn generate(out: &Path, opts: &GenerateOptions) -> anyhow::Result<GenerateRe
             let cam = Camera::from_angle_x(c2w, opts.res, opts.res, CAMERA_ANGLE_X);
             let rgba = render_view(&scene, &cam, opts.spp_side);
             let path = dir.join(format!("r_{i}.png"));
-            image::save_buffer(&path, &rgba, opts.res, opts.res, image::ColorType::Rgba8)
-                .with_context(|| format!("{}: cannot write PNG", path.display()))?;
+            crate::io::atomic::write_png(
+                &path,
+                &rgba,
+                opts.res,
+                opts.res,
+                image::ExtendedColorType::Rgba8,
+            )?;
             let rows: Vec<[f32; 4]> = (0..4).map(|r| c2w.row(r).to_array()).collect();
             frames.push(json!({"file_path": format!("./{split}/r_{i}"), "transform_matrix": rows}));
             bar.inc(1);
@@ -159,7 +165,7 @@ pub fn generate(out: &Path, opts: &GenerateOptions) -> anyhow::Result<GenerateRe
         let text = serde_json::to_string_pretty(
             &json!({"camera_angle_x": CAMERA_ANGLE_X, "frames": frames}),
         )?;
-        std::fs::write(&path, text).with_context(|| format!("{}: cannot write", path.display()))?;
+        crate::io::atomic::write_bytes(&path, text.as_bytes())?;
     }
     bar.finish_and_clear();
     let render_s = t0.elapsed().as_secs_f64();
@@ -177,6 +183,41 @@ pub fn generate(out: &Path, opts: &GenerateOptions) -> anyhow::Result<GenerateRe
     };
     write_scene_json(out, &scene, opts, &ranges, points.len(), &report)?;
     Ok(report)
+}
+
+/// Bytes held per pixel of the view being rendered: the RGBA image, its encoded copy and the
+/// per-tile candidate lists, rounded up.
+const BYTES_PER_PIXEL: f64 = 16.0;
+/// Bytes held per view until the end: its camera and its `transforms_*.json` entry.
+const BYTES_PER_VIEW: f64 = 512.0;
+/// Bytes per ground-truth point: the per-object list and the concatenated one (12 B each).
+const BYTES_PER_GT_POINT: f64 = 24.0;
+
+/// Refuse sizes that cannot be encoded (a PNG row count times width in 32 bits) or that need
+/// more memory than is available: `--res`, `--views` and `--gt-spacing` are checked before
+/// anything is rendered.
+fn check_memory(scene: &Scene, opts: &GenerateOptions) -> anyhow::Result<()> {
+    let px = opts.res as f64 * opts.res as f64;
+    if px * 4.0 > u32::MAX as f64 {
+        bail!(
+            "--res {}: at most 32767 pixels a side (an RGBA image must stay under 4 GiB)",
+            opts.res
+        );
+    }
+    let views: f64 = opts.split_views().iter().map(|s| s.1 as f64).sum();
+    let gt_points: f64 = scene
+        .objects
+        .iter()
+        .map(|o| (o.shape.area() / (opts.gt_spacing * opts.gt_spacing)).ceil())
+        .sum();
+    let need = px * BYTES_PER_PIXEL + views * BYTES_PER_VIEW + gt_points * BYTES_PER_GT_POINT;
+    crate::run::memory::ensure_fits(
+        &format!(
+            "make-scene --res {} --views {} --gt-spacing {} ({gt_points:.3e} ground-truth points)",
+            opts.res, opts.views, opts.gt_spacing
+        ),
+        need,
+    )
 }
 
 /// Area-uniform samples on every object: ceil(area/spacing²) per object, minus those strictly
@@ -275,7 +316,5 @@ fn write_scene_json(
         "timing_s": {"render": report.render_s, "gt": report.gt_s},
     });
     let path = out.join("scene.json");
-    std::fs::write(&path, serde_json::to_string_pretty(&doc)?)
-        .with_context(|| format!("{}: cannot write", path.display()))?;
-    Ok(())
+    crate::io::atomic::write_json(&path, &doc)
 }

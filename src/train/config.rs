@@ -127,6 +127,38 @@ impl Stage1Config {
         }
     }
 
+    /// Reject values no run can use (a checkpoint's configuration is checked on resume):
+    /// zero batch, checkpoint interval or pixel stride, a grid axis below 2, fractions outside
+    /// [0, 1], non-finite thresholds.
+    pub fn validate(&self) -> anyhow::Result<()> {
+        anyhow::ensure!(
+            self.batch > 0 && self.checkpoint_every > 0 && self.prune_pixel_stride > 0,
+            "batch, checkpoint_every and prune_pixel_stride must be at least 1"
+        );
+        anyhow::ensure!(
+            self.res >= 2 && self.upsample.iter().all(|u| u.1 >= 2),
+            "grid resolutions must be at least 2"
+        );
+        anyhow::ensure!(
+            (0.0..=1.0).contains(&self.tv_fraction),
+            "tv_fraction must be in [0, 1], got {}",
+            self.tv_fraction
+        );
+        for (name, v) in [
+            ("stop_thresh", self.stop_thresh),
+            ("prune_weight", self.prune_weight),
+            ("prune_stop_thresh", self.prune_stop_thresh),
+            ("tv_sigma", self.tv_sigma),
+            ("tv_sh", self.tv_sh),
+            ("beta", self.beta),
+            ("eps", self.eps),
+            ("init_sigma", self.init_sigma),
+        ] {
+            anyhow::ensure!(v.is_finite(), "{name} must be finite, got {v}");
+        }
+        Ok(())
+    }
+
     /// Resolution in force at step `t`.
     pub fn res_at(&self, t: u32) -> u32 {
         self.upsample

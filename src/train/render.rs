@@ -64,14 +64,14 @@ pub fn render_split_with(
             .map(|&v| (v.clamp(0.0, 1.0) * 255.0).round() as u8)
             .collect();
         let path = out.join(format!("r_{i}.png"));
-        image::save_buffer(
+        crate::io::atomic::write_png(
             &path,
             &bytes,
             split.width(),
             split.height(),
-            image::ColorType::Rgb8,
+            image::ExtendedColorType::Rgb8,
         )
-        .with_context(|| format!("writing {} (view {})", path.display(), frame.file.display()))?;
+        .with_context(|| format!("view {}", frame.file.display()))?;
     }
     let mean_psnr = psnrs.iter().sum::<f64>() / psnrs.len().max(1) as f64;
     Ok(RenderedSplit {

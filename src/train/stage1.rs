@@ -8,6 +8,7 @@ use super::render::{psnr, render_split, RenderedSplit};
 use crate::data::{Dataset, RaySampler, Split};
 use crate::grid::{checkpoint, dilate, upsample, Grid};
 use crate::plenoxel::{Plenoxels, StepParams, TvParams};
+use crate::run::train_log;
 use anyhow::{bail, Context, Result};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
@@ -17,33 +18,16 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 /// File name of the stage-1 checkpoint inside a run directory.
-pub const CHECKPOINT: &str = "plenoxels.npz";
+pub const CHECKPOINT: &str = crate::run::dir::STAGE1_CHECKPOINT;
 
 /// Per-step training log inside a run directory: CSV with the header [`TRAIN_LOG_HEADER`], one
 /// row per step (`step` = steps done, `psnr_batch` = PSNR of that step's batch MSE, `elapsed_s` =
-/// seconds since this process started training). A resumed run appends to it.
-pub const TRAIN_LOG: &str = "train_log.csv";
+/// seconds since this process started training). A resumed run cuts it back to the checkpoint's
+/// step and appends to it (see [`crate::run::train_log`]).
+pub const TRAIN_LOG: &str = crate::run::dir::TRAIN_LOG;
 
 /// Header line of [`TRAIN_LOG`].
 pub const TRAIN_LOG_HEADER: &str = "step,mse,psnr_batch,elapsed_s";
-
-/// Open the run's train log: truncated with a header at step 0, appended to on resume.
-fn open_train_log(out: &Path, start_step: u32) -> Result<std::io::BufWriter<std::fs::File>> {
-    let path = out.join(TRAIN_LOG);
-    let fresh = start_step == 0 || !path.exists();
-    let file = std::fs::OpenOptions::new()
-        .create(true)
-        .write(true)
-        .append(!fresh)
-        .truncate(fresh)
-        .open(&path)
-        .with_context(|| format!("opening {}", path.display()))?;
-    let mut w = std::io::BufWriter::new(file);
-    if fresh {
-        writeln!(w, "{TRAIN_LOG_HEADER}").with_context(|| format!("writing {}", path.display()))?;
-    }
-    Ok(w)
-}
 
 /// Wall time per phase and throughput of a finished run.
 #[derive(Clone, Debug, Default, serde::Serialize)]
@@ -147,7 +131,9 @@ fn save(backend: &dyn Plenoxels, cfg: &Stage1Config, out: &Path, step: u32) -> R
 /// Restore grid, optimiser state and step from a run's checkpoint; returns the next step.
 pub fn resume(backend: &mut dyn Plenoxels, path: &Path) -> Result<(u32, Stage1Config)> {
     let ck = checkpoint::load(path)?;
-    let (step, cfg) = checkpoint::meta_step_config(&ck.meta, "plenoxels", path)?;
+    let (step, cfg) = checkpoint::meta_step_config::<Stage1Config>(&ck.meta, "plenoxels", path)?;
+    cfg.validate()
+        .with_context(|| format!("{}: invalid configuration", path.display()))?;
     let state = |name: &str| checkpoint::optim_array(&ck.optim, name, path);
     let state = (state("rms_density")?, state("rms_sh")?);
     backend.load(ck.grid, Some(state))?;
@@ -171,7 +157,8 @@ pub fn train(
     let mut throughput = Throughput::new(start_step);
     let mut sample_totals = [0u64; 4];
     let mut mse = f64::NAN;
-    let mut log = open_train_log(out, start_step)?;
+    let log_path = out.join(TRAIN_LOG);
+    let mut log = train_log::open(&log_path, TRAIN_LOG_HEADER, start_step)?;
     let t_train = Instant::now();
     for step in start_step..cfg.iters {
         if let Some((_, r)) = cfg.upsample.iter().find(|(s, _)| *s == step) {
@@ -222,7 +209,7 @@ pub fn train(
         let secs = t.elapsed().as_secs_f64();
         let elapsed = t_train.elapsed().as_secs_f64();
         writeln!(log, "{},{mse:e},{:.4},{elapsed:.3}", step + 1, psnr(mse))
-            .with_context(|| format!("writing {}", out.join(TRAIN_LOG).display()))?;
+            .with_context(|| format!("writing {}", log_path.display()))?;
         throughput.add(step, batch.len(), secs);
         for (total, &c) in sample_totals.iter_mut().zip(&stats.counts) {
             *total += c as u64;
@@ -231,13 +218,13 @@ pub fn train(
         report.train_seconds += secs;
         if (step + 1) % cfg.checkpoint_every == 0 && step + 1 < cfg.iters {
             let t = Instant::now();
+            train_log::flush(&mut log, &log_path)?;
             save(backend, cfg, out, step + 1)?;
             report.checkpoint_seconds += t.elapsed().as_secs_f64();
         }
     }
     progress.finish();
-    log.flush()
-        .with_context(|| format!("writing {}", out.join(TRAIN_LOG).display()))?;
+    train_log::flush(&mut log, &log_path)?;
     drop(log);
     let t = Instant::now();
     save(backend, cfg, out, cfg.iters)?;

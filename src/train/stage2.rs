@@ -11,6 +11,7 @@ use crate::cpu::surface_reg::{delta_tv_chunk, opacity_tv_chunk, OpacityChunk};
 use crate::data::{Dataset, RaySampler};
 use crate::grid::checkpoint;
 use crate::grid::surface::SurfaceGrid;
+use crate::run::train_log;
 use crate::surface::{SurfaceBackend, SurfaceRegs, SurfaceStepParams};
 use anyhow::{bail, Context, Result};
 use rand::Rng;
@@ -20,10 +21,12 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 /// File name of the stage-2 checkpoint inside a run directory.
-pub const CHECKPOINT: &str = "surface.npz";
+pub const CHECKPOINT: &str = crate::run::dir::STAGE2_CHECKPOINT;
 /// Per-step log: step, mse, batch PSNR, entropy, consistency, regulariser loss (Lα + Ln),
-/// seconds since the start.
-pub const LOG: &str = "train_log.csv";
+/// seconds since the start (header [`LOG_HEADER`]); cut back to the checkpoint on resume.
+pub const LOG: &str = crate::run::dir::TRAIN_LOG;
+/// Header line of [`LOG`].
+pub const LOG_HEADER: &str = "step,mse,psnr_batch,entropy,consistency,reg_loss,elapsed_s";
 
 /// Wall time per phase, throughput and counters of a finished run.
 #[derive(Clone, Debug, Default, serde::Serialize)]
@@ -66,7 +69,9 @@ fn save(backend: &dyn SurfaceBackend, cfg: &SurfaceConfig, out: &Path, step: u32
 /// Restore grid, optimiser state and step from a stage-2 checkpoint; returns the next step.
 pub fn resume(backend: &mut dyn SurfaceBackend, path: &Path) -> Result<(u32, SurfaceConfig)> {
     let ck = SurfaceGrid::load(path)?;
-    let (step, cfg) = checkpoint::meta_step_config(&ck.meta, "surface", path)?;
+    let (step, cfg) = checkpoint::meta_step_config::<SurfaceConfig>(&ck.meta, "surface", path)?;
+    cfg.validate()
+        .with_context(|| format!("{}: invalid configuration", path.display()))?;
     let state = |name: &str| checkpoint::optim_array(&ck.optim, name, path);
     let state = [state("rms_delta")?, state("rms_opacity")?, state("rms_sh")?];
     backend.load(ck.grid, Some(state))?;
@@ -137,18 +142,7 @@ pub fn train(
     std::fs::create_dir_all(out)
         .with_context(|| format!("creating run directory {}", out.display()))?;
     let log_path = out.join(LOG);
-    let mut log = std::fs::OpenOptions::new()
-        .create(true)
-        .append(true)
-        .open(&log_path)
-        .with_context(|| format!("opening {}", log_path.display()))?;
-    if start_step == 0 {
-        log.set_len(0)?;
-        writeln!(
-            log,
-            "step,mse,psnr_batch,entropy,consistency,reg_loss,elapsed_s"
-        )?;
-    }
+    let mut log = train_log::open(&log_path, LOG_HEADER, start_step)?;
     let mut report = Stage2Report::default();
     let mut progress = Progress::new(cfg.iters as u64, start_step as u64, show_progress);
     let mut throughput = Throughput::new(start_step);
@@ -199,17 +193,20 @@ pub fn train(
             stats.consistency,
             stats.reg_loss,
             t_start.elapsed().as_secs_f64()
-        )?;
+        )
+        .with_context(|| format!("writing {}", log_path.display()))?;
         progress.step(step as u64 + 1, mse, throughput.rays_per_s());
         report.train_seconds += secs;
         if (step + 1) % cfg.checkpoint_every == 0 && step + 1 < cfg.iters {
             let t = Instant::now();
+            train_log::flush(&mut log, &log_path)?;
             save(backend, cfg, out, step + 1)?;
             report.checkpoint_seconds += t.elapsed().as_secs_f64();
         }
     }
     progress.finish();
-    log.flush()?;
+    train_log::flush(&mut log, &log_path)?;
+    drop(log);
 
     // Drop the surfaces that cannot reach α ≥ prune_alpha; the optimiser state ends with them.
     let mut grid = backend.grid()?;

@@ -229,8 +229,8 @@ impl SurfaceConfig {
             "init.density_levels must be a non-empty list of finite numbers"
         );
         ensure!(
-            self.iters > 0 && self.batch > 0,
-            "iters and batch must be at least 1"
+            self.iters > 0 && self.batch > 0 && self.checkpoint_every > 0,
+            "iters, batch and checkpoint_every must be at least 1"
         );
         Ok(())
     }

@@ -137,7 +137,7 @@ pub fn write(r: &Inputs) -> Result<Vec<PathBuf>> {
         }
     }
     let path = r.out.join("report.md");
-    std::fs::write(&path, md).with_context(|| format!("writing {}", path.display()))?;
+    crate::io::atomic::write_bytes(&path, md.as_bytes())?;
     let results = json!({
         "command": cmd,
         "scene": r.scene.name(),
@@ -154,8 +154,7 @@ pub fn write(r: &Inputs) -> Result<Vec<PathBuf>> {
         "figures": pngs,
     });
     let path = r.out.join("results.json");
-    std::fs::write(&path, serde_json::to_vec_pretty(&results)?)
-        .with_context(|| format!("writing {}", path.display()))?;
+    crate::io::atomic::write_json(&path, &results)?;
     Ok(pngs)
 }
 

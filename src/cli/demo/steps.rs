@@ -184,6 +184,8 @@ impl Invoker {
             os(self.backend.name()),
             os("--seed"),
             os(self.seed.to_string()),
+            // A rerun replaces the runs it made before (only runs: never other files).
+            os("--overwrite"),
         ];
         push_size(&mut a, size);
         if !progress {
@@ -224,6 +226,8 @@ impl Invoker {
             os(self.backend.name()),
             os("--seed"),
             os(self.seed.to_string()),
+            // A rerun replaces the runs it made before (only runs: never other files).
+            os("--overwrite"),
         ];
         push_size(
             &mut a,

@@ -1,0 +1,11 @@
+//! What a command owns on disk and the limits it runs within: run directories (marker, lock,
+//! file names, refusal rules, `--overwrite`), guards for output paths, the training log's
+//! resume-time cut, and memory estimates for flags that size allocations.
+
+pub mod dir;
+pub mod lock;
+pub mod memory;
+pub mod outputs;
+pub mod train_log;
+
+pub use dir::{read_info, Open, RunDir, RunInfo, RunStage};
