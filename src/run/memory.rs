@@ -25,7 +25,7 @@ fn gib(b: f64) -> String {
 /// overflow) exceeds `available` bytes; `available = None` (unknown) refuses only needs past
 /// the address space.
 pub fn check_fits(what: &str, bytes: f64, available: Option<u64>) -> Result<()> {
-    if !(bytes <= u64::MAX as f64 / 2.0) {
+    if bytes.is_nan() || bytes > u64::MAX as f64 / 2.0 {
         bail!("{what} would need about {bytes:.3e} bytes: far beyond any memory");
     }
     if let Some(avail) = available {
