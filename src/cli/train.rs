@@ -41,10 +41,10 @@ pub struct TrainArgs {
     /// (levels, learning rates, regulariser weights, truncation schedule).
     #[arg(long, value_enum, default_value_t = Category::Thin)]
     pub category: Category,
-    /// Stage 2: initial raw opacity σα = s·σ, s > 0. Default 0.005 (the released code; the
-    /// supplement says 0.05), and with preset `fast` on a stage-1 grid finer than 128³,
-    /// 0.005·(N/128)^1.5 (0.014 at 256³, 0.04 at 512³): its short schedule cannot raise σα far
-    /// enough on a fine grid before truncation leaves each ray two hits.
+    /// Stage 2: initial raw opacity σα = s·σ, s > 0. Default: preset `paper` 0.005 (the released
+    /// code); preset `fast` 0.05 for thin, 0.01 for translucent, 0.005 otherwise, and at least
+    /// 0.005·(N/128)^1.5 on a stage-1 grid of N³: its short schedule cannot raise σα far enough
+    /// on a fine grid before truncation leaves each ray two hits.
     #[arg(long)]
     pub alpha_init_scale: Option<f32>,
     /// Stage 2 steps (overrides the preset; with `--stage all`, `--iters` is stage 1's).

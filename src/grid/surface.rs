@@ -24,10 +24,9 @@ pub struct SurfaceCheckpoint {
 pub struct SurfaceInit {
     /// Density levels; the middle one is σ₀ (synthetic: [10, 30, 50, 70, 90]; real: [10, 30, 50]).
     pub density_levels: Vec<f32>,
-    /// σα = alpha_init_scale·σ. The supplement says 0.05, the released configs 0.005; 0.005 is the
-    /// default because it measured the lower Chamfer distance on the built-in thin scene
-    /// (docs/tuning.md). The `fast` preset raises it on grids finer than 128³
-    /// (`SurfaceConfig::fit_grid`).
+    /// σα = alpha_init_scale·σ. The supplement says 0.05, the released configs 0.005, which is
+    /// the default here and the `paper` preset's; the `fast` preset sets its own per category and
+    /// grid (`SurfaceConfig::fit_grid`).
     pub alpha_init_scale: f32,
 }
 

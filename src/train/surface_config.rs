@@ -87,6 +87,19 @@ fn every_row() -> f32 {
 /// The largest δ rate `SurfaceConfig::fit_grid` gives the fast translucent preset.
 pub const FAST_TRANSLUCENT_MAX_LR_DELTA: f32 = 3e-3;
 
+/// The `fast` preset's initial opacity scale (σα = s·σ) on a 128³ grid. Thin parts start nearly
+/// opaque (the supplement's 0.05), so that the photometric loss selects among levels that all
+/// render, rather than waiting for σα to rise; semi-transparent layers start lower (0.01); the
+/// other categories keep the released code's 0.005. Chosen on the development set
+/// (docs/tuning.md).
+pub fn fast_alpha_init_scale(category: Category) -> f32 {
+    match category {
+        Category::Thin => 0.05,
+        Category::Translucent => 0.01,
+        _ => SurfaceInit::default().alpha_init_scale,
+    }
+}
+
 impl SurfaceConfig {
     /// The paper's set-up for `category` (50k steps × 5000 rays).
     pub fn paper(category: Category) -> Self {
@@ -148,7 +161,7 @@ impl SurfaceConfig {
                 };
                 c.lambda_n2 = 1e-4;
             }
-            Category::Real | Category::Dtu => {
+            Category::Real => {
                 c.init.density_levels = vec![10.0, 30.0, 50.0];
                 c.lr_delta.init = 1e-4;
                 c.lr_delta.last = 1e-4;
@@ -159,13 +172,16 @@ impl SurfaceConfig {
                     steps: c.iters,
                 };
                 c.lambda_n2 = 1e-3;
-                if category == Category::Dtu {
-                    c.lambda_delta = 0.05;
-                    c.lambda_h = 1e-3;
-                    c.lambda_alpha = 1e-8;
-                    c.lr_delta.last = 1e-6;
-                    c.a = Linear::constant(5.0);
-                }
+            }
+            // The synthetic set-up (levels 10…90, Ln1 1e-6, no Ln2) with DTU's own changes
+            // (method.md §3.4).
+            Category::Dtu => {
+                c.lambda_delta = 0.05;
+                c.lambda_h = 1e-3;
+                c.lambda_alpha = 1e-8;
+                c.lr_delta.init = 1e-4;
+                c.lr_delta.last = 1e-6;
+                c.a = Linear::constant(5.0);
             }
         }
         c
@@ -245,32 +261,24 @@ impl SurfaceConfig {
                 c.preset = Preset::Fast;
                 c.batch = 4096;
                 c.checkpoint_every = 500;
-                // Lα is what fades surfaces no ray sees (inside solids); with 33× fewer steps it
-                // needs a larger weight to act at all: measured on the built-in solid scene
-                // (demo --fast) Chamfer 1.94 → 1.32 ×10⁻² at 1e-6, thin unchanged (0.582).
-                // Translucent (the paper's 1e-11, 100× below thin): ×10⁴, i.e. 10× below thin.
-                // Measured on the built-in translucent scene (demo's stage-1 run, 128³), Chamfer
-                // ×10⁻² / test PSNR: 1e-8 2.033 / 27.25 dB, 1e-7 1.944 / 26.21 dB, 3e-7 1.975 /
-                // 24.95 dB; at 64³ (demo --fast's stage 1) 3.45 → 3.43 (3e-8 → 1e-7). It fades
-                // the inner sheets of the shells' level sets that truncation hides from every ray,
-                // at the price of 1 dB. Chosen on the only translucent scene there is.
-                c.lambda_alpha *= if category == Category::Translucent {
-                    1e4
-                } else {
-                    1e3
+                // Lα fades the surfaces no ray sees (inner level sets of solids). With 33× fewer
+                // steps than the paper it needs a larger weight to act on the synthetic and
+                // translucent set-ups; thin keeps the paper's weight, since its higher σα start
+                // (`fast_alpha_init_scale`) would otherwise fade the thin parts rays rarely hit.
+                c.lambda_alpha *= match category {
+                    Category::Thin => 1.0,
+                    Category::Translucent => 1e4,
+                    _ => 1e3,
                 };
-                // RMSProp leaves a vertex's σα alone in steps that give it no gradient (per-group
-                // sparse updates), so its RMS state no longer decays between Lα visits and each
-                // visit moves σα less; three times the chunk restores the fading: thin scene
-                // Chamfer 0.5935 → 0.5843 ×10⁻² (the value before per-group updates).
+                // Colour must re-fit from volume to surface rendering in 1500 steps.
+                c.lr_sh = DelayedExp::constant(3e-3);
+                c.init.alpha_init_scale = fast_alpha_init_scale(category);
+                // RMSProp leaves a vertex's σα alone in steps that give it no gradient, so its
+                // state does not decay between Lα visits: a larger chunk keeps the fading rate.
                 c.alpha_fraction = 0.3;
-                // Ln1/Ln2 on a random 10 % of the cells each step (a mean over the chunk, so the
-                // same loss in expectation; the paper preset keeps every cell): the normal
-                // regularisers 13.8 → 1.8 ms per `bench surface` step on lavapipe. Chamfer ×10⁻²
-                // on the demos' stage-1 runs: thin 0.5843 → 0.5840, translucent 2.051 → 2.063;
-                // test PSNR unchanged. Lδ stays on every vertex: its 10 % chunk (`delta_fraction`)
-                // is faster still but leaves δ updated on a tenth of the rows per step, which cost
-                // thin 0.5 dB of test PSNR and translucent 1.9 % of Chamfer (measured).
+                // Ln1/Ln2 on a random 10 % of the cells each step (a mean over the chunk: the same
+                // loss in expectation, at a tenth of the cost). Lδ stays on every vertex: δ is
+                // updated only where it has a gradient, and a chunk would leave most rows still.
                 c.normal_fraction = 0.1;
                 Ok(c)
             }
@@ -278,38 +286,26 @@ impl SurfaceConfig {
         }
     }
 
-    /// Fit the preset to the stage-1 grid it starts from (`n`³ vertices). The `fast` preset's
-    /// initial opacity scale grows with the grid above 128³: s = 0.005·(n/128)^1.5. Its 1500
-    /// steps shade each surface vertex about (128/n)² times as often as at 128³, too rarely for
-    /// σα to rise from 0.005·σ before truncation (a → 2 by step 300) leaves each ray two hits;
-    /// the outer levels then let the background through. Thin scene, fast stage 1 at each
-    /// resolution, Chamfer ×10⁻² (test PSNR):
-    /// 128³: s 0.002 / 0.005 / 0.01 → 0.577 / 0.579 / 0.584 (23.1 dB at 0.005);
-    /// 256³: s 0.005 / 0.015 / 0.03 / 0.05 → 0.457 (18.9 dB) / 0.450 (23.1 dB) / 0.466 / 0.478;
-    /// 512³: s 0.005 / 0.015 / 0.04 / 0.05 → 0.787 (12.0 dB) / 0.416 (15.7 dB) / 0.420 (22.1 dB)
-    /// / 0.423 (23.3 dB), against the best Plenoxels level set's 0.645.
-    /// The `paper` preset keeps the released code's 0.005 (its 50k steps raise σα themselves).
+    /// Fit the preset to the stage-1 grid it starts from (`n`³ vertices); the `paper` preset is
+    /// left as it is (its 50k steps adapt by themselves).
+    ///
+    /// The `fast` preset's initial opacity scale is at least 0.005·(n/128)^1.5: its 1500 steps
+    /// shade each surface vertex about (128/n)² times as often as at 128³, too rarely for σα to
+    /// rise from a small start before truncation leaves each ray two hits, and the outer levels
+    /// then let the background through.
     ///
     /// For `translucent`, δ's rate also follows the grid: 3e-5 at 128³ and below, ×10 per
-    /// doubling (3e-4 at 256³, 3e-3 at 512³), no higher than measured
-    /// ([`FAST_TRANSLUCENT_MAX_LR_DELTA`]). The paper's 1e-5 moves δ by at most
-    /// about 1e-5 per step; over 50k steps that flattens the low-density fog stage 1 leaves
-    /// between the shells (Lδ acts alone on vertices no ray shades), over 1500 it cannot, and
-    /// the fog's level sets stay (a third of the points at 256³, three quarters of the distance
-    /// to the ground truth). At 128³, where rays shade each vertex 4× and 16× as often as at
-    /// 256³ and 512³, a faster rate breaks the surfaces instead (1e-4: 18.2 dB, 3e-4: 17.1 dB).
-    /// The test PSNR pays at 512³ (17.7 dB at 1e-5, 16.0 dB at 3e-3). Translucent scene, fast
-    /// stage 1 at each resolution, Chamfer ×10⁻² against the best Plenoxels level set:
-    /// 128³ (2.459): 1e-5 / 3e-5 / 1e-4 / 3e-4 → 2.089 / 2.048 / 3.408 / 4.827;
-    /// 256³ (2.241): 1e-5 / 1e-4 / 3e-4 / 1e-3 → 2.131 / 2.044 / 1.925 / 2.047;
-    /// 512³ (2.036): 1e-5 / 3e-4 / 1e-3 / 3e-3 → 2.086 / 1.984 / 1.922 / **1.576** (−22.6 %).
-    /// The thin scene wants the paper's rate: at 128³, 3e-5 gives 0.691 against 0.579.
+    /// doubling, no higher than [`FAST_TRANSLUCENT_MAX_LR_DELTA`]. Over 1500 steps the paper's
+    /// 1e-5 cannot flatten the low-density fog stage 1 leaves between shells (Lδ acts alone on
+    /// vertices no ray shades); on coarse grids, where rays shade each vertex more often, a faster
+    /// rate breaks the surfaces instead. Figures: docs/tuning.md.
     pub fn fit_grid(&mut self, n: u32) {
         if self.preset != Preset::Fast {
             return;
         }
         let f = (n as f32 / 128.0).max(1.0);
-        self.init.alpha_init_scale = SurfaceInit::default().alpha_init_scale * f * f.sqrt();
+        let grid_floor = SurfaceInit::default().alpha_init_scale * f * f.sqrt();
+        self.init.alpha_init_scale = fast_alpha_init_scale(self.category).max(grid_floor);
         if self.category == Category::Translucent {
             let lr = (3e-5 * 10f32.powf(f.log2())).min(FAST_TRANSLUCENT_MAX_LR_DELTA);
             self.lr_delta.init = lr;
@@ -348,15 +344,34 @@ mod tests {
         let tr = SurfaceConfig::paper(Category::Translucent);
         assert_eq!(tr.lambda_n1.at(0), 1e-2);
         assert!((tr.lambda_n1.at(50_000) - 1e-4).abs() < 1e-9);
-        assert_eq!(SurfaceConfig::paper(Category::Dtu).a.at(30_000), 5.0);
+        // DTU: the synthetic set-up (five levels, Ln1 1e-6, no Ln2) with its own changes.
+        let dtu = SurfaceConfig::paper(Category::Dtu);
+        assert_eq!(dtu.a.at(30_000), 5.0);
+        assert_eq!(dtu.init.density_levels, thin.init.density_levels);
+        assert_eq!((dtu.lambda_n1, dtu.lambda_n2), (thin.lambda_n1, 0.0));
+        assert_eq!(
+            (dtu.lambda_delta, dtu.lambda_h, dtu.lambda_alpha),
+            (0.05, 1e-3, 1e-8)
+        );
+        assert_eq!((dtu.lr_delta.init, dtu.lr_delta.last), (1e-4, 1e-6));
+        let real = SurfaceConfig::paper(Category::Real);
+        assert_eq!(real.init.density_levels, vec![10.0, 30.0, 50.0]);
         let fast = SurfaceConfig::preset(Preset::Fast, Category::Thin).unwrap();
         assert_eq!(fast.iters, 1500);
         assert_eq!(fast.a.steps, 300);
         assert_eq!(fast.lr_opacity.delay_steps, 750);
         assert_eq!(fast.lambda_c_until, 300);
-        assert!((fast.lambda_alpha - 1e-6).abs() < 1e-12);
+        // Lα: the paper's weight for thin, larger for the other set-ups' short schedule.
+        assert_eq!(fast.lambda_alpha, thin.lambda_alpha);
+        let fast_syn = SurfaceConfig::preset(Preset::Fast, Category::Synthetic).unwrap();
+        assert!((fast_syn.lambda_alpha - 1e-6).abs() < 1e-12);
         let fast_tr = SurfaceConfig::preset(Preset::Fast, Category::Translucent).unwrap();
         assert!((fast_tr.lambda_alpha - 1e-7).abs() < 1e-14);
+        for c in [&fast, &fast_syn, &fast_tr] {
+            assert_eq!(c.lr_sh.at(0), 3e-3);
+            assert_eq!(c.lr_sh.at(1400), 3e-3);
+        }
+        assert_eq!(thin.lr_sh.at(0), 1e-3);
         assert_eq!((fast.normal_fraction, fast.delta_fraction), (0.1, 1.0));
         assert_eq!((thin.normal_fraction, thin.delta_fraction), (1.0, 1.0));
         // A configuration saved before delta_fraction existed reads as Lδ on every vertex.
@@ -367,25 +382,31 @@ mod tests {
     }
 
     #[test]
-    fn fast_opacity_init_follows_the_grid() {
-        let at = |preset: Preset, n: u32| {
-            let mut c = SurfaceConfig::preset(preset, Category::Thin).unwrap();
+    fn fast_opacity_init_per_category_and_grid() {
+        let at = |preset: Preset, category: Category, n: u32| {
+            let mut c = SurfaceConfig::preset(preset, category).unwrap();
             c.fit_grid(n);
             c.init.alpha_init_scale
         };
         let close = |a: f32, b: f32| (a - b).abs() <= 1e-6 * b;
-        // Unchanged up to 128³ (the demos, CI), then ×(n/128)^1.5.
-        for n in [32, 64, 128] {
+        let floor = |n: f32| 0.005 * (n / 128.0).powf(1.5);
+        for n in [32u32, 64, 128, 256, 512, 1024] {
+            let g = floor(n as f32).max(0.005);
+            // Each category's start, raised to the grid's floor above 128³.
             assert!(
-                close(at(Preset::Fast, n), 0.005),
-                "{n}: {}",
-                at(Preset::Fast, n)
+                close(at(Preset::Fast, Category::Thin, n), g.max(0.05)),
+                "{n}"
             );
+            assert!(
+                close(at(Preset::Fast, Category::Translucent, n), g.max(0.01)),
+                "{n}"
+            );
+            assert!(close(at(Preset::Fast, Category::Synthetic, n), g), "{n}");
+            // The paper preset keeps the released code's value at every size.
+            assert!(close(at(Preset::Paper, Category::Thin, n), 0.005), "{n}");
         }
-        assert!(close(at(Preset::Fast, 256), 0.005 * 8f32.sqrt()));
-        assert!(close(at(Preset::Fast, 512), 0.04));
-        // The paper preset keeps the released code's value at every size.
-        assert!(close(at(Preset::Paper, 512), 0.005));
+        assert!(close(at(Preset::Fast, Category::Translucent, 512), 0.04));
+        assert!(close(at(Preset::Fast, Category::Thin, 1024), floor(1024.0)));
     }
 
     #[test]
