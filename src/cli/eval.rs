@@ -135,7 +135,9 @@ pub fn run(args: &EvalArgs) -> Result<Metrics> {
     let t_eval = t1.elapsed().as_secs_f64();
     ensure!(
         m.d2s_used > 0 && m.s2d_used > 0,
-        "no usable distance: {} of {} predicted and {} of {} ground-truth points lie within          --max-dist {} of the other cloud, so the Chamfer distance is undefined (are both clouds          in Blender units? a cloud in millimetres is 1000× too large)",
+        "no usable distance: {} of {} predicted and {} of {} ground-truth points lie within \
+         --max-dist {} of the other cloud, so the Chamfer distance is undefined (are both clouds \
+         in Blender units? a cloud in millimetres is 1000× too large)",
         m.d2s_used,
         m.n_pred,
         m.s2d_used,

@@ -211,7 +211,10 @@ fn run_all(args: &train::TrainArgs, gpu: Option<&Gpu>) -> anyhow::Result<()> {
         let step = s1.meta["step"].as_u64().unwrap_or(0);
         if args.iters.is_some_and(|n| n as u64 > step) {
             anyhow::bail!(
-                "--resume --iters {}: stage 1 ({}) finished at step {step} and stage 2 ({}) was                  built on that grid; extending stage 1 would leave stage 2 stale. Extend stage 1                  alone (train --stage plenoxels --resume --iters N --out {}), then restart stage                  2 (train --stage surface --init {} --out {} --overwrite)",
+                "--resume --iters {}: stage 1 ({}) finished at step {step} and stage 2 ({}) was \
+                 built on that grid; extending stage 1 would leave stage 2 stale. Extend stage 1 \
+                 alone (train --stage plenoxels --resume --iters N --out {}), then restart stage \
+                 2 (train --stage surface --init {} --out {} --overwrite)",
                 args.iters.unwrap_or(0),
                 s1_dir.display(),
                 s2_dir.display(),

@@ -350,7 +350,8 @@ fn check_resume_flags(args: &TrainArgs, cfg: &Stage1Config) -> Result<()> {
     let named: Vec<&str> = clashes.iter().filter(|c| c.1).map(|c| c.0).collect();
     if !named.is_empty() {
         bail!(
-            "--resume continues the checkpoint's configuration (grid {final_res}³, batch {},              preset {}); {} cannot change it (only --iters can)",
+            "--resume continues the checkpoint's configuration (grid {final_res}³, batch {}, \
+             preset {}); {} cannot change it (only --iters can)",
             cfg.batch,
             cfg.preset,
             named.join(", ")

@@ -238,7 +238,8 @@ fn check_resume_flags(args: &TrainArgs, cfg: &SurfaceConfig) -> Result<()> {
     let named: Vec<&str> = clashes.iter().filter(|c| c.1).map(|c| c.0).collect();
     ensure!(
         named.is_empty(),
-        "--resume continues the checkpoint's configuration (batch {}, category {}, preset {});          {} cannot change it (only --surface-iters / --iters can)",
+        "--resume continues the checkpoint's configuration (batch {}, category {}, preset {}); \
+         {} cannot change it (only --surface-iters / --iters can)",
         cfg.batch,
         cfg.category,
         cfg.preset,
