@@ -27,7 +27,7 @@ void main() {
     vec3 d = vec3(pc.cases.v[base + 11u], pc.cases.v[base + 12u], pc.cases.v[base + 13u]);
     float L = pc.cases.v[base + 14u];
     float tau = pc.cases.v[base + 15u];
-    CubicCrossings x = cubic_solve(cubic_cell(c, o, d), cubic_level_ends(c, o, d, L, tau), L);
+    CubicCrossings x = cubic_solve(cubic_cell(c, o, d), cubic_level_ends(c, o, d, L, tau), L, 0.0);
     pc.count.v[i] = x.n;
     pc.s.v[3u * i] = x.s.x;
     pc.s.v[3u * i + 1u] = x.s.y;

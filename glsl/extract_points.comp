@@ -69,7 +69,7 @@ void main() {
                 float u = lattice(ju, R);
                 float v = lattice(jv, R);
                 vec3 o = axis == 0u ? vec3(0.0, u, v) : (axis == 1u ? vec3(v, 0.0, u) : vec3(u, v, 0.0));
-                CubicCrossings x = cubic_solve(cubic_cell(c, o, d), cubic_level_ends(c, o, d, 1.0, tau), 1.0);
+                CubicCrossings x = cubic_solve(cubic_cell(c, o, d), cubic_level_ends(c, o, d, 1.0, tau), 1.0, 0.0);
                 for (uint k = 0u; k < x.n; ++k) {
                     float s = k == 0u ? x.s.x : (k == 1u ? x.s.y : x.s.z);
                     precise vec3 p = fma(vec3(s), d, o);

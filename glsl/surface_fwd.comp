@@ -102,6 +102,11 @@ void main() {
     float c[8];
     uint mask = 0u;
     vec3 q0, q1, cc; // the found cell's entry/exit points and cubic C1..C3
+    // Per level, the sign of δ − τ just before the last solved cell's exit (bits of face_pos /
+    // face_neg) and that exit's t (FaceSigns in the twin).
+    float face_t = 0.0;
+    uint face_pos = 0u;
+    uint face_neg = 0u;
     while (!done) {
         // Walk on to the next cell where some level can cross (all corners allocated, min/max and
         // segment culling passed) before solving: lanes then reach the cubic solver together instead of
@@ -134,8 +139,8 @@ void main() {
             for (int i = 0; i < 8; i++) c[i] = pc.delta.v[lk[i]];
             mask = surf_level_mask(c, lv, nl);
             if (mask != 0u) {
-                q0 = surf_local(og, dn, t0, l);
-                q1 = surf_local(og, dn, t1, l);
+                q0 = surf_local(w, og, dn, t0, l);
+                q1 = surf_local(w, og, dn, t1, l);
                 cc = cubic_cell(c, q0, dn);
                 mask = surf_segment_mask(c, cc, q0, q1, t1 - t0, lv, mask);
             }
@@ -150,7 +155,14 @@ void main() {
         if (!found) break;
         precise float L = t1 - t0;
         float hs[SURF_CELL_KEEP];
-        uint nh = surf_cell_hits(c, cc, q0, q1, L, lv, mask, hs);
+        // Signs before the entry point: the last solved cell's, when it ended here.
+        bool joined = t0 == face_t;
+        uint epos, eneg;
+        uint nh = surf_cell_hits(c, cc, q0, q1, L, lv, mask, joined ? face_pos : 0u,
+                                 joined ? face_neg : 0u, hs, epos, eneg);
+        face_t = t1;
+        face_pos = epos;
+        face_neg = eneg;
         for (uint h = 0u; h < nh; h++) {
             if (float(j) >= pc.a) {
                 cut++;

@@ -243,6 +243,11 @@ void main() {
     float c[8];
     uint mask = 0u;
     vec3 q0, q1, cc; // the found cell's entry/exit points and cubic C1..C3
+    // Per level, the sign of δ − τ just before the last solved cell's exit (bits of face_pos /
+    // face_neg) and that exit's t (FaceSigns in the twin).
+    float face_t = 0.0;
+    uint face_pos = 0u;
+    uint face_neg = 0u;
     uint nb = surf_blocks_per_axis(n, pc.block_shift);
     uint bbase = surf_live_words(n);
     uint skipped = SURF_NO_BLOCK;
@@ -270,8 +275,8 @@ void main() {
             [[unroll]] for (int i = 0; i < 8; i++) c[i] = pc.delta.v[lk[i]];
             mask = surf_level_mask(c, lv, nl);
             if (mask != 0u) {
-                q0 = surf_local(og, dn, t0, l);
-                q1 = surf_local(og, dn, t1, l);
+                q0 = surf_local(w, og, dn, t0, l);
+                q1 = surf_local(w, og, dn, t1, l);
                 cc = cubic_cell(c, q0, dn);
                 mask = surf_segment_mask(c, cc, q0, q1, t1 - t0, lv, mask);
             }
@@ -286,7 +291,14 @@ void main() {
         if (!found) break;
         precise float L = t1 - t0;
         float hs[SURF_CELL_KEEP];
-        uint nh = surf_cell_hits(c, cc, q0, q1, L, lv, mask, hs);
+        // Signs before the entry point: the last solved cell's, when it ended here.
+        bool joined = t0 == face_t;
+        uint epos, eneg;
+        uint nh = surf_cell_hits(c, cc, q0, q1, L, lv, mask, joined ? face_pos : 0u,
+                                 joined ? face_neg : 0u, hs, epos, eneg);
+        face_t = t1;
+        face_pos = epos;
+        face_neg = eneg;
         float cmin = min(min(min(c[0], c[1]), min(c[2], c[3])), min(min(c[4], c[5]), min(c[6], c[7])));
         float cmax = max(max(max(c[0], c[1]), max(c[2], c[3])), max(max(c[4], c[5]), max(c[6], c[7])));
         for (uint h = 0u; h < nh; h++) {

@@ -5,7 +5,9 @@
 use alphasurf::bench::cubic::{score_case, DS_TARGET};
 use alphasurf::check::cases::{gen_cases, CaseClass, OracleCase, FLOOR};
 use alphasurf::cpu::cubic_solve::CubicCase;
-use alphasurf::math::cubic::{cell_cubic, crossings, level_ends, Crossings, MERGE_EPS};
+use alphasurf::math::cubic::{
+    cell_cubic, crossings, exit_sign, level_ends, solve_crossings, Crossings, MERGE_EPS,
+};
 use alphasurf::math::cubic_oracle::{eval64, oracle_coefs, oracle_crossings, oracle_solve};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
@@ -247,9 +249,36 @@ fn root_exactly_at_entry_is_owned_by_the_entering_cell() {
     assert_eq!(s, 0.0);
     let after = trilerp64(&corners, [0.006, 0.0064, 0.37 - 0.0048], tau);
     assert_eq!(rising, after > 0.0);
-    // A level that only touches the entry and stays on one side after it is still a crossing at 0
-    // (the cell cannot see the previous cell's side), in the direction f leaves.
+    // With no previous cell (`before` unknown) a zero at the entry is a crossing at 0 in the
+    // direction f leaves, as in the oracle.
     assert_eq!(oracle_crossings(&corners, o, d, 0.5, tau).len(), 1);
+    // Told the sign before the entry point (the previous cell's exit sign), the cell counts the
+    // zero only when f changes sign through it: a touch is no crossing.
+    let cc = cell_cubic(&corners, o, d);
+    let ends = level_ends(&corners, o, d, 0.5, tau);
+    let leave = if rising { 1.0 } else { -1.0 };
+    let x = solve_crossings(cc, ends, 0.5, -leave);
+    assert_eq!((x.n, x.s[0], x.rising[0]), (1, 0.0, rising), "{x:?}");
+    let x = solve_crossings(cc, ends, 0.5, leave);
+    assert_eq!(x.n, 0, "touch counted: {x:?}");
+    assert_eq!(exit_sign(&x, ends[0], leave), leave);
+}
+
+#[test]
+fn exit_sign_is_the_sign_the_walk_ends_on() {
+    // δ = x − ½ along +x: one rising crossing, then positive.
+    let corners = [-0.5f32, -0.5, -0.5, -0.5, 0.5, 0.5, 0.5, 0.5];
+    let (o, d) = ([0.0, 0.3, 0.6], [1.0, 0.0, 0.0]);
+    for (tau, want) in [(0.0f32, 1.0f32), (-0.75, 1.0), (0.75, -1.0), (0.5, -1.0)] {
+        let ends = level_ends(&corners, o, d, 1.0, tau);
+        let x = solve_crossings(cell_cubic(&corners, o, d), ends, 1.0, 0.0);
+        assert_eq!(exit_sign(&x, ends[0], 0.0), want, "τ {tau}: {x:?}");
+    }
+    // A segment on the level everywhere passes `before` on.
+    let flat = [0.25f32; 8];
+    let ends = level_ends(&flat, o, d, 1.0, 0.25);
+    let x = solve_crossings(cell_cubic(&flat, o, d), ends, 1.0, -1.0);
+    assert_eq!((x.n, exit_sign(&x, ends[0], -1.0)), (0, -1.0));
 }
 
 #[test]
@@ -345,12 +374,12 @@ fn tangent_touch_is_no_hit() {
         c3: 0.0,
     };
     // f = s² − s + 0.25 = (s − 0.5)²: f(0) = f(1) = 0.25.
-    let x = alphasurf::math::cubic::solve_crossings(c, [0.25, 0.25], 1.0);
+    let x = solve_crossings(c, [0.25, 0.25], 1.0, 0.0);
     assert_eq!(x.n, 0, "exact double root: {x:?}");
     // Just above tangency: still no hit; just below: two crossings at 0.5 ± 0.01.
-    let x = alphasurf::math::cubic::solve_crossings(c, [0.2501, 0.2501], 1.0);
+    let x = solve_crossings(c, [0.2501, 0.2501], 1.0, 0.0);
     assert_eq!(x.n, 0);
-    let x = alphasurf::math::cubic::solve_crossings(c, [0.2499, 0.2499], 1.0);
+    let x = solve_crossings(c, [0.2499, 0.2499], 1.0, 0.0);
     assert_eq!(x.n, 2, "{x:?}");
     assert!(!x.rising[0] && x.rising[1]);
     assert!(

@@ -962,3 +962,15 @@ fn missing_rays_and_bad_input() {
     assert!(build_blocks(&sc.grid(), &[0.0; 9], 0.0, SHIFT).is_err());
     assert!(build_blocks(&sc.grid(), &sc.levels, -1.0, SHIFT).is_err());
 }
+
+#[test]
+fn face_edge_corner_crossings_counted_once_by_the_cpu_twin() {
+    let r = alphasurf::check::surface_faces::face_ownership(None, 5).expect("runs");
+    let (rays, missed, extra, first) = &r.backends[0];
+    assert!(
+        *rays > 10_000 && r.exact_zeros > 10_000,
+        "{rays} rays, {} exact zeros",
+        r.exact_zeros
+    );
+    assert!(*missed == 0 && *extra == 0, "{r:?} first {first:?}");
+}

@@ -7,7 +7,9 @@
 //   cubic_cell(c, o, d)      -> vec3(C1, C2, C3), shared by every level of the cell
 //   cubic_level_ends(c, o, d, L, tau) -> vec2(f(0), f(L)): trilerps of (corner - tau) at the entry
 //                               and exit points (a level through a face is decided exactly)
-//   cubic_solve(C123, ends, L) -> sign-change crossings of f on [0, L), sorted, merged
+//   cubic_solve(C123, ends, L, before) -> sign-change crossings of f on [0, L), sorted, merged;
+//                               before = sign of f just before s = 0 (0: unknown)
+//   cubic_exit_sign(x, f0, before) -> sign of f just before s = L (the next cell's `before`)
 #ifndef CUBIC_GLSL
 #define CUBIC_GLSL
 #extension GL_EXT_control_flow_attributes : require
@@ -237,8 +239,18 @@ CubicCrossings cubic_merge(CubicCrossings x, float L) {
     return o;
 }
 
+// The sign (+-1, or 0 if unknown) of f just before s = L: after the last crossing its direction,
+// else the sign at s = 0 (f0, or `before` when f0 = 0); see exit_sign in the twin.
+float cubic_exit_sign(CubicCrossings x, float f0, float before) {
+    if (x.n > 0u) return (x.rising & (1u << (x.n - 1u))) != 0u ? 1.0 : -1.0;
+    return f0 > 0.0 ? 1.0 : (f0 < 0.0 ? -1.0 : before);
+}
+
 // CubicCrossings of C3 s^3 + C2 s^2 + C1 s + C0' on [0, L); c123 = (C1, C2, C3); ends = (f(0), f(L)).
-CubicCrossings cubic_solve(vec3 c123, vec2 ends, float L) {
+// A zero at s = 0 is this cell's crossing when the sign after it differs from `before` (the sign
+// of f just before the entry point, from the previous cell of the walk; 0 when unknown: always);
+// a zero at s = L is left to the next cell (see solve_crossings in the twin).
+CubicCrossings cubic_solve(vec3 c123, vec2 ends, float L, float before) {
     float c0 = ends.x;
     CubicCrossings none;
     none.n = 0u;
@@ -281,7 +293,7 @@ CubicCrossings cubic_solve(vec3 c123, vec2 ends, float L) {
     if ((v0 > 0.0 && v1 > 0.0 && v2 > 0.0 && v3 > 0.0) || (v0 < 0.0 && v1 < 0.0 && v2 < 0.0 && v3 < 0.0))
         return none;
     CubicWalk wk;
-    wk.ps = v0 > 0.0 ? 1.0 : (v0 < 0.0 ? -1.0 : 0.0);
+    wk.ps = v0 > 0.0 ? 1.0 : (v0 < 0.0 ? -1.0 : before);
     wk.pending = v0 == 0.0;
     wk.zpos = 0.0;
     wk.res = none;

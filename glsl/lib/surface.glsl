@@ -6,10 +6,11 @@
 //
 // Conventions: grid = p·scale + offset; the grid-space direction is normalised, so t and s are in
 // voxels. A cell's piece [t0, t1] of the DDA walk has entry point q0 = P(t0) − l and exit point
-// q1 = P(t1) − l with P(t) = og + t·dn, both clamped to [0,1]³ and snapped onto the nearest face
-// within CUBIC_SNAP: the exit point of one cell and the entry point of the next are the same
-// global point P(t1), so a level through the shared face is decided by the same corner values on
-// both sides (the crossing belongs to the entered cell: half-open [0, L)).
+// q1 = P(t1) − l with P(t) = og + t·dn, clamped to [0,1]³, and exactly 0 or 1 on every axis whose
+// cell face the DDA crosses at that t (the walk's own plane time): the exit of one cell and the
+// entry of the next are the same point of their shared face, edge or corner, a level's value there
+// is the same trilerp of the shared corners on both sides, and a crossing there belongs to the
+// entered cell, which is given the sign before it (surf_cell_hits' bpos/bneg).
 #ifndef SURFACE_GLSL
 #define SURFACE_GLSL
 
@@ -39,12 +40,21 @@ void surf_ray(vec3 ro, vec3 rd, vec3 scale, vec3 offset, out vec3 og, out vec3 d
     dn = ray_unit(dg);
 }
 
-// Local coordinates in cell l of P(t) = og + t·dn, clamped to [0,1]³, the coordinate nearest a
-// face snapped onto it within CUBIC_SNAP.
-vec3 surf_local(vec3 og, vec3 dn, float t, ivec3 l) {
+// Local coordinates in cell l of P(t) = og + t·dn, clamped to [0,1]³; an axis whose lower or upper
+// cell plane the walk w crosses at exactly t ((plane − o)·inv, dda_next's expression) is put
+// exactly on that face.
+vec3 surf_local(Dda w, vec3 og, vec3 dn, float t, ivec3 l) {
     precise vec3 p = og + t * dn;
-    precise vec3 q = p - vec3(l);
-    return cubic_exit_point(q, dn, 0.0);
+    precise vec3 q = clamp(p - vec3(l), 0.0, 1.0);
+    precise vec3 tlo = (vec3(l) - w.o) * w.inv;
+    precise vec3 thi = (vec3(l + 1) - w.o) * w.inv;
+    [[unroll]] for (int a = 0; a < 3; a++) {
+        if (w.step[a] != 0) {
+            if (tlo[a] == t) q[a] = 0.0;
+            else if (thi[a] == t) q[a] = 1.0;
+        }
+    }
+    return q;
 }
 
 // Hits a cell's list keeps: its SURF_CELL_KEEP smallest (the count still covers them all). A kernel
@@ -137,20 +147,29 @@ uint surf_segment_mask(float c[8], vec3 cc, vec3 q0, vec3 q1, float L, float lv[
 // Front-face (rising) crossings in one cell of the levels in `mask` (from surf_segment_mask):
 // their count, and the SURF_CELL_KEEP smallest s ∈ [0, L) in ascending order in hs (read them with
 // surf_pop); corners c (paper order), cc = cubic_cell(c, q0, d) (C1..C3, formed once per cell),
-// entry/exit points q0/q1. Each level solves with its own exact end values.
+// entry/exit points q0/q1. Each level solves with its own exact end values and the sign before
+// the entry point (bit i of bpos/bneg; neither: unknown), and leaves the sign before the exit in
+// epos/eneg (for the next cell when it starts at this cell's t1).
 uint surf_cell_hits(float c[8], vec3 cc, vec3 q0, vec3 q1, float L, float lv[SURF_MAX_LEVELS],
-                    uint mask, out float hs[SURF_CELL_KEEP]) {
+                    uint mask, uint bpos, uint bneg, out float hs[SURF_CELL_KEEP], out uint epos,
+                    out uint eneg) {
     uint n = 0u;
+    epos = 0u;
+    eneg = 0u;
     [[unroll]] for (uint i = 0u; i < SURF_CELL_KEEP; i++) hs[i] = SURF_NO_HIT;
     while (mask != 0u) {
         uint i = uint(findLSB(mask));
         mask &= mask - 1u;
         float tau = lv[i];
         vec2 ends = vec2(cubic_trilerp_level(c, q0, tau), cubic_trilerp_level(c, q1, tau));
-        CubicCrossings x = cubic_solve(cc, ends, L);
+        float before = ((bpos >> i) & 1u) != 0u ? 1.0 : (((bneg >> i) & 1u) != 0u ? -1.0 : 0.0);
+        CubicCrossings x = cubic_solve(cc, ends, L, before);
         if (x.n > 0u && (x.rising & 1u) != 0u) surf_insert(hs, n, x.s.x);
         if (x.n > 1u && (x.rising & 2u) != 0u) surf_insert(hs, n, x.s.y);
         if (x.n > 2u && (x.rising & 4u) != 0u) surf_insert(hs, n, x.s.z);
+        float e = cubic_exit_sign(x, ends.x, before);
+        if (e > 0.0) epos |= 1u << i;
+        else if (e < 0.0) eneg |= 1u << i;
     }
     return n;
 }

@@ -11,6 +11,7 @@ pub mod fill_pattern;
 pub mod plenoxel;
 pub mod sh_eval;
 pub mod surface_blocks;
+pub mod surface_faces;
 pub mod surface_fwd;
 pub mod surface_reg;
 pub mod surface_train;
@@ -57,6 +58,7 @@ pub const CHECKS: &[(&str, CheckFn)] = &[
     ("surface_block_radius", surface_blocks::check_radius),
     ("surface_live_cells", surface_blocks::check_live),
     ("surface_fwd", surface_fwd::check),
+    ("surface_faces", surface_faces::check),
     ("surface_train", surface_train::check),
     ("surface_delta_tv", surface_reg::check_delta_tv),
     ("surface_opacity_reg", surface_reg::check_opacity_reg),

@@ -95,7 +95,12 @@ fn invocation(inp: &ExtractInput, ci: usize, axis: u32, out: &mut Vec<ExtractPoi
                     1 => [v, 0.0, u],
                     _ => [u, v, 0.0],
                 };
-                let x = solve_crossings(cell_cubic(&c, o, d), level_ends(&c, o, d, 1.0, tau), 1.0);
+                let x = solve_crossings(
+                    cell_cubic(&c, o, d),
+                    level_ends(&c, o, d, 1.0, tau),
+                    1.0,
+                    0.0,
+                );
                 for (s, _) in x.iter() {
                     let p = [0, 1, 2].map(|k| s.mul_add(d[k], o[k]));
                     let mut alpha = 1.0;

@@ -8,7 +8,7 @@ use crate::math::dda::{dda_cell_index, dda_init, dda_next, ray_unit, Dda, DdaPie
 use crate::math::sh::sh_basis;
 use crate::math::surface::{
     surf_alpha, surf_cell_hits, surf_gamma, surf_level_mask, surf_local, surf_ray,
-    surf_segment_mask, SurfOut, SURF_MAX_LEVELS,
+    surf_segment_mask, FaceSigns, SurfOut, SURF_MAX_LEVELS,
 };
 use crate::math::surface_blocks::{
     surf_block_index, surf_block_skip, surf_blocks_per_axis, surf_box_span, surf_live_words,
@@ -161,8 +161,8 @@ impl Iterator for CellWalk<'_> {
             let mut mask = surf_level_mask(&c, self.levels);
             let (mut q0, mut q1, mut cc) = ([0.0; 3], [0.0; 3], CellCubic::default());
             if mask != 0 {
-                q0 = surf_local(self.og, self.dn, piece.t0, l);
-                q1 = surf_local(self.og, self.dn, piece.t1, l);
+                q0 = surf_local(&self.w, self.og, self.dn, piece.t0, l);
+                q1 = surf_local(&self.w, self.og, self.dn, piece.t1, l);
                 cc = cell_cubic(&c, q0, self.dn);
                 let len = piece.t1 - piece.t0;
                 mask = surf_segment_mask(&c, cc, q0, q1, len, self.levels, mask);
@@ -202,10 +202,16 @@ pub fn render_ray(
     let mut j = 0u32;
     let mut cnt: SurfCounts = [0; 6];
     let mut walk = CellWalk::new(g, og, dn, levels, blocks);
+    let mut face = FaceSigns::default();
     'walk: for cell in walk.by_ref() {
         let (piece, c, q0, lk) = (cell.piece, cell.c, cell.q0, cell.lk);
         let len = piece.t1 - piece.t0;
-        let hits = surf_cell_hits(&c, cell.cc, q0, cell.q1, len, levels, cell.mask);
+        let before = face.before(piece.t0);
+        let hits = surf_cell_hits(&c, cell.cc, q0, cell.q1, len, levels, cell.mask, before);
+        face = FaceSigns {
+            t: piece.t1,
+            ..hits.exit
+        };
         for &s in hits.as_slice() {
             if j as f32 >= p.a {
                 cnt[4] += 1;

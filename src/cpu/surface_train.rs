@@ -27,7 +27,9 @@ use super::surface_fwd::{validate_blocks, validate_inputs, CellWalk, SurfacePara
 use crate::abi::surface_grid::SurfaceGridRef;
 use crate::math::dda::ray_unit;
 use crate::math::sh::sh_basis;
-use crate::math::surface::{surf_alpha, surf_cell_hits, surf_gamma, surf_ray, SURF_MAX_LEVELS};
+use crate::math::surface::{
+    surf_alpha, surf_cell_hits, surf_gamma, surf_ray, FaceSigns, SURF_MAX_LEVELS,
+};
 use crate::math::surface_blocks::SkipRef;
 use crate::math::trilerp::trilerp_weights;
 use anyhow::{ensure, Result};
@@ -120,10 +122,16 @@ pub fn trace_ray(
     };
     let mut t_acc = 1.0f32;
     let mut walk = CellWalk::new(g, og, dn, levels, blocks);
+    let mut face = FaceSigns::default();
     'walk: for cell in walk.by_ref() {
         let (piece, l, c, q0, lk) = (cell.piece, cell.piece.cell, cell.c, cell.q0, cell.lk);
         let len = piece.t1 - piece.t0;
-        let hits = surf_cell_hits(&c, cell.cc, q0, cell.q1, len, levels, cell.mask);
+        let before = face.before(piece.t0);
+        let hits = surf_cell_hits(&c, cell.cc, q0, cell.q1, len, levels, cell.mask, before);
+        face = FaceSigns {
+            t: piece.t1,
+            ..hits.exit
+        };
         for (&s, &lv) in hits.as_slice().iter().zip(hits.levels()) {
             let j = tr.n;
             if j as f32 >= p.a {

@@ -262,12 +262,15 @@ impl Walk {
 /// `ends` = [f(0), f(L)] from [`level_ends`]: [0, L] is split at the real roots of f′ into
 /// monotone pieces (values at the critical points by Horner, snapped to 0 within rounding); a
 /// piece whose end values have opposite signs holds one root, found by [`refine_root`] on the
-/// original cubic. A zero at s = 0 is a crossing in
-/// the direction f takes after it (the entering cell owns it); a zero at s = L is left to the next
-/// cell; crossings closer than `MERGE_EPS·max(1, L)` are clustered and a cluster keeps its first
+/// original cubic. A zero at s = 0 belongs to this cell (the one the ray enters): it is a crossing
+/// when the sign f takes after it differs from `before`, the sign (±1) of f just before the entry
+/// point when the previous cell of the walk ended there (from [`exit_sign`]), or always when
+/// `before` is 0 (unknown: no previous cell); a zero at s = L is left to the next cell. Both cells
+/// read that shared point's value from the same trilerp of the shared corners, so a crossing on a
+/// face is counted once, by the cell entered when that value is 0. Crossings closer than `MERGE_EPS·max(1, L)` are clustered and a cluster keeps its first
 /// crossing only when it changes the sign (odd count). Never NaN/Inf: coefficients that are
 /// non-finite (overflow in their formation) or L outside (0, [`MAX_L`]) give no crossings.
-pub fn solve_crossings(cc: CellCubic, ends: [f32; 2], l: f32) -> Crossings {
+pub fn solve_crossings(cc: CellCubic, ends: [f32; 2], l: f32, before: f32) -> Crossings {
     let [c0, cl] = ends;
     let none = Crossings::default();
     if !(l > 0.0 && l < MAX_L) {
@@ -322,7 +325,7 @@ pub fn solve_crossings(cc: CellCubic, ends: [f32; 2], l: f32) -> Crossings {
         } else if v0 < 0.0 {
             -1.0
         } else {
-            0.0
+            before
         },
         pending: v0 == 0.0,
         zpos: 0.0,
@@ -349,6 +352,26 @@ pub fn solve_crossings(cc: CellCubic, ends: [f32; 2], l: f32) -> Crossings {
     merge(walk.out, l)
 }
 
+/// The sign (±1, or 0 if unknown) of f just before s = L, for the next cell's `before` in
+/// [`solve_crossings`]: after the last crossing its direction, else the sign at s = 0 (`f0`, or
+/// `before` when f0 = 0). Crossings alternate and a merged cluster keeps its net direction, so this
+/// is the sign the sign walk ends on.
+pub fn exit_sign(x: &Crossings, f0: f32, before: f32) -> f32 {
+    if x.n > 0 {
+        if x.rising[x.n as usize - 1] {
+            1.0
+        } else {
+            -1.0
+        }
+    } else if f0 > 0.0 {
+        1.0
+    } else if f0 < 0.0 {
+        -1.0
+    } else {
+        before
+    }
+}
+
 /// Cluster merge and the half-open clamp s < L. Crossings alternate in direction, so a cluster
 /// (neighbours closer than `MERGE_EPS·max(1, L)`) changes the sign iff its count is odd; it then
 /// keeps its first. With at most three crossings: 0 is kept unless it opens an even cluster {0,1};
@@ -370,11 +393,12 @@ fn merge(x: Crossings, l: f32) -> Crossings {
     out
 }
 
-/// Convenience: coefficients and crossings for one (cell, ray, level).
+/// Convenience: coefficients and crossings for one (cell, ray, level), no previous cell.
 pub fn crossings(corners: &[f32; 8], o: [f32; 3], d: [f32; 3], l: f32, tau: f32) -> Crossings {
     solve_crossings(
         cell_cubic(corners, o, d),
         level_ends(corners, o, d, l, tau),
         l,
+        0.0,
     )
 }

@@ -4,12 +4,14 @@
 //!
 //! grid = p·scale + offset and the grid-space direction is normalised, so t and s are in voxels.
 //! A cell's piece [t0, t1] of the DDA walk has entry point q0 = P(t0) − l and exit point
-//! q1 = P(t1) − l with P(t) = og + t·dn, clamped to [0,1]³ with the coordinate nearest a face
-//! snapped onto it: the exit of one cell and the entry of the next are the same global point, so a
-//! level through a shared face is decided alike on both sides, and belongs to the entered cell.
+//! q1 = P(t1) − l with P(t) = og + t·dn, clamped to [0,1]³, and exactly 0 or 1 on every axis
+//! whose cell face the DDA crosses at that t (the same plane time as the walk's): the exit of one
+//! cell and the entry of the next are then the same point of their shared face, edge or corner,
+//! a level's value there is the same trilerp of the shared corners on both sides, and a crossing
+//! there belongs to the entered cell, which is told the sign before it ([`FaceSigns`]).
 
-use super::cubic::{exit_point, solve_crossings, trilerp_level, CellCubic};
-use super::dda::ray_unit;
+use super::cubic::{exit_sign, solve_crossings, trilerp_level, CellCubic};
+use super::dda::{ray_unit, Dda};
 use super::trilerp::trilerp;
 
 /// At most this many levels τ_i.
@@ -41,11 +43,54 @@ pub fn surf_ray(
     (og, ray_unit(dg))
 }
 
-/// Local coordinates in cell `l` of og + t·dn, clamped to [0,1]³, the coordinate nearest a face
-/// snapped onto it within `cubic::SNAP`.
-pub fn surf_local(og: [f32; 3], dn: [f32; 3], t: f32, l: [i32; 3]) -> [f32; 3] {
-    let q = std::array::from_fn(|i| (og[i] + t * dn[i]) - l[i] as f32);
-    exit_point(q, dn, 0.0)
+/// Local coordinates in cell `l` of og + t·dn, clamped to [0,1]³; an axis whose lower or upper
+/// cell plane the walk `w` crosses at exactly `t` (its plane time ((plane − o)·1/d, the DDA's own
+/// expression) equals t) is put exactly on that face.
+pub fn surf_local(w: &Dda, og: [f32; 3], dn: [f32; 3], t: f32, l: [i32; 3]) -> [f32; 3] {
+    std::array::from_fn(|a| {
+        let q = ((og[a] + t * dn[a]) - l[a] as f32).clamp(0.0, 1.0);
+        if w.step[a] == 0 {
+            q
+        } else if (l[a] as f32 - w.o[a]) * w.inv[a] == t {
+            0.0
+        } else if ((l[a] + 1) as f32 - w.o[a]) * w.inv[a] == t {
+            1.0
+        } else {
+            q
+        }
+    })
+}
+
+/// Per level, the sign of δ − τ just before the exit of the last solved cell of a ray's walk
+/// (bit i of `pos`/`neg`; neither when unknown) and that exit's t: the next solved cell uses them
+/// only when it starts at that t, i.e. shares that face point.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct FaceSigns {
+    pub t: f32,
+    pub pos: u32,
+    pub neg: u32,
+}
+
+impl FaceSigns {
+    /// The signs before a cell entered at `t0` (none unless the previous solved cell ended there).
+    pub fn before(&self, t0: f32) -> FaceSigns {
+        if t0 == self.t {
+            *self
+        } else {
+            FaceSigns::default()
+        }
+    }
+
+    /// Level i's sign: ±1, or 0 when unknown.
+    pub fn sign(&self, i: usize) -> f32 {
+        if self.pos & (1 << i) != 0 {
+            1.0
+        } else if self.neg & (1 << i) != 0 {
+            -1.0
+        } else {
+            0.0
+        }
+    }
 }
 
 /// A cell's sorted front-face hits (s values).
@@ -55,6 +100,8 @@ pub struct CellHits {
     pub s: [f32; SURF_MAX_CELL_HITS],
     /// Level index of each hit.
     pub level: [u32; SURF_MAX_CELL_HITS],
+    /// The solved levels' signs before the exit (`t` left 0 for the caller to set).
+    pub exit: FaceSigns,
 }
 
 impl CellHits {
@@ -155,7 +202,9 @@ pub fn surf_segment_mask(
 /// Front-face (rising) crossings in one cell of the levels in `mask` (from
 /// [`surf_segment_mask`]), sorted by s ∈ [0, L): corners `c` (paper order), `cc` =
 /// `cell_cubic(c, q0, d)` (C1..C3, formed once per cell), entry/exit points; each level solves
-/// with its own exact end values.
+/// with its own exact end values and the sign before the entry point from `before`
+/// (`FaceSigns::before`).
+#[allow(clippy::too_many_arguments)]
 pub fn surf_cell_hits(
     c: &[f32; 8],
     cc: CellCubic,
@@ -164,22 +213,31 @@ pub fn surf_cell_hits(
     l: f32,
     levels: &[f32],
     mut mask: u32,
+    before: FaceSigns,
 ) -> CellHits {
     let mut out = CellHits {
         n: 0,
         s: [0.0; SURF_MAX_CELL_HITS],
         level: [0; SURF_MAX_CELL_HITS],
+        exit: FaceSigns::default(),
     };
     while mask != 0 {
         let i = mask.trailing_zeros() as usize;
         mask &= mask - 1;
         let tau = levels[i];
         let ends = [trilerp_level(c, q0, tau), trilerp_level(c, q1, tau)];
-        let x = solve_crossings(cc, ends, l);
+        let b = before.sign(i);
+        let x = solve_crossings(cc, ends, l, b);
         for (s, rising) in x.iter() {
             if rising {
                 out.insert(s, i as u32);
             }
+        }
+        let e = exit_sign(&x, ends[0], b);
+        if e > 0.0 {
+            out.exit.pos |= 1 << i;
+        } else if e < 0.0 {
+            out.exit.neg |= 1 << i;
         }
     }
     out
@@ -236,6 +294,7 @@ mod tests {
             1.0,
             &levels,
             mask,
+            FaceSigns::default(),
         );
         assert_eq!(h.n, 3);
         for (s, want) in h.as_slice().iter().zip([0.2, 0.5, 0.7]) {
@@ -249,6 +308,7 @@ mod tests {
             1.0,
             &levels,
             mask,
+            FaceSigns::default(),
         );
         assert_eq!(h.n, 0);
     }
@@ -331,7 +391,7 @@ mod tests {
                 let keep = surf_segment_mask(&c, cc, q0, q1, l, chunk, all);
                 for (i, &tau) in chunk.iter().enumerate() {
                     let ends = [trilerp_level(&c, q0, tau), trilerp_level(&c, q1, tau)];
-                    let x = solve_crossings(cc, ends, l);
+                    let x = solve_crossings(cc, ends, l, 0.0);
                     solved += 1;
                     if keep & (1 << i) != 0 {
                         continue;
