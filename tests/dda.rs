@@ -9,7 +9,7 @@
 //! Adversarial rays (exactly representable crossings) allow no exception at all.
 
 use alphasurf::check::dda_walk::{adversarial_rays, fuzz_rays, random_rays, sphere_rays};
-use alphasurf::math::dda::{dda_init, ray_box, DdaPiece};
+use alphasurf::math::dda::{dda_init, ray_box, ray_unit, DdaPiece};
 
 type Piece = ([i32; 3], f64, f64);
 
@@ -321,4 +321,54 @@ fn fuzz_walks_terminate_in_range() {
     }
     // Coverage floor: 4974 of the 200,000 hit (rays with a direction component ≥ DDA_HUGE miss).
     assert!(walked > 4_500, "{walked} fuzz rays hit the box");
+}
+
+/// Rays through exact cell edges and corners with unit directions (`ray_unit`, as the renderers
+/// use): every moving coordinate starts at a half-integer and the moving components are equal in
+/// magnitude, so those axes reach their planes at the same t by symmetry, although no t is exact.
+/// The walk must step them at once (no zero-length or detour cell) and visit exactly the cells of
+/// the exact line. Run in both contraction modes (`--features fused`: the twin's a·b + c fused).
+#[test]
+fn edge_and_corner_rays_step_every_axis_at_once() {
+    let (mut rays, mut cells) = (0, 0);
+    for n in [4i32, 9] {
+        for moving in [&[0usize, 1][..], &[0, 2], &[1, 2], &[0, 1, 2]] {
+            let fixed: Vec<usize> = (0..3).filter(|a| !moving.contains(a)).collect();
+            for signs in 0..1u32 << moving.len() {
+                for m in 0..n {
+                    for k in 1..2 * (n - 1) {
+                        let mut o = [0f32; 3];
+                        let mut d = [0f32; 3];
+                        for (i, &a) in moving.iter().enumerate() {
+                            let up = signs & (1 << i) == 0;
+                            // The first moving axis enters at the box face; the others offset by m.
+                            let off = if i == 0 { 0 } else { m } as f32;
+                            d[a] = if up { 1.0 } else { -1.0 };
+                            o[a] = if up {
+                                -0.5 + off
+                            } else {
+                                (n - 1) as f32 + 0.5 - off
+                            };
+                        }
+                        for &a in &fixed {
+                            o[a] = k as f32 * 0.5;
+                        }
+                        // Exact cells: at u = 0, 1, 2, … every moving coordinate is a half-integer.
+                        let want: Vec<[i32; 3]> = (0..2 * n + 2)
+                            .map(|u| -> [f64; 3] {
+                                std::array::from_fn(|a| o[a] as f64 + u as f64 * d[a] as f64)
+                            })
+                            .filter(|p: &[f64; 3]| p.iter().all(|&x| x > 0.0 && x < (n - 1) as f64))
+                            .map(|p| p.map(|x| (x.floor() as i32).min(n - 2)))
+                            .collect();
+                        let got = cells_of(o, ray_unit(d), n);
+                        assert_eq!(got, want, "n {n} o {o:?} d {d:?}");
+                        rays += 1;
+                        cells += got.len();
+                    }
+                }
+            }
+        }
+    }
+    assert!(rays > 2000 && cells > 10_000, "{rays} rays, {cells} cells");
 }

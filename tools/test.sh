@@ -11,3 +11,6 @@ fi
 cargo build --release --locked
 ./target/release/alphasurf devices
 cargo test --release --locked --tests -- --test-threads 2
+# The twins' decision paths with a·b + c contracted (math::madd, feature `fused`): the DDA, cubic
+# and surface-hit parity tests must pass unchanged (issue 21; about a minute of extra build).
+cargo test --release --locked --features fused --test dda --test cubic --test surface_fwd -- --test-threads 2

@@ -34,6 +34,9 @@ float dda_adjacent(float y, bool up) {
     return uintBitsToFloat(floatBitsToUint(y) + (up ? 1u : 0xffffffffu));
 }
 
+// Above this |t| the entry point's exact product is not formed (4097·t would overflow).
+const float DDA_SPLIT_MAX = 1e30;
+
 // The exact product a·b = p + q (Dekker's product with Veltkamp's split, 4097 = 2^12 + 1).
 void dda_two_prod(float a, float b, out float p, out float q) {
     precise float pp = a * b;
@@ -164,8 +167,20 @@ Dda dda_init(vec3 o, vec3 d, int n, float t_min) {
     s.t_end = tt.y;
     ivec3 up = max(s.step, ivec3(0));
     // Estimate the entry cell from the entry point, then settle it with the plane crossings
-    // themselves: the next plane must lie beyond t, the previous one at or before t.
-    precise vec3 p = o + tt.x * d;
+    // themselves: the next plane must lie beyond t, the previous one at or before t. The entry
+    // point is o + (t·d as an exact product p + q), so no compiler's contraction changes it (when
+    // o and t·d nearly cancel, a fused and an unfused o + t·d can lie several cells apart). Past
+    // DDA_SPLIT_MAX the split would overflow: there the plain product (no cell is resolved anyway).
+    vec3 ph, pl;
+    dda_two_prod(tt.x, d.x, ph.x, pl.x);
+    dda_two_prod(tt.x, d.y, ph.y, pl.y);
+    dda_two_prod(tt.x, d.z, ph.z, pl.z);
+    if (!(abs(tt.x) < DDA_SPLIT_MAX)) {
+        precise vec3 pp = tt.x * d;
+        ph = pp;
+        pl = vec3(0.0);
+    }
+    precise vec3 p = (o + ph) + pl;
     ivec3 c = ivec3(floor(clamp(p, vec3(-1.0), vec3(float(n)))));
     precise vec3 tn = (vec3(c + up) - o) * s.inv;
     c += ivec3(lessThanEqual(tn, vec3(s.t))) * s.step;

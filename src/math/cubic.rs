@@ -10,6 +10,8 @@
 //!
 //! Corner order is the paper's: index i = 4a + 2b + c with a the x bit, b the y bit, c the z bit.
 
+use super::madd::madd;
+
 /// Crossings closer than `MERGE_EPS · max(1, L)` voxel are one cluster (method.md §5).
 pub const MERGE_EPS: f32 = 1e-6;
 /// Iteration cap of the safeguarded Newton/bisection in one bracket. Bisection alone would reach
@@ -179,7 +181,7 @@ pub fn pow2_scale(m: f32) -> f32 {
 /// replaced by bisection; the bracket shrinks on every evaluation. Stops when a step is ≤ `tol`.
 pub fn refine_root(c: &[f32; 4], mut lo: f32, mut hi: f32, flo: f32, fhi: f32, tol: f32) -> f32 {
     let neg_lo = flo < 0.0;
-    let mut x = lo + (hi - lo) * (flo / (flo - fhi));
+    let mut x = madd(hi - lo, flo / (flo - fhi), lo);
     x = x.clamp(lo, hi);
     let mut dxold = hi - lo;
     let mut dx = dxold;
@@ -194,7 +196,7 @@ pub fn refine_root(c: &[f32; 4], mut lo: f32, mut hi: f32, flo: f32, fhi: f32, t
         } else {
             hi = x;
         }
-        let out_of_bracket = ((x - hi) * fp - f) * ((x - lo) * fp - f) >= 0.0;
+        let out_of_bracket = madd(x - hi, fp, -f) * madd(x - lo, fp, -f) >= 0.0;
         let slow = (2.0 * f).abs() > (dxold * fp).abs();
         dxold = dx;
         if out_of_bracket || slow {

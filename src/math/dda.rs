@@ -3,6 +3,8 @@
 //! formula for the box faces and the interior planes). See that file for the tie rules
 //! (method.md §5).
 
+use super::madd::madd;
+
 /// Stands for infinity (no NaN from 0·inf anywhere).
 pub const DDA_BIG: f32 = f32::MAX;
 /// Components of `o` and `d` with magnitude < `DDA_TINY` count as zero.
@@ -19,6 +21,9 @@ fn adjacent(y: f32, up: bool) -> f32 {
     f32::from_bits(if up { y.to_bits() + 1 } else { y.to_bits() - 1 })
 }
 
+/// Above this |t| the entry point's exact product is not formed (4097·t would overflow).
+pub const DDA_SPLIT_MAX: f32 = 1e30;
+
 /// The exact product `a·b = p + q` (Dekker's product with Veltkamp's split, 4097 = 2^12 + 1):
 /// multiplies and adds only, as in the GLSL, where `fma()` need not be fused.
 fn two_prod(a: f32, b: f32) -> (f32, f32) {
@@ -29,7 +34,10 @@ fn two_prod(a: f32, b: f32) -> (f32, f32) {
         (h, x - h)
     };
     let ((ah, al), (bh, bl)) = (split(a), split(b));
-    (p, (((ah * bh - p) + ah * bl) + al * bh) + al * bl)
+    (
+        p,
+        madd(al, bl, madd(al, bh, madd(ah, bl, madd(ah, bh, -p)))),
+    )
 }
 
 /// `c − a·b`, exact when the result is representable and `a·b ≈ c`.
@@ -45,7 +53,7 @@ fn residual(c: f32, a: f32, b: f32) -> f32 {
 pub fn rcp_rn(x: f32, y0: f32) -> f32 {
     let b = x.abs();
     let e0 = residual(1.0, b, y0);
-    let y = y0 + y0 * e0;
+    let y = madd(y0, e0, y0);
     let e = residual(1.0, b, y);
     let z = adjacent(y, e > 0.0);
     let ez = residual(1.0, b, z);
@@ -63,11 +71,11 @@ pub fn rcp_rn(x: f32, y0: f32) -> f32 {
 /// `s·u` are multiples of `u²` that is the sign of `r − s·u` (> 0 for u > 0, ≤ 0 for u < 0).
 pub fn sqrt_rn(x: f32, s0: f32) -> f32 {
     let r0 = residual(x, s0, s0);
-    let s = s0 + r0 * (0.5 / s0);
+    let s = madd(r0, 0.5 / s0, s0);
     let r = residual(x, s, s);
     let up = r > 0.0;
     let z = adjacent(s, up);
-    let dm = r - s * (z - s);
+    let dm = madd(-s, z - s, r);
     let take = r != 0.0 && if up { dm > 0.0 } else { dm <= 0.0 };
     if take {
         z
@@ -79,7 +87,7 @@ pub fn sqrt_rn(x: f32, s0: f32) -> f32 {
 /// `d / |d|`, with a correctly rounded sqrt and reciprocal ([`sqrt_rn`], [`rcp_rn`]); `|d|²` as
 /// plain products and sums (identical on every device).
 pub fn ray_unit(d: [f32; 3]) -> [f32; 3] {
-    let l2 = (d[0] * d[0] + d[1] * d[1]) + d[2] * d[2];
+    let l2 = madd(d[2], d[2], madd(d[0], d[0], d[1] * d[1]));
     let s = sqrt_rn(l2, l2.sqrt());
     let r = rcp_rn(s, 1.0 / s);
     [d[0] * r, d[1] * r, d[2] * r]
@@ -194,8 +202,16 @@ pub fn dda_init(o: [f32; 3], d: [f32; 3], n: i32, t_min: f32) -> Dda {
     let mut t_next = [DDA_BIG; 3];
     for a in 0..3 {
         let up = step[a].max(0);
-        // Estimate from the entry point, then settle with the plane crossings themselves.
-        let p = o[a] + t * d[a];
+        // Estimate from the entry point, then settle with the plane crossings themselves. The
+        // entry point is o + (t·d as an exact product): no contraction changes it (when o and
+        // t·d nearly cancel, a fused and an unfused o + t·d can lie several cells apart). Past
+        // DDA_SPLIT_MAX the split would overflow: there the plain product.
+        let (ph, pl) = if t.abs() < DDA_SPLIT_MAX {
+            two_prod(t, d[a])
+        } else {
+            (t * d[a], 0.0)
+        };
+        let p = (o[a] + ph) + pl;
         let mut c = p.clamp(-1.0, n as f32).floor() as i32;
         let tn = ((c + up) as f32 - o[a]) * inv[a];
         c += i32::from(tn <= t) * step[a];

@@ -7,6 +7,7 @@
 pub mod cubic;
 pub mod cubic_oracle;
 pub mod dda;
+pub mod madd;
 pub mod plenoxel;
 pub mod sh;
 pub mod surface;

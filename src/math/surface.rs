@@ -12,6 +12,7 @@
 
 use super::cubic::{exit_sign, solve_crossings, trilerp_level, CellCubic};
 use super::dda::{ray_unit, Dda};
+use super::madd::madd;
 use super::trilerp::trilerp;
 
 /// At most this many levels τ_i.
@@ -38,7 +39,7 @@ pub fn surf_ray(
     scale: [f32; 3],
     offset: [f32; 3],
 ) -> ([f32; 3], [f32; 3]) {
-    let og = std::array::from_fn(|i| ro[i] * scale[i] + offset[i]);
+    let og = std::array::from_fn(|i| madd(ro[i], scale[i], offset[i]));
     let dg = std::array::from_fn(|i| rd[i] * scale[i]);
     (og, ray_unit(dg))
 }
@@ -48,7 +49,7 @@ pub fn surf_ray(
 /// expression) equals t) is put exactly on that face.
 pub fn surf_local(w: &Dda, og: [f32; 3], dn: [f32; 3], t: f32, l: [i32; 3]) -> [f32; 3] {
     std::array::from_fn(|a| {
-        let q = ((og[a] + t * dn[a]) - l[a] as f32).clamp(0.0, 1.0);
+        let q = (madd(t, dn[a], og[a]) - l[a] as f32).clamp(0.0, 1.0);
         if w.step[a] == 0 {
             q
         } else if (l[a] as f32 - w.o[a]) * w.inv[a] == t {
@@ -186,7 +187,7 @@ pub fn surf_segment_mask(
         }
         let b0 = v0 - tau;
         let b1 = b0 + a1 / 3.0;
-        let b2 = b0 + (2.0 * a1 + a2) / 3.0;
+        let b2 = b0 + madd(2.0, a1, a2) / 3.0;
         let b3 = ((b0 + a1) + a2) + a3;
         let e = v1 - tau;
         let m = SURF_SEGMENT_MARGIN * ((b0.abs() + size) + tau.abs());
