@@ -59,6 +59,7 @@ rows!(
     surface_block_radius,
     surface_live_cells,
     surface_fwd,
+    surface_faces,
     surface_train,
     surface_delta_tv,
     surface_opacity_reg,

@@ -12,5 +12,7 @@ cargo build --release --locked
 ./target/release/alphasurf devices
 cargo test --release --locked --tests -- --test-threads 2
 # The twins' decision paths with a·b + c contracted (math::madd, feature `fused`): the DDA, cubic
-# and surface-hit parity tests must pass unchanged (issue 21; about a minute of extra build).
+# and surface-hit tests and parity rows must pass unchanged (issue 21; one extra build).
 cargo test --release --locked --features fused --test dda --test cubic --test surface_fwd -- --test-threads 2
+cargo test --release --locked --features fused --test parity -- --test-threads 2 \
+  dda_walk cubic_solve extract_points surface_fwd surface_faces

@@ -20,8 +20,9 @@
 //! Both backends must match every ray exactly: 0 missed, 0 double-counted.
 
 use super::CheckRow;
+use crate::abi::surface_grid::SurfaceGridRef;
 use crate::check::surface_fwd::render_gpu;
-use crate::cpu::surface_fwd::{render, SurfaceGridRef, SurfaceParams};
+use crate::cpu::surface_fwd::{render, SurfaceParams};
 use crate::gpu::Gpu;
 use crate::math::surface::SURF_MAX_LEVELS;
 use anyhow::Result;
