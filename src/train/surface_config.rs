@@ -84,9 +84,6 @@ fn every_row() -> f32 {
     1.0
 }
 
-/// The largest δ rate `SurfaceConfig::fit_grid` gives the fast translucent preset.
-pub const FAST_TRANSLUCENT_MAX_LR_DELTA: f32 = 3e-3;
-
 /// The `fast` preset's initial opacity scale (σα = s·σ) on a 128³ grid. Thin parts start nearly
 /// opaque (the supplement's 0.05), so that the photometric loss selects among levels that all
 /// render, rather than waiting for σα to rise; semi-transparent layers start lower (0.01); the
@@ -292,13 +289,8 @@ impl SurfaceConfig {
     /// The `fast` preset's initial opacity scale is at least 0.005·(n/128)^1.5: its 1500 steps
     /// shade each surface vertex about (128/n)² times as often as at 128³, too rarely for σα to
     /// rise from a small start before truncation leaves each ray two hits, and the outer levels
-    /// then let the background through.
-    ///
-    /// For `translucent`, δ's rate also follows the grid: 3e-5 at 128³ and below, ×10 per
-    /// doubling, no higher than [`FAST_TRANSLUCENT_MAX_LR_DELTA`]. Over 1500 steps the paper's
-    /// 1e-5 cannot flatten the low-density fog stage 1 leaves between shells (Lδ acts alone on
-    /// vertices no ray shades); on coarse grids, where rays shade each vertex more often, a faster
-    /// rate breaks the surfaces instead. Figures: docs/tuning.md.
+    /// then let the background through. Every learning rate keeps the paper's value at every
+    /// grid (figures: docs/tuning.md).
     pub fn fit_grid(&mut self, n: u32) {
         if self.preset != Preset::Fast {
             return;
@@ -306,11 +298,6 @@ impl SurfaceConfig {
         let f = (n as f32 / 128.0).max(1.0);
         let grid_floor = SurfaceInit::default().alpha_init_scale * f * f.sqrt();
         self.init.alpha_init_scale = fast_alpha_init_scale(self.category).max(grid_floor);
-        if self.category == Category::Translucent {
-            let lr = (3e-5 * 10f32.powf(f.log2())).min(FAST_TRANSLUCENT_MAX_LR_DELTA);
-            self.lr_delta.init = lr;
-            self.lr_delta.last = lr;
-        }
     }
 
     /// The same schedule over `iters` steps: every step count (delays, decays, a's ramp, the
@@ -410,30 +397,21 @@ mod tests {
     }
 
     #[test]
-    fn fast_translucent_delta_rate_follows_the_grid() {
-        let rate = |preset: Preset, category: Category, n: u32| {
-            let mut c = SurfaceConfig::preset(preset, category).unwrap();
-            c.fit_grid(n);
-            assert_eq!(c.lr_delta.init, c.lr_delta.last);
-            c.lr_delta.init
-        };
-        let close = |a: f32, b: f32| (a - b).abs() <= 1e-5 * b;
-        for n in [64, 128] {
-            assert!(close(rate(Preset::Fast, Category::Translucent, n), 3e-5));
-        }
-        assert!(close(rate(Preset::Fast, Category::Translucent, 256), 3e-4));
-        assert!(close(rate(Preset::Fast, Category::Translucent, 512), 3e-3));
-        assert!(close(
-            rate(Preset::Fast, Category::Translucent, 1024),
-            FAST_TRANSLUCENT_MAX_LR_DELTA
-        ));
-        assert_eq!(FAST_TRANSLUCENT_MAX_LR_DELTA, 3e-3);
-        // Other categories and the paper preset keep the supplement's rate.
-        for (preset, category) in [
-            (Preset::Fast, Category::Thin),
-            (Preset::Paper, Category::Translucent),
-        ] {
-            assert!(close(rate(preset, category, 512), 1e-5));
+    fn fast_delta_rate_is_the_papers_at_every_grid() {
+        for category in [Category::Thin, Category::Translucent, Category::Synthetic] {
+            for n in [64, 128, 256, 512, 1024] {
+                let mut c = SurfaceConfig::preset(Preset::Fast, category).unwrap();
+                c.fit_grid(n);
+                assert_eq!(
+                    c.lr_delta,
+                    SurfaceConfig::paper(category).scaled(1500).lr_delta
+                );
+                assert_eq!(
+                    (c.lr_delta.init, c.lr_delta.last),
+                    (1e-5, 1e-5),
+                    "{category} {n}"
+                );
+            }
         }
     }
 }
