@@ -315,12 +315,9 @@ fn stored(path: &Path, settings: &Settings) -> Result<Option<SceneResult>> {
     Ok(Some(r))
 }
 
-/// Write `value` as JSON through a temporary file and a rename.
+/// Write `value` as pretty JSON, atomically.
 fn write_json(path: &Path, value: &impl Serialize) -> Result<()> {
-    let tmp = path.with_extension("json.tmp");
-    std::fs::write(&tmp, serde_json::to_string_pretty(value)?)
-        .with_context(|| format!("writing {}", tmp.display()))?;
-    std::fs::rename(&tmp, path).with_context(|| format!("renaming to {}", path.display()))
+    crate::io::atomic::write_bytes(path, serde_json::to_string_pretty(value)?.as_bytes())
 }
 
 /// The stage-1 record in `dir`, if its run finished.
