@@ -216,6 +216,11 @@ fn a_full_disk_leaves_previous_outputs_whole() {
     refused(&mut c, &["cloud.ply"]);
     assert_eq!(read(&ply), before, "the previous PLY is intact");
     assert!(!dir.path().join("cloud.ply.tmp").exists());
+    // With room again, the same command replaces its earlier cloud (a rerun is no error).
+    let mut c = bin();
+    extract(&mut c);
+    run_ok(&mut c);
+    assert_eq!(read(&ply).len(), before.len());
 
     // render: an error, no 0-byte PNG, and earlier renders intact.
     let renders = dir.path().join("renders");

@@ -82,12 +82,17 @@ pub fn dataset_containing(path: &Path) -> Option<PathBuf> {
         .map(Path::to_path_buf)
 }
 
-/// Refuse an output folder (e.g. `render --out`) that is an input, lies inside one, or lies in
-/// a dataset.
+/// Refuse an output folder (e.g. `render --out`) that is a file, an input, lies inside one, or
+/// lies in a dataset.
 pub fn check_output_dir(out: &Path, inputs: &[&Path]) -> Result<()> {
     if out.exists() && !out.is_dir() {
         bail!("--out {} is a file, not a folder", out.display());
     }
+    check_placement(out, inputs)
+}
+
+/// Refuse an output (file or folder) that lies in a dataset, is an input or lies inside one.
+fn check_placement(out: &Path, inputs: &[&Path]) -> Result<()> {
     if let Some(ds) = dataset_containing(out) {
         bail!(
             "--out {} lies inside the dataset {}: its images would be overwritten; choose a \
@@ -100,12 +105,13 @@ pub fn check_output_dir(out: &Path, inputs: &[&Path]) -> Result<()> {
 }
 
 /// Refuse an output file (`extract`, `export`) that is a folder, an input, inside an input
-/// folder or a dataset, or a file a run owns (its checkpoints, marker, metrics, log).
+/// folder or a dataset, or a file a run owns (its checkpoints, marker, metrics, log). An
+/// existing file that is none of these is replaced (atomically, by the writer).
 pub fn check_output_file(out: &Path, inputs: &[&Path]) -> Result<()> {
     if out.is_dir() {
         bail!("--out {} is a folder; give a file name", out.display());
     }
-    check_output_dir(out, inputs)?;
+    check_placement(out, inputs)?;
     if let (Some(parent), Some(name)) = (out.parent(), out.file_name()) {
         let parent = if parent.as_os_str().is_empty() {
             Path::new(".")
@@ -158,6 +164,11 @@ mod tests {
         assert!(check_output_dir(&data.join("test"), &[]).is_err());
         assert!(check_output_dir(&data, &[]).is_err());
         check_output_file(&run.join("cloud.ply"), &[&ckpt]).unwrap();
+        // An earlier output of the same kind is replaced, not refused (reruns of extract, demo).
+        std::fs::write(run.join("cloud.ply"), "old").unwrap();
+        check_output_file(&run.join("cloud.ply"), &[&ckpt]).unwrap();
+        let e = check_output_file(&ckpt, &[]).unwrap_err().to_string();
+        assert!(e.contains("is a file of the run"), "{e}");
         check_output_dir(&dir.path().join("renders"), &[&ckpt, &data]).unwrap();
         assert_eq!(absolute(&odd), absolute(&ckpt));
     }
