@@ -134,6 +134,16 @@ fn bench_accuracy_scores_each_scene_and_resumes() {
     assert!(err.contains("stage 1: reusing"), "{err}");
     assert!(out2.join("thin_a/alphasurf/metrics.json").is_file());
     assert!(!out2.join("thin_a/plenoxels").exists());
+
+    // Other settings in the same output: both runs are trained again over the old ones.
+    let (_, err) = bench(&[&thin], &out, &["--seed", "2"]);
+    assert!(err.contains("holds a result for other settings"), "{err}");
+    assert!(!err.contains("stage 1: reusing"), "{err}");
+    let result: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("thin_a/result.json")).unwrap())
+            .unwrap();
+    assert_eq!(result["settings"]["stage1"]["seed"], 2);
+    assert_eq!(result["settings"]["seed"], 2);
 }
 
 #[test]

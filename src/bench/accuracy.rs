@@ -11,7 +11,7 @@
 
 use crate::backend::Backend;
 use crate::cli::demo::steps::{Invoker, TrainSize, TrainedRun};
-use crate::cli::demo::{alphasurf_row, best_plenoxels, plenoxels_levels, Row, LEVELS};
+use crate::cli::demo::{alphasurf_row, plenoxels_levels, Row, LEVELS};
 use crate::cli::Cli;
 use crate::train::{Category, Preset};
 use anyhow::{bail, ensure, Context, Result};
@@ -87,14 +87,16 @@ struct Stage1Record {
     settings: Stage1Settings,
     wall_s: f64,
     levels: Vec<LevelScore>,
-    best_level: Option<f32>,
 }
 
 impl Stage1Record {
+    /// The level with the lowest finite Chamfer distance.
     fn best(&self) -> Option<&LevelScore> {
         self.levels
             .iter()
-            .find(|l| Some(l.level) == self.best_level)
+            .filter_map(|l| Some((l, l.chamfer_e2.filter(|c| c.is_finite())?)))
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+            .map(|(l, _)| l)
     }
 }
 
@@ -344,10 +346,7 @@ fn stage1(
         eprintln!("  stage 1: reusing {}", dir.display());
         return Ok((crate::cli::demo::steps::read_run(dir, r.wall_s)?, r));
     }
-    if dir.exists() {
-        std::fs::remove_dir_all(dir)
-            .with_context(|| format!("removing the unfinished or outdated {}", dir.display()))?;
-    }
+    // An unfinished or outdated run there is replaced (`train --overwrite`).
     let size = TrainSize {
         res: settings.res,
         iters: settings.iters,
@@ -360,7 +359,6 @@ fn stage1(
         settings: settings.clone(),
         wall_s: run.wall_s,
         levels: LEVELS.iter().map(|&l| score(&rows, l)).collect(),
-        best_level: best_plenoxels(&rows).and_then(|b| b.level),
     };
     write_json(&dir.join("stage1.json"), &rec)?;
     Ok((run, rec))
@@ -402,12 +400,8 @@ fn scene(
     );
     let (s1, rec) = stage1(inv, &settings.stage1, &stage1_dir(args, out))?;
     let best = rec.best();
+    // A stage-2 run without result.json was interrupted: `train --overwrite` starts it again.
     let s2_dir = out.join("alphasurf");
-    if s2_dir.exists() {
-        // A stage-2 run without result.json was interrupted: start it again.
-        std::fs::remove_dir_all(&s2_dir)
-            .with_context(|| format!("removing the unfinished {}", s2_dir.display()))?;
-    }
     let mut set = args.surface_set.clone();
     set.extend(args.batch.map(|b| format!("batch={b}")));
     let s2 = inv.train_surface(
