@@ -15,4 +15,4 @@ cargo test --release --locked --tests -- --test-threads 2
 # and surface-hit tests and parity rows must pass unchanged (issue 21; one extra build).
 cargo test --release --locked --features fused --test dda --test cubic --test surface_fwd -- --test-threads 2
 cargo test --release --locked --features fused --test parity -- --test-threads 2 \
-  dda_walk cubic_solve extract_points surface_fwd surface_faces
+  dda_walk cubic_solve extract_points surface_fwd surface_faces surface_train

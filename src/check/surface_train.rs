@@ -21,9 +21,11 @@
 //!   |Δ| ≤ 1e-4·max|g| + 1e-3·|g| for all but 0.1 % of the elements (atomic summation order).
 //!
 //! Last on the well-conditioned rays, those whose every hit has |f′| ≥ [`ILL_CONDITIONED`]·(the
-//! cell's δ range): the same gradient test with relative L2 ≤ 1e-4. (Where f′ is small an ulp of
-//! the f32 root moves the hit far, and the δ gradient goes as 1/f′: such rays, ~2 % of the random
-//! ones and all of the guard scene's, keep the looser bound.) In the guard scene every hit must be
+//! cell's δ range) and |σα| ≥ [`ILL_CONDITIONED`]·(the cell's σα range): the same gradient test
+//! with relative L2 ≤ 1e-4. (Where f′ is small an ulp of the f32 root moves the hit far, and the δ
+//! gradient goes as 1/f′; where σα at the hit is a near-cancelling trilerp, an ulp of the hit
+//! position changes α by far more than an ulp, which a contracting compiler, or the twin's `fused`
+//! mode, produces: such rays, and all of the guard scene's, keep the looser bound.) In the guard scene every hit must be
 //! guarded and no δ gradient may appear on either backend.
 
 use super::surface_fwd::{test_rays, test_scene, SurfaceScene, RES};
@@ -139,24 +141,35 @@ fn quantised(mut s: SurfaceScene) -> SurfaceScene {
     s
 }
 
-/// The smallest |f′(s)|/(max − min of the cell's δ) over a ray's composited hits (∞ without
-/// hits): how well its hit positions are determined (the f′ guard drops δ gradients below 1e-3).
-fn min_fprime(grid: &SurfaceGrid, ro: [f32; 3], rd: [f32; 3], sp: &SurfaceParams) -> f32 {
+/// How well a ray's figures are determined by its inputs: the smallest, over its composited hits,
+/// of |f′(s)|/(max − min of the cell's δ) and |σα(p)|/(max − min of the cell's σα) (∞ without hits).
+/// The first bounds how far an ulp of δ moves the root (the δ gradient goes as 1/f′); the second
+/// how much an ulp of the hit position changes α relative to itself (a σα that is a near-cancelling
+/// trilerp of larger corners: an f32 position error of ~ulp(t) ≈ 4e-6 voxels then moves α by
+/// |∇σα|·4e-6/σα ≤ √3·range·4e-6/(0.1·range) ≈ 7e-5 relative at the threshold).
+fn conditioning(grid: &SurfaceGrid, ro: [f32; 3], rd: [f32; 3], sp: &SurfaceParams) -> f32 {
     let tr = trace_ray(&grid.as_ref(), ro, rd, sp, None, &mut [0; 8]);
+    let range = |v: &[f32; 8]| {
+        let lo = v.iter().copied().fold(f32::INFINITY, f32::min);
+        let hi = v.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+        hi - lo
+    };
     tr.hits[..tr.n]
         .iter()
         .map(|h| {
-            let (_, g) = trilerp_grad(&h.c, hit_point(h, tr.dn));
+            let p = hit_point(h, tr.dn);
+            let (_, g) = trilerp_grad(&h.c, p);
             let f1 = g[0] * tr.dn[0] + g[1] * tr.dn[1] + g[2] * tr.dn[2];
-            let cmin = h.c.iter().copied().fold(f32::INFINITY, f32::min);
-            let cmax = h.c.iter().copied().fold(f32::NEG_INFINITY, f32::max);
-            f1.abs() / (cmax - cmin)
+            let sa: [f32; 8] = h.lk.map(|l| grid.opacity[l as usize]);
+            let (sa_p, _) = trilerp_grad(&sa, p);
+            (f1.abs() / range(&h.c)).min(sa_p.abs() / range(&sa))
         })
         .fold(f32::INFINITY, f32::min)
 }
 
-/// Hits with |f′| below this fraction of their cell's δ range make a ray ill-conditioned: an ulp
-/// of δ moves the root by ≳ 1e-6 voxels, and the δ gradient (∝ 1/f′) by more.
+/// Hits below this fraction (see [`conditioning`]) make a ray ill-conditioned: an ulp of δ moves
+/// the root by ≳ 1e-6 voxels and the δ gradient by more, or an ulp of the hit position moves α
+/// by ≳ 1e-4 relative.
 pub const ILL_CONDITIONED: f32 = 0.1;
 
 /// Figures of one pass, for the note.
@@ -286,7 +299,7 @@ fn run_pass(
     let good: Vec<usize> = (0..keep.len())
         .filter(|&i| {
             let r = &rays_k[6 * i..6 * i + 6];
-            min_fprime(grid, [r[0], r[1], r[2]], [r[3], r[4], r[5]], &sp) >= ILL_CONDITIONED
+            conditioning(grid, [r[0], r[1], r[2]], [r[3], r[4], r[5]], &sp) >= ILL_CONDITIONED
         })
         .collect();
     let rel = if good.is_empty() {
@@ -409,7 +422,7 @@ pub fn check(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
         cases,
         format!(
             "grad rel L2 δ/σα/SH {:.1e}/{:.1e}/{:.1e} on well-conditioned rays (≤ 1e-4), \
-             {:.1e}/{:.1e}/{:.1e} with the {ill} ill-conditioned ones (|f′| < {ILL_CONDITIONED}·range; \
+             {:.1e}/{:.1e}/{:.1e} with the {ill} ill-conditioned ones (|f′| or |σα| < {ILL_CONDITIONED}·range; \
              ≤ 1e-3); elementwise |Δ| ≤ 1e-4·max|g| + 1e-3·|g| for all but 0.1 %; touched \
              equal; guard scene: δ gradients 0, every hit guarded; {excused} rays excused (cap \
              {cap}); {}",
