@@ -1,7 +1,7 @@
 //! `alphasurf bench accuracy`: the method scored on a set of scenes with ground truth (the
 //! development set). For each scene: stage 1, the Plenoxels level-set sweep (extract + eval at
-//! every level of [`LEVELS`]), stage 2, αSurf's extraction and eval — the user-facing commands run
-//! in-process (`cli::demo::steps`). Then one table: scene, category, αSurf's Chamfer, the best
+//! every level of [`LEVELS`]), stage 2, αSurf's extraction and eval — the pipeline's library
+//! calls (`pipeline::steps`). Then one table: scene, category, αSurf's Chamfer, the best
 //! Plenoxels level of that scene, Plenoxels at the category's fixed level (the paper's protocol:
 //! one level per category, the one with the best mean over the set's scenes of that category),
 //! αSurf / best level, F1 of both, stage-1 and stage-2 test PSNR and wall time; then the category
@@ -10,9 +10,9 @@
 //! (`--stage1-from`), so stage-2 changes are compared on the same stage-1 grids.
 
 use crate::backend::Backend;
-use crate::cli::demo::steps::{Invoker, TrainSize, TrainedRun};
-use crate::cli::demo::{alphasurf_row, plenoxels_levels, Row, LEVELS};
-use crate::cli::Cli;
+use crate::pipeline::demo::{alphasurf_row, plenoxels_levels, Row, LEVELS};
+use crate::pipeline::steps::{Steps, TrainSize, TrainedRun};
+use crate::pipeline::Devices;
 use crate::train::{Category, Preset};
 use anyhow::{bail, ensure, Context, Result};
 use clap::ValueEnum;
@@ -338,13 +338,13 @@ fn read_stage1(dir: &Path) -> Result<Option<Stage1Record>> {
 /// Stage 1 of a scene and its level sweep in `dir`: reused when it finished with `settings`,
 /// else trained and swept.
 fn stage1(
-    inv: &Invoker,
+    steps: &Steps,
     settings: &Stage1Settings,
     dir: &Path,
 ) -> Result<(TrainedRun, Stage1Record)> {
     if let Some(r) = read_stage1(dir)?.filter(|r| &r.settings == settings) {
         eprintln!("  stage 1: reusing {}", dir.display());
-        return Ok((crate::cli::demo::steps::read_run(dir, r.wall_s)?, r));
+        return Ok((TrainedRun::read_stage1(dir, r.wall_s)?, r));
     }
     // An unfinished or outdated run there is replaced (`train --overwrite`).
     let size = TrainSize {
@@ -352,9 +352,9 @@ fn stage1(
         iters: settings.iters,
         batch: settings.batch,
     };
-    let run = inv.train_plenoxels(&settings.data, dir, &size, true)?;
+    let run = steps.train_plenoxels(&settings.data, dir, &size)?;
     let gt = settings.data.join("gt_points.ply");
-    let rows = plenoxels_levels(inv, &run, &gt, &LEVELS);
+    let rows = plenoxels_levels(steps, &run, &gt, &LEVELS);
     let rec = Stage1Record {
         settings: settings.clone(),
         wall_s: run.wall_s,
@@ -385,7 +385,7 @@ fn stage1_dir(args: &AccuracyArgs, out: &Path) -> PathBuf {
 
 /// One scene, end to end.
 fn scene(
-    inv: &Invoker,
+    steps: &Steps,
     args: &AccuracyArgs,
     out: &Path,
     settings: Settings,
@@ -398,24 +398,23 @@ fn scene(
         "{}: no gt_points.ply (bench accuracy needs ground truth)",
         data.display()
     );
-    let (s1, rec) = stage1(inv, &settings.stage1, &stage1_dir(args, out))?;
+    let (s1, rec) = stage1(steps, &settings.stage1, &stage1_dir(args, out))?;
     let best = rec.best();
     // A stage-2 run without result.json was interrupted: `train --overwrite` starts it again.
     let s2_dir = out.join("alphasurf");
     let mut set = args.surface_set.clone();
     set.extend(args.batch.map(|b| format!("batch={b}")));
-    let s2 = inv.train_surface(
+    let s2 = steps.train_surface(
         &s1.dir,
         data,
         &s2_dir,
         settings.category,
         args.surface_iters,
         &set,
-        true,
     );
     let (surf, s2_wall, error) = match &s2 {
         Ok(s2) => {
-            let r = alphasurf_row(inv, &s1, s2, &gt);
+            let r = alphasurf_row(steps, &s1, s2, &gt);
             let e = r.error.clone();
             (Some(r), s2.wall_s, e)
         }
@@ -439,8 +438,12 @@ fn scene(
 }
 
 /// Run `bench accuracy`.
-pub fn run(args: &AccuracyArgs, cli: &Cli) -> Result<()> {
-    let inv = Invoker::new(args.backend, cli)?.with_schedule(args.preset, args.seed);
+pub fn run(args: &AccuracyArgs, devices: &mut Devices) -> Result<()> {
+    let steps = Steps {
+        preset: args.preset,
+        seed: args.seed,
+        ..Steps::new(devices.for_backend(args.backend)?)
+    };
     let out = args.out.clone().unwrap_or_else(|| {
         PathBuf::from(format!(
             "runs/accuracy-{}-{}-s{}",
@@ -471,7 +474,7 @@ pub fn run(args: &AccuracyArgs, cli: &Cli) -> Result<()> {
             batch: args.batch,
             preset: args.preset,
             seed: args.seed,
-            backend: inv.backend,
+            backend: steps.backend(),
         };
         if args.stage1_from.is_some() {
             // Another output's stage 1, whatever its seed, as long as the rest matches.
@@ -512,7 +515,7 @@ pub fn run(args: &AccuracyArgs, cli: &Cli) -> Result<()> {
                 r
             }
             None => {
-                let r = scene(&inv, args, &dir, settings)?;
+                let r = scene(&steps, args, &dir, settings)?;
                 write_json(&path, &r)?;
                 r
             }

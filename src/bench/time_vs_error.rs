@@ -2,16 +2,16 @@
 //! it trains stage 1 at each sweep point (backend, final grid resolution, steps), sweeps the
 //! Plenoxels density levels and keeps the best, trains stage 2 (αSurf) from the same stage-1 run,
 //! and for each method records wall time, training rays/s, Chamfer, F1 and test PSNR. All steps
-//! are the user-facing commands run in-process (see `cli::demo::steps`). Writes
+//! are the pipeline's library calls (see `pipeline::steps`). Writes
 //! `time_vs_error.csv` and `time_vs_error.png` (Chamfer against wall time), prints a table, and
 //! with `--json` one JSON line last.
 
 use crate::backend::Backend;
-use crate::cli::demo::steps::Invoker;
-use crate::cli::demo::{
-    alphasurf_row, best_plenoxels, first_line, plenoxels_levels, stage2, Row, SizeArgs, LEVELS,
+use crate::pipeline::demo::{
+    alphasurf_row, best_plenoxels, category, first_line, plenoxels_levels, Row, SizeArgs, LEVELS,
 };
-use crate::cli::Cli;
+use crate::pipeline::steps::{Steps, TrainSize};
+use crate::pipeline::Devices;
 use crate::report::plot::{self, Axis, Plot, Series, Style, PALETTE};
 use crate::scene::SceneKind;
 use anyhow::{bail, Context, Result};
@@ -292,7 +292,7 @@ pub fn plot_png(rows: &[BenchRow], path: &Path) -> Result<()> {
 }
 
 /// Run the benchmark.
-pub fn run(args: &TimeVsErrorArgs, cli: &Cli) -> Result<()> {
+pub fn run(args: &TimeVsErrorArgs, devices: &mut Devices) -> Result<()> {
     let t0 = Instant::now();
     if args.points.is_empty() {
         bail!("--points: give at least one sweep point");
@@ -305,8 +305,17 @@ pub fn run(args: &TimeVsErrorArgs, cli: &Cli) -> Result<()> {
         .clone()
         .unwrap_or_else(|| PathBuf::from(format!("runs/time-vs-error-{}", args.scene.name())));
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
-    let cpu = Invoker::fixed(false, cli);
-    let vk = Invoker::fixed(true, cli);
+    let cpu = Steps::new(None).quiet();
+    // The Vulkan device is opened only when a sweep point asks for it; a device that cannot be
+    // opened fails those points, not the others.
+    let vk = if args.points.iter().any(|p| p.backend == Backend::Vulkan) {
+        devices
+            .gpu()
+            .map(|g| Steps::new(Some(g)).quiet())
+            .map_err(|e| format!("{e:#}"))
+    } else {
+        Err("no Vulkan sweep point".to_string())
+    };
     let data = out.join("scene");
     let gt = data.join("gt_points.ply");
     let size = args.size.scene(false);
@@ -319,12 +328,15 @@ pub fn run(args: &TimeVsErrorArgs, cli: &Cli) -> Result<()> {
     );
     cpu.make_scene(args.scene, &data, &size)?;
     let mut rows = Vec::new();
-    let mut surface_error: Option<String> = args.no_surface.then(|| "--no-surface".to_string());
     for (k, p) in args.points.iter().enumerate() {
-        let inv = if p.backend == Backend::Vulkan {
-            &vk
-        } else {
-            &cpu
+        let steps = match (p.backend, &vk) {
+            (Backend::Vulkan, Ok(vk)) => vk,
+            (Backend::Vulkan, Err(e)) => {
+                eprintln!("time-vs-error: no Vulkan device: {e}");
+                rows.push(BenchRow::failed(p, "plenoxels_best", e.clone()));
+                continue;
+            }
+            _ => &cpu,
         };
         let dir = out.join(p.name());
         eprintln!(
@@ -335,12 +347,12 @@ pub fn run(args: &TimeVsErrorArgs, cli: &Cli) -> Result<()> {
             p.res,
             p.iters
         );
-        let tsize = crate::cli::demo::steps::TrainSize {
+        let tsize = TrainSize {
             res: Some(p.res),
             iters: Some(p.iters),
             batch: args.size.batch,
         };
-        let s1 = match inv.train_plenoxels(&data, &dir.join("plenoxels"), &tsize, false) {
+        let s1 = match steps.train_plenoxels(&data, &dir.join("plenoxels"), &tsize) {
             Ok(s1) => s1,
             Err(e) => {
                 eprintln!("time-vs-error: stage 1 failed: {e:#}");
@@ -348,7 +360,7 @@ pub fn run(args: &TimeVsErrorArgs, cli: &Cli) -> Result<()> {
                 continue;
             }
         };
-        let levels = plenoxels_levels(inv, &s1, &gt, &LEVELS);
+        let levels = plenoxels_levels(steps, &s1, &gt, &LEVELS);
         match best_plenoxels(&levels) {
             Some(b) => rows.push(BenchRow::from_row(p, &b, Some(s1.train_rays_per_s))),
             None => rows.push(BenchRow::failed(
@@ -357,33 +369,27 @@ pub fn run(args: &TimeVsErrorArgs, cli: &Cli) -> Result<()> {
                 "no density level gave an evaluable point cloud".into(),
             )),
         }
-        if let Some(e) = &surface_error {
-            eprintln!("time-vs-error: stage 2 skipped ({})", first_line(e));
+        if args.no_surface {
+            eprintln!("time-vs-error: stage 2 skipped (--no-surface)");
             continue;
         }
         eprintln!("time-vs-error: stage 2 (αSurf) from {}", s1.dir.display());
-        match stage2(
-            inv,
-            &s1,
+        match steps.train_surface(
+            &s1.dir,
             &data,
             &dir.join("alphasurf"),
-            args.scene,
+            category(args.scene),
             Some(args.size.surface_iters.unwrap_or((p.iters / 2).max(1))),
             &args.size.surface_set,
-            false,
         ) {
             Ok(s2) => {
-                let r = alphasurf_row(inv, &s1, &s2, &gt);
+                let r = alphasurf_row(steps, &s1, &s2, &gt);
                 rows.push(BenchRow::from_row(p, &r, Some(s2.train_rays_per_s)));
             }
             Err(e) => {
                 let msg = format!("{e:#}");
                 eprintln!("time-vs-error: STAGE 2 FAILED: {msg}");
-                rows.push(BenchRow::failed(p, "alphasurf", msg.clone()));
-                // The command is missing from this build: no point trying it again.
-                if msg.contains("is not a valid command here") {
-                    surface_error = Some(msg);
-                }
+                rows.push(BenchRow::failed(p, "alphasurf", msg));
             }
         }
     }

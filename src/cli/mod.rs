@@ -2,19 +2,20 @@
 //! handler lives in its own module; this file only wires them together.
 
 mod check_kernels;
-pub mod demo;
+mod demo;
 mod devices;
-pub mod eval;
-pub mod extract;
-pub mod inspect;
-pub mod make_scene;
-mod resume;
+mod eval;
+mod extract;
+mod inspect;
+mod make_scene;
 mod train;
-mod train_surface;
 
-use crate::backend::Backend;
-use crate::gpu::{DeviceKind, Gpu, GpuOptions};
-use crate::run::{RunDir, RunStage};
+use crate::pipeline::demo::DemoOptions;
+use crate::pipeline::evaluate::EvaluateOptions;
+use crate::pipeline::extract::ExtractOptions;
+use crate::pipeline::render::RenderOptions;
+use crate::pipeline::svox2::{ExportOptions, ImportOptions};
+use crate::pipeline::{Devices, TrainOptions};
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
@@ -50,23 +51,23 @@ pub enum Command {
     /// Train a reconstruction — stage 1 (Plenoxels), stage 2 (αSurf surfaces, `--init` from a
     /// stage-1 run) or both — with a progress bar, periodic atomic checkpoints (`--resume`), test
     /// renders, metrics.json and train_log.csv.
-    Train(train::TrainArgs),
+    Train(TrainOptions),
     /// Render a split of a trained run to PNG and print per-view and mean PSNR.
-    Render(train::RenderArgs),
+    Render(RenderOptions),
     /// Extract the level-set surfaces of a trained grid as a point cloud (binary PLY in Blender
     /// units with level, alpha and normals); for a stage-1 grid, the Plenoxels baseline σ = τ.
-    Extract(extract::ExtractArgs),
+    Extract(ExtractOptions),
     /// Chamfer distance, precision, recall and F1 of a point cloud against ground truth.
-    Eval(eval::EvalArgs),
+    Eval(EvaluateOptions),
     /// Export a run's stage-1 grid as an svox2 `ckpt.npz`.
-    Export(train::ExportArgs),
+    Export(ExportOptions),
     /// Import an svox2 `ckpt.npz` as a stage-1 run directory (then `render`, or stage 2).
-    Import(train::ImportArgs),
+    Import(ImportOptions),
     /// Benchmarks: figures on the Vulkan device and the CPU twin, parity verdict, `--json` line.
     Bench(BenchArgs),
     /// The whole method on a built-in scene: make-scene → stage 1 → Plenoxels level-set sweep →
     /// stage 2 → extract → eval; prints the results table and writes report.md with PNG figures.
-    Demo(demo::DemoArgs),
+    Demo(DemoOptions),
 }
 
 /// `alphasurf bench <kind>`.
@@ -112,43 +113,6 @@ pub fn main() -> ExitCode {
     }
 }
 
-/// Open the Vulkan device chosen by `--device` (validation on when `ALPHASURF_VALIDATION` is set).
-fn open_gpu(cli: &Cli) -> anyhow::Result<Gpu> {
-    Gpu::new(&GpuOptions {
-        device: cli.device,
-        validation: std::env::var_os("ALPHASURF_VALIDATION").is_some(),
-        force_staging: false,
-    })
-}
-
-/// The Vulkan device a training/rendering command should use, or `None` for the CPU backend.
-/// `auto` takes the Vulkan device unless it is a CPU implementation (lavapipe) or missing.
-fn backend_gpu<'a>(
-    kind: Backend,
-    cli: &Cli,
-    slot: &'a mut Option<Gpu>,
-) -> anyhow::Result<Option<&'a Gpu>> {
-    match kind {
-        Backend::Cpu => Ok(None),
-        Backend::Vulkan => Ok(Some(slot.insert(open_gpu(cli)?))),
-        Backend::Auto => match open_gpu(cli) {
-            Ok(gpu) if gpu.info().kind != DeviceKind::Cpu => Ok(Some(slot.insert(gpu))),
-            Ok(gpu) => {
-                eprintln!(
-                    "backend auto: {} is a CPU implementation of Vulkan; using the CPU backend, \
-                     which is faster there (--backend vulkan forces the device)",
-                    gpu.info().name
-                );
-                Ok(None)
-            }
-            Err(e) => {
-                eprintln!("backend auto: no usable Vulkan device ({e:#}); using the CPU backend");
-                Ok(None)
-            }
-        },
-    }
-}
-
 fn exit(pass: bool) -> ExitCode {
     if pass {
         ExitCode::SUCCESS
@@ -157,90 +121,14 @@ fn exit(pass: bool) -> ExitCode {
     }
 }
 
-/// Run `train`: the stage(s) asked for.
-fn run_train(args: &train::TrainArgs, gpu: Option<&Gpu>) -> anyhow::Result<()> {
-    train::check_stage_flags(args)?;
-    match args.stage {
-        train::Stage::Plenoxels => train::run_stage1(args, &train::load_data(args)?, gpu),
-        train::Stage::Surface => train_surface::run(args, &train::load_data(args)?, gpu),
-        train::Stage::All => run_all(args, gpu),
-    }
-}
-
-/// `--stage all`: a parent run holding stage 1 in `plenoxels/` and stage 2 in `surface/`. With
-/// `--resume` it continues whichever stage was interrupted: stage 1 (then stage 2 from scratch),
-/// or stage 2 once stage 1 is done. Extending a finished stage 1 (`--iters`) under an existing
-/// stage 2 is refused: that stage 2 was built on the old grid.
-fn run_all(args: &train::TrainArgs, gpu: Option<&Gpu>) -> anyhow::Result<()> {
-    let mut parent = RunDir::claim(
-        &args.out,
-        RunStage::All,
-        train::open_mode(args),
-        &[&args.data],
-    )?;
-    let data = train::load_data(args)?;
-    parent.write_info(&train::run_info(args, None)?)?;
-    let s1_dir = parent.file(crate::run::dir::ALL_STAGE1);
-    let s2_dir = parent.file(crate::run::dir::ALL_STAGE2);
-    let s1_ckpt = crate::train::stage1::checkpoint_path(&s1_dir);
-    let s2_ckpt = crate::train::stage2::checkpoint_path(&s2_dir);
-    let stage1_args = train::TrainArgs {
-        stage: train::Stage::Plenoxels,
-        out: s1_dir.clone(),
-        resume: args.resume && s1_ckpt.exists(),
-        overwrite: args.resume && !s1_ckpt.exists(),
-        category: crate::train::Category::Thin,
-        set: Vec::new(),
-        alpha_init_scale: None,
-        surface_iters: None,
-        ..args.clone()
-    };
-    let stage2_args = train::TrainArgs {
-        stage: train::Stage::Surface,
-        out: s2_dir.clone(),
-        init: Some(s1_dir.clone()),
-        iters: args.surface_iters,
-        res: None,
-        resume: args.resume && s2_ckpt.exists(),
-        overwrite: args.resume && !s2_ckpt.exists(),
-        surface_iters: None,
-        ..args.clone()
-    };
-    if args.resume && s2_ckpt.exists() {
-        let s1 = crate::grid::checkpoint::load(&s1_ckpt)?;
-        let step = s1.meta["step"].as_u64().unwrap_or(0);
-        if args.iters.is_some_and(|n| n as u64 > step) {
-            anyhow::bail!(
-                "--resume --iters {}: stage 1 ({}) finished at step {step} and stage 2 ({}) was \
-                 built on that grid; extending stage 1 would leave stage 2 stale. Extend stage 1 \
-                 alone (train --stage plenoxels --resume --iters N --out {}), then restart stage \
-                 2 (train --stage surface --init {} --out {} --overwrite)",
-                args.iters.unwrap_or(0),
-                s1_dir.display(),
-                s2_dir.display(),
-                s1_dir.display(),
-                s1_dir.display(),
-                s2_dir.display()
-            );
-        }
-        eprintln!("--stage all --resume: stage 1 is done; resuming stage 2");
-    } else {
-        train::run_stage1(&stage1_args, &data, gpu)?;
-    }
-    train_surface::run(&stage2_args, &data, gpu)
-}
-
 fn run(cli: Cli) -> anyhow::Result<ExitCode> {
-    let mut gpu_used = None;
+    let mut devices = Devices::new(cli.device);
     let code = match &cli.command {
         Command::Devices => {
             devices::run()?;
             ExitCode::SUCCESS
         }
-        Command::CheckKernels(args) => {
-            let gpu = gpu_used.insert(open_gpu(&cli)?);
-            exit(check_kernels::run(gpu, args)?)
-        }
+        Command::CheckKernels(args) => exit(check_kernels::run(devices.gpu()?, args)?),
         Command::MakeScene(a) => {
             make_scene::run(a)?;
             ExitCode::SUCCESS
@@ -250,18 +138,15 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             ExitCode::SUCCESS
         }
         Command::Train(a) => {
-            let gpu = backend_gpu(a.backend, &cli, &mut gpu_used)?;
-            run_train(a, gpu)?;
+            train::run_train(a, devices.for_backend(a.backend)?)?;
             ExitCode::SUCCESS
         }
         Command::Render(a) => {
-            let gpu = backend_gpu(a.backend, &cli, &mut gpu_used)?;
-            train::run_render(a, gpu)?;
+            train::run_render(a, devices.for_backend(a.backend)?)?;
             ExitCode::SUCCESS
         }
         Command::Extract(a) => {
-            let gpu = backend_gpu(a.backend, &cli, &mut gpu_used)?;
-            extract::run(a, gpu)?;
+            extract::run(a, devices.for_backend(a.backend)?)?;
             ExitCode::SUCCESS
         }
         Command::Eval(a) => {
@@ -277,42 +162,34 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             ExitCode::SUCCESS
         }
         Command::Demo(a) => {
-            demo::run(a, &cli)?;
+            demo::run(a, &mut devices)?;
             ExitCode::SUCCESS
         }
         Command::Bench(b) => match &b.kind {
             BenchKind::Plenoxels(args) => {
-                let gpu = gpu_used.insert(open_gpu(&cli)?);
-                crate::bench::plenoxels::run(gpu, args)?;
+                crate::bench::plenoxels::run(devices.gpu()?, args)?;
                 ExitCode::SUCCESS
             }
             BenchKind::TimeVsError(args) => {
-                crate::bench::time_vs_error::run(args, &cli)?;
+                crate::bench::time_vs_error::run(args, &mut devices)?;
                 ExitCode::SUCCESS
             }
             BenchKind::Accuracy(args) => {
-                crate::bench::accuracy::run(args, &cli)?;
+                crate::bench::accuracy::run(args, &mut devices)?;
                 ExitCode::SUCCESS
             }
             BenchKind::Surface(args) => {
-                let gpu = gpu_used.insert(open_gpu(&cli)?);
-                crate::bench::surface::run(gpu, args)?;
+                crate::bench::surface::run(devices.gpu()?, args)?;
                 ExitCode::SUCCESS
             }
-            BenchKind::Dda(args) => {
-                let gpu = gpu_used.insert(open_gpu(&cli)?);
-                exit(crate::bench::dda::run(gpu, args)?)
-            }
-            BenchKind::Cubic(args) => {
-                let gpu = gpu_used.insert(open_gpu(&cli)?);
-                exit(crate::bench::cubic::run(gpu, args)?)
-            }
+            BenchKind::Dda(args) => exit(crate::bench::dda::run(devices.gpu()?, args)?),
+            BenchKind::Cubic(args) => exit(crate::bench::cubic::run(devices.gpu()?, args)?),
         },
     };
     if cli.profile {
         use std::io::Write;
         std::io::stdout().flush()?;
-        match &gpu_used {
+        match devices.opened() {
             Some(gpu) => eprint!("{}", gpu.profile().report()),
             None => eprintln!("profile: this command ran nothing on the Vulkan device"),
         }
@@ -323,9 +200,10 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::backend::Backend;
     use crate::train::{Category, Preset};
 
-    fn train_args(extra: &[&str]) -> Result<train::TrainArgs, clap::Error> {
+    fn train_args(extra: &[&str]) -> Result<TrainOptions, clap::Error> {
         let mut argv = vec!["alphasurf", "train", "--data", "d", "--out", "o"];
         argv.extend(extra);
         match Cli::try_parse_from(argv)?.command {

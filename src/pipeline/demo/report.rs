@@ -2,12 +2,12 @@
 //! the point clouds coloured by their distance to the ground truth, the training curves (from
 //! each run's `train_log.csv`), and Chamfer against the Plenoxels level.
 
-use super::steps::TrainedRun;
 use super::{objects_table, table, Row};
 use crate::backend::Backend;
-use crate::cli::extract::DEFAULT_RAYS_PER_AXIS;
 use crate::eval::PointIndex;
 use crate::io::read_points;
+use crate::pipeline::extract::DEFAULT_RAYS_PER_AXIS;
+use crate::pipeline::steps::TrainedRun;
 use crate::report::canvas::{load_rgb_on_white, side_by_side, Canvas, WHITE};
 use crate::report::cloud::{error_figure, Panel};
 use crate::report::log;
@@ -188,19 +188,6 @@ fn test_images(data: &Path) -> Result<Vec<PathBuf>> {
         .collect()
 }
 
-/// Per-view test PSNR from a run's metrics.json (empty if absent).
-fn view_psnrs(run: &Path) -> Vec<f64> {
-    std::fs::read_to_string(run.join("metrics.json"))
-        .ok()
-        .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
-        .and_then(|v| {
-            v["test_psnr_per_view"]
-                .as_array()
-                .map(|a| a.iter().filter_map(|x| x.as_f64()).collect())
-        })
-        .unwrap_or_default()
-}
-
 /// Index of the image with the most non-white pixels (the most object on screen).
 pub fn most_covered(images: &[image::RgbImage]) -> usize {
     images
@@ -225,7 +212,7 @@ fn test_view(r: &Inputs, path: &Path) -> Result<String> {
     }
     for (name, run) in runs {
         let img = load_rgb_on_white(&run.dir.join("test").join(format!("r_{i}.png")))?;
-        let label = match view_psnrs(&run.dir).get(i) {
+        let label = match run.test_psnr_per_view.get(i) {
             Some(p) => format!("{name} {p:.2} DB"),
             None => name.to_string(),
         };

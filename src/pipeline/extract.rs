@@ -1,0 +1,245 @@
+//! `extract` as a library call: the level-set point cloud of a trained grid as binary PLY
+//! (method.md §4). For a stage-2 run (surface.npz) these are the αSurf surfaces δ = τ_i at the
+//! run's levels, trimmed by raw opacity σα ≥ `--min-alpha`. For a stage-1 density grid this is the
+//! Plenoxels baseline "Plen (σ = τ)": the surfaces σ = τ for each `--levels` value, with no opacity
+//! trimming.
+
+use crate::backend::Backend;
+use crate::cpu::extract_points::ExtractInput;
+use crate::data::SceneBox;
+use crate::eval::extract::{
+    allocated_cells, extract_sorted, to_cloud, ExtractBackend, GridFrame, KernelStats, ThinStats,
+};
+use crate::gpu::Gpu;
+use crate::grid::surface::SurfaceGrid;
+use crate::grid::{checkpoint, npz, Grid};
+use crate::train::{stage1, stage2};
+use anyhow::{ensure, Context, Result};
+use serde::Serialize;
+use std::path::PathBuf;
+use std::time::Instant;
+
+/// Virtual rays per axis and cell face by default: method.md's 75 rays per cell (5 × 5 per axis).
+pub const DEFAULT_RAYS_PER_AXIS: u32 = 5;
+/// Raw opacity a stage-2 crossing needs by default (the paper's α ≥ 0.1).
+pub const DEFAULT_MIN_ALPHA: f32 = 0.1;
+/// Thinning radius by default, Blender units (the paper's downsampling).
+pub const DEFAULT_THIN_RADIUS: f64 = 0.001;
+
+/// Options of `extract` (its command-line flags).
+#[derive(clap::Args, Debug)]
+pub struct ExtractOptions {
+    /// A run directory written by `train`: its `surface.npz` (stage 2) if there is one, else its
+    /// `plenoxels.npz` (stage 1).
+    #[arg(long, required_unless_present = "ckpt", conflicts_with = "ckpt")]
+    pub run: Option<PathBuf>,
+    /// An svox2 `ckpt.npz` (or any npz with the svox2 grid arrays) instead of `--run`.
+    #[arg(long)]
+    pub ckpt: Option<PathBuf>,
+    /// Output PLY (binary little-endian: x, y, z, level, alpha, nx, ny, nz; Blender units).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Level values τ, comma-separated, for a stage-1 grid (density units; the paper sweeps
+    /// 10,30,50,70,90,100 and reports the best single level). Default 50. A stage-2 run uses its
+    /// own levels; giving --levels there is an error.
+    #[arg(long, value_delimiter = ',')]
+    pub levels: Option<Vec<f32>>,
+    /// Keep a crossing only where the trilerped raw opacity σα ≥ this (stage-2 grids; a stage-1
+    /// density grid has no opacity field, so it is not used there).
+    #[arg(long, default_value_t = DEFAULT_MIN_ALPHA)]
+    pub min_alpha: f32,
+    /// R: R² virtual rays per axis and cell (origins on the lattice 0, 1/(R−1), …, 1).
+    #[arg(long, default_value_t = DEFAULT_RAYS_PER_AXIS)]
+    pub rays_per_axis: u32,
+    /// Where the kernels run.
+    #[arg(long, value_enum, default_value_t = Backend::Auto)]
+    pub backend: Backend,
+    /// Thinning radius in Blender units (per level, then on the union); 0 keeps every point.
+    #[arg(long, default_value_t = DEFAULT_THIN_RADIUS)]
+    pub thin_radius: f64,
+    /// Blender → grid-scene scale (default: the scene box's, 2/3).
+    #[arg(long)]
+    pub scene_scale: Option<f32>,
+    /// Initial capacity of the device point buffer (default: min(upper bound, 2²¹) points).
+    #[arg(long, hide = true)]
+    pub capacity: Option<usize>,
+    /// Print one JSON object with the counts and timings as the last stdout line.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// The field to extract: a stage-1 density grid, or a stage-2 surface grid.
+enum Field {
+    Density(Grid),
+    Surface(SurfaceGrid),
+}
+
+/// Load the grid named by `--run` or `--ckpt`.
+fn load_grid(opts: &ExtractOptions) -> Result<(Field, PathBuf)> {
+    if let Some(ckpt) = &opts.ckpt {
+        return Ok((Field::Density(npz::load_svox2(ckpt)?), ckpt.clone()));
+    }
+    let run = opts.run.as_ref().context("give --run or --ckpt")?;
+    let surface = stage2::checkpoint_path(run);
+    if surface.exists() {
+        return Ok((Field::Surface(SurfaceGrid::load(&surface)?.grid), surface));
+    }
+    let path = stage1::checkpoint_path(run);
+    ensure!(
+        path.exists(),
+        "{}: no {} (is this a run directory written by `alphasurf train`?)",
+        run.display(),
+        stage1::CHECKPOINT
+    );
+    Ok((Field::Density(checkpoint::load(&path)?.grid), path))
+}
+
+impl ExtractOptions {
+    /// The defaults of every flag, extracting the grid of the run `run` into `out`.
+    pub fn for_run(run: PathBuf, out: PathBuf) -> ExtractOptions {
+        ExtractOptions {
+            run: Some(run),
+            ckpt: None,
+            out,
+            levels: None,
+            min_alpha: DEFAULT_MIN_ALPHA,
+            rays_per_axis: DEFAULT_RAYS_PER_AXIS,
+            backend: Backend::Auto,
+            thin_radius: DEFAULT_THIN_RADIUS,
+            scene_scale: None,
+            capacity: None,
+            json: false,
+        }
+    }
+}
+
+/// What an extraction did.
+#[derive(Clone, Debug, Serialize)]
+pub struct ExtractReport {
+    pub out: PathBuf,
+    /// The checkpoint read.
+    pub grid: PathBuf,
+    /// A stage-2 grid (αSurf surfaces, trimmed by opacity) rather than a density grid.
+    pub surface: bool,
+    pub res: [u32; 3],
+    pub levels: Vec<f32>,
+    pub min_alpha: f32,
+    pub rays_per_axis: u32,
+    /// Allocated vertices of the field.
+    pub vertices: usize,
+    /// Cells with 8 allocated corners.
+    pub cells: usize,
+    /// The device's name, or "cpu".
+    pub backend: String,
+    pub kernel: KernelStats,
+    pub thin: ThinStats,
+    /// Points written.
+    pub points: usize,
+    pub thin_radius: f64,
+    pub load_ms: f64,
+    pub write_ms: f64,
+    pub total_s: f64,
+}
+
+/// Extract the surfaces of the grid `opts` name into `opts.out` on `gpu` (`None`: the CPU twin).
+pub fn extract(opts: &ExtractOptions, gpu: Option<&Gpu>) -> Result<ExtractReport> {
+    let t0 = Instant::now();
+    ensure!(
+        (1..=64).contains(&opts.rays_per_axis),
+        "--rays-per-axis must be in 1..=64, got {}",
+        opts.rays_per_axis
+    );
+    ensure!(
+        opts.thin_radius >= 0.0 && opts.thin_radius.is_finite(),
+        "--thin-radius must be ≥ 0"
+    );
+    let scene_scale = opts.scene_scale.unwrap_or(SceneBox::default().scale);
+    ensure!(
+        scene_scale > 0.0 && scene_scale.is_finite(),
+        "--scene-scale must be positive"
+    );
+    ensure!(
+        opts.min_alpha.is_finite(),
+        "--min-alpha must be a finite number, got {}",
+        opts.min_alpha
+    );
+    let (field, path) = load_grid(opts)?;
+    crate::run::outputs::check_output_file(&opts.out, &[&path])?;
+    let load_ms = t0.elapsed().as_secs_f64() * 1e3;
+    let (res, center, radius, links) = match &field {
+        Field::Density(g) => (g.res, g.center, g.radius, &g.links),
+        Field::Surface(g) => (g.res, g.center, g.radius, &g.links),
+    };
+    let cells = allocated_cells(res, links)?;
+    let (values, opacity, levels) = match &field {
+        Field::Density(g) => (&g.density, None, opts.levels.clone().unwrap_or(vec![50.0])),
+        Field::Surface(g) => {
+            ensure!(
+                opts.levels.is_none(),
+                "--levels applies to stage-1 grids; {} has its own levels {:?}",
+                path.display(),
+                g.levels
+            );
+            (&g.delta, Some(g.opacity.as_slice()), g.levels.clone())
+        }
+    };
+    ensure!(!levels.is_empty(), "--levels: give at least one level");
+    ensure!(
+        levels.iter().all(|l| l.is_finite()),
+        "--levels: every level must be finite, got {levels:?}"
+    );
+    let inp = ExtractInput {
+        cells: &cells,
+        links,
+        field: values,
+        opacity,
+        levels: &levels,
+        res,
+        rays_per_axis: opts.rays_per_axis,
+        min_opacity: opts.min_alpha,
+    };
+    let backend = match gpu {
+        Some(g) => ExtractBackend::Vulkan(g),
+        None => ExtractBackend::Cpu,
+    };
+    let (points, kernel) = extract_sorted(backend, &inp, opts.capacity)?;
+    let frame = GridFrame {
+        res,
+        center,
+        radius,
+        scene_scale,
+    };
+    let (cloud, thin) = to_cloud(&points, &levels, &frame, opts.thin_radius)?;
+    ensure!(
+        !cloud.points.is_empty(),
+        "no surface points at levels {levels:?} (field range {:?}); nothing written",
+        value_range(values)
+    );
+    let t_w = Instant::now();
+    crate::io::write_ply(&opts.out, &cloud)?;
+    Ok(ExtractReport {
+        out: opts.out.clone(),
+        grid: path,
+        surface: matches!(field, Field::Surface(_)),
+        res,
+        levels,
+        min_alpha: opts.min_alpha,
+        rays_per_axis: opts.rays_per_axis,
+        vertices: values.len(),
+        cells: cells.len(),
+        backend: gpu.map_or("cpu".to_string(), |g| g.info().name.clone()),
+        kernel,
+        thin,
+        points: cloud.points.len(),
+        thin_radius: opts.thin_radius,
+        load_ms,
+        write_ms: t_w.elapsed().as_secs_f64() * 1e3,
+        total_s: t0.elapsed().as_secs_f64(),
+    })
+}
+
+/// (min, max) of the field over the allocated vertices.
+fn value_range(v: &[f32]) -> (f32, f32) {
+    v.iter()
+        .fold((f32::MAX, f32::MIN), |(a, b), &x| (a.min(x), b.max(x)))
+}

@@ -1,0 +1,189 @@
+//! A training run's `metrics.json`, typed: [`Stage1Metrics`] for a stage-1 (Plenoxels) run,
+//! [`Stage2Metrics`] for a stage-2 (αSurf) run. The JSON layout is the one runs have always
+//! written; counters added over time are `Option`s, absent in runs written before them.
+
+use crate::run::dir::METRICS;
+use crate::train::{Stage1Config, SurfaceConfig};
+use anyhow::{Context, Result};
+use serde::de::DeserializeOwned;
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// Wall time of a stage-1 run's phases, seconds.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Stage1Seconds {
+    /// Reading the dataset.
+    pub load: f64,
+    pub train: f64,
+    pub upsample: f64,
+    pub checkpoint: f64,
+    pub render_test: f64,
+    /// The whole command.
+    pub total: f64,
+}
+
+/// Samples per training ray of stage 1.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SamplesPerRay {
+    /// Shaded (σ above the threshold).
+    pub shaded: f64,
+    /// Evaluated and found empty.
+    pub empty: f64,
+    /// Skipped by the occupancy volume.
+    pub skipped: f64,
+}
+
+/// `metrics.json` of a stage-1 run.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Stage1Metrics {
+    /// "plenoxels".
+    pub stage: String,
+    /// The backend's name ("cpu", "vulkan").
+    pub backend: String,
+    /// The Vulkan device's name (`None` on the CPU backend).
+    #[serde(default)]
+    pub device: Option<String>,
+    pub wall_seconds: Stage1Seconds,
+    pub train_rays_per_s: f64,
+    pub final_train_mse: f64,
+    /// Mean PSNR over the test views, dB.
+    pub test_psnr: f64,
+    pub test_psnr_per_view: Vec<f64>,
+    pub samples_per_ray: Option<SamplesPerRay>,
+    pub atomic_adds_per_ray: Option<f64>,
+    pub allocated_vertices: usize,
+    /// Bytes per vertex with its optimiser state.
+    pub bytes_per_vertex: f64,
+    /// Peak resident memory of the process (where the platform reports it).
+    pub peak_rss_bytes: Option<u64>,
+    pub config: Stage1Config,
+}
+
+/// Wall time of a stage-2 run's phases, seconds.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Stage2Seconds {
+    /// Reading the dataset.
+    pub load: f64,
+    pub train: f64,
+    pub checkpoint: f64,
+    pub render_test: f64,
+    /// The whole command.
+    pub total: f64,
+}
+
+/// Per training ray of stage 2 (the kernel's counters over the run's steps).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Stage2PerRay {
+    /// Cells read (live cells).
+    pub cells: f64,
+    /// Cubic solves.
+    pub solves: f64,
+    /// Solves skipped by the min/max test or segment culling.
+    pub culled_solves: f64,
+    pub hits: f64,
+    /// Hits cut by the truncation.
+    pub cut_hits: f64,
+    /// Hits whose δ gradient was guarded.
+    pub guarded_hits: f64,
+    /// Gradient atomic adds.
+    pub atomic_adds: f64,
+    /// Empty-space blocks skipped.
+    pub blocks_skipped: Option<f64>,
+}
+
+/// `metrics.json` of a stage-2 run.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Stage2Metrics {
+    /// "surface".
+    pub stage: String,
+    /// The backend's name ("cpu", "vulkan").
+    pub backend: String,
+    /// The Vulkan device's name (`None` on the CPU backend).
+    #[serde(default)]
+    pub device: Option<String>,
+    pub wall_seconds: Stage2Seconds,
+    pub train_rays_per_s: f64,
+    pub final_train_mse: f64,
+    /// Mean PSNR over the test views, dB.
+    pub test_psnr: f64,
+    pub test_psnr_per_view: Vec<f64>,
+    pub per_ray: Option<Stage2PerRay>,
+    /// Vertices before dropping the surfaces with α below the configuration's `prune_alpha`.
+    pub vertices_before_prune: Option<usize>,
+    pub allocated_vertices: usize,
+    /// Peak resident memory of the process (where the platform reports it).
+    pub peak_rss_bytes: Option<u64>,
+    pub config: SurfaceConfig,
+}
+
+/// Read the `metrics.json` of the run in `dir`.
+pub fn read<M: DeserializeOwned>(dir: &Path) -> Result<M> {
+    let path = dir.join(METRICS);
+    let text =
+        std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
+    serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))
+}
+
+impl Stage1Metrics {
+    /// The lines `train` prints when stage 1 ends: per-view PSNR, per-ray counters, the summary.
+    pub fn summary(&self) -> String {
+        let mut s = views(&self.test_psnr_per_view);
+        if let (Some(spr), Some(adds)) = (&self.samples_per_ray, self.atomic_adds_per_ray) {
+            s += &format!(
+                "per training ray: {:.1} samples shaded, {:.1} evaluated empty, {:.1} skipped by \
+                 the occupancy volume; {:.1} gradient atomic adds\n",
+                spr.shaded, spr.empty, spr.skipped, adds
+            );
+        }
+        s + &format!(
+            "stage 1 done: test PSNR {:.2} dB, {:.0} training rays/s, {} vertices ({:.0} B each \
+             with optimiser state), {:.1} s\n",
+            self.test_psnr,
+            self.train_rays_per_s,
+            self.allocated_vertices,
+            self.bytes_per_vertex,
+            self.wall_seconds.total
+        )
+    }
+}
+
+impl Stage2Metrics {
+    /// The lines `train` prints when stage 2 ends: per-view PSNR, per-ray counters, the summary.
+    pub fn summary(&self) -> String {
+        let mut s = views(&self.test_psnr_per_view);
+        if let Some(r) = &self.per_ray {
+            s += &format!(
+                "per training ray: {:.1} cells read ({:.1} empty blocks skipped), {:.2} cubic \
+                 solves ({:.1} skipped by min/max or segment culling), {:.2} hits, {:.2} cut by \
+                 truncation, {:.3} guarded, {:.1} gradient atomic adds\n",
+                r.cells,
+                r.blocks_skipped.unwrap_or(0.0),
+                r.solves,
+                r.culled_solves,
+                r.hits,
+                r.cut_hits,
+                r.guarded_hits,
+                r.atomic_adds
+            );
+        }
+        s + &format!(
+            "stage 2 done: test PSNR {:.2} dB, {:.0} training rays/s, {} vertices after dropping \
+             α < {} ({} before), {:.1} s\n",
+            self.test_psnr,
+            self.train_rays_per_s,
+            self.allocated_vertices,
+            self.config.prune_alpha,
+            self.vertices_before_prune
+                .map_or("?".to_string(), |n| n.to_string()),
+            self.wall_seconds.total
+        )
+    }
+}
+
+/// One line per test view.
+fn views(psnr: &[f64]) -> String {
+    psnr.iter()
+        .enumerate()
+        .map(|(i, p)| format!("test view {i:>3}: PSNR {p:.2} dB\n"))
+        .collect()
+}

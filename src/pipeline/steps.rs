@@ -1,0 +1,221 @@
+//! The pipeline steps of `demo` and the benchmarks (`bench time-vs-error`, `bench accuracy`):
+//! make-scene, stage 1, stage 2, extract and eval as library calls on one resolved backend and
+//! one schedule.
+
+use super::evaluate::{evaluate, EvaluateOptions};
+use super::extract::{extract, ExtractOptions, DEFAULT_RAYS_PER_AXIS};
+use super::metrics::{self, Stage1Metrics};
+use super::train::{train, Trained};
+use super::train_options::{Stage, TrainOptions};
+use crate::backend::Backend;
+use crate::eval::Metrics;
+use crate::gpu::Gpu;
+use crate::scene::{generate, GenerateOptions, SceneKind};
+use crate::train::{Category, Preset};
+use anyhow::{bail, Result};
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Size of a generated scene.
+#[derive(Clone, Copy, Debug)]
+pub struct SceneSize {
+    pub image_res: u32,
+    pub views: u32,
+    /// Samples per pixel along each axis.
+    pub spp: u32,
+    /// Ground-truth point spacing, Blender units.
+    pub gt_spacing: f64,
+}
+
+/// Stage-1 size overrides (`None` keeps the preset's value).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct TrainSize {
+    /// Final grid resolution.
+    pub res: Option<u32>,
+    pub iters: Option<u32>,
+    /// Rays per batch.
+    pub batch: Option<u32>,
+}
+
+/// A finished training run.
+#[derive(Clone, Debug)]
+pub struct TrainedRun {
+    pub dir: PathBuf,
+    /// Wall time of the training call (load, training, checkpoints, test renders).
+    pub wall_s: f64,
+    /// Mean test-view PSNR, dB.
+    pub test_psnr: f64,
+    pub test_psnr_per_view: Vec<f64>,
+    pub train_rays_per_s: f64,
+}
+
+impl TrainedRun {
+    /// The finished stage-1 run in `dir`, from its metrics.json; `wall_s` as recorded elsewhere.
+    pub fn read_stage1(dir: &Path, wall_s: f64) -> Result<TrainedRun> {
+        let m: Stage1Metrics = metrics::read(dir)?;
+        Ok(TrainedRun {
+            dir: dir.to_path_buf(),
+            wall_s,
+            test_psnr: m.test_psnr,
+            test_psnr_per_view: m.test_psnr_per_view,
+            train_rays_per_s: m.train_rays_per_s,
+        })
+    }
+}
+
+/// Runs the steps on one device (`None`: the CPU twins) with one schedule.
+#[derive(Clone, Copy)]
+pub struct Steps<'g> {
+    /// The Vulkan device the kernels run on (`None`: the CPU twins).
+    pub gpu: Option<&'g Gpu>,
+    /// `extract --rays-per-axis` of every extraction.
+    pub rays_per_axis: u32,
+    /// `train --preset` of both stages.
+    pub preset: Preset,
+    /// `train --seed` of both stages.
+    pub seed: u64,
+    /// Progress bars (or, off a terminal, a line every 10 %) while training.
+    pub progress: bool,
+}
+
+impl<'g> Steps<'g> {
+    /// Steps on `gpu` with preset `fast`, seed 0 and the default extraction lattice.
+    pub fn new(gpu: Option<&'g Gpu>) -> Steps<'g> {
+        Steps {
+            gpu,
+            rays_per_axis: DEFAULT_RAYS_PER_AXIS,
+            preset: Preset::Fast,
+            seed: 0,
+            progress: true,
+        }
+    }
+
+    /// The same steps without progress bars.
+    pub fn quiet(self) -> Steps<'g> {
+        Steps {
+            progress: false,
+            ..self
+        }
+    }
+
+    /// Where the steps run: `vulkan` or `cpu`.
+    pub fn backend(&self) -> Backend {
+        match self.gpu {
+            Some(_) => Backend::Vulkan,
+            None => Backend::Cpu,
+        }
+    }
+
+    /// `make-scene`; returns its wall time.
+    pub fn make_scene(&self, kind: SceneKind, out: &Path, size: &SceneSize) -> Result<f64> {
+        let t = Instant::now();
+        let r = generate(
+            out,
+            &GenerateOptions {
+                kind,
+                res: size.image_res,
+                views: size.views,
+                seed: 0,
+                spp_side: size.spp,
+                gt_spacing: size.gt_spacing,
+                progress: std::io::stderr().is_terminal(),
+            },
+        )?;
+        eprintln!(
+            "wrote {} ({} views, {} gt points) to {} in {:.2} s",
+            kind.name(),
+            r.views,
+            r.gt_points,
+            out.display(),
+            r.total_s
+        );
+        Ok(t.elapsed().as_secs_f64())
+    }
+
+    /// The options of a training step that replaces the run in `out` (only a run: never other
+    /// files).
+    fn train_options(&self, stage: Stage, data: &Path, out: &Path) -> TrainOptions {
+        TrainOptions {
+            preset: self.preset,
+            backend: self.backend(),
+            seed: self.seed,
+            overwrite: true,
+            quiet: !self.progress,
+            ..TrainOptions::new(stage, data.to_path_buf(), out.to_path_buf())
+        }
+    }
+
+    /// Stage 1: `train --stage plenoxels` with the size overrides.
+    pub fn train_plenoxels(&self, data: &Path, out: &Path, size: &TrainSize) -> Result<TrainedRun> {
+        let opts = TrainOptions {
+            res: size.res,
+            iters: size.iters,
+            batch: size.batch,
+            ..self.train_options(Stage::Plenoxels, data, out)
+        };
+        let t = Instant::now();
+        let done = train(&opts, self.gpu)?.stage1;
+        let wall_s = t.elapsed().as_secs_f64();
+        match done {
+            Some(Trained::Done(m)) => Ok(TrainedRun {
+                dir: out.to_path_buf(),
+                wall_s,
+                test_psnr: m.test_psnr,
+                test_psnr_per_view: m.test_psnr_per_view,
+                train_rays_per_s: m.train_rays_per_s,
+            }),
+            _ => bail!("stage 1 into {} trained nothing", out.display()),
+        }
+    }
+
+    /// Stage 2 (αSurf): `train --stage surface --init STAGE1_RUN` with `--set` overrides.
+    pub fn train_surface(
+        &self,
+        init: &Path,
+        data: &Path,
+        out: &Path,
+        category: Category,
+        iters: Option<u32>,
+        set: &[String],
+    ) -> Result<TrainedRun> {
+        let opts = TrainOptions {
+            init: Some(init.to_path_buf()),
+            category,
+            iters,
+            set: set.to_vec(),
+            ..self.train_options(Stage::Surface, data, out)
+        };
+        let t = Instant::now();
+        let done = train(&opts, self.gpu)?.stage2;
+        let wall_s = t.elapsed().as_secs_f64();
+        match done {
+            Some(Trained::Done(m)) => Ok(TrainedRun {
+                dir: out.to_path_buf(),
+                wall_s,
+                test_psnr: m.test_psnr,
+                test_psnr_per_view: m.test_psnr_per_view,
+                train_rays_per_s: m.train_rays_per_s,
+            }),
+            _ => bail!("stage 2 into {} trained nothing", out.display()),
+        }
+    }
+
+    /// `extract --run RUN --out PLY [--levels …]`; returns its wall time.
+    pub fn extract(&self, run: &Path, ply: &Path, levels: Option<&[f32]>) -> Result<f64> {
+        let opts = ExtractOptions {
+            levels: levels.map(<[f32]>::to_vec),
+            rays_per_axis: self.rays_per_axis,
+            backend: self.backend(),
+            ..ExtractOptions::for_run(run.to_path_buf(), ply.to_path_buf())
+        };
+        let t = Instant::now();
+        extract(&opts, self.gpu)?;
+        Ok(t.elapsed().as_secs_f64())
+    }
+
+    /// `eval --pred PLY --gt GT`.
+    pub fn eval(&self, pred: &Path, gt: &Path) -> Result<Metrics> {
+        Ok(evaluate(&EvaluateOptions::new(pred.to_path_buf(), gt.to_path_buf()))?.metrics)
+    }
+}

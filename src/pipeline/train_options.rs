@@ -1,0 +1,287 @@
+//! The options of `train` ([`TrainOptions`], also its command-line flags): which stage, the
+//! dataset, the run directory, the preset and its overrides; the checks that refuse flags a stage
+//! would ignore; and each stage's configuration built from them.
+
+use crate::backend::Backend;
+use crate::run::Open;
+use crate::train::{Category, Preset, Stage1Config, SurfaceConfig};
+use anyhow::{bail, ensure, Context, Result};
+use std::path::PathBuf;
+
+/// Which stage to train.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Stage {
+    /// Stage 1: Plenoxels density + SH grid (writes plenoxels.npz).
+    Plenoxels,
+    /// Stage 2: αSurf surfaces initialised from a stage-1 grid (`--init`; writes surface.npz).
+    Surface,
+    /// Stage 1 into OUT/plenoxels, then stage 2 from it into OUT/surface.
+    All,
+}
+
+/// Options of `train` (its command-line flags).
+#[derive(clap::Args, Debug, Clone)]
+pub struct TrainOptions {
+    /// Which stage.
+    #[arg(long, value_enum, default_value = "plenoxels")]
+    pub stage: Stage,
+    /// Dataset directory (NeRF-synthetic format, e.g. from `make-scene`).
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Stage 2: the stage-1 run directory (its plenoxels.npz) or an svox2 `ckpt.npz` to
+    /// initialise from (required unless resuming).
+    #[arg(long)]
+    pub init: Option<PathBuf>,
+    /// Stage 2: the data category whose hyper-parameters from the paper's supplement apply
+    /// (levels, learning rates, regulariser weights, truncation schedule).
+    #[arg(long, value_enum, default_value_t = Category::Thin)]
+    pub category: Category,
+    /// Stage 2: initial raw opacity σα = s·σ, s > 0. Default: preset `paper` 0.005 (the released
+    /// code); preset `fast` 0.05 for thin, 0.01 for translucent, 0.005 otherwise, and at least
+    /// 0.005·(N/128)^1.5 on a stage-1 grid of N³: its short schedule cannot raise σα far enough
+    /// on a fine grid before truncation leaves each ray two hits.
+    #[arg(long)]
+    pub alpha_init_scale: Option<f32>,
+    /// Stage 2 steps (overrides the preset; with `--stage all`, `--iters` is stage 1's).
+    #[arg(long)]
+    pub surface_iters: Option<u32>,
+    /// Stage 2: override any field of the configuration (as printed in metrics.json), e.g.
+    /// `--set lambda_h=1e-3 --set lr_delta.init=1e-4`; the value is JSON. Repeatable.
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub set: Vec<String>,
+    /// Run directory: checkpoints, test renders, metrics.json.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// The schedule of both stages.
+    #[arg(long, value_enum, default_value_t = Preset::Fast)]
+    pub preset: Preset,
+    /// Where the kernels run.
+    #[arg(long, value_enum, default_value_t = Backend::Auto)]
+    pub backend: Backend,
+    /// Number of steps (overrides the preset; stage 1's learning-rate decays keep their length,
+    /// stage 2's schedules scale with it).
+    #[arg(long)]
+    pub iters: Option<u32>,
+    /// Final grid resolution (the preset's upsampling schedule is scaled to it).
+    #[arg(long)]
+    pub res: Option<u32>,
+    /// Rays per batch (overrides the preset).
+    #[arg(long)]
+    pub batch: Option<u32>,
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Box-downscale the images by this factor.
+    #[arg(long, default_value_t = 1)]
+    pub downscale: u32,
+    /// Write a checkpoint every N steps (overrides the preset).
+    #[arg(long)]
+    pub checkpoint_every: Option<u32>,
+    /// Continue from the run directory's checkpoint (its configuration wins).
+    #[arg(long, conflicts_with = "overwrite")]
+    pub resume: bool,
+    /// Replace the run already in `--out` (only a run: a folder that is not one is never
+    /// overwritten).
+    #[arg(long)]
+    pub overwrite: bool,
+    /// Hide the progress bar.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+impl TrainOptions {
+    /// The defaults of every flag, training `stage` on `data` into `out`.
+    pub fn new(stage: Stage, data: PathBuf, out: PathBuf) -> TrainOptions {
+        TrainOptions {
+            stage,
+            data,
+            init: None,
+            category: Category::Thin,
+            alpha_init_scale: None,
+            surface_iters: None,
+            set: Vec::new(),
+            out,
+            preset: Preset::Fast,
+            backend: Backend::Auto,
+            iters: None,
+            res: None,
+            batch: None,
+            seed: 0,
+            downscale: 1,
+            checkpoint_every: None,
+            resume: false,
+            overwrite: false,
+            quiet: false,
+        }
+    }
+
+    /// The stage-1 configuration: the preset, then the overrides.
+    pub fn stage1_config(&self) -> Result<Stage1Config> {
+        let mut cfg = Stage1Config::preset(self.preset)?;
+        cfg.seed = self.seed;
+        if let Some(n) = self.iters {
+            if n == 0 {
+                bail!("--iters must be at least 1");
+            }
+            cfg.upsample
+                .iter_mut()
+                .for_each(|u| u.0 = (u.0 as u64 * n as u64 / cfg.iters as u64) as u32);
+            cfg.checkpoint_every = cfg.checkpoint_every.min(n);
+            cfg.iters = n;
+        }
+        if let Some(r) = self.res {
+            if !(8..=1024).contains(&r) {
+                bail!("--res {r}: expected 8 ..= 1024");
+            }
+            let last = cfg.upsample.last().map_or(cfg.res, |u| u.1);
+            cfg.res = (cfg.res as u64 * r as u64 / last as u64).max(8) as u32;
+            cfg.upsample
+                .iter_mut()
+                .for_each(|u| u.1 = (u.1 as u64 * r as u64 / last as u64) as u32);
+        }
+        if let Some(c) = self.checkpoint_every {
+            if c == 0 {
+                bail!("--checkpoint-every must be at least 1");
+            }
+            cfg.checkpoint_every = c;
+        }
+        if let Some(b) = self.batch {
+            if b == 0 {
+                bail!("--batch must be at least 1");
+            }
+            cfg.batch = b;
+        }
+        Ok(cfg)
+    }
+
+    /// How these options open their run directory.
+    pub fn open_mode(&self) -> Open {
+        match (self.resume, self.overwrite) {
+            (true, _) => Open::Resume,
+            (false, true) => Open::Overwrite,
+            (false, false) => Open::Fresh,
+        }
+    }
+
+    /// Refuse flags the stage asked for would ignore.
+    pub fn check_stage_flags(&self) -> Result<()> {
+        let mut ignored = Vec::new();
+        if self.stage == Stage::Plenoxels {
+            let stage2_only = [
+                ("--init", self.init.is_some()),
+                ("--category", self.category != Category::Thin),
+                ("--set", !self.set.is_empty()),
+                ("--alpha-init-scale", self.alpha_init_scale.is_some()),
+                ("--surface-iters", self.surface_iters.is_some()),
+            ];
+            ignored.extend(stage2_only.iter().filter(|f| f.1).map(|f| f.0));
+        }
+        if self.stage == Stage::Surface && self.res.is_some() {
+            ignored.push("--res");
+        }
+        if self.stage == Stage::All && self.init.is_some() {
+            ignored.push("--init");
+        }
+        if !ignored.is_empty() {
+            bail!(
+                "{} {} not used by --stage {} ({}); leave {} out",
+                ignored.join(", "),
+                if ignored.len() == 1 { "is" } else { "are" },
+                match self.stage {
+                    Stage::Plenoxels => "plenoxels",
+                    Stage::Surface => "surface",
+                    Stage::All => "all",
+                },
+                match self.stage {
+                    Stage::Plenoxels => "they configure stage 2",
+                    Stage::Surface => "the grid resolution comes from --init",
+                    Stage::All => "stage 2 starts from this run's own stage 1",
+                },
+                if ignored.len() == 1 { "it" } else { "them" }
+            );
+        }
+        for (name, v) in [
+            ("--iters", self.iters),
+            ("--surface-iters", self.surface_iters),
+        ] {
+            if v == Some(0) {
+                bail!("{name} must be at least 1");
+            }
+        }
+        if let Some(b) = self.batch {
+            check_batch_memory(b)?;
+        }
+        Ok(())
+    }
+
+    /// The stage-2 configuration for a stage-1 grid of `grid_n`³ vertices: the preset fitted to the
+    /// grid, then the command line's overrides.
+    pub fn stage2_config(&self, grid_n: u32) -> Result<SurfaceConfig> {
+        let mut cfg = SurfaceConfig::preset(self.preset, self.category)?;
+        cfg.fit_grid(grid_n);
+        cfg.seed = self.seed;
+        if let Some(n) = self.surface_iters.or(self.iters) {
+            ensure!(n > 0, "the number of stage-2 steps must be at least 1");
+            let preset = cfg.preset;
+            cfg = cfg.scaled(n);
+            cfg.preset = preset;
+        }
+        if let Some(b) = self.batch {
+            ensure!(b > 0, "--batch must be at least 1");
+            cfg.batch = b;
+        }
+        if let Some(c) = self.checkpoint_every {
+            ensure!(c > 0, "--checkpoint-every must be at least 1");
+            cfg.checkpoint_every = c;
+        }
+        for kv in &self.set {
+            cfg = set_field(&cfg, kv)?;
+        }
+        if let Some(s) = self.alpha_init_scale {
+            ensure!(
+                s > 0.0 && s.is_finite(),
+                "--alpha-init-scale must be positive, got {s}"
+            );
+            cfg.init.alpha_init_scale = s;
+        }
+        cfg.validate()?;
+        Ok(cfg)
+    }
+}
+
+/// Bytes a training step holds per ray of its batch: the sampled batch, its flat copies handed
+/// to the backend and the backend's per-ray buffers. Peak RSS grows by about 100 B per ray on the
+/// CPU backend (stage 1, `--batch` 2000 against 400000); the Vulkan backend also stages its
+/// copies, hence the margin.
+const BYTES_PER_BATCH_RAY: f64 = 256.0;
+
+/// Refuse a `--batch` whose per-step buffers cannot fit in the memory available.
+fn check_batch_memory(batch: u32) -> Result<()> {
+    crate::run::memory::ensure_fits(
+        &format!("--batch {batch}"),
+        batch as f64 * BYTES_PER_BATCH_RAY,
+    )
+}
+
+/// `--set key.path=json`: patch one field of the configuration.
+fn set_field(cfg: &SurfaceConfig, kv: &str) -> Result<SurfaceConfig> {
+    let (key, value) = kv
+        .split_once('=')
+        .with_context(|| format!("--set {kv}: expected KEY=VALUE"))?;
+    let value: serde_json::Value = serde_json::from_str(value)
+        .or_else(|_| serde_json::from_str(&format!("\"{value}\"")))
+        .with_context(|| format!("--set {kv}: the value is not JSON"))?;
+    let mut v = serde_json::to_value(cfg)?;
+    let mut slot = &mut v;
+    for part in key.split('.') {
+        slot = slot
+            .get_mut(part)
+            .with_context(|| format!("--set {kv}: no configuration field {key:?}"))?;
+    }
+    ensure!(
+        std::mem::discriminant(slot) == std::mem::discriminant(&value)
+            || (slot.is_number() && value.is_number()),
+        "--set {kv}: {key} is {slot}, not {value}"
+    );
+    *slot = value;
+    serde_json::from_value(v).with_context(|| format!("--set {kv}: invalid value for {key}"))
+}

@@ -1,0 +1,143 @@
+//! Stage 1 (Plenoxels) as a library call: claim the run directory, start a grid or resume the
+//! checkpoint, train, and write `metrics.json` ([`Stage1Metrics`]).
+
+use super::metrics::{SamplesPerRay, Stage1Metrics, Stage1Seconds};
+use super::train::{resume, run_info, Loaded, Trained};
+use super::train_options::TrainOptions;
+use crate::data::dataset::peak_rss_bytes;
+use crate::gpu::Gpu;
+use crate::grid::Grid;
+use crate::plenoxel::{CpuPlenoxels, Plenoxels, VulkanPlenoxels};
+use crate::run::{RunDir, RunStage};
+use crate::train::{stage1, Preset, Stage1Config};
+use anyhow::{bail, Result};
+use std::time::Instant;
+
+/// The Vulkan backend on `gpu`, or the CPU backend when there is none.
+pub fn make_backend(gpu: Option<&Gpu>, grid: Grid) -> Result<Box<dyn Plenoxels>> {
+    Ok(match gpu {
+        Some(gpu) => Box::new(VulkanPlenoxels::new(gpu, grid)?),
+        None => Box::new(CpuPlenoxels::new(grid)),
+    })
+}
+
+/// Train stage 1 into `opts.out` on `gpu` (`None`: the CPU twins).
+pub fn train_stage1(
+    opts: &TrainOptions,
+    data: &Loaded,
+    gpu: Option<&Gpu>,
+) -> Result<Trained<Stage1Metrics>> {
+    let t_all = Instant::now();
+    // A new run's flags are checked before its folder is claimed.
+    let fresh_cfg = if opts.resume {
+        None
+    } else {
+        Some(opts.stage1_config()?)
+    };
+    let mut run = RunDir::claim(
+        &opts.out,
+        RunStage::Plenoxels,
+        opts.open_mode(),
+        &[&opts.data],
+    )?;
+    let (load_s, data) = (data.seconds, &data.data);
+    let ckpt = stage1::checkpoint_path(&opts.out);
+    let (mut backend, cfg, start) = if let Some(cfg) = fresh_cfg {
+        let grid = Grid::sphere(
+            cfg.res,
+            data.scene.centre.to_array(),
+            [data.scene.radius; 3],
+            1.0,
+            cfg.init_sigma,
+        );
+        (make_backend(gpu, grid)?, cfg, 0)
+    } else {
+        let restore = || {
+            let probe = crate::grid::checkpoint::load(&ckpt)?;
+            let mut b = make_backend(gpu, probe.grid)?;
+            let (step, cfg) = stage1::resume(b.as_mut(), &ckpt)?;
+            check_resume_flags(opts, &cfg)?;
+            Ok((b, step, cfg))
+        };
+        match resume(
+            &ckpt,
+            opts.iters,
+            |c: &mut Stage1Config| &mut c.iters,
+            restore,
+        )? {
+            Ok(resumed) => resumed,
+            Err(done) => return Ok(done),
+        }
+    };
+    run.write_info(&run_info(opts, None)?)?;
+    eprintln!(
+        "stage 1 on {} ({}): preset {}, {} steps of {} rays, grid {}³{}",
+        backend.name(),
+        gpu.map_or("rayon".to_string(), |g| g.info().name.clone()),
+        cfg.preset,
+        cfg.iters,
+        cfg.batch,
+        cfg.res,
+        cfg.upsample
+            .iter()
+            .map(|(s, r)| format!(" → {r}³ at step {s}"))
+            .collect::<String>()
+    );
+    let (report, rendered) =
+        stage1::train(backend.as_mut(), data, &cfg, &opts.out, start, !opts.quiet)?;
+    let spr = report.samples_per_ray;
+    let metrics = Stage1Metrics {
+        stage: RunStage::Plenoxels.name().into(),
+        backend: backend.name().into(),
+        device: gpu.map(|g| g.info().name.clone()),
+        wall_seconds: Stage1Seconds {
+            load: load_s,
+            train: report.train_seconds,
+            upsample: report.upsample_seconds,
+            checkpoint: report.checkpoint_seconds,
+            render_test: report.render_seconds,
+            total: load_s + t_all.elapsed().as_secs_f64(),
+        },
+        train_rays_per_s: report.train_rays_per_s,
+        final_train_mse: report.final_mse,
+        test_psnr: report.test_psnr,
+        test_psnr_per_view: rendered.psnr,
+        samples_per_ray: Some(SamplesPerRay {
+            shaded: spr[0],
+            empty: spr[1],
+            skipped: spr[2],
+        }),
+        atomic_adds_per_ray: Some(spr[3]),
+        allocated_vertices: report.allocated_vertices,
+        bytes_per_vertex: report.bytes_per_vertex,
+        peak_rss_bytes: peak_rss_bytes(),
+        config: cfg,
+    };
+    run.write_metrics(&serde_json::to_value(&metrics)?)?;
+    Ok(Trained::Done(metrics))
+}
+
+/// On `--resume` the checkpoint's configuration wins: a flag that asks for something else is an
+/// error rather than silently ignored.
+fn check_resume_flags(opts: &TrainOptions, cfg: &Stage1Config) -> Result<()> {
+    let final_res = cfg.upsample.last().map_or(cfg.res, |u| u.1);
+    let clashes = [
+        ("--res", opts.res.is_some_and(|r| r != final_res)),
+        ("--batch", opts.batch.is_some_and(|b| b != cfg.batch)),
+        (
+            "--preset",
+            opts.preset != Preset::Fast && opts.preset != cfg.preset,
+        ),
+    ];
+    let named: Vec<&str> = clashes.iter().filter(|c| c.1).map(|c| c.0).collect();
+    if !named.is_empty() {
+        bail!(
+            "--resume continues the checkpoint's configuration (grid {final_res}³, batch {}, \
+             preset {}); {} cannot change it (only --iters can)",
+            cfg.batch,
+            cfg.preset,
+            named.join(", ")
+        );
+    }
+    Ok(())
+}

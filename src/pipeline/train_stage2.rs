@@ -1,0 +1,184 @@
+//! Stage 2 (αSurf) as a library call: initialise the surface grid from a stage-1 run or an
+//! svox2 checkpoint (method.md §3.1), or resume a stage-2 run, train it, and write
+//! `metrics.json` ([`Stage2Metrics`]).
+
+use super::metrics::{Stage2Metrics, Stage2PerRay, Stage2Seconds};
+use super::train::{resume, run_info, Loaded, Trained};
+use super::train_options::TrainOptions;
+use crate::data::dataset::peak_rss_bytes;
+use crate::gpu::Gpu;
+use crate::grid::surface::SurfaceGrid;
+use crate::grid::{npz, Grid};
+use crate::run::{RunDir, RunStage};
+use crate::surface::{CpuSurface, SurfaceBackend, VulkanSurface};
+use crate::train::{stage1, stage2, Category, Preset, SurfaceConfig};
+use anyhow::{ensure, Context, Result};
+use std::path::Path;
+use std::time::Instant;
+
+/// The Vulkan backend on `gpu`, or the CPU backend when there is none.
+fn make_backend(gpu: Option<&Gpu>, grid: SurfaceGrid) -> Result<Box<dyn SurfaceBackend>> {
+    Ok(match gpu {
+        Some(gpu) => {
+            grid.validate()?;
+            Box::new(VulkanSurface::new(gpu, grid)?)
+        }
+        None => Box::new(CpuSurface::new(grid)?),
+    })
+}
+
+/// The stage-1 grid `--init` names: a run directory (its plenoxels.npz) or an npz file.
+fn load_init(path: &Path) -> Result<Grid> {
+    let file = if path.is_dir() {
+        let ck = stage1::checkpoint_path(path);
+        ensure!(
+            ck.exists(),
+            "--init {}: no {} in that directory (is it a stage-1 run?)",
+            path.display(),
+            stage1::CHECKPOINT
+        );
+        ck
+    } else {
+        path.to_path_buf()
+    };
+    npz::load_svox2(&file).with_context(|| format!("--init {}", path.display()))
+}
+
+/// A new stage-2 grid and its configuration from `--init` and the flags.
+fn fresh_start(opts: &TrainOptions) -> Result<(SurfaceGrid, SurfaceConfig)> {
+    let init = opts
+        .init
+        .as_ref()
+        .context("stage 2 needs --init STAGE1_RUN_DIR or --init ckpt.npz")?;
+    let density = load_init(init)?;
+    let cfg = opts.stage2_config(density.res.into_iter().max().unwrap_or(0))?;
+    let grid = SurfaceGrid::from_density(&density, &cfg.init)
+        .with_context(|| format!("initialising the surfaces from {}", init.display()))?;
+    eprintln!(
+        "initialised from {}: {}³ grid, {} of {} vertices kept (σ > {}, dilated twice), \
+         mean |∇σ| {:.4}, levels τ = {:?}, σα = {}·σ",
+        init.display(),
+        grid.res[0],
+        grid.delta.len(),
+        density.allocated(),
+        cfg.init.density_levels[0] / 2.0,
+        grid.gradient_scale,
+        grid.levels,
+        cfg.init.alpha_init_scale
+    );
+    Ok((grid, cfg))
+}
+
+/// Train stage 2 into `opts.out` on `gpu` (`None`: the CPU twins).
+pub fn train_stage2(
+    opts: &TrainOptions,
+    data: &Loaded,
+    gpu: Option<&Gpu>,
+) -> Result<Trained<Stage2Metrics>> {
+    let t_all = Instant::now();
+    // A new run's inputs and flags are checked before its folder is claimed.
+    let fresh = if opts.resume {
+        None
+    } else {
+        Some(fresh_start(opts)?)
+    };
+    let mut inputs = vec![opts.data.as_path()];
+    inputs.extend(opts.init.as_deref());
+    let mut run = RunDir::claim(&opts.out, RunStage::Surface, opts.open_mode(), &inputs)?;
+    let (load_s, data) = (data.seconds, &data.data);
+    let ckpt = stage2::checkpoint_path(&opts.out);
+    let (mut backend, cfg, start) = match fresh {
+        Some((grid, cfg)) => (make_backend(gpu, grid)?, cfg, 0),
+        None => {
+            let restore = || {
+                let probe = SurfaceGrid::load(&ckpt)?;
+                let mut b = make_backend(gpu, probe.grid)?;
+                let (step, cfg) = stage2::resume(b.as_mut(), &ckpt)?;
+                check_resume_flags(opts, &cfg)?;
+                Ok((b, step, cfg))
+            };
+            let iters = opts.surface_iters.or(opts.iters);
+            match resume(&ckpt, iters, |c: &mut SurfaceConfig| &mut c.iters, restore)? {
+                Ok(resumed) => resumed,
+                Err(done) => return Ok(done),
+            }
+        }
+    };
+    run.write_info(&run_info(opts, opts.init.clone())?)?;
+    eprintln!(
+        "stage 2 on {} ({}): preset {}, category {}, {} steps of {} rays, a {} → {}, δ rate {:.1e}",
+        backend.name(),
+        gpu.map_or("rayon".to_string(), |g| g.info().name.clone()),
+        cfg.preset,
+        cfg.category,
+        cfg.iters,
+        cfg.batch,
+        cfg.a.start,
+        cfg.a.end,
+        cfg.lr_delta.init
+    );
+    let (report, rendered) =
+        stage2::train(backend.as_mut(), data, &cfg, &opts.out, start, !opts.quiet)?;
+    let r = report.per_ray;
+    let metrics = Stage2Metrics {
+        stage: RunStage::Surface.name().into(),
+        backend: backend.name().into(),
+        device: gpu.map(|g| g.info().name.clone()),
+        wall_seconds: Stage2Seconds {
+            load: load_s,
+            train: report.train_seconds,
+            checkpoint: report.checkpoint_seconds,
+            render_test: report.render_seconds,
+            total: load_s + t_all.elapsed().as_secs_f64(),
+        },
+        train_rays_per_s: report.train_rays_per_s,
+        final_train_mse: report.final_mse,
+        test_psnr: report.test_psnr,
+        test_psnr_per_view: rendered.psnr,
+        per_ray: Some(Stage2PerRay {
+            cells: r[0],
+            solves: r[1],
+            culled_solves: r[2],
+            hits: r[3],
+            cut_hits: r[4],
+            guarded_hits: r[5],
+            atomic_adds: r[6],
+            blocks_skipped: Some(r[7]),
+        }),
+        vertices_before_prune: Some(report.vertices_before_prune),
+        allocated_vertices: report.allocated_vertices,
+        peak_rss_bytes: peak_rss_bytes(),
+        config: cfg,
+    };
+    run.write_metrics(&serde_json::to_value(&metrics)?)?;
+    Ok(Trained::Done(metrics))
+}
+
+/// On `--resume` the checkpoint's configuration wins: a flag that asks for something else is an
+/// error rather than silently ignored.
+fn check_resume_flags(opts: &TrainOptions, cfg: &SurfaceConfig) -> Result<()> {
+    let clashes = [
+        ("--batch", opts.batch.is_some_and(|b| b != cfg.batch)),
+        (
+            "--category",
+            opts.category != Category::Thin && opts.category != cfg.category,
+        ),
+        (
+            "--preset",
+            opts.preset != Preset::Fast && opts.preset != cfg.preset,
+        ),
+        ("--set", !opts.set.is_empty()),
+        ("--alpha-init-scale", opts.alpha_init_scale.is_some()),
+    ];
+    let named: Vec<&str> = clashes.iter().filter(|c| c.1).map(|c| c.0).collect();
+    ensure!(
+        named.is_empty(),
+        "--resume continues the checkpoint's configuration (batch {}, category {}, preset {}); \
+         {} cannot change it (only --surface-iters / --iters can)",
+        cfg.batch,
+        cfg.category,
+        cfg.preset,
+        named.join(", ")
+    );
+    Ok(())
+}
