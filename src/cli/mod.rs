@@ -241,4 +241,32 @@ mod tests {
             assert!(train_args(&[flag, value]).is_err(), "{flag} {value}");
         }
     }
+
+    fn parse(argv: &[&str]) -> Command {
+        let mut full = vec!["alphasurf"];
+        full.extend(argv);
+        Cli::try_parse_from(full).unwrap().command
+    }
+
+    /// The library's constructors with every flag at its default agree with the command line's
+    /// defaults (the demo and the benchmarks build their options with them).
+    #[test]
+    fn library_defaults_are_the_command_line_defaults() {
+        use crate::pipeline::train_options::Stage;
+        let Command::Train(t) = parse(&["train", "--data", "d", "--out", "o"]) else {
+            panic!("not train")
+        };
+        let lib = TrainOptions::new(Stage::Plenoxels, "d".into(), "o".into());
+        assert_eq!(format!("{t:?}"), format!("{lib:?}"));
+        let Command::Extract(e) = parse(&["extract", "--run", "r", "--out", "p.ply"]) else {
+            panic!("not extract")
+        };
+        let lib = ExtractOptions::for_run("r".into(), "p.ply".into());
+        assert_eq!(format!("{e:?}"), format!("{lib:?}"));
+        let Command::Eval(e) = parse(&["eval", "--pred", "p.ply", "--gt", "g.ply"]) else {
+            panic!("not eval")
+        };
+        let lib = EvaluateOptions::new("p.ply".into(), "g.ply".into());
+        assert_eq!(format!("{e:?}"), format!("{lib:?}"));
+    }
 }

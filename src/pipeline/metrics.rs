@@ -187,3 +187,117 @@ fn views(psnr: &[f64]) -> String {
         .map(|(i, p)| format!("test view {i:>3}: PSNR {p:.2} dB\n"))
         .collect()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::train::{Category, Preset};
+    use serde_json::{json, Value};
+
+    /// metrics.json of a stage-1 run as the untyped writer wrote it (before these types).
+    fn stage1_untyped() -> Value {
+        json!({
+            "stage": "plenoxels",
+            "backend": "cpu",
+            "device": null,
+            "wall_seconds": {
+                "load": 0.5, "train": 10.0, "upsample": 1.0, "checkpoint": 0.25,
+                "render_test": 2.0, "total": 14.0,
+            },
+            "train_rays_per_s": 150000.0,
+            "final_train_mse": 0.004,
+            "test_psnr": 21.9,
+            "test_psnr_per_view": [21.5, 22.3],
+            "samples_per_ray": { "shaded": 5.5, "empty": 20.25, "skipped": 100.0 },
+            "atomic_adds_per_ray": 88.0,
+            "allocated_vertices": 12345,
+            "bytes_per_vertex": 224.0,
+            "peak_rss_bytes": 1048576,
+            "config": Stage1Config::fast(),
+        })
+    }
+
+    /// metrics.json of a stage-2 run as the untyped writer wrote it.
+    fn stage2_untyped() -> Value {
+        json!({
+            "stage": "surface",
+            "backend": "vulkan",
+            "device": "llvmpipe",
+            "wall_seconds": {
+                "load": 0.5, "train": 10.0, "checkpoint": 0.25, "render_test": 2.0,
+                "total": 13.0,
+            },
+            "train_rays_per_s": 90000.0,
+            "final_train_mse": 0.005,
+            "test_psnr": 21.2,
+            "test_psnr_per_view": [21.0],
+            "per_ray": {
+                "cells": 30.0, "solves": 4.5, "culled_solves": 20.0, "hits": 1.5,
+                "cut_hits": 0.25, "guarded_hits": 0.0, "atomic_adds": 60.0, "blocks_skipped": 3.0,
+            },
+            "vertices_before_prune": 9000,
+            "allocated_vertices": 8752,
+            "peak_rss_bytes": null,
+            "config": SurfaceConfig::preset(Preset::Fast, Category::Thin).unwrap(),
+        })
+    }
+
+    #[test]
+    fn the_typed_metrics_read_and_write_the_untyped_layout() {
+        let v = stage1_untyped();
+        let m: Stage1Metrics = serde_json::from_value(v.clone()).unwrap();
+        assert_eq!(m.samples_per_ray.as_ref().unwrap().empty, 20.25);
+        assert_eq!(serde_json::to_value(&m).unwrap(), v);
+        let v = stage2_untyped();
+        let m: Stage2Metrics = serde_json::from_value(v.clone()).unwrap();
+        assert_eq!(m.per_ray.as_ref().unwrap().blocks_skipped, Some(3.0));
+        assert_eq!(serde_json::to_value(&m).unwrap(), v);
+    }
+
+    #[test]
+    fn runs_written_before_the_later_counters_still_load() {
+        let mut v = stage1_untyped();
+        for k in [
+            "device",
+            "samples_per_ray",
+            "atomic_adds_per_ray",
+            "peak_rss_bytes",
+        ] {
+            v.as_object_mut().unwrap().remove(k);
+        }
+        let m: Stage1Metrics = serde_json::from_value(v).unwrap();
+        assert_eq!((&m.device, m.atomic_adds_per_ray), (&None, None));
+        assert!(m.summary().contains("stage 1 done: test PSNR 21.90 dB"));
+        assert!(!m.summary().contains("per training ray"));
+        let mut v = stage2_untyped();
+        for k in [
+            "device",
+            "per_ray",
+            "vertices_before_prune",
+            "peak_rss_bytes",
+        ] {
+            v.as_object_mut().unwrap().remove(k);
+        }
+        let m: Stage2Metrics = serde_json::from_value(v).unwrap();
+        assert_eq!((m.per_ray, m.vertices_before_prune), (None, None));
+        let mut v = stage2_untyped();
+        v["per_ray"]
+            .as_object_mut()
+            .unwrap()
+            .remove("blocks_skipped");
+        let m: Stage2Metrics = serde_json::from_value(v).unwrap();
+        assert_eq!(m.per_ray.unwrap().blocks_skipped, None);
+        // A stage-2 file is not a stage-1 run's metrics.
+        assert!(serde_json::from_value::<Stage1Metrics>(stage2_untyped()).is_err());
+    }
+
+    #[test]
+    fn read_names_the_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let e = format!("{:#}", read::<Stage1Metrics>(dir.path()).unwrap_err());
+        assert!(e.contains(METRICS), "{e}");
+        std::fs::write(dir.path().join(METRICS), "{}").unwrap();
+        let e = format!("{:#}", read::<Stage1Metrics>(dir.path()).unwrap_err());
+        assert!(e.contains("parsing") && e.contains(METRICS), "{e}");
+    }
+}
