@@ -51,16 +51,23 @@ pub struct TrainedRun {
 }
 
 impl TrainedRun {
+    /// The run in `dir` that took `wall_s`, with its test PSNR (mean and per view) and training
+    /// rays/s.
+    fn new(dir: &Path, wall_s: f64, psnr: (f64, Vec<f64>), train_rays_per_s: f64) -> TrainedRun {
+        TrainedRun {
+            dir: dir.to_path_buf(),
+            wall_s,
+            test_psnr: psnr.0,
+            test_psnr_per_view: psnr.1,
+            train_rays_per_s,
+        }
+    }
+
     /// The finished stage-1 run in `dir`, from its metrics.json; `wall_s` as recorded elsewhere.
     pub fn read_stage1(dir: &Path, wall_s: f64) -> Result<TrainedRun> {
         let m: Stage1Metrics = metrics::read(dir)?;
-        Ok(TrainedRun {
-            dir: dir.to_path_buf(),
-            wall_s,
-            test_psnr: m.test_psnr,
-            test_psnr_per_view: m.test_psnr_per_view,
-            train_rays_per_s: m.train_rays_per_s,
-        })
+        let psnr = (m.test_psnr, m.test_psnr_per_view);
+        Ok(TrainedRun::new(dir, wall_s, psnr, m.train_rays_per_s))
     }
 }
 
@@ -158,13 +165,10 @@ impl<'g> Steps<'g> {
         let done = train(&opts, self.gpu)?.stage1;
         let wall_s = t.elapsed().as_secs_f64();
         match done {
-            Some(Trained::Done(m)) => Ok(TrainedRun {
-                dir: out.to_path_buf(),
-                wall_s,
-                test_psnr: m.test_psnr,
-                test_psnr_per_view: m.test_psnr_per_view,
-                train_rays_per_s: m.train_rays_per_s,
-            }),
+            Some(Trained::Done(m)) => {
+                let psnr = (m.test_psnr, m.test_psnr_per_view);
+                Ok(TrainedRun::new(out, wall_s, psnr, m.train_rays_per_s))
+            }
             _ => bail!("stage 1 into {} trained nothing", out.display()),
         }
     }
@@ -190,13 +194,10 @@ impl<'g> Steps<'g> {
         let done = train(&opts, self.gpu)?.stage2;
         let wall_s = t.elapsed().as_secs_f64();
         match done {
-            Some(Trained::Done(m)) => Ok(TrainedRun {
-                dir: out.to_path_buf(),
-                wall_s,
-                test_psnr: m.test_psnr,
-                test_psnr_per_view: m.test_psnr_per_view,
-                train_rays_per_s: m.train_rays_per_s,
-            }),
+            Some(Trained::Done(m)) => {
+                let psnr = (m.test_psnr, m.test_psnr_per_view);
+                Ok(TrainedRun::new(out, wall_s, psnr, m.train_rays_per_s))
+            }
             _ => bail!("stage 2 into {} trained nothing", out.display()),
         }
     }

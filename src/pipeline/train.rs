@@ -65,16 +65,6 @@ pub enum Trained<M> {
     },
 }
 
-impl<M> Trained<M> {
-    /// The metrics of a run that trained.
-    pub fn metrics(&self) -> Option<&M> {
-        match self {
-            Trained::Done(m) => Some(m),
-            Trained::AlreadyDone { .. } => None,
-        }
-    }
-}
-
 /// What `train` did: stage 1, stage 2, or both (`--stage all`, stage 1 absent when it was
 /// already done).
 #[derive(Clone, Debug, Default)]
