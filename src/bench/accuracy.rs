@@ -325,7 +325,7 @@ fn write_json(path: &Path, value: &impl Serialize) -> Result<()> {
 /// The stage-1 record in `dir`, if its run finished.
 fn read_stage1(dir: &Path) -> Result<Option<Stage1Record>> {
     let rec = dir.join("stage1.json");
-    if !(dir.join("metrics.json").is_file() && rec.is_file()) {
+    if !(dir.join(crate::run::dir::METRICS).is_file() && rec.is_file()) {
         return Ok(None);
     }
     let text =

@@ -113,7 +113,7 @@ pub fn train_stage1(
         peak_rss_bytes: peak_rss_bytes(),
         config: cfg,
     };
-    run.write_metrics(&serde_json::to_value(&metrics)?)?;
+    run.write_metrics(&metrics)?;
     Ok(Trained::Done(metrics))
 }
 

@@ -150,7 +150,7 @@ pub fn train_stage2(
         peak_rss_bytes: peak_rss_bytes(),
         config: cfg,
     };
-    run.write_metrics(&serde_json::to_value(&metrics)?)?;
+    run.write_metrics(&metrics)?;
     Ok(Trained::Done(metrics))
 }
 

@@ -231,8 +231,8 @@ impl RunDir {
     }
 
     /// Write `metrics.json` (atomically).
-    pub fn write_metrics(&self, metrics: &serde_json::Value) -> Result<()> {
-        crate::io::atomic::write_json(&self.file(METRICS), metrics)
+    pub fn write_metrics(&self, metrics: &impl Serialize) -> Result<()> {
+        crate::io::atomic::write_json(&self.file(METRICS), &serde_json::to_value(metrics)?)
     }
 }
 

@@ -211,7 +211,8 @@ fn test_view(r: &Inputs, path: &Path) -> Result<String> {
         runs.push(("αSURF", s2));
     }
     for (name, run) in runs {
-        let img = load_rgb_on_white(&run.dir.join("test").join(format!("r_{i}.png")))?;
+        let renders = run.dir.join(crate::run::dir::TEST_RENDERS);
+        let img = load_rgb_on_white(&renders.join(format!("r_{i}.png")))?;
         let label = match run.test_psnr_per_view.get(i) {
             Some(p) => format!("{name} {p:.2} DB"),
             None => name.to_string(),
