@@ -1,5 +1,6 @@
-//! `alphasurf inspect DATASET`: loads a NeRF-synthetic dataset and prints its splits, cameras,
-//! estimated object bounds, warnings, and the load time and memory.
+//! `alphasurf inspect DATASET`: loads a dataset (NeRF-synthetic, COLMAP or IDR) and prints its
+//! layout, splits, cameras, scene box, estimated object bounds, warnings, and the load time and
+//! memory.
 
 use crate::data::{inspect::inspect, Dataset, LoadOptions, SceneBox};
 use std::path::PathBuf;
@@ -7,31 +8,32 @@ use std::path::PathBuf;
 /// Arguments of `inspect`.
 #[derive(clap::Args, Debug)]
 pub struct InspectArgs {
-    /// Dataset directory (with transforms_{train,val,test}.json).
+    /// Dataset directory (NeRF-synthetic, COLMAP or IDR layout; see the README).
     pub dataset: PathBuf,
     /// Box-downscale the images by this factor.
     #[arg(long, default_value_t = 1)]
     pub downscale: u32,
-    /// Blender → scaled-world factor; the grid box [-1, 1]^3 then covers [-1/scale, 1/scale]^3.
-    #[arg(long, default_value_t = 2.0 / 3.0)]
-    pub scale: f32,
+    /// World → scaled-world factor; the grid box [-1, 1]^3 then covers [-1/scale, 1/scale]^3
+    /// (default: the layout's box; NeRF-synthetic: 2/3).
+    #[arg(long)]
+    pub scale: Option<f32>,
 }
 
 /// Runs `inspect`.
 pub fn run(args: &InspectArgs) -> anyhow::Result<()> {
-    if !(args.scale > 0.0 && args.scale.is_finite()) {
-        anyhow::bail!("--scale must be positive, got {}", args.scale);
+    if let Some(scale) = args.scale.filter(|s| !(*s > 0.0 && s.is_finite())) {
+        anyhow::bail!("--scale must be positive, got {scale}");
     }
     let opts = LoadOptions {
         downscale: args.downscale,
-        scene: SceneBox {
-            scale: args.scale,
+        scene: args.scale.map(|scale| SceneBox {
+            scale,
             ..SceneBox::default()
-        },
+        }),
     };
     let ds = Dataset::load(&args.dataset, &opts)?;
     let r = ds.report;
-    println!("dataset {}", ds.root.display());
+    println!("dataset {} ({})", ds.root.display(), ds.layout);
     println!(
         "loaded {} images in {:.3} s; pixels held {:.1} MiB (8-bit RGBA); peak RSS {}",
         r.n_images,
@@ -43,7 +45,7 @@ pub fn run(args: &InspectArgs) -> anyhow::Result<()> {
         ))
     );
     if ds.val_split.is_none() {
-        println!("note: no transforms_val.json; val uses the test split");
+        println!("note: no validation split; val uses the test split");
     }
     print!("{}", inspect(&ds));
     Ok(())

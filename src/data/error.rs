@@ -1,5 +1,6 @@
-//! Typed errors of the dataset loader. Every variant names the offending file and the problem;
-//! the loader returns them wrapped in `anyhow` context, so callers can still `downcast_ref`.
+//! Typed errors of the dataset loaders (NeRF-synthetic, COLMAP, IDR). Every variant names the
+//! offending file and the problem; the loaders return them wrapped in `anyhow` context, so callers
+//! can still `downcast_ref`.
 
 use std::path::PathBuf;
 
@@ -111,5 +112,63 @@ pub enum DataError {
         factor: u32,
         /// Why.
         reason: String,
+    },
+    /// A directory that is none of the supported dataset layouts.
+    #[error(
+        "{}: not a dataset: expected transforms_train.json (NeRF-synthetic), sparse/0/ or sparse/ \
+         with cameras.bin or cameras.txt (COLMAP), or cameras_sphere.npz (IDR/DTU)",
+        path.display()
+    )]
+    UnknownLayout {
+        /// The directory given.
+        path: PathBuf,
+    },
+    /// A COLMAP camera model the loader cannot use.
+    #[error("{}: camera {camera_id}: camera model {model} is not supported ({reason})", path.display())]
+    CameraModel {
+        /// cameras.txt or cameras.bin.
+        path: PathBuf,
+        /// The camera's id.
+        camera_id: i64,
+        /// The model's name (or numeric id when unknown).
+        model: String,
+        /// What is supported instead.
+        reason: String,
+    },
+    /// A binary file that ends before the entries it declares.
+    #[error("{}: truncated: {what}", path.display())]
+    Truncated {
+        /// The file.
+        path: PathBuf,
+        /// What was being read when it ended.
+        what: String,
+    },
+    /// A camera pose that is non-finite or degenerate.
+    #[error("{}: image '{image}': {problem}", path.display())]
+    BadPose {
+        /// The file holding the pose (images.txt/bin, cameras_sphere.npz).
+        path: PathBuf,
+        /// The image it belongs to.
+        image: String,
+        /// What is wrong.
+        problem: String,
+    },
+    /// Counts that disagree (declared vs present, cameras vs images, images vs masks).
+    #[error("{}: {msg}", path.display())]
+    CountMismatch {
+        /// The file or directory where the disagreement shows.
+        path: PathBuf,
+        /// The counts.
+        msg: String,
+    },
+    /// An image or mask of a posed view that does not exist.
+    #[error("{}: not found (image '{image}' posed in {})", path.display(), listed_in.display())]
+    MissingViewFile {
+        /// The file looked for.
+        path: PathBuf,
+        /// The image's name in the model.
+        image: String,
+        /// The file that poses it.
+        listed_in: PathBuf,
     },
 }

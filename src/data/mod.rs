@@ -1,16 +1,24 @@
-//! Datasets in the NeRF-synthetic format: loading ([`Dataset::load`]), cameras and rays in the
-//! OpenGL convention ([`Camera`]), the scene box ([`SceneBox`]), ray batch sampling
-//! ([`RaySampler`]) and dataset inspection ([`inspect`]).
+//! Datasets of posed images in three layouts ([`Layout`], detected from the files): NeRF-synthetic,
+//! COLMAP and IDR/DTU. Loading ([`Dataset::load`]), cameras and rays in the OpenGL convention
+//! ([`Camera`]), the scene box ([`SceneBox`]), ray batch sampling ([`RaySampler`]) and dataset
+//! inspection ([`inspect`]).
 
 pub mod camera;
+pub mod colmap;
 pub mod dataset;
+pub mod distortion;
 pub mod error;
+pub mod idr;
 pub mod image;
 pub mod inspect;
+pub mod layout;
+mod nerf_synthetic;
 pub mod sampler;
+pub mod views;
 
 pub use camera::{look_at, Camera, SceneBox};
 pub use dataset::{Dataset, Frame, LoadOptions, LoadReport, Split};
 pub use error::DataError;
 pub use image::RgbaImage;
+pub use layout::Layout;
 pub use sampler::{view_rays, PixelRef, RayBatch, RaySampler};

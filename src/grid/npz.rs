@@ -93,6 +93,40 @@ impl NpzReader {
             .with_context(|| format!("array '{name}'"))
     }
 
+    /// Float array `name` at double precision (float32 and float64 entries; IDR's camera
+    /// matrices are float64 and need it): its shape and C-order values.
+    pub fn read_f64(&mut self, name: &str) -> Result<(Vec<u64>, Vec<f64>)> {
+        if !self.contains(name) {
+            bail!(
+                "missing array '{name}' (arrays present: {})",
+                self.names().join(", ")
+            );
+        }
+        let read = |zip: &mut ZipArchive<BufReader<File>>| -> Result<(Vec<u64>, Vec<f64>)> {
+            let entry = zip.by_name(&format!("{name}.npy"))?;
+            let npy = NpyFile::new(BufReader::new(entry)).context("bad npy header")?;
+            let shape = npy.shape().to_vec();
+            ensure!(
+                shape.len() < 2 || npy.order() == Order::C,
+                "Fortran-ordered arrays are not supported (shape {shape:?})"
+            );
+            ensure!(
+                shape.iter().product::<u64>() <= 1 << 20,
+                "shape {shape:?} is too large for a camera matrix"
+            );
+            let descr = npy.dtype().descr();
+            let values: io::Result<Vec<f64>> = match npy.try_data::<f64>() {
+                Ok(r) => r.collect(),
+                Err(npy) => match npy.try_data::<f32>() {
+                    Ok(r) => r.map(|v| v.map(f64::from)).collect(),
+                    Err(_) => bail!("dtype {descr}: expected float32 or float64"),
+                },
+            };
+            Ok((shape, values.map_err(read_error)?))
+        };
+        read(&mut self.zip).with_context(|| format!("array '{name}'"))
+    }
+
     fn read_entry(&mut self, name: &str) -> Result<Array> {
         let entry = self.zip.by_name(&format!("{name}.npy"))?;
         let entry_size = entry.size();

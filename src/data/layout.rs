@@ -1,0 +1,59 @@
+//! Which dataset layout a directory holds, decided from the files present, in a fixed order:
+//! NeRF-synthetic (any `transforms_{train,val,test}.json`), IDR/DTU (`cameras_sphere.npz`), COLMAP (`sparse/0/`
+//! or `sparse/` with `cameras.bin` or `cameras.txt`; binary wins when both exist).
+
+use super::error::DataError;
+use std::path::{Path, PathBuf};
+
+/// A dataset layout on disk.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Layout {
+    /// `transforms_{train,val,test}.json` with images (Blender / nerfstudio).
+    NerfSynthetic,
+    /// A COLMAP reconstruction: `images/` and a sparse model.
+    Colmap {
+        /// The model folder (`sparse/0` or `sparse`).
+        sparse: PathBuf,
+        /// Whether the model is read from `*.bin` (else `*.txt`).
+        binary: bool,
+    },
+    /// The IDR layout used for DTU: `cameras_sphere.npz`, `image/`, optional `mask/`.
+    Idr,
+}
+
+impl std::fmt::Display for Layout {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Layout::NerfSynthetic => f.write_str("NeRF-synthetic (transforms_*.json)"),
+            Layout::Colmap { sparse, binary } => write!(
+                f,
+                "COLMAP ({}, {})",
+                sparse.display(),
+                if *binary { "binary" } else { "text" }
+            ),
+            Layout::Idr => f.write_str("IDR/DTU (cameras_sphere.npz)"),
+        }
+    }
+}
+
+/// The layout of dataset directory `root`.
+pub fn detect(root: &Path) -> Result<Layout, DataError> {
+    let transforms = |s: &str| root.join(format!("transforms_{s}.json")).exists();
+    if ["train", "val", "test"].into_iter().any(transforms) {
+        return Ok(Layout::NerfSynthetic);
+    }
+    if root.join("cameras_sphere.npz").exists() {
+        return Ok(Layout::Idr);
+    }
+    for sparse in [root.join("sparse").join("0"), root.join("sparse")] {
+        for binary in [true, false] {
+            let ext = if binary { "bin" } else { "txt" };
+            if sparse.join(format!("cameras.{ext}")).is_file() {
+                return Ok(Layout::Colmap { sparse, binary });
+            }
+        }
+    }
+    Err(DataError::UnknownLayout {
+        path: root.to_path_buf(),
+    })
+}
