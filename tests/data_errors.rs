@@ -1,9 +1,11 @@
-//! Bad datasets give a clear error that names the file and the problem (one test each), and a
-//! bounded fuzz of the JSON and image parsing never panics.
+//! Bad datasets (NeRF-synthetic, COLMAP, IDR) give a clear error that names the file and the
+//! problem (one test each), and a bounded fuzz of the JSON, image, COLMAP binary and npz parsing
+//! never panics.
 
 mod data_common;
 
 use alphasurf::data::{image::decode_bytes, DataError, Dataset, LoadOptions};
+use data_common::convert::Target;
 use data_common::*;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
@@ -397,6 +399,191 @@ fn fuzz_images_never_panic() {
             // Through the whole loader as well.
             std::fs::write(d.path().join("train/r_1.png"), &bytes).unwrap();
             let _ = Dataset::load(d.path(), &LoadOptions::default());
+        }
+    }
+}
+
+/// A tiny NeRF-synthetic dataset converted to `target`.
+fn small(target: Target) -> (tempfile::TempDir, std::path::PathBuf) {
+    let src = valid();
+    converted(src.path(), target)
+}
+
+/// Asserts the load fails with `want` in the message, naming `file`.
+fn fails_naming(dir: &Path, file: &str, want: &str) -> anyhow::Error {
+    let (msg, e) = load_err(dir);
+    assert!(msg.contains(file) && msg.contains(want), "{msg}");
+    assert!(e.downcast_ref::<DataError>().is_some(), "{msg}");
+    e
+}
+
+fn edit(path: &Path, f: impl FnOnce(String) -> String) {
+    std::fs::write(path, f(std::fs::read_to_string(path).unwrap())).unwrap();
+}
+
+#[test]
+fn unknown_layout() {
+    let d = tempfile::tempdir().unwrap();
+    let e = fails_naming(d.path(), &d.path().display().to_string(), "not a dataset");
+    assert!(matches!(
+        e.downcast_ref(),
+        Some(DataError::UnknownLayout { .. })
+    ));
+}
+
+#[test]
+fn colmap_unknown_and_unsupported_camera_models() {
+    let (_k, dir) = small(Target::ColmapText);
+    let cams = dir.join("sparse/0/cameras.txt");
+    edit(&cams, |s| s.replacen("PINHOLE", "PINHOLE_42", 1));
+    let e = fails_naming(
+        &dir,
+        "cameras.txt",
+        "camera model PINHOLE_42 is not supported",
+    );
+    assert!(matches!(
+        e.downcast_ref(),
+        Some(DataError::CameraModel { .. })
+    ));
+    edit(&cams, |s| s.replacen("PINHOLE_42", "OPENCV_FISHEYE", 1));
+    let (msg, _) = load_err(&dir);
+    assert!(
+        msg.contains("OPENCV_FISHEYE") && msg.contains("undistort"),
+        "{msg}"
+    );
+    // Binary: an unknown model id cannot even be skipped (its parameter count is unknown).
+    let (_k, dir) = small(Target::ColmapBinary);
+    let cams = dir.join("sparse/0/cameras.bin");
+    let mut b = std::fs::read(&cams).unwrap();
+    b[12..16].copy_from_slice(&42i32.to_le_bytes());
+    std::fs::write(&cams, b).unwrap();
+    fails_naming(&dir, "cameras.bin", "camera model id 42 is not supported");
+}
+
+#[test]
+fn colmap_binary_truncated_or_with_trailing_bytes() {
+    let (_k, dir) = small(Target::ColmapBinary);
+    let images = dir.join("sparse/0/images.bin");
+    let full = std::fs::read(&images).unwrap();
+    // Declares 6 images but holds 5 and a half.
+    std::fs::write(&images, &full[..full.len() - 30]).unwrap();
+    let e = fails_naming(
+        &dir,
+        "images.bin",
+        "truncated: the file ends in image 6 of the 6",
+    );
+    assert!(matches!(
+        e.downcast_ref(),
+        Some(DataError::Truncated { .. })
+    ));
+    // Declares 5 of the 6 entries present.
+    let mut b = full.clone();
+    b[..8].copy_from_slice(&5u64.to_le_bytes());
+    std::fs::write(&images, b).unwrap();
+    let e = fails_naming(
+        &dir,
+        "images.bin",
+        "bytes follow the 5 images the file declares",
+    );
+    assert!(matches!(
+        e.downcast_ref(),
+        Some(DataError::CountMismatch { .. })
+    ));
+}
+
+#[test]
+fn colmap_missing_image_mask_and_camera() {
+    let (_k, dir) = small(Target::ColmapText);
+    std::fs::remove_file(dir.join("images/test_r_1.png")).unwrap();
+    let e = fails_naming(
+        &dir,
+        "images/test_r_1.png",
+        "not found (image 'test_r_1.png' posed in",
+    );
+    assert!(matches!(
+        e.downcast_ref(),
+        Some(DataError::MissingViewFile { .. })
+    ));
+    let (_k, dir) = small(Target::ColmapText);
+    std::fs::remove_file(dir.join("masks/val_r_0.png")).unwrap();
+    fails_naming(&dir, "masks/val_r_0.png", "not found");
+    let (_k, dir) = small(Target::ColmapText);
+    edit(&dir.join("sparse/0/cameras.txt"), |s| {
+        s.replacen("\n3 PINHOLE", "\n33 PINHOLE", 1)
+    });
+    fails_naming(&dir, "images.txt", "uses camera 3, which");
+}
+
+#[test]
+fn colmap_nan_pose_and_bad_numbers() {
+    let (_k, dir) = small(Target::ColmapText);
+    let images = dir.join("sparse/0/images.txt");
+    let orig = std::fs::read_to_string(&images).unwrap();
+    let line = orig.lines().find(|l| l.starts_with("2 ")).unwrap();
+    let mut f: Vec<&str> = line.split(' ').collect();
+    f[5] = "NaN";
+    edit(&images, |s| s.replace(line, &f.join(" ")));
+    let e = fails_naming(&dir, "images.txt", "non-finite pose");
+    assert!(matches!(e.downcast_ref(), Some(DataError::BadPose { .. })));
+    f[5] = "zero";
+    std::fs::write(&images, orig.replace(line, &f.join(" "))).unwrap();
+    fails_naming(&dir, "images.txt", "TX 'zero' is not a number");
+}
+
+#[test]
+fn idr_mismatched_counts_and_nan_matrix() {
+    let (_k, dir) = small(Target::Idr);
+    std::fs::remove_file(dir.join("image/000005.png")).unwrap();
+    let e = fails_naming(&dir, "image", "5 images but cameras_sphere.npz poses 6");
+    assert!(matches!(
+        e.downcast_ref(),
+        Some(DataError::CountMismatch { .. })
+    ));
+    let (_k, dir) = small(Target::Idr);
+    std::fs::remove_file(dir.join("mask/002.png")).unwrap();
+    fails_naming(&dir, "mask", "5 images but cameras_sphere.npz poses 6");
+    let (_k, dir) = small(Target::Idr);
+    let npz = dir.join("cameras_sphere.npz");
+    alphasurf::grid::npz::write_atomic(&npz, |z| {
+        for i in 0..6 {
+            let mut w = [0f64; 16];
+            (w[0], w[5], w[10], w[15], w[3]) = (50.0, 50.0, 1.0, 1.0, 4.0);
+            if i == 4 {
+                w[7] = f64::NAN;
+            }
+            z.array(&format!("world_mat_{i}"), &[4, 4], &w)?;
+            let s = [
+                1.5, 0., 0., 0., 0., 1.5, 0., 0., 0., 0., 1.5, 0., 0., 0., 0., 1.,
+            ];
+            z.array(&format!("scale_mat_{i}"), &[4, 4], &s)?;
+        }
+        Ok(())
+    })
+    .unwrap();
+    let e = fails_naming(
+        &dir,
+        "cameras_sphere.npz",
+        "image '000004.png': world_mat_4: non-finite",
+    );
+    assert!(matches!(e.downcast_ref(), Some(DataError::BadPose { .. })));
+}
+
+/// Random byte edits of the binary model and the npz give errors, never a panic.
+#[test]
+fn fuzz_colmap_binary_and_idr_never_panic() {
+    let mut rng = Pcg64::seed_from_u64(23);
+    for (target, file) in [
+        (Target::ColmapBinary, "sparse/0/cameras.bin"),
+        (Target::ColmapBinary, "sparse/0/images.bin"),
+        (Target::ColmapBinary, "sparse/0/points3D.bin"),
+        (Target::Idr, "cameras_sphere.npz"),
+    ] {
+        let (_k, dir) = small(target);
+        let path = dir.join(file);
+        let orig = std::fs::read(&path).unwrap();
+        for _ in 0..40 {
+            std::fs::write(&path, mutate(&mut rng, &orig)).unwrap();
+            let _ = Dataset::load(&dir, &LoadOptions::default());
         }
     }
 }

@@ -84,3 +84,30 @@ pub fn write_json(dir: &Path, split: &str, v: &serde_json::Value) {
     )
     .unwrap();
 }
+
+/// The NeRF-synthetic → COLMAP/IDR converter of `tools/convert` (its example binary's functions).
+#[path = "../../tools/convert/convert.rs"]
+pub mod convert;
+
+/// `src` converted to `target` in a new temporary directory (the dataset is its `scene` folder).
+pub fn converted(src: &Path, target: convert::Target) -> (tempfile::TempDir, PathBuf) {
+    let d = tempfile::tempdir().unwrap();
+    let out = d.path().join("scene");
+    convert::convert(src, &out, target).unwrap();
+    (d, out)
+}
+
+/// Largest entry-wise difference between the camera-to-world matrices of two datasets' views
+/// (same splits, same order).
+pub fn max_pose_difference(a: &alphasurf::data::Dataset, b: &alphasurf::data::Dataset) -> f32 {
+    let mut worst = 0f32;
+    for (sa, sb) in a.splits().iter().zip(b.splits()) {
+        assert_eq!(sa.name, sb.name);
+        assert_eq!(sa.frames.len(), sb.frames.len(), "split {}", sa.name);
+        for (fa, fb) in sa.frames.iter().zip(&sb.frames) {
+            let d = (fa.camera.c2w - fb.camera.c2w).to_cols_array();
+            worst = d.iter().fold(worst, |m, v| m.max(v.abs()));
+        }
+    }
+    worst
+}

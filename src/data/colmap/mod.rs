@@ -36,7 +36,7 @@ pub const MODELS: [(&str, usize); 11] = [
     ("THIN_PRISM_FISHEYE", 12),
 ];
 
-/// The models the loader reads.
+/// The models the loader reads, for messages.
 const SUPPORTED: &str = "PINHOLE, SIMPLE_PINHOLE, SIMPLE_RADIAL, RADIAL, OPENCV";
 
 /// Percentiles of the in-view sparse points (per axis) that bound the scene.
@@ -192,6 +192,21 @@ fn intrinsics(path: &Path, c: &CameraEntry) -> Result<Intrinsics, DataError> {
             "unknown to COLMAP; the loader reads {SUPPORTED}"
         )));
     };
+    let unsupported = || {
+        refuse(format!(
+            "undistort the images first (colmap image_undistorter) or use {SUPPORTED}"
+        ))
+    };
+    const READ: [&str; 5] = [
+        "SIMPLE_PINHOLE",
+        "PINHOLE",
+        "SIMPLE_RADIAL",
+        "RADIAL",
+        "OPENCV",
+    ];
+    if !READ.contains(&c.model.as_str()) {
+        return Err(unsupported());
+    }
     if c.params.len() != n {
         return Err(refuse(format!(
             "it takes {n} parameters, the camera has {}",
@@ -219,11 +234,7 @@ fn intrinsics(path: &Path, c: &CameraEntry) -> Result<Intrinsics, DataError> {
                 p2: p[7],
             },
         ),
-        _ => {
-            return Err(refuse(format!(
-                "undistort the images first (colmap image_undistorter) or use {SUPPORTED}"
-            )))
-        }
+        _ => return Err(unsupported()),
     };
     let bad = |msg: String| DataError::Format {
         path: path.to_path_buf(),
