@@ -103,3 +103,35 @@ fn bad_input_exits_with_a_clear_error() {
     ]);
     assert!(!ok && stderr.contains("--res"), "{stderr}");
 }
+
+/// `inspect` names the detected layout of the fixture's COLMAP and IDR copies.
+#[test]
+fn inspect_describes_colmap_and_idr_copies() {
+    use data_common::convert::Target;
+    for (target, want) in [
+        (Target::ColmapBinary, "(COLMAP ("),
+        (Target::ColmapText, "text))"),
+        (Target::Idr, "(IDR/DTU (cameras_sphere.npz))"),
+    ] {
+        let (_keep, dir) = data_common::converted(&data_common::fixture(), target);
+        let (ok, stdout, stderr) = alphasurf(&["inspect", dir.to_str().unwrap()]);
+        assert!(ok, "{stderr}");
+        for line in [
+            want,
+            "train  100 views  256x256",
+            "val     10 views",
+            "test    20 views",
+        ] {
+            assert!(
+                stdout.contains(line),
+                "{target:?}: no '{line}' in\n{stdout}"
+            );
+        }
+        assert!(
+            stdout.contains(
+                "scene box (Blender units): [-1.500, -1.500, -1.500] .. [1.500, 1.500, 1.500]"
+            ),
+            "{stdout}"
+        );
+    }
+}
