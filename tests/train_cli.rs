@@ -317,3 +317,65 @@ fn converted_layouts_train_to_the_same_figures() {
         );
     }
 }
+
+/// A run records the scene box's scale it trained with in `run.json`, and `extract` writes its
+/// points back in dataset units with it (COLMAP and IDR boxes have their own scale; the
+/// NeRF-synthetic box's 2/3 was assumed before): halving the recorded scale doubles every point,
+/// and `--scene-scale` still overrides it.
+#[test]
+fn extract_uses_the_scene_scale_the_run_recorded() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = scene(dir.path());
+    let run = dir.path().join("run");
+    train(
+        &data,
+        &run,
+        "cpu",
+        &["--stage", "plenoxels", "--iters", "40"],
+    );
+    let marker = run.join("run.json");
+    let mut info: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&marker).unwrap()).unwrap();
+    let recorded = info["scene_scale"]
+        .as_f64()
+        .expect("run.json records scene_scale");
+    assert!(
+        (recorded - 2.0 / 3.0).abs() < 1e-6,
+        "scene_scale {recorded}"
+    );
+    let extract = |name: &str, extra: &[&str]| {
+        let out = dir.path().join(name);
+        run_ok(
+            bin()
+                .args(["extract", "--backend", "cpu", "--levels", "10", "--run"])
+                .arg(&run)
+                .arg("--out")
+                .arg(&out)
+                .args(extra),
+        );
+        alphasurf::io::ply::read_points(&out).unwrap()
+    };
+    let before = extract("a.ply", &[]);
+    info["scene_scale"] = serde_json::json!(recorded / 2.0);
+    std::fs::write(&marker, serde_json::to_string(&info).unwrap()).unwrap();
+    let halved = extract("b.ply", &["--thin-radius", "0.002"]);
+    let overridden = extract("c.ply", &["--scene-scale", &recorded.to_string()]);
+    assert!(!before.is_empty());
+    assert_eq!(
+        overridden, before,
+        "--scene-scale overrides the recorded scale"
+    );
+    assert_eq!(
+        halved.len(),
+        before.len(),
+        "thinning radius doubled with the units"
+    );
+    for (h, b) in halved.iter().zip(&before) {
+        for k in 0..3 {
+            assert!(
+                (h[k] - 2.0 * b[k]).abs() <= 1e-5 * (1.0 + b[k].abs()),
+                "{h:?} vs 2×{b:?}"
+            );
+        }
+    }
+}

@@ -57,7 +57,8 @@ pub struct ExtractOptions {
     /// Thinning radius in Blender units (per level, then on the union); 0 keeps every point.
     #[arg(long, default_value_t = DEFAULT_THIN_RADIUS)]
     pub thin_radius: f64,
-    /// Blender → grid-scene scale (default: the scene box's, 2/3).
+    /// Dataset units → grid-scene scale (default: the one the run trained with, recorded in its
+    /// run.json; for --ckpt and older runs the NeRF-synthetic box's 2/3).
     #[arg(long)]
     pub scene_scale: Option<f32>,
     /// Initial capacity of the device point buffer (default: min(upper bound, 2²¹) points).
@@ -153,7 +154,15 @@ pub fn extract(opts: &ExtractOptions, gpu: Option<&Gpu>) -> Result<ExtractReport
         opts.thin_radius >= 0.0 && opts.thin_radius.is_finite(),
         "--thin-radius must be ≥ 0"
     );
-    let scene_scale = opts.scene_scale.unwrap_or(SceneBox::default().scale);
+    let recorded = opts
+        .run
+        .as_ref()
+        .and_then(|r| crate::run::read_info(r).ok())
+        .and_then(|info| info.scene_scale);
+    let scene_scale = opts
+        .scene_scale
+        .or(recorded)
+        .unwrap_or(SceneBox::default().scale);
     ensure!(
         scene_scale > 0.0 && scene_scale.is_finite(),
         "--scene-scale must be positive"

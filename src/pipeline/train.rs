@@ -39,14 +39,15 @@ pub fn load_data(opts: &TrainOptions) -> Result<Loaded> {
     })
 }
 
-/// The `run.json` of a training run: the dataset's absolute path, the downscale factor and
-/// (stage 2) the grid it started from.
-pub fn run_info(opts: &TrainOptions, init: Option<PathBuf>) -> Result<RunInfo> {
+/// The `run.json` of a training run: the dataset's absolute path, the downscale factor, the
+/// scene box's scale and (stage 2) the grid it started from.
+pub fn run_info(opts: &TrainOptions, data: &Dataset, init: Option<PathBuf>) -> Result<RunInfo> {
     Ok(RunInfo {
         stage: None,
         data: std::fs::canonicalize(&opts.data)
             .with_context(|| format!("dataset {}", opts.data.display()))?,
         downscale: opts.downscale,
+        scene_scale: Some(data.scene.scale),
         init,
         imported_from: None,
     })
@@ -96,7 +97,7 @@ pub fn train(opts: &TrainOptions, gpu: Option<&Gpu>) -> Result<TrainOutcome> {
 pub fn train_all(opts: &TrainOptions, gpu: Option<&Gpu>) -> Result<TrainOutcome> {
     let mut parent = RunDir::claim(&opts.out, RunStage::All, opts.open_mode(), &[&opts.data])?;
     let data = load_data(opts)?;
-    parent.write_info(&run_info(opts, None)?)?;
+    parent.write_info(&run_info(opts, &data.data, None)?)?;
     let s1_dir = parent.file(ALL_STAGE1);
     let s2_dir = parent.file(ALL_STAGE2);
     let s1_ckpt = crate::train::stage1::checkpoint_path(&s1_dir);

@@ -69,7 +69,7 @@ pub fn train_stage1(
             Err(done) => return Ok(done),
         }
     };
-    run.write_info(&run_info(opts, None)?)?;
+    run.write_info(&run_info(opts, data, None)?)?;
     eprintln!(
         "stage 1 on {} ({}): preset {}, {} steps of {} rays, grid {}³{}",
         backend.name(),

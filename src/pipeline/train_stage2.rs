@@ -104,7 +104,7 @@ pub fn train_stage2(
             }
         }
     };
-    run.write_info(&run_info(opts, opts.init.clone())?)?;
+    run.write_info(&run_info(opts, data, opts.init.clone())?)?;
     eprintln!(
         "stage 2 on {} ({}): preset {}, category {}, {} steps of {} rays, a {} → {}, δ rate {:.1e}",
         backend.name(),

@@ -87,6 +87,11 @@ pub struct RunInfo {
     pub data: PathBuf,
     /// Image downscale factor used in training.
     pub downscale: u32,
+    /// Dataset units → the grid's world (the scene box's scale the run trained with; `extract`
+    /// writes points back in dataset units with it). Absent in runs written before it was
+    /// recorded and in imports: the NeRF-synthetic 2/3.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scene_scale: Option<f32>,
     /// Stage 2: the stage-1 run or checkpoint it was initialised from.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub init: Option<PathBuf>,
@@ -338,6 +343,7 @@ mod tests {
             stage: None,
             data: data.to_path_buf(),
             downscale: 1,
+            scene_scale: None,
             init: None,
             imported_from: None,
         }
