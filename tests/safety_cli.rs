@@ -595,3 +595,20 @@ fn oversized_flags_are_refused_before_allocating() {
         &["--batch 4000000000", "memory"],
     );
 }
+
+/// A closed stdout (`alphasurf devices | head` when head has quit) ends the command quietly, as
+/// other tools do, instead of a panic on the next print.
+#[test]
+fn closed_stdout_is_not_a_panic() {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_alphasurf"))
+        .arg("devices")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert_ne!(out.status.code(), Some(101), "{stderr}");
+}
