@@ -3,7 +3,8 @@
 use crate::gpu::Gpu;
 use crate::pipeline::render::{render, RenderOptions};
 use crate::pipeline::svox2::{export, import, ExportOptions, ImportOptions};
-use crate::pipeline::train::{train, Trained};
+use crate::pipeline::train::train;
+use crate::pipeline::train_run::Trained;
 use crate::pipeline::TrainOptions;
 use anyhow::Result;
 

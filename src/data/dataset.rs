@@ -3,12 +3,9 @@
 //! The layouts' readers live in `nerf_synthetic`, `colmap` and `idr`.
 
 use super::camera::{Camera, SceneBox};
-use super::error::DataError;
 use super::image::RgbaImage;
 use super::layout::Layout;
-use anyhow::Context;
-use std::path::{Path, PathBuf};
-use std::time::Instant;
+use std::path::PathBuf;
 
 /// Loader settings.
 #[derive(Clone, Copy, Debug)]
@@ -103,11 +100,6 @@ pub struct Dataset {
 }
 
 impl Dataset {
-    /// Loads a dataset directory of any supported layout. Errors are [`DataError`]s with context.
-    pub fn load(root: &Path, opts: &LoadOptions) -> anyhow::Result<Dataset> {
-        load(root, opts).with_context(|| format!("loading dataset {}", root.display()))
-    }
-
     /// The validation split (the test split when there is none).
     pub fn val(&self) -> &Split {
         self.val_split.as_ref().unwrap_or(&self.test)
@@ -134,66 +126,3 @@ pub fn peak_rss_bytes() -> Option<u64> {
 
 /// Splits as a layout's reader returns them: train, val (if any), test.
 pub(super) type Splits = (Split, Option<Split>, Split);
-
-fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset, DataError> {
-    let t0 = Instant::now();
-    if !root.is_dir() {
-        return Err(DataError::MissingDir {
-            path: root.to_path_buf(),
-        });
-    }
-    let k = opts.downscale;
-    if k == 0 {
-        return Err(DataError::BadDownscale {
-            path: root.to_path_buf(),
-            factor: 0,
-            reason: "the factor must be at least 1".into(),
-        });
-    }
-    let layout = super::layout::detect(root)?;
-    let ((train, val_split, test), scene) = match &layout {
-        Layout::NerfSynthetic => (
-            super::nerf_synthetic::load_splits(root, k)?,
-            SceneBox::default(),
-        ),
-        Layout::Colmap { sparse, .. } => super::colmap::load(root, sparse, k)?,
-        Layout::Idr => super::idr::load(root, k)?,
-    };
-    // One image size for the whole dataset.
-    let (w, h) = (train.width(), train.height());
-    for s in [Some(&test), val_split.as_ref()].into_iter().flatten() {
-        let f = &s.frames[0];
-        if (f.image.width, f.image.height) != (w, h) {
-            return Err(DataError::MixedSizes {
-                path: f.file.clone(),
-                got_w: f.image.width,
-                got_h: f.image.height,
-                reference: format!("{} (train)", train.frames[0].file.display()),
-                want_w: w,
-                want_h: h,
-            });
-        }
-    }
-    let all = [Some(&train), val_split.as_ref(), Some(&test)];
-    let splits = all.iter().flatten();
-    let image_bytes = splits
-        .clone()
-        .flat_map(|s| &s.frames)
-        .map(|f| f.image.bytes())
-        .sum();
-    let n_images = splits.map(|s| s.frames.len()).sum();
-    Ok(Dataset {
-        root: root.to_path_buf(),
-        layout,
-        train,
-        val_split,
-        test,
-        scene: opts.scene.unwrap_or(scene),
-        report: LoadReport {
-            seconds: t0.elapsed().as_secs_f64(),
-            image_bytes,
-            n_images,
-            peak_rss_bytes: peak_rss_bytes(),
-        },
-    })
-}

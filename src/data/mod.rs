@@ -12,6 +12,7 @@ pub mod idr;
 pub mod image;
 pub mod inspect;
 pub mod layout;
+mod load;
 mod nerf_synthetic;
 pub mod sampler;
 pub mod views;

@@ -16,6 +16,7 @@ pub mod steps;
 pub mod svox2;
 pub mod train;
 pub mod train_options;
+pub mod train_run;
 pub mod train_stage1;
 pub mod train_stage2;
 

@@ -5,8 +5,9 @@
 use super::evaluate::{evaluate, EvaluateOptions};
 use super::extract::{extract, ExtractOptions, DEFAULT_RAYS_PER_AXIS};
 use super::metrics::{self, Stage1Metrics};
-use super::train::{train, Trained};
+use super::train::train;
 use super::train_options::{Stage, TrainOptions};
+use super::train_run::Trained;
 use crate::backend::Backend;
 use crate::eval::Metrics;
 use crate::gpu::Gpu;

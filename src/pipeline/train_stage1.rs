@@ -2,8 +2,8 @@
 //! checkpoint, train, and write `metrics.json` ([`Stage1Metrics`]).
 
 use super::metrics::{SamplesPerRay, Stage1Metrics, Stage1Seconds};
-use super::train::{resume, run_info, Loaded, Trained};
 use super::train_options::TrainOptions;
+use super::train_run::{resume, run_info, Loaded, Trained};
 use crate::data::dataset::peak_rss_bytes;
 use crate::gpu::Gpu;
 use crate::grid::Grid;

@@ -3,8 +3,8 @@
 //! `metrics.json` ([`Stage2Metrics`]).
 
 use super::metrics::{Stage2Metrics, Stage2PerRay, Stage2Seconds};
-use super::train::{resume, run_info, Loaded, Trained};
 use super::train_options::TrainOptions;
+use super::train_run::{resume, run_info, Loaded, Trained};
 use crate::data::dataset::peak_rss_bytes;
 use crate::gpu::Gpu;
 use crate::grid::surface::SurfaceGrid;

@@ -1,5 +1,5 @@
-//! Run directories: the one place that knows a run's file names, its marker ([`MARKER`],
-//! `run.json`), its lock ([`LOCK`]) and the rules for writing into a folder.
+//! Run directories: a run's marker ([`MARKER`], `run.json`), its lock ([`LOCK`]) and the rules
+//! for writing into a folder (the file names themselves are in [`super::files`]).
 //!
 //! A writer claims a folder with [`RunDir::claim`]:
 //! - a new or empty folder becomes a run;
@@ -16,42 +16,13 @@
 //! checkpoint paths; commands that write single files outside runs check them with
 //! [`super::outputs`].
 
+pub use super::files::*;
 use super::lock::Lock;
 use super::outputs::{check_not_inside_inputs, dataset_containing};
 use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
 use std::fs;
 use std::path::{Path, PathBuf};
-
-/// The marker of a run directory: its description (stage, dataset, downscale, init).
-pub const MARKER: &str = "run.json";
-/// The lock file of a run being written.
-pub const LOCK: &str = "run.lock";
-/// End-of-run metrics.
-pub const METRICS: &str = "metrics.json";
-/// Per-step training log (CSV).
-pub const TRAIN_LOG: &str = "train_log.csv";
-/// Folder of the end-of-run test renders.
-pub const TEST_RENDERS: &str = "test";
-/// Stage-1 checkpoint (svox2 arrays + optimiser state).
-pub const STAGE1_CHECKPOINT: &str = "plenoxels.npz";
-/// Stage-2 checkpoint.
-pub const STAGE2_CHECKPOINT: &str = "surface.npz";
-/// `train --stage all`: the stage-1 run inside the parent run.
-pub const ALL_STAGE1: &str = "plenoxels";
-/// `train --stage all`: the stage-2 run inside the parent run.
-pub const ALL_STAGE2: &str = "surface";
-
-/// The files (directly in a run directory) that a run owns: an output path equal to one of
-/// these inside a run is refused, and `--overwrite` removes them.
-pub const OWNED_FILES: [&str; 6] = [
-    MARKER,
-    LOCK,
-    METRICS,
-    TRAIN_LOG,
-    STAGE1_CHECKPOINT,
-    STAGE2_CHECKPOINT,
-];
 
 /// What a run directory holds.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -120,11 +91,6 @@ pub struct RunDir {
     /// `Open::Overwrite`: the previous run's files are still to be removed.
     replace_pending: bool,
     _lock: Lock,
-}
-
-/// Whether `path` is a run directory (holds the marker).
-pub fn is_run(path: &Path) -> bool {
-    path.join(MARKER).is_file()
 }
 
 /// The entries of a folder other than a lock file (a run killed between taking the lock and

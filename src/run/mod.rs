@@ -3,6 +3,7 @@
 //! resume-time cut, and memory estimates for flags that size allocations.
 
 pub mod dir;
+pub mod files;
 pub mod lock;
 pub mod memory;
 pub mod outputs;

@@ -1,7 +1,7 @@
 //! Guards for output paths: an output may not replace an input, lie inside a dataset (its images
 //! are ground truth), lie inside an input folder, or take the name of a file a run owns.
 
-use super::dir::{is_run, OWNED_FILES};
+use super::files::{is_run, OWNED_FILES};
 use anyhow::{bail, Result};
 use std::path::{Component, Path, PathBuf};
 

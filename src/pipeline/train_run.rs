@@ -1,0 +1,92 @@
+//! What both training stages share: the dataset as loaded for training, a run's `run.json`, how a
+//! training call ended, and resuming from a checkpoint.
+
+use super::train_options::TrainOptions;
+use crate::data::{Dataset, LoadOptions};
+use crate::run::RunInfo;
+use anyhow::{ensure, Context, Result};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// A dataset loaded for training, and the seconds its loading took.
+pub struct Loaded {
+    pub data: Dataset,
+    pub seconds: f64,
+}
+
+/// The dataset `--data` names, at `--downscale`; `inspect`'s warnings are repeated on stderr.
+pub fn load_data(opts: &TrainOptions) -> Result<Loaded> {
+    let t = Instant::now();
+    let data = Dataset::load(
+        &opts.data,
+        &LoadOptions {
+            downscale: opts.downscale,
+            ..Default::default()
+        },
+    )?;
+    for w in crate::data::inspect::inspect(&data).warnings {
+        eprintln!("warning: {}: {w}", opts.data.display());
+    }
+    Ok(Loaded {
+        data,
+        seconds: t.elapsed().as_secs_f64(),
+    })
+}
+
+/// The `run.json` of a training run: the dataset's absolute path, the downscale factor, the
+/// scene box's scale and (stage 2) the grid it started from.
+pub fn run_info(opts: &TrainOptions, data: &Dataset, init: Option<PathBuf>) -> Result<RunInfo> {
+    Ok(RunInfo {
+        stage: None,
+        data: std::fs::canonicalize(&opts.data)
+            .with_context(|| format!("dataset {}", opts.data.display()))?,
+        downscale: opts.downscale,
+        scene_scale: Some(data.scene.scale),
+        init,
+        imported_from: None,
+    })
+}
+
+/// How a training call ended.
+#[derive(Clone, Debug)]
+pub enum Trained<M> {
+    /// The run trained to its last step and wrote these metrics.
+    Done(M),
+    /// `--resume` found the run already at its last step: nothing was trained.
+    AlreadyDone {
+        checkpoint: PathBuf,
+        step: u32,
+        total: u32,
+    },
+}
+
+/// Resumes the run whose checkpoint is `ckpt`: `restore` builds the backend from it and returns
+/// `(backend, step reached, configuration)`; `iters` (when given) replaces the step count that
+/// `total` points at in the configuration. Returns `Ok((backend, configuration, step))`, or
+/// `Err(Trained::AlreadyDone)` when the run is already at its last step.
+pub(super) fn resume<B, C, M>(
+    ckpt: &Path,
+    iters: Option<u32>,
+    total: impl FnOnce(&mut C) -> &mut u32,
+    restore: impl FnOnce() -> Result<(B, u32, C)>,
+) -> Result<Result<(B, C, u32), Trained<M>>> {
+    ensure!(
+        ckpt.exists(),
+        "--resume: no checkpoint at {}",
+        ckpt.display()
+    );
+    let (backend, step, mut cfg) = restore()?;
+    let total = total(&mut cfg);
+    if let Some(n) = iters {
+        *total = n; // extend (or shorten) the run; the schedules keep their lengths
+    }
+    if step >= *total {
+        return Ok(Err(Trained::AlreadyDone {
+            checkpoint: ckpt.to_path_buf(),
+            step,
+            total: *total,
+        }));
+    }
+    eprintln!("resuming {} at step {step} of {}", ckpt.display(), total);
+    Ok(Ok((backend, cfg, step)))
+}
