@@ -14,6 +14,7 @@ pub mod grid;
 pub mod io;
 pub mod kernels;
 pub mod math;
+pub mod mesh;
 pub mod pipeline;
 pub mod plenoxel;
 pub mod report;

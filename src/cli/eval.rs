@@ -34,6 +34,15 @@ pub fn run(opts: &EvaluateOptions) -> Result<()> {
     if let Some(note) = &e.note {
         println!("{note}");
     }
+    for (path, faces) in [(&opts.pred, e.pred_mesh_faces), (&opts.gt, e.gt_mesh_faces)] {
+        if let Some(f) = faces {
+            println!(
+                "{}: a mesh of {f} faces; drew {} points on it",
+                path.display(),
+                opts.mesh_samples
+            );
+        }
+    }
     let m = &e.metrics;
     println!(
         "pred {}: {} points ({} after downsampling at {})",

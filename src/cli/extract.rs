@@ -1,8 +1,9 @@
 //! `extract`: the library call and what it prints (levels, counts per level, timings, `--json`).
 
 use crate::gpu::Gpu;
-use crate::pipeline::extract::{extract, ExtractOptions};
+use crate::pipeline::extract::{extract, ExtractOptions, MeshReport, PointsReport};
 use anyhow::Result;
+use serde_json::json;
 
 /// Run `extract` and print what it did.
 pub fn run(opts: &ExtractOptions, gpu: Option<&Gpu>) -> Result<()> {
@@ -25,43 +26,69 @@ pub fn run(opts: &ExtractOptions, gpu: Option<&Gpu>) -> Result<()> {
         r.vertices,
         r.cells
     );
-    if r.kernel.retries > 0 {
+    let mut j = json!({
+        "grid": r.grid,
+        "res": r.res,
+        "levels": r.levels,
+    });
+    if let Some(p) = &r.points {
+        print_points(p, &r.levels);
+        j["out"] = json!(p.out);
+        j["rays_per_axis"] = json!(p.rays_per_axis);
+        j["backend"] = json!(p.backend);
+        j["kernel"] = json!(p.kernel);
+        j["thin"] = json!(p.thin);
+        j["points"] = json!(p.points);
+    }
+    if let Some(m) = &r.mesh {
+        print_mesh(m, &r.levels);
+        j["mesh"] = json!(m.out);
+        j["mesh_stats"] = json!(m.stats);
+    }
+    println!("total {:.2} s (load {:.0} ms)", r.total_s, r.load_ms);
+    if opts.json {
+        j["total_s"] = json!(r.total_s);
+        println!("{j}");
+    }
+    Ok(())
+}
+
+fn print_points(p: &PointsReport, levels: &[f32]) {
+    if p.kernel.retries > 0 {
         println!(
             "point buffer was full: ran the kernel {} more time(s) with room for {} points",
-            r.kernel.retries, r.kernel.capacity
+            p.kernel.retries, p.kernel.capacity
         );
     }
     println!(
         "{}² rays per axis and cell on {}: {} raw points in {:.1} ms (kernel {:.1} ms device)",
-        r.rays_per_axis, r.backend, r.kernel.points, r.kernel.wall_ms, r.kernel.device_ms
+        p.rays_per_axis, p.backend, p.kernel.points, p.kernel.wall_ms, p.kernel.device_ms
     );
-    for (l, n) in r.levels.iter().zip(&r.thin.per_level) {
+    for (l, n) in levels.iter().zip(&p.thin.per_level) {
         println!("  level {l:>8}: {n:>9} points");
     }
     println!(
-        "thinned (radius {}) to {} points in {:.1} ms; wrote {} in {:.1} ms; total {:.2} s (load {:.0} ms)",
-        r.thin_radius,
-        r.thin.kept,
-        r.thin.wall_ms,
-        r.out.display(),
-        r.write_ms,
-        r.total_s,
-        r.load_ms
+        "thinned (radius {}) to {} points in {:.1} ms; wrote {} in {:.1} ms",
+        p.thin_radius,
+        p.thin.kept,
+        p.thin.wall_ms,
+        p.out.display(),
+        p.write_ms,
     );
-    if opts.json {
-        let j = serde_json::json!({
-            "out": r.out,
-            "grid": r.grid,
-            "res": r.res,
-            "levels": r.levels,
-            "rays_per_axis": r.rays_per_axis,
-            "backend": r.backend,
-            "kernel": r.kernel,
-            "thin": r.thin,
-            "points": r.points,
-            "total_s": r.total_s,
-        });
-        println!("{j}");
+}
+
+fn print_mesh(m: &MeshReport, levels: &[f32]) {
+    println!(
+        "mesh (marching tetrahedra, on the cpu): {} vertices, {} faces, area {:.4} in {:.1} ms; \
+         wrote {} in {:.1} ms",
+        m.stats.vertices,
+        m.stats.faces,
+        m.stats.area,
+        m.stats.wall_ms,
+        m.out.display(),
+        m.write_ms
+    );
+    for (l, n) in levels.iter().zip(&m.stats.per_level) {
+        println!("  level {l:>8}: {n:>9} faces");
     }
-    Ok(())
 }

@@ -3,11 +3,13 @@
 //! `--downsample` (the paper downsamples predicted and GT points at 0.001); an extraction is
 //! already thinned at that radius, so this only changes an unthinned cloud. With the scene's
 //! `scene.json` (found next to the GT cloud, or `--scene`) the figures are also split over its
-//! objects ([`crate::eval::objects`]).
+//! objects ([`crate::eval::objects`]). A mesh (a PLY with faces, e.g. from `extract --mesh`) is
+//! compared through points drawn on it uniformly by area.
 
 use crate::eval::objects::{load_groups, GtGroups};
 use crate::eval::{evaluate_groups, thin, EvalOptions, Metrics};
 use crate::io::read_points;
+use crate::mesh::ply::{has_faces, read_mesh_ply};
 use anyhow::{ensure, Result};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -18,13 +20,19 @@ pub const DEFAULT_MAX_DIST: f64 = 1.5;
 pub const DEFAULT_THRESHOLD: f64 = 0.01;
 /// Thinning radius of both clouds by default (the paper's downsampling).
 pub const DEFAULT_DOWNSAMPLE: f64 = 0.001;
+/// Points drawn on a mesh by default.
+pub const DEFAULT_MESH_SAMPLES: usize = 1_000_000;
 
 /// Options of `eval` (its command-line flags).
 #[derive(clap::Args, Debug)]
 pub struct EvaluateOptions {
-    /// Predicted points (PLY, e.g. from `extract`), Blender units.
+    /// Predicted points (PLY, e.g. from `extract`), Blender units. A PLY with faces (e.g. from
+    /// `extract --mesh`; --gt too) is sampled uniformly by area (--mesh-samples points).
     #[arg(long)]
     pub pred: PathBuf,
+    /// Points drawn on a mesh (uniform by area, fixed seed), before the downsampling.
+    #[arg(long, default_value_t = DEFAULT_MESH_SAMPLES)]
+    pub mesh_samples: usize,
     /// Ground-truth points (PLY, e.g. a scene's gt_points.ply), Blender units.
     #[arg(long)]
     pub gt: PathBuf,
@@ -46,12 +54,39 @@ pub struct EvaluateOptions {
     pub json: bool,
 }
 
-/// Read a cloud and thin it; returns (points, indices kept, count before thinning).
-fn load(path: &Path, radius: f64) -> Result<(Vec<[f32; 3]>, Vec<usize>, usize)> {
-    let pts = read_points(path)?;
-    let n = pts.len();
+/// A cloud read and thinned.
+struct Loaded {
+    points: Vec<[f32; 3]>,
+    /// Indices of the kept points among those read or drawn.
+    kept: Vec<usize>,
+    /// Points read or drawn, before thinning.
+    n_raw: usize,
+    /// Faces of the mesh the points were drawn on, for a mesh.
+    mesh_faces: Option<usize>,
+}
+
+/// Read a cloud (for a mesh: `mesh_samples` points drawn on it) and thin it.
+fn load(path: &Path, radius: f64, mesh_samples: usize) -> Result<Loaded> {
+    let (pts, mesh_faces) = if has_faces(path)? {
+        let mesh = read_mesh_ply(path)?;
+        let pts = mesh.sample(mesh_samples, 0);
+        ensure!(
+            !pts.is_empty(),
+            "{}: no points drawn on the mesh of {} faces (--mesh-samples {mesh_samples}, area 0?)",
+            path.display(),
+            mesh.faces.len()
+        );
+        (pts, Some(mesh.faces.len()))
+    } else {
+        (read_points(path)?, None)
+    };
     let kept = thin(&pts, radius)?;
-    Ok((kept.iter().map(|&i| pts[i]).collect(), kept, n))
+    Ok(Loaded {
+        points: kept.iter().map(|&i| pts[i]).collect(),
+        kept,
+        n_raw: pts.len(),
+        mesh_faces,
+    })
 }
 
 /// The GT cloud's object groups: their names, the group of each kept GT point, and the scene.json
@@ -99,6 +134,7 @@ impl EvaluateOptions {
     pub fn new(pred: PathBuf, gt: PathBuf) -> EvaluateOptions {
         EvaluateOptions {
             pred,
+            mesh_samples: DEFAULT_MESH_SAMPLES,
             gt,
             max_dist: DEFAULT_MAX_DIST,
             threshold: DEFAULT_THRESHOLD,
@@ -115,6 +151,9 @@ pub struct Evaluation {
     /// Points read, before thinning.
     pub n_pred_raw: usize,
     pub n_gt_raw: usize,
+    /// Faces of the predicted and GT meshes the points were drawn on, for a mesh.
+    pub pred_mesh_faces: Option<usize>,
+    pub gt_mesh_faces: Option<usize>,
     /// The scene.json the figures were split over objects by.
     pub objects_from: Option<PathBuf>,
     /// Why a scene.json next to the GT cloud could not split the figures.
@@ -132,17 +171,17 @@ pub fn evaluate(opts: &EvaluateOptions) -> Result<Evaluation> {
     );
     let t0 = Instant::now();
     let (pred, gt) = rayon::join(
-        || load(&opts.pred, opts.downsample),
-        || load(&opts.gt, opts.downsample),
+        || load(&opts.pred, opts.downsample, opts.mesh_samples),
+        || load(&opts.gt, opts.downsample, opts.mesh_samples),
     );
-    let ((pred, _, n_pred_raw), (gt, gt_kept, n_gt_raw)) = (pred?, gt?);
+    let (pred, gt) = (pred?, gt?);
     let mut note = None;
-    let groups = groups(opts, n_gt_raw, &gt_kept, &mut note)?;
+    let groups = groups(opts, gt.n_raw, &gt.kept, &mut note)?;
     let load_s = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
     let m = evaluate_groups(
-        &pred,
-        &gt,
+        &pred.points,
+        &gt.points,
         groups
             .as_ref()
             .map(|g| (g.names.as_slice(), g.labels.as_slice())),
@@ -165,8 +204,10 @@ pub fn evaluate(opts: &EvaluateOptions) -> Result<Evaluation> {
     );
     Ok(Evaluation {
         metrics: m,
-        n_pred_raw,
-        n_gt_raw,
+        n_pred_raw: pred.n_raw,
+        n_gt_raw: gt.n_raw,
+        pred_mesh_faces: pred.mesh_faces,
+        gt_mesh_faces: gt.mesh_faces,
         objects_from: groups.map(|g| g.path),
         note,
         load_s,

@@ -2,7 +2,8 @@
 //! (method.md §4). For a stage-2 run (surface.npz) these are the αSurf surfaces δ = τ_i at the
 //! run's levels, trimmed by raw opacity σα ≥ `--min-alpha`. For a stage-1 density grid this is the
 //! Plenoxels baseline "Plen (σ = τ)": the surfaces σ = τ for each `--levels` value, with no opacity
-//! trimming.
+//! trimming. With `--mesh` the same surfaces are also (or instead) written as a triangle mesh
+//! ([`crate::mesh`]).
 
 use crate::backend::Backend;
 use crate::cpu::extract_points::ExtractInput;
@@ -13,10 +14,12 @@ use crate::eval::extract::{
 use crate::gpu::Gpu;
 use crate::grid::surface::SurfaceGrid;
 use crate::grid::{checkpoint, npz, Grid};
+use crate::mesh::ply::write_mesh_ply;
+use crate::mesh::{level_set_mesh, MeshInput, MeshStats};
 use crate::train::{stage1, stage2};
 use anyhow::{ensure, Context, Result};
 use serde::Serialize;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 /// Virtual rays per axis and cell face by default: method.md's 75 rays per cell (5 × 5 per axis).
@@ -36,9 +39,15 @@ pub struct ExtractOptions {
     /// An svox2 `ckpt.npz` (or any npz with the svox2 grid arrays) instead of `--run`.
     #[arg(long)]
     pub ckpt: Option<PathBuf>,
-    /// Output PLY (binary little-endian: x, y, z, level, alpha, nx, ny, nz; Blender units).
+    /// Output point cloud PLY (binary little-endian: x, y, z, level, alpha, nx, ny, nz; Blender
+    /// units).
+    #[arg(long, required_unless_present = "mesh")]
+    pub out: Option<PathBuf>,
+    /// Output mesh PLY of the same surfaces (marching tetrahedra on the trilinear field, welded;
+    /// vertices x, y, z, nx, ny, nz, level, alpha; triangles; Blender units). Stage-2 faces are
+    /// kept where σα ≥ --min-alpha at their centroid. With or instead of --out.
     #[arg(long)]
-    pub out: PathBuf,
+    pub mesh: Option<PathBuf>,
     /// Level values τ, comma-separated, for a stage-1 grid (density units; the paper sweeps
     /// 10,30,50,70,90,100 and reports the best single level). Default 50. A stage-2 run uses its
     /// own levels; giving --levels there is an error.
@@ -101,7 +110,8 @@ impl ExtractOptions {
         ExtractOptions {
             run: Some(run),
             ckpt: None,
-            out,
+            out: Some(out),
+            mesh: None,
             levels: None,
             min_alpha: DEFAULT_MIN_ALPHA,
             rays_per_axis: DEFAULT_RAYS_PER_AXIS,
@@ -117,7 +127,6 @@ impl ExtractOptions {
 /// What an extraction did.
 #[derive(Clone, Debug, Serialize)]
 pub struct ExtractReport {
-    pub out: PathBuf,
     /// The checkpoint read.
     pub grid: PathBuf,
     /// A stage-2 grid (αSurf surfaces, trimmed by opacity) rather than a density grid.
@@ -125,11 +134,23 @@ pub struct ExtractReport {
     pub res: [u32; 3],
     pub levels: Vec<f32>,
     pub min_alpha: f32,
-    pub rays_per_axis: u32,
     /// Allocated vertices of the field.
     pub vertices: usize,
     /// Cells with 8 allocated corners.
     pub cells: usize,
+    /// The point cloud (`--out`).
+    pub points: Option<PointsReport>,
+    /// The mesh (`--mesh`).
+    pub mesh: Option<MeshReport>,
+    pub load_ms: f64,
+    pub total_s: f64,
+}
+
+/// What the point extraction did.
+#[derive(Clone, Debug, Serialize)]
+pub struct PointsReport {
+    pub out: PathBuf,
+    pub rays_per_axis: u32,
     /// The device's name, or "cpu".
     pub backend: String,
     pub kernel: KernelStats,
@@ -137,12 +158,19 @@ pub struct ExtractReport {
     /// Points written.
     pub points: usize,
     pub thin_radius: f64,
-    pub load_ms: f64,
     pub write_ms: f64,
-    pub total_s: f64,
 }
 
-/// Extract the surfaces of the grid `opts` name into `opts.out` on `gpu` (`None`: the CPU twin).
+/// What the mesh extraction did.
+#[derive(Clone, Debug, Serialize)]
+pub struct MeshReport {
+    pub out: PathBuf,
+    pub stats: MeshStats,
+    pub write_ms: f64,
+}
+
+/// Extract the surfaces of the grid `opts` name into `opts.out` (points, on `gpu`; `None`: the CPU
+/// twin) and `opts.mesh` (a mesh, on the CPU).
 pub fn extract(opts: &ExtractOptions, gpu: Option<&Gpu>) -> Result<ExtractReport> {
     let t0 = Instant::now();
     ensure!(
@@ -172,8 +200,18 @@ pub fn extract(opts: &ExtractOptions, gpu: Option<&Gpu>) -> Result<ExtractReport
         "--min-alpha must be a finite number, got {}",
         opts.min_alpha
     );
+    ensure!(
+        opts.out.is_some() || opts.mesh.is_some(),
+        "give --out (points) or --mesh (a mesh), or both"
+    );
+    ensure!(
+        opts.out.is_none() || opts.out != opts.mesh,
+        "--out and --mesh name the same file"
+    );
     let (field, path) = load_grid(opts)?;
-    crate::run::outputs::check_output_file(&opts.out, &[&path])?;
+    for out in opts.out.iter().chain(&opts.mesh) {
+        crate::run::outputs::check_output_file(out, &[&path])?;
+    }
     let load_ms = t0.elapsed().as_secs_f64() * 1e3;
     let (res, center, radius, links) = match &field {
         Field::Density(g) => (g.res, g.center, g.radius, &g.links),
@@ -197,13 +235,69 @@ pub fn extract(opts: &ExtractOptions, gpu: Option<&Gpu>) -> Result<ExtractReport
         levels.iter().all(|l| l.is_finite()),
         "--levels: every level must be finite, got {levels:?}"
     );
-    let inp = ExtractInput {
+    let frame = GridFrame {
+        res,
+        center,
+        radius,
+        scene_scale,
+    };
+    let surfaces = Surfaces {
         cells: &cells,
         links,
-        field: values,
+        values,
         opacity,
         levels: &levels,
         res,
+        frame,
+    };
+    let points = match &opts.out {
+        Some(out) => Some(write_points(opts, &surfaces, out, gpu)?),
+        None => None,
+    };
+    let mesh = match &opts.mesh {
+        Some(out) => Some(write_mesh(opts, &surfaces, out)?),
+        None => None,
+    };
+    Ok(ExtractReport {
+        grid: path,
+        surface: matches!(field, Field::Surface(_)),
+        res,
+        levels,
+        min_alpha: opts.min_alpha,
+        vertices: values.len(),
+        cells: cells.len(),
+        points,
+        mesh,
+        load_ms,
+        total_s: t0.elapsed().as_secs_f64(),
+    })
+}
+
+/// The level sets to extract: the field on the allocated vertices and where it lies.
+struct Surfaces<'a> {
+    cells: &'a [u32],
+    links: &'a [i32],
+    values: &'a [f32],
+    opacity: Option<&'a [f32]>,
+    levels: &'a [f32],
+    res: [u32; 3],
+    frame: GridFrame,
+}
+
+/// The thinned point cloud of the surfaces (virtual rays on `gpu`), written to `out`.
+fn write_points(
+    opts: &ExtractOptions,
+    s: &Surfaces,
+    out: &Path,
+    gpu: Option<&Gpu>,
+) -> Result<PointsReport> {
+    let inp = ExtractInput {
+        cells: s.cells,
+        links: s.links,
+        field: s.values,
+        opacity: s.opacity,
+        levels: s.levels,
+        res: s.res,
         rays_per_axis: opts.rays_per_axis,
         min_opacity: opts.min_alpha,
     };
@@ -212,38 +306,51 @@ pub fn extract(opts: &ExtractOptions, gpu: Option<&Gpu>) -> Result<ExtractReport
         None => ExtractBackend::Cpu,
     };
     let (points, kernel) = extract_sorted(backend, &inp, opts.capacity)?;
-    let frame = GridFrame {
-        res,
-        center,
-        radius,
-        scene_scale,
-    };
-    let (cloud, thin) = to_cloud(&points, &levels, &frame, opts.thin_radius)?;
+    let (cloud, thin) = to_cloud(&points, s.levels, &s.frame, opts.thin_radius)?;
     ensure!(
         !cloud.points.is_empty(),
-        "no surface points at levels {levels:?} (field range {:?}); nothing written",
-        value_range(values)
+        "no surface points at levels {:?} (field range {:?}); nothing written",
+        s.levels,
+        value_range(s.values)
     );
     let t_w = Instant::now();
-    crate::io::write_ply(&opts.out, &cloud)?;
-    Ok(ExtractReport {
-        out: opts.out.clone(),
-        grid: path,
-        surface: matches!(field, Field::Surface(_)),
-        res,
-        levels,
-        min_alpha: opts.min_alpha,
+    crate::io::write_ply(out, &cloud)?;
+    Ok(PointsReport {
+        out: out.to_path_buf(),
         rays_per_axis: opts.rays_per_axis,
-        vertices: values.len(),
-        cells: cells.len(),
         backend: gpu.map_or("cpu".to_string(), |g| g.info().name.clone()),
         kernel,
         thin,
         points: cloud.points.len(),
         thin_radius: opts.thin_radius,
-        load_ms,
         write_ms: t_w.elapsed().as_secs_f64() * 1e3,
-        total_s: t0.elapsed().as_secs_f64(),
+    })
+}
+
+/// The welded triangle mesh of the surfaces (marching tetrahedra on the CPU), written to `out`.
+fn write_mesh(opts: &ExtractOptions, s: &Surfaces, out: &Path) -> Result<MeshReport> {
+    let inp = MeshInput {
+        cells: s.cells,
+        links: s.links,
+        field: s.values,
+        opacity: s.opacity,
+        levels: s.levels,
+        res: s.res,
+        min_opacity: opts.min_alpha,
+    };
+    let (mesh, stats) = level_set_mesh(&inp, &s.frame)?;
+    ensure!(
+        !mesh.faces.is_empty(),
+        "no surface faces at levels {:?} (field range {:?}); nothing written",
+        s.levels,
+        value_range(s.values)
+    );
+    let t_w = Instant::now();
+    write_mesh_ply(out, &mesh)?;
+    Ok(MeshReport {
+        out: out.to_path_buf(),
+        stats,
+        write_ms: t_w.elapsed().as_secs_f64() * 1e3,
     })
 }
 

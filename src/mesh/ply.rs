@@ -1,0 +1,178 @@
+//! Meshes as binary little-endian PLY: `vertex` (float x, y, z, nx, ny, nz, level, alpha) and
+//! `face` (`list uchar int vertex_indices`, the form Blender and MeshLab read), written atomically.
+//! Reading takes the positions and faces of any PLY mesh (ascii or binary, through `ply-rs-bw`;
+//! polygons are split into triangle fans) and rejects indices out of range or non-finite
+//! positions, naming the file.
+
+use super::Mesh;
+use anyhow::{bail, ensure, Context, Result};
+use ply_rs_bw::parser::{Parser, Reader};
+use ply_rs_bw::ply::{PropertyAccess, PropertyAccessResult};
+use std::io::{BufReader, Write};
+use std::path::Path;
+
+/// Write `mesh` (Blender units) to `path` atomically.
+pub fn write_mesh_ply(path: &Path, mesh: &Mesh) -> Result<()> {
+    let name = path.display();
+    let n = mesh.positions.len();
+    ensure!(
+        mesh.normals.len() == n && mesh.level.len() == n && mesh.alpha.len() == n,
+        "{name}: per-vertex attributes do not match the {n} vertices"
+    );
+    ensure!(
+        n <= i32::MAX as usize,
+        "{name}: {n} vertices, more than a PLY int index can name"
+    );
+    ensure!(
+        mesh.faces.iter().flatten().all(|&i| (i as usize) < n),
+        "{name}: a face names a vertex past the {n} vertices"
+    );
+    let header = format!(
+        "ply\nformat binary_little_endian 1.0\ncomment written by alphasurf\n\
+         element vertex {n}\nproperty float x\nproperty float y\nproperty float z\n\
+         property float nx\nproperty float ny\nproperty float nz\n\
+         property float level\nproperty float alpha\n\
+         element face {}\nproperty list uchar int vertex_indices\nend_header\n",
+        mesh.faces.len()
+    );
+    crate::io::atomic::write_atomic(path, |w| {
+        w.write_all(header.as_bytes())?;
+        for i in 0..n {
+            let p = mesh.positions[i];
+            let nn = mesh.normals[i];
+            for v in p.iter().chain(&nn).chain([&mesh.level[i], &mesh.alpha[i]]) {
+                w.write_all(&v.to_le_bytes())?;
+            }
+        }
+        for f in &mesh.faces {
+            w.write_all(&[3])?;
+            for i in f {
+                w.write_all(&(*i as i32).to_le_bytes())?;
+            }
+        }
+        Ok(())
+    })
+}
+
+/// A vertex row as read: x, y, z only.
+struct VertexRow([f32; 3]);
+
+impl PropertyAccess for VertexRow {
+    fn new() -> Self {
+        VertexRow([f32::NAN; 3])
+    }
+    fn set_float(&mut self, name: &str, v: f32) -> PropertyAccessResult {
+        self.set_double(name, v as f64)
+    }
+    fn set_double(&mut self, name: &str, v: f64) -> PropertyAccessResult {
+        match name {
+            "x" => self.0[0] = v as f32,
+            "y" => self.0[1] = v as f32,
+            "z" => self.0[2] = v as f32,
+            _ => return PropertyAccessResult::Ignored,
+        }
+        PropertyAccessResult::Set
+    }
+}
+
+/// A face row as read: its vertex indices (negative ones kept, to be rejected).
+struct FaceRow(Vec<i64>);
+
+impl FaceRow {
+    fn set<T: Into<i64>>(&mut self, name: &str, v: Vec<T>) -> PropertyAccessResult {
+        if name == "vertex_indices" || name == "vertex_index" {
+            self.0 = v.into_iter().map(Into::into).collect();
+            PropertyAccessResult::Set
+        } else {
+            PropertyAccessResult::Ignored
+        }
+    }
+}
+
+impl PropertyAccess for FaceRow {
+    fn new() -> Self {
+        FaceRow(Vec::new())
+    }
+    fn set_list_int(&mut self, name: &str, v: Vec<i32>) -> PropertyAccessResult {
+        self.set(name, v)
+    }
+    fn set_list_uint(&mut self, name: &str, v: Vec<u32>) -> PropertyAccessResult {
+        self.set(name, v)
+    }
+    fn set_list_short(&mut self, name: &str, v: Vec<i16>) -> PropertyAccessResult {
+        self.set(name, v)
+    }
+    fn set_list_ushort(&mut self, name: &str, v: Vec<u16>) -> PropertyAccessResult {
+        self.set(name, v)
+    }
+    fn set_list_uchar(&mut self, name: &str, v: Vec<u8>) -> PropertyAccessResult {
+        self.set(name, v)
+    }
+}
+
+/// Whether the PLY at `path` has a non-empty `face` element (is a mesh, not a point cloud).
+pub fn has_faces(path: &Path) -> Result<bool> {
+    let f =
+        std::fs::File::open(path).with_context(|| format!("{}: cannot open", path.display()))?;
+    let header = Parser::<VertexRow>::new()
+        .read_ply_header(&mut BufReader::new(f))
+        .map_err(|e| anyhow::anyhow!("{}: not a valid PLY header: {e}", path.display()))?;
+    Ok(header.elements.get("face").is_some_and(|e| e.count > 0))
+}
+
+/// Positions and triangles of the PLY mesh at `path` (normals, levels and α left empty).
+pub fn read_mesh_ply(path: &Path) -> Result<Mesh> {
+    read_inner(path).with_context(|| format!("reading PLY mesh {}", path.display()))
+}
+
+fn read_inner(path: &Path) -> Result<Mesh> {
+    let name = path.display();
+    let f = std::fs::File::open(path).with_context(|| format!("{name}: cannot open"))?;
+    let mut reader = Reader::new(BufReader::new(f));
+    let vparser = Parser::<VertexRow>::new();
+    let fparser = Parser::<FaceRow>::new();
+    let header = vparser
+        .read_header(&mut reader)
+        .map_err(|e| anyhow::anyhow!("{name}: not a valid PLY header: {e}"))?;
+    let mut mesh = Mesh::default();
+    let mut polygons = Vec::new();
+    for (ename, edef) in header.elements.iter() {
+        let bad = |e| anyhow::anyhow!("{name}: malformed or truncated '{ename}' data: {e}");
+        if ename == "face" {
+            polygons = fparser
+                .read_payload_for_element(&mut reader, edef, &header)
+                .map_err(bad)?;
+        } else {
+            let rows = vparser
+                .read_payload_for_element(&mut reader, edef, &header)
+                .map_err(bad)?;
+            if ename == "vertex" {
+                mesh.positions = rows.into_iter().map(|r| r.0).collect();
+            }
+        }
+    }
+    ensure!(!mesh.positions.is_empty(), "{name}: no vertices");
+    if let Some(i) = mesh
+        .positions
+        .iter()
+        .position(|p| !p.iter().all(|v| v.is_finite()))
+    {
+        bail!("{name}: vertex {i} has a missing or non-finite coordinate");
+    }
+    let n = mesh.positions.len() as i64;
+    for (fi, FaceRow(idx)) in polygons.into_iter().enumerate() {
+        ensure!(
+            idx.len() >= 3,
+            "{name}: face {fi} has {} vertices",
+            idx.len()
+        );
+        if let Some(&i) = idx.iter().find(|&&i| !(0..n).contains(&i)) {
+            bail!("{name}: face {fi} names vertex {i}, outside 0..{n}");
+        }
+        for k in 1..idx.len() - 1 {
+            mesh.faces
+                .push([idx[0] as u32, idx[k] as u32, idx[k + 1] as u32]);
+        }
+    }
+    Ok(mesh)
+}
