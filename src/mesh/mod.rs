@@ -125,3 +125,44 @@ pub fn level_set_mesh(inp: &MeshInput, frame: &GridFrame) -> anyhow::Result<(Mes
     };
     Ok((mesh, stats))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn samples_are_uniform_by_area_and_reproducible() {
+        // Two triangles in the plane z = 0: area 2 (x in [0, 2]) and area 0.5 (x in [3, 4]).
+        let m = Mesh {
+            positions: vec![
+                [0.0, 0.0, 0.0],
+                [2.0, 0.0, 0.0],
+                [0.0, 2.0, 0.0],
+                [3.0, 0.0, 0.0],
+                [4.0, 0.0, 0.0],
+                [3.0, 1.0, 0.0],
+            ],
+            faces: vec![[0, 1, 2], [3, 4, 5]],
+            ..Default::default()
+        };
+        assert_eq!(m.face_areas(), vec![2.0, 0.5]);
+        let s = m.sample(20_000, 7);
+        assert_eq!(s, m.sample(20_000, 7));
+        let in_first = s.iter().filter(|p| p[0] <= 2.0).count() as f64 / s.len() as f64;
+        // Binomial standard deviation √(0.8·0.2/20000) ≈ 0.003: 0.8 ± 0.015 is 5 σ.
+        assert!((in_first - 0.8).abs() < 0.015, "{in_first}");
+        for p in &s {
+            let inside = if p[0] <= 2.0 {
+                p[0] >= 0.0 && p[1] >= 0.0 && p[0] + p[1] <= 2.0 + 1e-5
+            } else {
+                p[1] >= 0.0 && p[1] <= 4.0 - p[0] + 1e-5 && p[0] >= 3.0
+            };
+            assert!(inside && p[2] == 0.0, "{p:?}");
+        }
+        // Uniform inside a triangle: the mean is the centroid.
+        let first: Vec<_> = s.iter().filter(|p| p[0] <= 2.0).collect();
+        let mx = first.iter().map(|p| p[0] as f64).sum::<f64>() / first.len() as f64;
+        assert!((mx - 2.0 / 3.0).abs() < 0.02, "{mx}");
+        assert!(Mesh::default().sample(10, 0).is_empty());
+    }
+}

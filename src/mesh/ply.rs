@@ -24,6 +24,16 @@ pub fn write_mesh_ply(path: &Path, mesh: &Mesh) -> Result<()> {
         "{name}: {n} vertices, more than a PLY int index can name"
     );
     ensure!(
+        mesh.positions
+            .iter()
+            .chain(&mesh.normals)
+            .flatten()
+            .chain(&mesh.level)
+            .chain(&mesh.alpha)
+            .all(|v| v.is_finite()),
+        "{name}: the mesh has a non-finite position, normal, level or alpha"
+    );
+    ensure!(
         mesh.faces.iter().flatten().all(|&i| (i as usize) < n),
         "{name}: a face names a vertex past the {n} vertices"
     );
@@ -175,4 +185,104 @@ fn read_inner(path: &Path) -> Result<Mesh> {
         }
     }
     Ok(mesh)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tetrahedron() -> Mesh {
+        Mesh {
+            positions: vec![
+                [0.0, 0.0, 0.0],
+                [1.0, 0.0, 0.0],
+                [0.0, 1.0, 0.0],
+                [0.0, 0.0, 1.0],
+            ],
+            normals: vec![[0.0, 0.0, 1.0]; 4],
+            level: vec![50.0; 4],
+            alpha: vec![0.5; 4],
+            faces: vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]],
+        }
+    }
+
+    #[test]
+    fn round_trip_and_bad_files() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("m.ply");
+        let m = tetrahedron();
+        write_mesh_ply(&path, &m).unwrap();
+        assert!(has_faces(&path).unwrap());
+        let back = read_mesh_ply(&path).unwrap();
+        assert_eq!(
+            (back.positions, back.faces),
+            (m.positions.clone(), m.faces.clone())
+        );
+        // 4 + 4·8 bytes per vertex, 1 + 3·4 per face after the header.
+        let bytes = std::fs::read(&path).unwrap();
+        let end = bytes
+            .windows(11)
+            .position(|w| w == b"end_header\n")
+            .unwrap()
+            + 11;
+        assert_eq!(bytes.len() - end, 4 * 32 + 4 * 13);
+
+        // A NaN coordinate (patched into vertex 1's y) is refused by the reader, and the writer
+        // refuses to write one.
+        let mut nan = bytes.clone();
+        nan[end + 32 + 4..end + 32 + 8].copy_from_slice(&f32::NAN.to_le_bytes());
+        std::fs::write(&path, &nan).unwrap();
+        let err = format!("{:#}", read_mesh_ply(&path).unwrap_err());
+        assert!(
+            err.contains("m.ply") && err.contains("vertex 1 has a missing or non-finite"),
+            "{err}"
+        );
+        let mut bad = m.clone();
+        bad.normals[2][0] = f32::INFINITY;
+        let err = format!("{:#}", write_mesh_ply(&path, &bad).unwrap_err());
+        assert!(err.contains("non-finite"), "{err}");
+
+        // A point cloud has no faces.
+        let pts = dir.path().join("p.ply");
+        crate::io::write_points(&pts, &m.positions).unwrap();
+        assert!(!has_faces(&pts).unwrap());
+
+        // Out-of-range index, non-finite vertex: errors naming the file, never a panic.
+        let ascii = |body: &str| {
+            format!(
+                "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n\
+                 property float z\nelement face 1\nproperty list uchar int vertex_indices\n\
+                 end_header\n{body}"
+            )
+        };
+        for (body, msg) in [
+            ("0 0 0\n1 0 0\n0 1 0\n3 0 1 5\n", "outside 0..3"),
+            ("0 0 0\n1 0 0\n0 1 0\n3 0 -1 2\n", "outside 0..3"),
+            ("0 0 0\n1 0 0\n", "malformed or truncated"),
+        ] {
+            let bad = dir.path().join("bad.ply");
+            std::fs::write(&bad, ascii(body)).unwrap();
+            let err = format!("{:#}", read_mesh_ply(&bad).unwrap_err());
+            assert!(
+                err.contains("bad.ply") && err.contains(msg),
+                "{body:?}: {err}"
+            );
+        }
+        // A quad is split into two triangles.
+        let quad = dir.path().join("quad.ply");
+        let text = ascii("0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n")
+            .replace("vertex 3", "vertex 4")
+            .replace("0 1 0\n3 0 1 2", "1 1 0\n0 1 0\n4 0 1 2 3");
+        std::fs::write(&quad, text).unwrap();
+        assert_eq!(
+            read_mesh_ply(&quad).unwrap().faces,
+            vec![[0, 1, 2], [0, 2, 3]]
+        );
+
+        // Attributes of the wrong length are refused before anything is written.
+        let mut short = m.clone();
+        short.alpha.pop();
+        assert!(write_mesh_ply(&dir.path().join("s.ply"), &short).is_err());
+        assert!(!dir.path().join("s.ply").exists());
+    }
 }

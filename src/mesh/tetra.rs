@@ -288,14 +288,158 @@ pub fn march(inp: &MeshInput) -> Result<Mesh> {
         mesh.alpha.push(uses[i].alpha);
         i = j;
     }
+    ensure!(
+        mesh.positions.len() <= u32::MAX as usize,
+        "{} mesh vertices: more than a u32 index can name",
+        mesh.positions.len()
+    );
     mesh.faces = face_keys
         .par_iter()
         .map(|f| f.map(|k| keys.binary_search(&k).expect("every face vertex has a use") as u32))
         .collect();
-    ensure!(
-        mesh.positions.len() <= u32::MAX as usize,
-        "{} mesh vertices: more than a PLY u32 index can name",
-        mesh.positions.len()
-    );
     Ok(mesh)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::eval::extract::allocated_cells;
+    use std::collections::HashMap;
+
+    /// A dense n³ grid with `f` at each vertex (grid coordinates), every vertex allocated.
+    fn dense(n: u32, f: impl Fn([f32; 3]) -> f32) -> (Vec<i32>, Vec<f32>) {
+        let mut links = Vec::new();
+        let mut field = Vec::new();
+        for i in 0..n {
+            for j in 0..n {
+                for k in 0..n {
+                    links.push(field.len() as i32);
+                    field.push(f([i as f32, j as f32, k as f32]));
+                }
+            }
+        }
+        (links, field)
+    }
+
+    fn sphere_field(c: f32, r: f32) -> impl Fn([f32; 3]) -> f32 {
+        move |p| r - ((p[0] - c).powi(2) + (p[1] - c).powi(2) + (p[2] - c).powi(2)).sqrt()
+    }
+
+    #[test]
+    fn a_sphere_is_a_closed_oriented_welded_surface() {
+        let (n, c, r) = (20u32, 9.3f32, 6.1f32);
+        let (links, field) = dense(n, sphere_field(c, r));
+        let cells = allocated_cells([n; 3], &links).unwrap();
+        let inp = MeshInput {
+            cells: &cells,
+            links: &links,
+            field: &field,
+            opacity: None,
+            levels: &[0.0],
+            res: [n; 3],
+            min_opacity: 0.0,
+        };
+        let m = march(&inp).unwrap();
+        assert!(m.faces.len() > 1000, "{} faces", m.faces.len());
+        // Every directed edge once and its reverse once: closed (no cracks between cells),
+        // consistently oriented, and welded (a duplicated vertex would leave open edges).
+        let mut directed: HashMap<(u32, u32), u32> = HashMap::new();
+        for f in &m.faces {
+            for k in 0..3 {
+                *directed.entry((f[k], f[(k + 1) % 3])).or_default() += 1;
+            }
+        }
+        for (&(a, b), &count) in &directed {
+            assert_eq!(count, 1, "edge {a}→{b} used {count} times");
+            assert_eq!(directed.get(&(b, a)), Some(&1), "edge {a}→{b} has no twin");
+        }
+        // Euler characteristic of a sphere: V − E + F = 2.
+        let euler = m.positions.len() as i64 - (directed.len() / 2) as i64 + m.faces.len() as i64;
+        assert_eq!(euler, 2);
+        // On the surface (the trilerp of a distance field is within a small fraction of a cell
+        // of the sphere at this radius), with the area of the sphere.
+        for p in &m.positions {
+            let d = (p.iter().map(|v| (v - c).powi(2)).sum::<f32>()).sqrt();
+            assert!((d - r).abs() < 0.05, "vertex {p:?} at radius {d}");
+        }
+        let area: f64 = m.face_areas().iter().sum();
+        let exact = 4.0 * std::f64::consts::PI * (r as f64).powi(2);
+        assert!((area / exact - 1.0).abs() < 0.01, "area {area} vs {exact}");
+        // Normals (the gradient) point toward increasing field, into the sphere, and faces are
+        // wound the same way.
+        for (p, g) in m.positions.iter().zip(&m.normals) {
+            let inward: [f32; 3] = std::array::from_fn(|i| c - p[i]);
+            assert!(dot(*g, inward) > 0.9 * dot(*g, *g).sqrt() * dot(inward, inward).sqrt());
+        }
+        for f in &m.faces {
+            let [a, b, cc] = f.map(|i| m.positions[i as usize]);
+            let n = cross(sub(b, a), sub(cc, a));
+            assert!(dot(n, m.normals[f[0] as usize]) > 0.0);
+        }
+        assert!(m.level.iter().all(|&l| l == 0.0) && m.alpha.iter().all(|&a| a == 1.0));
+    }
+
+    #[test]
+    fn levels_sparsity_and_opacity_trimming() {
+        let (n, c) = (16u32, 7.5f32);
+        let (mut links, field) = dense(n, sphere_field(c, 10.0));
+        // Unallocate one vertex: the 8 cells around it are not meshed.
+        let hole = ((8 * n + 8) * n + 2) as usize;
+        links[hole] = -1;
+        let cells = allocated_cells([n; 3], &links).unwrap();
+        // σα = 2 where x < 7, else 0; threshold 1 keeps the faces with centroid x < 7.
+        let opacity: Vec<f32> = (0..field.len())
+            .map(|row| {
+                if ((row as u32) / (n * n)) < 7 {
+                    2.0
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        let levels = [4.0, 6.0];
+        let inp = MeshInput {
+            cells: &cells,
+            links: &links,
+            field: &field,
+            opacity: Some(&opacity),
+            levels: &levels,
+            res: [n; 3],
+            min_opacity: 1.0,
+        };
+        let m = march(&inp).unwrap();
+        assert!(!m.faces.is_empty());
+        for l in levels {
+            assert!(m.level.contains(&l), "no vertex at level {l}");
+        }
+        for f in &m.faces {
+            let lv = f.map(|i| m.level[i as usize]);
+            assert!(lv[0] == lv[1] && lv[1] == lv[2], "a face across levels");
+            let cx = f.iter().map(|&i| m.positions[i as usize][0]).sum::<f32>() / 3.0;
+            assert!(cx <= 7.0, "face with centroid x = {cx} kept");
+        }
+        // α = 1 − exp(−σα) of the trilerped σα at the vertex, in [0, 1].
+        assert!(m
+            .alpha
+            .iter()
+            .all(|&a| (0.0..=1.0 - (-2.0f32).exp() + 1e-6).contains(&a)));
+        // Every vertex is used, and nothing lies in the cells around the unallocated vertex.
+        let mut used = vec![false; m.positions.len()];
+        m.faces
+            .iter()
+            .flatten()
+            .for_each(|&i| used[i as usize] = true);
+        assert!(used.iter().all(|&u| u));
+        for p in &m.positions {
+            let inside = (0..3).all(|i| (p[i] - [8.0, 8.0, 2.0][i]).abs() < 1.0);
+            assert!(!inside, "vertex {p:?} in a cell with an unallocated corner");
+        }
+        // No opacity field: more faces (the x ≥ 7 part is back).
+        let all = march(&MeshInput {
+            opacity: None,
+            ..inp
+        })
+        .unwrap();
+        assert!(all.faces.len() > m.faces.len() + 100);
+    }
 }
