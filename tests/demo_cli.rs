@@ -160,6 +160,7 @@ fn demo_fast_writes_table_report_and_figures() {
         ("error_cloud.png", 300, 8),
         ("curves.png", 300, 3),
         ("chamfer_levels.png", 300, 3),
+        ("meshes.png", 300, 8),
     ] {
         assert!(
             report.contains(&format!("![{name}]({name})")),
@@ -169,6 +170,16 @@ fn demo_fast_writes_table_report_and_figures() {
     }
     assert!(out.join("plenoxels/train_log.csv").exists());
     assert!(out.join("alphasurf/train_log.csv").exists());
+    // The meshes of the best level and of αSurf, both shown in the figure.
+    let level = best["level"].as_f64().unwrap();
+    for mesh in [
+        format!("plenoxels/mesh_sigma{level}.ply"),
+        "alphasurf/mesh.ply".into(),
+    ] {
+        let m = alphasurf::mesh::ply::read_mesh_ply(&out.join(&mesh)).expect(&mesh);
+        assert!(!m.faces.is_empty(), "{mesh}");
+        assert!(report.contains(&format!("`{mesh}`")), "report lacks {mesh}");
+    }
 }
 
 #[test]

@@ -352,7 +352,10 @@ fn mesh_flag_errors() {
     );
     // Neither --out nor --mesh; the same file for both; a level no surface has.
     let (ok, text) = run(bin().args(["extract", "--run"]).arg(&out));
-    assert!(!ok && text.contains("required") && text.contains("--out"), "{text}");
+    assert!(
+        !ok && text.contains("required") && text.contains("--out"),
+        "{text}"
+    );
     let same = dir.path().join("a.ply");
     let (ok, text) = run(bin()
         .args(["extract", "--backend", "cpu", "--run"])

@@ -69,7 +69,8 @@ impl Mesh {
             total += a;
             cdf.push(total);
         }
-        if !(total > 0.0) {
+        let has_area = total > 0.0;
+        if !has_area {
             return Vec::new();
         }
         let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);

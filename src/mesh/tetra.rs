@@ -174,12 +174,15 @@ fn cell_faces(inp: &MeshInput, cell: u32, faces: &mut Vec<[u64; 3]>, uses: &mut 
                 let [v0, v1, v2] = tri.map(|i| verts[i]);
                 let n = cross(sub(v1.1, v0.1), sub(v2.1, v0.1));
                 let area2 = dot(n, n);
-                if !(area2 > 1e-24) {
-                    continue; // degenerate: a corner exactly at τ
+                let has_area = area2 > 1e-24; // false when degenerate: a corner exactly at τ
+                if !has_area {
+                    continue;
                 }
                 let centroid: [f32; 3] =
                     std::array::from_fn(|i| (v0.1[i] + v1.1[i] + v2.1[i]) / 3.0);
-                if inp.opacity.is_some() && !(trilerp(&a, centroid) >= inp.min_opacity) {
+                // NaN opacity fails the test, as in the point extraction.
+                let opaque = trilerp(&a, centroid) >= inp.min_opacity;
+                if inp.opacity.is_some() && !opaque {
                     continue;
                 }
                 let face = if dot(n, up) >= 0.0 {

@@ -216,6 +216,20 @@ impl<'g> Steps<'g> {
         Ok(t.elapsed().as_secs_f64())
     }
 
+    /// `extract --run RUN --mesh PLY [--levels …]`; returns its wall time.
+    pub fn extract_mesh(&self, run: &Path, mesh: &Path, levels: Option<&[f32]>) -> Result<f64> {
+        let opts = ExtractOptions {
+            out: None,
+            mesh: Some(mesh.to_path_buf()),
+            levels: levels.map(<[f32]>::to_vec),
+            backend: self.backend(),
+            ..ExtractOptions::for_run(run.to_path_buf(), mesh.to_path_buf())
+        };
+        let t = Instant::now();
+        extract(&opts, self.gpu)?;
+        Ok(t.elapsed().as_secs_f64())
+    }
+
     /// `eval --pred PLY --gt GT`.
     pub fn eval(&self, pred: &Path, gt: &Path) -> Result<Metrics> {
         Ok(evaluate(&EvaluateOptions::new(pred.to_path_buf(), gt.to_path_buf()))?.metrics)

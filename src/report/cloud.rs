@@ -61,6 +61,16 @@ impl Projection {
         p
     }
 
+    /// Image width and height in pixels.
+    pub fn size(&self) -> (u32, u32) {
+        (self.w, self.h)
+    }
+
+    /// Unit vectors of the view: image right, image up, towards the eye.
+    pub fn axes(&self) -> [[f64; 3]; 3] {
+        [self.right, self.up, self.towards_eye]
+    }
+
     /// Pixel position and depth (larger = nearer the eye) of a point.
     pub fn project(&self, q: [f32; 3]) -> (f64, f64, f64) {
         let q = q.map(f64::from);

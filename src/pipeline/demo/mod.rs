@@ -1,8 +1,9 @@
 //! `demo` as a library call: the whole method on a built-in scene, step by step ([`super::steps`]):
 //! make-scene → stage 1 (`train --stage plenoxels`) → the Plenoxels level-set sweep (`extract` +
 //! `eval` at σ ∈ {10, 30, 50, 70, 90, 100}) → stage 2 (`train --stage surface`) → `extract` →
-//! `eval`. Returns the results table's rows (method | Chamfer ×10⁻² | F1 | test PSNR | wall time)
-//! and writes `report.md` with PNG figures ([`report`]) and `results.json`.
+//! `eval`, then `extract --mesh` of the best level and of αSurf. Returns the results table's rows
+//! (method | Chamfer ×10⁻² | F1 | test PSNR | wall time) and writes `report.md` with PNG figures
+//! ([`report`]) and `results.json`.
 
 pub mod report;
 pub mod table;
@@ -244,6 +245,30 @@ pub fn alphasurf_row(steps: &Steps, s1: &TrainedRun, s2: &TrainedRun, gt: &Path)
     extract_eval(steps, s2, gt, row, s1.wall_s + s2.wall_s)
 }
 
+/// Where the mesh of a row's surfaces goes: its point cloud's name with "points" → "mesh".
+pub fn mesh_path(row: &Row) -> PathBuf {
+    let name = row.ply.file_name().map_or_else(
+        || "mesh.ply".to_string(),
+        |n| n.to_string_lossy().replacen("points", "mesh", 1),
+    );
+    row.ply.with_file_name(name)
+}
+
+/// `extract --mesh` for the best Plenoxels level and αSurf (the rows that were evaluated); a
+/// failure is reported and leaves that mesh out.
+fn write_meshes(steps: &Steps, rows: &[Row], s1: &TrainedRun, s2: Option<&TrainedRun>) {
+    for row in rows.iter().filter(|r| r.error.is_none()) {
+        let (run, levels) = match (row.kind.as_str(), s2) {
+            ("plenoxels_best", _) => (s1, row.level.map(|l| vec![l])),
+            ("alphasurf", Some(s2)) => (s2, None),
+            _ => continue,
+        };
+        if let Err(e) = steps.extract_mesh(&run.dir, &mesh_path(row), levels.as_deref()) {
+            eprintln!("demo: mesh of {}: {e:#}", row.method);
+        }
+    }
+}
+
 fn phase(i: usize, n: usize, msg: &str) {
     eprintln!("\n=== demo [{i}/{n}] {msg}");
 }
@@ -370,6 +395,8 @@ pub fn demo(opts: &DemoOptions, devices: &mut Devices) -> Result<DemoSummary> {
     };
     rows.extend(best);
     rows.extend(surf);
+    eprintln!("\ndemo: meshes (extract --mesh) of the best Plenoxels level and αSurf");
+    write_meshes(&steps, &rows, &s1, s2.as_ref().ok());
 
     let report = out.join("report.md");
     phase(6, n, &format!("report → {}", report.display()));

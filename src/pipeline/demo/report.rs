@@ -1,16 +1,18 @@
 //! The demo's `report.md`, `results.json` and PNG figures: a test view next to its renderings,
-//! the point clouds coloured by their distance to the ground truth, the training curves (from
-//! each run's `train_log.csv`), and Chamfer against the Plenoxels level.
+//! the point clouds coloured by their distance to the ground truth, the meshes shaded, the
+//! training curves (from each run's `train_log.csv`), and Chamfer against the Plenoxels level.
 
 use super::{objects_table, table, Row};
 use crate::backend::Backend;
 use crate::eval::PointIndex;
 use crate::io::read_points;
+use crate::mesh::ply::read_mesh_ply;
 use crate::pipeline::extract::DEFAULT_RAYS_PER_AXIS;
 use crate::pipeline::steps::TrainedRun;
 use crate::report::canvas::{load_rgb_on_white, side_by_side, Canvas, WHITE};
-use crate::report::cloud::{error_figure, Panel};
+use crate::report::cloud::{error_figure, Panel, Projection};
 use crate::report::log;
+use crate::report::mesh::render_mesh;
 use crate::report::plot::{self, Axis, Plot, Series, Style, PALETTE};
 use crate::scene::SceneKind;
 use anyhow::{Context, Result};
@@ -116,9 +118,10 @@ pub fn write(r: &Inputs) -> Result<Vec<PathBuf>> {
         md += "\n";
     }
 
-    let figs: [(&str, Figure); 4] = [
+    let figs: [(&str, Figure); 5] = [
         ("test_view.png", test_view),
         ("error_cloud.png", error_cloud),
+        ("meshes.png", meshes),
         ("curves.png", curves),
         ("chamfer_levels.png", chamfer_levels),
     ];
@@ -278,6 +281,43 @@ fn error_cloud(r: &Inputs, path: &Path) -> Result<String> {
         CLOUD_VIEW.0,
         CLOUD_VIEW.1,
         ERROR_VMAX / 2.0
+    ))
+}
+
+/// The meshes `extract --mesh` wrote for the best Plenoxels level and αSurf, shaded, in the view
+/// of the point-cloud figure.
+fn meshes(r: &Inputs, path: &Path) -> Result<String> {
+    let gt = read_points(&r.data.join("gt_points.ply"))?;
+    let proj = Projection::fit(&gt, CLOUD_VIEW.0, CLOUD_VIEW.1, 480, 480);
+    let mut panels = Vec::new();
+    let mut files = Vec::new();
+    for row in r
+        .rows
+        .iter()
+        .filter(|x| x.kind == "plenoxels_best" || x.kind == "alphasurf")
+    {
+        let file = super::mesh_path(row);
+        if !file.is_file() {
+            continue;
+        }
+        let m = read_mesh_ply(&file)?;
+        let label = match row.level {
+            Some(l) => format!("PLENOXELS σ = {l}"),
+            None => "αSURF".to_string(),
+        };
+        panels.push((
+            format!("{label}: {} FACES", m.faces.len()),
+            render_mesh(&m.positions, &m.faces, &proj),
+        ));
+        files.push(format!("`{}`", rel(r.out, &file)));
+    }
+    anyhow::ensure!(!panels.is_empty(), "no mesh was written");
+    side_by_side(&panels, 2).save(path)?;
+    Ok(format!(
+        "## Meshes\n\n`alphasurf extract --mesh` (marching tetrahedra on the trilinear field; \
+         {}), shaded, in the view of the point clouds. Every level's surface is in the mesh \
+         (αSurf: faces with σα ≥ 0.1).\n",
+        files.join(", ")
     ))
 }
 
