@@ -249,13 +249,19 @@ fn check_stage(dir: &Path, gt: &Path, run: &Path, levels: Option<&str>, name: &s
         f.iter().for_each(|&i| used[i as usize] = true);
     }
     assert!(used.iter().all(|&u| u), "{name}: unused vertices");
-    // Welded: no two vertices at the same position (the levels are distinct surfaces).
+    // Welded: an unwelded mesh repeats each vertex in every face around it (about 6 times).
+    // A few distinct edge crossings may still round to one f32 position (a crossing within
+    // ~1e-7 of a cell of a grid vertex whose value is not exactly τ), so a handful is allowed.
     let mut keys: Vec<[u32; 4]> = (0..nv)
         .map(|i| ["x", "y", "z", "level"].map(|p| m.prop(p)[i].to_bits()))
         .collect();
     keys.sort_unstable();
     keys.dedup();
-    assert_eq!(keys.len(), nv, "{name}: duplicated vertices");
+    assert!(
+        (nv - keys.len()) * 10_000 < nv,
+        "{name}: {} of {nv} vertices repeat a position",
+        nv - keys.len()
+    );
     for i in 0..nv {
         let n = ["nx", "ny", "nz"].map(|p| m.prop(p)[i] as f64);
         let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();

@@ -7,7 +7,9 @@
 //!
 //! A vertex lies on the trilinear level set itself, not on a linear approximation: the field is
 //! linear along an axis edge (closed form) and a quadratic or cubic along a diagonal (bisection
-//! between its endpoints, which straddle the level). Corners with value ≥ τ are "above".
+//! between its endpoints, which straddle the level). Corners with value ≥ τ are "above"; where a
+//! corner's value is exactly τ, the vertex is that corner, shared by all the edges meeting there
+//! (faces that collapse to a line or a point are dropped).
 //!
 //! Opacity trimming (stage 2) follows the point extraction's rule: a face is kept when the
 //! trilerped σα at its centroid is ≥ the threshold; vertices only used by dropped faces are
@@ -95,7 +97,8 @@ fn crossing(c: &[f32; 8], p: usize, q: usize, tau: f32) -> [f32; 3] {
 }
 
 /// Name of the edge from cell corner `p` to `q` (p ⊂ q) of the cell at `cell` for level `l`:
-/// (level, slot of the grid vertex at corner p, direction bits q ^ p).
+/// (level, slot of the grid vertex at corner p, direction bits q ^ p). With p = q (direction 0)
+/// it names the grid vertex itself, for a level-set vertex that lies exactly on it.
 fn edge_key(l: usize, cell: u32, p: usize, q: usize, res: [u32; 3]) -> u64 {
     let yz = res[1] as u64 * res[2] as u64;
     let slot =
@@ -155,8 +158,13 @@ fn cell_faces(inp: &MeshInput, cell: u32, faces: &mut Vec<[u64; 3]>, uses: &mut 
             let verts: Vec<(u64, [f32; 3])> = ring
                 .iter()
                 .map(|&(u, b)| {
-                    let (p, q) = (u.min(b), u.max(b));
-                    (edge_key(l, cell, p, q, inp.res), crossing(&c, p, q, tau))
+                    if c[u] == tau {
+                        // On the corner itself: one vertex for every edge that meets there.
+                        (edge_key(l, cell, u, u, inp.res), corner(u))
+                    } else {
+                        let (p, q) = (u.min(b), u.max(b));
+                        (edge_key(l, cell, p, q, inp.res), crossing(&c, p, q, tau))
+                    }
                 })
                 .collect();
             // From the below side toward the above side.
@@ -380,6 +388,36 @@ mod tests {
             assert!(dot(n, m.normals[f[0] as usize]) > 0.0);
         }
         assert!(m.level.iter().all(|&l| l == 0.0) && m.alpha.iter().all(|&a| a == 1.0));
+    }
+
+    #[test]
+    fn a_level_through_grid_vertices_welds_there() {
+        // f = x + y + z − 12 on integer vertices: the plane passes exactly through grid vertices
+        // (value 0 = τ), where every edge meeting the vertex would otherwise make its own copy.
+        let n = 10u32;
+        let (links, field) = dense(n, |p| p[0] + p[1] + p[2] - 12.0);
+        let cells = allocated_cells([n; 3], &links).unwrap();
+        let inp = MeshInput {
+            cells: &cells,
+            links: &links,
+            field: &field,
+            opacity: None,
+            levels: &[0.0],
+            res: [n; 3],
+            min_opacity: 0.0,
+        };
+        let m = march(&inp).unwrap();
+        assert!(!m.faces.is_empty());
+        let mut pos: Vec<[u32; 3]> = m.positions.iter().map(|p| p.map(f32::to_bits)).collect();
+        pos.sort_unstable();
+        pos.dedup();
+        assert_eq!(pos.len(), m.positions.len(), "vertices at the same place");
+        for f in &m.faces {
+            assert!(f[0] != f[1] && f[1] != f[2] && f[0] != f[2], "{f:?}");
+        }
+        for p in &m.positions {
+            assert!((p[0] + p[1] + p[2] - 12.0).abs() < 1e-5, "{p:?}");
+        }
     }
 
     #[test]
