@@ -2,7 +2,10 @@
 //! trained (`train --stage all`, 64³), each grid is extracted as points and as a mesh, the mesh is
 //! read back by a PLY reader written here (independent of the crate's writer and of `ply-rs-bw`)
 //! and checked (finite, valid indices, unit normals, levels and α), and points drawn uniformly by
-//! area on it have a Chamfer distance within 5 % of the point cloud's.
+//! area on it have a Chamfer distance within 5 % of the point cloud's. Training runs on one rayon
+//! thread so that every figure is fixed (with several, the order of the float atomic adds varies
+//! and the thin scene's gaps ranged from −3.2 % to −4.8 % over runs); the fixed gaps are −3.3 %,
+//! −2.9 % (thin, stages 1 and 2), +0.7 %, +1.1 % (translucent).
 //!
 //! The point clouds use 9² rays per axis and cell: their ray spacing at 64³, 3/64/8 Blender units,
 //! is the default extraction's at 128³ (5² rays), where the demo's figures are taken. With 5² rays
@@ -175,8 +178,11 @@ fn trained(dir: &Path, kind: &str) -> (PathBuf, PathBuf) {
             .arg(&data),
     );
     let out = dir.join(format!("{kind}-run"));
+    // One rayon thread: CPU training with several is not bit-reproducible (the order of the
+    // float atomic adds varies), and the Chamfer comparison below needs a fixed figure.
     run_ok(
         bin()
+            .env("RAYON_NUM_THREADS", "1")
             .args(["train", "--stage", "all", "--data"])
             .arg(&data)
             .arg("--out")
@@ -286,7 +292,10 @@ fn check_stage(dir: &Path, gt: &Path, run: &Path, levels: Option<&str>, name: &s
     let c_mesh = chamfer(&drawn, gt, &[]);
     let n = n_points.to_string();
     let c_eval = chamfer(&mesh, gt, &["--mesh-samples", &n]);
-    println!("{name}: Chamfer points {c_points:.5}, mesh {c_mesh:.5} (eval {c_eval:.5})");
+    println!(
+        "{name}: Chamfer points {c_points:.7}, mesh {c_mesh:.7} ({:+.2} %; eval {c_eval:.7})",
+        100.0 * (c_mesh / c_points - 1.0)
+    );
     assert!(
         (c_mesh / c_points - 1.0).abs() < 0.05,
         "{name}: mesh Chamfer {c_mesh} vs points {c_points}"
@@ -394,5 +403,5 @@ fn mesh_flag_errors() {
             .arg("--gt")
             .arg(data.join("gt_points.ply")),
     );
-    assert!(text.contains("drawing 5000 points"), "{text}");
+    assert!(text.contains("drew 5000 points"), "{text}");
 }
