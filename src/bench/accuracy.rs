@@ -283,8 +283,9 @@ pub fn table(s: &Summary) -> String {
     }
     for c in &s.categories {
         t += &format!(
-            "| **mean** ({} scenes) | {} | {} | {} | {} ({}) | {}× | | {:.2} → {} dB | |\n",
+            "| **mean** ({} scene{}) | {} | {} | {} | {} ({}) | {}× | | {:.2} → {} dB | |\n",
             c.scenes,
+            if c.scenes == 1 { "" } else { "s" },
             c.category,
             num(c.alphasurf_chamfer_e2, 4),
             num(c.best_chamfer_e2, 4),
