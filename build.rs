@@ -8,11 +8,27 @@
 //! fails the build. That removes descriptor pools and updates from the hot path and lifts
 //! `maxStorageBufferRange` (128 MiB on lavapipe) for every kernel at once.
 //!
+//! Shared constants and buffer structs come from `src/abi/consts.rs` and `src/abi/buffers.rs`,
+//! read here through `build/abi.rs` and served to the kernels as the virtual include
+//! `abi.glsl`; every kernel's SPIR-V is checked against each buffer struct it uses (member
+//! names, offsets and array stride equal to the `#[repr(C)]` struct's), and every struct must be
+//! used by some kernel.
+//!
 //! A GLSL error fails the build with the compiler's `file:line: error` text.
 
-use std::collections::HashMap;
+#[macro_use]
+#[path = "build/abi.rs"]
+mod abi;
+#[allow(dead_code)]
+#[path = "src/abi/buffers.rs"]
+mod buffers;
+#[allow(dead_code)]
+#[path = "src/abi/consts.rs"]
+mod consts;
+
+use std::collections::{HashMap, HashSet};
 use std::fmt::Write as _;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 fn main() {
     let root = PathBuf::from(std::env::var("CARGO_MANIFEST_DIR").unwrap());
@@ -20,6 +36,14 @@ fn main() {
     let lib_dir = glsl_dir.join("lib");
     println!("cargo:rerun-if-changed=glsl");
     println!("cargo:rerun-if-changed=glsl/lib");
+    for f in ["build/abi.rs", "src/abi/consts.rs", "src/abi/buffers.rs"] {
+        println!("cargo:rerun-if-changed={f}");
+    }
+    let layouts = buffers::layouts();
+    let abi_header = abi::header(consts::glsl, &layouts);
+    let out_dir = PathBuf::from(std::env::var("OUT_DIR").unwrap());
+    std::fs::write(out_dir.join("abi.glsl"), &abi_header).unwrap();
+    let mut used_layouts = HashSet::new();
 
     let mut kernels: Vec<PathBuf> = std::fs::read_dir(&glsl_dir)
         .expect("glsl/ directory")
@@ -54,7 +78,14 @@ fn main() {
             opts.set_optimization_level(level);
             opts.set_warnings_as_errors();
             let lib_dir = lib_dir.clone();
+            let abi_header = abi_header.clone();
             opts.set_include_callback(move |requested, _ty, _from, _depth| {
+                if requested == "abi.glsl" {
+                    return Ok(shaderc::ResolvedInclude {
+                        resolved_name: "abi.glsl (generated from src/abi/)".into(),
+                        content: abi_header.clone(),
+                    });
+                }
                 let p = lib_dir.join(requested);
                 std::fs::read_to_string(&p)
                     .map(|content| shaderc::ResolvedInclude {
@@ -87,15 +118,32 @@ fn main() {
                 continue;
             }
         };
+        for layout in &layouts {
+            match check_layout(&info, layout) {
+                Ok(true) => {
+                    used_layouts.insert(layout.name);
+                }
+                Ok(false) => {}
+                Err(e) => failures.push(format!("{rel}: struct {}: {e}", layout.name)),
+            }
+        }
         emit_kernel(&mut out, &name, optimised.as_binary(), &info);
         names.push(name);
+    }
+    for layout in &layouts {
+        if failures.is_empty() && !used_layouts.contains(layout.name) {
+            failures.push(format!(
+                "src/abi/buffers.rs: struct {} is used by no kernel",
+                layout.name
+            ));
+        }
     }
     if !failures.is_empty() {
         for f in &failures {
             eprintln!("{f}");
         }
         panic!(
-            "{} GLSL kernel(s) failed to compile (errors above)",
+            "{} error(s) building the kernels: GLSL compile or mismatch with src/abi/ (above)",
             failures.len()
         );
     }
@@ -104,8 +152,7 @@ fn main() {
         writeln!(out, "    &{n}::INFO,").unwrap();
     }
     out.push_str("];\n");
-    let dest = Path::new(&std::env::var("OUT_DIR").unwrap()).join("kernels.rs");
-    std::fs::write(dest, out).unwrap();
+    std::fs::write(out_dir.join("kernels.rs"), out).unwrap();
 }
 
 struct Member {
@@ -144,6 +191,43 @@ struct Reflection {
     local_size: [u32; 3],
     members: Vec<Member>,
     float_atomics: bool,
+    /// Named struct types laid out explicitly (buffer blocks and what they hold).
+    structs: Vec<StructLayout>,
+}
+
+/// A named SPIR-V struct type with member offsets, and the strides of runtime arrays of it.
+struct StructLayout {
+    name: String,
+    members: Vec<(String, u32)>,
+    strides: Vec<u32>,
+}
+
+/// Checks the kernel's layout of `layout` (when it uses the struct) against the Rust one;
+/// `Ok(true)` when the kernel uses it.
+fn check_layout(info: &Reflection, layout: &abi::Layout) -> Result<bool, String> {
+    let mut used = false;
+    for s in info.structs.iter().filter(|s| s.name == layout.name) {
+        used = true;
+        let want: Vec<(String, u32)> = layout
+            .members
+            .iter()
+            .map(|m| (m.name.to_string(), m.offset))
+            .collect();
+        if s.members != want {
+            return Err(format!(
+                "members (name, offset) {:?} in the SPIR-V, {want:?} in src/abi/buffers.rs \
+                 (declare its buffer with scalar layout)",
+                s.members
+            ));
+        }
+        if let Some(&st) = s.strides.iter().find(|&&st| st != layout.size) {
+            return Err(format!(
+                "array stride {st} in the SPIR-V, size {} in Rust",
+                layout.size
+            ));
+        }
+    }
+    Ok(used)
 }
 
 /// Minimal SPIR-V reader: local size, the push-constant block's members, descriptor use, and the
@@ -156,12 +240,14 @@ fn reflect(words: &[u32]) -> Result<Reflection, String> {
     const OP_TYPE_INT: u32 = 21;
     const OP_TYPE_FLOAT: u32 = 22;
     const OP_TYPE_VECTOR: u32 = 23;
+    const OP_TYPE_RUNTIME_ARRAY: u32 = 29;
     const OP_TYPE_STRUCT: u32 = 30;
     const OP_TYPE_POINTER: u32 = 32;
     const OP_TYPE_FORWARD_POINTER: u32 = 39;
     const OP_VARIABLE: u32 = 59;
     const OP_DECORATE: u32 = 71;
     const OP_MEMBER_DECORATE: u32 = 72;
+    const DEC_ARRAY_STRIDE: u32 = 6;
     const DEC_BINDING: u32 = 33;
     const DEC_OFFSET: u32 = 35;
     const SC_PUSH_CONSTANT: u32 = 9;
@@ -171,7 +257,10 @@ fn reflect(words: &[u32]) -> Result<Reflection, String> {
 
     let mut i = 5;
     let mut local_size = None;
+    let mut names: HashMap<u32, String> = HashMap::new();
     let mut member_names: HashMap<(u32, u32), String> = HashMap::new();
+    let mut runtime_arrays: HashMap<u32, u32> = HashMap::new();
+    let mut strides: HashMap<u32, u32> = HashMap::new();
     let mut member_offsets: HashMap<(u32, u32), u32> = HashMap::new();
     let mut types: HashMap<u32, RustTy> = HashMap::new();
     let mut structs: HashMap<u32, Vec<u32>> = HashMap::new();
@@ -187,7 +276,9 @@ fn reflect(words: &[u32]) -> Result<Reflection, String> {
         }
         let a = &words[i + 1..i + count];
         match op {
-            OP_NAME => {}
+            OP_NAME => {
+                names.insert(a[0], spirv_string(&a[1..]));
+            }
             OP_MEMBER_NAME => {
                 member_names.insert((a[0], a[1]), spirv_string(&a[2..]));
             }
@@ -215,6 +306,12 @@ fn reflect(words: &[u32]) -> Result<Reflection, String> {
                 if let Some(RustTy::Scalar(t, s)) = types.get(&a[1]).copied() {
                     types.insert(a[0], RustTy::Vector(t, s, a[2]));
                 }
+            }
+            OP_TYPE_RUNTIME_ARRAY => {
+                runtime_arrays.insert(a[0], a[1]);
+            }
+            OP_DECORATE if a[1] == DEC_ARRAY_STRIDE => {
+                strides.insert(a[0], a[2]);
             }
             OP_TYPE_STRUCT => {
                 structs.insert(a[0], a[1..].to_vec());
@@ -265,10 +362,35 @@ fn reflect(words: &[u32]) -> Result<Reflection, String> {
             });
         }
     }
+    let mut laid_out = Vec::new();
+    for (&sid, fields) in &structs {
+        let Some(name) = names.get(&sid) else {
+            continue;
+        };
+        let offsets: Option<Vec<(String, u32)>> = (0..fields.len() as u32)
+            .map(|k| {
+                let offset = *member_offsets.get(&(sid, k))?;
+                let member = member_names.get(&(sid, k)).cloned().unwrap_or_default();
+                Some((member, offset))
+            })
+            .collect();
+        if let Some(members) = offsets {
+            laid_out.push(StructLayout {
+                name: name.clone(),
+                members,
+                strides: runtime_arrays
+                    .iter()
+                    .filter(|&(_, &elem)| elem == sid)
+                    .filter_map(|(arr, _)| strides.get(arr).copied())
+                    .collect(),
+            });
+        }
+    }
     Ok(Reflection {
         local_size,
         members,
         float_atomics,
+        structs: laid_out,
     })
 }
 

@@ -13,7 +13,6 @@
 #include "common.glsl"
 layout(local_size_x = 64) in;
 
-const uint REPLAY = 32u;
 
 layout(push_constant, scalar) uniform Push {
     I32Buf links;

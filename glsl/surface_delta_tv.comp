@@ -37,7 +37,6 @@ layout(push_constant, scalar) uniform Push {
 } pc;
 
 // Floats per row of q.
-const uint Q_FLOATS = 4u;
 
 // Row i from the chunk's start (i < rows), and whether row v is in the chunk.
 uint chunk_row(uint i) {

@@ -18,7 +18,7 @@
 // (27), levels[n_levels ≤ 8], rays (6 floats: scene origin, direction), a, stop_thresh, blocks
 // (live-cell words, nb³ u32 level masks, the allocated box; read only when block_skip ≠ 0),
 // block_shift.
-// Outputs: out[r] = (rgb, transmittance, hits composited); stats (6 u32) += cells read (live
+// Outputs: out[r] = (rgb, transmittance, hits composited); stats (SurfCounts) += cells read (live
 // cells: links read), cubic solves, solves skipped by min/max or segment culling, hits composited,
 // hits cut by truncation, blocks skipped (subgroup-reduced atomics).
 // CPU twin: cpu::surface_fwd::render (src/cpu/surface_fwd.rs).
@@ -39,7 +39,7 @@ layout(push_constant, scalar) uniform Push {
     F32Buf levels;
     F32Buf rays;
     SurfOutBuf out_rays;
-    U32Buf stats;
+    SurfCountsBuf stats;
     U32Buf blocks;
     vec3 scale;
     vec3 offset;
@@ -51,17 +51,6 @@ layout(push_constant, scalar) uniform Push {
     uint block_skip;
     uint block_shift;
 } pc;
-
-void add_surf_stats(uvec4 c, uint cut, uint skips) {
-    uvec4 s = subgroupAdd(c);
-    uint sc = subgroupAdd(cut);
-    uint sk = subgroupAdd(skips);
-    if (subgroupElect()) {
-        for (uint i = 0u; i < 4u; i++) atomicAdd(pc.stats.v[i], s[i]);
-        atomicAdd(pc.stats.v[4], sc);
-        atomicAdd(pc.stats.v[5], sk);
-    }
-}
 
 void main() {
     uint r = flat_id();
@@ -81,9 +70,7 @@ void main() {
     vec3 color = vec3(0.0);
     float T = 1.0;
     uint j = 0u;
-    uvec4 cnt = uvec4(0u); // cells, solves, culled, hits
-    uint cut = 0u;
-    uint skips = 0u;
+    SurfCounts cnt = SURF_COUNTS_ZERO;
     uint nb = surf_blocks_per_axis(n, pc.block_shift);
     uint words = surf_live_words(n);
     uint skipped = SURF_NO_BLOCK;
@@ -121,12 +108,12 @@ void main() {
                 if ((word & SURF_MASK_BITS) == 0u
                     && surf_block_skip(w, dn, int(n), l, bi, skipped, pc.block_shift,
                                        word >> SURF_RADIUS_SHIFT)) {
-                    skips++;
+                    cnt.blocks_skipped++;
                     continue;
                 }
                 if (!SURF_CELL_LIVE(pc.blocks, base)) continue;
             }
-            cnt.x++;
+            cnt.cells++;
             lk[0] = pc.links.v[base];
             lk[1] = pc.links.v[base + 1u];
             lk[2] = pc.links.v[base + nz];
@@ -145,8 +132,8 @@ void main() {
                 mask = surf_segment_mask(c, cc, q0, q1, t1 - t0, lv, mask);
             }
             uint ns = uint(bitCount(mask));
-            cnt.y += ns;
-            cnt.z += nl - ns;
+            cnt.solves += ns;
+            cnt.culled += nl - ns;
             if (mask != 0u) {
                 found = true;
                 break;
@@ -165,7 +152,7 @@ void main() {
         face_neg = eneg;
         for (uint h = 0u; h < nh; h++) {
             if (float(j) >= pc.a) {
-                cut++;
+                cnt.cut++;
                 done = true;
                 break;
             }
@@ -201,7 +188,7 @@ void main() {
             precise float tn = T * (1.0 - at);
             T = tn;
             j++;
-            cnt.w++;
+            cnt.hits++;
             if (T < pc.stop_thresh) {
                 done = true;
                 break;
@@ -214,5 +201,5 @@ void main() {
     o.transmittance = T;
     o.hits = j;
     pc.out_rays.v[r] = o;
-    add_surf_stats(cnt, cut, skips);
+    SURF_COUNTS_SUBGROUP_ADD(pc.stats, cnt);
 }

@@ -27,16 +27,16 @@ layout(push_constant, scalar) uniform Push {
     float lambda;
 } pc;
 
-// Rows per invocation (lavapipe's cost per invocation is larger than one row's work).
-const uint ROWS_PER_INVOCATION = 16u;
+// OPACITY_REG_ROWS rows per invocation (lavapipe's cost per invocation is larger than one row's
+// work).
 
 void main() {
     uint id = flat_id();
     uint len = min(pc.count, pc.rows);
-    uint stride = (len + ROWS_PER_INVOCATION - 1u) / ROWS_PER_INVOCATION;
+    uint stride = (len + OPACITY_REG_ROWS - 1u) / OPACITY_REG_ROWS;
     float l = 0.0;
     if (id < stride) {
-        for (uint k = 0u; k < ROWS_PER_INVOCATION; k++) {
+        for (uint k = 0u; k < OPACITY_REG_ROWS; k++) {
             uint i = id + k * stride;
             if (i >= len) break;
             uint r = (pc.start % pc.rows + i) % pc.rows;

@@ -51,8 +51,7 @@ layout(push_constant, scalar) uniform Push {
 
 #include "rmsprop.glsl"
 
-// Rows per invocation of the range pass.
-const uint RANGE_ROWS = 16u;
+// Row pairs per invocation of the range pass: RMSPROP_RANGE_ROWS (src/abi/consts.rs).
 #include "step.glsl"
 
 void main() {
@@ -64,7 +63,7 @@ void main() {
         // The range's rows in aligned pairs (2m, 2m + 1), m cyclic over ⌈rows/2⌉ from start/2.
         uint pairs = (pc.rows + 1u) / 2u;
         uint count = min(((start & 1u) + len + 1u) / 2u, pairs);
-        uint stride = (count + RANGE_ROWS - 1u) / RANGE_ROWS;
+        uint stride = (count + RMSPROP_RANGE_ROWS - 1u) / RMSPROP_RANGE_ROWS;
         if (i >= stride) return;
         F32Buf th = delta ? pc.delta : pc.opacity;
         F32Buf gr = delta ? pc.grad_delta : pc.grad_opacity;
@@ -73,7 +72,7 @@ void main() {
         U64Buf gr2 = U64Buf(uint64_t(gr));
         U64Buf st2 = U64Buf(uint64_t(st));
         float lr = delta ? pc.lr_delta : pc.lr_opacity;
-        for (uint k = 0u; k < RANGE_ROWS; k++) {
+        for (uint k = 0u; k < RMSPROP_RANGE_ROWS; k++) {
             uint j = i + k * stride;
             if (j >= count) break;
             uint m = range_row(start >> 1u, j, pairs);

@@ -24,32 +24,22 @@
 // for the current δ or with a margin bounding its drift since (exact), then the allocated box
 // (static: the walk covers only the ray's span inside it, surf_box_span); block_shift; delta,
 // opacity (raw σα), sh (27) per allocated vertex;
-// params (floats): scale[3], offset[3], a, stop_thresh, grad_scale, lambda_h, lambda_c, (pad),
-// levels[8] (n_levels used); rays (6 floats), targets (3 floats).
+// params (SurfTrainParams: scale, offset, a, stop_thresh, the loss weights grad_scale, lambda_h,
+// lambda_c, the levels; n_levels used); rays (6 floats), targets (3 floats).
 // Outputs: grad_delta, grad_opacity, grad_sh += (float atomics), touched list (step buffer);
-// out_rays[r] = (squared error, entropy, consistency, hits composited); stats (8 u32) += cells
-// read (live cells: links and δ loaded), cubic solves, solves culled (min/max or segment), hits
-// composited, hits cut by truncation, guarded hits, gradient atomic adds, blocks skipped
-// (subgroup-reduced).
+// out_rays[r] = RayLoss (squared error, entropy, consistency, hits composited); stats
+// (TrainCounts) += cells read (live cells: links and δ loaded), cubic solves, solves culled
+// (min/max or segment), hits composited, hits cut by truncation, guarded hits, gradient atomic
+// adds, blocks skipped (subgroup-reduced).
 // CPU twin: cpu::surface_train::train (src/cpu/surface_train.rs).
 #extension GL_EXT_shader_atomic_float : require
 #include "common.glsl"
-// Composited hits recorded per ray (the truncation parameter a may not exceed this); a cell's hit
-// list keeps as many (surface.glsl), all a ray can composite.
-#define SURF_MAX_HITS 8u
+// A cell's hit list keeps SURF_MAX_HITS (surface.glsl; the hits a ray records, a ≤ this), all a
+// ray can composite.
 #define SURF_CELL_KEEP SURF_MAX_HITS
 #include "surface.glsl"
 #include "surface_blocks.glsl"
 layout(local_size_x = 64) in;
-
-// Per-ray output (scalar layout, 16 bytes); twin cpu::surface_train::RayLoss.
-struct SurfTrainOut {
-    float sq_err;
-    float entropy;
-    float consistency;
-    uint hits;
-};
-layout(buffer_reference, scalar, buffer_reference_align = 4) buffer SurfTrainOutBuf { SurfTrainOut v[]; };
 
 layout(push_constant, scalar) uniform Push {
     I32Buf links;
@@ -57,14 +47,14 @@ layout(push_constant, scalar) uniform Push {
     F32Buf delta;
     F32Buf opacity;
     F32Buf sh;
-    F32Buf params;
+    SurfTrainParamsBuf params;
     F32Buf rays;
     F32Buf targets;
     F32Buf grad_delta;
     F32Buf grad_opacity;
     F32Buf grad_sh;
-    SurfTrainOutBuf out_rays;
-    U32Buf stats;
+    RayLossBuf out_rays;
+    TrainCountsBuf stats;
     U32Buf step;
     uint n;
     uint n_rays;
@@ -73,18 +63,6 @@ layout(push_constant, scalar) uniform Push {
 } pc;
 
 #include "step.glsl"
-
-// Relative guard on the implicit derivative's denominator f′(s).
-const float FPRIME_GUARD = 1e-3;
-// Layout of the params buffer.
-const uint P_SCALE = 0u;
-const uint P_OFFSET = 3u;
-const uint P_A = 6u;
-const uint P_STOP = 7u;
-const uint P_GRAD_SCALE = 8u;
-const uint P_LAMBDA_H = 9u;
-const uint P_LAMBDA_C = 10u;
-const uint P_LEVELS = 12u;
 
 // What the backward pass needs of a composited hit (surface_train records ≤ SURF_MAX_HITS).
 struct HitRec {
@@ -198,28 +176,20 @@ uint flush(ivec3 cell, float y[9], inout float acc_d[8], inout float acc_a[8], i
     return adds;
 }
 
-void add_train_stats(uvec4 c, uvec4 d) {
-    uvec4 s = subgroupAdd(c);
-    uvec4 t = subgroupAdd(d);
-    if (subgroupElect()) {
-        for (uint i = 0u; i < 4u; i++) atomicAdd(pc.stats.v[i], s[i]);
-        for (uint i = 0u; i < 4u; i++) atomicAdd(pc.stats.v[4u + i], t[i]);
-    }
-}
-
 void main() {
     uint r = flat_id();
     if (r >= pc.n_rays) return;
     vec3 ro = vec3(pc.rays.v[6u * r], pc.rays.v[6u * r + 1u], pc.rays.v[6u * r + 2u]);
     vec3 rd = vec3(pc.rays.v[6u * r + 3u], pc.rays.v[6u * r + 4u], pc.rays.v[6u * r + 5u]);
     vec3 target = vec3(pc.targets.v[3u * r], pc.targets.v[3u * r + 1u], pc.targets.v[3u * r + 2u]);
-    vec3 scale = vec3(pc.params.v[P_SCALE], pc.params.v[P_SCALE + 1u], pc.params.v[P_SCALE + 2u]);
-    vec3 offset = vec3(pc.params.v[P_OFFSET], pc.params.v[P_OFFSET + 1u], pc.params.v[P_OFFSET + 2u]);
-    float a = pc.params.v[P_A];
-    float stop_thresh = pc.params.v[P_STOP];
+    SurfTrainParams prm = pc.params.v[0];
+    vec3 scale = prm.scale;
+    vec3 offset = prm.offset;
+    float a = prm.a;
+    float stop_thresh = prm.stop_thresh;
     uint nl = min(pc.n_levels, SURF_MAX_LEVELS);
     float lv[SURF_MAX_LEVELS];
-    for (uint i = 0u; i < SURF_MAX_LEVELS; i++) lv[i] = i < nl ? pc.params.v[P_LEVELS + i] : 0.0;
+    for (uint i = 0u; i < SURF_MAX_LEVELS; i++) lv[i] = i < nl ? prm.levels[i] : 0.0;
     vec3 og, dn;
     surf_ray(ro, rd, scale, offset, og, dn);
     precise vec3 dg = rd * scale;
@@ -229,8 +199,7 @@ void main() {
     float y[9];
     sh_basis(ray_unit(rd), y);
     uint n = pc.n;
-    uvec4 cnt = uvec4(0u); // cells, solves, culled, hits
-    uvec4 cnt2 = uvec4(0u); // cut, guarded, atomic adds, blocks skipped
+    TrainCounts cnt = TRAIN_COUNTS_ZERO;
 
     // Forward walk, recording the composited hits (registers: HitRec, set_hit).
     HitRec rec[SURF_MAX_HITS];
@@ -266,11 +235,11 @@ void main() {
             if ((word & SURF_MASK_BITS) == 0u
                 && surf_block_skip(w, dn, int(n), l, bi, skipped, pc.block_shift,
                                    word >> SURF_RADIUS_SHIFT)) {
-                cnt2.w++;
+                cnt.blocks_skipped++;
                 continue;
             }
             if (!SURF_CELL_LIVE(pc.skip, dda_cell_index(l, n))) continue;
-            cnt.x++;
+            cnt.cells++;
             cell_links(l, lk);
             [[unroll]] for (int i = 0; i < 8; i++) c[i] = pc.delta.v[lk[i]];
             mask = surf_level_mask(c, lv, nl);
@@ -281,8 +250,8 @@ void main() {
                 mask = surf_segment_mask(c, cc, q0, q1, t1 - t0, lv, mask);
             }
             uint ns = uint(bitCount(mask));
-            cnt.y += ns;
-            cnt.z += nl - ns;
+            cnt.solves += ns;
+            cnt.culled += nl - ns;
             if (mask != 0u) {
                 found = true;
                 break;
@@ -303,7 +272,7 @@ void main() {
         float cmax = max(max(max(c[0], c[1]), max(c[2], c[3])), max(max(c[4], c[5]), max(c[6], c[7])));
         for (uint h = 0u; h < nh; h++) {
             if (float(j) >= a || j >= SURF_MAX_HITS) {
-                cnt2.x++;
+                cnt.cut++;
                 done = true;
                 break;
             }
@@ -348,7 +317,7 @@ void main() {
             hr.guard = abs(f1) <= FPRIME_GUARD * (cmax - cmin);
             set_hit(rec, j, hr);
             j++;
-            cnt.w++;
+            cnt.hits++;
             precise float tn = T * (1.0 - at);
             T = tn;
             if (T < stop_thresh) {
@@ -378,16 +347,16 @@ void main() {
     float t_last = tr[SURF_MAX_HITS]; // = tr[nh]: the slots past nh copy it
     precise vec3 total = color + vec3(t_last);
     precise vec3 diff = total - target;
-    SurfTrainOut o;
+    RayLoss o;
     precise float sq = diff.x * diff.x + diff.y * diff.y + diff.z * diff.z;
     o.sq_err = sq;
     o.entropy = 0.0;
     o.consistency = 0.0;
     o.hits = nh;
-    precise vec3 d_c = pc.params.v[P_GRAD_SCALE] * diff;
+    precise vec3 d_c = prm.grad_scale * diff;
 
     // Entropy of the normalised weights and ∂(λH·LH)/∂w_j.
-    float lambda_h = pc.params.v[P_LAMBDA_H];
+    float lambda_h = prm.lambda_h;
     float e[SURF_MAX_HITS];
     [[unroll]] for (uint k = 0u; k < SURF_MAX_HITS; k++) e[k] = 0.0;
     precise float wsum = 0.0;
@@ -412,7 +381,7 @@ void main() {
     }
     // Lc: depths in scene units, mode m = first largest weight; ∂/∂t_m is summed apart (the same
     // additions in the same order) and stored after the loop.
-    float lambda_c = pc.params.v[P_LAMBDA_C];
+    float lambda_c = prm.lambda_c;
     float d_t[SURF_MAX_HITS];
     [[unroll]] for (uint k = 0u; k < SURF_MAX_HITS; k++) d_t[k] = 0.0;
     if (lambda_c != 0.0 && nh > 1u) {
@@ -492,10 +461,10 @@ void main() {
         precise float dl_ds = d_sa * hk.dsa + dtk * inv_len;
         [[unroll]] for (uint ch = 0u; ch < 3u; ch++) dl_ds += d_raw[ch] * hk.draw[ch];
         bool guarded = hk.guard;
-        if (guarded) cnt2.y++;
+        if (guarded) cnt.guarded++;
         precise float dds = (guarded || dl_ds == 0.0) ? 0.0 : -dl_ds / hk.f1;
         if (hk.cell != cur) {
-            cnt2.z += flush(cur, y, acc_d, acc_a, acc_c, nz_d, nz_a, nz_c);
+            cnt.atomic_adds += flush(cur, y, acc_d, acc_a, acc_c, nz_d, nz_a, nz_c);
             cur = hk.cell;
         }
         float wt[8];
@@ -515,6 +484,6 @@ void main() {
             nz_c |= (uint(tc.x != 0.0) | (uint(tc.y != 0.0) << 1u) | (uint(tc.z != 0.0) << 2u)) << (3u * i);
         }
     }
-    cnt2.z += flush(cur, y, acc_d, acc_a, acc_c, nz_d, nz_a, nz_c);
-    add_train_stats(cnt, cnt2);
+    cnt.atomic_adds += flush(cur, y, acc_d, acc_a, acc_c, nz_d, nz_a, nz_c);
+    TRAIN_COUNTS_SUBGROUP_ADD(pc.stats, cnt);
 }

@@ -6,7 +6,7 @@ use alphasurf::bench::cubic::{score_case, DS_TARGET};
 use alphasurf::check::cases::{gen_cases, CaseClass, OracleCase, FLOOR};
 use alphasurf::cpu::cubic_solve::CubicCase;
 use alphasurf::math::cubic::{
-    cell_cubic, crossings, exit_sign, level_ends, solve_crossings, Crossings, MERGE_EPS,
+    cell_cubic, crossings, exit_sign, level_ends, solve_crossings, Crossings, CUBIC_MERGE_EPS,
 };
 use alphasurf::math::cubic_oracle::{eval64, oracle_coefs, oracle_crossings, oracle_solve};
 use rand::{Rng, SeedableRng};
@@ -390,9 +390,9 @@ fn tangent_touch_is_no_hit() {
     assert!(oracle_solve(&[0.25, -1.0, 1.0, 0.0], 1.0).is_empty());
     // Merge rule (f64 oracle, where a sub-1e-6 tangent pair is representable): two crossings
     // closer than the merge distance cancel; farther apart they stay.
-    let h = 0.2 * MERGE_EPS as f64; // half distance between the roots
+    let h = 0.2 * CUBIC_MERGE_EPS as f64; // half distance between the roots
     assert!(oracle_solve(&[0.25 - h * h, -1.0, 1.0, 0.0], 1.0).is_empty());
-    let h = 5.0 * MERGE_EPS as f64;
+    let h = 5.0 * CUBIC_MERGE_EPS as f64;
     assert_eq!(oracle_solve(&[0.25 - h * h, -1.0, 1.0, 0.0], 1.0).len(), 2);
 }
 

@@ -7,12 +7,12 @@
 //! its midpoint), and each level's crossings in a cell from dense sampling of the trilinear field
 //! (plus its extrema, located by bisection on the analytic derivative) and bisection in f64.
 
+use alphasurf::abi::buffers::{SurfCounts, SurfOut};
 use alphasurf::check::surface_blocks::check as blocks_check;
 use alphasurf::check::surface_fwd::{check, render_gpu, test_rays, test_scene, SurfaceScene};
 use alphasurf::cpu::surface_blocks::build_blocks;
 use alphasurf::cpu::surface_fwd::render;
 use alphasurf::gpu::test_gpu;
-use alphasurf::math::surface::SurfOut;
 use alphasurf::math::surface_blocks::{
     surf_blocks_per_axis, surf_live_words, SkipRef, SURF_BLOCK_SHIFT_CPU, SURF_BLOCK_SHIFT_VULKAN,
     SURF_BOX_WORDS, SURF_MASK_BITS,
@@ -432,7 +432,7 @@ fn backends_match_f64_reference() {
         total[0] += n;
         total[1] += flagged;
         total[2] += hits as usize;
-        total[3] += counts[5] as usize;
+        total[3] += counts.blocks_skipped as usize;
     }
     eprintln!("total: {total:?} (rays, flagged, reference hits, blocks skipped)");
     assert!(total[3] > 1000, "the reference rays must skip blocks");
@@ -577,11 +577,15 @@ fn block_skipping_is_exact_and_saves_cells() {
             }
             for (b, x, y) in [(bc, ac, skc), (gbc, gac, gsk)] {
                 assert_eq!(b, x);
-                assert_eq!([b[1], b[3], b[4]], [y[1], y[3], y[4]]);
-                assert!(y[0] * 3 < b[0] * 2, "cells {} → {}", b[0], y[0]);
-                assert!(y[5] > 1000, "{} blocks skipped", y[5]);
+                assert_eq!([b.solves, b.hits, b.cut], [y.solves, y.hits, y.cut]);
+                assert!(y.cells * 3 < b.cells * 2, "cells {} → {}", b.cells, y.cells);
+                assert!(
+                    y.blocks_skipped > 1000,
+                    "{} blocks skipped",
+                    y.blocks_skipped
+                );
             }
-            assert!(bc[3] > 500, "the scene must produce hits");
+            assert!(bc.hits > 500, "the scene must produce hits");
         }
     }
     let msgs = gpu.validation_messages();
@@ -671,7 +675,7 @@ fn planar_field_one_live_block() {
     assert_eq!(cpu0, cpu);
     assert_eq!(gpu0, gpu);
     eprintln!("counters without blocks {c0:?}, with: cpu {cc:?} gpu {gc:?}");
-    assert!(cc[0] * 4 < c0[0], "cells {} → {}", c0[0], cc[0]);
+    assert!(cc.cells * 4 < c0.cells, "cells {} → {}", c0.cells, cc.cells);
     let mut hits = 0;
     for (backend, out) in [("cpu", &cpu), ("gpu", &gpu)] {
         for (i, o) in out.iter().enumerate() {
@@ -896,8 +900,8 @@ fn truncated_compositing() {
         let cut = u32::from((used as usize) < planes.len());
         for (backend, o, cn) in [("cpu", cpu[0], counts), ("gpu", gpu[0], gc)] {
             assert_eq!(o.hits, used, "{backend} a {a}: {o:?}");
-            assert_eq!(cn[3], used, "{backend} a {a}: counters {cn:?}");
-            assert_eq!(cn[4], cut, "{backend} a {a}: counters {cn:?}");
+            assert_eq!(cn.hits, used, "{backend} a {a}: counters {cn:?}");
+            assert_eq!(cn.cut, cut, "{backend} a {a}: counters {cn:?}");
             for k in 0..3 {
                 assert!(
                     (o.rgb[k] as f64 - want[k]).abs() < 2e-5,
@@ -946,8 +950,8 @@ fn missing_rays_and_bad_input() {
         hits: 0,
     };
     assert!(o.iter().chain(&og).all(|x| *x == white), "{o:?} {og:?}");
-    assert_eq!(counts, [0; 6]);
-    assert_eq!(gc, [0; 6]);
+    assert_eq!(counts, SurfCounts::default());
+    assert_eq!(gc, SurfCounts::default());
     let mut q = sc.params(5.0, 1e-4);
     q.levels = vec![0.0; 9];
     assert!(render(&sc.grid(), &rays, &q, None).is_err());

@@ -11,6 +11,7 @@
 // Index loops mirror the formulas; the f64 forward takes the whole ray context.
 #![allow(clippy::needless_range_loop, clippy::too_many_arguments)]
 
+use alphasurf::abi::buffers::TrainCounts;
 use alphasurf::abi::surface_grid::SurfaceGridRef;
 use alphasurf::cpu::surface_fwd::SurfaceParams;
 use alphasurf::cpu::surface_train::{
@@ -243,7 +244,7 @@ fn cpu_backward_matches_f64_central_differences() {
             rng.random_range(0.0..1.0),
             rng.random_range(0.0..1.0),
         ];
-        let mut cnt = [0; 8];
+        let mut cnt = TrainCounts::default();
         let tr = trace_ray(&g, ro, rd, &p, None, &mut cnt);
         if tr.n == 0 || ray_loss64(&tr, rd, target, &levels, p.a as f64, &lp, &q, true).is_none() {
             continue;
@@ -283,7 +284,7 @@ fn cpu_backward_matches_f64_central_differences() {
     )
     .unwrap();
     assert_eq!(losses.len(), traces.len());
-    assert_eq!(counts[5], 0, "no hit of these rays should be guarded");
+    assert_eq!(counts.guarded, 0, "no hit of these rays should be guarded");
     assert!(losses.iter().any(|l| l.entropy > 0.0) && losses.iter().any(|l| l.consistency > 0.0));
 
     let total = |q: &Params64| -> f64 {

@@ -4,6 +4,8 @@
 #extension GL_EXT_buffer_reference2 : require
 #extension GL_EXT_shader_explicit_arithmetic_types_int64 : require
 #extension GL_EXT_scalar_block_layout : require
+// Constants and buffer structs shared with the host, generated from src/abi/ by build.rs.
+#include "abi.glsl"
 
 layout(buffer_reference, scalar, buffer_reference_align = 4) buffer F32Buf { float v[]; };
 layout(buffer_reference, scalar, buffer_reference_align = 4) buffer U32Buf { uint v[]; };
@@ -17,7 +19,6 @@ layout(buffer_reference, scalar, buffer_reference_align = 8) buffer U64Buf { uin
 // DISPATCH_ROW_GROUPS workgroups whenever it needs more than one row. A macro, not a function:
 // glslang fixes gl_WorkGroupSize where a function body is compiled, and this file is included
 // before the kernel's `layout(local_size_x = …)`, where it would still read 1.
-const uint DISPATCH_ROW_GROUPS = 32768u;
 #define flat_id() (gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * (DISPATCH_ROW_GROUPS * gl_WorkGroupSize.x))
 
 // Cyclic row ranges (Rust twin: cpu::step::RowRange): the rows (start + i) mod n for i < len,

@@ -14,13 +14,8 @@
 #define CUBIC_GLSL
 #extension GL_EXT_control_flow_attributes : require
 
-const float CUBIC_MERGE_EPS = 1e-6;
-const uint CUBIC_MAX_ITERS = 32u;
-const float CUBIC_STEP_TOL = 2.4e-7;
-const float CUBIC_SNAP = 1e-6;
-const float CUBIC_CRIT_SNAP = 2.3841858e-7; // 2^-22: f at a critical point within this of its
-                                             // magnitude is rounding noise, taken as 0
-const float CUBIC_MAX_L = 1e12;
+// CUBIC_MERGE_EPS, CUBIC_MAX_ITERS, CUBIC_STEP_TOL, CUBIC_SNAP, CUBIC_CRIT_SNAP, CUBIC_MAX_L:
+// src/abi/consts.rs (abi.glsl).
 
 // Up to three crossings: s[i] for i < n, bit i of `rising` set when f - tau goes from < 0 to > 0.
 struct CubicCrossings {

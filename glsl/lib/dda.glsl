@@ -12,14 +12,9 @@
 #ifndef DDA_GLSL
 #define DDA_GLSL
 
-// Stands for infinity (no NaN from 0·inf anywhere).
-const float DDA_BIG = 3.402823466e38;
-// Components of o and d with magnitude < DDA_TINY count as zero (denormal-safe on every device).
-const float DDA_TINY = 1e-30;
-// A ray with a direction component of magnitude ≥ DDA_HUGE = 2^26 misses: every nonzero plane
-// distance |k − o| ≥ DDA_TINY times 1/d then stays a normal float (no subnormal t, which some
-// devices flush to zero).
-const float DDA_HUGE = 67108864.0;
+// DDA_BIG (infinity), DDA_TINY (smaller direction components count as zero, denormal-safe on
+// every device), DDA_HUGE (a ray with a larger direction component misses: no subnormal t, which
+// some devices flush to zero), DDA_SPLIT_MAX and DDA_HASH0: src/abi/consts.rs (abi.glsl).
 
 // Division and sqrt are not correctly rounded on every device (Vulkan allows 2.5 ulp for x/y, and
 // sqrt inherits the error of 1/inversesqrt), and fma() need not be fused (lavapipe's is a multiply
@@ -33,9 +28,6 @@ const float DDA_HUGE = 67108864.0;
 float dda_adjacent(float y, bool up) {
     return uintBitsToFloat(floatBitsToUint(y) + (up ? 1u : 0xffffffffu));
 }
-
-// Above this |t| the entry point's exact product is not formed (4097·t would overflow).
-const float DDA_SPLIT_MAX = 1e30;
 
 // The exact product a·b = p + q (Dekker's product with Veltkamp's split, 4097 = 2^12 + 1).
 void dda_two_prod(float a, float b, out float p, out float q) {
@@ -222,7 +214,6 @@ uint dda_cell_index(ivec3 c, uint n) {
 }
 
 // Order-sensitive checksum of a walk (FNV-1a over cell indices); start from DDA_HASH0.
-const uint DDA_HASH0 = 2166136261u;
 uint dda_hash(uint h, uint idx) {
     return (h ^ idx) * 16777619u;
 }

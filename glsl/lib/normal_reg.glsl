@@ -23,10 +23,9 @@
 
 layout(buffer_reference, scalar, buffer_reference_align = 16) buffer Vec4Buf { u64vec2 v[]; };
 
-const uint NBR_WORDS = 8u;
-// The corner offset b of table entry j (and 8 + j).
-const uint NBR_B[8] = uint[8](0u, 1u, 2u, 4u, 3u, 5u, 6u, 7u);
-const float TINY_NORMAL2 = 1e-12;
+// NBR_STRIDE (ints per row), NBR_B (the corner offset b of table entry j and 8 + j) and
+// TINY_NORMAL2: src/abi/consts.rs (abi.glsl).
+const uint NBR_WORDS = NBR_STRIDE / 2u;
 // The corner slots of a cell in no kept pair: +∞.
 const uint NO_PAIR_BITS = 0x7f800000u;
 

@@ -18,12 +18,9 @@
 #include "sh.glsl"
 #include "dda.glsl"
 
-const float SIGMA_EPS = 1e-8;
-const float STEP = 0.5;
-// Skips stop this far (voxels) before the block exit, so rounding never skips a live sample.
-const float SKIP_MARGIN = 1e-3;
-// Occupancy blocks are 8³ cells.
-const uint OCC_SHIFT = 3u;
+// SIGMA_EPS, STEP, SKIP_MARGIN (skips stop this far before the block exit, so rounding never
+// skips a live sample), OCC_SHIFT (occupancy blocks are 2^OCC_SHIFT cells per axis):
+// src/abi/consts.rs (abi.glsl).
 
 struct March {
     vec3 o;      // origin, grid units

@@ -5,11 +5,7 @@
 #define SH_GLSL
 #extension GL_EXT_control_flow_attributes : require
 
-const float SH_C0 = 0.28209479;
-const float SH_C1 = 0.48860251;
-const float SH_C2 = 1.09254843;
-const float SH_C3 = 0.31539157;
-const float SH_C4 = 0.54627422;
+// SH_C0..SH_C4: src/abi/consts.rs (abi.glsl).
 
 // The 9 basis values Y_0..Y_8 at the unit direction d (x, y, z).
 void sh_basis(vec3 d, out float y[9]) {

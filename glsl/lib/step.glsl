@@ -12,18 +12,9 @@
 #extension GL_KHR_shader_subgroup_arithmetic : require
 #extension GL_KHR_shader_subgroup_basic : require
 
-const uint STEP_COUNT = 0u;
-const uint STEP_STATS = 1u;
-const uint STEP_N = 5u;
-const uint STEP_FLAGS = 8u;
-
-// Touched-flag bits. Stage 1 has one group (TOUCH_ALL); stage 2 flags its three parameter groups
-// apart, so the optimiser updates only the groups of a vertex that received a gradient.
-const uint TOUCH_ALL = 1u;
-const uint TOUCH_DELTA = 1u;
-const uint TOUCH_OPACITY = 2u;
-const uint TOUCH_SH = 4u;
-const uint TOUCH_SURFACE = TOUCH_DELTA | TOUCH_OPACITY | TOUCH_SH;
+// The layout indices STEP_COUNT, STEP_STATS, STEP_N, STEP_FLAGS and the touched-flag bits
+// TOUCH_ALL (stage 1's one group), TOUCH_DELTA, TOUCH_OPACITY, TOUCH_SH, TOUCH_SURFACE (stage 2
+// flags its three parameter groups apart): src/abi/consts.rs (abi.glsl).
 
 // Set the bits m of vertex v's flag (m = 0: nothing); the first marker of the step appends v to
 // the list.

@@ -19,18 +19,10 @@
 #include "trilerp.glsl"
 #include "sh.glsl"
 
-// At most this many levels τ_i.
-const uint SURF_MAX_LEVELS = 8u;
+// SURF_MAX_LEVELS (at most this many levels τ_i), SURF_SEGMENT_MARGIN: src/abi/consts.rs.
 const float SURF_PI = 3.14159265358979;
 
-// Per-ray output of surface_fwd (scalar layout, 20 bytes): rgb on white, final transmittance
-// (before the background), front-face hits composited.
-struct SurfOut {
-    vec3 rgb;
-    float transmittance;
-    uint hits;
-};
-layout(buffer_reference, scalar, buffer_reference_align = 4) buffer SurfOutBuf { SurfOut v[]; };
+// Per-ray output of surface_fwd: SurfOut (src/abi/buffers.rs, abi.glsl).
 
 // Scene ray (ro, rd) → grid origin og = ro·scale + offset and unit grid direction dn.
 void surf_ray(vec3 ro, vec3 rd, vec3 scale, vec3 offset, out vec3 og, out vec3 dn) {
@@ -102,9 +94,7 @@ uint surf_level_mask(float c[8], float lv[SURF_MAX_LEVELS], uint nl) {
     return m;
 }
 
-// Relative margin of segment culling (surf_segment_mask): about 80 times the rounding of the
-// quantities it compares.
-const float SURF_SEGMENT_MARGIN = 1e-5;
+// Relative margin of segment culling (surf_segment_mask): SURF_SEGMENT_MARGIN.
 
 // Segment culling: the levels of `mask` (from surf_level_mask) that can cross the ray's piece of
 // the cell, corners c, entry/exit points q0/q1, cc = cubic_cell(c, q0, d), length L. Along the

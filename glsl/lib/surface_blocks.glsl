@@ -45,8 +45,8 @@
 
 #include "dda.glsl"
 
-// "No block skipped yet" (an index no block has).
-const uint SURF_NO_BLOCK = 0xffffffffu;
+// SURF_NO_BLOCK ("no block skipped yet"), SURF_MASK_BITS, SURF_RADIUS_SHIFT, SURF_MAX_RADIUS,
+// SURF_BLOCK_BIG and SURF_BOX_WORDS: src/abi/consts.rs (abi.glsl).
 
 // Blocks per axis of an n³-vertex grid (n ≥ 2) with 2^shift-cell blocks: ceil((n − 1)/2^shift).
 uint surf_blocks_per_axis(uint n, uint shift) {
@@ -66,9 +66,6 @@ uint surf_live_words(uint n) {
 
 // Low bits of a block word: the level mask (≤ 8 levels); bits from SURF_RADIUS_SHIFT on: the
 // empty radius of a mask-0 block (0 ≤ r ≤ SURF_MAX_RADIUS; 0 for a block with levels).
-const uint SURF_MASK_BITS = 0xffu;
-const uint SURF_RADIUS_SHIFT = 8u;
-const uint SURF_MAX_RADIUS = 8u;
 
 // Linear index of the block holding cell l.
 uint surf_block_index(ivec3 l, uint nb, uint shift) {
@@ -87,7 +84,6 @@ void surf_block_box(ivec3 l, int n, uint shift, uint r, out vec3 lo, out vec3 hi
 
 // Start of a block's δ range scan (the largest float): bmin = SURF_BLOCK_BIG and
 // bmax = −SURF_BLOCK_BIG, an empty range (bmin > bmax) that stays so without allocated vertices.
-const float SURF_BLOCK_BIG = 3.402823466e38;
 
 // Block level mask from the block's δ range: bit i (i < nl) set iff
 // bmin − margin ≤ lv[i] ≤ bmax + margin; 0 for an empty range (no allocated vertex).
@@ -148,7 +144,7 @@ void surf_dda_restart(inout Dda w, vec3 dn, int n, float t) {
 // it lies inside: a walk runs from dda_init(og, dn, n, t_in) and ends at the first piece entered
 // at t_out or later. Exact: t_in is a plane crossing computed with the DDA's own formula
 // (ray_box), and dda_init at such a t is the continuous walk's state there (as for a block exit).
-const uint SURF_BOX_WORDS = 6u;
+// SURF_BOX_WORDS words.
 
 // The span (t_in, t_out) of the ray inside the allocated box [lo, hi]; t_in ≥ t_out (or NaN) when
 // it misses it.

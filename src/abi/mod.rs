@@ -1,4 +1,9 @@
 //! Types that cross the host/kernel boundary: what a kernel reads, in its buffers' layout, named
-//! once for the Vulkan backend, the CPU twins and the owners of the data.
+//! once for the Vulkan backend, the CPU twins and the owners of the data. `consts` and `buffers`
+//! are also read by `build.rs`, which generates the kernels' declarations from them (`abi.glsl`).
 
+#[macro_use]
+mod macros;
+pub mod buffers;
+pub mod consts;
 pub mod surface_grid;

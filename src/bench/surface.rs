@@ -16,6 +16,7 @@
 //! machine's speed drifts), and reports every round's ratio and the round with the median one.
 
 use super::stage1::{thin_scene, time_steps, warm_config};
+use crate::abi::buffers::{TrainCounts, TrainPerRay};
 use crate::data::{Dataset, RaySampler};
 use crate::gpu::Gpu;
 use crate::grid::surface::SurfaceGrid;
@@ -60,18 +61,13 @@ pub struct SurfaceBenchArgs {
     pub a: f32,
 }
 
-/// Names of the stage-2 counters, per ray.
-const COUNTERS: [&str; 8] = [
-    "cells", "solves", "culled", "hits", "cut", "guarded", "atomics", "skips",
-];
-
 /// One backend's figures.
 #[derive(Debug, Default, serde::Serialize)]
 struct Figures {
     rays_per_s: f64,
     mean_mse: f64,
-    /// The counters per ray (see [`COUNTERS`]).
-    per_ray: BTreeMap<&'static str, f64>,
+    /// The training pass's counters per ray.
+    per_ray: TrainPerRay,
     /// Device ms per step and kernel (Vulkan only).
     device_ms_per_step: BTreeMap<&'static str, f64>,
 }
@@ -105,7 +101,7 @@ fn time_surface(
     let mut f = Figures::default();
     let mut sampler = RaySampler::new(&data.train, 11);
     let mut secs = 0.0;
-    let mut counts = [0u64; 8];
+    let mut counts = TrainPerRay::default();
     for i in 0..=args.steps {
         let b = sampler.next_batch(&data.train, &data.scene, args.batch as usize);
         let (rays, targets) = (b.flat_rays(), b.flat_targets());
@@ -120,17 +116,11 @@ fn time_surface(
         }
         secs += t.elapsed().as_secs_f64();
         f.mean_mse += s.mse / args.steps as f64;
-        for (c, &v) in counts.iter_mut().zip(&s.counts) {
-            *c += v as u64;
-        }
+        counts.add(&s.counts);
     }
     let rays = (args.batch * args.steps) as f64;
     f.rays_per_s = rays / secs;
-    f.per_ray = COUNTERS
-        .iter()
-        .zip(counts)
-        .map(|(&k, c)| (k, c as f64 / rays))
-        .collect();
+    f.per_ray = counts.scaled(1.0 / rays);
     Ok(f)
 }
 
@@ -271,14 +261,14 @@ fn run_in(gpu: &Gpu, args: &SurfaceBenchArgs, dir: &std::path::Path) -> Result<(
         args.a
     );
     print!("{:<8} {:>10} {:>9}", "backend", "rays/s", "mse");
-    for k in COUNTERS {
+    for k in TrainCounts::NAMES {
         print!(" {k:>8}");
     }
     println!("   (per ray)");
     for (name, f) in [("vulkan", &fv), ("cpu", &fc), ("vk-data", &fd)] {
         print!("{name:<8} {:>10.0} {:>9.5}", f.rays_per_s, f.mean_mse);
-        for k in COUNTERS {
-            print!(" {:>8.2}", f.per_ray[k]);
+        for (k, v) in f.per_ray.named() {
+            print!(" {v:>w$.2}", w = k.len().max(8));
         }
         println!();
     }

@@ -12,8 +12,7 @@ use crate::math::sh::sh_basis;
 use rayon::prelude::*;
 use std::sync::atomic::AtomicU32;
 
-/// Shaded samples whose indices the forward pass records for the backward replay (plenoxel_train).
-const REPLAY: usize = 32;
+use crate::abi::consts::REPLAY;
 
 /// How rays map into the grid and when they stop.
 #[derive(Clone, Copy, Debug)]

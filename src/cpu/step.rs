@@ -5,20 +5,11 @@ use rayon::prelude::*;
 use std::ops::Range;
 use std::sync::atomic::{AtomicU32, Ordering};
 
-/// Step-buffer layout (u32 indices), as in step.glsl: touched count, 4 counters (samples shaded,
-/// empty, skipped; gradient atomic adds), vertex count, then the flags (n) and the list (n).
-pub const STEP_COUNT: usize = 0;
-pub const STEP_STATS: usize = 1;
-pub const STEP_N: usize = 5;
-pub const STEP_FLAGS: usize = 8;
-
-/// Touched-flag bits, as in step.glsl: stage 1's one group, stage 2's three.
-pub const TOUCH_ALL: u32 = 1;
-pub const TOUCH_DELTA: u32 = 1;
-pub const TOUCH_OPACITY: u32 = 2;
-pub const TOUCH_SH: u32 = 4;
-/// Every stage-2 group.
-pub const TOUCH_SURFACE: u32 = TOUCH_DELTA | TOUCH_OPACITY | TOUCH_SH;
+use crate::abi::consts::DISPATCH_ROW_GROUPS;
+pub use crate::abi::consts::{
+    STEP_COUNT, STEP_FLAGS, STEP_N, STEP_STATS, TOUCH_ALL, TOUCH_DELTA, TOUCH_OPACITY, TOUCH_SH,
+    TOUCH_SURFACE,
+};
 
 /// The vertex rows (start + i) mod rows, i < len (start < rows, len ≤ rows; len = 0: none) —
 /// the chunks of the stage-2 regularisers and the rows whose δ RMSProp updates densely.
@@ -95,7 +86,7 @@ pub fn touch(flags: &[AtomicU32], v: usize) {
 /// Twin of `optim_args.comp`: indirect dispatch arguments for `count` touched vertices.
 pub fn optim_args(count: u32) -> [u32; 3] {
     let groups = count.div_ceil(64);
-    let gx = groups.min(32768);
+    let gx = groups.min(DISPATCH_ROW_GROUPS);
     [gx, if gx == 0 { 0 } else { groups.div_ceil(gx) }, 1]
 }
 

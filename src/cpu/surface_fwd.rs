@@ -18,10 +18,20 @@ use crate::math::trilerp::trilerp_weights;
 use anyhow::{ensure, Result};
 use rayon::prelude::*;
 
-/// Counters summed over rays: cells read (links read: live cells when skipping), cubic solves,
-/// solves skipped by min/max or segment culling, hits composited, hits cut off by truncation,
-/// blocks skipped (the kernel's `stats` buffer).
-pub type SurfCounts = [u32; 6];
+pub use crate::abi::buffers::SurfCounts;
+
+/// What a [`CellWalk`] counted (the first and last counters of both surface kernels).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct WalkCounts {
+    /// Cells read (corners loaded).
+    pub cells: u32,
+    /// Cubic solves.
+    pub solves: u32,
+    /// Solves culled (levels dropped by min/max or segment culling).
+    pub culled: u32,
+    /// Empty-space blocks skipped.
+    pub blocks_skipped: u32,
+}
 
 /// How rays map into the grid, the levels, truncation and early termination.
 #[derive(Clone, Debug)]
@@ -55,8 +65,6 @@ pub struct WalkCell {
 /// box (`surf_box_span`), cells of mask-0 blocks are skipped and cells whose live bit is clear
 /// are passed over unread; cells with an unallocated corner and cells no
 /// level can cross (min/max culling, then segment culling on the ray's piece) are passed over.
-/// `counts` = cells read (corners loaded), cubic solves, solves culled (levels dropped by either
-/// culling), blocks skipped.
 pub struct CellWalk<'a> {
     g: &'a SurfaceGridRef<'a>,
     levels: &'a [f32],
@@ -68,7 +76,7 @@ pub struct CellWalk<'a> {
     /// from the allocated box).
     t_out: f32,
     skipped: u32,
-    pub counts: [u32; 4],
+    pub counts: WalkCounts,
 }
 
 impl<'a> CellWalk<'a> {
@@ -99,7 +107,7 @@ impl<'a> CellWalk<'a> {
             ),
             t_out,
             skipped: SURF_NO_BLOCK,
-            counts: [0; 4],
+            counts: WalkCounts::default(),
         }
     }
 }
@@ -136,14 +144,14 @@ impl Iterator for CellWalk<'_> {
                         word >> SURF_RADIUS_SHIFT,
                     )
                 {
-                    self.counts[3] += 1;
+                    self.counts.blocks_skipped += 1;
                     continue;
                 }
                 if skip[base >> 5] & (1 << (base & 31)) == 0 {
                     continue;
                 }
             }
-            self.counts[0] += 1;
+            self.counts.cells += 1;
             let lk = [
                 g.links[base],
                 g.links[base + 1],
@@ -167,8 +175,8 @@ impl Iterator for CellWalk<'_> {
                 let len = piece.t1 - piece.t0;
                 mask = surf_segment_mask(&c, cc, q0, q1, len, self.levels, mask);
             }
-            self.counts[1] += mask.count_ones();
-            self.counts[2] += self.levels.len() as u32 - mask.count_ones();
+            self.counts.solves += mask.count_ones();
+            self.counts.culled += self.levels.len() as u32 - mask.count_ones();
             if mask != 0 {
                 return Some(WalkCell {
                     piece,
@@ -200,7 +208,7 @@ pub fn render_ray(
     let mut color = [0f32; 3];
     let mut t_acc = 1.0f32;
     let mut j = 0u32;
-    let mut cnt: SurfCounts = [0; 6];
+    let mut cnt = SurfCounts::default();
     let mut walk = CellWalk::new(g, og, dn, levels, blocks);
     let mut face = FaceSigns::default();
     'walk: for cell in walk.by_ref() {
@@ -214,7 +222,7 @@ pub fn render_ray(
         };
         for &s in hits.as_slice() {
             if j as f32 >= p.a {
-                cnt[4] += 1;
+                cnt.cut += 1;
                 break 'walk;
             }
             let pos = std::array::from_fn(|k| (q0[k] + s * dn[k]).clamp(0.0, 1.0));
@@ -241,13 +249,15 @@ pub fn render_ray(
             }
             t_acc *= 1.0 - at;
             j += 1;
-            cnt[3] += 1;
+            cnt.hits += 1;
             if t_acc < p.stop_thresh {
                 break 'walk;
             }
         }
     }
-    [cnt[0], cnt[1], cnt[2], cnt[5]] = walk.counts;
+    let w = walk.counts;
+    (cnt.cells, cnt.solves, cnt.culled, cnt.blocks_skipped) =
+        (w.cells, w.solves, w.culled, w.blocks_skipped);
     (
         SurfOut {
             rgb: color.map(|c| c + t_acc),
@@ -304,8 +314,6 @@ pub fn render(
         .par_chunks_exact(6)
         .map(|r| render_ray(g, [r[0], r[1], r[2]], [r[3], r[4], r[5]], p, blocks))
         .collect();
-    let counts = out.iter().fold([0u32; 6], |a, (_, c)| {
-        std::array::from_fn(|i| a[i].wrapping_add(c[i]))
-    });
+    let counts = out.iter().fold(SurfCounts::default(), |a, (_, c)| a + *c);
     Ok((out.into_iter().map(|o| o.0).collect(), counts))
 }

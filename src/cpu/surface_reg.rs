@@ -126,16 +126,7 @@ pub struct NormalRegStats {
     pub skipped: u32,
 }
 
-/// Pairs where a cell's unnormalised normal has |n|² at most this are skipped (no direction).
-pub const TINY_NORMAL2: f32 = 1e-12;
-
-/// Ints per row of the neighbour table (layout in glsl/lib/normal_reg.glsl): [0] k, [j] the row
-/// of v + NBR_B[j], [8 + j] the row of v − NBR_B[j] (j = 1..7; −1 outside the grid or
-/// unallocated), [8] −1.
-pub const NBR_STRIDE: usize = 16;
-/// The corner offset b (4·x + 2·y + z bits) of neighbour-table entry j and 8 + j: the face
-/// neighbours z, y, x first.
-pub const NBR_B: [usize; 8] = [0, 1, 2, 4, 3, 5, 6, 7];
+pub use crate::abi::consts::{NBR_B, NBR_STRIDE, TINY_NORMAL2};
 /// Floats per row of the normals ((n, status + 4·k)) and corners (∂L/∂δ of the 8 corners, +∞
 /// for a cell in no kept pair) arrays.
 pub const NORMALS_STRIDE: usize = 4;

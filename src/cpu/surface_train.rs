@@ -36,15 +36,8 @@ use anyhow::{ensure, Result};
 use rayon::prelude::*;
 use std::sync::atomic::AtomicU32;
 
-/// Composited hits recorded per ray: the truncation parameter a may not exceed this.
-pub const SURF_MAX_HITS: usize = 8;
-/// Relative guard on the implicit derivative's denominator f′(s).
-pub const FPRIME_GUARD: f32 = 1e-3;
-
-/// Counters summed over rays: cells read (live cells: corners loaded), cubic solves, solves skipped
-/// by min/max or segment culling, hits composited, hits cut off by truncation, hits whose δ
-/// gradient was dropped by the f′ guard, gradient atomic adds, empty-space blocks skipped.
-pub type TrainCounts = [u32; 8];
+pub use crate::abi::buffers::{RayLoss, TrainCounts};
+pub use crate::abi::consts::{FPRIME_GUARD, SURF_MAX_HITS};
 
 /// Loss weights of the fused per-ray terms (per-ray coefficients: the batch mean is the caller's).
 #[derive(Clone, Copy, Debug)]
@@ -135,7 +128,7 @@ pub fn trace_ray(
         for (&s, &lv) in hits.as_slice().iter().zip(hits.levels()) {
             let j = tr.n;
             if j as f32 >= p.a {
-                cnt[4] += 1;
+                cnt.cut += 1;
                 break 'walk;
             }
             let h = Hit {
@@ -156,14 +149,16 @@ pub fn trace_ray(
             let at = surf_alpha(sa) * surf_gamma(p.a, j as u32);
             tr.hits[j] = h;
             tr.n += 1;
-            cnt[3] += 1;
+            cnt.hits += 1;
             t_acc *= 1.0 - at;
             if t_acc < p.stop_thresh {
                 break 'walk;
             }
         }
     }
-    [cnt[0], cnt[1], cnt[2], cnt[7]] = walk.counts;
+    let w = walk.counts;
+    (cnt.cells, cnt.solves, cnt.culled, cnt.blocks_skipped) =
+        (w.cells, w.solves, w.culled, w.blocks_skipped);
     tr
 }
 
@@ -223,17 +218,6 @@ fn shade(g: &SurfaceGridRef, h: &Hit, dn: [f32; 3], y: &[f32; 9], a: f32, j: usi
     }
 }
 
-/// Per-ray output of the training pass: squared error, entropy and Lc terms (unweighted), and
-/// the hits composited (`SurfTrainOut` in the GLSL, scalar layout, 16 bytes).
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
-pub struct RayLoss {
-    pub sq_err: f32,
-    pub entropy: f32,
-    pub consistency: f32,
-    pub hits: u32,
-}
-
 /// Twin of `surface_train.comp`: per-ray losses and the summed counters; dL/dδ, dL/dσα and
 /// dL/dSH are added into `grads` and every vertex receiving a gradient is flagged. `blocks`: the
 /// `surface_blocks` masks of the current δ (the kernel always skips with them; `None` walks every
@@ -290,9 +274,7 @@ pub fn train(
             )
         })
         .collect();
-    let counts = res.iter().fold([0u32; 8], |a, (_, c)| {
-        std::array::from_fn(|i| a[i].wrapping_add(c[i]))
-    });
+    let counts = res.iter().fold(TrainCounts::default(), |a, (_, c)| a + *c);
     Ok((res.into_iter().map(|o| o.0).collect(), counts))
 }
 
@@ -430,7 +412,7 @@ fn train_ray(
     blocks: Option<SkipRef>,
     out: &Scatter,
 ) -> (RayLoss, TrainCounts) {
-    let mut cnt: TrainCounts = [0; 8];
+    let mut cnt = TrainCounts::default();
     let tr = trace_ray(g, ro, rd, p, blocks, &mut cnt);
     let y = sh_basis(ray_unit(rd));
     let shades: Vec<Shade> = (0..tr.n)
@@ -471,7 +453,7 @@ fn train_ray(
         let cmax = h.c.iter().copied().fold(f32::NEG_INFINITY, f32::max);
         let guarded = f1.abs() <= FPRIME_GUARD * (cmax - cmin);
         if guarded {
-            cnt[5] += 1;
+            cnt.guarded += 1;
         }
         let d_delta_scale = if guarded || dl_ds == 0.0 {
             0.0
@@ -479,7 +461,7 @@ fn train_ray(
             -dl_ds / f1
         };
         if acc.cell != Some(h.cell) {
-            cnt[6] += acc.flush(out, &y);
+            cnt.atomic_adds += acc.flush(out, &y);
             acc.cell = Some(h.cell);
             acc.lk = h.lk;
         }
@@ -497,7 +479,7 @@ fn train_ray(
             }
         }
     }
-    cnt[6] += acc.flush(out, &y);
+    cnt.atomic_adds += acc.flush(out, &y);
     (rl, cnt)
 }
 

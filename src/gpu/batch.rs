@@ -5,6 +5,7 @@
 
 use super::buffer::GpuBuffer;
 use super::context::Gpu;
+use crate::abi::consts::DISPATCH_ROW_GROUPS;
 use crate::kernels::KernelInfo;
 use anyhow::{ensure, Context, Result};
 use ash::vk;
@@ -12,8 +13,6 @@ use bytemuck::Pod;
 
 /// Dispatches timed per batch; later ones in the same batch run untimed.
 const MAX_TIMED: u32 = 1024;
-/// Workgroups along x in `dispatch_1d` before wrapping to y (each dimension allows ≥ 65535).
-const MAX_GROUPS_X: u32 = 32768; // = DISPATCH_ROW_GROUPS in glsl/lib/common.glsl
 
 /// Device time of each timed dispatch of a submitted batch.
 #[derive(Debug, Clone, Default)]
@@ -222,7 +221,8 @@ impl Batch {
     /// Record `k` for `n` threads (a 2-D grid of workgroups; kernels use `flat_id()`).
     pub fn dispatch_1d<P: Pod>(&mut self, k: &'static KernelInfo, push: &P, n: u32) -> Result<()> {
         let groups = n.div_ceil(k.local_size[0]);
-        let gx = groups.min(MAX_GROUPS_X);
+        // Rows of DISPATCH_ROW_GROUPS workgroups, as common.glsl's flat_id() reads them.
+        let gx = groups.min(DISPATCH_ROW_GROUPS);
         let gy = groups.div_ceil(gx.max(1));
         self.dispatch(k, push, [gx, gy, 1])
     }

@@ -12,13 +12,9 @@
 
 use super::madd::madd;
 
-/// Crossings closer than `MERGE_EPS · max(1, L)` voxel are one cluster (method.md §5).
-pub const MERGE_EPS: f32 = 1e-6;
-/// Iteration cap of the safeguarded Newton/bisection in one bracket. Bisection alone would reach
-/// f32 resolution on [0, √3] in about 24 steps, so the cap is never the binding stop in practice.
-pub const MAX_ITERS: u32 = 32;
-/// Newton/bisection stops when the last step is below this times max(1, L) (≈ 2 ulp at s = 1).
-pub const STEP_TOL: f32 = 2.4e-7;
+pub use crate::abi::consts::{
+    CUBIC_CRIT_SNAP, CUBIC_MAX_ITERS, CUBIC_MAX_L, CUBIC_MERGE_EPS, CUBIC_SNAP, CUBIC_STEP_TOL,
+};
 
 /// The coefficients of a cell's cubic that do not depend on the level.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -98,19 +94,8 @@ pub fn trilerp_level(corners: &[f32; 8], p: [f32; 3], tau: f32) -> f32 {
     lerp(lerp(m00, m01, oy), lerp(m10, m11, oy), ox)
 }
 
-/// A value of f at a critical point within `CRIT_SNAP · Σ|C_k|·s^k` of zero (its f32 rounding
-/// noise) is taken as exactly zero: the sign walk then decides from the neighbouring values, so a
-/// tangent touch is no crossing and a triple root one crossing, instead of rounding-noise pairs.
-/// A crossing above the stress suite's floor cannot lie that close to a critical value.
-pub const CRIT_SNAP: f32 = 2.384_185_8e-7; // 2^-22
-
-/// A coordinate of the exit point within this of a cell face is put on the face.
-pub const SNAP: f32 = 1e-6;
-/// Segments longer than this (voxel) have no crossings (keeps every intermediate finite).
-pub const MAX_L: f32 = 1e12;
-
 /// Exit point o′ + L·d, clamped to the cell; its coordinate nearest a face is snapped onto the face
-/// when within [`SNAP`] (a chord leaves through a face, so this only undoes rounding, and the level
+/// when within [`CUBIC_SNAP`] (a chord leaves through a face, so this only undoes rounding, and the level
 /// through that face is then decided by the same corner values as in the next cell).
 pub fn exit_point(o: [f32; 3], d: [f32; 3], l: f32) -> [f32; 3] {
     let mut q = [0, 1, 2].map(|k| l.mul_add(d[k], o[k]).clamp(0.0, 1.0));
@@ -122,7 +107,7 @@ pub fn exit_point(o: [f32; 3], d: [f32; 3], l: f32) -> [f32; 3] {
     } else {
         2
     };
-    if dq[k] <= SNAP {
+    if dq[k] <= CUBIC_SNAP {
         q[k] = if q[k] > 0.5 { 1.0 } else { 0.0 };
     }
     q
@@ -151,7 +136,7 @@ pub fn eval_deriv(c: &[f32; 4], s: f32) -> f32 {
     (3.0 * c[3]).mul_add(s, 2.0 * c[2]).mul_add(s, c[1])
 }
 
-/// f at a critical point, snapped to 0 within its rounding noise (see [`CRIT_SNAP`]).
+/// f at a critical point, snapped to 0 within its rounding noise (see [`CUBIC_CRIT_SNAP`]).
 #[inline(always)]
 fn crit_value(c: &[f32; 4], s: f32) -> f32 {
     let v = eval(c, s);
@@ -160,7 +145,7 @@ fn crit_value(c: &[f32; 4], s: f32) -> f32 {
         .mul_add(s, c[2].abs())
         .mul_add(s, c[1].abs())
         .mul_add(s, c[0].abs());
-    if v.abs() <= CRIT_SNAP * mag {
+    if v.abs() <= CUBIC_CRIT_SNAP * mag {
         0.0
     } else {
         v
@@ -187,7 +172,7 @@ pub fn refine_root(c: &[f32; 4], mut lo: f32, mut hi: f32, flo: f32, fhi: f32, t
     let mut dx = dxold;
     let mut f = eval(c, x);
     let mut fp = eval_deriv(c, x);
-    for _ in 0..MAX_ITERS {
+    for _ in 0..CUBIC_MAX_ITERS {
         if f == 0.0 {
             break;
         }
@@ -269,13 +254,13 @@ impl Walk {
 /// point when the previous cell of the walk ended there (from [`exit_sign`]), or always when
 /// `before` is 0 (unknown: no previous cell); a zero at s = L is left to the next cell. Both cells
 /// read that shared point's value from the same trilerp of the shared corners, so a crossing on a
-/// face is counted once, by the cell entered when that value is 0. Crossings closer than `MERGE_EPS·max(1, L)` are clustered and a cluster keeps its first
+/// face is counted once, by the cell entered when that value is 0. Crossings closer than `CUBIC_MERGE_EPS·max(1, L)` are clustered and a cluster keeps its first
 /// crossing only when it changes the sign (odd count). Never NaN/Inf: coefficients that are
-/// non-finite (overflow in their formation) or L outside (0, [`MAX_L`]) give no crossings.
+/// non-finite (overflow in their formation) or L outside (0, [`CUBIC_MAX_L`]) give no crossings.
 pub fn solve_crossings(cc: CellCubic, ends: [f32; 2], l: f32, before: f32) -> Crossings {
     let [c0, cl] = ends;
     let none = Crossings::default();
-    if !(l > 0.0 && l < MAX_L) {
+    if !(l > 0.0 && l < CUBIC_MAX_L) {
         return none;
     }
     // Zero, NaN or overflowed inputs: no crossings (a NaN or Inf makes the sum non-finite).
@@ -339,7 +324,7 @@ pub fn solve_crossings(cc: CellCubic, ends: [f32; 2], l: f32, before: f32) -> Cr
     walk.piece(0.0, v0, b1, v1);
     walk.piece(b1, v1, b2, v2);
     walk.piece(b2, v2, l, v3);
-    let tol = STEP_TOL * l.max(1.0);
+    let tol = CUBIC_STEP_TOL * l.max(1.0);
     let mut r = [0.0f32; 3];
     for (x, b) in r.iter_mut().zip(&walk.br).take(walk.nb) {
         *x = refine_root(&c, b[0], b[1], b[2], b[3], tol);
@@ -375,11 +360,11 @@ pub fn exit_sign(x: &Crossings, f0: f32, before: f32) -> f32 {
 }
 
 /// Cluster merge and the half-open clamp s < L. Crossings alternate in direction, so a cluster
-/// (neighbours closer than `MERGE_EPS·max(1, L)`) changes the sign iff its count is odd; it then
+/// (neighbours closer than `CUBIC_MERGE_EPS·max(1, L)`) changes the sign iff its count is odd; it then
 /// keeps its first. With at most three crossings: 0 is kept unless it opens an even cluster {0,1};
 /// 1 only when alone; 2 unless it joins 1.
 fn merge(x: Crossings, l: f32) -> Crossings {
-    let eps = MERGE_EPS * l.max(1.0);
+    let eps = CUBIC_MERGE_EPS * l.max(1.0);
     let gap01 = x.n >= 2 && x.s[1] - x.s[0] < eps;
     let gap12 = x.n >= 3 && x.s[2] - x.s[1] < eps;
     let keep = [

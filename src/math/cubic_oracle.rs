@@ -121,7 +121,7 @@ pub fn oracle_solve(c: &[f64; 4], l: f64) -> Vec<OracleCrossing> {
         ps = sign(v1);
     }
     // Cluster merge, as in the f32 solver.
-    let eps = crate::math::cubic::MERGE_EPS as f64 * l.max(1.0);
+    let eps = crate::math::cubic::CUBIC_MERGE_EPS as f64 * l.max(1.0);
     let mut out = Vec::new();
     let mut i = 0;
     while i < raw.len() {

@@ -5,24 +5,12 @@
 
 use super::madd::madd;
 
-/// Stands for infinity (no NaN from 0·inf anywhere).
-pub const DDA_BIG: f32 = f32::MAX;
-/// Components of `o` and `d` with magnitude < `DDA_TINY` count as zero.
-pub const DDA_TINY: f32 = 1e-30;
-/// Initial value of the walk checksum ([`dda_hash`]).
-pub const DDA_HASH0: u32 = 2_166_136_261;
-
-/// A ray with a direction component of magnitude ≥ `DDA_HUGE` (2^26) misses: every nonzero plane
-/// distance `|k − o| ≥ DDA_TINY` times `1/d` then stays a normal float.
-pub const DDA_HUGE: f32 = 67_108_864.0;
+pub use crate::abi::consts::{DDA_BIG, DDA_HASH0, DDA_HUGE, DDA_SPLIT_MAX, DDA_TINY};
 
 /// The float adjacent to `y > 0` on the side `up`.
 fn adjacent(y: f32, up: bool) -> f32 {
     f32::from_bits(if up { y.to_bits() + 1 } else { y.to_bits() - 1 })
 }
-
-/// Above this |t| the entry point's exact product is not formed (4097·t would overflow).
-pub const DDA_SPLIT_MAX: f32 = 1e30;
 
 /// The exact product `a·b = p + q` (Dekker's product with Veltkamp's split, 4097 = 2^12 + 1):
 /// multiplies and adds only, as in the GLSL, where `fma()` need not be fused.

@@ -4,14 +4,7 @@
 use super::dda::ray_box;
 use super::trilerp::trilerp_weights;
 
-/// Samples with trilerped σ at or below this are skipped (ReLU).
-pub const SIGMA_EPS: f32 = 1e-8;
-/// March step in voxels.
-pub const STEP: f32 = 0.5;
-/// Skips stop this far (voxels) before the block exit.
-pub const SKIP_MARGIN: f32 = 1e-3;
-/// Occupancy blocks are 2^OCC_SHIFT cells per axis.
-pub const OCC_SHIFT: u32 = 3;
+pub use crate::abi::consts::{OCC_SHIFT, SIGMA_EPS, SKIP_MARGIN, STEP};
 
 /// Borrowed view of a sparse grid and its occupancy volume.
 #[derive(Clone, Copy)]

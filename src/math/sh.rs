@@ -1,17 +1,7 @@
 //! Real spherical harmonics of degree 2 and the SH colour (method.md §1): the twin of
 //! `glsl/lib/sh.glsl`. Coefficients per vertex: 27 floats `[R0..R8, G0..G8, B0..B8]`.
 
-/// Y_0.
-pub const SH_C0: f32 = 0.282_094_79;
-/// |Y_1..Y_3| / coordinate.
-pub const SH_C1: f32 = 0.488_602_51;
-/// |Y_4|, |Y_5|, |Y_7| / product of coordinates. (Digits as written in method.md, like the GLSL.)
-#[allow(clippy::excessive_precision)]
-pub const SH_C2: f32 = 1.092_548_43;
-/// Y_6 / (2z² − x² − y²).
-pub const SH_C3: f32 = 0.315_391_57;
-/// Y_8 / (x² − y²).
-pub const SH_C4: f32 = 0.546_274_22;
+pub use crate::abi::consts::{SH_C0, SH_C1, SH_C2, SH_C3, SH_C4};
 
 /// The 9 basis values at the unit direction `d`.
 pub fn sh_basis(d: [f32; 3]) -> [f32; 9] {

@@ -15,22 +15,11 @@ use super::dda::{ray_unit, Dda};
 use super::madd::madd;
 use super::trilerp::trilerp;
 
-/// At most this many levels τ_i.
-pub const SURF_MAX_LEVELS: usize = 8;
+pub use crate::abi::consts::{SURF_MAX_LEVELS, SURF_SEGMENT_MARGIN};
 /// Bound of a cell's hit list: ≤ 3 crossings per level.
 pub const SURF_MAX_CELL_HITS: usize = 24;
 
-/// Per-ray output of `surface_fwd` (`SurfOut` in the GLSL, scalar layout, 20 bytes).
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
-pub struct SurfOut {
-    /// Colour on a white background.
-    pub rgb: [f32; 3],
-    /// Final transmittance (before the background is added).
-    pub transmittance: f32,
-    /// Front-face hits composited.
-    pub hits: u32,
-}
+pub use crate::abi::buffers::SurfOut;
 
 /// Scene ray (ro, rd) → grid origin `ro·scale + offset` and unit grid direction.
 pub fn surf_ray(
@@ -147,10 +136,6 @@ pub fn surf_level_mask(c: &[f32; 8], levels: &[f32]) -> u32 {
         .filter(|(_, &tau)| cmin <= tau && tau <= cmax)
         .fold(0, |m, (i, _)| m | 1 << i)
 }
-
-/// Relative margin of segment culling ([`surf_segment_mask`]): about 80 times the rounding of the
-/// quantities it compares.
-pub const SURF_SEGMENT_MARGIN: f32 = 1e-5;
 
 /// Segment culling: the levels of `mask` (from [`surf_level_mask`]) that can cross the ray's
 /// piece of the cell, corners `c`, entry/exit points `q0`/`q1`, `cc` = `cell_cubic(c, q0, d)`,

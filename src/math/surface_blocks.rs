@@ -34,16 +34,17 @@ use super::dda::{dda_flush, ray_box, Dda, DDA_BIG};
 /// jumps), 4³ on lavapipe (a walk step costs its SIMD lanes more than a restart).
 pub const SURF_BLOCK_SHIFT_CPU: u32 = 3;
 pub const SURF_BLOCK_SHIFT_VULKAN: u32 = 2;
-/// "No block skipped yet" (an index no block has).
-pub const SURF_NO_BLOCK: u32 = u32::MAX;
+pub use crate::abi::consts::{
+    SURF_BLOCK_BIG, SURF_BOX_WORDS, SURF_MASK_BITS, SURF_MAX_RADIUS, SURF_NO_BLOCK,
+    SURF_RADIUS_SHIFT,
+};
 
-/// Words after the block masks in a skip structure: the box of the allocated vertices, lo x, y, z
-/// then hi x, y, z (vertex coordinates; lo > hi when nothing is allocated). A cell the walk can
-/// solve has its 8 corners allocated, so it lies inside: a walk starts at the ray's entry into
-/// the box and ends at its exit ([`surf_box_span`]). Exact: the entry is a plane crossing computed
-/// with the DDA's own formula (`ray_box`), and `dda_init(og, dn, n, t)` is the continuous walk's
-/// state at such a t (as for a block exit).
-pub const SURF_BOX_WORDS: usize = 6;
+// The skip structure ends with SURF_BOX_WORDS words: the box of the allocated vertices, lo x, y,
+// z then hi x, y, z (vertex coordinates; lo > hi when nothing is allocated). A cell the walk can
+// solve has its 8 corners allocated, so it lies inside: a walk starts at the ray's entry into
+// the box and ends at its exit ([`surf_box_span`]). Exact: the entry is a plane crossing computed
+// with the DDA's own formula (`ray_box`), and `dda_init(og, dn, n, t)` is the continuous walk's
+// state at such a t (as for a block exit).
 
 /// The t span `[t_in, t_out]` of the ray (`og`, `dn` as given to `dda_init`) inside the allocated
 /// box `b` ([`SURF_BOX_WORDS`] words): the walk starts with `dda_init(og, dn, n, t_in)` and ends at
@@ -82,16 +83,6 @@ pub fn surf_block_index(l: [i32; 3], nb: u32, shift: u32) -> u32 {
     let b = l.map(|x| (x >> shift) as u32);
     (b[0] * nb + b[1]) * nb + b[2]
 }
-
-/// Bits of a block word holding its level mask (at most 8 levels).
-pub const SURF_MASK_BITS: u32 = 0xff;
-/// A mask-0 block's word holds its empty radius r from this bit on: every block within Chebyshev
-/// distance r of it (in blocks, inside the grid) has mask 0 as well, so a walk in it may jump to
-/// the exit of that cube of blocks. 0 ≤ r ≤ [`SURF_MAX_RADIUS`]; 0 for a block with levels.
-pub const SURF_RADIUS_SHIFT: u32 = 8;
-/// Largest empty radius recorded (each of the three passes that find it reads 2·this + 1 words
-/// per block).
-pub const SURF_MAX_RADIUS: u32 = 8;
 
 /// Vertex box `(lo, hi)` of the blocks within Chebyshev distance `r` of the block holding cell `l`
 /// (the block itself for r = 0), clipped to the grid of `n`³ vertices.
@@ -158,10 +149,6 @@ pub fn surf_block_radii(words: &mut [u32], nb: u32) {
         }
     }
 }
-
-/// Start of a block's δ range scan: `bmin = SURF_BLOCK_BIG`, `bmax = −SURF_BLOCK_BIG` (an empty
-/// range, `bmin > bmax`, stays so when the block has no allocated vertex).
-pub const SURF_BLOCK_BIG: f32 = f32::MAX;
 
 /// Block level mask from the block's δ range: bit i set iff
 /// `bmin − margin ≤ levels[i] ≤ bmax + margin` (at most 8 levels); 0 for an empty range.

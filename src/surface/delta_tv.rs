@@ -7,9 +7,7 @@ use crate::gpu::Batch;
 use crate::kernels;
 use anyhow::{ensure, Result};
 
-/// Floats per row of the directions scratch `q` (x, y, z and a pad: two aligned 64-bit words,
-/// the kernel's Q_FLOATS).
-pub const Q_FLOATS: usize = 4;
+pub use crate::abi::consts::Q_FLOATS;
 
 /// Device addresses of the inputs and outputs of the passes.
 #[derive(Clone, Copy, Debug)]

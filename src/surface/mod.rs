@@ -111,8 +111,7 @@ impl RegPlan {
     }
 }
 
-/// Chunk rows per invocation of surface_opacity_reg (its ROWS_PER_INVOCATION).
-const OPACITY_REG_ROWS: u32 = 16;
+use crate::abi::consts::OPACITY_REG_ROWS;
 
 /// Invocations of surface_opacity_reg for chunk `c`.
 pub fn opacity_reg_invocations(c: &OpacityChunk) -> u32 {

@@ -7,8 +7,7 @@ use crate::gpu::{record_optim_args, Batch, GpuBuffer};
 use crate::kernels;
 use anyhow::Result;
 
-/// Row pairs per invocation of surface_rmsprop's range pass (its RANGE_ROWS).
-const RANGE_ROWS: u32 = 16;
+use crate::abi::consts::RMSPROP_RANGE_ROWS;
 
 /// The aligned row pairs (2m, 2m + 1) surface_rmsprop's range pass visits for the `len` rows from
 /// `start` of a grid with `rows` rows (the kernel's count).
@@ -66,7 +65,7 @@ pub fn record_surface_rmsprop(
                     range_pass: pass,
                     ..push
                 },
-                range_pairs(start, len, push.rows).div_ceil(RANGE_ROWS),
+                range_pairs(start, len, push.rows).div_ceil(RMSPROP_RANGE_ROWS),
             )?;
         }
     }

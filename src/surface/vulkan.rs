@@ -14,42 +14,43 @@ use super::{
     batch_loss, opacity_reg_invocations, surface_params, BlockRefresh, RegPlan, SurfaceBackend,
     SurfaceState, SurfaceStepParams, SurfaceStepStats,
 };
+use crate::abi::buffers::{RayLoss, SurfCounts, SurfOut, SurfTrainParams, TrainCounts};
 use crate::cpu::step::{STEP_COUNT, STEP_FLAGS, STEP_N};
 use crate::cpu::surface_blocks::{alloc_box, complete_cells};
 use crate::cpu::surface_delta_tv::{axis_neighbours, forward_reach};
-use crate::cpu::surface_fwd::{SurfCounts, SurfaceParams};
+use crate::cpu::surface_fwd::SurfaceParams;
 use crate::cpu::surface_reg::{row_slots, NormalPrefix};
-use crate::cpu::surface_train::{RayLoss, SurfaceLoss, TrainCounts, SURF_MAX_HITS};
+use crate::cpu::surface_train::{SurfaceLoss, SURF_MAX_HITS};
 use crate::cpu::SurfaceRmsProp;
 use crate::gpu::{Batch, BatchTimes, Gpu, GpuBuffer, RayBuffers};
 use crate::grid::surface::SurfaceGrid;
 use crate::grid::SH_DIM;
 use crate::kernels;
-use crate::math::surface::{SurfOut, SURF_MAX_LEVELS};
+use crate::math::surface::SURF_MAX_LEVELS;
 use crate::math::surface_blocks::{
     surf_blocks_per_axis, surf_live_words, SURF_BLOCK_SHIFT_VULKAN, SURF_BOX_WORDS,
 };
 use anyhow::{ensure, Result};
 
-/// Floats in the params buffer of `surface_train` (layout in the kernel's header).
-const PARAMS_LEN: usize = 12 + SURF_MAX_LEVELS;
-
-/// The params buffer of `surface_train`: scale, offset, a, stop threshold, the three loss
-/// weights, padding, the levels (zero-padded to [`SURF_MAX_LEVELS`]).
-pub fn train_params(sp: &SurfaceParams, loss: &SurfaceLoss) -> [f32; PARAMS_LEN] {
-    let mut v = [0.0f32; PARAMS_LEN];
-    v[0..3].copy_from_slice(&sp.scale);
-    v[3..6].copy_from_slice(&sp.offset);
-    v[6] = sp.a;
-    v[7] = sp.stop_thresh;
-    v[8] = loss.grad_scale;
-    v[9] = loss.lambda_h;
-    v[10] = loss.lambda_c;
-    for (d, &l) in v[12..].iter_mut().zip(&sp.levels) {
+/// The params buffer of `surface_train`: the levels zero-padded to [`SURF_MAX_LEVELS`].
+pub fn train_params(sp: &SurfaceParams, loss: &SurfaceLoss) -> SurfTrainParams {
+    let mut levels = [0.0f32; SURF_MAX_LEVELS];
+    for (d, &l) in levels.iter_mut().zip(&sp.levels) {
         *d = l;
     }
-    v
+    SurfTrainParams {
+        scale: sp.scale,
+        offset: sp.offset,
+        a: sp.a,
+        stop_thresh: sp.stop_thresh,
+        grad_scale: loss.grad_scale,
+        lambda_h: loss.lambda_h,
+        lambda_c: loss.lambda_c,
+        levels,
+    }
 }
+
+const _: () = assert!(std::mem::size_of::<SurfCounts>() <= std::mem::size_of::<TrainCounts>());
 
 /// The data term of one training pass, read back (see [`VulkanSurface::gradients`]).
 pub struct SurfaceGradients {
@@ -93,7 +94,7 @@ pub struct VulkanSurface {
     params: GpuBuffer,
     /// The levels, zero-padded (surface_fwd).
     levels: GpuBuffer,
-    /// Counters: 7 of surface_train, or 5 of surface_fwd.
+    /// Counters: `TrainCounts` of surface_train, or `SurfCounts` of surface_fwd (no larger).
     stats: GpuBuffer,
     /// Lδ's axis-neighbour table (6 rows per row), its forward reach in rows
     /// (`forward_reach`), and its per-row directions q (3 floats).
@@ -170,9 +171,9 @@ impl VulkanSurface {
                 gpu.upload(&init)?
             },
             args: gpu.zeros::<u32>(3)?,
-            params: gpu.zeros::<f32>(PARAMS_LEN)?,
+            params: gpu.zeros::<SurfTrainParams>(1)?,
             levels: gpu.upload(&levels)?,
-            stats: gpu.zeros::<u32>(8)?,
+            stats: gpu.zeros::<TrainCounts>(1)?,
             axis_nbrs: upload_nonempty(gpu, &axis_nbrs)?,
             axis_reach: forward_reach(&axis_nbrs),
             tv_dirs: gpu.zeros::<f32>(Q_FLOATS * n.max(1))?,
@@ -228,7 +229,7 @@ impl VulkanSurface {
             p.a
         );
         let sp = surface_params(&self.meta, p.a, p.stop_thresh);
-        self.params.write(&train_params(&sp, &batch_loss(n, p)))?;
+        self.params.write(&[train_params(&sp, &batch_loss(n, p))])?;
         let (mut b, [ray_buf, target_buf, out_buf]) = self.begin(rays, Some(targets))?;
         if let Some(margin) = self.refresh.before_pass(p.lr_delta, p.beta) {
             self.record_blocks(&mut b, margin)?;
@@ -400,8 +401,7 @@ impl VulkanSurface {
     }
 
     fn read_train_counts(&self) -> Result<TrainCounts> {
-        let v: Vec<u32> = self.stats.download_range(0, 8)?;
-        Ok(std::array::from_fn(|i| v[i]))
+        Ok(self.stats.download_range::<TrainCounts>(0, 1)?[0])
     }
 
     fn ray_loss(&self, n: usize) -> Result<Vec<RayLoss>> {
@@ -520,11 +520,8 @@ impl SurfaceBackend for VulkanSurface {
         )?;
         b.submit()?;
         let out: Vec<SurfOut> = self.rays.out().download_range(0, n)?;
-        let s: Vec<u32> = self.stats.download_range(0, 6)?;
-        Ok((
-            out.iter().flat_map(|o| o.rgb).collect(),
-            std::array::from_fn(|i| s[i]),
-        ))
+        let counts = self.stats.download_range::<SurfCounts>(0, 1)?[0];
+        Ok((out.iter().flat_map(|o| o.rgb).collect(), counts))
     }
 
     fn grid(&self) -> Result<SurfaceGrid> {

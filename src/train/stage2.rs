@@ -7,6 +7,7 @@ use super::progress::{Progress, Throughput};
 use super::render::{render_split_with, RenderedSplit};
 use super::stage1::step_rng;
 use super::surface_config::SurfaceConfig;
+use crate::abi::buffers::TrainPerRay;
 use crate::cpu::surface_reg::{delta_tv_chunk, opacity_tv_chunk, OpacityChunk};
 use crate::data::{Dataset, RaySampler};
 use crate::grid::checkpoint;
@@ -39,10 +40,8 @@ pub struct Stage2Report {
     pub train_rays_per_s: f64,
     pub final_mse: f64,
     pub test_psnr: f64,
-    /// Per training ray: cells read (live cells), cubic solves, solves skipped by min/max or
-    /// segment culling, hits, hits cut by truncation, hits with a guarded δ gradient, gradient
-    /// atomic adds, empty-space blocks skipped.
-    pub per_ray: [f64; 8],
+    /// Per training ray: the training pass's counters (`TrainCounts`).
+    pub per_ray: TrainPerRay,
     pub vertices_before_prune: usize,
     pub allocated_vertices: usize,
 }
@@ -146,7 +145,7 @@ pub fn train(
     let mut report = Stage2Report::default();
     let mut progress = Progress::new(cfg.iters as u64, start_step as u64, show_progress);
     let mut throughput = Throughput::new(start_step);
-    let mut totals = [0u64; 8];
+    let mut totals = TrainPerRay::default();
     let mut mse = f64::NAN;
     let t_start = Instant::now();
     let grid0 = backend.grid()?;
@@ -180,9 +179,7 @@ pub fn train(
         mse = stats.mse;
         let secs = t.elapsed().as_secs_f64();
         throughput.add(step, batch.len(), secs);
-        for (a, &c) in totals.iter_mut().zip(&stats.counts) {
-            *a += c as u64;
-        }
+        totals.add(&stats.counts);
         writeln!(
             log,
             "{},{:.6e},{:.3},{:.5},{:.5},{:.4e},{:.3}",
@@ -236,7 +233,7 @@ pub fn train(
     report.train_rays_per_s = throughput.rays_per_s().unwrap_or(0.0);
     report.final_mse = mse;
     report.test_psnr = rendered.mean_psnr;
-    report.per_ray = totals.map(|s| s as f64 / throughput.rays().max(1) as f64);
+    report.per_ray = totals.scaled(1.0 / throughput.rays().max(1) as f64);
     report.allocated_vertices = backend.grid()?.delta.len();
     Ok((report, rendered))
 }

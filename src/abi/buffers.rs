@@ -1,0 +1,88 @@
+//! Structs the kernels read or write in their buffers: the one definition of each layout.
+//! `build.rs` reads this file too: it declares each struct in the generated `abi.glsl` (scalar
+//! layout, with a `<Name>Buf` buffer reference over an array of it) and fails the build when a
+//! kernel's SPIR-V places a member at another offset than this `#[repr(C)]` struct.
+//!
+//! Member types: `u32`, `i32`, `f32`, `[T; 2..=4]` of those (GLSL `uvec`/`ivec`/`vec`) or
+//! `[T; N]` for other N (a GLSL array). `counters` structs hold `u32` counters only.
+
+use super::consts::SURF_MAX_LEVELS;
+
+abi_structs! {
+    /// The params buffer of `surface_train`: how rays map into the grid, the levels, truncation,
+    /// early stop and the loss weights (`surface::vulkan::train_params`).
+    struct SurfTrainParams {
+        /// grid = p·scale + offset (per axis).
+        scale: [f32; 3],
+        offset: [f32; 3],
+        /// Truncation parameter a.
+        a: f32,
+        /// Stop once transmittance falls below this.
+        stop_thresh: f32,
+        /// dL/dC = grad_scale·(C − target).
+        grad_scale: f32,
+        /// Weight of the entropy of the ray's normalised hit weights.
+        lambda_h: f32,
+        /// Weight of Σ |t_j − t_mode|.
+        lambda_c: f32,
+        /// Level values τ_i, zero-padded (the push block's `n_levels` are used).
+        levels: [f32; SURF_MAX_LEVELS],
+    }
+
+    /// Per-ray output of `surface_fwd`.
+    struct SurfOut {
+        /// Colour on a white background.
+        rgb: [f32; 3],
+        /// Final transmittance (before the background is added).
+        transmittance: f32,
+        /// Front-face hits composited.
+        hits: u32,
+    }
+
+    /// Per-ray output of `surface_train`: the loss terms before weighting, and hits composited.
+    struct RayLoss {
+        /// Σ over channels of (C − target)².
+        sq_err: f32,
+        /// Entropy of the normalised hit weights (0 when λH = 0).
+        entropy: f32,
+        /// Σ |t_j − t_mode| in scene units (0 when λc = 0).
+        consistency: f32,
+        hits: u32,
+    }
+
+    /// Counters of `surface_fwd`, summed over rays.
+    counters SurfCounts {
+        /// Cells read (links loaded: live cells when skipping).
+        cells,
+        /// Cubic solves (levels that pass min/max and segment culling, per cell read).
+        solves,
+        /// Solves skipped by min/max or segment culling.
+        culled,
+        /// Hits composited.
+        hits,
+        /// Hits cut off by truncation (j ≥ a).
+        cut,
+        /// Empty-space blocks skipped.
+        blocks_skipped,
+    }
+
+    /// Counters of `surface_train`, summed over rays.
+    counters TrainCounts / TrainPerRay {
+        /// Cells read (live cells: corners loaded).
+        cells,
+        /// Cubic solves.
+        solves,
+        /// Solves skipped by min/max or segment culling.
+        culled,
+        /// Hits composited.
+        hits,
+        /// Hits cut off by truncation.
+        cut,
+        /// Hits whose δ gradient the f′ guard dropped.
+        guarded,
+        /// Gradient atomic adds.
+        atomic_adds,
+        /// Empty-space blocks skipped.
+        blocks_skipped,
+    }
+}
