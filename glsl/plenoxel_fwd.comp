@@ -34,7 +34,7 @@ void main() {
     vec3 rd = vec3(pc.rays.v[6u * r + 3u], pc.rays.v[6u * r + 4u], pc.rays.v[6u * r + 5u]);
     vec3 color = vec3(0.0);
     float T = 1.0;
-    uvec4 counts = uvec4(0);
+    PlenoxelCounts counts = PLENOXEL_COUNTS_ZERO;
     March m;
     if (march_init(ro, rd, pc.scale, pc.offset, pc.res, m)) {
         float y[9];
@@ -42,7 +42,7 @@ void main() {
         uint k = 0u;
         Sample s;
         while (march_next(m, k, counts, s)) {
-            counts.x++;
+            counts.shaded++;
             float alpha = sample_alpha(s.sigma, m.delta);
             vec3 c = max(sample_color_raw(s.lk, s.w, y), vec3(0.0));
             precise float wt = T * alpha;

@@ -72,7 +72,7 @@ void main() {
     sh_basis(rd, y);
     March m;
     bool hit = march_init(ro, rd, pc.scale, pc.offset, pc.res, m);
-    uvec4 counts = uvec4(0);
+    PlenoxelCounts counts = PLENOXEL_COUNTS_ZERO;
 
     // Forward: C and the final transmittance.
     vec3 color = vec3(0.0);
@@ -84,7 +84,7 @@ void main() {
     while (hit && march_next(m, k, counts, s)) {
         if (shaded < REPLAY) replay[shaded] = k - 1u;
         shaded++;
-        counts.x++;
+        counts.shaded++;
         float alpha = sample_alpha(s.sigma, m.delta);
         vec3 c = max(sample_color_raw(s.lk, s.w, y), vec3(0.0));
         precise float wt = T * alpha;
@@ -113,7 +113,7 @@ void main() {
     vec3 accum = vec3(0.0);
     T = 1.0;
     k = 0u;
-    uvec4 replayed = uvec4(0); // the forward pass already counted these samples
+    PlenoxelCounts replayed = PLENOXEL_COUNTS_ZERO; // the forward pass already counted these samples
     for (uint j = 0u; hit; j++) {
         if (shaded <= REPLAY) {
             if (j == shaded) break;
@@ -134,7 +134,7 @@ void main() {
         precise float d_sigma = m.delta * (dsig3.x + dsig3.y + dsig3.z);
         vec3 d_color = mix(vec3(0.0), g_c * wt, greaterThan(raw, vec3(0.0)));
         if (s.l != cur_cell) {
-            counts.w += flush(y, cur_lk, acc_sigma, acc_color);
+            counts.atomic_adds += flush(y, cur_lk, acc_sigma, acc_color);
             cur_cell = s.l;
             cur_lk = s.lk;
         }
@@ -147,6 +147,6 @@ void main() {
         T = tn;
         if (T < pc.stop_thresh) break;
     }
-    counts.w += flush(y, cur_lk, acc_sigma, acc_color);
+    counts.atomic_adds += flush(y, cur_lk, acc_sigma, acc_color);
     add_stats(counts);
 }

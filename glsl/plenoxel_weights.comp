@@ -34,7 +34,7 @@ void main() {
     if (!march_init(ro, rd, pc.scale, pc.offset, pc.res, m)) return;
     float T = 1.0;
     uint k = 0u;
-    uvec4 counts = uvec4(0);
+    PlenoxelCounts counts = PLENOXEL_COUNTS_ZERO;
     Sample s;
     while (march_next(m, k, counts, s)) {
         float alpha = sample_alpha(s.sigma, m.delta);

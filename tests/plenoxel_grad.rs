@@ -168,7 +168,7 @@ fn check_against_finite_differences(res: u32, seed: u64, stride: usize) -> f64 {
             picked.len()
         );
     }
-    grads.counts[0] as f64 / n_rays as f64
+    grads.counts.shaded as f64 / n_rays as f64
 }
 
 #[test]

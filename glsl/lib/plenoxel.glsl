@@ -165,9 +165,9 @@ void sample_at(March m, uint k, out Sample s) {
 }
 
 // Advances the march from sample index k to the next sample with σ > SIGMA_EPS and returns true,
-// or returns false at the box exit. counts.y += samples evaluated with σ ≤ SIGMA_EPS, counts.z +=
-// samples jumped over by the occupancy volume.
-bool march_next(March m, inout uint k, inout uvec4 counts, out Sample s) {
+// or returns false at the box exit. counts.empty += samples evaluated with σ ≤ SIGMA_EPS,
+// counts.skipped += samples jumped over by the occupancy volume.
+bool march_next(March m, inout uint k, inout PlenoxelCounts counts, out Sample s) {
     while (true) {
         float t = march_t(m, k);
         if (!(t < m.t_end)) return false;
@@ -176,17 +176,17 @@ bool march_next(March m, inout uint k, inout uvec4 counts, out Sample s) {
         uint next = march_skip(m, k, s.l);
         if (next != k) {
             if (!(march_t(m, next) < m.t_end)) {
-                counts.z += uint(ceil((m.t_end - t) / STEP));
+                counts.skipped += uint(ceil((m.t_end - t) / STEP));
                 return false;
             }
-            counts.z += next - k;
+            counts.skipped += next - k;
             k = next;
             continue;
         }
         k++;
         sample_fill(p, s);
         if (s.sigma > SIGMA_EPS) return true;
-        counts.y++;
+        counts.empty++;
     }
     return false;
 }

@@ -1,8 +1,8 @@
 // step.glsl — the per-step record shared by the training kernels: sample counters, and the
 // "touched vertices" that let the optimiser visit only the vertices that received a gradient this
 // step (method.md §2; svox2's sparse updates).
-// Step buffer (u32) layout: [0] touched count, [1..5) counters (samples shaded, samples empty,
-// samples skipped, gradient atomic adds), [5] vertex count n, [STEP_FLAGS, STEP_FLAGS + n) touched flags (bit masks of parameter groups), then
+// Step buffer (u32) layout: [0] touched count, [1..5) counters (PlenoxelCounts: samples shaded,
+// samples empty, samples skipped, gradient atomic adds), [5] vertex count n, [STEP_FLAGS, STEP_FLAGS + n) touched flags (bit masks of parameter groups), then
 // the touched list (n).
 // The host zeroes [0, 5) each step; rmsprop_sparse clears the flags it visits.
 // Include after a push block `pc` with member `step` (U32Buf). Rust twin: src/cpu/step.rs.
@@ -30,13 +30,10 @@ void touch(uint v) {
     touch_mask(v, TOUCH_ALL);
 }
 
-// The counters += (shaded, empty, skipped, atomic adds), reduced over the subgroup first: one
-// atomic per subgroup and counter.
-void add_stats(uvec4 counts) {
-    uvec4 s = subgroupAdd(counts);
-    if (subgroupElect()) {
-        for (uint i = 0u; i < 4u; i++) atomicAdd(pc.step.v[STEP_STATS + i], s[i]);
-    }
+// The record's counters += counts, reduced over the subgroup first: one atomic per subgroup and
+// counter.
+void add_stats(PlenoxelCounts counts) {
+    PLENOXEL_COUNTS_SUBGROUP_ADD(PlenoxelCountsBuf(uint64_t(pc.step) + 4ul * STEP_STATS), counts);
 }
 
 #endif

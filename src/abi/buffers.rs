@@ -50,6 +50,19 @@ abi_structs! {
         hits: u32,
     }
 
+    /// Counters of the stage-1 march (plenoxel_fwd, plenoxel_train), summed over rays; kept in
+    /// the step record from `STEP_STATS` on.
+    counters PlenoxelCounts / PlenoxelPerRay {
+        /// Samples shaded (σ > SIGMA_EPS).
+        shaded,
+        /// Samples evaluated with σ ≤ SIGMA_EPS.
+        empty,
+        /// Samples jumped over by the occupancy volume.
+        skipped,
+        /// Gradient atomic adds (training).
+        atomic_adds,
+    }
+
     /// Counters of `surface_fwd`, summed over rays.
     counters SurfCounts {
         /// Cells read (links loaded: live cells when skipping).

@@ -90,7 +90,12 @@ pub fn run(gpu: &Gpu, args: &PlenoxelsBenchArgs) -> Result<()> {
     for (name, f) in [("vulkan", &fv), ("cpu", &fc)] {
         println!(
             "{name:<8} {:>12.0} {:>10.5} {:>9.2} {:>9.2} {:>9.2} {:>12.1}",
-            f.rays_per_s, f.mean_mse, f.per_ray[0], f.per_ray[1], f.per_ray[2], f.per_ray[3]
+            f.rays_per_s,
+            f.mean_mse,
+            f.per_ray.shaded,
+            f.per_ray.empty,
+            f.per_ray.skipped,
+            f.per_ray.atomic_adds
         );
     }
     let ratio = fv.rays_per_s / fc.rays_per_s;

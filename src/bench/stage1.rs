@@ -1,6 +1,7 @@
 //! Stage-1 pieces shared by `bench plenoxels` and `bench surface`: the built-in thin scene they
 //! train on, the short fast-preset run that prepares a grid, and the timed training steps.
 
+use crate::abi::buffers::PlenoxelPerRay;
 use crate::data::{Dataset, LoadOptions, RaySampler};
 use crate::grid::Grid;
 use crate::plenoxel::{Plenoxels, StepParams};
@@ -36,8 +37,8 @@ pub fn warm_config(res: u32, iters: u32) -> (Stage1Config, Grid) {
 pub struct Figures {
     pub rays_per_s: f64,
     pub mean_mse: f64,
-    /// shaded, empty, skipped samples and atomic adds, per ray.
-    pub per_ray: [f64; 4],
+    /// The march's counters per ray.
+    pub per_ray: PlenoxelPerRay,
 }
 
 /// `steps + 1` stage-1 training steps (no TV, the learning rates of the schedule's end) of
@@ -74,10 +75,9 @@ pub fn time_steps(
         }
         secs += t.elapsed().as_secs_f64();
         f.mean_mse += s.mse / steps as f64;
-        for i in 0..4 {
-            f.per_ray[i] += s.counts[i] as f64 / (batch * steps) as f64;
-        }
+        f.per_ray.add(&s.counts);
     }
     f.rays_per_s = (batch * steps) as f64 / secs;
+    f.per_ray = f.per_ray.scaled(1.0 / (batch * steps) as f64);
     Ok(f)
 }

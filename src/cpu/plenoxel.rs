@@ -5,8 +5,8 @@
 use super::atomic;
 use super::step::touch;
 use crate::math::plenoxel::{
-    march_init, march_next, occ_dims, sample_alpha, sample_at, sample_color_raw, Counts, GridRef,
-    March, OCC_SHIFT, SIGMA_EPS,
+    march_init, march_next, occ_dims, sample_alpha, sample_at, sample_color_raw, GridRef, March,
+    PlenoxelCounts, OCC_SHIFT, SIGMA_EPS,
 };
 use crate::math::sh::sh_basis;
 use rayon::prelude::*;
@@ -27,10 +27,6 @@ pub struct MarchParams {
 fn ray(rays: &[f32], r: usize) -> ([f32; 3], [f32; 3]) {
     let v = &rays[6 * r..6 * r + 6];
     ([v[0], v[1], v[2]], [v[3], v[4], v[5]])
-}
-
-fn sum_counts(a: Counts, b: Counts) -> Counts {
-    std::array::from_fn(|i| a[i] + b[i])
 }
 
 /// Twin of `occupancy.comp`.
@@ -62,23 +58,23 @@ pub fn occupancy(links: &[i32], density: &[f32], res: [u32; 3]) -> Vec<u32> {
 
 /// The forward march of one ray (both kernels' first loop): accumulated colour (background not
 /// yet added) and final transmittance; the indices of the first REPLAY shaded samples go to
-/// `replay`, and the number of shaded samples to `counts[0]`.
+/// `replay`, and the number of shaded samples to `counts.shaded`.
 fn forward(
     g: &GridRef,
     m: &March,
     y: &[f32; 9],
     stop_thresh: f32,
-    counts: &mut Counts,
+    counts: &mut PlenoxelCounts,
     replay: &mut [u32; REPLAY],
 ) -> ([f32; 3], f32) {
     let mut color = [0f32; 3];
     let mut t_acc = 1.0f32;
     let mut k = 0;
     while let Some(s) = march_next(g, m, &mut k, counts) {
-        if (counts[0] as usize) < REPLAY {
-            replay[counts[0] as usize] = k - 1;
+        if (counts.shaded as usize) < REPLAY {
+            replay[counts.shaded as usize] = k - 1;
         }
-        counts[0] += 1;
+        counts.shaded += 1;
         let alpha = sample_alpha(s.sigma, m.delta);
         let c = sample_color_raw(g, &s.lk, &s.w, y).map(|x| x.max(0.0));
         let wt = t_acc * alpha;
@@ -94,13 +90,13 @@ fn forward(
 }
 
 /// Twin of `plenoxel_fwd.comp`: rgb per ray (white background) and the summed sample counts.
-pub fn render(g: &GridRef, rays: &[f32], mp: &MarchParams) -> (Vec<f32>, Counts) {
+pub fn render(g: &GridRef, rays: &[f32], mp: &MarchParams) -> (Vec<f32>, PlenoxelCounts) {
     let n = rays.len() / 6;
-    let out: Vec<([f32; 3], Counts)> = (0..n)
+    let out: Vec<([f32; 3], PlenoxelCounts)> = (0..n)
         .into_par_iter()
         .map(|r| {
             let (ro, rd) = ray(rays, r);
-            let mut counts = [0u32; 4];
+            let mut counts = PlenoxelCounts::default();
             let (color, t_acc) = match march_init(ro, rd, mp.scale, mp.offset, g.res) {
                 Some(m) => forward(
                     g,
@@ -115,7 +111,7 @@ pub fn render(g: &GridRef, rays: &[f32], mp: &MarchParams) -> (Vec<f32>, Counts)
             (color.map(|c| c + t_acc), counts)
         })
         .collect();
-    let counts = out.iter().map(|o| o.1).fold([0; 4], sum_counts);
+    let counts = out.iter().fold(PlenoxelCounts::default(), |a, o| a + o.1);
     (out.into_iter().flat_map(|o| o.0).collect(), counts)
 }
 
@@ -135,25 +131,25 @@ pub fn train(
     mp: &MarchParams,
     grad_scale: f32,
     grads: TrainGrads,
-) -> (Vec<f32>, Counts) {
+) -> (Vec<f32>, PlenoxelCounts) {
     let n = rays.len() / 6;
     let gd = atomic::as_atomic(grads.density);
     let gs = atomic::as_atomic(grads.sh);
     let touched = atomic::as_atomic_u32(grads.touched);
-    let out: Vec<(f32, Counts)> = (0..n)
+    let out: Vec<(f32, PlenoxelCounts)> = (0..n)
         .into_par_iter()
         .map(|r| {
             let (ro, rd) = ray(rays, r);
             let target = [targets[3 * r], targets[3 * r + 1], targets[3 * r + 2]];
             let y = sh_basis(rd);
             let m = march_init(ro, rd, mp.scale, mp.offset, g.res);
-            let mut counts = [0u32; 4];
+            let mut counts = PlenoxelCounts::default();
             let mut replay = [0u32; REPLAY];
             let (color, t_acc) = match &m {
                 Some(m) => forward(g, m, &y, mp.stop_thresh, &mut counts, &mut replay),
                 None => ([0.0; 3], 1.0),
             };
-            let shaded = counts[0] as usize;
+            let shaded = counts.shaded as usize;
             let total: [f32; 3] = color.map(|c| c + t_acc);
             let diff: [f32; 3] = std::array::from_fn(|ch| total[ch] - target[ch]);
             let loss = diff[0] * diff[0] + diff[1] * diff[1] + diff[2] * diff[2];
@@ -166,7 +162,7 @@ pub fn train(
             let mut accum = [0f32; 3];
             let mut t_acc = 1.0f32;
             let mut k = 0;
-            let mut ignored = [0u32; 4];
+            let mut ignored = PlenoxelCounts::default();
             for j in 0.. {
                 let s = if shaded <= REPLAY {
                     if j == shaded {
@@ -192,17 +188,17 @@ pub fn train(
                 let d_sigma = m.delta * (dsig3[0] + dsig3[1] + dsig3[2]);
                 let d_color: [f32; 3] =
                     std::array::from_fn(|ch| if raw[ch] > 0.0 { g_c[ch] * wt } else { 0.0 });
-                counts[3] += scatter.add(s.l, &s.lk, &s.w, d_sigma, d_color);
+                counts.atomic_adds += scatter.add(s.l, &s.lk, &s.w, d_sigma, d_color);
                 t_acc = tn;
                 if t_acc < mp.stop_thresh {
                     break;
                 }
             }
-            counts[3] += scatter.flush();
+            counts.atomic_adds += scatter.flush();
             (loss, counts)
         })
         .collect();
-    let counts = out.iter().map(|o| o.1).fold([0; 4], sum_counts);
+    let counts = out.iter().fold(PlenoxelCounts::default(), |a, o| a + o.1);
     (out.into_iter().map(|o| o.0).collect(), counts)
 }
 
@@ -302,7 +298,7 @@ pub fn max_weights(g: &GridRef, rays: &[f32], mp: &MarchParams) -> Vec<f32> {
         };
         let mut t_acc = 1.0f32;
         let mut k = 0;
-        let mut counts = [0u32; 4];
+        let mut counts = PlenoxelCounts::default();
         while let Some(s) = march_next(g, &m, &mut k, &mut counts) {
             let alpha = sample_alpha(s.sigma, m.delta);
             let wt = t_acc * alpha;

@@ -160,9 +160,7 @@ pub struct Sample {
     pub sigma: f32,
 }
 
-/// Counters of one or more rays: samples shaded, evaluated at σ ≤ ε, skipped by occupancy, and
-/// (training) gradient atomic adds.
-pub type Counts = [u32; 4];
+pub use crate::abi::buffers::PlenoxelCounts;
 
 /// Corner links, trilinear weights and σ of the sample in cell l at local position p.
 fn sample_fill(g: &GridRef, l: [i32; 3], p: [f32; 3]) -> Sample {
@@ -179,7 +177,12 @@ pub fn sample_at(g: &GridRef, m: &March, k: u32) -> Sample {
 }
 
 /// Advance from sample k to the next sample with σ > SIGMA_EPS (twin of `march_next`).
-pub fn march_next(g: &GridRef, m: &March, k: &mut u32, counts: &mut Counts) -> Option<Sample> {
+pub fn march_next(
+    g: &GridRef,
+    m: &March,
+    k: &mut u32,
+    counts: &mut PlenoxelCounts,
+) -> Option<Sample> {
     loop {
         let t = march_t(m, *k);
         if !(t < m.t_end) {
@@ -189,10 +192,10 @@ pub fn march_next(g: &GridRef, m: &March, k: &mut u32, counts: &mut Counts) -> O
         let next = march_skip(g, m, *k, l);
         if next != *k {
             if !(march_t(m, next) < m.t_end) {
-                counts[2] += ((m.t_end - t) / STEP).ceil() as u32;
+                counts.skipped += ((m.t_end - t) / STEP).ceil() as u32;
                 return None;
             }
-            counts[2] += next - *k;
+            counts.skipped += next - *k;
             *k = next;
             continue;
         }
@@ -201,6 +204,6 @@ pub fn march_next(g: &GridRef, m: &March, k: &mut u32, counts: &mut Counts) -> O
         if s.sigma > SIGMA_EPS {
             return Some(s);
         }
-        counts[1] += 1;
+        counts.empty += 1;
     }
 }

@@ -5,7 +5,7 @@ use crate::cpu::plenoxel::{self as twin, TrainGrads};
 use crate::cpu::step::TOUCH_ALL;
 use crate::cpu::{rmsprop_sparse, tv, RmsProp, Stage1Params, TvChunk};
 use crate::grid::{Grid, SH_DIM};
-use crate::math::plenoxel::{Counts, GridRef};
+use crate::math::plenoxel::{GridRef, PlenoxelCounts};
 use anyhow::{ensure, Result};
 
 /// Grid, occupancy, gradient accumulators and RMSProp state on the host.
@@ -66,7 +66,7 @@ fn data_term(
     targets: &[f32],
     stop_thresh: f32,
     grads: TrainGrads,
-) -> Result<(Vec<f32>, Counts)> {
+) -> Result<(Vec<f32>, PlenoxelCounts)> {
     let n = rays.len() / 6;
     ensure!(
         n > 0 && targets.len() == 3 * n,
@@ -168,7 +168,7 @@ impl Plenoxels for CpuPlenoxels {
         })
     }
 
-    fn render(&mut self, rays: &[f32], stop_thresh: f32) -> Result<(Vec<f32>, Counts)> {
+    fn render(&mut self, rays: &[f32], stop_thresh: f32) -> Result<(Vec<f32>, PlenoxelCounts)> {
         self.refresh_occupancy();
         let mp = march_params(&self.grid, stop_thresh);
         Ok(twin::render(&self.view(), rays, &mp))

@@ -9,7 +9,7 @@ pub use vulkan::VulkanPlenoxels;
 
 use crate::cpu::plenoxel::MarchParams;
 use crate::grid::Grid;
-use crate::math::plenoxel::Counts;
+use crate::math::plenoxel::PlenoxelCounts;
 use anyhow::Result;
 
 /// TV regularisation of one step: a contiguous chunk of vertex slots and the two weights.
@@ -38,7 +38,7 @@ pub struct StepStats {
     /// Mean squared error over the batch's rays and channels.
     pub mse: f64,
     /// Samples shaded, evaluated at σ ≤ ε, skipped by the occupancy volume; gradient atomic adds.
-    pub counts: Counts,
+    pub counts: PlenoxelCounts,
     /// Device time of the step's kernels in ns (0 on the CPU backend).
     pub device_ns: f64,
 }
@@ -49,7 +49,7 @@ pub struct Gradients {
     pub ray_loss: Vec<f32>,
     pub density: Vec<f32>,
     pub sh: Vec<f32>,
-    pub counts: Counts,
+    pub counts: PlenoxelCounts,
 }
 
 /// What [`Plenoxels::with_state`] calls: the grid and the running averages (σ, SH).
@@ -65,7 +65,7 @@ pub trait Plenoxels {
     /// dL/dσ and dL/dSH (L = mean squared error over rays and channels), and the sample counts.
     fn gradients(&mut self, rays: &[f32], targets: &[f32], stop_thresh: f32) -> Result<Gradients>;
     /// Render rays (white background): 3 floats per ray, and the sample counts.
-    fn render(&mut self, rays: &[f32], stop_thresh: f32) -> Result<(Vec<f32>, Counts)>;
+    fn render(&mut self, rays: &[f32], stop_thresh: f32) -> Result<(Vec<f32>, PlenoxelCounts)>;
     /// Max over rays and samples of w·w_trilinear per allocated vertex (pruning weights).
     fn max_weights(&mut self, rays: &[f32], stop_thresh: f32) -> Result<Vec<f32>>;
     /// The current grid.

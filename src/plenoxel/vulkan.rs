@@ -6,7 +6,7 @@ use crate::cpu::step::{STEP_FLAGS, STEP_N, STEP_STATS, TOUCH_ALL};
 use crate::gpu::{record_optim_args, Batch, Gpu, GpuBuffer, RayBuffers};
 use crate::grid::{Grid, SH_DIM};
 use crate::kernels;
-use crate::math::plenoxel::{occ_dims, Counts};
+use crate::math::plenoxel::{occ_dims, PlenoxelCounts};
 use anyhow::{ensure, Result};
 
 /// Device-resident stage-1 state.
@@ -79,9 +79,11 @@ impl VulkanPlenoxels {
         )
     }
 
-    fn read_stats(&self) -> Result<Counts> {
-        let v: Vec<u32> = self.step.download_range(STEP_STATS, 4)?;
-        Ok([v[0], v[1], v[2], v[3]])
+    fn read_stats(&self) -> Result<PlenoxelCounts> {
+        // The counters sit at u32 index STEP_STATS of the step record.
+        let words = std::mem::size_of::<PlenoxelCounts>() / 4;
+        let v: Vec<u32> = self.step.download_range(STEP_STATS, words)?;
+        Ok(bytemuck::pod_read_unaligned(bytemuck::cast_slice(&v)))
     }
 
     /// Record clearing the step's touched count and sample counters.
@@ -230,7 +232,7 @@ impl Plenoxels for VulkanPlenoxels {
         Ok(g)
     }
 
-    fn render(&mut self, rays: &[f32], stop_thresh: f32) -> Result<(Vec<f32>, Counts)> {
+    fn render(&mut self, rays: &[f32], stop_thresh: f32) -> Result<(Vec<f32>, PlenoxelCounts)> {
         let n = rays.len() / 6;
         let mp = march_params(&self.meta, stop_thresh);
         let (mut b, [ray_buf, _, out_buf]) = self.begin(rays, None)?;

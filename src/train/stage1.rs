@@ -5,6 +5,7 @@
 use super::config::Stage1Config;
 use super::progress::{Progress, Throughput};
 use super::render::{psnr, render_split, RenderedSplit};
+use crate::abi::buffers::PlenoxelPerRay;
 use crate::data::{Dataset, RaySampler, Split};
 use crate::grid::{checkpoint, dilate, upsample, Grid};
 use crate::plenoxel::{Plenoxels, StepParams, TvParams};
@@ -41,9 +42,9 @@ pub struct Stage1Report {
     pub train_rays_per_s: f64,
     pub final_mse: f64,
     pub test_psnr: f64,
-    /// Per training ray: samples shaded, evaluated at σ ≤ ε, skipped by the occupancy volume;
-    /// gradient atomic adds.
-    pub samples_per_ray: [f64; 4],
+    /// Per training ray: the march's counters (samples shaded, evaluated at σ ≤ ε, skipped by
+    /// the occupancy volume; gradient atomic adds).
+    pub samples_per_ray: PlenoxelPerRay,
     pub allocated_vertices: usize,
     pub bytes_per_vertex: f64,
 }
@@ -155,7 +156,7 @@ pub fn train(
     let mut report = Stage1Report::default();
     let mut progress = Progress::new(cfg.iters as u64, start_step as u64, show_progress);
     let mut throughput = Throughput::new(start_step);
-    let mut sample_totals = [0u64; 4];
+    let mut sample_totals = PlenoxelPerRay::default();
     let mut mse = f64::NAN;
     let log_path = out.join(TRAIN_LOG);
     let mut log = train_log::open(&log_path, TRAIN_LOG_HEADER, start_step)?;
@@ -211,9 +212,7 @@ pub fn train(
         writeln!(log, "{},{mse:e},{:.4},{elapsed:.3}", step + 1, psnr(mse))
             .with_context(|| format!("writing {}", log_path.display()))?;
         throughput.add(step, batch.len(), secs);
-        for (total, &c) in sample_totals.iter_mut().zip(&stats.counts) {
-            *total += c as u64;
-        }
+        sample_totals.add(&stats.counts);
         progress.step(step as u64 + 1, mse, throughput.rays_per_s());
         report.train_seconds += secs;
         if (step + 1) % cfg.checkpoint_every == 0 && step + 1 < cfg.iters {
@@ -244,7 +243,7 @@ pub fn train(
     report.train_rays_per_s = throughput.rays_per_s().unwrap_or(0.0);
     report.final_mse = mse;
     report.test_psnr = rendered.mean_psnr;
-    report.samples_per_ray = sample_totals.map(|s| s as f64 / throughput.rays().max(1) as f64);
+    report.samples_per_ray = sample_totals.scaled(1.0 / throughput.rays().max(1) as f64);
     report.allocated_vertices = grid.allocated();
     report.bytes_per_vertex = grid.bytes_per_vertex(true);
     Ok((report, rendered))
