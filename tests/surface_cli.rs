@@ -298,7 +298,7 @@ fn bench_surface_json_is_consistent() {
             "{ratio}"
         );
     }
-    for k in ["cells", "solves", "culled", "hits", "skips"] {
+    for k in ["cells", "solves", "culled", "hits", "blocks_skipped"] {
         let v = f(&j["vulkan"]["per_ray"][k]);
         assert!(v >= 0.0 && v.is_finite(), "{k}: {v}");
     }
