@@ -3,6 +3,8 @@
 //! configuration stops with a message and leaves the last good checkpoint intact; `bench surface
 //! --json` at a small size reports consistent figures.
 
+mod bench_common;
+
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -231,8 +233,8 @@ fn diverging_surface_training_stops_and_keeps_the_checkpoint() {
 }
 
 /// `bench surface --json` at 32³: both backends' rays/s and counters, the kernels' device times,
-/// and the stage-1 figures the ratios are taken against (rounds of stage 1 then stage 2; the
-/// reported ratio is the median round's).
+/// where each step's time goes (wall, device, host phases), and the stage-1 figures the ratios
+/// are taken against (rounds of stage 1 then stage 2; the reported ratio is the median round's).
 #[test]
 fn bench_surface_json_is_consistent() {
     let out = run_ok(bin().args([
@@ -311,4 +313,23 @@ fn bench_surface_json_is_consistent() {
     assert!((hv - hc).abs() <= 5e-3 * hc.max(1.0), "hits {hv} vs {hc}");
     assert!(f(&j["vulkan"]["per_ray"]["hits"]) > 0.0, "no hits: {line}");
     assert!(f(&j["vulkan"]["device_ms_per_step"]["surface_train"]) > 0.0);
+    for (backend, vulkan) in [
+        ("vulkan", true),
+        ("vulkan_data_term_only", true),
+        ("cpu", false),
+    ] {
+        bench_common::check_step_times(backend, &j[backend], vulkan);
+    }
+    // The kernels' total is the sum of the per-kernel times.
+    let per_kernel: f64 = j["vulkan"]["device_ms_per_step"]
+        .as_object()
+        .unwrap()
+        .values()
+        .map(f)
+        .sum();
+    let total = f(&j["vulkan"]["device_ms_total_per_step"]);
+    assert!(
+        (per_kernel - total).abs() <= 1e-9 * total,
+        "{per_kernel} vs {total}"
+    );
 }

@@ -1,6 +1,9 @@
 //! End to end at a small size: make-scene → train (Vulkan and CPU backends) → render → export →
-//! import, a run killed with SIGKILL that resumes from its last checkpoint, and the scene
-//! converted to the COLMAP and IDR layouts training to the same figures.
+//! import, a run killed with SIGKILL that resumes from its last checkpoint, the scene
+//! converted to the COLMAP and IDR layouts training to the same figures; `bench plenoxels --json`
+//! at a small size reports consistent figures.
+
+mod bench_common;
 
 #[path = "../tools/convert/convert.rs"]
 mod convert;
@@ -378,4 +381,48 @@ fn extract_uses_the_scene_scale_the_run_recorded() {
             );
         }
     }
+}
+
+/// `bench plenoxels --json` at 32³: both backends train the same batches from the same grid (the
+/// same counters up to the near-degenerate samples the parity checks excuse, ≤ 0.5 %; MSE within
+/// 1e-5 relative, float atomics summing in another order), and report where each step's time goes
+/// (wall, device, host phases).
+#[test]
+fn bench_plenoxels_json_reports_where_the_time_goes() {
+    let out = run_ok(bin().args([
+        "bench",
+        "plenoxels",
+        "--json",
+        "--res",
+        "32",
+        "--warm-steps",
+        "12",
+        "--steps",
+        "2",
+        "--batch",
+        "256",
+    ]));
+    let line = out
+        .lines()
+        .find(|l| l.starts_with('{'))
+        .unwrap_or_else(|| panic!("no JSON line:\n{out}"));
+    let j: serde_json::Value = serde_json::from_str(line).unwrap();
+    let f = |v: &serde_json::Value| v.as_f64().unwrap_or_else(|| panic!("not a number: {v}"));
+    for (backend, vulkan) in [("vulkan", true), ("cpu", false)] {
+        assert!(f(&j[backend]["rays_per_s"]) > 0.0, "{line}");
+        bench_common::check_step_times(backend, &j[backend], vulkan);
+    }
+    for i in 0..4 {
+        let (v, c) = (f(&j["vulkan"]["per_ray"][i]), f(&j["cpu"]["per_ray"][i]));
+        assert!(
+            (v - c).abs() <= 5e-3 * c.max(1.0),
+            "per ray [{i}] {v} vs {c}"
+        );
+    }
+    let (mv, mc) = (f(&j["vulkan"]["mean_mse"]), f(&j["cpu"]["mean_mse"]));
+    assert!((mv - mc).abs() <= 1e-5 * mc, "mse {mv} vs {mc}");
+    assert!(
+        f(&j["device_ms_per_step"]["plenoxel_train"]) > 0.0,
+        "{line}"
+    );
 }

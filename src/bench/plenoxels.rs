@@ -4,9 +4,10 @@
 //! sparsity, then each backend trains the same `--steps` batches from that state. Reported:
 //! training rays/s (forward + backward + TV + optimiser, wall time, after one warm-up step), their
 //! ratio, device time per kernel (timestamp queries), samples per ray shaded / evaluated empty /
-//! skipped by the occupancy volume, and gradient atomic adds per ray.
+//! skipped by the occupancy volume, and gradient atomic adds per ray; per step, the wall time of
+//! the loop iteration, the device time and the host time by phase (`StepFigures`).
 
-use super::stage1::{thin_scene, time_steps, warm_config};
+use super::stage1::{thin_scene, time_steps, warm_config, StepFigures};
 use crate::gpu::Gpu;
 use crate::plenoxel::{CpuPlenoxels, Plenoxels, VulkanPlenoxels};
 use crate::train::stage1;
@@ -100,6 +101,11 @@ pub fn run(gpu: &Gpu, args: &PlenoxelsBenchArgs) -> Result<()> {
     }
     let ratio = fv.rays_per_s / fc.rays_per_s;
     println!("vulkan / cpu: {ratio:.2}×");
+    println!("ms per step: wall, device (kernels' timestamps; the CPU: its compute), host phases:");
+    println!("{}", StepFigures::header("backend", 8));
+    for (name, f) in [("vulkan", &fv), ("cpu", &fc)] {
+        println!("{name:<8} {}", f.times.row());
+    }
     println!("device ms per step (Vulkan):");
     for (k, ms) in &kernels {
         println!("  {k:<18} {ms:>9.3}");

@@ -3,6 +3,7 @@
 
 use crate::abi::buffers::PlenoxelPerRay;
 use crate::data::{Dataset, LoadOptions, RaySampler};
+use crate::gpu::{Phase, PhaseClock, StepTimes};
 use crate::grid::Grid;
 use crate::plenoxel::{Plenoxels, StepParams};
 use crate::scene::{generate, GenerateOptions, SceneKind};
@@ -35,10 +36,70 @@ pub fn warm_config(res: u32, iters: u32) -> (Stage1Config, Grid) {
 /// One backend's figures.
 #[derive(Debug, Default, serde::Serialize)]
 pub struct Figures {
+    /// Rays over the time spent in the backend's step calls (sampling and bookkeeping excluded).
     pub rays_per_s: f64,
     pub mean_mse: f64,
     /// The march's counters per ray.
     pub per_ray: PlenoxelPerRay,
+    #[serde(flatten)]
+    pub times: StepFigures,
+}
+
+/// Where a step's time goes, per step (ms): `wall_ms_per_step` is the whole loop iteration
+/// (sampling, step, bookkeeping) and equals the sum of `host_ms`, whose `other` is the part in
+/// no named phase; `device_ms_total_per_step` is the sum of the kernels' timestamps on Vulkan
+/// (inside `host_ms.wait`) and the twin's compute on the CPU (`host_ms.compute`).
+#[derive(Debug, Default, serde::Serialize)]
+pub struct StepFigures {
+    pub wall_ms_per_step: f64,
+    pub device_ms_total_per_step: f64,
+    pub host_ms: StepTimes,
+}
+
+impl StepFigures {
+    /// Accumulates one step: its wall ms, the phases measured around and inside it, and its
+    /// device ns (0 on the CPU backend, whose kernels are its `compute`).
+    pub fn add(&mut self, wall_ms: f64, phases: &StepTimes, device_ns: f64) {
+        self.wall_ms_per_step += wall_ms;
+        self.host_ms.add(phases);
+        self.device_ms_total_per_step += if device_ns > 0.0 {
+            device_ns / 1e6
+        } else {
+            phases.compute
+        };
+    }
+
+    /// Sums of `steps` steps to means per step; the wall time in no phase becomes `other`.
+    pub fn per_step(mut self, steps: u32) -> StepFigures {
+        self.host_ms.other += (self.wall_ms_per_step - self.host_ms.total()).max(0.0);
+        let k = 1.0 / steps as f64;
+        StepFigures {
+            wall_ms_per_step: self.wall_ms_per_step * k,
+            device_ms_total_per_step: self.device_ms_total_per_step * k,
+            host_ms: self.host_ms.scaled(k),
+        }
+    }
+
+    /// A table row: wall, device, then every host phase, in ms.
+    pub fn row(&self) -> String {
+        let mut s = format!(
+            "{:>8.3} {:>8.3}",
+            self.wall_ms_per_step, self.device_ms_total_per_step
+        );
+        for (_, ms) in self.host_ms.phases() {
+            s += &format!(" {ms:>11.3}");
+        }
+        s
+    }
+
+    /// The header of [`row`](Self::row), after a `width`-wide label column.
+    pub fn header(label: &str, width: usize) -> String {
+        let mut s = format!("{label:<width$} {:>8} {:>8}", "wall", "device");
+        for (name, _) in StepTimes::default().phases() {
+            s += &format!(" {name:>11}");
+        }
+        s
+    }
 }
 
 /// `steps + 1` stage-1 training steps (no TV, the learning rates of the schedule's end) of
@@ -52,32 +113,43 @@ pub fn time_steps(
     batch: u32,
 ) -> Result<Figures> {
     let mut f = Figures::default();
+    let mut times = StepFigures::default();
     let mut secs = 0.0;
     let mut sampler = RaySampler::new(&data.train, 7);
     for step in 0..=steps {
+        let wall = Instant::now();
+        let mut clock = PhaseClock::start();
         let b = sampler.next_batch(&data.train, &data.scene, batch as usize);
         let (rays, targets) = (b.flat_rays(), b.flat_targets());
+        clock.mark(Phase::Sampling);
+        let p = StepParams {
+            lr_sigma: cfg.lr_sigma.at(cfg.iters),
+            lr_sh: cfg.lr_sh.at(cfg.iters),
+            beta: cfg.beta,
+            eps: cfg.eps,
+            stop_thresh: cfg.stop_thresh,
+            tv: None,
+        };
+        clock.mark(Phase::Bookkeeping);
         let t = Instant::now();
-        let s = backend.step(
-            &rays,
-            &targets,
-            &StepParams {
-                lr_sigma: cfg.lr_sigma.at(cfg.iters),
-                lr_sh: cfg.lr_sh.at(cfg.iters),
-                beta: cfg.beta,
-                eps: cfg.eps,
-                stop_thresh: cfg.stop_thresh,
-                tv: None,
-            },
-        )?;
+        let s = backend.step(&rays, &targets, &p)?;
+        let step_secs = t.elapsed().as_secs_f64();
+        clock.absorb(&s.host);
         if step == 0 {
             continue;
         }
-        secs += t.elapsed().as_secs_f64();
+        secs += step_secs;
         f.mean_mse += s.mse / steps as f64;
         f.per_ray.add(&s.counts);
+        clock.mark(Phase::Bookkeeping);
+        times.add(
+            wall.elapsed().as_secs_f64() * 1e3,
+            &clock.times,
+            s.device_ns,
+        );
     }
     f.rays_per_s = (batch * steps) as f64 / secs;
     f.per_ray = f.per_ray.scaled(1.0 / (batch * steps) as f64);
+    f.times = times.per_step(steps);
     Ok(f)
 }

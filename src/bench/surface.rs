@@ -8,17 +8,19 @@
 //! after one untimed step), mean MSE, and per ray: cells read (live cells), cubic solves, solves
 //! skipped by min/max or segment culling, hits composited, hits cut by truncation, hits whose δ
 //! gradient the f′ guard dropped, gradient atomic adds; the Vulkan/CPU ratio; the Vulkan device
-//! time per kernel (timestamps). The Vulkan backend is also timed without the regularisers (the
-//! data term, its scatter and RMSProp over the vertices the rays touched): `bench plenoxels` times
-//! stage-1 steps without TV, and Lδ alone touches every vertex each step. For the target it
-//! times stage-1 training on the Vulkan device at the same resolution, from the stage-1 grid, the
-//! way `bench plenoxels` does, in `--rounds` rounds of stage 1 then stage 2 back to back (the
-//! machine's speed drifts), and reports every round's ratio and the round with the median one.
+//! time per kernel (timestamps); per step, the wall time of the loop iteration, the device time
+//! and the host time by phase (`StepFigures`). The Vulkan backend is also timed without the
+//! regularisers (the data term, its scatter and RMSProp over the vertices the rays touched):
+//! `bench plenoxels` times stage-1 steps without TV, and Lδ alone touches every vertex each step.
+//! For the target it times stage-1 training on the Vulkan device at the same resolution,
+//! from the stage-1 grid, the way `bench plenoxels` does, in `--rounds` rounds of stage 1 then
+//! stage 2 back to back (the machine's speed drifts), and reports every round's ratio and the
+//! round with the median one.
 
-use super::stage1::{thin_scene, time_steps, warm_config};
+use super::stage1::{thin_scene, time_steps, warm_config, StepFigures};
 use crate::abi::buffers::{TrainCounts, TrainPerRay};
 use crate::data::{Dataset, RaySampler};
-use crate::gpu::Gpu;
+use crate::gpu::{Gpu, Phase, PhaseClock};
 use crate::grid::surface::SurfaceGrid;
 use crate::plenoxel::{CpuPlenoxels, Plenoxels, VulkanPlenoxels};
 use crate::surface::{
@@ -70,6 +72,8 @@ struct Figures {
     per_ray: TrainPerRay,
     /// Device ms per step and kernel (Vulkan only).
     device_ms_per_step: BTreeMap<&'static str, f64>,
+    #[serde(flatten)]
+    times: StepFigures,
 }
 
 /// The stage-2 step parameters of the thin category's fast preset at step 0 (as the training
@@ -99,27 +103,41 @@ fn time_surface(
     regs: bool,
 ) -> Result<Figures> {
     let mut f = Figures::default();
+    let mut times = StepFigures::default();
     let mut sampler = RaySampler::new(&data.train, 11);
     let mut secs = 0.0;
     let mut counts = TrainPerRay::default();
     for i in 0..=args.steps {
+        let wall = Instant::now();
+        let mut clock = PhaseClock::start();
         let b = sampler.next_batch(&data.train, &data.scene, args.batch as usize);
         let (rays, targets) = (b.flat_rays(), b.flat_targets());
+        clock.mark(Phase::Sampling);
         let mut p = step_params(cfg, grid.res, grid.delta.len() as u32, args.a, i);
         if !regs {
             p.regs = SurfaceRegs::default();
         }
+        clock.mark(Phase::Bookkeeping);
         let t = Instant::now();
         let s = step(&rays, &targets, &p)?;
+        let step_secs = t.elapsed().as_secs_f64();
+        clock.absorb(&s.host);
         if i == 0 {
             continue; // warm-up: first-dispatch compilation on lavapipe
         }
-        secs += t.elapsed().as_secs_f64();
+        secs += step_secs;
         f.mean_mse += s.mse / args.steps as f64;
         counts.add(&s.counts);
+        clock.mark(Phase::Bookkeeping);
+        times.add(
+            wall.elapsed().as_secs_f64() * 1e3,
+            &clock.times,
+            s.device_ns,
+        );
     }
     let rays = (args.batch * args.steps) as f64;
     f.rays_per_s = rays / secs;
+    f.times = times.per_step(args.steps);
     f.per_ray = counts.scaled(1.0 / rays);
     Ok(f)
 }
@@ -277,6 +295,11 @@ fn run_in(gpu: &Gpu, args: &SurfaceBenchArgs, dir: &std::path::Path) -> Result<(
     );
     let ratio = fv.rays_per_s / fc.rays_per_s;
     println!("vulkan / cpu: {ratio:.2}×");
+    println!("ms per step: wall, device (kernels' timestamps; the CPU: its compute), host phases:");
+    println!("{}", StepFigures::header("backend", 8));
+    for (name, f) in [("vulkan", &fv), ("cpu", &fc), ("vk-data", &fd)] {
+        println!("{name:<8} {}", f.times.row());
+    }
     for (what, f) in [("", &fv), (", data term only", &fd)] {
         println!("device ms per step (Vulkan{what}):");
         for (k, ms) in &f.device_ms_per_step {

@@ -5,6 +5,7 @@
 
 use super::buffer::GpuBuffer;
 use super::context::Gpu;
+use super::step_times::{Phase, PhaseClock, StepTimes};
 use crate::abi::consts::DISPATCH_ROW_GROUPS;
 use crate::kernels::KernelInfo;
 use anyhow::{ensure, Context, Result};
@@ -19,6 +20,9 @@ const MAX_TIMED: u32 = 1024;
 pub struct BatchTimes {
     /// (kernel name, device nanoseconds), in dispatch order.
     pub dispatches: Vec<(&'static str, f64)>,
+    /// Host time of `submit`: ending the command buffer (record), the submission, the fence wait,
+    /// reading the timestamps (readback).
+    pub host: StepTimes,
 }
 
 impl BatchTimes {
@@ -267,6 +271,7 @@ impl Batch {
 
     /// Submit, wait for completion, and return the device time of each timed dispatch.
     pub fn submit(mut self) -> Result<BatchTimes> {
+        let mut clock = PhaseClock::start();
         let inner = &self.gpu.inner;
         let dev = &inner.device;
         let to_host = [vk::MemoryBarrier::default()
@@ -284,17 +289,20 @@ impl Batch {
             );
             dev.end_command_buffer(self.cmd)?;
         }
+        clock.mark(Phase::Record);
         let fence = unsafe { dev.create_fence(&vk::FenceCreateInfo::default(), None) }?;
         let cmds = [self.cmd];
         let submit = [vk::SubmitInfo::default().command_buffers(&cmds)];
         let result = {
             let queue = inner.queue.lock().unwrap();
             unsafe { dev.queue_submit(*queue, &submit, fence) }
-        }
-        .and_then(|_| unsafe { dev.wait_for_fences(&[fence], true, u64::MAX) });
+        };
+        clock.mark(Phase::Submit);
+        let result = result.and_then(|_| unsafe { dev.wait_for_fences(&[fence], true, u64::MAX) });
         unsafe { dev.destroy_fence(fence, None) };
         self.submitted = true;
         result.context("submitting a batch to the Vulkan queue")?;
+        clock.mark(Phase::Wait);
 
         let mut times = BatchTimes::default();
         if let (Some(q), false) = (self.queries, self.timed.is_empty()) {
@@ -315,6 +323,8 @@ impl Batch {
                 times.dispatches.push((name, ns));
             }
         }
+        clock.mark(Phase::Readback);
+        times.host = clock.times;
         Ok(times)
     }
 }

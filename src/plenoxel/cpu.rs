@@ -4,6 +4,7 @@ use super::{march_params, Gradients, Plenoxels, StateFn, StepParams, StepStats};
 use crate::cpu::plenoxel::{self as twin, TrainGrads};
 use crate::cpu::step::TOUCH_ALL;
 use crate::cpu::{rmsprop_sparse, tv, RmsProp, Stage1Params, TvChunk};
+use crate::gpu::{Phase, PhaseClock};
 use crate::grid::{Grid, SH_DIM};
 use crate::math::plenoxel::{GridRef, PlenoxelCounts};
 use anyhow::{ensure, Result};
@@ -90,6 +91,7 @@ impl Plenoxels for CpuPlenoxels {
     }
 
     fn step(&mut self, rays: &[f32], targets: &[f32], p: &StepParams) -> Result<StepStats> {
+        let mut clock = PhaseClock::start();
         self.refresh_occupancy();
         let grads = TrainGrads {
             density: &mut self.grad_density,
@@ -142,10 +144,12 @@ impl Plenoxels for CpuPlenoxels {
             },
         );
         let mse = loss.iter().map(|&l| l as f64).sum::<f64>() / (3 * n) as f64;
+        clock.mark(Phase::Compute);
         Ok(StepStats {
             mse,
             counts,
             device_ns: 0.0,
+            host: clock.times,
         })
     }
 

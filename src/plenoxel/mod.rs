@@ -41,6 +41,8 @@ pub struct StepStats {
     pub counts: PlenoxelCounts,
     /// Device time of the step's kernels in ns (0 on the CPU backend).
     pub device_ns: f64,
+    /// Host time of the step by phase (upload to readback on Vulkan, compute on the CPU).
+    pub host: crate::gpu::StepTimes,
 }
 
 /// Output of `Plenoxels::gradients`.

@@ -3,7 +3,7 @@
 
 use super::{march_params, Gradients, Plenoxels, StepParams, StepStats};
 use crate::cpu::step::{STEP_FLAGS, STEP_N, STEP_STATS, TOUCH_ALL};
-use crate::gpu::{record_optim_args, Batch, Gpu, GpuBuffer, RayBuffers};
+use crate::gpu::{record_optim_args, Batch, Gpu, GpuBuffer, Phase, PhaseClock, RayBuffers};
 use crate::grid::{Grid, SH_DIM};
 use crate::kernels;
 use crate::math::plenoxel::{occ_dims, PlenoxelCounts};
@@ -114,10 +114,16 @@ impl VulkanPlenoxels {
     }
 
     /// Upload rays (and targets), start a batch and record the step reset and the occupancy
-    /// refresh every march kernel needs first. Returns the batch and the device addresses of the
-    /// rays, targets and per-ray output.
-    fn begin(&mut self, rays: &[f32], targets: Option<&[f32]>) -> Result<(Batch, [u64; 3])> {
+    /// refresh every march kernel needs first (the upload charged to `clock`). Returns the batch
+    /// and the device addresses of the rays, targets and per-ray output.
+    fn begin(
+        &mut self,
+        rays: &[f32],
+        targets: Option<&[f32]>,
+        clock: &mut PhaseClock,
+    ) -> Result<(Batch, [u64; 3])> {
         let addrs = self.rays.upload(&self.gpu, rays, targets)?;
+        clock.mark(Phase::Upload);
         let mut b = self.gpu.batch()?;
         self.record_step_reset(&mut b);
         self.record_occupancy(&mut b)?;
@@ -125,7 +131,13 @@ impl VulkanPlenoxels {
     }
 
     /// Upload a batch and record occupancy + the fused train kernel (gradients += data term).
-    fn record_train(&mut self, rays: &[f32], targets: &[f32], stop_thresh: f32) -> Result<Batch> {
+    fn record_train(
+        &mut self,
+        rays: &[f32],
+        targets: &[f32],
+        stop_thresh: f32,
+        clock: &mut PhaseClock,
+    ) -> Result<Batch> {
         let n = rays.len() / 6;
         ensure!(
             n > 0 && targets.len() == 3 * n,
@@ -133,7 +145,7 @@ impl VulkanPlenoxels {
             targets.len() / 3
         );
         let mp = march_params(&self.meta, stop_thresh);
-        let (mut b, [ray_buf, target_buf, loss_buf]) = self.begin(rays, Some(targets))?;
+        let (mut b, [ray_buf, target_buf, loss_buf]) = self.begin(rays, Some(targets), clock)?;
         b.dispatch_1d(
             &kernels::plenoxel_train::INFO,
             &kernels::plenoxel_train::Push {
@@ -174,7 +186,8 @@ impl Plenoxels for VulkanPlenoxels {
 
     fn step(&mut self, rays: &[f32], targets: &[f32], p: &StepParams) -> Result<StepStats> {
         let n = rays.len() / 6;
-        let mut b = self.record_train(rays, targets, p.stop_thresh)?;
+        let mut clock = PhaseClock::start();
+        let mut b = self.record_train(rays, targets, p.stop_thresh, &mut clock)?;
         if let Some(t) = p.tv {
             let span = t.count + self.meta.res[1] * self.meta.res[2];
             for (data, grad, channels, lambda) in [
@@ -200,19 +213,25 @@ impl Plenoxels for VulkanPlenoxels {
             }
         }
         self.record_rmsprop(&mut b, p)?;
+        clock.mark(Phase::Record);
         let times = b.submit()?;
+        clock.absorb(&times.host);
         let loss = self.ray_loss(n)?;
         let mse = loss.iter().map(|&l| l as f64).sum::<f64>() / (3 * n) as f64;
+        let counts = self.read_stats()?;
+        clock.mark(Phase::Readback);
         Ok(StepStats {
             mse,
-            counts: self.read_stats()?,
+            counts,
             device_ns: times.total_ns(),
+            host: clock.times,
         })
     }
 
     fn gradients(&mut self, rays: &[f32], targets: &[f32], stop_thresh: f32) -> Result<Gradients> {
         let n = rays.len() / 6;
-        self.record_train(rays, targets, stop_thresh)?.submit()?;
+        self.record_train(rays, targets, stop_thresh, &mut PhaseClock::start())?
+            .submit()?;
         let g = Gradients {
             ray_loss: self.ray_loss(n)?,
             density: self.grad_density.download()?,
@@ -235,7 +254,7 @@ impl Plenoxels for VulkanPlenoxels {
     fn render(&mut self, rays: &[f32], stop_thresh: f32) -> Result<(Vec<f32>, PlenoxelCounts)> {
         let n = rays.len() / 6;
         let mp = march_params(&self.meta, stop_thresh);
-        let (mut b, [ray_buf, _, out_buf]) = self.begin(rays, None)?;
+        let (mut b, [ray_buf, _, out_buf]) = self.begin(rays, None, &mut PhaseClock::start())?;
         b.dispatch_1d(
             &kernels::plenoxel_fwd::INFO,
             &kernels::plenoxel_fwd::Push {
@@ -265,7 +284,7 @@ impl Plenoxels for VulkanPlenoxels {
         let n = rays.len() / 6;
         let mp = march_params(&self.meta, stop_thresh);
         let out = self.gpu.zeros::<u32>(self.allocated())?;
-        let (mut b, [ray_buf, _, _]) = self.begin(rays, None)?;
+        let (mut b, [ray_buf, _, _]) = self.begin(rays, None, &mut PhaseClock::start())?;
         b.dispatch_1d(
             &kernels::plenoxel_weights::INFO,
             &kernels::plenoxel_weights::Push {

@@ -13,6 +13,7 @@ use crate::cpu::surface_reg::{
 };
 use crate::cpu::surface_train::{train, SurfaceGrads};
 use crate::cpu::{surface_rmsprop_sparse, tv, Stage2Params, SurfaceRmsProp};
+use crate::gpu::{Phase, PhaseClock};
 use crate::grid::surface::SurfaceGrid;
 use crate::grid::SH_DIM;
 use crate::math::surface_blocks::{SkipRef, SURF_BLOCK_SHIFT_CPU};
@@ -168,6 +169,7 @@ impl SurfaceBackend for CpuSurface {
         targets: &[f32],
         p: &SurfaceStepParams,
     ) -> Result<SurfaceStepStats> {
+        let mut clock = PhaseClock::start();
         let sp = surface_params(&self.grid, p.a, p.stop_thresh);
         let n = rays.len() / 6;
         self.refresh_blocks(p.lr_delta, p.beta)?;
@@ -194,14 +196,18 @@ impl SurfaceBackend for CpuSurface {
         self.optimise(p, &plan);
         self.refresh.after_update(p.lr_delta, p.beta);
         let nf = n.max(1) as f64;
-        Ok(SurfaceStepStats {
+        let mut stats = SurfaceStepStats {
             mse: losses.iter().map(|l| l.sq_err as f64).sum::<f64>() / (3.0 * nf),
             entropy: losses.iter().map(|l| l.entropy as f64).sum::<f64>() / nf,
             consistency: losses.iter().map(|l| l.consistency as f64).sum::<f64>() / nf,
             reg_loss,
             counts,
             device_ns: 0.0,
-        })
+            host: Default::default(),
+        };
+        clock.mark(Phase::Compute);
+        stats.host = clock.times;
+        Ok(stats)
     }
 
     fn render(&mut self, rays: &[f32], a: f32, stop_thresh: f32) -> Result<(Vec<f32>, SurfCounts)> {

@@ -132,6 +132,8 @@ pub struct SurfaceStepStats {
     pub counts: TrainCounts,
     /// Device time of the step's kernels in ns (0 on the CPU backend).
     pub device_ns: f64,
+    /// Host time of the step by phase (upload to readback on Vulkan, compute on the CPU).
+    pub host: crate::gpu::StepTimes,
 }
 
 /// The optimiser's running averages: δ, σα, SH.

@@ -22,7 +22,7 @@ use crate::cpu::surface_fwd::SurfaceParams;
 use crate::cpu::surface_reg::{row_slots, NormalPrefix};
 use crate::cpu::surface_train::{SurfaceLoss, SURF_MAX_HITS};
 use crate::cpu::SurfaceRmsProp;
-use crate::gpu::{Batch, BatchTimes, Gpu, GpuBuffer, RayBuffers};
+use crate::gpu::{Batch, BatchTimes, Gpu, GpuBuffer, Phase, PhaseClock, RayBuffers};
 use crate::grid::surface::SurfaceGrid;
 use crate::grid::SH_DIM;
 use crate::kernels;
@@ -193,14 +193,21 @@ impl VulkanSurface {
     }
 
     /// Upload rays (and targets), start a batch and record the step reset (touched count) and the
-    /// counters' reset. Returns the batch and the addresses of rays, targets and per-ray output.
-    fn begin(&mut self, rays: &[f32], targets: Option<&[f32]>) -> Result<(Batch, [u64; 3])> {
+    /// counters' reset (the upload, and what preceded it since the last mark, charged to `clock`).
+    /// Returns the batch and the addresses of rays, targets and per-ray output.
+    fn begin(
+        &mut self,
+        rays: &[f32],
+        targets: Option<&[f32]>,
+        clock: &mut PhaseClock,
+    ) -> Result<(Batch, [u64; 3])> {
         ensure!(
             rays.len().is_multiple_of(6),
             "rays must be 6 floats each, got {} floats",
             rays.len()
         );
         let addrs = self.rays.upload(&self.gpu, rays, targets)?;
+        clock.mark(Phase::Upload);
         let mut b = self.gpu.batch()?;
         b.fill_zero_range(&self.step, 0, 4 * STEP_N as u64);
         b.fill_zero(&self.stats);
@@ -215,6 +222,7 @@ impl VulkanSurface {
         rays: &[f32],
         targets: &[f32],
         p: &SurfaceStepParams,
+        clock: &mut PhaseClock,
     ) -> Result<Batch> {
         let n = rays.len() / 6;
         ensure!(
@@ -229,8 +237,9 @@ impl VulkanSurface {
             p.a
         );
         let sp = surface_params(&self.meta, p.a, p.stop_thresh);
+        clock.mark(Phase::Record);
         self.params.write(&[train_params(&sp, &batch_loss(n, p))])?;
-        let (mut b, [ray_buf, target_buf, out_buf]) = self.begin(rays, Some(targets))?;
+        let (mut b, [ray_buf, target_buf, out_buf]) = self.begin(rays, Some(targets), clock)?;
         if let Some(margin) = self.refresh.before_pass(p.lr_delta, p.beta) {
             self.record_blocks(&mut b, margin)?;
         }
@@ -417,7 +426,8 @@ impl VulkanSurface {
         p: &SurfaceStepParams,
     ) -> Result<SurfaceGradients> {
         let n = rays.len() / 6;
-        self.record_train(rays, targets, p)?.submit()?;
+        self.record_train(rays, targets, p, &mut PhaseClock::start())?
+            .submit()?;
         let rows = self.rows;
         let g = SurfaceGradients {
             ray_loss: self.ray_loss(n)?,
@@ -450,24 +460,30 @@ impl VulkanSurface {
         p: &SurfaceStepParams,
     ) -> Result<(SurfaceStepStats, BatchTimes)> {
         let n = rays.len() / 6;
-        let mut b = self.record_train(rays, targets, p)?;
+        let mut clock = PhaseClock::start();
+        let mut b = self.record_train(rays, targets, p, &mut clock)?;
         let plan = RegPlan::new(p, &self.normal_prefix, self.axis_reach);
         self.record_regularisers(&mut b, p, &plan)?;
         self.record_rmsprop(&mut b, p, &plan)?;
+        clock.mark(Phase::Record);
         let times = b.submit()?;
+        clock.absorb(&times.host);
         self.refresh.after_update(p.lr_delta, p.beta);
         let loss = self.ray_loss(n)?;
         let nf = n as f64;
         let sum = |f: fn(&RayLoss) -> f32| loss.iter().map(|l| f(l) as f64).sum::<f64>();
         let reg: Vec<f32> = self.reg_loss.download()?;
-        let stats = SurfaceStepStats {
+        let mut stats = SurfaceStepStats {
             mse: sum(|l| l.sq_err) / (3.0 * nf),
             reg_loss: reg.iter().map(|&x| x as f64).sum(),
             entropy: sum(|l| l.entropy) / nf,
             consistency: sum(|l| l.consistency) / nf,
             counts: self.read_train_counts()?,
             device_ns: times.total_ns(),
+            host: Default::default(),
         };
+        clock.mark(Phase::Readback);
+        stats.host = clock.times;
         Ok((stats, times))
     }
 }
@@ -488,7 +504,7 @@ impl SurfaceBackend for VulkanSurface {
 
     fn render(&mut self, rays: &[f32], a: f32, stop_thresh: f32) -> Result<(Vec<f32>, SurfCounts)> {
         let n = rays.len() / 6;
-        let (mut b, [ray_buf, _, out_buf]) = self.begin(rays, None)?;
+        let (mut b, [ray_buf, _, out_buf]) = self.begin(rays, None, &mut PhaseClock::start())?;
         let sp = surface_params(&self.meta, a, stop_thresh);
         if let Some(margin) = self.refresh.before_pass(0.0, 0.0) {
             self.record_blocks(&mut b, margin)?;
