@@ -21,7 +21,8 @@ impl Devices {
     }
 
     /// The Vulkan device, opened now if it is not yet (validation on when
-    /// `ALPHASURF_VALIDATION` is set).
+    /// `ALPHASURF_VALIDATION` is set; data moved through staging buffers, as on a discrete GPU,
+    /// when `ALPHASURF_FORCE_STAGING` is).
     pub fn gpu(&mut self) -> Result<&Gpu> {
         if self.opened.is_none() {
             self.opened = Some(open(self.index)?);
@@ -76,6 +77,6 @@ fn open(index: Option<usize>) -> Result<Gpu> {
     Gpu::new(&GpuOptions {
         device: index,
         validation: std::env::var_os("ALPHASURF_VALIDATION").is_some(),
-        force_staging: false,
+        force_staging: std::env::var_os("ALPHASURF_FORCE_STAGING").is_some(),
     })
 }
