@@ -202,8 +202,26 @@ impl Gpu {
 
     /// A zero-filled device buffer of `len` elements of `T`.
     pub fn zeros<T: Pod>(&self, len: usize) -> Result<GpuBuffer> {
+        self.zeros_in::<T>(len, MemoryLocation::GpuOnly, "zeros")
+    }
+
+    /// A zero-filled buffer of `len` elements of `T` in host-visible memory that the host writes
+    /// and kernels read (per-step inputs: rays, targets, parameters). Writing it is a copy into
+    /// its mapping on every device, with no staging buffer and no submission.
+    pub fn host_to_device<T: Pod>(&self, len: usize) -> Result<GpuBuffer> {
+        self.zeros_in::<T>(len, MemoryLocation::CpuToGpu, "host-to-device")
+    }
+
+    /// A zero-filled buffer of `len` elements of `T` in host-visible memory that copies recorded
+    /// in a batch fill and the host reads after it (per-step results); reading it is a copy from
+    /// its mapping on every device, with no staging buffer and no submission.
+    pub fn device_to_host<T: Pod>(&self, len: usize) -> Result<GpuBuffer> {
+        self.zeros_in::<T>(len, MemoryLocation::GpuToCpu, "device-to-host")
+    }
+
+    fn zeros_in<T: Pod>(&self, len: usize, at: MemoryLocation, name: &str) -> Result<GpuBuffer> {
         let bytes = (len * std::mem::size_of::<T>()) as u64;
-        let buf = GpuBuffer::new(self, bytes, MemoryLocation::GpuOnly, "zeros")?;
+        let buf = GpuBuffer::new(self, bytes, at, name)?;
         let mut b = self.batch()?;
         b.fill_zero(&buf);
         b.submit()?;

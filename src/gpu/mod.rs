@@ -1,8 +1,9 @@
 //! Vulkan compute runtime: instance and device choice (`device`), the context with its allocator
 //! and pipelines (`context`), RAII buffers addressed by device address (`buffer`), batched
 //! submission with timestamp queries (`batch`), per-kernel profiles (`profile`), and what the Vulkan
-//! backends share: per-batch ray buffers (`ray_buffers`), the `optim_args` recording
-//! (`optim_args`), the host time of a training step by phase (`step_times`).
+//! backends share: per-batch ray buffers (`ray_buffers`), per-step results copied back at the end
+//! of a batch (`readback`), the `optim_args` recording (`optim_args`), the host time of a training
+//! step by phase (`step_times`).
 
 mod batch;
 mod buffer;
@@ -12,6 +13,7 @@ mod instance;
 mod optim_args;
 mod profile;
 mod ray_buffers;
+mod readback;
 mod step_times;
 
 pub use batch::{Batch, BatchTimes};
@@ -21,6 +23,7 @@ pub use device::{pick_default, DeviceInfo, DeviceKind};
 pub use optim_args::record_optim_args;
 pub use profile::Profile;
 pub use ray_buffers::RayBuffers;
+pub use readback::Readback;
 pub use step_times::{Phase, PhaseClock, StepTimes};
 
 use std::sync::OnceLock;

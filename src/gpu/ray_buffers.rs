@@ -1,6 +1,7 @@
 //! Per-batch ray buffers of the Vulkan backends: rays (6 floats each), their target colours (3
 //! floats each) and a per-ray output whose size the backend chooses, grown to the next power of
-//! two of rays when a batch does not fit.
+//! two of rays when a batch does not fit. Rays and targets live in host-visible memory, so an
+//! upload is a copy into their mapping, with no staging buffer or submission on any device.
 
 use super::{Gpu, GpuBuffer};
 use anyhow::Result;
@@ -37,8 +38,8 @@ impl RayBuffers {
             let cap = n.next_power_of_two();
             self.bufs = Some(Allocated {
                 capacity: cap,
-                rays: gpu.zeros::<f32>(6 * cap)?,
-                targets: gpu.zeros::<f32>(3 * cap)?,
+                rays: gpu.host_to_device::<f32>(6 * cap)?,
+                targets: gpu.host_to_device::<f32>(3 * cap)?,
                 out: gpu.zeros::<u8>(self.out_bytes * cap)?,
             });
         }

@@ -3,7 +3,9 @@
 
 use super::{march_params, Gradients, Plenoxels, StepParams, StepStats};
 use crate::cpu::step::{STEP_FLAGS, STEP_N, STEP_STATS, TOUCH_ALL};
-use crate::gpu::{record_optim_args, Batch, Gpu, GpuBuffer, Phase, PhaseClock, RayBuffers};
+use crate::gpu::{
+    record_optim_args, Batch, Gpu, GpuBuffer, Phase, PhaseClock, RayBuffers, Readback,
+};
 use crate::grid::{Grid, SH_DIM};
 use crate::kernels;
 use crate::math::plenoxel::{occ_dims, PlenoxelCounts};
@@ -28,6 +30,8 @@ pub struct VulkanPlenoxels {
     /// Per-batch rays, targets and per-ray output: rgb (3 floats) for render, the squared error
     /// (1 float) for training.
     rays: RayBuffers,
+    /// A training step's per-ray losses and counters, copied back at the end of its batch.
+    readback: Readback,
 }
 
 impl VulkanPlenoxels {
@@ -51,6 +55,7 @@ impl VulkanPlenoxels {
             },
             args: gpu.zeros::<u32>(3)?,
             rays: RayBuffers::new(3 * std::mem::size_of::<f32>()),
+            readback: Readback::default(),
             meta: Grid {
                 links: Vec::new(),
                 density: Vec::new(),
@@ -213,12 +218,24 @@ impl Plenoxels for VulkanPlenoxels {
             }
         }
         self.record_rmsprop(&mut b, p)?;
+        self.readback.record(
+            &self.gpu,
+            &mut b,
+            &[
+                (self.rays.out(), 0, 4 * n as u64),
+                (
+                    &self.step,
+                    4 * STEP_STATS as u64,
+                    std::mem::size_of::<PlenoxelCounts>() as u64,
+                ),
+            ],
+        )?;
         clock.mark(Phase::Record);
         let times = b.submit()?;
         clock.absorb(&times.host);
-        let loss = self.ray_loss(n)?;
+        let loss: Vec<f32> = self.readback.part(0)?;
         let mse = loss.iter().map(|&l| l as f64).sum::<f64>() / (3 * n) as f64;
-        let counts = self.read_stats()?;
+        let counts = self.readback.part::<PlenoxelCounts>(1)?[0];
         clock.mark(Phase::Readback);
         Ok(StepStats {
             mse,

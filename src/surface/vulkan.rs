@@ -22,7 +22,7 @@ use crate::cpu::surface_fwd::SurfaceParams;
 use crate::cpu::surface_reg::{row_slots, NormalPrefix};
 use crate::cpu::surface_train::{SurfaceLoss, SURF_MAX_HITS};
 use crate::cpu::SurfaceRmsProp;
-use crate::gpu::{Batch, BatchTimes, Gpu, GpuBuffer, Phase, PhaseClock, RayBuffers};
+use crate::gpu::{Batch, BatchTimes, Gpu, GpuBuffer, Phase, PhaseClock, RayBuffers, Readback};
 use crate::grid::surface::SurfaceGrid;
 use crate::grid::SH_DIM;
 use crate::kernels;
@@ -111,6 +111,9 @@ pub struct VulkanSurface {
     /// Per-batch rays, targets and per-ray output: `RayLoss` (16 bytes) for training, `SurfOut`
     /// (20 bytes) for rendering.
     rays: RayBuffers,
+    /// A training step's per-ray losses, regulariser values and counters, copied back at the end
+    /// of its batch.
+    readback: Readback,
 }
 
 impl VulkanSurface {
@@ -171,7 +174,7 @@ impl VulkanSurface {
                 gpu.upload(&init)?
             },
             args: gpu.zeros::<u32>(3)?,
-            params: gpu.zeros::<SurfTrainParams>(1)?,
+            params: gpu.host_to_device::<SurfTrainParams>(1)?,
             levels: gpu.upload(&levels)?,
             stats: gpu.zeros::<TrainCounts>(1)?,
             axis_nbrs: upload_nonempty(gpu, &axis_nbrs)?,
@@ -182,6 +185,7 @@ impl VulkanSurface {
             reg_loss: gpu.zeros::<f32>(2)?,
             reg_skipped: gpu.zeros::<u32>(1)?,
             rays: RayBuffers::new(std::mem::size_of::<SurfOut>()),
+            readback: Readback::default(),
             meta: SurfaceGrid {
                 links: Vec::new(),
                 delta: Vec::new(),
@@ -465,20 +469,33 @@ impl VulkanSurface {
         let plan = RegPlan::new(p, &self.normal_prefix, self.axis_reach);
         self.record_regularisers(&mut b, p, &plan)?;
         self.record_rmsprop(&mut b, p, &plan)?;
+        self.readback.record(
+            &self.gpu,
+            &mut b,
+            &[
+                (
+                    self.rays.out(),
+                    0,
+                    (n * std::mem::size_of::<RayLoss>()) as u64,
+                ),
+                (&self.reg_loss, 0, self.reg_loss.size()),
+                (&self.stats, 0, std::mem::size_of::<TrainCounts>() as u64),
+            ],
+        )?;
         clock.mark(Phase::Record);
         let times = b.submit()?;
         clock.absorb(&times.host);
         self.refresh.after_update(p.lr_delta, p.beta);
-        let loss = self.ray_loss(n)?;
+        let loss: Vec<RayLoss> = self.readback.part(0)?;
         let nf = n as f64;
         let sum = |f: fn(&RayLoss) -> f32| loss.iter().map(|l| f(l) as f64).sum::<f64>();
-        let reg: Vec<f32> = self.reg_loss.download()?;
+        let reg: Vec<f32> = self.readback.part(1)?;
         let mut stats = SurfaceStepStats {
             mse: sum(|l| l.sq_err) / (3.0 * nf),
             reg_loss: reg.iter().map(|&x| x as f64).sum(),
             entropy: sum(|l| l.entropy) / nf,
             consistency: sum(|l| l.consistency) / nf,
-            counts: self.read_train_counts()?,
+            counts: self.readback.part::<TrainCounts>(2)?[0],
             device_ns: times.total_ns(),
             host: Default::default(),
         };
