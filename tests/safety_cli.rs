@@ -54,7 +54,13 @@ fn refused(cmd: &mut Command, needles: &[&str]) -> String {
     err
 }
 
+/// The built-in solid scene at 32² pixels and 12 views, in `dir/scene`.
 fn scene(dir: &Path) -> PathBuf {
+    small_scene(dir, "32", "12")
+}
+
+/// The built-in solid scene at `res`² pixels and `views` views, in `dir/scene`.
+fn small_scene(dir: &Path, res: &str, views: &str) -> PathBuf {
     let data = dir.join("scene");
     run_ok(
         bin()
@@ -63,9 +69,9 @@ fn scene(dir: &Path) -> PathBuf {
                 "--kind",
                 "solid",
                 "--res",
-                "32",
+                res,
                 "--views",
-                "12",
+                views,
             ])
             .args(["--spp", "1", "--gt-spacing", "0.05", "--out"])
             .arg(&data),
@@ -427,21 +433,7 @@ fn svox2_ckpt(path: &Path, shape: [u64; 3]) {
 #[test]
 fn bad_inputs_are_clear_errors() {
     let dir = tempfile::tempdir().unwrap();
-    let data = dir.path().join("scene");
-    run_ok(
-        bin()
-            .args([
-                "make-scene",
-                "--kind",
-                "solid",
-                "--res",
-                "16",
-                "--views",
-                "5",
-            ])
-            .args(["--spp", "1", "--gt-spacing", "0.05", "--out"])
-            .arg(&data),
-    );
+    let data = small_scene(dir.path(), "16", "5");
     // 6. Grids with an axis of one vertex (a renderer would index past it).
     for shape in [[1, 1, 1], [1, 32, 32], [1, 1, 2]] {
         let ck = dir
@@ -564,21 +556,7 @@ fn oversized_flags_are_refused_before_allocating() {
         );
     }
     assert!(!out.exists());
-    let data = dir.path().join("scene");
-    run_ok(
-        bin()
-            .args([
-                "make-scene",
-                "--kind",
-                "solid",
-                "--res",
-                "16",
-                "--views",
-                "5",
-            ])
-            .args(["--spp", "1", "--gt-spacing", "0.05", "--out"])
-            .arg(&data),
-    );
+    let data = small_scene(dir.path(), "16", "5");
     refused(
         bin()
             .args([
