@@ -18,6 +18,7 @@
 //! vertex). Everything is in grid coordinates: [`super::Mesh::to_blender`] maps it to world units.
 
 use super::Mesh;
+use crate::math::surface::surf_alpha;
 use crate::math::trilerp::{trilerp, trilerp_grad};
 use anyhow::{ensure, Result};
 use rayon::prelude::*;
@@ -201,7 +202,7 @@ fn cell_faces(inp: &MeshInput, cell: u32, faces: &mut Vec<[u64; 3]>, uses: &mut 
                 faces.push(face);
                 for (key, local) in [v0, v1, v2] {
                     let alpha = if inp.opacity.is_some() {
-                        1.0 - (-trilerp(&a, local).max(0.0)).exp()
+                        surf_alpha(trilerp(&a, local))
                     } else {
                         1.0
                     };
