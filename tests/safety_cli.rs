@@ -320,6 +320,18 @@ fn resume_cuts_the_log_back_and_validates_the_checkpoint() {
             .arg(&r),
         &["--res"],
     );
+    // An explicit `--preset fast` on a `paper` checkpoint is a clash too, although `fast` is the
+    // default (the checkpoint's preset is relabelled here: a real paper run is 50k steps).
+    let ck = checkpoint::load(&ckpt).unwrap();
+    let mut meta = ck.meta.clone();
+    meta["config"]["preset"] = "paper".into();
+    checkpoint::save(&ckpt, &ck.grid, &optim_refs(&ck.optim), &meta).unwrap();
+    refused(
+        bin()
+            .args(train_args(&data, &r))
+            .args(["--resume", "--preset", "fast", "--iters", "30"]),
+        &["--preset", "preset paper"],
+    );
     // A checkpoint whose configuration says checkpoint_every 0 is refused (was a panic).
     let ck = checkpoint::load(&ckpt).unwrap();
     let mut meta = ck.meta.clone();

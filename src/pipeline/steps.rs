@@ -145,7 +145,7 @@ impl<'g> Steps<'g> {
     /// files).
     fn train_options(&self, stage: Stage, data: &Path, out: &Path) -> TrainOptions {
         TrainOptions {
-            preset: self.preset,
+            preset: Some(self.preset),
             backend: self.backend(),
             seed: self.seed,
             overwrite: true,
@@ -186,7 +186,7 @@ impl<'g> Steps<'g> {
     ) -> Result<TrainedRun> {
         let opts = TrainOptions {
             init: Some(init.to_path_buf()),
-            category,
+            category: Some(category),
             iters,
             set: set.to_vec(),
             ..self.train_options(Stage::Surface, data, out)

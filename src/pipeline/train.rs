@@ -8,7 +8,6 @@ use super::{train_stage1, train_stage2};
 use crate::gpu::Gpu;
 use crate::run::dir::{ALL_STAGE1, ALL_STAGE2};
 use crate::run::{RunDir, RunStage};
-use crate::train::Category;
 use anyhow::{bail, Result};
 
 /// What `train` did: stage 1, stage 2, or both (`--stage all`, stage 1 absent when it was
@@ -52,7 +51,7 @@ pub fn train_all(opts: &TrainOptions, gpu: Option<&Gpu>) -> Result<TrainOutcome>
         out: s1_dir.clone(),
         resume: opts.resume && s1_ckpt.exists(),
         overwrite: opts.resume && !s1_ckpt.exists(),
-        category: Category::Thin,
+        category: None,
         set: Vec::new(),
         alpha_init_scale: None,
         surface_iters: None,

@@ -34,8 +34,9 @@ pub struct TrainOptions {
     pub init: Option<PathBuf>,
     /// Stage 2: the data category whose hyper-parameters from the paper's supplement apply
     /// (levels, learning rates, regulariser weights, truncation schedule).
-    #[arg(long, value_enum, default_value_t = Category::Thin)]
-    pub category: Category,
+    /// [default: thin]
+    #[arg(long, value_enum)]
+    pub category: Option<Category>,
     /// Stage 2: initial raw opacity σα = s·σ, s > 0. Default: preset `paper` 0.005 (the released
     /// code); preset `fast` 0.05 for thin, 0.01 for translucent, 0.005 otherwise, and at least
     /// 0.005·(N/128)^1.5 on a stage-1 grid of N³: its short schedule cannot raise σα far enough
@@ -52,9 +53,9 @@ pub struct TrainOptions {
     /// Run directory: checkpoints, test renders, metrics.json.
     #[arg(long)]
     pub out: PathBuf,
-    /// The schedule of both stages.
-    #[arg(long, value_enum, default_value_t = Preset::Fast)]
-    pub preset: Preset,
+    /// The schedule of both stages [default: fast].
+    #[arg(long, value_enum)]
+    pub preset: Option<Preset>,
     /// Where the kernels run.
     #[arg(long, value_enum, default_value_t = Backend::Auto)]
     pub backend: Backend,
@@ -89,18 +90,29 @@ pub struct TrainOptions {
 }
 
 impl TrainOptions {
+    /// The preset asked for, or the default `fast`. `None` in the field means "not given", so
+    /// `--resume` can tell an explicit `--preset fast` on a `paper` run from no flag at all.
+    pub fn preset(&self) -> Preset {
+        self.preset.unwrap_or(Preset::Fast)
+    }
+
+    /// The stage-2 category asked for, or the default `thin` (`None`: not given).
+    pub fn category(&self) -> Category {
+        self.category.unwrap_or(Category::Thin)
+    }
+
     /// The defaults of every flag, training `stage` on `data` into `out`.
     pub fn new(stage: Stage, data: PathBuf, out: PathBuf) -> TrainOptions {
         TrainOptions {
             stage,
             data,
             init: None,
-            category: Category::Thin,
+            category: None,
             alpha_init_scale: None,
             surface_iters: None,
             set: Vec::new(),
             out,
-            preset: Preset::Fast,
+            preset: None,
             backend: Backend::Auto,
             iters: None,
             res: None,
@@ -116,7 +128,7 @@ impl TrainOptions {
 
     /// The stage-1 configuration: the preset, then the overrides.
     pub fn stage1_config(&self) -> Result<Stage1Config> {
-        let mut cfg = Stage1Config::preset(self.preset)?;
+        let mut cfg = Stage1Config::preset(self.preset())?;
         cfg.seed = self.seed;
         if let Some(n) = self.iters {
             if n == 0 {
@@ -168,7 +180,7 @@ impl TrainOptions {
         if self.stage == Stage::Plenoxels {
             let stage2_only = [
                 ("--init", self.init.is_some()),
-                ("--category", self.category != Category::Thin),
+                ("--category", self.category.is_some()),
                 ("--set", !self.set.is_empty()),
                 ("--alpha-init-scale", self.alpha_init_scale.is_some()),
                 ("--surface-iters", self.surface_iters.is_some()),
@@ -216,7 +228,7 @@ impl TrainOptions {
     /// The stage-2 configuration for a stage-1 grid of `grid_n`³ vertices: the preset fitted to the
     /// grid, then the command line's overrides.
     pub fn stage2_config(&self, grid_n: u32) -> Result<SurfaceConfig> {
-        let mut cfg = SurfaceConfig::preset(self.preset, self.category)?;
+        let mut cfg = SurfaceConfig::preset(self.preset(), self.category())?;
         cfg.fit_grid(grid_n);
         cfg.seed = self.seed;
         if let Some(n) = self.surface_iters.or(self.iters) {

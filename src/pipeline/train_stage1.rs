@@ -9,7 +9,7 @@ use crate::gpu::Gpu;
 use crate::grid::Grid;
 use crate::plenoxel::{CpuPlenoxels, Plenoxels, VulkanPlenoxels};
 use crate::run::{RunDir, RunStage};
-use crate::train::{stage1, Preset, Stage1Config};
+use crate::train::{stage1, Stage1Config};
 use anyhow::{bail, Result};
 use std::time::Instant;
 
@@ -124,10 +124,7 @@ fn check_resume_flags(opts: &TrainOptions, cfg: &Stage1Config) -> Result<()> {
     let clashes = [
         ("--res", opts.res.is_some_and(|r| r != final_res)),
         ("--batch", opts.batch.is_some_and(|b| b != cfg.batch)),
-        (
-            "--preset",
-            opts.preset != Preset::Fast && opts.preset != cfg.preset,
-        ),
+        ("--preset", opts.preset.is_some_and(|p| p != cfg.preset)),
     ];
     let named: Vec<&str> = clashes.iter().filter(|c| c.1).map(|c| c.0).collect();
     if !named.is_empty() {

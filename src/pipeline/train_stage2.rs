@@ -11,7 +11,7 @@ use crate::grid::surface::SurfaceGrid;
 use crate::grid::{npz, Grid};
 use crate::run::{RunDir, RunStage};
 use crate::surface::{CpuSurface, SurfaceBackend, VulkanSurface};
-use crate::train::{stage1, stage2, Category, Preset, SurfaceConfig};
+use crate::train::{stage1, stage2, SurfaceConfig};
 use anyhow::{ensure, Context, Result};
 use std::path::Path;
 use std::time::Instant;
@@ -161,12 +161,9 @@ fn check_resume_flags(opts: &TrainOptions, cfg: &SurfaceConfig) -> Result<()> {
         ("--batch", opts.batch.is_some_and(|b| b != cfg.batch)),
         (
             "--category",
-            opts.category != Category::Thin && opts.category != cfg.category,
+            opts.category.is_some_and(|c| c != cfg.category),
         ),
-        (
-            "--preset",
-            opts.preset != Preset::Fast && opts.preset != cfg.preset,
-        ),
+        ("--preset", opts.preset.is_some_and(|p| p != cfg.preset)),
         ("--set", !opts.set.is_empty()),
         ("--alpha-init-scale", opts.alpha_init_scale.is_some()),
     ];
