@@ -216,14 +216,14 @@ mod tests {
     fn typed_choices_keep_their_command_line_names() {
         let a = train_args(&[]).unwrap();
         assert_eq!(
-            (a.preset, a.category, a.backend),
-            (Preset::Fast, Category::Thin, Backend::Auto)
+            (a.preset(), a.category(), a.preset, a.category, a.backend),
+            (Preset::Fast, Category::Thin, None, None, Backend::Auto)
         );
         let a =
             train_args(&["--preset", "paper", "--category", "dtu", "--backend", "cpu"]).unwrap();
         assert_eq!(
             (a.preset, a.category, a.backend),
-            (Preset::Paper, Category::Dtu, Backend::Cpu)
+            (Some(Preset::Paper), Some(Category::Dtu), Backend::Cpu)
         );
         for (flag, value) in [
             ("--category", "translucent"),
