@@ -63,6 +63,39 @@ fn make_scene_then_inspect() {
         assert!(stdout.contains(want), "missing '{want}' in:\n{stdout}");
     }
     assert!(!stdout.contains("warning"), "{stdout}");
+
+    // Writing the same scene again replaces it; a folder holding anything else is refused and
+    // left as it was.
+    let small = [
+        "--kind",
+        "thin",
+        "--res",
+        "16",
+        "--views",
+        "2",
+        "--gt-spacing",
+        "0.05",
+    ];
+    let again = [&["make-scene", "--out", o][..], &small[..]].concat();
+    let (ok, _, stderr) = alphasurf(&again);
+    assert!(ok, "{stderr}");
+    let other = d.path().join("other");
+    std::fs::create_dir(&other).unwrap();
+    std::fs::write(other.join("transforms_train.json"), "mine").unwrap();
+    let into_other = [
+        &["make-scene", "--out", other.to_str().unwrap()][..],
+        &small[..],
+    ]
+    .concat();
+    let (ok, _, stderr) = alphasurf(&into_other);
+    assert!(
+        !ok && stderr.contains("other") && stderr.contains("not a scene written by make-scene"),
+        "{stderr}"
+    );
+    assert_eq!(
+        std::fs::read_to_string(other.join("transforms_train.json")).unwrap(),
+        "mine"
+    );
 }
 
 #[test]

@@ -107,6 +107,9 @@ pub fn split_cameras(split: &str, n: u32, seed: u64) -> Vec<Mat4> {
         .collect()
 }
 
+/// `scene.json`'s "generator": marks a folder as a built-in scene that may be regenerated.
+const GENERATOR: &str = "alphasurf make-scene";
+
 /// Generates the dataset into `out` (created if needed).
 pub fn generate(out: &Path, opts: &GenerateOptions) -> anyhow::Result<GenerateReport> {
     let t0 = Instant::now();
@@ -125,6 +128,7 @@ pub fn generate(out: &Path, opts: &GenerateOptions) -> anyhow::Result<GenerateRe
         );
     }
     check_memory(&scene, opts)?;
+    check_output_dir(out)?;
     std::fs::create_dir_all(out)
         .with_context(|| format!("{}: cannot create directory", out.display()))?;
     let splits = opts.split_views();
@@ -259,6 +263,34 @@ pub fn sample_gt(scene: &Scene, spacing: f64, seed: u64) -> (Vec<[f32; 3]>, Vec<
     (all, ranges)
 }
 
+/// `out` must be new, empty, or a scene this command wrote before (its `scene.json` names the
+/// generator): files of anything else (a real dataset, a run) are never replaced.
+fn check_output_dir(out: &Path) -> anyhow::Result<()> {
+    if !out.exists() {
+        return Ok(());
+    }
+    if !out.is_dir() {
+        bail!("{}: exists and is not a directory", out.display());
+    }
+    let mut entries = std::fs::read_dir(out)
+        .with_context(|| format!("{}: cannot list directory", out.display()))?;
+    if entries.next().is_none() {
+        return Ok(());
+    }
+    let generator = std::fs::read(out.join("scene.json"))
+        .ok()
+        .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok())
+        .and_then(|v| v.get("generator")?.as_str().map(str::to_owned));
+    if generator.as_deref() != Some(GENERATOR) {
+        bail!(
+            "{}: not empty and not a scene written by make-scene (no scene.json of ours); \
+             its files would be replaced — give a new or empty --out",
+            out.display()
+        );
+    }
+    Ok(())
+}
+
 fn write_scene_json(
     out: &Path,
     scene: &Scene,
@@ -290,7 +322,7 @@ fn write_scene_json(
     let area = scene.area();
     let doc = json!({
         "name": scene.name,
-        "generator": "alphasurf make-scene",
+        "generator": GENERATOR,
         "seed": opts.seed,
         "bbox_min": v(lo), "bbox_max": v(hi),
         "objects": objects,
