@@ -1,9 +1,10 @@
 #version 460
 // surface_fwd — stage-2 (αSurf) forward rendering of a batch of rays (method.md §3.2).
 // Thread mapping: one invocation per ray.
-// Per ray: grid = p·scale + offset (direction normalised in grid space, so s is in voxels); DDA
-// walk over the cells of [0, n−1]³ front to back from t = 0; a cell with an unallocated corner is
-// skipped; cubic coefficients once per cell; per level τ_i that passes min/max, then segment
+// Per ray: grid = p·scale + offset (direction normalised in grid space, so s is in voxels); the
+// cell walk of glsl/lib/surface_walk.glsl (shared with surface_train): DDA over the cells of
+// [0, n−1]³ front to back from t = 0; a cell with an unallocated corner is skipped; cubic
+// coefficients once per cell; per level τ_i that passes min/max, then segment
 // culling (surf_segment_mask) the crossings of δ − τ_i on [0, L); only rising (front-face) crossings are hits, sorted by s within the cell; at
 // hit j: α = 1 − exp(−max(σα, 0)), colour max(0, SH + 0.5) (trilerped at the hit, basis on the unit
 // scene direction), α̃ = α·γ_a(j); C = Σ w_j c_j + T·1. The ray stops at the first hit with j ≥ a
@@ -52,6 +53,10 @@ layout(push_constant, scalar) uniform Push {
     uint block_shift;
 } pc;
 
+// The skip structure the cell walk reads.
+#define SURF_WALK_BLOCKS pc.blocks
+#include "surface_walk.glsl"
+
 void main() {
     uint r = flat_id();
     if (r >= pc.n_rays) return;
@@ -64,89 +69,29 @@ void main() {
     surf_ray(ro, rd, pc.scale, pc.offset, og, dn);
     float y[9];
     sh_basis(ray_unit(rd), y);
-    uint n = pc.n;
-    uint nz = n;
-    uint nyz = n * n;
     vec3 color = vec3(0.0);
     float T = 1.0;
     uint j = 0u;
     SurfCounts cnt = SURF_COUNTS_ZERO;
-    uint nb = surf_blocks_per_axis(n, pc.block_shift);
-    uint words = surf_live_words(n);
-    uint skipped = SURF_NO_BLOCK;
-    bool done = false;
-    // With the skip structure, only the span inside the allocated box (surface_blocks.glsl).
-    vec2 span = vec2(0.0, DDA_BIG);
-    if (pc.block_skip != 0u) {
-        uint bx = words + nb * nb * nb;
-        span = surf_box_span(og, dn, uvec3(pc.blocks.v[bx], pc.blocks.v[bx + 1u], pc.blocks.v[bx + 2u]),
-                             uvec3(pc.blocks.v[bx + 3u], pc.blocks.v[bx + 4u], pc.blocks.v[bx + 5u]));
-    }
-    Dda w = dda_init(og, dn, int(n), span.x < span.y ? span.x : DDA_BIG);
-    ivec3 l;
-    float t0, t1;
-    int lk[8];
-    float c[8];
-    uint mask = 0u;
-    vec3 q0, q1, cc; // the found cell's entry/exit points and cubic C1..C3
+    SkipRef blocks = SkipRef(pc.block_skip != 0u, pc.block_shift);
+    CellWalk walk = cell_walk_new(og, dn, lv, nl, blocks);
+    WalkCell cell;
     // Per level, the sign of δ − τ just before the last solved cell's exit (bits of face_pos /
     // face_neg) and that exit's t (FaceSigns in the twin).
     float face_t = 0.0;
     uint face_pos = 0u;
     uint face_neg = 0u;
-    while (!done) {
-        // Walk on to the next cell where some level can cross (all corners allocated, min/max and
-        // segment culling passed) before solving: lanes then reach the cubic solver together instead of
-        // one solving while the others idle through empty cells.
-        bool found = false;
-        while (dda_next(w, l, t0, t1)) {
-            if (t0 >= span.y) break; // past the allocated box
-            uint base = dda_cell_index(l, n);
-            if (pc.block_skip != 0u) {
-                uint bi = surf_block_index(l, nb, pc.block_shift);
-                uint word = pc.blocks.v[words + bi];
-                if ((word & SURF_MASK_BITS) == 0u
-                    && surf_block_skip(w, dn, int(n), l, bi, skipped, pc.block_shift,
-                                       word >> SURF_RADIUS_SHIFT)) {
-                    cnt.blocks_skipped++;
-                    continue;
-                }
-                if (!SURF_CELL_LIVE(pc.blocks, base)) continue;
-            }
-            cnt.cells++;
-            lk[0] = pc.links.v[base];
-            lk[1] = pc.links.v[base + 1u];
-            lk[2] = pc.links.v[base + nz];
-            lk[3] = pc.links.v[base + nz + 1u];
-            lk[4] = pc.links.v[base + nyz];
-            lk[5] = pc.links.v[base + nyz + 1u];
-            lk[6] = pc.links.v[base + nyz + nz];
-            lk[7] = pc.links.v[base + nyz + nz + 1u];
-            if (min(min(min(lk[0], lk[1]), min(lk[2], lk[3])), min(min(lk[4], lk[5]), min(lk[6], lk[7]))) < 0) continue;
-            for (int i = 0; i < 8; i++) c[i] = pc.delta.v[lk[i]];
-            mask = surf_level_mask(c, lv, nl);
-            if (mask != 0u) {
-                q0 = surf_local(w, og, dn, t0, l);
-                q1 = surf_local(w, og, dn, t1, l);
-                cc = cubic_cell(c, q0, dn);
-                mask = surf_segment_mask(c, cc, q0, q1, t1 - t0, lv, mask);
-            }
-            uint ns = uint(bitCount(mask));
-            cnt.solves += ns;
-            cnt.culled += nl - ns;
-            if (mask != 0u) {
-                found = true;
-                break;
-            }
-        }
-        if (!found) break;
+    bool done = false;
+    while (!done && cell_walk_next(walk, cell)) {
+        float t0 = cell.piece.t0;
+        float t1 = cell.piece.t1;
         precise float L = t1 - t0;
         float hs[SURF_CELL_KEEP];
         // Signs before the entry point: the last solved cell's, when it ended here.
         bool joined = t0 == face_t;
         uint epos, eneg;
-        uint nh = surf_cell_hits(c, cc, q0, q1, L, lv, mask, joined ? face_pos : 0u,
-                                 joined ? face_neg : 0u, hs, epos, eneg);
+        uint nh = surf_cell_hits(cell.c, cell.cc, cell.q0, cell.q1, L, lv, cell.mask,
+                                 joined ? face_pos : 0u, joined ? face_neg : 0u, hs, epos, eneg);
         face_t = t1;
         face_pos = epos;
         face_neg = eneg;
@@ -156,18 +101,18 @@ void main() {
                 done = true;
                 break;
             }
-            precise vec3 p = clamp(q0 + surf_pop(hs) * dn, 0.0, 1.0);
+            precise vec3 p = clamp(cell.q0 + surf_pop(hs) * dn, 0.0, 1.0);
             float wt[8];
             trilerp_weights(p, wt);
             precise float sa = 0.0;
-            for (int i = 0; i < 8; i++) sa += wt[i] * pc.opacity.v[lk[i]];
+            for (int i = 0; i < 8; i++) sa += wt[i] * pc.opacity.v[cell.lk[i]];
             float alpha = surf_alpha(sa);
             precise float at = alpha * surf_gamma(pc.a, j);
             float sh[27];
             for (int k = 0; k < 27; k++) sh[k] = 0.0;
             [[unroll]] for (int i = 0; i < 8; i++) {
                 float shv[27];
-                SH27_LOAD(pc.sh, uint(lk[i]), shv);
+                SH27_LOAD(pc.sh, uint(cell.lk[i]), shv);
                 [[unroll]] for (int k = 0; k < 27; k++) {
                     precise float acc = sh[k] + wt[i] * shv[k];
                     sh[k] = acc;
@@ -195,6 +140,10 @@ void main() {
             }
         }
     }
+    cnt.cells = walk.counts.cells;
+    cnt.solves = walk.counts.solves;
+    cnt.culled = walk.counts.culled;
+    cnt.blocks_skipped = walk.counts.blocks_skipped;
     SurfOut o;
     precise vec3 outc = color + vec3(T);
     o.rgb = outc;

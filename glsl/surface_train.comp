@@ -2,7 +2,8 @@
 // surface_train — one stage-2 (αSurf) training pass over a batch of rays, forward and backward
 // fused per ray (method.md §3.2–3.4): squared error, entropy LH and depth consistency Lc.
 // Thread mapping: one invocation per ray.
-// Forward: the walk of surface_fwd (same DDA, culling, per-cell hits, truncation, early stop),
+// Forward: the cell walk of glsl/lib/surface_walk.glsl (shared with surface_fwd: same DDA,
+// skipping, culling) with surface_fwd's per-cell hits, truncation and early stop,
 // recording the ≤ a ≤ SURF_MAX_HITS composited hits in registers together with what the
 // backward needs of them (hit point, depth, σα, α̃, raw colour, and the derivatives along the ray
 // of σα, raw colour and δ: dσα/ds, draw/ds, f′(s), plus the f′ guard verdict).
@@ -62,6 +63,10 @@ layout(push_constant, scalar) uniform Push {
     uint block_shift;
 } pc;
 
+// The skip structure the cell walk reads.
+#define SURF_WALK_BLOCKS pc.skip
+#include "surface_walk.glsl"
+
 #include "step.glsl"
 
 // What the backward pass needs of a composited hit (surface_train records ≤ SURF_MAX_HITS).
@@ -95,21 +100,6 @@ HitRec get_hit(HitRec rec[SURF_MAX_HITS], uint k) {
     return v;
 }
 
-// Corner links of cell l (paper order).
-void cell_links(ivec3 l, out int lk[8]) {
-    uint base = dda_cell_index(l, pc.n);
-    uint nz = pc.n;
-    uint nyz = pc.n * pc.n;
-    lk[0] = pc.links.v[base];
-    lk[1] = pc.links.v[base + 1u];
-    lk[2] = pc.links.v[base + nz];
-    lk[3] = pc.links.v[base + nz + 1u];
-    lk[4] = pc.links.v[base + nyz];
-    lk[5] = pc.links.v[base + nyz + 1u];
-    lk[6] = pc.links.v[base + nyz + nz];
-    lk[7] = pc.links.v[base + nyz + nz + 1u];
-}
-
 // ∂w_i/∂s at local point p moving along unit direction d.
 void trilerp_dwds(vec3 p, vec3 d, out float dw[8]) {
     vec3 q = vec3(1.0) - p;
@@ -137,7 +127,7 @@ uint flush(ivec3 cell, float y[9], inout float acc_d[8], inout float acc_a[8], i
            inout uint nz_d, inout uint nz_a, inout uint nz_c) {
     if (cell.x < 0) return 0u;
     int lk[8];
-    cell_links(cell, lk);
+    cell_links(pc.links, uvec3(pc.n), cell, lk);
     uint adds = 0u;
     for (uint i = 0u; i < 8u; i++) {
         float gd = acc_d[i];
@@ -198,78 +188,39 @@ void main() {
     float inv_len = len > 0.0 ? 1.0 / len : 0.0;
     float y[9];
     sh_basis(ray_unit(rd), y);
-    uint n = pc.n;
     TrainCounts cnt = TRAIN_COUNTS_ZERO;
 
     // Forward walk, recording the composited hits (registers: HitRec, set_hit).
     HitRec rec[SURF_MAX_HITS];
     float T = 1.0;
     uint j = 0u;
-    bool done = false;
-    ivec3 l;
-    float t0, t1;
-    int lk[8];
-    float c[8];
-    uint mask = 0u;
-    vec3 q0, q1, cc; // the found cell's entry/exit points and cubic C1..C3
+    SkipRef blocks = SkipRef(true, pc.block_shift);
+    CellWalk walk = cell_walk_new(og, dn, lv, nl, blocks);
+    WalkCell cell;
     // Per level, the sign of δ − τ just before the last solved cell's exit (bits of face_pos /
     // face_neg) and that exit's t (FaceSigns in the twin).
     float face_t = 0.0;
     uint face_pos = 0u;
     uint face_neg = 0u;
-    uint nb = surf_blocks_per_axis(n, pc.block_shift);
-    uint bbase = surf_live_words(n);
-    uint skipped = SURF_NO_BLOCK;
-    // Only the span inside the allocated box (surface_blocks.glsl).
-    uint bx = bbase + nb * nb * nb;
-    vec2 span = surf_box_span(og, dn, uvec3(pc.skip.v[bx], pc.skip.v[bx + 1u], pc.skip.v[bx + 2u]),
-                              uvec3(pc.skip.v[bx + 3u], pc.skip.v[bx + 4u], pc.skip.v[bx + 5u]));
-    Dda w = dda_init(og, dn, int(n), span.x < span.y ? span.x : DDA_BIG);
-    while (!done) {
-        // Walk on to the next cell where some level can cross before solving (as surface_fwd).
-        bool found = false;
-        while (dda_next(w, l, t0, t1)) {
-            if (t0 >= span.y) break; // past the allocated box
-            uint bi = surf_block_index(l, nb, pc.block_shift);
-            uint word = pc.skip.v[bbase + bi];
-            if ((word & SURF_MASK_BITS) == 0u
-                && surf_block_skip(w, dn, int(n), l, bi, skipped, pc.block_shift,
-                                   word >> SURF_RADIUS_SHIFT)) {
-                cnt.blocks_skipped++;
-                continue;
-            }
-            if (!SURF_CELL_LIVE(pc.skip, dda_cell_index(l, n))) continue;
-            cnt.cells++;
-            cell_links(l, lk);
-            [[unroll]] for (int i = 0; i < 8; i++) c[i] = pc.delta.v[lk[i]];
-            mask = surf_level_mask(c, lv, nl);
-            if (mask != 0u) {
-                q0 = surf_local(w, og, dn, t0, l);
-                q1 = surf_local(w, og, dn, t1, l);
-                cc = cubic_cell(c, q0, dn);
-                mask = surf_segment_mask(c, cc, q0, q1, t1 - t0, lv, mask);
-            }
-            uint ns = uint(bitCount(mask));
-            cnt.solves += ns;
-            cnt.culled += nl - ns;
-            if (mask != 0u) {
-                found = true;
-                break;
-            }
-        }
-        if (!found) break;
+    bool done = false;
+    while (!done && cell_walk_next(walk, cell)) {
+        ivec3 l = cell.piece.cell;
+        float t0 = cell.piece.t0;
+        float t1 = cell.piece.t1;
         precise float L = t1 - t0;
         float hs[SURF_CELL_KEEP];
         // Signs before the entry point: the last solved cell's, when it ended here.
         bool joined = t0 == face_t;
         uint epos, eneg;
-        uint nh = surf_cell_hits(c, cc, q0, q1, L, lv, mask, joined ? face_pos : 0u,
-                                 joined ? face_neg : 0u, hs, epos, eneg);
+        uint nh = surf_cell_hits(cell.c, cell.cc, cell.q0, cell.q1, L, lv, cell.mask,
+                                 joined ? face_pos : 0u, joined ? face_neg : 0u, hs, epos, eneg);
         face_t = t1;
         face_pos = epos;
         face_neg = eneg;
-        float cmin = min(min(min(c[0], c[1]), min(c[2], c[3])), min(min(c[4], c[5]), min(c[6], c[7])));
-        float cmax = max(max(max(c[0], c[1]), max(c[2], c[3])), max(max(c[4], c[5]), max(c[6], c[7])));
+        float cmin = min(min(min(cell.c[0], cell.c[1]), min(cell.c[2], cell.c[3])),
+                         min(min(cell.c[4], cell.c[5]), min(cell.c[6], cell.c[7])));
+        float cmax = max(max(max(cell.c[0], cell.c[1]), max(cell.c[2], cell.c[3])),
+                         max(max(cell.c[4], cell.c[5]), max(cell.c[6], cell.c[7])));
         for (uint h = 0u; h < nh; h++) {
             if (float(j) >= a || j >= SURF_MAX_HITS) {
                 cnt.cut++;
@@ -277,13 +228,13 @@ void main() {
                 break;
             }
             precise float s_hit = surf_pop(hs);
-            precise vec3 p = clamp(q0 + s_hit * dn, 0.0, 1.0);
+            precise vec3 p = clamp(cell.q0 + s_hit * dn, 0.0, 1.0);
             float wt[8];
             trilerp_weights(p, wt);
             float dw[8];
             trilerp_dwds(p, dn, dw);
             precise float sa = 0.0;
-            [[unroll]] for (int i = 0; i < 8; i++) sa += wt[i] * pc.opacity.v[lk[i]];
+            [[unroll]] for (int i = 0; i < 8; i++) sa += wt[i] * pc.opacity.v[cell.lk[i]];
             precise float at = surf_alpha(sa) * surf_gamma(a, j);
             // Shading and the derivatives along the ray the backward pass needs.
             precise vec3 raw = vec3(0.5);
@@ -291,9 +242,9 @@ void main() {
             precise float dsa = 0.0;
             precise float f1 = 0.0;
             [[unroll]] for (int i = 0; i < 8; i++) {
-                uint row = uint(lk[i]);
+                uint row = uint(cell.lk[i]);
                 dsa += dw[i] * pc.opacity.v[row];
-                f1 += dw[i] * c[i];
+                f1 += dw[i] * cell.c[i];
                 float shv[27];
                 SH27_LOAD(pc.sh, row, shv);
                 [[unroll]] for (uint ch = 0u; ch < 3u; ch++) {
@@ -327,6 +278,10 @@ void main() {
         }
     }
     uint nh = j;
+    cnt.cells = walk.counts.cells;
+    cnt.solves = walk.counts.solves;
+    cnt.culled = walk.counts.culled;
+    cnt.blocks_skipped = walk.counts.blocks_skipped;
 
     // Compositing from the records, and the squared error. Loops over the records run over all
     // SURF_MAX_HITS slots with a guard, unrolled, so that every index is a constant.

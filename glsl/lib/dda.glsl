@@ -189,6 +189,14 @@ Dda dda_init(vec3 o, vec3 d, int n, float t_min) {
     return s;
 }
 
+// One cell of a walk and the t range [t0, t1] the ray spends in it (dda_next's out parameters;
+// twin: math::dda::DdaPiece).
+struct DdaPiece {
+    ivec3 cell; // cell index l ∈ [0, n−2]³
+    float t0;   // entry t
+    float t1;   // exit t
+};
+
 // Next cell of the walk, front to back: its index and the t range [t0, t1] (t1 > t0).
 // Returns false when the walk is over. Written as one do-while (no return inside the loop), which
 // llvmpipe runs faster than a while loop with a return inside (docs/tuning.md); past the end a

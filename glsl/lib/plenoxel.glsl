@@ -88,21 +88,6 @@ uint march_skip(March m, uint k, ivec3 l) {
     return max(k + 1u, uint(max(next, 0.0)));
 }
 
-// Links of the 8 corners of cell l (order 4a + 2b + c).
-void cell_links(ivec3 l, out int lk[8]) {
-    uint ny = pc.res.y, nz = pc.res.z;
-    uint base = (uint(l.x) * ny + uint(l.y)) * nz + uint(l.z);
-    lk[0] = pc.links.v[base];
-    lk[1] = pc.links.v[base + 1u];
-    lk[2] = pc.links.v[base + nz];
-    lk[3] = pc.links.v[base + nz + 1u];
-    uint bx = base + ny * nz;
-    lk[4] = pc.links.v[bx];
-    lk[5] = pc.links.v[bx + 1u];
-    lk[6] = pc.links.v[bx + nz];
-    lk[7] = pc.links.v[bx + nz + 1u];
-}
-
 // σ at trilinear weights w (unallocated corners count 0).
 float sample_sigma(int lk[8], float w[8]) {
     precise float s = 0.0;
@@ -152,7 +137,7 @@ struct Sample {
 
 // Corner links, trilinear weights and σ of a sample in cell l at local position p.
 void sample_fill(vec3 p, inout Sample s) {
-    cell_links(s.l, s.lk);
+    cell_links(pc.links, pc.res, s.l, s.lk);
     trilerp_weights(p, s.w);
     s.sigma = sample_sigma(s.lk, s.w);
 }

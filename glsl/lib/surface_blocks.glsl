@@ -15,7 +15,7 @@
 // Chebyshev distance r of it (inside the grid) has mask 0 too, so the walk may jump to the exit of
 // that cube of blocks, which is a box of the same kind (integer planes, no hit inside).
 //
-// Skipping in a walk loop (surface_fwd.comp is the reference use):
+// Skipping in a walk loop (cell_walk_next in surface_walk.glsl is the reference use):
 //     uint skipped = SURF_NO_BLOCK;
 //     while (dda_next(w, l, t0, t1)) {
 //         uint bi = surf_block_index(l, nb, shift);

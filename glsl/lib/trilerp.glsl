@@ -59,4 +59,20 @@ void trilerp_weights(vec3 p, out float w[8]) {
     w[4] = w4; w[5] = w5; w[6] = w6; w[7] = w7;
 }
 
+// Links of the 8 corners of cell l in a grid of res vertices (x-major: slot (x·ny + y)·nz + z),
+// in the corner order above; < 0: unallocated. Reads `links` (I32Buf, common.glsl).
+void cell_links(I32Buf links, uvec3 res, ivec3 l, out int lk[8]) {
+    uint ny = res.y, nz = res.z;
+    uint base = (uint(l.x) * ny + uint(l.y)) * nz + uint(l.z);
+    lk[0] = links.v[base];
+    lk[1] = links.v[base + 1u];
+    lk[2] = links.v[base + nz];
+    lk[3] = links.v[base + nz + 1u];
+    uint bx = base + ny * nz;
+    lk[4] = links.v[bx];
+    lk[5] = links.v[bx + 1u];
+    lk[6] = links.v[bx + nz];
+    lk[7] = links.v[bx + nz + 1u];
+}
+
 #endif

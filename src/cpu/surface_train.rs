@@ -23,7 +23,7 @@
 
 use super::atomic;
 use super::step::{touch_mask, TOUCH_SURFACE};
-use super::surface_fwd::{validate_blocks, validate_inputs, CellWalk, SurfaceParams};
+use super::surface_fwd::{validate_blocks, validate_inputs, SurfaceParams};
 use crate::abi::surface_grid::SurfaceGridRef;
 use crate::math::dda::ray_unit;
 use crate::math::sh::sh_basis;
@@ -31,6 +31,7 @@ use crate::math::surface::{
     surf_alpha, surf_cell_hits, surf_gamma, surf_ray, FaceSigns, SURF_MAX_LEVELS,
 };
 use crate::math::surface_blocks::SkipRef;
+use crate::math::surface_walk::CellWalk;
 use crate::math::trilerp::trilerp_weights;
 use anyhow::{ensure, Result};
 use rayon::prelude::*;

@@ -12,5 +12,6 @@ pub mod plenoxel;
 pub mod sh;
 pub mod surface;
 pub mod surface_blocks;
+pub mod surface_walk;
 pub mod trilerp;
 pub mod vieta;

@@ -2,7 +2,7 @@
 //! contraction on either side), so the CPU kernels in `cpu::plenoxel` visit the same samples.
 
 use super::dda::ray_box;
-use super::trilerp::trilerp_weights;
+use super::trilerp::{cell_links, trilerp_weights};
 
 pub use crate::abi::consts::{OCC_SHIFT, SIGMA_EPS, SKIP_MARGIN, STEP};
 
@@ -97,23 +97,6 @@ pub fn march_skip(g: &GridRef, m: &March, k: u32, l: [i32; 3]) -> u32 {
     (k + 1).max(next.max(0.0) as u32)
 }
 
-/// Links of the 8 corners of cell l (order 4a + 2b + c).
-pub fn cell_links(g: &GridRef, l: [i32; 3]) -> [i32; 8] {
-    let (ny, nz) = (g.res[1] as usize, g.res[2] as usize);
-    let base = (l[0] as usize * ny + l[1] as usize) * nz + l[2] as usize;
-    let bx = base + ny * nz;
-    [
-        g.links[base],
-        g.links[base + 1],
-        g.links[base + nz],
-        g.links[base + nz + 1],
-        g.links[bx],
-        g.links[bx + 1],
-        g.links[bx + nz],
-        g.links[bx + nz + 1],
-    ]
-}
-
 /// σ at trilinear weights w (unallocated corners count 0).
 pub fn sample_sigma(g: &GridRef, lk: &[i32; 8], w: &[f32; 8]) -> f32 {
     let mut s = 0.0f32;
@@ -164,7 +147,7 @@ pub use crate::abi::buffers::PlenoxelCounts;
 
 /// Corner links, trilinear weights and σ of the sample in cell l at local position p.
 fn sample_fill(g: &GridRef, l: [i32; 3], p: [f32; 3]) -> Sample {
-    let lk = cell_links(g, l);
+    let lk = cell_links(g.links, g.res, l);
     let w = trilerp_weights(p);
     let sigma = sample_sigma(g, &lk, &w);
     Sample { l, lk, w, sigma }

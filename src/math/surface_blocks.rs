@@ -10,7 +10,7 @@
 //! ([`surf_block_radii`]): the blocks within Chebyshev distance r of it have mask 0 too, and the
 //! walk jumps to the exit of that cube of blocks with [`surf_block_skip`].
 //!
-//! Use in a walk loop (as in `cpu::surface_fwd::CellWalk`):
+//! Use in a walk loop (as in `math::surface_walk::CellWalk`):
 //! ```text
 //! let mut w = dda_init(og, dn, n, 0.0);
 //! let mut skipped = SURF_NO_BLOCK;
