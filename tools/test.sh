@@ -13,6 +13,6 @@ cargo build --release --locked
 cargo test --release --locked --tests -- --test-threads 2
 # The twins' decision paths with a·b + c contracted (math::madd, feature `fused`): the DDA, cubic
 # and surface-hit tests and parity rows must pass unchanged (issue 21; one extra build).
-cargo test --release --locked --features fused --test dda --test cubic --test surface_fwd -- --test-threads 2
-cargo test --release --locked --features fused --test parity -- --test-threads 2 \
-  dda_walk cubic_solve extract_points surface_fwd surface_faces surface_train
+cargo test --release --locked --features fused --test kernels -- --test-threads 2 \
+  dda:: cubic:: surface_fwd:: parity::dda_walk parity::cubic_solve parity::extract_points \
+  parity::surface_fwd parity::surface_faces parity::surface_train

@@ -1,5 +1,5 @@
 //! Parity of `glsl/dda_walk.comp` with `cpu::dda_walk`, and the ray sets shared by the check, the
-//! tests (`tests/dda.rs`) and `alphasurf bench dda`. Cell sequences (count, indices, checksum of
+//! tests (`tests/kernels/dda.rs`) and `alphasurf bench dda`. Cell sequences (count, indices, checksum of
 //! the whole walk) must match exactly; entry/exit t within abs 1e-5 + rel 1e-6 (in practice the
 //! twin is bit-exact).
 

@@ -1,5 +1,5 @@
 //! GPU-vs-CPU-twin parity checks, one row per kernel. `alphasurf check-kernels` prints them and
-//! `tests/parity.rs` asserts them: the same code decides pass/fail in both places.
+//! `tests/kernels/parity.rs` asserts them: the same code decides pass/fail in both places.
 
 use crate::gpu::Gpu;
 

@@ -1,6 +1,6 @@
 //! Pinhole cameras in the NeRF-synthetic (Blender/OpenGL) convention, and the scene box.
 //!
-//! Convention (pinned by `tests/data_convention.rs`): `c2w` maps camera to world coordinates; the
+//! Convention (pinned by `tests/pipeline/data_fixture.rs`): `c2w` maps camera to world coordinates; the
 //! camera looks down its −Z axis with +Y up and +X right. Pixel (u, v) has its centre at continuous
 //! image coordinates (u + 0.5, v + 0.5), with v growing downwards, so the ray through image point
 //! (px, py) has camera-frame direction ((px − cx)/fx, −(py − cy)/fy, −1). Converting to the OpenCV

@@ -3,7 +3,7 @@
 //!
 //! The coefficients come from an independent derivation: the trilinear weights of each corner are
 //! products of three linear polynomials in s (X_a(s)·Y_b(s)·Z_c(s), X_1 = o_x + s·d_x,
-//! X_0 = 1 − X_1), expanded and summed with weights δ_i − τ. `tests/cubic.rs` cross-checks the
+//! X_0 = 1 − X_1), expanded and summed with weights δ_i − τ. `tests/kernels/cubic.rs` cross-checks the
 //! crossings against a dense sign scan with bisection.
 
 /// One crossing of the oracle, with |f′(s)| for the near-tangent floor.

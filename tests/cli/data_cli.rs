@@ -1,7 +1,7 @@
 //! The `make-scene` and `inspect` commands end to end, and bad input giving exit code 1 with a
 //! message naming the file (no panic).
 
-mod data_common;
+use crate::data_common;
 
 use std::process::Command;
 

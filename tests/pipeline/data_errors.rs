@@ -2,11 +2,9 @@
 //! problem (one test each), and a bounded fuzz of the JSON, image, COLMAP binary and npz parsing
 //! never panics.
 
-mod data_common;
-
+use crate::data_common::convert::Target;
+use crate::data_common::*;
 use alphasurf::data::{image::decode_bytes, DataError, Dataset, LoadOptions};
-use data_common::convert::Target;
-use data_common::*;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
 use serde_json::json;

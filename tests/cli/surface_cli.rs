@@ -3,7 +3,7 @@
 //! configuration stops with a message and leaves the last good checkpoint intact; `bench surface
 //! --json` at a small size reports consistent figures.
 
-mod bench_common;
+use crate::bench_common;
 
 use std::path::{Path, PathBuf};
 use std::process::Command;

@@ -1,7 +1,7 @@
 //! The Vulkan stage-2 backend against the CPU one (lavapipe, validation layers on): a few training
 //! steps from the same grid on the same batches, with every regulariser (Lδ, TVα, Lα, Ln1/Ln2).
 //! The kernel-level parity (per-ray losses, gradients, touched flags, counters) is the
-//! `surface_train` row of `check-kernels`, asserted in tests/parity.rs.
+//! `surface_train` row of `check-kernels`, asserted in tests/kernels/parity.rs.
 
 use alphasurf::check::rel_l2;
 use alphasurf::check::surface_fwd::{test_rays, test_scene};

@@ -3,13 +3,10 @@
 //! converted to the COLMAP and IDR layouts training to the same figures; `bench plenoxels --json`
 //! at a small size reports consistent figures.
 
-mod bench_common;
-
-#[path = "../tools/convert/convert.rs"]
-mod convert;
+use crate::bench_common;
+use crate::data_common::convert::{self, Target};
 
 use alphasurf::grid::checkpoint::optim_refs;
-use convert::Target;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};

@@ -1,12 +1,10 @@
 //! The loader, the camera convention, the sampler and `inspect` on the Blender-rendered fixture
 //! `../shared/fixtures/thin_lyre` (a missing fixture fails these tests).
 
-mod data_common;
-
+use crate::data_common::fixture;
 use alphasurf::data::image::decode_file;
 use alphasurf::data::inspect::inspect;
 use alphasurf::data::{Camera, Dataset, LoadOptions, RaySampler, Split};
-use data_common::fixture;
 use glam::{Mat4, Vec3, Vec4};
 use std::sync::OnceLock;
 

@@ -1,7 +1,7 @@
 //! PLY point clouds: round trip with extras, the fixture's 1 M points, ascii input, and clean
 //! errors naming the file for unreadable, empty and malformed files.
 
-mod data_common;
+use crate::data_common;
 
 use alphasurf::io::{
     read_ply, read_points, write_ply, write_points, Extra, ExtraValues, PointCloud,

@@ -1,6 +1,6 @@
 //! Every registered kernel against its CPU twin on lavapipe (the rows of `check-kernels`): one
-//! test per row, named after it (`cargo test --test parity surface_fwd` runs that row alone), and
-//! a test that no registered row is left without one.
+//! test per row, named after it (`cargo test --test kernels parity::surface_fwd` runs that row
+//! alone), and a test that no registered row is left without one.
 
 use alphasurf::check::CHECKS;
 use alphasurf::gpu::test_gpu;
@@ -74,6 +74,6 @@ fn every_registered_row_has_a_test() {
     let registered: Vec<&str> = CHECKS.iter().map(|(n, _)| *n).collect();
     assert_eq!(
         registered, TESTED,
-        "tests/parity.rs must list every row of check::CHECKS, in table order"
+        "tests/kernels/parity.rs must list every row of check::CHECKS, in table order"
     );
 }

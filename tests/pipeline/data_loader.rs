@@ -2,12 +2,10 @@
 //! and without extensions, downscaling, the rays of a whole view; the fixture converted to the
 //! COLMAP and IDR layouts, the held-out split, undistortion.
 
-mod data_common;
-
+use crate::data_common::convert::Target;
+use crate::data_common::*;
 use alphasurf::data::distortion::Distortion;
 use alphasurf::data::{view_rays, Dataset, Layout, LoadOptions, SceneBox};
-use data_common::convert::Target;
-use data_common::*;
 use glam::Vec3;
 use serde_json::json;
 
