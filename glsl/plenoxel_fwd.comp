@@ -2,8 +2,9 @@
 // plenoxel_fwd — stage-1 volume rendering of a batch of rays (method.md §2).
 // Thread mapping: one invocation per ray.
 // Inputs: the grid (links, density, sh, occupancy), rays as 6 floats (scene origin, unit
-// direction), grid = p·scale + offset, stop threshold on transmittance.
-// Outputs: rgb (3 floats per ray, white background); step-buffer counters += samples shaded,
+// direction), grid = p·scale + offset, stop threshold on transmittance, bg (Background: the
+// colour composited behind: C = Σ w_i c_i + T·bg.rgb).
+// Outputs: rgb (3 floats per ray); step-buffer counters += samples shaded,
 // samples evaluated at σ ≤ 1e-8, samples skipped by the occupancy volume (subgroup-reduced).
 // CPU twin: cpu::plenoxel::render.
 #include "common.glsl"
@@ -17,6 +18,7 @@ layout(push_constant, scalar) uniform Push {
     F32Buf rays;
     F32Buf rgb;
     U32Buf step;
+    BackgroundBuf bg;
     uvec3 res;
     vec3 scale;
     vec3 offset;
@@ -53,7 +55,7 @@ void main() {
             if (T < pc.stop_thresh) break;
         }
     }
-    precise vec3 outc = color + vec3(T);
+    precise vec3 outc = color + T * pc.bg.v[0].rgb;
     pc.rgb.v[3u * r] = outc.x;
     pc.rgb.v[3u * r + 1u] = outc.y;
     pc.rgb.v[3u * r + 2u] = outc.z;

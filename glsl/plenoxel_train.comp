@@ -6,11 +6,14 @@
 // float atomic per corner and parameter when the cell changes (SH needs only 3 accumulators per
 // corner: the basis Y_k is constant along a ray).
 // Thread mapping: one invocation per ray.
-// Inputs: grid, occupancy, rays (6 floats), targets (3 floats), scale/offset, stop threshold.
+// Inputs: grid, occupancy, rays (6 floats), targets (3 floats), params (PlenoxelParams: scale,
+// offset, stop threshold, grad_scale), res, bg (Background: C = Σ w_i c_i + T·bg.rgb).
 // Outputs: grad_density, grad_sh (+= by float atomics; each vertex that gets one is touched), ray_loss[r] = Σ_channels (C − target)²,
+// when bg.learn ≠ 0, bg.grad += Σ_rays dL/dC·T (subgroup-reduced float atomics),
 // sample counters as in plenoxel_fwd, touched vertices listed in the step buffer. CPU twin: cpu::plenoxel::train.
 #extension GL_EXT_shader_atomic_float : require
 #include "common.glsl"
+#include "background.glsl"
 layout(local_size_x = 64) in;
 
 
@@ -25,12 +28,10 @@ layout(push_constant, scalar) uniform Push {
     F32Buf grad_sh;
     F32Buf ray_loss;
     U32Buf step;
+    PlenoxelParamsBuf params;
+    BackgroundBuf bg;
     uvec3 res;
-    vec3 scale;
-    vec3 offset;
     uint n_rays;
-    float stop_thresh;
-    float grad_scale;
 } pc;
 
 #include "plenoxel.glsl"
@@ -68,10 +69,12 @@ void main() {
     vec3 ro = vec3(pc.rays.v[6u * r], pc.rays.v[6u * r + 1u], pc.rays.v[6u * r + 2u]);
     vec3 rd = vec3(pc.rays.v[6u * r + 3u], pc.rays.v[6u * r + 4u], pc.rays.v[6u * r + 5u]);
     vec3 target = vec3(pc.targets.v[3u * r], pc.targets.v[3u * r + 1u], pc.targets.v[3u * r + 2u]);
+    PlenoxelParams prm = pc.params.v[0];
+    float stop_thresh = prm.stop_thresh;
     float y[9];
     sh_basis(rd, y);
     March m;
-    bool hit = march_init(ro, rd, pc.scale, pc.offset, pc.res, m);
+    bool hit = march_init(ro, rd, prm.scale, prm.offset, pc.res, m);
     PlenoxelCounts counts = PLENOXEL_COUNTS_ZERO;
 
     // Forward: C and the final transmittance.
@@ -92,12 +95,14 @@ void main() {
         color = acc;
         precise float tn = T * (1.0 - alpha);
         T = tn;
-        if (T < pc.stop_thresh) break;
+        if (T < stop_thresh) break;
     }
-    precise vec3 total = color + vec3(T);
+    precise vec3 total = color + T * pc.bg.v[0].rgb;
     precise vec3 diff = total - target;
     pc.ray_loss.v[r] = dot(diff, diff);
-    vec3 g_c = pc.grad_scale * diff;
+    vec3 g_c = prm.grad_scale * diff;
+    // dL/dbg = g·T_final (T before the backward pass reuses it).
+    vec3 g_bg = g_c * T;
 
     // Backward: the same samples again, in the same order.
     // Per-cell gradient accumulators, flushed when the sample's cell changes.
@@ -145,8 +150,9 @@ void main() {
             acc_color[i] = ac;
         }
         T = tn;
-        if (T < pc.stop_thresh) break;
+        if (T < stop_thresh) break;
     }
     counts.atomic_adds += flush(y, cur_lk, acc_sigma, acc_color);
+    if (pc.bg.v[0].learn != 0u) BACKGROUND_GRAD_ADD(pc.bg, g_bg);
     add_stats(counts);
 }

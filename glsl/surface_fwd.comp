@@ -7,7 +7,7 @@
 // coefficients once per cell; per level τ_i that passes min/max, then segment
 // culling (surf_segment_mask) the crossings of δ − τ_i on [0, L); only rising (front-face) crossings are hits, sorted by s within the cell; at
 // hit j: α = 1 − exp(−max(σα, 0)), colour max(0, SH + 0.5) (trilerped at the hit, basis on the unit
-// scene direction), α̃ = α·γ_a(j); C = Σ w_j c_j + T·1. The ray stops at the first hit with j ≥ a
+// scene direction), α̃ = α·γ_a(j); C = Σ w_j c_j + T·bg. The ray stops at the first hit with j ≥ a
 // (γ = 0, not shaded, counted as cut) or once T < stop_thresh.
 // Skipping (block_skip ≠ 0) with the skip structure `blocks` (glsl/lib/surface_blocks.glsl): the
 // walk covers only the ray's span inside the allocated box (surf_box_span); a cell whose
@@ -16,7 +16,8 @@
 // surface_block_radius; surf_block_skip: the same pieces as the continuous walk, so the same
 // hits); a cell whose live bit is clear (kernel surface_live_cells) is passed over unread.
 // Inputs: links (n³ i32, < 0 unallocated), per allocated vertex delta, opacity (raw σα) and sh
-// (27), levels[n_levels ≤ 8], rays (6 floats: scene origin, direction), a, stop_thresh, blocks
+// (27), params (SurfParams: scale, offset, a, stop_thresh, n_rays, levels[n_levels ≤ 8]; the loss
+// weights unused), bg (Background: rgb), rays (6 floats: scene origin, direction), blocks
 // (live-cell words, nb³ u32 level masks, the allocated box; read only when block_skip ≠ 0),
 // block_shift.
 // Outputs: out[r] = (rgb, transmittance, hits composited); stats (SurfCounts) += cells read (live
@@ -37,18 +38,13 @@ layout(push_constant, scalar) uniform Push {
     F32Buf delta;
     F32Buf opacity;
     F32Buf sh;
-    F32Buf levels;
+    SurfParamsBuf params;
     F32Buf rays;
     SurfOutBuf out_rays;
     SurfCountsBuf stats;
     U32Buf blocks;
-    vec3 scale;
-    vec3 offset;
+    BackgroundBuf bg;
     uint n;
-    uint n_rays;
-    uint n_levels;
-    float a;
-    float stop_thresh;
     uint block_skip;
     uint block_shift;
 } pc;
@@ -59,14 +55,17 @@ layout(push_constant, scalar) uniform Push {
 
 void main() {
     uint r = flat_id();
-    if (r >= pc.n_rays) return;
+    SurfParams prm = pc.params.v[0];
+    if (r >= prm.n_rays) return;
     vec3 ro = vec3(pc.rays.v[6u * r], pc.rays.v[6u * r + 1u], pc.rays.v[6u * r + 2u]);
     vec3 rd = vec3(pc.rays.v[6u * r + 3u], pc.rays.v[6u * r + 4u], pc.rays.v[6u * r + 5u]);
-    uint nl = min(pc.n_levels, SURF_MAX_LEVELS);
+    float a = prm.a;
+    float stop_thresh = prm.stop_thresh;
+    uint nl = min(prm.n_levels, SURF_MAX_LEVELS);
     float lv[SURF_MAX_LEVELS];
-    for (uint i = 0u; i < SURF_MAX_LEVELS; i++) lv[i] = i < nl ? pc.levels.v[i] : 0.0;
+    for (uint i = 0u; i < SURF_MAX_LEVELS; i++) lv[i] = i < nl ? prm.levels[i] : 0.0;
     vec3 og, dn;
-    surf_ray(ro, rd, pc.scale, pc.offset, og, dn);
+    surf_ray(ro, rd, prm.scale, prm.offset, og, dn);
     float y[9];
     sh_basis(ray_unit(rd), y);
     vec3 color = vec3(0.0);
@@ -96,7 +95,7 @@ void main() {
         face_pos = epos;
         face_neg = eneg;
         for (uint h = 0u; h < nh; h++) {
-            if (float(j) >= pc.a) {
+            if (float(j) >= a) {
                 cnt.cut++;
                 done = true;
                 break;
@@ -107,7 +106,7 @@ void main() {
             precise float sa = 0.0;
             for (int i = 0; i < 8; i++) sa += wt[i] * pc.opacity.v[cell.lk[i]];
             float alpha = surf_alpha(sa);
-            precise float at = alpha * surf_gamma(pc.a, j);
+            precise float at = alpha * surf_gamma(a, j);
             float sh[27];
             for (int k = 0; k < 27; k++) sh[k] = 0.0;
             [[unroll]] for (int i = 0; i < 8; i++) {
@@ -134,7 +133,7 @@ void main() {
             T = tn;
             j++;
             cnt.hits++;
-            if (T < pc.stop_thresh) {
+            if (T < stop_thresh) {
                 done = true;
                 break;
             }
@@ -145,7 +144,7 @@ void main() {
     cnt.culled = walk.counts.culled;
     cnt.blocks_skipped = walk.counts.blocks_skipped;
     SurfOut o;
-    precise vec3 outc = color + vec3(T);
+    precise vec3 outc = color + T * pc.bg.v[0].rgb;
     o.rgb = outc;
     o.transmittance = T;
     o.hits = j;

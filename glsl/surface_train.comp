@@ -25,9 +25,11 @@
 // for the current δ or with a margin bounding its drift since (exact), then the allocated box
 // (static: the walk covers only the ray's span inside it, surf_box_span); block_shift; delta,
 // opacity (raw σα), sh (27) per allocated vertex;
-// params (SurfTrainParams: scale, offset, a, stop_thresh, the loss weights grad_scale, lambda_h,
-// lambda_c, the levels; n_levels used); rays (6 floats), targets (3 floats).
+// params (SurfParams: scale, offset, a, stop_thresh, the loss weights grad_scale, lambda_h,
+// lambda_c, n_rays, the levels; n_levels used); rays (6 floats), targets (3 floats); bg (the
+// background composited behind the last hit: C = Σ w_j c_j + T·bg.rgb).
 // Outputs: grad_delta, grad_opacity, grad_sh += (float atomics), touched list (step buffer);
+// when bg.learn ≠ 0, bg.grad += Σ_rays dL/dC·T (subgroup-reduced float atomics);
 // out_rays[r] = RayLoss (squared error, entropy, consistency, hits composited); stats
 // (TrainCounts) += cells read (live cells: links and δ loaded), cubic solves, solves culled
 // (min/max or segment), hits composited, hits cut by truncation, guarded hits, gradient atomic
@@ -40,6 +42,7 @@
 #define SURF_CELL_KEEP SURF_MAX_HITS
 #include "surface.glsl"
 #include "surface_blocks.glsl"
+#include "background.glsl"
 layout(local_size_x = 64) in;
 
 layout(push_constant, scalar) uniform Push {
@@ -48,7 +51,7 @@ layout(push_constant, scalar) uniform Push {
     F32Buf delta;
     F32Buf opacity;
     F32Buf sh;
-    SurfTrainParamsBuf params;
+    SurfParamsBuf params;
     F32Buf rays;
     F32Buf targets;
     F32Buf grad_delta;
@@ -57,9 +60,8 @@ layout(push_constant, scalar) uniform Push {
     RayLossBuf out_rays;
     TrainCountsBuf stats;
     U32Buf step;
+    BackgroundBuf bg;
     uint n;
-    uint n_rays;
-    uint n_levels;
     uint block_shift;
 } pc;
 
@@ -168,16 +170,16 @@ uint flush(ivec3 cell, float y[9], inout float acc_d[8], inout float acc_a[8], i
 
 void main() {
     uint r = flat_id();
-    if (r >= pc.n_rays) return;
+    if (r >= pc.params.v[0].n_rays) return;
     vec3 ro = vec3(pc.rays.v[6u * r], pc.rays.v[6u * r + 1u], pc.rays.v[6u * r + 2u]);
     vec3 rd = vec3(pc.rays.v[6u * r + 3u], pc.rays.v[6u * r + 4u], pc.rays.v[6u * r + 5u]);
     vec3 target = vec3(pc.targets.v[3u * r], pc.targets.v[3u * r + 1u], pc.targets.v[3u * r + 2u]);
-    SurfTrainParams prm = pc.params.v[0];
+    SurfParams prm = pc.params.v[0];
     vec3 scale = prm.scale;
     vec3 offset = prm.offset;
     float a = prm.a;
     float stop_thresh = prm.stop_thresh;
-    uint nl = min(pc.n_levels, SURF_MAX_LEVELS);
+    uint nl = min(prm.n_levels, SURF_MAX_LEVELS);
     float lv[SURF_MAX_LEVELS];
     for (uint i = 0u; i < SURF_MAX_LEVELS; i++) lv[i] = i < nl ? prm.levels[i] : 0.0;
     vec3 og, dn;
@@ -300,7 +302,8 @@ void main() {
         tr[k + 1u] = tn;
     }
     float t_last = tr[SURF_MAX_HITS]; // = tr[nh]: the slots past nh copy it
-    precise vec3 total = color + vec3(t_last);
+    vec3 bg = pc.bg.v[0].rgb;
+    precise vec3 total = color + t_last * bg;
     precise vec3 diff = total - target;
     RayLoss o;
     precise float sq = diff.x * diff.x + diff.y * diff.y + diff.z * diff.z;
@@ -309,6 +312,7 @@ void main() {
     o.consistency = 0.0;
     o.hits = nh;
     precise vec3 d_c = prm.grad_scale * diff;
+    bool learn_bg = pc.bg.v[0].learn != 0u;
 
     // Entropy of the normalised weights and ∂(λH·LH)/∂w_j.
     float lambda_h = prm.lambda_h;
@@ -370,11 +374,11 @@ void main() {
     }
     pc.out_rays.v[r] = o;
 
-    // Reverse pass: colour and entropy seen from behind each hit; the gradients of consecutive
-    // hits in one cell are summed per corner and flushed when the cell changes. Unrolled over the
-    // slots (constant indices) with the flush outside: a slot whose cell differs from the running
-    // one hands the running sums over first.
-    precise vec3 s_c = vec3(1.0);
+    // Reverse pass: colour and entropy seen from behind each hit (behind the last: the
+    // background); the gradients of consecutive hits in one cell are summed per corner and
+    // flushed when the cell changes. Unrolled over the slots (constant indices) with the flush
+    // outside: a slot whose cell differs from the running one hands the running sums over first.
+    precise vec3 s_c = bg;
     precise float s_e = 0.0;
     ivec3 cur = ivec3(-1);
     float acc_d[8];
@@ -440,5 +444,6 @@ void main() {
         }
     }
     cnt.atomic_adds += flush(cur, y, acc_d, acc_a, acc_c, nz_d, nz_a, nz_c);
+    if (learn_bg) BACKGROUND_GRAD_ADD(pc.bg, d_c * t_last);
     TRAIN_COUNTS_SUBGROUP_ADD(pc.stats, cnt);
 }

@@ -9,9 +9,11 @@
 use super::consts::SURF_MAX_LEVELS;
 
 abi_structs! {
-    /// The params buffer of `surface_train`: how rays map into the grid, the levels, truncation,
-    /// early stop and the loss weights (`surface::vulkan::train_params`).
-    struct SurfTrainParams {
+    /// The params buffer of `surface_fwd` and `surface_train`: how rays map into the grid, the
+    /// batch, the levels, truncation, early stop and the loss weights (`surface::vulkan::
+    /// surf_params`; the loss weights are zero for a render). Both kernels' push blocks are at
+    /// lavapipe's 128-byte limit without these.
+    struct SurfParams {
         /// grid = p·scale + offset (per axis).
         scale: [f32; 3],
         offset: [f32; 3],
@@ -25,13 +27,44 @@ abi_structs! {
         lambda_h: f32,
         /// Weight of Σ |t_j − t_mode|.
         lambda_c: f32,
-        /// Level values τ_i, zero-padded (the push block's `n_levels` are used).
+        /// Rays in the batch.
+        n_rays: u32,
+        /// Levels used (≤ SURF_MAX_LEVELS).
+        n_levels: u32,
+        /// Level values τ_i, zero-padded past `n_levels`.
         levels: [f32; SURF_MAX_LEVELS],
+    }
+
+    /// The params buffer of `plenoxel_train` (its push block would pass lavapipe's 128-byte
+    /// limit with these): how rays map into the grid, early stop, the loss weight.
+    struct PlenoxelParams {
+        /// grid = p·scale + offset (per axis).
+        scale: [f32; 3],
+        offset: [f32; 3],
+        /// Stop once transmittance falls below this.
+        stop_thresh: f32,
+        /// dL/dC = grad_scale·(C − target).
+        grad_scale: f32,
+    }
+
+    /// The background every render and training kernel composites behind its rays,
+    /// C = Σ w_j c_j + T·rgb, and, when it is learned, its gradient and optimiser state
+    /// (`background_step`). One per backend, in a device buffer, so that a learned colour is
+    /// updated on the device without a host round trip.
+    struct Background {
+        /// The colour, in [0, 1].
+        rgb: [f32; 3],
+        /// ≠ 0: the training kernels add dL/d`rgb` = Σ_rays dL/dC·T into `grad`.
+        learn: u32,
+        /// dL/d`rgb` of the step so far (float atomics); cleared by `background_step`.
+        grad: [f32; 3],
+        /// RMSProp running average of grad² (`background_step`).
+        avg: [f32; 3],
     }
 
     /// Per-ray output of `surface_fwd`.
     struct SurfOut {
-        /// Colour on a white background.
+        /// Colour composited on the background.
         rgb: [f32; 3],
         /// Final transmittance (before the background is added).
         transmittance: f32,

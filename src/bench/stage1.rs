@@ -129,6 +129,7 @@ pub fn time_steps(
             eps: cfg.eps,
             stop_thresh: cfg.stop_thresh,
             tv: None,
+            lr_bg: cfg.lr_sh.at(cfg.iters),
         };
         clock.mark(Phase::Bookkeeping);
         let t = Instant::now();

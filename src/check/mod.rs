@@ -17,6 +17,10 @@ pub mod surface_reg;
 pub mod surface_train;
 pub mod trilerp_eval;
 
+/// The background the parity rows of the render and training kernels composite on: neither
+/// white nor grey, so a kernel that ignores its background (or mixes up its channels) fails.
+pub const TEST_BACKGROUND: [f32; 3] = [0.2, 0.6, 0.9];
+
 /// Result of comparing one kernel on the Vulkan device with its CPU twin.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct CheckRow {
@@ -52,6 +56,7 @@ pub const CHECKS: &[(&str, CheckFn)] = &[
     ("optim_args", plenoxel::check_optim_args),
     ("rmsprop_sparse", plenoxel::check_rmsprop),
     ("tv", plenoxel::check_tv),
+    ("background_step", plenoxel::check_background_step),
     ("cubic_solve", cubic_solve::check),
     ("extract_points", extract_points::check),
     ("surface_blocks", surface_blocks::check),

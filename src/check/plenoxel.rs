@@ -1,9 +1,11 @@
 //! Parity of the stage-1 kernels (occupancy, plenoxel_fwd, plenoxel_train, plenoxel_weights,
 //! rmsprop, tv) with their CPU twins, on a small random grid with unallocated regions, empty
 //! blocks and a dense blob, and on random plus adversarial rays (axis-aligned, starting inside
-//! the box, grazing, missing).
+//! the box, grazing, missing); the render and training passes composite on [`TEST_BACKGROUND`]
+//! (learned in training, so its gradient is compared too). Also `background_step`.
 
-use super::{grad_outliers, rel_l2, CheckRow, Compare};
+use super::{grad_outliers, rel_l2, CheckRow, Compare, TEST_BACKGROUND};
+use crate::cpu::background::{self, Background};
 use crate::cpu::plenoxel as twin;
 use crate::cpu::step::{optim_args, STEP_COUNT, STEP_FLAGS, STEP_N, TOUCH_ALL};
 use crate::cpu::{rmsprop_sparse, tv, RmsProp, Stage1Params, TvChunk};
@@ -148,10 +150,21 @@ pub fn check_occupancy(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
     ))
 }
 
+/// The two backends on `g`, composited on [`TEST_BACKGROUND`] (`learn`: learned).
+fn backends(gpu: &Gpu, g: Grid, learn: bool) -> Result<(CpuPlenoxels, VulkanPlenoxels)> {
+    let bg = Background::new(TEST_BACKGROUND, learn);
+    let mut cpu = CpuPlenoxels::new(g.clone());
+    cpu.set_background(bg)?;
+    let mut vk = VulkanPlenoxels::new(gpu, g)?;
+    vk.set_background(bg)?;
+    Ok((cpu, vk))
+}
+
 pub fn check_fwd(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
     let (g, rays, _) = test_scene(seed, 40, 4000);
-    let (want, wc) = CpuPlenoxels::new(g.clone()).render(&rays, STOP)?;
-    let (got, gc) = VulkanPlenoxels::new(gpu, g)?.render(&rays, STOP)?;
+    let (mut cpu, mut vk) = backends(gpu, g, false)?;
+    let (want, wc) = cpu.render(&rays, STOP)?;
+    let (got, gc) = vk.render(&rays, STOP)?;
     let mut cmp = Compare::new(2e-5, 2e-4);
     for (i, (&a, &b)) in got.iter().zip(&want).enumerate() {
         cmp.value(a as f64, b as f64, || {
@@ -168,8 +181,9 @@ pub fn check_fwd(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
 
 pub fn check_train(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
     let (g, rays, targets) = test_scene(seed, 40, 4000);
-    let want = CpuPlenoxels::new(g.clone()).gradients(&rays, &targets, STOP)?;
-    let got = VulkanPlenoxels::new(gpu, g)?.gradients(&rays, &targets, STOP)?;
+    let (mut cpu, mut vk) = backends(gpu, g, true)?;
+    let want = cpu.gradients(&rays, &targets, STOP)?;
+    let got = vk.gradients(&rays, &targets, STOP)?;
     // Per-ray losses elementwise; atomically accumulated gradients by aggregate measures, and
     // elementwise against the largest magnitude (summation order differs run to run).
     let mut cmp = Compare::new(1e-5, 1e-3);
@@ -195,8 +209,21 @@ pub fn check_train(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
                 .get_or_insert_with(|| format!("{name}: rel L2 {e:.2e}, {bad} elements off"));
         }
     }
+    // dL/dbg: a sum over the rays of dL/dC·T (subgroup sums and atomics against the twin's
+    // sequential sum), as close as the per-ray terms.
+    let e_bg = rel_l2(&got.background, &want.background);
+    if e_bg > 1e-4 || want.background == [0.0; 3] {
+        cmp.failures += 1;
+        cmp.first_failure.get_or_insert_with(|| {
+            format!(
+                "dbg: rel L2 {e_bg:.2e}: gpu {:?} cpu {:?}",
+                got.background, want.background
+            )
+        });
+    }
     let note = format!(
-        "grad rel L2 {worst:.1e} (≤ 1e-4; elementwise |Δ| ≤ 1e-4·max|g| + 1e-3·|g| for all but 0.1%); {}",
+        "grad rel L2 {worst:.1e} (≤ 1e-4; elementwise |Δ| ≤ 1e-4·max|g| + 1e-3·|g| for all but 0.1%), \
+         dbg rel L2 {e_bg:.1e} (≤ 1e-4); {}",
         counts_note(got.counts, want.counts)
     );
     Ok(cmp.row("plenoxel_train", rays.len() / 6, note))
@@ -442,5 +469,80 @@ pub fn check_tv(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
         "σ and SH, chunk inside, past the end and the whole grid; touched bits 1, 2, 0: flags \
          exact"
             .into(),
+    ))
+}
+
+/// `background_step` against `cpu::background::step` on 64 random states, one dispatch each:
+/// fresh (r = 0) and running averages, zero gradients, 1e-6..1e2 magnitudes, steps that leave
+/// [0, 1] (the clamp). Same tolerance as rmsprop_sparse (the same update).
+pub fn check_background_step(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
+    let mut rng = Pcg64::seed_from_u64(seed);
+    let (lr, beta, eps) = (0.05, 0.95, 1e-8);
+    let cases: Vec<Background> = (0..64)
+        .map(|i| {
+            let mut bg = Background::new(std::array::from_fn(|_| rng.random_range(0.0..1.0)), true);
+            for ch in 0..3 {
+                let mag = 10f32.powi((i + ch) as i32 % 9 - 6);
+                bg.grad[ch] = if (i + ch) % 7 == 0 {
+                    0.0
+                } else {
+                    rng.random_range(-1.0..1.0) * mag
+                };
+                bg.avg[ch] = if i % 4 == 0 {
+                    0.0
+                } else {
+                    rng.random_range(0.0..2.0) * mag * mag
+                };
+            }
+            // Colours at the edges, stepped outwards: the clamp decides.
+            if i % 8 == 1 {
+                bg.rgb = [0.01, 0.99, 0.0];
+                bg.grad = [1.0, -1.0, 0.5];
+            }
+            bg
+        })
+        .collect();
+    let buf = gpu.upload(&cases)?;
+    let size = std::mem::size_of::<Background>() as u64;
+    let mut b = gpu.batch()?;
+    for i in 0..cases.len() as u64 {
+        b.dispatch_1d(
+            &kernels::background_step::INFO,
+            &kernels::background_step::Push {
+                bg: buf.address() + i * size,
+                lr,
+                beta,
+                eps,
+                ..Default::default()
+            },
+            3,
+        )?;
+    }
+    b.submit()?;
+    let got: Vec<Background> = buf.download()?;
+    let mut cmp = Compare::new(1e-6, 1e-5);
+    let mut clamped = 0;
+    for (i, (g, mut w)) in got.iter().zip(cases).enumerate() {
+        let before = w.rgb;
+        background::step(&mut w, lr, beta, eps);
+        clamped += (0..3)
+            .filter(|&ch| (w.rgb[ch] == 0.0 || w.rgb[ch] == 1.0) && w.rgb[ch] != before[ch])
+            .count();
+        for (name, a, b) in [
+            ("rgb", g.rgb, w.rgb),
+            ("grad", g.grad, w.grad),
+            ("avg", g.avg, w.avg),
+        ] {
+            for ch in 0..3 {
+                cmp.value(a[ch] as f64, b[ch] as f64, || {
+                    format!("case {i} {name}[{ch}]")
+                });
+            }
+        }
+    }
+    Ok(cmp.row(
+        "background_step",
+        got.len(),
+        format!("{clamped} channels clamped to 0 or 1"),
     ))
 }

@@ -182,6 +182,7 @@ fn run_field(
             levels: lv.clone(),
             a: 1e6,
             stop_thresh: 1e-4,
+            background: [1.0; 3],
         };
         let ray_buf: Vec<f32> = rays
             .iter()

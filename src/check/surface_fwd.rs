@@ -6,21 +6,24 @@
 //! a = 3.5 with stop 1e-4 (truncation and fractional γ) skipping with the scene's block masks, and
 //! a = 100 with stop 1e-3 skipping with random block masks (exercising the walk's restarts).
 //!
-//! Per ray the hit counts must agree exactly, and then rgb and transmittance within
+//! Rays are composited on [`TEST_BACKGROUND`]. Per ray the hit counts must agree exactly, and
+//! then rgb and transmittance within
 //! |Δ| ≤ 1e-4 + 1e-4·|cpu|. A ray whose hit count differs is excused (a near-tangent or
 //! face-ambiguous crossing: lavapipe evaluates GLSL `fma` unfused while the twin fuses, and
 //! `exp`/`cos` differ by an ulp, which can also flip an early-termination test), counted, and
 //! capped at [`EXCUSED_CAP_FRAC`] of the rays. The summed counters must agree within 0.5 % + 4.
 
-use super::{CheckRow, Compare};
+use super::{CheckRow, Compare, TEST_BACKGROUND};
 use crate::abi::surface_grid::SurfaceGridRef;
+use crate::cpu::background::Background;
 use crate::cpu::surface_blocks::build_blocks;
 use crate::cpu::surface_fwd::{
     render, validate_blocks, validate_inputs, SurfCounts, SurfaceParams,
 };
+use crate::cpu::surface_train::SurfaceLoss;
 use crate::gpu::Gpu;
 use crate::kernels::surface_fwd::{Push, INFO};
-use crate::math::surface::{SurfOut, SURF_MAX_LEVELS};
+use crate::math::surface::SurfOut;
 use crate::math::surface_blocks::{
     surf_live_words, SkipRef, SURF_BLOCK_SHIFT_CPU, SURF_BLOCK_SHIFT_VULKAN, SURF_BOX_WORDS,
 };
@@ -59,7 +62,7 @@ impl SurfaceScene {
         }
     }
 
-    /// Parameters with truncation `a` and stop threshold `stop`.
+    /// Parameters with truncation `a` and stop threshold `stop`, on [`TEST_BACKGROUND`].
     pub fn params(&self, a: f32, stop: f32) -> SurfaceParams {
         SurfaceParams {
             scale: self.scale,
@@ -67,6 +70,7 @@ impl SurfaceScene {
             levels: self.levels.clone(),
             a,
             stop_thresh: stop,
+            background: TEST_BACKGROUND,
         }
     }
 
@@ -221,8 +225,13 @@ pub fn render_gpu(
     validate_inputs(g, rays, p)?;
     validate_blocks(g, blocks)?;
     let n_rays = rays.len() / 6;
-    let mut levels = p.levels.clone();
-    levels.resize(SURF_MAX_LEVELS, 0.0);
+    let no_loss = SurfaceLoss {
+        grad_scale: 0.0,
+        lambda_h: 0.0,
+        lambda_c: 0.0,
+    };
+    let params = gpu.upload(&[crate::surface::surf_params(p, &no_loss, n_rays)])?;
+    let bg = gpu.upload(&[Background::new(p.background, false)])?;
     let one = |v: &[f32]| {
         if v.is_empty() {
             vec![0.0f32]
@@ -234,7 +243,6 @@ pub fn render_gpu(
     let delta = gpu.upload(&one(g.delta))?;
     let opacity = gpu.upload(&one(g.opacity))?;
     let sh = gpu.upload(&one(g.sh))?;
-    let lv = gpu.upload(&levels)?;
     let rb = gpu.upload(&one(rays))?;
     let out = gpu.zeros::<SurfOut>(n_rays.max(1))?;
     let bb = gpu.upload(blocks.map_or(&[0][..], |b| b.words))?;
@@ -246,18 +254,13 @@ pub fn render_gpu(
             delta: delta.address(),
             opacity: opacity.address(),
             sh: sh.address(),
-            levels: lv.address(),
+            params: params.address(),
             rays: rb.address(),
             out_rays: out.address(),
             stats: stats.address(),
             blocks: bb.address(),
-            scale: p.scale,
-            offset: p.offset,
+            bg: bg.address(),
             n: g.n,
-            n_rays: n_rays as u32,
-            n_levels: p.levels.len() as u32,
-            a: p.a,
-            stop_thresh: p.stop_thresh,
             block_skip: u32::from(blocks.is_some()),
             block_shift: blocks.map_or(0, |b| b.shift),
             ..Default::default()

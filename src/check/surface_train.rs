@@ -18,7 +18,9 @@
 //!   against a threshold and the scatter skips exact zeros, and an ulp can flip either);
 //! - touched flags: equal;
 //! - gradients per parameter type (δ, σα, SH): relative L2 ≤ 1e-3, and elementwise
-//!   |Δ| ≤ 1e-4·max|g| + 1e-3·|g| for all but 0.1 % of the elements (atomic summation order).
+//!   |Δ| ≤ 1e-4·max|g| + 1e-3·|g| for all but 0.1 % of the elements (atomic summation order);
+//!   the background's (rays composited on [`TEST_BACKGROUND`], learned): relative L2 ≤ 1e-3
+//!   (a sum over rays of dL/dC·T, each as close as the per-ray losses).
 //!
 //! Last on the well-conditioned rays, those whose every hit has |f′| ≥ [`ILL_CONDITIONED`]·(the
 //! cell's δ range) and |σα| ≥ [`ILL_CONDITIONED`]·(the cell's σα range): the same gradient test
@@ -29,7 +31,8 @@
 //! guarded and no δ gradient may appear on either backend.
 
 use super::surface_fwd::{test_rays, test_scene, SurfaceScene, RES};
-use super::{grad_outliers, rel_l2, CheckRow, Compare};
+use super::{grad_outliers, rel_l2, CheckRow, Compare, TEST_BACKGROUND};
+use crate::cpu::background::Background;
 use crate::cpu::surface_blocks::build_blocks;
 use crate::cpu::surface_fwd::SurfaceParams;
 use crate::cpu::surface_train::{hit_point, trace_ray, train, RayLoss, SurfaceGrads, TrainCounts};
@@ -39,7 +42,8 @@ use crate::grid::SH_DIM;
 use crate::math::surface_blocks::{SkipRef, SURF_BLOCK_SHIFT_VULKAN};
 use crate::math::trilerp::trilerp_grad;
 use crate::surface::{
-    batch_loss, surface_params, SurfaceGradients, SurfaceStepParams, VulkanSurface,
+    batch_loss, surface_params, SurfaceBackend as _, SurfaceGradients, SurfaceStepParams,
+    VulkanSurface,
 };
 use anyhow::Result;
 use rand::{Rng, SeedableRng};
@@ -76,18 +80,28 @@ pub fn pass_params(a: f32, stop_thresh: f32, lambda_h: f32, lambda_c: f32) -> Su
         lambda_h,
         lambda_c,
         regs: Default::default(),
+        lr_bg: 0.0,
     }
 }
 
-/// The CPU twin's outputs: per-ray losses, counters, gradients (δ, σα, SH) and touched flags.
+/// The CPU twin's outputs: per-ray losses, counters, gradients (δ, σα, SH, background) and
+/// touched flags.
 pub struct CpuTrain {
     pub ray_loss: Vec<RayLoss>,
     pub counts: TrainCounts,
     pub grads: [Vec<f32>; 3],
+    pub background: [f32; 3],
     pub touched: Vec<u32>,
 }
 
-/// Run the CPU twin on `grid` the way the backends do (surface_params, batch_loss).
+/// The background of the training parity passes: [`TEST_BACKGROUND`], learned (its gradient is
+/// compared too).
+pub fn test_background() -> Background {
+    Background::new(TEST_BACKGROUND, true)
+}
+
+/// Run the CPU twin on `grid` the way the backends do (surface_params, batch_loss), on
+/// [`test_background`].
 pub fn cpu_train(
     grid: &SurfaceGrid,
     rays: &[f32],
@@ -98,13 +112,14 @@ pub fn cpu_train(
     let mut grads = [vec![0.0; rows], vec![0.0; rows], vec![0.0; rows * SH_DIM]];
     let mut touched = vec![0u32; rows];
     let [gd, go, gs] = &mut grads;
+    let mut background = [0.0; 3];
     // The skip structure the Vulkan backend walks with (its block edge).
     let blocks = build_blocks(&grid.as_ref(), &grid.levels, 0.0, SURF_BLOCK_SHIFT_VULKAN)?;
     let (ray_loss, counts) = train(
         &grid.as_ref(),
         rays,
         targets,
-        &surface_params(grid, p.a, p.stop_thresh),
+        &surface_params(grid, p.a, p.stop_thresh, TEST_BACKGROUND),
         &batch_loss(rays.len() / 6, p),
         Some(SkipRef {
             words: &blocks,
@@ -115,12 +130,14 @@ pub fn cpu_train(
             opacity: go,
             sh: gs,
             touched: &mut touched,
+            background: Some(&mut background),
         },
     )?;
     Ok(CpuTrain {
         ray_loss,
         counts,
         grads,
+        background,
         touched,
     })
 }
@@ -229,6 +246,13 @@ fn compare_grads(
             ));
         }
     }
+    let e = rel_l2(&got.background, &want.background);
+    if e > limit {
+        errs.push(format!(
+            "{what} dbg: rel L2 {e:.2e} (limit {limit:.0e}): gpu {:?} cpu {:?}",
+            got.background, want.background
+        ));
+    }
     rel
 }
 
@@ -249,7 +273,9 @@ fn run_pass(
 ) -> Result<PassNote> {
     let (p, what, all_guarded) = (pass.p, pass.what, pass.all_guarded);
     let train_gpu = |rays: &[f32], targets: &[f32]| {
-        VulkanSurface::new(gpu, grid.clone())?.gradients(rays, targets, p)
+        let mut vk = VulkanSurface::new(gpu, grid.clone())?;
+        vk.set_background(test_background())?;
+        vk.gradients(rays, targets, p)
     };
     // 1: every ray; keep those whose hit counts agree.
     let want = cpu_train(grid, rays, targets, p)?;
@@ -311,7 +337,7 @@ fn run_pass(
         ));
     }
     // 3: the well-conditioned rays: gradients within 1e-4.
-    let sp = surface_params(grid, p.a, p.stop_thresh);
+    let sp = surface_params(grid, p.a, p.stop_thresh, TEST_BACKGROUND);
     let good: Vec<usize> = (0..keep.len())
         .filter(|&i| {
             let r = &rays_k[6 * i..6 * i + 6];

@@ -6,6 +6,7 @@
 #![allow(clippy::needless_range_loop, clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod atomic;
+pub mod background;
 pub mod cubic_solve;
 mod dda_walk;
 pub mod extract_points;

@@ -89,8 +89,13 @@ fn forward(
     (color, t_acc)
 }
 
-/// Twin of `plenoxel_fwd.comp`: rgb per ray (white background) and the summed sample counts.
-pub fn render(g: &GridRef, rays: &[f32], mp: &MarchParams) -> (Vec<f32>, PlenoxelCounts) {
+/// Twin of `plenoxel_fwd.comp`: rgb per ray (composited on `bg`) and the summed sample counts.
+pub fn render(
+    g: &GridRef,
+    rays: &[f32],
+    mp: &MarchParams,
+    bg: [f32; 3],
+) -> (Vec<f32>, PlenoxelCounts) {
     let n = rays.len() / 6;
     let out: Vec<([f32; 3], PlenoxelCounts)> = (0..n)
         .into_par_iter()
@@ -108,7 +113,7 @@ pub fn render(g: &GridRef, rays: &[f32], mp: &MarchParams) -> (Vec<f32>, Plenoxe
                 ),
                 None => ([0.0; 3], 1.0),
             };
-            (color.map(|c| c + t_acc), counts)
+            (std::array::from_fn(|ch| color[ch] + t_acc * bg[ch]), counts)
         })
         .collect();
     let counts = out.iter().fold(PlenoxelCounts::default(), |a, o| a + o.1);
@@ -120,23 +125,27 @@ pub struct TrainGrads<'a> {
     pub density: &'a mut [f32],
     pub sh: &'a mut [f32],
     pub touched: &'a mut [u32],
+    /// dL/dbg (a learned background), or `None` (fixed: not accumulated).
+    pub background: Option<&'a mut [f32; 3]>,
 }
 
 /// Twin of `plenoxel_train.comp`: returns per-ray squared error and the sample counts, adds
-/// dL/dσ and dL/dSH (dL/dC = grad_scale·(C − target)) into `grads`.
+/// dL/dσ and dL/dSH (dL/dC = grad_scale·(C − target), C composited on `bg`) into `grads`, and
+/// dL/dbg = Σ_rays dL/dC·T when `grads.background` is given.
 pub fn train(
     g: &GridRef,
     rays: &[f32],
     targets: &[f32],
     mp: &MarchParams,
     grad_scale: f32,
+    bg: [f32; 3],
     grads: TrainGrads,
 ) -> (Vec<f32>, PlenoxelCounts) {
     let n = rays.len() / 6;
     let gd = atomic::as_atomic(grads.density);
     let gs = atomic::as_atomic(grads.sh);
     let touched = atomic::as_atomic_u32(grads.touched);
-    let out: Vec<(f32, PlenoxelCounts)> = (0..n)
+    let out: Vec<(f32, [f32; 3], PlenoxelCounts)> = (0..n)
         .into_par_iter()
         .map(|r| {
             let (ro, rd) = ray(rays, r);
@@ -150,13 +159,14 @@ pub fn train(
                 None => ([0.0; 3], 1.0),
             };
             let shaded = counts.shaded as usize;
-            let total: [f32; 3] = color.map(|c| c + t_acc);
+            let total: [f32; 3] = std::array::from_fn(|ch| color[ch] + t_acc * bg[ch]);
             let diff: [f32; 3] = std::array::from_fn(|ch| total[ch] - target[ch]);
             let loss = diff[0] * diff[0] + diff[1] * diff[1] + diff[2] * diff[2];
             let g_c = diff.map(|d| grad_scale * d);
+            let g_bg = g_c.map(|gc| gc * t_acc);
 
             let Some(m) = &m else {
-                return (loss, counts);
+                return (loss, g_bg, counts);
             };
             let mut scatter = CellAccumulator::new(gd, gs, touched, &y);
             let mut accum = [0f32; 3];
@@ -195,10 +205,17 @@ pub fn train(
                 }
             }
             counts.atomic_adds += scatter.flush();
-            (loss, counts)
+            (loss, g_bg, counts)
         })
         .collect();
-    let counts = out.iter().fold(PlenoxelCounts::default(), |a, o| a + o.1);
+    if let Some(gb) = grads.background {
+        for o in &out {
+            for ch in 0..3 {
+                gb[ch] += o.1[ch];
+            }
+        }
+    }
+    let counts = out.iter().fold(PlenoxelCounts::default(), |a, o| a + o.2);
     (out.into_iter().map(|o| o.0).collect(), counts)
 }
 

@@ -28,6 +28,8 @@ pub struct SurfaceParams {
     pub a: f32,
     /// Stop once transmittance falls below this.
     pub stop_thresh: f32,
+    /// The colour composited behind the last hit: C = Σ w_j c_j + T·background.
+    pub background: [f32; 3],
 }
 
 /// One ray: its output and counters. `blocks`: the skip structure of `g` for `p.levels`
@@ -97,7 +99,7 @@ pub fn render_ray(
         (w.cells, w.solves, w.culled, w.blocks_skipped);
     (
         SurfOut {
-            rgb: color.map(|c| c + t_acc),
+            rgb: std::array::from_fn(|ch| color[ch] + t_acc * p.background[ch]),
             transmittance: t_acc,
             hits: j,
         },

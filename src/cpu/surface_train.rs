@@ -57,6 +57,8 @@ pub struct SurfaceGrads<'a> {
     pub opacity: &'a mut [f32],
     pub sh: &'a mut [f32],
     pub touched: &'a mut [u32],
+    /// dL/dbg (a learned background), or `None` (fixed: not accumulated).
+    pub background: Option<&'a mut [f32; 3]>,
 }
 
 /// One composited hit: its cell, corner links, level, and where the ray meets it.
@@ -220,7 +222,8 @@ fn shade(g: &SurfaceGridRef, h: &Hit, dn: [f32; 3], y: &[f32; 9], a: f32, j: usi
 }
 
 /// Twin of `surface_train.comp`: per-ray losses and the summed counters; dL/dδ, dL/dσα and
-/// dL/dSH are added into `grads` and every vertex receiving a gradient is flagged. `blocks`: the
+/// dL/dSH are added into `grads` and every vertex receiving a gradient is flagged; dL/dbg =
+/// Σ_rays dL/dC·T is added when `grads.background` is given. `blocks`: the
 /// `surface_blocks` masks of the current δ (the kernel always skips with them; `None` walks every
 /// cell, with the same result).
 pub fn train(
@@ -259,7 +262,7 @@ pub fn train(
         sh: atomic::as_atomic(grads.sh),
         touched: atomic::as_atomic_u32(grads.touched),
     };
-    let res: Vec<(RayLoss, TrainCounts)> = rays
+    let res: Vec<(RayLoss, [f32; 3], TrainCounts)> = rays
         .par_chunks_exact(6)
         .zip(targets.par_chunks_exact(3))
         .map(|(r, t)| {
@@ -275,7 +278,16 @@ pub fn train(
             )
         })
         .collect();
-    let counts = res.iter().fold(TrainCounts::default(), |a, (_, c)| a + *c);
+    if let Some(gb) = grads.background {
+        for o in &res {
+            for ch in 0..3 {
+                gb[ch] += o.1[ch];
+            }
+        }
+    }
+    let counts = res
+        .iter()
+        .fold(TrainCounts::default(), |a, (_, _, c)| a + *c);
     Ok((res.into_iter().map(|o| o.0).collect(), counts))
 }
 
@@ -295,13 +307,14 @@ pub struct HitGrads {
 }
 
 /// The loss of one traced ray and the per-hit gradients with respect to α̃_j, raw colour and
-/// depth (the part of the backward pass that does not touch the grid).
+/// depth (the part of the backward pass that does not touch the grid), and dL/dbg = dL/dC·T.
 fn ray_backward(
     tr: &Trace,
     sh: &[Shade],
     target: [f32; 3],
     loss: &SurfaceLoss,
-) -> (RayLoss, [HitGrads; SURF_MAX_HITS]) {
+    bg: [f32; 3],
+) -> (RayLoss, [HitGrads; SURF_MAX_HITS], [f32; 3]) {
     let n = tr.n;
     let mut t = [1.0f32; SURF_MAX_HITS + 1];
     let mut w = [0.0f32; SURF_MAX_HITS];
@@ -313,7 +326,7 @@ fn ray_backward(
         }
         t[j + 1] = t[j] * (1.0 - sh[j].at);
     }
-    let total: [f32; 3] = color.map(|c| c + t[n]);
+    let total: [f32; 3] = std::array::from_fn(|ch| color[ch] + t[n] * bg[ch]);
     let diff: [f32; 3] = std::array::from_fn(|ch| total[ch] - target[ch]);
     let mut out = RayLoss {
         sq_err: diff[0] * diff[0] + diff[1] * diff[1] + diff[2] * diff[2],
@@ -321,6 +334,7 @@ fn ray_backward(
         ..Default::default()
     };
     let d_c = diff.map(|d| loss.grad_scale * d);
+    let d_bg = d_c.map(|d| d * t[n]);
 
     // Entropy of the normalised weights and ∂(λH·LH)/∂w_j.
     let mut e = [0.0f32; SURF_MAX_HITS];
@@ -368,13 +382,14 @@ fn ray_backward(
             d_t[m] -= loss.lambda_c * sg;
         }
     }
-    // Reverse pass: colour and entropy seen from behind each hit.
+    // Reverse pass: colour and entropy seen from behind each hit (behind the last: the
+    // background).
     let mut grads: [HitGrads; SURF_MAX_HITS] = std::array::from_fn(|_| HitGrads {
         d_at: 0.0,
         d_raw: [0.0; 3],
         d_t: 0.0,
     });
-    let mut s_c = [1.0f32; 3];
+    let mut s_c = bg;
     let mut s_e = 0.0f32;
     for j in (0..n).rev() {
         let at = sh[j].at;
@@ -399,7 +414,7 @@ fn ray_backward(
         }
         s_e = at * e[j] + (1.0 - at) * s_e;
     }
-    (out, grads)
+    (out, grads, d_bg)
 }
 
 #[allow(clippy::too_many_arguments)] // the kernel's per-ray inputs, one argument each
@@ -412,14 +427,14 @@ fn train_ray(
     loss: &SurfaceLoss,
     blocks: Option<SkipRef>,
     out: &Scatter,
-) -> (RayLoss, TrainCounts) {
+) -> (RayLoss, [f32; 3], TrainCounts) {
     let mut cnt = TrainCounts::default();
     let tr = trace_ray(g, ro, rd, p, blocks, &mut cnt);
     let y = sh_basis(ray_unit(rd));
     let shades: Vec<Shade> = (0..tr.n)
         .map(|j| shade(g, &tr.hits[j], tr.dn, &y, p.a, j))
         .collect();
-    let (rl, hg) = ray_backward(&tr, &shades, target, loss);
+    let (rl, hg, d_bg) = ray_backward(&tr, &shades, target, loss, p.background);
     // Per-corner sums over consecutive hits in one cell, in reverse hit order (the kernel scatters
     // inside its reverse recurrence), flushed when the cell changes.
     let mut acc = CellAcc::default();
@@ -481,7 +496,7 @@ fn train_ray(
         }
     }
     cnt.atomic_adds += acc.flush(out, &y);
-    (rl, cnt)
+    (rl, d_bg, cnt)
 }
 
 /// Per-corner gradient sums of the current cell (SH as 3 colour sums: Y is constant along a ray).

@@ -1,6 +1,7 @@
 //! The CPU stage-1 backend: the kernels' rayon twins over host arrays.
 
 use super::{march_params, Gradients, Plenoxels, StateFn, StepParams, StepStats};
+use crate::cpu::background::{self, Background};
 use crate::cpu::plenoxel::{self as twin, TrainGrads};
 use crate::cpu::step::TOUCH_ALL;
 use crate::cpu::{rmsprop_sparse, tv, RmsProp, Stage1Params, TvChunk};
@@ -18,6 +19,7 @@ pub struct CpuPlenoxels {
     state_density: Vec<f32>,
     state_sh: Vec<f32>,
     touched: Vec<u32>,
+    bg: Background,
 }
 
 impl CpuPlenoxels {
@@ -35,6 +37,7 @@ impl CpuPlenoxels {
             state_density: Vec::new(),
             state_sh: Vec::new(),
             touched: Vec::new(),
+            bg: Background::new([1.0; 3], false),
         };
         b.load(grid, None).expect("a fresh state always fits");
         b
@@ -66,6 +69,7 @@ fn data_term(
     rays: &[f32],
     targets: &[f32],
     stop_thresh: f32,
+    bg: [f32; 3],
     grads: TrainGrads,
 ) -> Result<(Vec<f32>, PlenoxelCounts)> {
     let n = rays.len() / 6;
@@ -81,6 +85,7 @@ fn data_term(
         targets,
         &mp,
         2.0 / (3.0 * n as f32),
+        bg,
         grads,
     ))
 }
@@ -93,12 +98,22 @@ impl Plenoxels for CpuPlenoxels {
     fn step(&mut self, rays: &[f32], targets: &[f32], p: &StepParams) -> Result<StepStats> {
         let mut clock = PhaseClock::start();
         self.refresh_occupancy();
+        let learned = self.bg.learned();
         let grads = TrainGrads {
             density: &mut self.grad_density,
             sh: &mut self.grad_sh,
             touched: &mut self.touched,
+            background: learned.then_some(&mut self.bg.grad),
         };
-        let (loss, counts) = data_term(&self.grid, &self.occ, rays, targets, p.stop_thresh, grads)?;
+        let (loss, counts) = data_term(
+            &self.grid,
+            &self.occ,
+            rays,
+            targets,
+            p.stop_thresh,
+            self.bg.rgb,
+            grads,
+        )?;
         let n = loss.len();
         if let Some(t) = p.tv {
             let chunk = |channels: u32, lambda: f32| TvChunk {
@@ -143,6 +158,9 @@ impl Plenoxels for CpuPlenoxels {
                 eps: p.eps,
             },
         );
+        if learned {
+            background::step(&mut self.bg, p.lr_bg, p.beta, p.eps);
+        }
         let mse = loss.iter().map(|&l| l as f64).sum::<f64>() / (3 * n) as f64;
         clock.mark(Phase::Compute);
         Ok(StepStats {
@@ -157,17 +175,27 @@ impl Plenoxels for CpuPlenoxels {
         self.refresh_occupancy();
         let n = self.grid.allocated();
         let (mut density, mut sh, mut touched) = (vec![0.0; n], vec![0.0; n * SH_DIM], vec![0; n]);
+        let mut background = [0.0; 3];
         let grads = TrainGrads {
             density: &mut density,
             sh: &mut sh,
             touched: &mut touched,
+            background: self.bg.learned().then_some(&mut background),
         };
-        let (ray_loss, counts) =
-            data_term(&self.grid, &self.occ, rays, targets, stop_thresh, grads)?;
+        let (ray_loss, counts) = data_term(
+            &self.grid,
+            &self.occ,
+            rays,
+            targets,
+            stop_thresh,
+            self.bg.rgb,
+            grads,
+        )?;
         Ok(Gradients {
             ray_loss,
             density,
             sh,
+            background,
             counts,
         })
     }
@@ -175,7 +203,7 @@ impl Plenoxels for CpuPlenoxels {
     fn render(&mut self, rays: &[f32], stop_thresh: f32) -> Result<(Vec<f32>, PlenoxelCounts)> {
         self.refresh_occupancy();
         let mp = march_params(&self.grid, stop_thresh);
-        Ok(twin::render(&self.view(), rays, &mp))
+        Ok(twin::render(&self.view(), rays, &mp, self.bg.rgb))
     }
 
     fn max_weights(&mut self, rays: &[f32], stop_thresh: f32) -> Result<Vec<f32>> {
@@ -210,6 +238,15 @@ impl Plenoxels for CpuPlenoxels {
         self.touched = vec![0; n];
         self.grid = grid;
         self.refresh_occupancy();
+        Ok(())
+    }
+
+    fn background(&self) -> Result<Background> {
+        Ok(self.bg)
+    }
+
+    fn set_background(&mut self, bg: Background) -> Result<()> {
+        self.bg = bg;
         Ok(())
     }
 }

@@ -7,6 +7,7 @@ mod vulkan;
 pub use cpu::CpuPlenoxels;
 pub use vulkan::VulkanPlenoxels;
 
+use crate::cpu::background::Background;
 use crate::cpu::plenoxel::MarchParams;
 use crate::grid::Grid;
 use crate::math::plenoxel::PlenoxelCounts;
@@ -30,6 +31,8 @@ pub struct StepParams {
     pub eps: f32,
     pub stop_thresh: f32,
     pub tv: Option<TvParams>,
+    /// RMSProp rate of a learned background (`background_step`; unused when it is fixed).
+    pub lr_bg: f32,
 }
 
 /// What a step reports back.
@@ -51,6 +54,8 @@ pub struct Gradients {
     pub ray_loss: Vec<f32>,
     pub density: Vec<f32>,
     pub sh: Vec<f32>,
+    /// dL/dbg of a learned background (zero when it is fixed).
+    pub background: [f32; 3],
     pub counts: PlenoxelCounts,
 }
 
@@ -64,9 +69,10 @@ pub trait Plenoxels {
     /// One optimisation step on a batch: `rays` 6 floats per ray, `targets` 3 per ray.
     fn step(&mut self, rays: &[f32], targets: &[f32], p: &StepParams) -> Result<StepStats>;
     /// The data-term gradients of a batch without updating anything: per-ray squared error,
-    /// dL/dσ and dL/dSH (L = mean squared error over rays and channels), and the sample counts.
+    /// dL/dσ, dL/dSH and, when it is learned, dL/dbg (L = mean squared error over rays and
+    /// channels), and the sample counts.
     fn gradients(&mut self, rays: &[f32], targets: &[f32], stop_thresh: f32) -> Result<Gradients>;
-    /// Render rays (white background): 3 floats per ray, and the sample counts.
+    /// Render rays (composited on the background): 3 floats per ray, and the sample counts.
     fn render(&mut self, rays: &[f32], stop_thresh: f32) -> Result<(Vec<f32>, PlenoxelCounts)>;
     /// Max over rays and samples of w·w_trilinear per allocated vertex (pruning weights).
     fn max_weights(&mut self, rays: &[f32], stop_thresh: f32) -> Result<Vec<f32>>;
@@ -80,8 +86,13 @@ pub trait Plenoxels {
         let (sd, ss) = self.optimizer_state()?;
         f(&self.grid()?, [&sd, &ss])
     }
-    /// Replace grid and optimiser state (after resampling, or when resuming).
+    /// Replace grid and optimiser state (after resampling, or when resuming); the background
+    /// stays.
     fn load(&mut self, grid: Grid, state: Option<(Vec<f32>, Vec<f32>)>) -> Result<()>;
+    /// The background with its optimiser state (white and fixed unless set).
+    fn background(&self) -> Result<Background>;
+    /// Replace the background (colour, whether it is learned, its optimiser state).
+    fn set_background(&mut self, bg: Background) -> Result<()>;
 }
 
 /// Ray → grid mapping of a grid: grid = p·scale + offset.

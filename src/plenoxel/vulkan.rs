@@ -2,6 +2,8 @@
 //! training step is one batch (occupancy → train → TV → RMSProp) and one submission.
 
 use super::{march_params, Gradients, Plenoxels, StepParams, StepStats};
+use crate::abi::buffers::PlenoxelParams;
+use crate::cpu::background::Background;
 use crate::cpu::step::{STEP_FLAGS, STEP_N, STEP_STATS, TOUCH_ALL};
 use crate::gpu::{
     record_optim_args, Batch, Gpu, GpuBuffer, Phase, PhaseClock, RayBuffers, Readback,
@@ -27,6 +29,14 @@ pub struct VulkanPlenoxels {
     step: GpuBuffer,
     /// Indirect dispatch arguments of rmsprop_sparse.
     args: GpuBuffer,
+    /// plenoxel_train's params buffer (written before each training batch).
+    params: GpuBuffer,
+    /// The background (`Background`): read by the render and training kernels, and, when
+    /// learned, its gradient accumulated and stepped on the device (`background_step`) so that a
+    /// step needs no host round trip for it.
+    bg: GpuBuffer,
+    /// Whether `bg` is learned (the host's copy of its flag: `background_step` is recorded then).
+    bg_learned: bool,
     /// Per-batch rays, targets and per-ray output: rgb (3 floats) for render, the squared error
     /// (1 float) for training.
     rays: RayBuffers,
@@ -54,6 +64,9 @@ impl VulkanPlenoxels {
                 gpu.upload(&init)?
             },
             args: gpu.zeros::<u32>(3)?,
+            params: gpu.host_to_device::<PlenoxelParams>(1)?,
+            bg: gpu.upload(&[Background::new([1.0; 3], false)])?,
+            bg_learned: false,
             rays: RayBuffers::new(3 * std::mem::size_of::<f32>()),
             readback: Readback::default(),
             meta: Grid {
@@ -150,6 +163,12 @@ impl VulkanPlenoxels {
             targets.len() / 3
         );
         let mp = march_params(&self.meta, stop_thresh);
+        self.params.write(&[PlenoxelParams {
+            scale: mp.scale,
+            offset: mp.offset,
+            stop_thresh,
+            grad_scale: 2.0 / (3.0 * n as f32),
+        }])?;
         let (mut b, [ray_buf, target_buf, loss_buf]) = self.begin(rays, Some(targets), clock)?;
         b.dispatch_1d(
             &kernels::plenoxel_train::INFO,
@@ -164,12 +183,10 @@ impl VulkanPlenoxels {
                 grad_sh: self.grad_sh.address(),
                 ray_loss: loss_buf,
                 step: self.step.address(),
+                params: self.params.address(),
+                bg: self.bg.address(),
                 res: self.meta.res,
-                scale: mp.scale,
-                offset: mp.offset,
                 n_rays: n as u32,
-                stop_thresh,
-                grad_scale: 2.0 / (3.0 * n as f32),
             },
             n as u32,
         )?;
@@ -218,6 +235,19 @@ impl Plenoxels for VulkanPlenoxels {
             }
         }
         self.record_rmsprop(&mut b, p)?;
+        if self.bg_learned {
+            b.dispatch_1d(
+                &kernels::background_step::INFO,
+                &kernels::background_step::Push {
+                    bg: self.bg.address(),
+                    lr: p.lr_bg,
+                    beta: p.beta,
+                    eps: p.eps,
+                    ..Default::default()
+                },
+                3,
+            )?;
+        }
         self.readback.record(
             &self.gpu,
             &mut b,
@@ -249,12 +279,16 @@ impl Plenoxels for VulkanPlenoxels {
         let n = rays.len() / 6;
         self.record_train(rays, targets, stop_thresh, &mut PhaseClock::start())?
             .submit()?;
+        let mut bg: Background = self.bg.download()?[0];
         let g = Gradients {
             ray_loss: self.ray_loss(n)?,
             density: self.grad_density.download()?,
             sh: self.grad_sh.download()?,
+            background: bg.grad,
             counts: self.read_stats()?,
         };
+        bg.grad = [0.0; 3];
+        self.bg.write(&[bg])?;
         // Leave no gradient or touched flag behind for the next step.
         let mut b = self.gpu.batch()?;
         b.fill_zero(&self.grad_density);
@@ -282,6 +316,7 @@ impl Plenoxels for VulkanPlenoxels {
                 rays: ray_buf,
                 rgb: out_buf,
                 step: self.step.address(),
+                bg: self.bg.address(),
                 res: self.meta.res,
                 scale: mp.scale,
                 offset: mp.offset,
@@ -349,12 +384,24 @@ impl Plenoxels for VulkanPlenoxels {
                 "optimizer state does not match the grid"
             );
         }
-        let fresh = VulkanPlenoxels::new(&self.gpu, grid)?;
+        let bg = self.background()?;
+        let mut fresh = VulkanPlenoxels::new(&self.gpu, grid)?;
         if let Some((sd, ss)) = state {
             fresh.state_density.write(&sd)?;
             fresh.state_sh.write(&ss)?;
         }
+        fresh.set_background(bg)?;
         *self = fresh;
+        Ok(())
+    }
+
+    fn background(&self) -> Result<Background> {
+        Ok(self.bg.download()?[0])
+    }
+
+    fn set_background(&mut self, bg: Background) -> Result<()> {
+        self.bg.write(&[bg])?;
+        self.bg_learned = bg.learned();
         Ok(())
     }
 }

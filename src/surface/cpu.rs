@@ -5,6 +5,7 @@ use super::{
     SurfaceStateFn, SurfaceStepParams, SurfaceStepStats,
 };
 use crate::abi::surface_grid::SurfaceGridRef;
+use crate::cpu::background::{self, Background};
 use crate::cpu::surface_blocks::build_blocks;
 use crate::cpu::surface_delta_tv::{axis_neighbours, delta_tv, forward_reach};
 use crate::cpu::surface_fwd::{render, SurfCounts};
@@ -46,6 +47,7 @@ pub struct CpuSurface {
     /// The block masks the walks skip with, and when to rebuild them.
     blocks: Vec<u32>,
     refresh: BlockRefresh,
+    bg: Background,
 }
 
 impl CpuSurface {
@@ -68,6 +70,7 @@ impl CpuSurface {
             grad: [vec![0.0; n], vec![0.0; n], vec![0.0; n * SH_DIM]],
             state: [vec![0.0; n], vec![0.0; n], vec![0.0; n * SH_DIM]],
             touched: vec![0; n],
+            bg: Background::new([1.0; 3], false),
         })
     }
 
@@ -170,8 +173,9 @@ impl SurfaceBackend for CpuSurface {
         p: &SurfaceStepParams,
     ) -> Result<SurfaceStepStats> {
         let mut clock = PhaseClock::start();
-        let sp = surface_params(&self.grid, p.a, p.stop_thresh);
+        let sp = surface_params(&self.grid, p.a, p.stop_thresh, self.bg.rgb);
         let n = rays.len() / 6;
+        let learned = self.bg.learned();
         self.refresh_blocks(p.lr_delta, p.beta)?;
         let [gd, go, gs] = &mut self.grad;
         let (losses, counts) = train(
@@ -189,11 +193,15 @@ impl SurfaceBackend for CpuSurface {
                 opacity: go,
                 sh: gs,
                 touched: &mut self.touched,
+                background: learned.then_some(&mut self.bg.grad),
             },
         )?;
         let plan = RegPlan::new(p, &self.normals, self.axis_reach);
         let reg_loss = self.regularise(p, &plan)?;
         self.optimise(p, &plan);
+        if learned {
+            background::step(&mut self.bg, p.lr_bg, p.beta, p.eps);
+        }
         self.refresh.after_update(p.lr_delta, p.beta);
         let nf = n.max(1) as f64;
         let mut stats = SurfaceStepStats {
@@ -211,7 +219,7 @@ impl SurfaceBackend for CpuSurface {
     }
 
     fn render(&mut self, rays: &[f32], a: f32, stop_thresh: f32) -> Result<(Vec<f32>, SurfCounts)> {
-        let sp = surface_params(&self.grid, a, stop_thresh);
+        let sp = surface_params(&self.grid, a, stop_thresh, self.bg.rgb);
         self.refresh_blocks(0.0, 0.0)?;
         let skip = SkipRef {
             words: &self.blocks,
@@ -241,8 +249,19 @@ impl SurfaceBackend for CpuSurface {
             state[0].len() == n && state[1].len() == n && state[2].len() == n * SH_DIM,
             "optimizer state does not match the surface grid"
         );
+        let bg = self.bg;
         *self = CpuSurface::new(grid)?;
         self.state = state;
+        self.bg = bg;
+        Ok(())
+    }
+
+    fn background(&self) -> Result<Background> {
+        Ok(self.bg)
+    }
+
+    fn set_background(&mut self, bg: Background) -> Result<()> {
+        self.bg = bg;
         Ok(())
     }
 }

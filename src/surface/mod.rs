@@ -9,8 +9,9 @@ pub mod skip;
 mod vulkan;
 
 pub use cpu::CpuSurface;
-pub use vulkan::{train_params, SurfaceGradients, VulkanSurface};
+pub use vulkan::{surf_params, SurfaceGradients, VulkanSurface};
 
+use crate::cpu::background::Background;
 use crate::cpu::step::RowRange;
 use crate::cpu::surface_delta_tv::DeltaTvChunk;
 use crate::cpu::surface_fwd::{SurfCounts, SurfaceParams};
@@ -49,6 +50,8 @@ pub struct SurfaceStepParams {
     pub lambda_h: f32,
     pub lambda_c: f32,
     pub regs: SurfaceRegs,
+    /// RMSProp rate of a learned background (`background_step`; unused when it is fixed).
+    pub lr_bg: f32,
 }
 
 /// The rows whose δ a step's RMSProp updates flagged or not (`SurfaceRmsProp::delta_rows`), and
@@ -153,7 +156,8 @@ pub trait SurfaceBackend {
         targets: &[f32],
         p: &SurfaceStepParams,
     ) -> Result<SurfaceStepStats>;
-    /// Render rays (white background): 3 floats per ray, and the counters of `surface_fwd`.
+    /// Render rays (composited on the background): 3 floats per ray, and the counters of
+    /// `surface_fwd`.
     fn render(&mut self, rays: &[f32], a: f32, stop_thresh: f32) -> Result<(Vec<f32>, SurfCounts)>;
     /// The current grid.
     fn grid(&self) -> Result<SurfaceGrid>;
@@ -165,8 +169,12 @@ pub trait SurfaceBackend {
         let [sd, so, ss] = self.optimizer_state()?;
         f(&self.grid()?, [&sd, &so, &ss])
     }
-    /// Replace grid and optimiser state (after pruning, or when resuming).
+    /// Replace grid and optimiser state (after pruning, or when resuming); the background stays.
     fn load(&mut self, grid: SurfaceGrid, state: Option<SurfaceState>) -> Result<()>;
+    /// The background with its optimiser state (white and fixed unless set).
+    fn background(&self) -> Result<Background>;
+    /// Replace the background (colour, whether it is learned, its optimiser state).
+    fn set_background(&mut self, bg: Background) -> Result<()>;
 }
 
 /// Passes between rebuilds of the block masks the walks skip with (see [`BlockRefresh`]).
@@ -210,8 +218,13 @@ impl BlockRefresh {
     }
 }
 
-/// Ray → grid mapping and rendering parameters of a surface grid.
-pub fn surface_params(g: &SurfaceGrid, a: f32, stop_thresh: f32) -> SurfaceParams {
+/// Ray → grid mapping and rendering parameters of a surface grid, composited on `background`.
+pub fn surface_params(
+    g: &SurfaceGrid,
+    a: f32,
+    stop_thresh: f32,
+    background: [f32; 3],
+) -> SurfaceParams {
     SurfaceParams {
         scale: std::array::from_fn(|i| g.res[i] as f32 / (2.0 * g.radius[i])),
         offset: std::array::from_fn(|i| {
@@ -220,6 +233,7 @@ pub fn surface_params(g: &SurfaceGrid, a: f32, stop_thresh: f32) -> SurfaceParam
         levels: g.levels.clone(),
         a,
         stop_thresh,
+        background,
     }
 }
 

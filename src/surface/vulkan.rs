@@ -14,7 +14,8 @@ use super::{
     batch_loss, opacity_reg_invocations, surface_params, BlockRefresh, RegPlan, SurfaceBackend,
     SurfaceState, SurfaceStepParams, SurfaceStepStats,
 };
-use crate::abi::buffers::{RayLoss, SurfCounts, SurfOut, SurfTrainParams, TrainCounts};
+use crate::abi::buffers::{RayLoss, SurfCounts, SurfOut, SurfParams, TrainCounts};
+use crate::cpu::background::Background;
 use crate::cpu::step::{STEP_COUNT, STEP_FLAGS, STEP_N};
 use crate::cpu::surface_blocks::{alloc_box, complete_cells};
 use crate::cpu::surface_delta_tv::{axis_neighbours, forward_reach};
@@ -32,13 +33,14 @@ use crate::math::surface_blocks::{
 };
 use anyhow::{ensure, Result};
 
-/// The params buffer of `surface_train`: the levels zero-padded to [`SURF_MAX_LEVELS`].
-pub fn train_params(sp: &SurfaceParams, loss: &SurfaceLoss) -> SurfTrainParams {
+/// The params buffer of `surface_fwd` and `surface_train` for a batch of `n_rays`: the levels
+/// zero-padded to [`SURF_MAX_LEVELS`]; `loss` zero for a render.
+pub fn surf_params(sp: &SurfaceParams, loss: &SurfaceLoss, n_rays: usize) -> SurfParams {
     let mut levels = [0.0f32; SURF_MAX_LEVELS];
     for (d, &l) in levels.iter_mut().zip(&sp.levels) {
         *d = l;
     }
-    SurfTrainParams {
+    SurfParams {
         scale: sp.scale,
         offset: sp.offset,
         a: sp.a,
@@ -46,6 +48,8 @@ pub fn train_params(sp: &SurfaceParams, loss: &SurfaceLoss) -> SurfTrainParams {
         grad_scale: loss.grad_scale,
         lambda_h: loss.lambda_h,
         lambda_c: loss.lambda_c,
+        n_rays: n_rays as u32,
+        n_levels: sp.levels.len() as u32,
         levels,
     }
 }
@@ -60,6 +64,8 @@ pub struct SurfaceGradients {
     pub sh: Vec<f32>,
     /// Per-vertex touched flags (0/1).
     pub touched: Vec<u32>,
+    /// dL/dbg of a learned background (zero when it is fixed).
+    pub background: [f32; 3],
     pub counts: TrainCounts,
 }
 
@@ -90,9 +96,15 @@ pub struct VulkanSurface {
     step: GpuBuffer,
     /// Indirect dispatch arguments of surface_rmsprop.
     args: GpuBuffer,
-    /// surface_train's params buffer.
+    /// The params buffer of surface_fwd and surface_train (written before each batch).
     params: GpuBuffer,
-    /// The levels, zero-padded (surface_fwd).
+    /// The background (`Background`): read by surface_fwd and surface_train, and, when learned,
+    /// its gradient accumulated and stepped on the device (`background_step`), so that a step
+    /// needs no host round trip for it.
+    bg: GpuBuffer,
+    /// Whether `bg` is learned (the host's copy of its flag: `background_step` is recorded then).
+    bg_learned: bool,
+    /// The levels, zero-padded (the skip-structure kernels).
     levels: GpuBuffer,
     /// Counters: `TrainCounts` of surface_train, or `SurfCounts` of surface_fwd (no larger).
     stats: GpuBuffer,
@@ -174,7 +186,9 @@ impl VulkanSurface {
                 gpu.upload(&init)?
             },
             args: gpu.zeros::<u32>(3)?,
-            params: gpu.host_to_device::<SurfTrainParams>(1)?,
+            params: gpu.host_to_device::<SurfParams>(1)?,
+            bg: gpu.upload(&[Background::new([1.0; 3], false)])?,
+            bg_learned: false,
             levels: gpu.upload(&levels)?,
             stats: gpu.zeros::<TrainCounts>(1)?,
             axis_nbrs: upload_nonempty(gpu, &axis_nbrs)?,
@@ -240,9 +254,11 @@ impl VulkanSurface {
             "truncation parameter a = {} exceeds the {SURF_MAX_HITS} hits a ray records",
             p.a
         );
-        let sp = surface_params(&self.meta, p.a, p.stop_thresh);
+        // The colour is the device's (`bg`); surface_fwd and surface_train read it there.
+        let sp = surface_params(&self.meta, p.a, p.stop_thresh, [1.0; 3]);
         clock.mark(Phase::Record);
-        self.params.write(&[train_params(&sp, &batch_loss(n, p))])?;
+        self.params
+            .write(&[surf_params(&sp, &batch_loss(n, p), n)])?;
         let (mut b, [ray_buf, target_buf, out_buf]) = self.begin(rays, Some(targets), clock)?;
         if let Some(margin) = self.refresh.before_pass(p.lr_delta, p.beta) {
             self.record_blocks(&mut b, margin)?;
@@ -264,9 +280,8 @@ impl VulkanSurface {
                 out_rays: out_buf,
                 stats: self.stats.address(),
                 step: self.step.address(),
+                bg: self.bg.address(),
                 n: self.meta.res[0],
-                n_rays: n as u32,
-                n_levels: self.meta.levels.len() as u32,
                 block_shift: SURF_BLOCK_SHIFT_VULKAN,
             },
             n as u32,
@@ -439,8 +454,12 @@ impl VulkanSurface {
             opacity: self.grad[1].download_range(0, rows)?,
             sh: self.grad[2].download_range(0, rows * SH_DIM)?,
             touched: self.step.download_range(STEP_FLAGS, rows)?,
+            background: self.bg.download::<Background>()?[0].grad,
             counts: self.read_train_counts()?,
         };
+        let mut bg = self.background()?;
+        bg.grad = [0.0; 3];
+        self.bg.write(&[bg])?;
         // Leave no gradient or touched flag behind for the next step.
         let mut b = self.gpu.batch()?;
         for gb in &self.grad {
@@ -469,6 +488,19 @@ impl VulkanSurface {
         let plan = RegPlan::new(p, &self.normal_prefix, self.axis_reach);
         self.record_regularisers(&mut b, p, &plan)?;
         self.record_rmsprop(&mut b, p, &plan)?;
+        if self.bg_learned {
+            b.dispatch_1d(
+                &kernels::background_step::INFO,
+                &kernels::background_step::Push {
+                    bg: self.bg.address(),
+                    lr: p.lr_bg,
+                    beta: p.beta,
+                    eps: p.eps,
+                    ..Default::default()
+                },
+                3,
+            )?;
+        }
         self.readback.record(
             &self.gpu,
             &mut b,
@@ -521,8 +553,14 @@ impl SurfaceBackend for VulkanSurface {
 
     fn render(&mut self, rays: &[f32], a: f32, stop_thresh: f32) -> Result<(Vec<f32>, SurfCounts)> {
         let n = rays.len() / 6;
+        let sp = surface_params(&self.meta, a, stop_thresh, [1.0; 3]);
+        let no_loss = SurfaceLoss {
+            grad_scale: 0.0,
+            lambda_h: 0.0,
+            lambda_c: 0.0,
+        };
+        self.params.write(&[surf_params(&sp, &no_loss, n)])?;
         let (mut b, [ray_buf, _, out_buf]) = self.begin(rays, None, &mut PhaseClock::start())?;
-        let sp = surface_params(&self.meta, a, stop_thresh);
         if let Some(margin) = self.refresh.before_pass(0.0, 0.0) {
             self.record_blocks(&mut b, margin)?;
         }
@@ -533,17 +571,12 @@ impl SurfaceBackend for VulkanSurface {
                 delta: self.delta.address(),
                 opacity: self.opacity.address(),
                 sh: self.sh.address(),
-                levels: self.levels.address(),
+                params: self.params.address(),
                 rays: ray_buf,
                 out_rays: out_buf,
                 stats: self.stats.address(),
-                scale: sp.scale,
-                offset: sp.offset,
+                bg: self.bg.address(),
                 n: self.meta.res[0],
-                n_rays: n as u32,
-                n_levels: self.meta.levels.len() as u32,
-                a,
-                stop_thresh,
                 blocks: self.skip_address(),
                 block_skip: 1,
                 block_shift: SURF_BLOCK_SHIFT_VULKAN,
@@ -585,13 +618,25 @@ impl SurfaceBackend for VulkanSurface {
                 "optimizer state does not match the surface grid"
             );
         }
-        let fresh = VulkanSurface::new(&self.gpu, grid)?;
+        let bg = self.background()?;
+        let mut fresh = VulkanSurface::new(&self.gpu, grid)?;
         if let Some(s) = state {
             for (buf, v) in fresh.state.iter().zip(&s) {
                 buf.write(v)?;
             }
         }
+        fresh.set_background(bg)?;
         *self = fresh;
+        Ok(())
+    }
+
+    fn background(&self) -> Result<Background> {
+        Ok(self.bg.download()?[0])
+    }
+
+    fn set_background(&mut self, bg: Background) -> Result<()> {
+        self.bg.write(&[bg])?;
+        self.bg_learned = bg.learned();
         Ok(())
     }
 }

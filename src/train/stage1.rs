@@ -197,6 +197,8 @@ pub fn train(
                 eps: cfg.eps,
                 stop_thresh: cfg.stop_thresh,
                 tv,
+                // A learned background is a colour, as the SH are: it steps at their rate.
+                lr_bg: cfg.lr_sh.at(step),
             },
         )?;
         if !stats.mse.is_finite() {

@@ -101,6 +101,8 @@ pub fn step_params(
         lr_delta: cfg.lr_delta.at(step),
         lr_opacity: cfg.lr_opacity.at(step),
         lr_sh: cfg.lr_sh.at(step),
+        // A learned background is a colour, as the SH are: it steps at their rate.
+        lr_bg: cfg.lr_sh.at(step),
         beta: cfg.beta,
         eps: cfg.eps,
         a,

@@ -53,6 +53,7 @@ rows!(
     optim_args,
     rmsprop_sparse,
     tv,
+    background_step,
     cubic_solve,
     extract_points,
     surface_blocks,
