@@ -1,14 +1,25 @@
 //! Stage-1 backward against central finite differences of an independent f64 forward renderer,
 //! on a scene kept away from the discontinuities (σ well above the ReLU threshold, colours well
-//! inside the ReLU, no early termination).
+//! inside the ReLU, no early termination), composited on a learned background (dL/dbg checked
+//! too).
 
+use alphasurf::check::TEST_BACKGROUND;
+use alphasurf::cpu::background::Background;
 use alphasurf::grid::{Grid, SH_DIM};
 use alphasurf::plenoxel::{CpuPlenoxels, Plenoxels};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
 
-/// Independent f64 volume renderer of one ray (method.md §2), same sample lattice.
-fn render_f64(g: &Grid, density: &[f64], sh: &[f64], ro: [f64; 3], rd: [f64; 3]) -> [f64; 3] {
+/// Independent f64 volume renderer of one ray (method.md §2), same sample lattice, composited on
+/// `bg`.
+fn render_f64(
+    g: &Grid,
+    density: &[f64],
+    sh: &[f64],
+    bg: [f64; 3],
+    ro: [f64; 3],
+    rd: [f64; 3],
+) -> [f64; 3] {
     let n = g.res.map(|r| r as f64);
     let scale: [f64; 3] = std::array::from_fn(|i| n[i] / (2.0 * g.radius[i] as f64));
     let offset: [f64; 3] = std::array::from_fn(|i| {
@@ -79,7 +90,7 @@ fn render_f64(g: &Grid, density: &[f64], sh: &[f64], ro: [f64; 3], rd: [f64; 3])
         }
         trans *= 1.0 - alpha;
     }
-    color.map(|c| c + trans)
+    std::array::from_fn(|ch| color[ch] + trans * bg[ch])
 }
 
 /// Central differences of the f64 forward against the CPU backward on a res³ grid with σ in
@@ -116,16 +127,18 @@ fn check_against_finite_differences(res: u32, seed: u64, stride: usize) -> f64 {
         .map(|_| rng.random_range(0.2..0.8))
         .collect();
     // No early termination (stop threshold 0), so the loss is smooth in every parameter.
-    let grads = CpuPlenoxels::new(g.clone())
-        .gradients(&rays, &targets, 0.0)
+    let mut backend = CpuPlenoxels::new(g.clone());
+    backend
+        .set_background(Background::new(TEST_BACKGROUND, true))
         .unwrap();
+    let grads = backend.gradients(&rays, &targets, 0.0).unwrap();
 
-    let loss = |density: &[f64], sh: &[f64]| -> f64 {
+    let loss = |density: &[f64], sh: &[f64], bg: [f64; 3]| -> f64 {
         let mut total = 0.0;
         for r in 0..n_rays {
             let ro = std::array::from_fn(|i| rays[6 * r + i] as f64);
             let rd = std::array::from_fn(|i| rays[6 * r + 3 + i] as f64);
-            let c = render_f64(&g, density, sh, ro, rd);
+            let c = render_f64(&g, density, sh, bg, ro, rd);
             for ch in 0..3 {
                 total += (c[ch] - targets[3 * r + ch] as f64).powi(2);
             }
@@ -134,20 +147,29 @@ fn check_against_finite_differences(res: u32, seed: u64, stride: usize) -> f64 {
     };
     let d64: Vec<f64> = g.density.iter().map(|&x| x as f64).collect();
     let s64: Vec<f64> = g.sh.iter().map(|&x| x as f64).collect();
+    let b64 = TEST_BACKGROUND.map(|x| x as f64);
     let h = 1e-6;
     let fd = |which: usize, i: usize| -> f64 {
-        let (mut dp, mut sp) = (d64.clone(), s64.clone());
-        let (mut dm, mut sm) = (d64.clone(), s64.clone());
-        if which == 0 {
-            dp[i] += h;
-            dm[i] -= h;
-        } else {
-            sp[i] += h;
-            sm[i] -= h;
+        let (mut dp, mut sp, mut bp) = (d64.clone(), s64.clone(), b64);
+        let (mut dm, mut sm, mut bm) = (d64.clone(), s64.clone(), b64);
+        match which {
+            0 => {
+                dp[i] += h;
+                dm[i] -= h;
+            }
+            1 => {
+                sp[i] += h;
+                sm[i] -= h;
+            }
+            _ => {
+                bp[i] += h;
+                bm[i] -= h;
+            }
         }
-        (loss(&dp, &sp) - loss(&dm, &sm)) / (2.0 * h)
+        (loss(&dp, &sp, bp) - loss(&dm, &sm, bm)) / (2.0 * h)
     };
-    for (which, analytic) in [(0usize, &grads.density), (1, &grads.sh)] {
+    let bg_grad = grads.background.to_vec();
+    for (which, analytic) in [(0usize, &grads.density), (1, &grads.sh), (2, &bg_grad)] {
         // Every stride-th parameter, plus every one with a sizeable analytic gradient.
         let max = analytic.iter().fold(0f32, |m, &a| m.max(a.abs()));
         let picked: Vec<usize> = (0..analytic.len())
@@ -160,7 +182,7 @@ fn check_against_finite_differences(res: u32, seed: u64, stride: usize) -> f64 {
             den += n * n;
         }
         let rel = (num / den).sqrt();
-        let name = ["dL/dσ", "dL/dSH"][which];
+        let name = ["dL/dσ", "dL/dSH", "dL/dbg"][which];
         assert!(den > 0.0, "{name}: no gradient at all");
         assert!(
             rel <= 1e-3,

@@ -1,6 +1,7 @@
 //! Stage-2 backward pass (method.md §3.3–3.4): the CPU twin's gradients of the fused per-ray loss
-//! (squared error, entropy LH, depth consistency Lc) with respect to δ, σα and SH against central
-//! finite differences of a float64 forward pass.
+//! (squared error, entropy LH, depth consistency Lc) with respect to δ, σα, SH and the
+//! background (rays composited on a learned one) against central finite differences of a float64
+//! forward pass.
 //!
 //! The f64 forward keeps the discrete structure of the f32 trace (which cells, which levels, in
 //! which order) and recomputes everything continuous in f64: each hit's s by Newton's method on the
@@ -13,6 +14,7 @@
 
 use alphasurf::abi::buffers::TrainCounts;
 use alphasurf::abi::surface_grid::SurfaceGridRef;
+use alphasurf::check::TEST_BACKGROUND;
 use alphasurf::cpu::surface_fwd::SurfaceParams;
 use alphasurf::cpu::surface_train::{
     hit_point, trace_ray, train, SurfaceGrads, SurfaceLoss, Trace,
@@ -107,6 +109,8 @@ struct Params64 {
     delta: Vec<f64>,
     opacity: Vec<f64>,
     sh: Vec<f64>,
+    /// The background colour.
+    bg: Vec<f64>,
 }
 
 /// f64 forward of one traced ray with fixed hit structure; `None` when the ray is near a
@@ -178,7 +182,7 @@ fn ray_loss64(
     }
     let mut l = 0.0;
     for ch in 0..3 {
-        let d = color[ch] + t_acc - target[ch] as f64;
+        let d = color[ch] + t_acc * q.bg[ch] - target[ch] as f64;
         l += 0.5 * lp.grad_scale as f64 * d * d;
     }
     let wsum: f64 = w.iter().sum();
@@ -216,6 +220,7 @@ fn cpu_backward_matches_f64_central_differences() {
         levels: levels.clone(),
         a: 2.6,
         stop_thresh: 0.0,
+        background: TEST_BACKGROUND,
     };
     let lp = SurfaceLoss {
         grad_scale: 1.0,
@@ -226,6 +231,7 @@ fn cpu_backward_matches_f64_central_differences() {
         delta: sc.delta.iter().map(|&v| v as f64).collect(),
         opacity: sc.opacity.iter().map(|&v| v as f64).collect(),
         sh: sc.sh.iter().map(|&v| v as f64).collect(),
+        bg: TEST_BACKGROUND.map(|v| v as f64).to_vec(),
     };
     // Rays entering through x = −1 heading roughly +x, kept when smooth.
     let mut rays = Vec::new();
@@ -268,6 +274,7 @@ fn cpu_backward_matches_f64_central_differences() {
         vec![0f32; 27 * rows],
         vec![0u32; rows],
     );
+    let mut gbg = [0f32; 3];
     let (losses, counts) = train(
         &g,
         &rays,
@@ -280,6 +287,7 @@ fn cpu_backward_matches_f64_central_differences() {
             opacity: &mut go,
             sh: &mut gs,
             touched: &mut touched,
+            background: Some(&mut gbg),
         },
     )
     .unwrap();
@@ -299,6 +307,7 @@ fn cpu_backward_matches_f64_central_differences() {
             delta: q.delta.clone(),
             opacity: q.opacity.clone(),
             sh: q.sh.clone(),
+            bg: q.bg.clone(),
         };
         let (mut num, mut den, mut checked) = (0.0f64, 0.0f64, 0);
         for i in 0..analytic.len() {
@@ -317,7 +326,8 @@ fn cpu_backward_matches_f64_central_differences() {
             checked += 1;
         }
         let rel = (num / den).sqrt();
-        assert!(checked > 50 && den > 0.0, "{name}: {checked} checked");
+        // The background has 3 values; the grid's groups at least 50 each.
+        assert!(checked >= analytic.len().min(51) && den > 0.0, "{name}: {checked} checked");
         assert!(
             rel <= 1e-3,
             "{name}: relative L2 {rel:.3e} over {checked} values"
@@ -327,6 +337,7 @@ fn cpu_backward_matches_f64_central_differences() {
     check("delta", &gd, |q| &mut q.delta);
     check("opacity", &go, |q| &mut q.opacity);
     check("sh", &gs, |q| &mut q.sh);
+    check("background", &gbg, |q| &mut q.bg);
     // Every vertex with a gradient is flagged, in all three groups.
     for i in 0..rows {
         if gd[i] != 0.0 || go[i] != 0.0 || gs[27 * i..27 * i + 27].iter().any(|&v| v != 0.0) {
