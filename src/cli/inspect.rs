@@ -30,6 +30,7 @@ pub fn run(args: &InspectArgs) -> anyhow::Result<()> {
             scale,
             ..SceneBox::default()
         }),
+        ..Default::default()
     };
     let ds = Dataset::load(&args.dataset, &opts)?;
     let r = ds.report;

@@ -1,7 +1,9 @@
 //! A loaded dataset of posed images, whatever its layout on disk ([`Layout`]): the splits, their
-//! frames (camera and 8-bit RGBA pixels composited on white), the scene box and what loading cost.
+//! frames (camera and 8-bit RGBA pixels composited on the run's background), the scene box and
+//! what loading cost.
 //! The layouts' readers live in `nerf_synthetic`, `colmap` and `idr`.
 
+use super::background::BackgroundMode;
 use super::camera::{Camera, SceneBox};
 use super::image::RgbaImage;
 use super::layout::Layout;
@@ -15,6 +17,9 @@ pub struct LoadOptions {
     /// Scene normalisation; `None` takes the layout's own (NeRF-synthetic: `SceneBox::default()`,
     /// COLMAP: from the sparse points in view, IDR: from `scale_mat`).
     pub scene: Option<SceneBox>,
+    /// The colour images with alpha or masks are composited on; `Learned` refuses them
+    /// (`DataError::AlphaWithLearnedBackground`).
+    pub background: BackgroundMode,
 }
 
 impl Default for LoadOptions {
@@ -22,6 +27,7 @@ impl Default for LoadOptions {
         LoadOptions {
             downscale: 1,
             scene: None,
+            background: BackgroundMode::White,
         }
     }
 }
@@ -33,7 +39,7 @@ pub struct Frame {
     pub file: PathBuf,
     /// The camera (already adjusted for the downscale).
     pub camera: Camera,
-    /// The pixels, composited on white.
+    /// The pixels, composited on the background.
     pub image: RgbaImage,
 }
 
@@ -95,6 +101,9 @@ pub struct Dataset {
     pub test: Split,
     /// Scene normalisation.
     pub scene: SceneBox,
+    /// The background its images with alpha were composited on (`LoadOptions::background`), and
+    /// that training composites on.
+    pub background: BackgroundMode,
     /// Load time and memory.
     pub report: LoadReport,
 }

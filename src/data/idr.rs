@@ -25,7 +25,7 @@ pub const CAMERAS: &str = "cameras_sphere.npz";
 pub const MAX_SKEW: f64 = 1e-3;
 
 /// The splits and scene box of the IDR dataset `root`.
-pub fn load(root: &Path, k: u32) -> Result<(Splits, SceneBox), DataError> {
+pub fn load(root: &Path, k: u32, bg: [f32; 3]) -> Result<(Splits, SceneBox), DataError> {
     let npz_path = root.join(CAMERAS);
     let fail = |msg: String| DataError::Format {
         path: npz_path.clone(),
@@ -124,7 +124,7 @@ pub fn load(root: &Path, k: u32) -> Result<(Splits, SceneBox), DataError> {
         radius: 1.0,
     };
     Ok((
-        views::load_splits(root, &npz_path, posed, &folders, k)?,
+        views::load_splits(root, &npz_path, posed, &folders, k, bg)?,
         scene,
     ))
 }

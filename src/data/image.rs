@@ -1,11 +1,11 @@
-//! Compact 8-bit RGBA images: decoding (PNG/JPEG via the image crate), white-background
-//! compositing and box downscaling. Colour channels are stored already composited on white
-//! (rgb·a + (1 − a)); the alpha channel keeps the coverage for masks.
+//! Compact 8-bit RGBA images: decoding (PNG/JPEG via the image crate), compositing on the run's
+//! background colour and box downscaling. Colour channels are stored already composited
+//! (rgb·a + (1 − a)·bg); the alpha channel keeps the coverage for masks.
 
 use super::error::DataError;
 use std::path::Path;
 
-/// An 8-bit RGBA image, row-major, top row first; RGB composited on white.
+/// An 8-bit RGBA image, row-major, top row first; RGB composited on the background.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RgbaImage {
     /// Width in pixels.
@@ -82,9 +82,15 @@ pub fn decode_bytes(bytes: &[u8]) -> Result<(u32, u32, Vec<u8>, bool), String> {
     Ok((w, h, rgba.into_raw(), had_alpha))
 }
 
-/// Composites straight-alpha RGBA8 on white, then box-averages k×k blocks (the ragged right and
+/// Composites straight-alpha RGBA8 on `bg`, then box-averages k×k blocks (the ragged right and
 /// bottom remainders are dropped). Alpha is box-averaged too. Results are rounded to 8 bits.
-pub fn composite_and_downscale(w: u32, h: u32, src: &[u8], k: u32) -> (u32, u32, Vec<u8>) {
+pub fn composite_and_downscale(
+    w: u32,
+    h: u32,
+    src: &[u8],
+    k: u32,
+    bg: [f32; 3],
+) -> (u32, u32, Vec<u8>) {
     let k = k.max(1);
     let (ow, oh) = (w / k, h / k);
     let mut out = vec![0u8; ow as usize * oh as usize * 4];
@@ -97,7 +103,7 @@ pub fn composite_and_downscale(w: u32, h: u32, src: &[u8], k: u32) -> (u32, u32,
                     let i = 4 * ((oy * k + dy) as usize * w as usize + (ox * k + dx) as usize);
                     let a = src[i + 3] as f32 / 255.0;
                     for c in 0..3 {
-                        acc[c] += src[i + c] as f32 / 255.0 * a + (1.0 - a);
+                        acc[c] += src[i + c] as f32 / 255.0 * a + (1.0 - a) * bg[c];
                     }
                     acc[3] += a;
                 }

@@ -32,14 +32,33 @@ fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset, DataError> {
         });
     }
     let layout = layout::detect(root)?;
+    let bg = opts.background.initial_rgb();
     let ((train, val_split, test), scene) = match &layout {
         Layout::NerfSynthetic => (
-            super::nerf_synthetic::load_splits(root, k)?,
+            super::nerf_synthetic::load_splits(root, k, bg)?,
             SceneBox::default(),
         ),
-        Layout::Colmap { sparse, .. } => super::colmap::load(root, sparse, k)?,
-        Layout::Idr => super::idr::load(root, k)?,
+        Layout::Colmap { sparse, .. } => super::colmap::load(root, sparse, k, bg)?,
+        Layout::Idr => super::idr::load(root, k, bg)?,
     };
+    // A learned background is for images without alpha: where alpha (or a mask) says which
+    // pixels are background, its colour is known and white or black composites them exactly,
+    // while a learned colour could fit the composited pixels only by matching the colour they
+    // were composited on, and the mask would be thrown away.
+    if opts.background.learned() {
+        let all = [Some(&train), val_split.as_ref(), Some(&test)];
+        if let Some(f) = all
+            .into_iter()
+            .flatten()
+            .flat_map(|s| &s.frames)
+            .find(|f| f.image.had_alpha)
+        {
+            return Err(DataError::AlphaWithLearnedBackground {
+                path: root.to_path_buf(),
+                image: f.file.clone(),
+            });
+        }
+    }
     // One image size for the whole dataset.
     let (w, h) = (train.width(), train.height());
     for s in [Some(&test), val_split.as_ref()].into_iter().flatten() {
@@ -70,6 +89,7 @@ fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset, DataError> {
         val_split,
         test,
         scene: opts.scene.unwrap_or(scene),
+        background: opts.background,
         report: LoadReport {
             seconds: t0.elapsed().as_secs_f64(),
             image_bytes,

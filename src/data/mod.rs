@@ -3,6 +3,7 @@
 //! ([`Camera`]), the scene box ([`SceneBox`]), ray batch sampling ([`RaySampler`]) and dataset
 //! inspection ([`inspect`]).
 
+pub mod background;
 pub mod camera;
 pub mod colmap;
 pub mod dataset;
@@ -17,6 +18,7 @@ mod nerf_synthetic;
 pub mod sampler;
 pub mod views;
 
+pub use background::BackgroundMode;
 pub use camera::{look_at, Camera, SceneBox};
 pub use dataset::{Dataset, Frame, LoadOptions, LoadReport, Split};
 pub use error::DataError;

@@ -14,10 +14,14 @@ use std::path::{Component, Path, PathBuf};
 
 /// The train, val (if `transforms_val.json` exists) and test splits of `root`, images
 /// box-downscaled by `k`.
-pub(super) fn load_splits(root: &Path, k: u32) -> Result<(Split, Option<Split>, Split), DataError> {
-    let train = load_split(root, "train", k)?.ok_or_else(|| missing(root, "train"))?;
-    let test = load_split(root, "test", k)?.ok_or_else(|| missing(root, "test"))?;
-    let val = load_split(root, "val", k)?;
+pub(super) fn load_splits(
+    root: &Path,
+    k: u32,
+    bg: [f32; 3],
+) -> Result<(Split, Option<Split>, Split), DataError> {
+    let train = load_split(root, "train", k, bg)?.ok_or_else(|| missing(root, "train"))?;
+    let test = load_split(root, "test", k, bg)?.ok_or_else(|| missing(root, "test"))?;
+    let val = load_split(root, "val", k, bg)?;
     Ok((train, val, test))
 }
 
@@ -72,7 +76,7 @@ struct FrameJson {
 }
 
 /// Loads `transforms_<name>.json` and its images; `Ok(None)` if the file does not exist.
-fn load_split(root: &Path, name: &str, k: u32) -> Result<Option<Split>, DataError> {
+fn load_split(root: &Path, name: &str, k: u32, bg: [f32; 3]) -> Result<Option<Split>, DataError> {
     let json = root.join(format!("transforms_{name}.json"));
     if !json.exists() {
         return Ok(None);
@@ -108,7 +112,7 @@ fn load_split(root: &Path, name: &str, k: u32) -> Result<Option<Split>, DataErro
     let frames: Vec<Result<Frame, DataError>> = jobs
         .into_par_iter()
         .enumerate()
-        .map(|(i, (file, c2w, intr))| load_frame(&json, i, file, c2w, intr, k))
+        .map(|(i, (file, c2w, intr))| load_frame(&json, i, file, c2w, intr, k, bg))
         .collect();
     let frames: Vec<Frame> = frames.into_iter().collect::<Result<_, _>>()?;
     let (w, h) = (frames[0].image.width, frames[0].image.height);
@@ -138,6 +142,7 @@ fn load_frame(
     c2w: Mat4,
     intr: Intrinsics,
     k: u32,
+    bg: [f32; 3],
 ) -> Result<Frame, DataError> {
     let (w, h, raw, had_alpha) = decode_file(&file)?;
     for (declared, got, what) in [(intr.w, w, "w"), (intr.h, h, "h")] {
@@ -214,7 +219,7 @@ fn load_frame(
             camera.fy = camera.fx;
         }
     }
-    let (ow, oh, data) = composite_and_downscale(w, h, &raw, k);
+    let (ow, oh, data) = composite_and_downscale(w, h, &raw, k, bg);
     Ok(Frame {
         file,
         camera: camera.downscaled(k),

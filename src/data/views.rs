@@ -87,6 +87,7 @@ pub fn load_splits(
     mut views: Vec<View>,
     folders: &Folders,
     k: u32,
+    bg: [f32; 3],
 ) -> Result<Splits, DataError> {
     views.sort_by(|a, b| a.name.cmp(&b.name));
     if let Some(w) = views.windows(2).find(|w| w[0].name == w[1].name) {
@@ -126,7 +127,7 @@ pub fn load_splits(
         }
         let frames: Vec<Result<Frame, DataError>> = idx
             .par_iter()
-            .map(|&i| load_view(&views[i], source, folders, k))
+            .map(|&i| load_view(&views[i], source, folders, k, bg))
             .collect();
         Ok(Split {
             name: name.into(),
@@ -177,8 +178,14 @@ fn assign_from_file(path: &Path, views: &[View]) -> Result<Assignment, DataError
     Ok((look("train", &file.train)?, val, look("test", &file.test)?))
 }
 
-/// Decodes one view: image (+ mask as alpha), undistorted, composited on white, downscaled.
-fn load_view(v: &View, source: &Path, folders: &Folders, k: u32) -> Result<Frame, DataError> {
+/// Decodes one view: image (+ mask as alpha), undistorted, composited on `bg`, downscaled.
+fn load_view(
+    v: &View,
+    source: &Path,
+    folders: &Folders,
+    k: u32,
+    bg: [f32; 3],
+) -> Result<Frame, DataError> {
     let missing = |path: &Path| DataError::MissingViewFile {
         path: path.to_path_buf(),
         image: v.name.clone(),
@@ -259,7 +266,7 @@ fn load_view(v: &View, source: &Path, folders: &Folders, k: u32) -> Result<Frame
             reason: format!("the image is only {w}x{h}"),
         });
     }
-    let (ow, oh, data) = composite_and_downscale(w, h, &raw, k_rest);
+    let (ow, oh, data) = composite_and_downscale(w, h, &raw, k_rest, bg);
     Ok(Frame {
         file: v.file.clone(),
         camera: cam.downscaled(k_rest),

@@ -86,6 +86,24 @@ pub fn load(path: &Path) -> Result<Checkpoint> {
     read(&mut r).with_context(|| format!("loading checkpoint {}", path.display()))
 }
 
+/// The metadata of the npz at `path`: `None` when it has none (an svox2 `ckpt.npz`).
+pub fn read_meta(path: &Path) -> Result<Option<serde_json::Value>> {
+    let mut r = NpzReader::open(path)?;
+    if !r.contains(META) {
+        return Ok(None);
+    }
+    let meta = match r.read(META)?.data {
+        Data::U8(bytes) => serde_json::from_slice(&bytes)
+            .with_context(|| format!("{}: array '{META}' is not valid JSON", path.display()))?,
+        d => bail!(
+            "{}: array '{META}' has dtype {}, expected uint8",
+            path.display(),
+            d.kind()
+        ),
+    };
+    Ok(Some(meta))
+}
+
 fn read(r: &mut NpzReader) -> Result<Checkpoint> {
     ensure!(
         r.contains(META),

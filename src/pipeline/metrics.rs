@@ -3,7 +3,7 @@
 //! written; counters added over time are `Option`s, absent in runs written before them.
 
 use crate::run::dir::METRICS;
-use crate::train::{Stage1Config, SurfaceConfig};
+use crate::train::{BackgroundRecord, Stage1Config, SurfaceConfig};
 use anyhow::{Context, Result};
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
@@ -56,6 +56,9 @@ pub struct Stage1Metrics {
     pub bytes_per_vertex: f64,
     /// Peak resident memory of the process (where the platform reports it).
     pub peak_rss_bytes: Option<u64>,
+    /// The background at the end (a learned colour's value; absent in older runs: white).
+    #[serde(default)]
+    pub background: BackgroundRecord,
     pub config: Stage1Config,
 }
 
@@ -113,6 +116,9 @@ pub struct Stage2Metrics {
     pub allocated_vertices: usize,
     /// Peak resident memory of the process (where the platform reports it).
     pub peak_rss_bytes: Option<u64>,
+    /// The background at the end (a learned colour's value; absent in older runs: white).
+    #[serde(default)]
+    pub background: BackgroundRecord,
     pub config: SurfaceConfig,
 }
 

@@ -1,11 +1,12 @@
-//! `render` as a library call: a split of a trained stage-1 run rendered to PNG, with PSNR.
+//! `render` as a library call: a split of a trained stage-1 run rendered to PNG, with PSNR: the
+//! images composited, and the views rendered, on the run's background.
 
 use super::train_stage1::make_backend;
 use crate::backend::Backend;
 use crate::data::{Dataset, LoadOptions};
 use crate::gpu::Gpu;
 use crate::run::{self, read_info};
-use crate::train::{render_split, RenderedSplit, Stage1Config};
+use crate::train::{render_split, BackgroundRecord, RenderedSplit, Stage1Config};
 use anyhow::{bail, Context, Result};
 use std::path::PathBuf;
 
@@ -33,23 +34,31 @@ pub struct RenderOptions {
 /// twins); returns the per-view and mean PSNR.
 pub fn render(opts: &RenderOptions, gpu: Option<&Gpu>) -> Result<RenderedSplit> {
     let ckpt_path = run::dir::stage1_checkpoint(&opts.run, "render")?;
+    let ckpt = crate::grid::checkpoint::load(&ckpt_path)?;
+    let bg = BackgroundRecord::from_meta(&ckpt.meta, &ckpt_path)?;
     let data_dir = match &opts.data {
         Some(d) => d.clone(),
         None => read_info(&opts.run).context("(or pass --data)")?.data,
     };
     run::outputs::check_output_dir(&opts.out, &[&ckpt_path, &data_dir])?;
-    let data = Dataset::load(&data_dir, &LoadOptions::default())?;
+    let data = Dataset::load(
+        &data_dir,
+        &LoadOptions {
+            background: bg.mode,
+            ..Default::default()
+        },
+    )?;
     let split = match opts.split.as_str() {
         "train" => &data.train,
         "val" => data.val(),
         "test" => &data.test,
         s => bail!("--split {s}: expected train, val or test"),
     };
-    let ckpt = crate::grid::checkpoint::load(&ckpt_path)?;
     let stop = serde_json::from_value::<Stage1Config>(ckpt.meta["config"].clone())
         .map(|c| c.stop_thresh)
         .unwrap_or(1e-7);
     let mut backend = make_backend(gpu, ckpt.grid)?;
+    backend.set_background(bg.kernel())?;
     let r = render_split(backend.as_mut(), &data, split, stop, &opts.out)?;
     Ok(r)
 }

@@ -80,6 +80,7 @@ pub fn import(opts: &ImportOptions) -> Result<Grid> {
         stage: None,
         data,
         downscale: 1,
+        background: crate::data::BackgroundMode::White,
         scene_scale: None,
         init: None,
         imported_from: Some(opts.ckpt.clone()),

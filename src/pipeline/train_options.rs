@@ -3,6 +3,7 @@
 //! would ignore; and each stage's configuration built from them.
 
 use crate::backend::Backend;
+use crate::data::BackgroundMode;
 use crate::run::Open;
 use crate::train::{Category, Preset, Stage1Config, SurfaceConfig};
 use anyhow::{bail, ensure, Context, Result};
@@ -74,6 +75,11 @@ pub struct TrainOptions {
     /// Box-downscale the images by this factor.
     #[arg(long, default_value_t = 1)]
     pub downscale: u32,
+    /// The colour behind the scene: images with alpha or masks are composited on it at load,
+    /// and every render and training pass composites on it. `learned`: a constant colour
+    /// trained with the scene, for images without alpha (it refuses images with alpha).
+    #[arg(long, value_enum, default_value_t = BackgroundMode::White)]
+    pub background: BackgroundMode,
     /// Write a checkpoint every N steps (overrides the preset).
     #[arg(long)]
     pub checkpoint_every: Option<u32>,
@@ -119,6 +125,7 @@ impl TrainOptions {
             batch: None,
             seed: 0,
             downscale: 1,
+            background: BackgroundMode::White,
             checkpoint_every: None,
             resume: false,
             overwrite: false,

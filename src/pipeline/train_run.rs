@@ -14,13 +14,15 @@ pub struct Loaded {
     pub seconds: f64,
 }
 
-/// The dataset `--data` names, at `--downscale`; `inspect`'s warnings are repeated on stderr.
+/// The dataset `--data` names, at `--downscale`, composited on `--background`; `inspect`'s
+/// warnings are repeated on stderr.
 pub fn load_data(opts: &TrainOptions) -> Result<Loaded> {
     let t = Instant::now();
     let data = Dataset::load(
         &opts.data,
         &LoadOptions {
             downscale: opts.downscale,
+            background: opts.background,
             ..Default::default()
         },
     )?;
@@ -34,13 +36,14 @@ pub fn load_data(opts: &TrainOptions) -> Result<Loaded> {
 }
 
 /// The `run.json` of a training run: the dataset's absolute path, the downscale factor, the
-/// scene box's scale and (stage 2) the grid it started from.
+/// background, the scene box's scale and (stage 2) the grid it started from.
 pub fn run_info(opts: &TrainOptions, data: &Dataset, init: Option<PathBuf>) -> Result<RunInfo> {
     Ok(RunInfo {
         stage: None,
         data: std::fs::canonicalize(&opts.data)
             .with_context(|| format!("dataset {}", opts.data.display()))?,
         downscale: opts.downscale,
+        background: opts.background,
         scene_scale: Some(data.scene.scale),
         init,
         imported_from: None,

@@ -9,7 +9,7 @@ use crate::gpu::Gpu;
 use crate::grid::Grid;
 use crate::plenoxel::{CpuPlenoxels, Plenoxels, VulkanPlenoxels};
 use crate::run::{RunDir, RunStage};
-use crate::train::{stage1, Stage1Config};
+use crate::train::{stage1, BackgroundRecord, Stage1Config};
 use anyhow::{bail, Result};
 use std::time::Instant;
 
@@ -55,8 +55,9 @@ pub fn train_stage1(
         let restore = || {
             let probe = crate::grid::checkpoint::load(&ckpt)?;
             let mut b = make_backend(gpu, probe.grid)?;
-            let (step, cfg) = stage1::resume(b.as_mut(), &ckpt)?;
+            let (step, cfg, bg) = stage1::resume(b.as_mut(), &ckpt)?;
             check_resume_flags(opts, &cfg)?;
+            bg.ensure_mode(opts.background, "the checkpoint")?;
             Ok((b, step, cfg))
         };
         match resume(
@@ -111,6 +112,7 @@ pub fn train_stage1(
         allocated_vertices: report.allocated_vertices,
         bytes_per_vertex: report.bytes_per_vertex,
         peak_rss_bytes: peak_rss_bytes(),
+        background: BackgroundRecord::of(data.background, &backend.background()?),
         config: cfg,
     };
     run.write_metrics(&metrics)?;

@@ -6,12 +6,13 @@ use super::metrics::{Stage2Metrics, Stage2PerRay, Stage2Seconds};
 use super::train_options::TrainOptions;
 use super::train_run::{resume, run_info, Loaded, Trained};
 use crate::data::dataset::peak_rss_bytes;
+use crate::data::BackgroundMode;
 use crate::gpu::Gpu;
 use crate::grid::surface::SurfaceGrid;
-use crate::grid::{npz, Grid};
+use crate::grid::{checkpoint, npz, Grid};
 use crate::run::{RunDir, RunStage};
 use crate::surface::{CpuSurface, SurfaceBackend, VulkanSurface};
-use crate::train::{stage1, stage2, SurfaceConfig};
+use crate::train::{stage1, stage2, BackgroundRecord, SurfaceConfig};
 use anyhow::{ensure, Context, Result};
 use std::path::Path;
 use std::time::Instant;
@@ -27,8 +28,9 @@ fn make_backend(gpu: Option<&Gpu>, grid: SurfaceGrid) -> Result<Box<dyn SurfaceB
     })
 }
 
-/// The stage-1 grid `--init` names: a run directory (its plenoxels.npz) or an npz file.
-fn load_init(path: &Path) -> Result<Grid> {
+/// The stage-1 grid `--init` names (a run directory: its plenoxels.npz, or an npz file) and the
+/// background it trained with (an svox2 `ckpt.npz`: white).
+fn load_init(path: &Path) -> Result<(Grid, BackgroundRecord)> {
     let file = if path.is_dir() {
         let ck = stage1::checkpoint_path(path);
         ensure!(
@@ -41,16 +43,23 @@ fn load_init(path: &Path) -> Result<Grid> {
     } else {
         path.to_path_buf()
     };
-    npz::load_svox2(&file).with_context(|| format!("--init {}", path.display()))
+    let grid = npz::load_svox2(&file).with_context(|| format!("--init {}", path.display()))?;
+    let bg = match checkpoint::read_meta(&file)? {
+        Some(meta) => BackgroundRecord::from_meta(&meta, &file)?,
+        None => BackgroundRecord::start(BackgroundMode::White),
+    };
+    Ok((grid, bg))
 }
 
-/// A new stage-2 grid and its configuration from `--init` and the flags.
-fn fresh_start(opts: &TrainOptions) -> Result<(SurfaceGrid, SurfaceConfig)> {
+/// A new stage-2 grid, its configuration and its background (stage 1's, carried on) from
+/// `--init` and the flags.
+fn fresh_start(opts: &TrainOptions) -> Result<(SurfaceGrid, SurfaceConfig, BackgroundRecord)> {
     let init = opts
         .init
         .as_ref()
         .context("stage 2 needs --init STAGE1_RUN_DIR or --init ckpt.npz")?;
-    let density = load_init(init)?;
+    let (density, bg) = load_init(init)?;
+    bg.ensure_mode(opts.background, &format!("--init {}", init.display()))?;
     let cfg = opts.stage2_config(density.res.into_iter().max().unwrap_or(0))?;
     let grid = SurfaceGrid::from_density(&density, &cfg.init)
         .with_context(|| format!("initialising the surfaces from {}", init.display()))?;
@@ -66,7 +75,7 @@ fn fresh_start(opts: &TrainOptions) -> Result<(SurfaceGrid, SurfaceConfig)> {
         grid.levels,
         cfg.init.alpha_init_scale
     );
-    Ok((grid, cfg))
+    Ok((grid, cfg, bg))
 }
 
 /// Train stage 2 into `opts.out` on `gpu` (`None`: the CPU twins).
@@ -88,13 +97,18 @@ pub fn train_stage2(
     let (load_s, data) = (data.seconds, &data.data);
     let ckpt = stage2::checkpoint_path(&opts.out);
     let (mut backend, cfg, start) = match fresh {
-        Some((grid, cfg)) => (make_backend(gpu, grid)?, cfg, 0),
+        Some((grid, cfg, bg)) => {
+            let mut b = make_backend(gpu, grid)?;
+            b.set_background(bg.kernel())?;
+            (b, cfg, 0)
+        }
         None => {
             let restore = || {
                 let probe = SurfaceGrid::load(&ckpt)?;
                 let mut b = make_backend(gpu, probe.grid)?;
-                let (step, cfg) = stage2::resume(b.as_mut(), &ckpt)?;
+                let (step, cfg, bg) = stage2::resume(b.as_mut(), &ckpt)?;
                 check_resume_flags(opts, &cfg)?;
+                bg.ensure_mode(opts.background, "the checkpoint")?;
                 Ok((b, step, cfg))
             };
             let iters = opts.surface_iters.or(opts.iters);
@@ -148,6 +162,7 @@ pub fn train_stage2(
         vertices_before_prune: Some(report.vertices_before_prune),
         allocated_vertices: report.allocated_vertices,
         peak_rss_bytes: peak_rss_bytes(),
+        background: BackgroundRecord::of(data.background, &backend.background()?),
         config: cfg,
     };
     run.write_metrics(&metrics)?;

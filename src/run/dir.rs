@@ -19,6 +19,7 @@
 pub use super::files::*;
 use super::lock::Lock;
 use super::outputs::{check_not_inside_inputs, dataset_containing};
+use crate::data::BackgroundMode;
 use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
 use std::fs;
@@ -58,6 +59,11 @@ pub struct RunInfo {
     pub data: PathBuf,
     /// Image downscale factor used in training.
     pub downscale: u32,
+    /// `--background`: what the images were composited on and training composited on (absent
+    /// in runs written before it was recorded: white). A learned colour is in the checkpoints
+    /// and metrics.json.
+    #[serde(default)]
+    pub background: BackgroundMode,
     /// Dataset units → the grid's world (the scene box's scale the run trained with; `extract`
     /// writes points back in dataset units with it). Absent in runs written before it was
     /// recorded and in imports: the NeRF-synthetic 2/3.
@@ -309,6 +315,7 @@ mod tests {
             stage: None,
             data: data.to_path_buf(),
             downscale: 1,
+            background: BackgroundMode::White,
             scene_scale: None,
             init: None,
             imported_from: None,

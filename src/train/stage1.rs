@@ -2,11 +2,12 @@
 //! upsampling with weight pruning on schedule, periodic atomic checkpoints (resumable), NaN/Inf
 //! detection, and the end-of-run test renders, PSNR and metrics.json.
 
+use super::background::{self, BackgroundRecord};
 use super::config::Stage1Config;
 use super::progress::{Progress, Throughput};
 use super::render::{psnr, render_split, RenderedSplit};
 use crate::abi::buffers::PlenoxelPerRay;
-use crate::data::{Dataset, RaySampler, Split};
+use crate::data::{BackgroundMode, Dataset, RaySampler, Split};
 use crate::grid::{checkpoint, dilate, upsample, Grid};
 use crate::plenoxel::{Plenoxels, StepParams, TvParams};
 use crate::run::train_log;
@@ -115,9 +116,18 @@ fn check_finite(grid: &Grid, step: u32) -> Result<()> {
     Ok(())
 }
 
-/// Write the checkpoint of `step` atomically.
-fn save(backend: &dyn Plenoxels, cfg: &Stage1Config, out: &Path, step: u32) -> Result<()> {
-    let meta = json!({ "stage": "plenoxels", "step": step, "config": cfg });
+/// Write the checkpoint of `step` atomically (with the background of a run in `mode`).
+fn save(
+    backend: &dyn Plenoxels,
+    cfg: &Stage1Config,
+    mode: BackgroundMode,
+    out: &Path,
+    step: u32,
+) -> Result<()> {
+    let bg = BackgroundRecord::of(mode, &backend.background()?);
+    let meta = json!({
+        "stage": "plenoxels", "step": step, "config": cfg, background::META_KEY: bg
+    });
     backend.with_state(&mut |grid, [sd, ss]| {
         check_finite(grid, step)?;
         checkpoint::save(
@@ -129,20 +139,27 @@ fn save(backend: &dyn Plenoxels, cfg: &Stage1Config, out: &Path, step: u32) -> R
     })
 }
 
-/// Restore grid, optimiser state and step from a run's checkpoint; returns the next step.
-pub fn resume(backend: &mut dyn Plenoxels, path: &Path) -> Result<(u32, Stage1Config)> {
+/// Restore grid, optimiser state, background and step from a run's checkpoint; returns the next
+/// step, the configuration and the background.
+pub fn resume(
+    backend: &mut dyn Plenoxels,
+    path: &Path,
+) -> Result<(u32, Stage1Config, BackgroundRecord)> {
     let ck = checkpoint::load(path)?;
     let (step, cfg) = checkpoint::meta_step_config::<Stage1Config>(&ck.meta, "plenoxels", path)?;
     cfg.validate()
         .with_context(|| format!("{}: invalid configuration", path.display()))?;
     let state = |name: &str| checkpoint::optim_array(&ck.optim, name, path);
     let state = (state("rms_density")?, state("rms_sh")?);
+    let bg = BackgroundRecord::from_meta(&ck.meta, path)?;
     backend.load(ck.grid, Some(state))?;
-    Ok((step, cfg))
+    backend.set_background(bg.kernel())?;
+    Ok((step, cfg, bg))
 }
 
 /// Train stage 1 from `start_step` (0, or the step after a resumed checkpoint) to `cfg.iters`,
-/// then render the test split into `out/test/` and write `out/metrics.json`.
+/// then render the test split into `out/test/` and write `out/metrics.json`. From step 0 the
+/// background starts as `data.background` says; a resumed run keeps the one `resume` restored.
 pub fn train(
     backend: &mut dyn Plenoxels,
     data: &Dataset,
@@ -161,6 +178,9 @@ pub fn train(
     let log_path = out.join(TRAIN_LOG);
     let mut log = train_log::open(&log_path, TRAIN_LOG_HEADER, start_step)?;
     let t_train = Instant::now();
+    if start_step == 0 {
+        backend.set_background(BackgroundRecord::start(data.background).kernel())?;
+    }
     for step in start_step..cfg.iters {
         if let Some((_, r)) = cfg.upsample.iter().find(|(s, _)| *s == step) {
             let t = Instant::now();
@@ -220,7 +240,7 @@ pub fn train(
         if (step + 1) % cfg.checkpoint_every == 0 && step + 1 < cfg.iters {
             let t = Instant::now();
             train_log::flush(&mut log, &log_path)?;
-            save(backend, cfg, out, step + 1)?;
+            save(backend, cfg, data.background, out, step + 1)?;
             report.checkpoint_seconds += t.elapsed().as_secs_f64();
         }
     }
@@ -228,7 +248,7 @@ pub fn train(
     train_log::flush(&mut log, &log_path)?;
     drop(log);
     let t = Instant::now();
-    save(backend, cfg, out, cfg.iters)?;
+    save(backend, cfg, data.background, out, cfg.iters)?;
     report.checkpoint_seconds += t.elapsed().as_secs_f64();
 
     let t = Instant::now();

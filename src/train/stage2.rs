@@ -3,13 +3,14 @@
 //! (resumable); NaN/Inf detection; at the end the α < 0.1 surfaces are dropped, the test split
 //! rendered and metrics.json written.
 
+use super::background::{self, BackgroundRecord};
 use super::progress::{Progress, Throughput};
 use super::render::{render_split_with, RenderedSplit};
 use super::stage1::step_rng;
 use super::surface_config::SurfaceConfig;
 use crate::abi::buffers::TrainPerRay;
 use crate::cpu::surface_reg::{delta_tv_chunk, opacity_tv_chunk, OpacityChunk};
-use crate::data::{Dataset, RaySampler};
+use crate::data::{BackgroundMode, Dataset, RaySampler};
 use crate::grid::checkpoint;
 use crate::grid::surface::SurfaceGrid;
 use crate::run::train_log;
@@ -51,9 +52,19 @@ pub fn checkpoint_path(run: &Path) -> PathBuf {
     run.join(CHECKPOINT)
 }
 
-/// Write the checkpoint of `step` atomically (refuses non-finite values).
-fn save(backend: &dyn SurfaceBackend, cfg: &SurfaceConfig, out: &Path, step: u32) -> Result<()> {
-    let meta = json!({ "stage": "surface", "step": step, "config": cfg });
+/// Write the checkpoint of `step` atomically (refuses non-finite values), with the background of
+/// a run in `mode`.
+fn save(
+    backend: &dyn SurfaceBackend,
+    cfg: &SurfaceConfig,
+    mode: BackgroundMode,
+    out: &Path,
+    step: u32,
+) -> Result<()> {
+    let bg = BackgroundRecord::of(mode, &backend.background()?);
+    let meta = json!({
+        "stage": "surface", "step": step, "config": cfg, background::META_KEY: bg
+    });
     backend
         .with_state(&mut |grid, [sd, so, ss]| {
             grid.save(
@@ -65,16 +76,22 @@ fn save(backend: &dyn SurfaceBackend, cfg: &SurfaceConfig, out: &Path, step: u32
         .with_context(|| format!("after step {step}"))
 }
 
-/// Restore grid, optimiser state and step from a stage-2 checkpoint; returns the next step.
-pub fn resume(backend: &mut dyn SurfaceBackend, path: &Path) -> Result<(u32, SurfaceConfig)> {
+/// Restore grid, optimiser state, background and step from a stage-2 checkpoint; returns the
+/// next step, the configuration and the background.
+pub fn resume(
+    backend: &mut dyn SurfaceBackend,
+    path: &Path,
+) -> Result<(u32, SurfaceConfig, BackgroundRecord)> {
     let ck = SurfaceGrid::load(path)?;
     let (step, cfg) = checkpoint::meta_step_config::<SurfaceConfig>(&ck.meta, "surface", path)?;
     cfg.validate()
         .with_context(|| format!("{}: invalid configuration", path.display()))?;
     let state = |name: &str| checkpoint::optim_array(&ck.optim, name, path);
     let state = [state("rms_delta")?, state("rms_opacity")?, state("rms_sh")?];
+    let bg = BackgroundRecord::from_meta(&ck.meta, path)?;
     backend.load(ck.grid, Some(state))?;
-    Ok((step, cfg))
+    backend.set_background(bg.kernel())?;
+    Ok((step, cfg, bg))
 }
 
 /// The scheduled parameters of step `step`, with truncation `a`, for a grid of resolution `res`
@@ -199,7 +216,7 @@ pub fn train(
         if (step + 1) % cfg.checkpoint_every == 0 && step + 1 < cfg.iters {
             let t = Instant::now();
             train_log::flush(&mut log, &log_path)?;
-            save(backend, cfg, out, step + 1)?;
+            save(backend, cfg, data.background, out, step + 1)?;
             report.checkpoint_seconds += t.elapsed().as_secs_f64();
         }
     }
@@ -219,7 +236,7 @@ pub fn train(
     }
     backend.load(grid, None)?;
     let t = Instant::now();
-    save(backend, cfg, out, cfg.iters)?;
+    save(backend, cfg, data.background, out, cfg.iters)?;
     report.checkpoint_seconds += t.elapsed().as_secs_f64();
 
     let t = Instant::now();

@@ -327,7 +327,10 @@ fn cpu_backward_matches_f64_central_differences() {
         }
         let rel = (num / den).sqrt();
         // The background has 3 values; the grid's groups at least 50 each.
-        assert!(checked >= analytic.len().min(51) && den > 0.0, "{name}: {checked} checked");
+        assert!(
+            checked >= analytic.len().min(51) && den > 0.0,
+            "{name}: {checked} checked"
+        );
         assert!(
             rel <= 1e-3,
             "{name}: relative L2 {rel:.3e} over {checked} values"

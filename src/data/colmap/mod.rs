@@ -76,7 +76,12 @@ pub struct ImageEntry {
 }
 
 /// The splits and scene box of the COLMAP dataset `root` with its model in `sparse`.
-pub fn load(root: &Path, sparse: &Path, k: u32) -> Result<(Splits, SceneBox), DataError> {
+pub fn load(
+    root: &Path,
+    sparse: &Path,
+    k: u32,
+    bg: [f32; 3],
+) -> Result<(Splits, SceneBox), DataError> {
     let binary = sparse.join("cameras.bin").is_file();
     let file = |stem: &str| sparse.join(format!("{stem}.{}", if binary { "bin" } else { "txt" }));
     let (cam_file, img_file, pts_file) = (file("cameras"), file("images"), file("points3D"));
@@ -172,7 +177,7 @@ pub fn load(root: &Path, sparse: &Path, k: u32) -> Result<(Splits, SceneBox), Da
             ),
         })?;
     Ok((
-        views::load_splits(root, &img_file, posed, &folders, k)?,
+        views::load_splits(root, &img_file, posed, &folders, k, bg)?,
         scene,
     ))
 }

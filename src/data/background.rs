@@ -1,0 +1,45 @@
+//! What rays are composited on (`--background`): the colour behind every render and training
+//! pass, and the colour images with alpha (or masks) are composited on at load.
+
+use serde::{Deserialize, Serialize};
+
+/// The background of a run.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum BackgroundMode {
+    /// White (1, 1, 1): NeRF-synthetic practice.
+    #[default]
+    White,
+    /// Black (0, 0, 0).
+    Black,
+    /// A constant RGB colour trained with the scene, for images without alpha or masks (real
+    /// photos of an object in front of a plain backdrop).
+    Learned,
+}
+
+impl BackgroundMode {
+    /// The colour a run starts from, and the one images are composited on at load: white, black,
+    /// or, learned, mid grey (within 0.5 of any backdrop colour; images with alpha are refused
+    /// then, so it composites nothing).
+    pub fn initial_rgb(self) -> [f32; 3] {
+        match self {
+            BackgroundMode::White => [1.0; 3],
+            BackgroundMode::Black => [0.0; 3],
+            BackgroundMode::Learned => [0.5; 3],
+        }
+    }
+
+    /// Whether the colour is trained.
+    pub fn learned(self) -> bool {
+        self == BackgroundMode::Learned
+    }
+
+    /// The name on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            BackgroundMode::White => "white",
+            BackgroundMode::Black => "black",
+            BackgroundMode::Learned => "learned",
+        }
+    }
+}
