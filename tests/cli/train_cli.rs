@@ -424,3 +424,196 @@ fn bench_plenoxels_json_reports_where_the_time_goes() {
         "{line}"
     );
 }
+
+/// Mean colour (0..1) of the `k`×`k` corner block of an image (the built-in scenes' cameras
+/// look at the object: their corners see the background).
+fn corner(img: &image::RgbaImage, k: u32) -> [f64; 3] {
+    let mut acc = [0.0; 3];
+    for y in 0..k {
+        for x in 0..k {
+            let p = img.get_pixel(x, y).0;
+            for c in 0..3 {
+                acc[c] += p[c] as f64 / 255.0 / (k * k) as f64;
+            }
+        }
+    }
+    acc
+}
+
+#[test]
+fn black_background_trains_and_renders_on_black() {
+    use alphasurf::data::{BackgroundMode, Dataset, LoadOptions};
+    let dir = tempfile::tempdir().unwrap();
+    let data = scene(dir.path());
+    // The targets: alpha composited on black, not white.
+    for (mode, want) in [(BackgroundMode::Black, 0.0), (BackgroundMode::White, 1.0)] {
+        let d = Dataset::load(
+            &data,
+            &LoadOptions {
+                background: mode,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        assert_eq!(d.background, mode);
+        let f = &d.test.frames[0].image;
+        assert!(f.had_alpha && f.alpha(0, 0) == 0.0, "corner not background");
+        assert_eq!(f.rgb(0, 0), [want; 3], "{mode:?} target corner");
+    }
+    let run = dir.path().join("run");
+    train(&data, &run, "vulkan", &["--iters", "60", "--background", "black"]);
+    let m = metrics(&run);
+    let psnr = m["test_psnr"].as_f64().unwrap();
+    // As the white run's bound (train_render_export_import_on_both_backends).
+    assert!(psnr > 15.0, "test PSNR {psnr}");
+    assert_eq!(m["background"]["mode"], "black");
+    assert_eq!(m["background"]["rgb"], serde_json::json!([0.0, 0.0, 0.0]));
+    let info: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run.join("run.json")).unwrap()).unwrap();
+    assert_eq!(info["background"], "black");
+    let ck = alphasurf::grid::checkpoint::load(&run.join("plenoxels.npz")).unwrap();
+    assert_eq!(ck.meta["background"]["mode"], "black");
+    // The test renders: background corners near black (0.05: the empty space of a 60-step grid
+    // still holds a little density).
+    let img = image::open(run.join("test/r_0.png")).unwrap().to_rgba8();
+    let c = corner(&img, 4);
+    eprintln!("black: test PSNR {psnr:.3} dB, render corner {c:?}");
+    assert!(c.iter().all(|&v| v < 0.05), "render corner {c:?}");
+    // `render` composites the data and the views on the run's background: the same PSNR.
+    let out = run_ok(
+        bin()
+            .args(["render", "--run"])
+            .arg(&run)
+            .arg("--out")
+            .arg(dir.path().join("r")),
+    );
+    let mean: f64 = out
+        .lines()
+        .find_map(|l| l.strip_prefix("mean PSNR "))
+        .and_then(|l| l.split_whitespace().next())
+        .and_then(|v| v.parse().ok())
+        .expect("mean PSNR line");
+    assert!((mean - psnr).abs() < 0.01, "render {mean} vs train {psnr}");
+    // Resuming under another background is refused, naming both.
+    let out = bin()
+        .args(["train", "--data"])
+        .arg(&data)
+        .arg("--out")
+        .arg(&run)
+        .args(["--backend", "cpu", "--resume", "--iters", "70", "--quiet"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "resumed on white");
+    assert!(
+        err.contains("--background white") && err.contains("--background black"),
+        "{err}"
+    );
+}
+
+#[test]
+fn learned_background_converges_to_the_backdrop_of_images_without_alpha() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = scene(dir.path());
+    // With alpha the colour is known: learned refuses it, naming the dataset and the option.
+    let out = bin()
+        .args(["train", "--data"])
+        .arg(&data)
+        .arg("--out")
+        .arg(dir.path().join("refused"))
+        .args(["--backend", "cpu", "--background", "learned", "--quiet"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        err.contains(&data.display().to_string()) && err.contains("--background learned"),
+        "{err}"
+    );
+    // Photos of the scene in front of a backdrop: RGB files composited on `backdrop`.
+    let backdrop = [0.2f32, 0.6, 0.9];
+    for split in ["train", "val", "test"] {
+        for e in std::fs::read_dir(data.join(split)).unwrap() {
+            let path = e.unwrap().path();
+            if path.extension().is_none_or(|x| x != "png") {
+                continue;
+            }
+            let rgba = image::open(&path).unwrap().to_rgba8();
+            let rgb = image::RgbImage::from_fn(rgba.width(), rgba.height(), |x, y| {
+                let p = rgba.get_pixel(x, y).0;
+                let a = p[3] as f32 / 255.0;
+                image::Rgb(std::array::from_fn(|c| {
+                    ((p[c] as f32 / 255.0 * a + (1.0 - a) * backdrop[c]) * 255.0).round() as u8
+                }))
+            });
+            rgb.save(&path).unwrap();
+        }
+    }
+    let run = dir.path().join("run");
+    train(
+        &data,
+        &run,
+        "vulkan",
+        &[
+            "--stage",
+            "all",
+            "--iters",
+            "200",
+            "--surface-iters",
+            "40",
+            "--background",
+            "learned",
+        ],
+    );
+    let rgb = |m: &serde_json::Value| -> Vec<f64> {
+        assert_eq!(m["background"]["mode"], "learned");
+        (0..3)
+            .map(|c| m["background"]["rgb"][c].as_f64().unwrap())
+            .collect()
+    };
+    let (s1, s2) = (
+        metrics(&run.join("plenoxels")),
+        metrics(&run.join("surface")),
+    );
+    // From mid grey (0.5) to the backdrop: RMSProp moves the colour by about its rate (the SH
+    // rate, 1e-2 here) per step, so after 200 steps it sits within a few steps' jitter of the
+    // backdrop; 0.03 allows three (and the 8-bit rounding of the images, 0.002).
+    for (name, m) in [("stage 1", &s1), ("stage 2", &s2)] {
+        let got = rgb(m);
+        eprintln!("{name}: learned {got:?}, backdrop {backdrop:?}");
+        for c in 0..3 {
+            assert!(
+                (got[c] - backdrop[c] as f64).abs() <= 0.03,
+                "{name} learned {got:?}, backdrop {backdrop:?}"
+            );
+        }
+    }
+    // Stage 2 started from stage 1's colour (its checkpoint's), not from grey again.
+    let s1_ck = alphasurf::grid::checkpoint::load(&run.join("plenoxels/plenoxels.npz")).unwrap();
+    assert_eq!(s1_ck.meta["background"]["rgb"], s1["background"]["rgb"]);
+    let psnr = s1["test_psnr"].as_f64().unwrap();
+    eprintln!(
+        "learned: stage-1 test PSNR {psnr:.3} dB, stage-2 {:.3} dB",
+        s2["test_psnr"].as_f64().unwrap()
+    );
+    assert!(psnr > 15.0, "stage-1 test PSNR {psnr}");
+}
+
+#[test]
+fn unknown_background_is_a_usage_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = bin()
+        .args(["train", "--data"])
+        .arg(dir.path())
+        .arg("--out")
+        .arg(dir.path().join("run"))
+        .args(["--background", "pink"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("invalid value 'pink'") && err.contains("white, black, learned"),
+        "{err}"
+    );
+}
