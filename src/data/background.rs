@@ -18,9 +18,9 @@ pub enum BackgroundMode {
 }
 
 impl BackgroundMode {
-    /// The colour a run starts from, and the one images are composited on at load: white, black,
-    /// or, learned, mid grey (within 0.5 of any backdrop colour; images with alpha are refused
-    /// then, so it composites nothing).
+    /// The colour images are composited on at load, and a fixed background's colour: white,
+    /// black, or, learned, mid grey (images with alpha are refused then, so it composites
+    /// nothing; a learned run starts from its images' border colour, `train::BackgroundRecord`).
     pub fn initial_rgb(self) -> [f32; 3] {
         match self {
             BackgroundMode::White => [1.0; 3],

@@ -70,6 +70,34 @@ impl Split {
     pub fn n_pixels(&self) -> u64 {
         self.frames.len() as u64 * self.width() as u64 * self.height() as u64
     }
+
+    /// Per channel, the median over every view of the pixels on the image border (0..1): the
+    /// backdrop's colour when the views frame an object in front of one.
+    pub fn border_median(&self) -> [f32; 3] {
+        let mut hist = [[0u64; 256]; 3];
+        for f in &self.frames {
+            let img = &f.image;
+            let (w, h) = (img.width, img.height);
+            let ring = (0..w)
+                .flat_map(|x| [(x, 0), (x, h - 1)])
+                .chain((1..h.saturating_sub(1)).flat_map(|y| [(0, y), (w - 1, y)]));
+            for (x, y) in ring {
+                let p = img.pixel(x, y);
+                for c in 0..3 {
+                    hist[c][p[c] as usize] += 1;
+                }
+            }
+        }
+        hist.map(|hc| {
+            let total: u64 = hc.iter().sum();
+            let mut seen = 0;
+            let level = hc.iter().position(|&n| {
+                seen += n;
+                2 * seen >= total
+            });
+            level.unwrap_or(0) as f32 / 255.0
+        })
+    }
 }
 
 /// What loading cost.

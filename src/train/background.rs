@@ -2,7 +2,7 @@
 //! it is learned, the optimiser's running average; carried from stage 1 into stage 2.
 
 use crate::cpu::background::Background;
-use crate::data::BackgroundMode;
+use crate::data::{BackgroundMode, Dataset};
 use anyhow::{ensure, Context, Result};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -27,13 +27,27 @@ impl Default for BackgroundRecord {
 }
 
 impl BackgroundRecord {
-    /// A run's background before its first step.
+    /// A background of `mode` at its colour at load (`BackgroundMode::initial_rgb`).
     pub fn start(mode: BackgroundMode) -> Self {
         BackgroundRecord {
             mode,
             rgb: mode.initial_rgb(),
             avg: [0.0; 3],
         }
+    }
+
+    /// A run's background before its first step on `data`: its mode's colour, or, learned, the
+    /// median colour of the training images' borders. Starting a learned colour far from the
+    /// backdrop (at grey) lets the grid explain the difference with coloured fog in empty space
+    /// first, which the colour, once it has converged, does not clear: on the built-in solid
+    /// scene composited on white, 200 steps from grey reached white yet scored 10.7 dB against
+    /// 23.0 dB for a fixed white (docs/datasets.md).
+    pub fn start_on(data: &Dataset) -> Self {
+        let mut r = Self::start(data.background);
+        if data.background.learned() {
+            r.rgb = data.train.border_median();
+        }
+        r
     }
 
     /// What a backend holds, of a run in `mode`.

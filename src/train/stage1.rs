@@ -159,7 +159,8 @@ pub fn resume(
 
 /// Train stage 1 from `start_step` (0, or the step after a resumed checkpoint) to `cfg.iters`,
 /// then render the test split into `out/test/` and write `out/metrics.json`. From step 0 the
-/// background starts as `data.background` says; a resumed run keeps the one `resume` restored.
+/// background starts as `data.background` says (`BackgroundRecord::start_on`); a resumed run
+/// keeps the one `resume` restored.
 pub fn train(
     backend: &mut dyn Plenoxels,
     data: &Dataset,
@@ -179,7 +180,7 @@ pub fn train(
     let mut log = train_log::open(&log_path, TRAIN_LOG_HEADER, start_step)?;
     let t_train = Instant::now();
     if start_step == 0 {
-        backend.set_background(BackgroundRecord::start(data.background).kernel())?;
+        backend.set_background(BackgroundRecord::start_on(data).kernel())?;
     }
     for step in start_step..cfg.iters {
         if let Some((_, r)) = cfg.upsample.iter().find(|(s, _)| *s == step) {

@@ -461,7 +461,12 @@ fn black_background_trains_and_renders_on_black() {
         assert_eq!(f.rgb(0, 0), [want; 3], "{mode:?} target corner");
     }
     let run = dir.path().join("run");
-    train(&data, &run, "vulkan", &["--iters", "60", "--background", "black"]);
+    train(
+        &data,
+        &run,
+        "vulkan",
+        &["--iters", "60", "--background", "black"],
+    );
     let m = metrics(&run);
     let psnr = m["test_psnr"].as_f64().unwrap();
     // As the white run's bound (train_render_export_import_on_both_backends).
@@ -530,25 +535,8 @@ fn learned_background_converges_to_the_backdrop_of_images_without_alpha() {
         err.contains(&data.display().to_string()) && err.contains("--background learned"),
         "{err}"
     );
-    // Photos of the scene in front of a backdrop: RGB files composited on `backdrop`.
     let backdrop = [0.2f32, 0.6, 0.9];
-    for split in ["train", "val", "test"] {
-        for e in std::fs::read_dir(data.join(split)).unwrap() {
-            let path = e.unwrap().path();
-            if path.extension().is_none_or(|x| x != "png") {
-                continue;
-            }
-            let rgba = image::open(&path).unwrap().to_rgba8();
-            let rgb = image::RgbImage::from_fn(rgba.width(), rgba.height(), |x, y| {
-                let p = rgba.get_pixel(x, y).0;
-                let a = p[3] as f32 / 255.0;
-                image::Rgb(std::array::from_fn(|c| {
-                    ((p[c] as f32 / 255.0 * a + (1.0 - a) * backdrop[c]) * 255.0).round() as u8
-                }))
-            });
-            rgb.save(&path).unwrap();
-        }
-    }
+    drop_alpha(&data, backdrop);
     let run = dir.path().join("run");
     train(
         &data,
@@ -575,9 +563,8 @@ fn learned_background_converges_to_the_backdrop_of_images_without_alpha() {
         metrics(&run.join("plenoxels")),
         metrics(&run.join("surface")),
     );
-    // From mid grey (0.5) to the backdrop: RMSProp moves the colour by about its rate (the SH
-    // rate, 1e-2 here) per step, so after 200 steps it sits within a few steps' jitter of the
-    // backdrop; 0.03 allows three (and the 8-bit rounding of the images, 0.002).
+    // The colour starts at the images' border median (here the backdrop, to 8 bits) and stays
+    // within a few RMSProp steps (the SH rate, 1e-2 here) of it: 0.03 allows three.
     for (name, m) in [("stage 1", &s1), ("stage 2", &s2)] {
         let got = rgb(m);
         eprintln!("{name}: learned {got:?}, backdrop {backdrop:?}");
@@ -596,7 +583,92 @@ fn learned_background_converges_to_the_backdrop_of_images_without_alpha() {
         "learned: stage-1 test PSNR {psnr:.3} dB, stage-2 {:.3} dB",
         s2["test_psnr"].as_f64().unwrap()
     );
-    assert!(psnr > 15.0, "stage-1 test PSNR {psnr}");
+    // Measured 26.5 dB; a fixed white background on the RGBA scene gives 23.0 dB at 200 steps.
+    assert!(psnr > 20.0, "stage-1 test PSNR {psnr}");
+}
+
+/// Replace the scene's RGBA images by RGB ones composited on `backdrop` (photos without masks).
+fn drop_alpha(data: &Path, backdrop: [f32; 3]) {
+    for split in ["train", "val", "test"] {
+        for e in std::fs::read_dir(data.join(split)).unwrap() {
+            let path = e.unwrap().path();
+            if path.extension().is_none_or(|x| x != "png") {
+                continue;
+            }
+            let rgba = image::open(&path).unwrap().to_rgba8();
+            let rgb = image::RgbImage::from_fn(rgba.width(), rgba.height(), |x, y| {
+                let p = rgba.get_pixel(x, y).0;
+                let a = p[3] as f32 / 255.0;
+                image::Rgb(std::array::from_fn(|c| {
+                    ((p[c] as f32 / 255.0 * a + (1.0 - a) * backdrop[c]) * 255.0).round() as u8
+                }))
+            });
+            rgb.save(&path).unwrap();
+        }
+    }
+}
+
+#[test]
+fn learned_background_converges_from_grey_on_the_device() {
+    use alphasurf::cpu::background::Background;
+    use alphasurf::data::{BackgroundMode, Dataset, LoadOptions, RaySampler};
+    use alphasurf::grid::Grid;
+    use alphasurf::plenoxel::{Plenoxels, StepParams, VulkanPlenoxels};
+    use alphasurf::train::Stage1Config;
+    let dir = tempfile::tempdir().unwrap();
+    let data = scene(dir.path());
+    let backdrop = [0.2f32, 0.6, 0.9];
+    drop_alpha(&data, backdrop);
+    let d = Dataset::load(
+        &data,
+        &LoadOptions {
+            background: BackgroundMode::Learned,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let b = d.train.border_median();
+    assert!(
+        // The images hold the backdrop rounded to 8 bits.
+        (0..3).all(|c| (b[c] - backdrop[c]).abs() <= 1.0 / 255.0),
+        "border median {b:?}"
+    );
+    // From mid grey instead of the border median: the optimiser alone must find the backdrop.
+    let cfg = Stage1Config::fast();
+    let gpu = alphasurf::gpu::test_gpu();
+    let grid = Grid::sphere(32, [0.0; 3], [d.scene.radius; 3], 1.0, cfg.init_sigma);
+    let mut vk = VulkanPlenoxels::new(gpu, grid).unwrap();
+    vk.set_background(Background::new([0.5; 3], true)).unwrap();
+    let mut sampler = RaySampler::new(&d.train, 3);
+    for step in 0..200 {
+        let batch = sampler.next_batch(&d.train, &d.scene, 2048);
+        let p = StepParams {
+            lr_sigma: cfg.lr_sigma.at(step),
+            lr_sh: cfg.lr_sh.at(step),
+            beta: cfg.beta,
+            eps: cfg.eps,
+            stop_thresh: cfg.stop_thresh,
+            tv: None,
+            lr_bg: cfg.lr_sh.at(step),
+        };
+        vk.step(&batch.flat_rays(), &batch.flat_targets(), &p)
+            .unwrap();
+    }
+    let bg = vk.background().unwrap();
+    eprintln!(
+        "from grey after 200 steps: {:?}, backdrop {backdrop:?}",
+        bg.rgb
+    );
+    // 0.3 to 0.4 away at the start; RMSProp moves it by about its rate (1e-2) per step, so 200
+    // steps leave it within a few steps' jitter: 0.03 allows three.
+    for c in 0..3 {
+        assert!(
+            (bg.rgb[c] - backdrop[c]).abs() <= 0.03,
+            "learned {:?}, backdrop {backdrop:?}",
+            bg.rgb
+        );
+    }
+    assert!(bg.learned() && bg.grad == [0.0; 3], "{bg:?}");
 }
 
 #[test]
