@@ -1,6 +1,6 @@
 //! The NeRF-synthetic ("Blender") layout: `transforms_{train,val,test}.json` (val falls back to
 //! test), `camera_angle_x` or nerfstudio-style `fl_x`/`fl_y`/`cx`/`cy`/`w`/`h` (top level or per
-//! frame), RGBA/RGB PNG and JPEG images loaded in parallel, composited on white, optionally
+//! frame), RGBA/RGB PNG and JPEG images loaded in parallel, composited on the background, optionally
 //! box-downscaled, and held as 8-bit RGBA.
 
 use super::camera::Camera;

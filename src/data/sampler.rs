@@ -7,7 +7,7 @@ use super::dataset::Split;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
 
-/// A batch of rays with their target colours (composited on white) and alpha.
+/// A batch of rays with their target colours (composited on the background) and alpha.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct RayBatch {
     /// Ray origins, scaled world.

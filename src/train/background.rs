@@ -39,9 +39,8 @@ impl BackgroundRecord {
     /// A run's background before its first step on `data`: its mode's colour, or, learned, the
     /// median colour of the training images' borders. Starting a learned colour far from the
     /// backdrop (at grey) lets the grid explain the difference with coloured fog in empty space
-    /// first, which the colour, once it has converged, does not clear: on the built-in solid
-    /// scene composited on white, 200 steps from grey reached white yet scored 10.7 dB against
-    /// 23.0 dB for a fixed white (docs/datasets.md).
+    /// first, which the colour, once it has converged, does not clear (docs/results.md,
+    /// "Learned background").
     pub fn start_on(data: &Dataset) -> Self {
         let mut r = Self::start(data.background);
         if data.background.learned() {
