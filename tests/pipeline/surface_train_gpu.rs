@@ -1,11 +1,12 @@
 //! The Vulkan stage-2 backend against the CPU one (lavapipe, validation layers on): a few training
-//! steps from the same grid on the same batches, with every regulariser (Lδ, TVα, Lα, Ln1/Ln2).
+//! steps from the same grid on the same batches, with every regulariser (Lδ, TVα, Lα, Ln1/Ln2)
+//! and a learned background.
 //! The kernel-level parity (per-ray losses, gradients, touched flags, counters) is the
 //! `surface_train` row of `check-kernels`, asserted in tests/kernels/parity.rs.
 
 use alphasurf::check::rel_l2;
 use alphasurf::check::surface_fwd::{test_rays, test_scene};
-use alphasurf::check::surface_train::scene_grid;
+use alphasurf::check::surface_train::{scene_grid, test_background};
 use alphasurf::cpu::surface_reg::{delta_tv_chunk, opacity_tv_chunk, OpacityChunk};
 use alphasurf::gpu::test_gpu;
 use alphasurf::grid::surface::SurfaceGrid;
@@ -28,6 +29,7 @@ fn params(g: &SurfaceGrid, step: u32) -> SurfaceStepParams {
         stop_thresh: 1e-4,
         lambda_h: 1e-2,
         lambda_c: 1e-2,
+        lr_bg: 1e-2,
         regs: SurfaceRegs {
             // Whole-grid Lδ (dense δ update) and a 30 % chunk (δ flagged) in turn.
             delta_tv: Some(delta_tv_chunk(
@@ -77,6 +79,8 @@ fn vulkan_steps_match_cpu_steps() {
     let g0 = scene_grid(&scene);
     let mut vk = VulkanSurface::new(gpu, g0.clone()).unwrap();
     let mut cpu = CpuSurface::new(g0.clone()).unwrap();
+    vk.set_background(test_background()).unwrap();
+    cpu.set_background(test_background()).unwrap();
     let mut rng = Pcg64::seed_from_u64(5);
     for step in 0..5u32 {
         let rays = test_rays(&scene, 100 + step as u64, 2000);
@@ -127,6 +131,16 @@ fn vulkan_steps_match_cpu_steps() {
                 sc.counts
             );
         }
+    }
+    // The learned background: five RMSProp steps of about lr each, from (0.2, 0.6, 0.9), on
+    // gradients summed in another order.
+    let (bv, bc) = (vk.background().unwrap(), cpu.background().unwrap());
+    eprintln!("background: vulkan {:?} cpu {:?}", bv.rgb, bc.rgb);
+    for ch in 0..3 {
+        assert!(
+            (bv.rgb[ch] - bc.rgb[ch]).abs() <= 1e-5 && bc.rgb[ch] != test_background().rgb[ch],
+            "background: vulkan {bv:?} cpu {bc:?}"
+        );
     }
     let (gv, gc) = (vk.grid().unwrap(), cpu.grid().unwrap());
     assert_eq!(gv.links, gc.links);
@@ -195,7 +209,9 @@ fn vulkan_render_and_load_round_trip() {
     let state = [vec![0.5f32; n], vec![0.25; n], vec![0.125; 27 * n]];
     let mut g1 = g0.clone();
     g1.opacity.iter_mut().for_each(|o| *o += 1.0);
+    vk.set_background(test_background()).unwrap();
     vk.load(g1.clone(), Some(state.clone())).unwrap();
+    assert_eq!(vk.background().unwrap(), test_background(), "load keeps the background");
     assert_eq!(vk.grid().unwrap(), g1);
     assert_eq!(vk.optimizer_state().unwrap(), state);
     assert!(vk.load(g1, Some([vec![], vec![], vec![]])).is_err());
