@@ -211,7 +211,11 @@ fn vulkan_render_and_load_round_trip() {
     g1.opacity.iter_mut().for_each(|o| *o += 1.0);
     vk.set_background(test_background()).unwrap();
     vk.load(g1.clone(), Some(state.clone())).unwrap();
-    assert_eq!(vk.background().unwrap(), test_background(), "load keeps the background");
+    assert_eq!(
+        vk.background().unwrap(),
+        test_background(),
+        "load keeps the background"
+    );
     assert_eq!(vk.grid().unwrap(), g1);
     assert_eq!(vk.optimizer_state().unwrap(), state);
     assert!(vk.load(g1, Some([vec![], vec![], vec![]])).is_err());
