@@ -10,6 +10,7 @@
 use alphasurf::abi::buffers::{SurfCounts, SurfOut};
 use alphasurf::check::surface_blocks::check as blocks_check;
 use alphasurf::check::surface_fwd::{check, render_gpu, test_rays, test_scene, SurfaceScene};
+use alphasurf::check::TEST_BACKGROUND;
 use alphasurf::cpu::surface_blocks::build_blocks;
 use alphasurf::cpu::surface_fwd::render;
 use alphasurf::gpu::test_gpu;
@@ -174,7 +175,7 @@ fn crossings64(
     out
 }
 
-/// Renders one ray in f64 by method.md §3.2 and §5.
+/// Renders one ray in f64 by method.md §3.2 and §5, on [`TEST_BACKGROUND`] (`SurfaceScene::params`).
 fn ref_ray(sc: &SurfaceScene, ro: [f32; 3], rd: [f32; 3], a: f64, stop: f64) -> RefRay {
     let n = sc.n as usize;
     let hi = (n - 1) as f64;
@@ -185,8 +186,9 @@ fn ref_ray(sc: &SurfaceScene, ro: [f32; 3], rd: [f32; 3], a: f64, stop: f64) -> 
     let dn = dg.map(|x| x / dl);
     let rl = rd.iter().map(|&x| (x as f64).powi(2)).sum::<f64>().sqrt();
     let y = sh_basis64(rd.map(|x| x as f64 / rl));
+    let bg = TEST_BACKGROUND.map(|c| c as f64);
     let mut res = RefRay {
-        rgb: [1.0; 3],
+        rgb: bg,
         transmittance: 1.0,
         hits: 0,
         degenerate: false,
@@ -351,7 +353,7 @@ fn ref_ray(sc: &SurfaceScene, ro: [f32; 3], rd: [f32; 3], a: f64, stop: f64) -> 
             break;
         }
     }
-    res.rgb = color.map(|c| c + trans);
+    res.rgb = std::array::from_fn(|ch| color[ch] + trans * bg[ch]);
     res.transmittance = trans;
     res.hits = j;
     res
@@ -723,7 +725,7 @@ fn planar_field_one_live_block() {
                     what()
                 );
             } else {
-                assert_eq!(o.rgb, [1.0; 3], "{}", what());
+                assert_eq!(o.rgb, TEST_BACKGROUND, "{}", what());
             }
         }
     }
@@ -829,7 +831,7 @@ fn planar_field_one_hit_at_the_right_depth() {
                         what()
                     );
                 } else {
-                    assert_eq!(o.rgb, [1.0; 3], "{}", what());
+                    assert_eq!(o.rgb, TEST_BACKGROUND, "{}", what());
                 }
             }
         }
@@ -896,7 +898,7 @@ fn truncated_compositing() {
             t *= 1.0 - at;
             used += 1;
         }
-        let want = col.map(|c| c + t);
+        let want: [f64; 3] = std::array::from_fn(|k| col[k] + t * TEST_BACKGROUND[k] as f64);
         let cut = u32::from((used as usize) < planes.len());
         for (backend, o, cn) in [("cpu", cpu[0], counts), ("gpu", gpu[0], gc)] {
             assert_eq!(o.hits, used, "{backend} a {a}: {o:?}");
@@ -928,8 +930,8 @@ fn gpu_parity_row() {
     assert!(msgs.is_empty(), "validation messages: {msgs:#?}");
 }
 
-/// Rays that miss (outside the box, zero or NaN direction) are white with T = 1 and no hits, on
-/// both backends; more than 8 levels or a link past the vertex rows is an error, not a panic.
+/// Rays that miss (outside the box, zero or NaN direction) are the background with T = 1 and no
+/// hits, on both backends; more than 8 levels or a link past the vertex rows is an error, not a panic.
 #[test]
 fn missing_rays_and_bad_input() {
     let sc = test_scene(3, 8);
@@ -944,12 +946,12 @@ fn missing_rays_and_bad_input() {
     let blocks = build_blocks(&sc.grid(), &sc.levels, 0.0, SHIFT).unwrap();
     let (o, counts) = render(&sc.grid(), &rays, &p, Some(sk(&blocks))).unwrap();
     let (og, gc, _) = render_gpu(test_gpu(), &sc.grid(), &rays, &p, Some(sk(&blocks))).unwrap();
-    let white = SurfOut {
-        rgb: [1.0; 3],
+    let missed = SurfOut {
+        rgb: TEST_BACKGROUND,
         transmittance: 1.0,
         hits: 0,
     };
-    assert!(o.iter().chain(&og).all(|x| *x == white), "{o:?} {og:?}");
+    assert!(o.iter().chain(&og).all(|x| *x == missed), "{o:?} {og:?}");
     assert_eq!(counts, SurfCounts::default());
     assert_eq!(gc, SurfCounts::default());
     let mut q = sc.params(5.0, 1e-4);
