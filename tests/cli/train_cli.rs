@@ -575,9 +575,39 @@ fn learned_background_converges_to_the_backdrop_of_images_without_alpha() {
             );
         }
     }
-    // Stage 2 started from stage 1's colour (its checkpoint's), not from grey again.
-    let s1_ck = alphasurf::grid::checkpoint::load(&run.join("plenoxels/plenoxels.npz")).unwrap();
+    let s1_path = run.join("plenoxels/plenoxels.npz");
+    let s1_ck = alphasurf::grid::checkpoint::load(&s1_path).unwrap();
     assert_eq!(s1_ck.meta["background"]["rgb"], s1["background"]["rgb"]);
+    // Resume and stage 2 start from the checkpoint's colour: set it to grey, far from the
+    // backdrop and from the images' border median.
+    let mut meta = s1_ck.meta.clone();
+    meta["background"]["rgb"] = serde_json::json!([0.5, 0.5, 0.5]);
+    alphasurf::grid::checkpoint::save(&s1_path, &s1_ck.grid, &optim_refs(&s1_ck.optim), &meta)
+        .unwrap();
+    let mut b = alphasurf::plenoxel::CpuPlenoxels::new(s1_ck.grid.clone());
+    let (_, _, rec) = alphasurf::train::stage1::resume(&mut b, &s1_path).unwrap();
+    use alphasurf::plenoxel::Plenoxels as _;
+    let restored = b.background().unwrap();
+    assert!(restored.learned() && restored.rgb == [0.5; 3] && restored == rec.kernel());
+    let s2b = dir.path().join("s2b");
+    run_ok(
+        bin()
+            .args(["train", "--stage", "surface", "--init"])
+            .arg(run.join("plenoxels"))
+            .arg("--data")
+            .arg(&data)
+            .arg("--out")
+            .arg(&s2b)
+            .args(["--backend", "cpu", "--background", "learned", "--quiet"])
+            .args(["--surface-iters", "1", "--batch", "256"]),
+    );
+    // One RMSProp step moves a channel by at most lr/√(1 − β) (stage 2's SH rate, ≤ 3e-3 in the
+    // presets, β 0.95: ≤ 0.014); started from the border median it would sit 0.3 or more away.
+    let one = rgb(&metrics(&s2b));
+    assert!(
+        one.iter().all(|&c| (c - 0.5).abs() <= 0.05),
+        "stage 2 did not start from stage 1's colour: {one:?}"
+    );
     let psnr = s1["test_psnr"].as_f64().unwrap();
     eprintln!(
         "learned: stage-1 test PSNR {psnr:.3} dB, stage-2 {:.3} dB",
