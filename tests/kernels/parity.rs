@@ -67,6 +67,7 @@ rows!(
     surface_normal_reg_pairs,
     surface_normal_reg_gather,
     surface_rmsprop,
+    sample_rays,
 );
 
 #[test]

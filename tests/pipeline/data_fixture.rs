@@ -2,9 +2,10 @@
 //! `../shared/fixtures/thin_lyre` (a missing fixture fails these tests).
 
 use crate::data_common::fixture;
+use alphasurf::cpu::sample_rays::key_pixel;
 use alphasurf::data::image::decode_file;
 use alphasurf::data::inspect::inspect;
-use alphasurf::data::{Camera, Dataset, LoadOptions, RaySampler, Split};
+use alphasurf::data::{Camera, Dataset, LoadOptions, Split, TrainViews};
 use glam::{Mat4, Vec3, Vec4};
 use std::sync::OnceLock;
 
@@ -245,30 +246,40 @@ fn inspect_estimates_object_bounds() {
 #[test]
 fn sampler_is_seeded_uniform_and_matches_pixels() {
     let ds = dataset();
-    let batch = |seed| RaySampler::new(&ds.train, seed).next_batch(&ds.train, &ds.scene, 4096);
+    let views = TrainViews::new(&ds.train, &ds.scene).unwrap();
+    let batch = |seed| views.sample(seed, 4096).unwrap();
     let (a, b, c) = (batch(1), batch(1), batch(2));
     assert_eq!(a, b);
     assert_ne!(a, c);
-    let mut s = RaySampler::new(&ds.train, 3);
-    let px = s.sample_pixels(200_000);
+    // A second set over the same split draws the same batch (a function of the seed alone).
+    assert_eq!(
+        TrainViews::new(&ds.train, &ds.scene)
+            .unwrap()
+            .sample(1, 4096)
+            .unwrap(),
+        a
+    );
+    let bits = views.set().key_bits();
+    let big = views.sample(3, 200_000).unwrap();
     let mut per_view = vec![0usize; 100];
-    for p in &px {
-        per_view[p.view as usize] += 1;
-        assert!(p.x < 256 && p.y < 256);
+    for &k in &big.keys {
+        let (v, x, y) = key_pixel(k, bits);
+        per_view[v as usize] += 1;
+        assert!(x < 256 && y < 256);
     }
     // Uniform over views: each gets 2000 ± 5σ (σ ≈ 44).
     assert!(
         per_view.iter().all(|&n| (1780..=2220).contains(&n)),
         "{per_view:?}"
     );
-    // Rays: scaled origins, unit directions, the pixel's colour.
-    let mut s = RaySampler::new(&ds.train, 9);
-    let p = s.sample_pixels(1)[0];
-    let b = RaySampler::new(&ds.train, 9).next_batch(&ds.train, &ds.scene, 1);
-    let f = &ds.train.frames[p.view as usize];
-    let o = Vec3::from_array(b.origins[0]);
-    assert!((o - f.camera.centre() * (2.0 / 3.0)).length() < 1e-5);
-    assert!((Vec3::from_array(b.dirs[0]).length() - 1.0).abs() < 1e-5);
-    assert_eq!(b.rgb[0], f.image.rgb(p.x, p.y));
-    assert_eq!(b.alpha[0], f.image.alpha(p.x, p.y));
+    // Rays: exactly the camera's pixel ray in the scaled world, and the pixel's colour.
+    for (i, &k) in a.keys.iter().enumerate() {
+        let (v, x, y) = key_pixel(k, bits);
+        let f = &ds.train.frames[v as usize];
+        let (o, d) = f.camera.pixel_ray(x, y);
+        let mut want = ds.scene.to_scaled(o).to_array().to_vec();
+        want.extend(d.to_array());
+        assert_eq!(&a.rays[6 * i..6 * i + 6], want.as_slice(), "ray {i}");
+        assert_eq!(&a.targets[3 * i..3 * i + 3], f.image.rgb(x, y).as_slice());
+    }
 }
