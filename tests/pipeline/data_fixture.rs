@@ -283,3 +283,53 @@ fn sampler_is_seeded_uniform_and_matches_pixels() {
         assert_eq!(&a.targets[3 * i..3 * i + 3], f.image.rgb(x, y).as_slice());
     }
 }
+
+/// The Vulkan backend draws the twin's batch from the fixture's views (100 views of 256², a
+/// batch of two sort runs), the CPU backend trains on it (the same first-step loss), and a
+/// restart — new views, new backend, straight to a later step's seed — draws that step's batch
+/// again, as a resumed run must.
+#[test]
+fn device_batches_are_the_twins_and_a_restart_draws_them_again() {
+    use alphasurf::check::sample_rays::{DIR_ABS, TARGET_ABS};
+    use alphasurf::grid::Grid;
+    use alphasurf::plenoxel::{CpuPlenoxels, Plenoxels, StepParams, VulkanPlenoxels};
+    let ds = dataset();
+    let gpu = alphasurf::gpu::test_gpu();
+    let grid = Grid::sphere(32, [0.0; 3], [1.0; 3], 1.0, 0.1);
+    let p = StepParams {
+        lr_sigma: 10.0,
+        lr_sh: 1e-2,
+        beta: 0.95,
+        eps: 1e-8,
+        stop_thresh: 1e-4,
+        tv: None,
+    };
+    let n = 5000;
+    let views = TrainViews::new(&ds.train, &ds.scene).unwrap();
+    let mut vk = VulkanPlenoxels::new(gpu, grid.clone()).unwrap();
+    let mut cpu = CpuPlenoxels::new(grid.clone());
+    let first_vk = vk.step_sampled(&views, 5, n, &p).unwrap().mse;
+    let first_cpu = cpu.step_sampled(&views, 5, n, &p).unwrap().mse;
+    assert!(
+        (first_vk - first_cpu).abs() <= 1e-5 * first_cpu,
+        "first-step MSE: vulkan {first_vk}, cpu {first_cpu}"
+    );
+    vk.step_sampled(&views, 6, n, &p).unwrap();
+    let (rays, targets, keys) = vk.sampled_batch(n).unwrap();
+    let twin = views.sample(6, n).unwrap();
+    assert_eq!(keys, twin.keys);
+    let close = |a: &[f32], b: &[f32], tol: f64| {
+        a.iter()
+            .zip(b)
+            .all(|(x, y)| (*x as f64 - *y as f64).abs() <= tol)
+    };
+    assert!(close(&rays, &twin.rays, DIR_ABS));
+    assert!(close(&targets, &twin.targets, TARGET_ABS));
+
+    let views2 = TrainViews::new(&ds.train, &ds.scene).unwrap();
+    let mut vk2 = VulkanPlenoxels::new(gpu, grid).unwrap();
+    vk2.step_sampled(&views2, 6, n, &p).unwrap();
+    assert_eq!(vk2.sampled_batch(n).unwrap(), (rays, targets, keys));
+    let msgs = gpu.validation_messages();
+    assert!(msgs.is_empty(), "validation messages: {msgs:#?}");
+}
