@@ -72,6 +72,18 @@ abi_structs! {
         hits: u32,
     }
 
+    /// One training view's camera as `sample_rays` reads it (`data::TrainViews`): the columns of
+    /// the camera-to-world rotation (OpenGL convention, `data::Camera`), the camera centre in the
+    /// scaled world, focal lengths and principal point in pixels.
+    struct SampleCamera {
+        x_axis: [f32; 3],
+        y_axis: [f32; 3],
+        z_axis: [f32; 3],
+        origin: [f32; 3],
+        focal: [f32; 2],
+        centre: [f32; 2],
+    }
+
     /// Per-ray output of `surface_train`: the loss terms before weighting, and hits composited.
     struct RayLoss {
         /// Σ over channels of (C − target)².

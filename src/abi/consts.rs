@@ -116,6 +116,12 @@ abi_consts! {
     /// Start of a block's δ range scan: `bmin = SURF_BLOCK_BIG`, `bmax = −SURF_BLOCK_BIG`.
     SURF_BLOCK_BIG: f32 = f32::MAX;
 
+    // Training-ray sampling (cpu::sample_rays, glsl/sample_rays.comp).
+    /// Rays one workgroup of sample_rays draws and sorts in shared memory (4096 64-bit keys:
+    /// 32 KiB, within the shared memory lavapipe and NVIDIA GPUs offer); a larger batch is
+    /// sorted in runs of this many rays.
+    SAMPLE_SORT_RAYS: u32 = 4096;
+
     // Stage-2 regularisers and optimiser (surface::{delta_tv, rmsprop}, cpu::surface_reg).
     /// Floats per row of Lδ's directions scratch `q` (x, y, z and a pad: two aligned 64-bit
     /// words).

@@ -2,7 +2,7 @@
 //! train on, the short fast-preset run that prepares a grid, and the timed training steps.
 
 use crate::abi::buffers::PlenoxelPerRay;
-use crate::data::{Dataset, LoadOptions, RaySampler};
+use crate::data::{Dataset, LoadOptions, TrainViews};
 use crate::gpu::{Phase, PhaseClock, StepTimes};
 use crate::grid::Grid;
 use crate::plenoxel::{Plenoxels, StepParams};
@@ -36,7 +36,8 @@ pub fn warm_config(res: u32, iters: u32) -> (Stage1Config, Grid) {
 /// One backend's figures.
 #[derive(Debug, Default, serde::Serialize)]
 pub struct Figures {
-    /// Rays over the time spent in the backend's step calls (sampling and bookkeeping excluded).
+    /// Rays over the time spent in the backend's step calls (drawing the batch included, the
+    /// loop's bookkeeping excluded).
     pub rays_per_s: f64,
     pub mean_mse: f64,
     /// The march's counters per ray.
@@ -103,8 +104,8 @@ impl StepFigures {
 }
 
 /// `steps + 1` stage-1 training steps (no TV, the learning rates of the schedule's end) of
-/// `batch` rays from a fixed sampler; the first is untimed (first-dispatch compilation on
-/// lavapipe).
+/// `batch` rays drawn with seeds 7, 8, … (on the device on Vulkan, by the twin on the CPU); the
+/// first is untimed (first-dispatch compilation on lavapipe).
 pub fn time_steps(
     backend: &mut dyn Plenoxels,
     data: &Dataset,
@@ -115,13 +116,10 @@ pub fn time_steps(
     let mut f = Figures::default();
     let mut times = StepFigures::default();
     let mut secs = 0.0;
-    let mut sampler = RaySampler::new(&data.train, 7);
+    let views = TrainViews::new(&data.train, &data.scene)?;
     for step in 0..=steps {
         let wall = Instant::now();
         let mut clock = PhaseClock::start();
-        let b = sampler.next_batch(&data.train, &data.scene, batch as usize);
-        let (rays, targets) = (b.flat_rays(), b.flat_targets());
-        clock.mark(Phase::Sampling);
         let p = StepParams {
             lr_sigma: cfg.lr_sigma.at(cfg.iters),
             lr_sh: cfg.lr_sh.at(cfg.iters),
@@ -133,7 +131,7 @@ pub fn time_steps(
         };
         clock.mark(Phase::Bookkeeping);
         let t = Instant::now();
-        let s = backend.step(&rays, &targets, &p)?;
+        let s = backend.step_sampled(&views, 7 + step as u64, batch as usize, &p)?;
         let step_secs = t.elapsed().as_secs_f64();
         clock.absorb(&s.host);
         if step == 0 {

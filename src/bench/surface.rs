@@ -19,8 +19,8 @@
 
 use super::stage1::{thin_scene, time_steps, warm_config, StepFigures};
 use crate::abi::buffers::{TrainCounts, TrainPerRay};
-use crate::data::{Dataset, RaySampler};
-use crate::gpu::{Gpu, Phase, PhaseClock};
+use crate::data::TrainViews;
+use crate::gpu::{Gpu, Phase, PhaseClock, TrainRays};
 use crate::grid::surface::SurfaceGrid;
 use crate::plenoxel::{CpuPlenoxels, Plenoxels, VulkanPlenoxels};
 use crate::surface::{
@@ -89,37 +89,32 @@ fn step_params(
     stage2::step_params(cfg, res, rows, 0, a, [draw, draw >> 17, draw >> 7])
 }
 
-/// One backend step: rays, targets, parameters.
-type StepFn<'a> = dyn FnMut(&[f32], &[f32], &SurfaceStepParams) -> Result<SurfaceStepStats> + 'a;
+/// One backend step: the batch's seed, parameters.
+type StepFn<'a> = dyn FnMut(u64, &SurfaceStepParams) -> Result<SurfaceStepStats> + 'a;
 
-/// `steps + 1` stage-2 steps (the first untimed) on the batches of a fixed sampler; `regs`:
-/// with the regularisers, else the data term alone.
+/// `steps + 1` stage-2 steps (the first untimed) on the batches drawn with seeds 11, 12, …;
+/// `regs`: with the regularisers, else the data term alone.
 fn time_surface(
     step: &mut StepFn,
     grid: &SurfaceGrid,
     cfg: &SurfaceConfig,
-    data: &Dataset,
     args: &SurfaceBenchArgs,
     regs: bool,
 ) -> Result<Figures> {
     let mut f = Figures::default();
     let mut times = StepFigures::default();
-    let mut sampler = RaySampler::new(&data.train, 11);
     let mut secs = 0.0;
     let mut counts = TrainPerRay::default();
     for i in 0..=args.steps {
         let wall = Instant::now();
         let mut clock = PhaseClock::start();
-        let b = sampler.next_batch(&data.train, &data.scene, args.batch as usize);
-        let (rays, targets) = (b.flat_rays(), b.flat_targets());
-        clock.mark(Phase::Sampling);
         let mut p = step_params(cfg, grid.res, grid.delta.len() as u32, args.a, i);
         if !regs {
             p.regs = SurfaceRegs::default();
         }
         clock.mark(Phase::Bookkeeping);
         let t = Instant::now();
-        let s = step(&rays, &targets, &p)?;
+        let s = step(11 + i as u64, &p)?;
         let step_secs = t.elapsed().as_secs_f64();
         clock.absorb(&s.host);
         if i == 0 {
@@ -193,14 +188,11 @@ fn run_in(gpu: &Gpu, args: &SurfaceBenchArgs, dir: &std::path::Path) -> Result<(
         "bench surface: {} stage-2 warm-up steps (CPU)",
         args.warm_steps
     );
-    let mut sampler = RaySampler::new(&data.train, 3);
+    let views = TrainViews::new(&data.train, &data.scene)?;
+    let n = args.batch as usize;
     for i in 0..args.warm_steps {
-        let b = sampler.next_batch(&data.train, &data.scene, args.batch as usize);
-        cpu.step(
-            &b.flat_rays(),
-            &b.flat_targets(),
-            &step_params(&scfg, res, rows, args.a, i),
-        )?;
+        let p = step_params(&scfg, res, rows, args.a, i);
+        cpu.step_sampled(&views, 3 + i as u64, n, &p)?;
     }
     let grid = cpu.grid()?;
     let state = cpu.optimizer_state()?;
@@ -212,8 +204,14 @@ fn run_in(gpu: &Gpu, args: &SurfaceBenchArgs, dir: &std::path::Path) -> Result<(
         let mut kernel_ns: BTreeMap<&'static str, f64> = BTreeMap::new();
         let mut first = true;
         let mut f = time_surface(
-            &mut |r, t, p| {
-                let (s, times) = vk.step_timed(r, t, p)?;
+            &mut |seed, p| {
+                let src = TrainRays::Sampled {
+                    id: views.id(),
+                    set: views.set(),
+                    seed,
+                    n,
+                };
+                let (s, times) = vk.step_timed(src, p)?;
                 if !std::mem::take(&mut first) {
                     for (k, ns) in times.dispatches {
                         *kernel_ns.entry(k).or_default() += ns;
@@ -223,7 +221,6 @@ fn run_in(gpu: &Gpu, args: &SurfaceBenchArgs, dir: &std::path::Path) -> Result<(
             },
             &grid,
             &scfg,
-            &data,
             args,
             regs,
         )?;
@@ -260,10 +257,9 @@ fn run_in(gpu: &Gpu, args: &SurfaceBenchArgs, dir: &std::path::Path) -> Result<(
     let mut cpu = CpuSurface::new(grid.clone())?;
     cpu.load(grid.clone(), Some(state))?;
     let fc = time_surface(
-        &mut |r, t, p| cpu.step(r, t, p),
+        &mut |seed, p| cpu.step_sampled(&views, seed, n, p),
         &grid,
         &scfg,
-        &data,
         args,
         true,
     )?;

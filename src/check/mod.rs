@@ -9,6 +9,7 @@ pub mod dda_walk;
 pub mod extract_points;
 pub mod fill_pattern;
 pub mod plenoxel;
+pub mod sample_rays;
 pub mod sh_eval;
 pub mod surface_blocks;
 pub mod surface_faces;
@@ -74,6 +75,7 @@ pub const CHECKS: &[(&str, CheckFn)] = &[
         surface_reg::check_normal_gather,
     ),
     ("surface_rmsprop", surface_reg::check_rmsprop),
+    ("sample_rays", sample_rays::check),
 ];
 
 /// Relative L2 distance ‖a − b‖/‖b‖ (0 when both vanish, ∞ when only `b` does).

@@ -13,6 +13,7 @@ pub mod extract_points;
 mod fill_pattern;
 pub mod plenoxel;
 mod rmsprop;
+pub mod sample_rays;
 mod sh_eval;
 pub mod step;
 pub mod surface_blocks;

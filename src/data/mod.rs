@@ -1,7 +1,7 @@
 //! Datasets of posed images in three layouts ([`Layout`], detected from the files): NeRF-synthetic,
 //! COLMAP and IDR/DTU. Loading ([`Dataset::load`]), cameras and rays in the OpenGL convention
-//! ([`Camera`]), the scene box ([`SceneBox`]), ray batch sampling ([`RaySampler`]) and dataset
-//! inspection ([`inspect`]).
+//! ([`Camera`]), the scene box ([`SceneBox`]), training views for ray sampling ([`TrainViews`])
+//! and dataset inspection ([`inspect`]).
 
 pub mod background;
 pub mod camera;
@@ -24,4 +24,4 @@ pub use dataset::{Dataset, Frame, LoadOptions, LoadReport, Split};
 pub use error::DataError;
 pub use image::RgbaImage;
 pub use layout::Layout;
-pub use sampler::{view_rays, PixelRef, RayBatch, RaySampler};
+pub use sampler::{view_rays, RayBatch, TrainViews};

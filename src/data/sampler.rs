@@ -1,11 +1,14 @@
-//! Rays for training and rendering: a seeded sampler of uniform ray batches over all pixels of a
-//! split (with replacement; deterministic for a seed), and the rays of a whole view. Rays are in
-//! the scaled world (Blender units × `SceneBox::scale`) with unit directions.
+//! Rays for training and rendering: a split's views as the seeded sampler of training batches
+//! reads them (uniform over all pixels of the split, with replacement; deterministic for a seed),
+//! and the rays of a whole view. Rays are in the scaled world (Blender units × `SceneBox::scale`)
+//! with unit directions.
 
 use super::camera::SceneBox;
 use super::dataset::Split;
-use rand::{Rng, SeedableRng};
-use rand_pcg::Pcg64;
+use crate::abi::buffers::SampleCamera;
+use crate::cpu::sample_rays::{sample_rays, SampleSet, SampledRays};
+use anyhow::{Context, Result};
+use std::sync::atomic::{AtomicU64, Ordering};
 
 /// A batch of rays with their target colours (composited on the background) and alpha.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -55,77 +58,68 @@ impl RayBatch {
     }
 }
 
-/// One pixel of a split.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct PixelRef {
-    /// View index.
-    pub view: u32,
-    /// Column.
-    pub x: u32,
-    /// Row.
-    pub y: u32,
+/// A split's training views as the ray sampler reads them (`cpu::sample_rays`, and the device
+/// copy the Vulkan backends keep of it): every view's image (borrowed) and its camera in the
+/// scaled world. Each set has an id of its own, so a backend uploads one set once per run.
+pub struct TrainViews<'a> {
+    id: u64,
+    set: SampleSet<'a>,
 }
 
-/// Uniform random pixels (with replacement) over every view of a split; deterministic for a seed.
-pub struct RaySampler {
-    rng: Pcg64,
-    width: u32,
-    height: u32,
-    n_pixels: u64,
-}
-
-impl RaySampler {
-    /// A sampler over `split`'s pixels.
-    pub fn new(split: &Split, seed: u64) -> RaySampler {
-        RaySampler {
-            rng: Pcg64::seed_from_u64(seed),
+impl<'a> TrainViews<'a> {
+    /// The views of `split` in the scaled world of `scene`. Errors name the split's source when
+    /// its images cannot be sampled (over 65536 pixels per axis).
+    pub fn new(split: &'a Split, scene: &SceneBox) -> Result<TrainViews<'a>> {
+        static NEXT_ID: AtomicU64 = AtomicU64::new(1);
+        let set = SampleSet {
             width: split.width(),
             height: split.height(),
-            n_pixels: split.n_pixels(),
-        }
+            images: split
+                .frames
+                .iter()
+                .map(|f| f.image.data.as_slice())
+                .collect(),
+            cams: split
+                .frames
+                .iter()
+                .map(|f| {
+                    let (c, m) = (&f.camera, f.camera.c2w);
+                    SampleCamera {
+                        x_axis: m.x_axis.truncate().to_array(),
+                        y_axis: m.y_axis.truncate().to_array(),
+                        z_axis: m.z_axis.truncate().to_array(),
+                        origin: scene.to_scaled(c.centre()).to_array(),
+                        focal: [c.fx, c.fy],
+                        centre: [c.cx, c.cy],
+                    }
+                })
+                .collect(),
+        };
+        set.validate()
+            .with_context(|| format!("{} split of {}", split.name, split.source.display()))?;
+        Ok(TrainViews {
+            id: NEXT_ID.fetch_add(1, Ordering::Relaxed),
+            set,
+        })
     }
 
-    /// The next `n` pixels, drawn independently, then ordered by view and Z-order within the
-    /// view: neighbouring invocations of a kernel then trace nearby rays (the walks diverge less;
-    /// docs/tuning.md). The order changes no loss: a batch's gradient is a sum over its rays.
-    pub fn sample_pixels(&mut self, n: usize) -> Vec<PixelRef> {
-        let per_view = self.width as u64 * self.height as u64;
-        let mut px: Vec<PixelRef> = (0..n)
-            .map(|_| {
-                let i = self.rng.random_range(0..self.n_pixels);
-                let (view, rest) = (i / per_view, i % per_view);
-                PixelRef {
-                    view: view as u32,
-                    x: (rest % self.width as u64) as u32,
-                    y: (rest / self.width as u64) as u32,
-                }
-            })
-            .collect();
-        px.sort_unstable_by_key(|p| (p.view, morton2(p.x, p.y)));
-        px
+    /// Identifies this set among those made in this process.
+    pub fn id(&self) -> u64 {
+        self.id
     }
 
-    /// The next batch of `n` rays with their targets.
-    pub fn next_batch(&mut self, split: &Split, scene: &SceneBox, n: usize) -> RayBatch {
-        let mut b = RayBatch::default();
-        for p in self.sample_pixels(n) {
-            b.push(split, scene, p.view as usize, p.x, p.y);
-        }
-        b
+    /// The images and cameras.
+    pub fn set(&self) -> &SampleSet<'a> {
+        &self.set
     }
-}
 
-/// Interleaved bits of `x` and `y` (Z-order), so pixels close in the image are close in the key.
-fn morton2(x: u32, y: u32) -> u64 {
-    fn spread(v: u32) -> u64 {
-        let mut v = v as u64;
-        v = (v | (v << 16)) & 0x0000_ffff_0000_ffff;
-        v = (v | (v << 8)) & 0x00ff_00ff_00ff_00ff;
-        v = (v | (v << 4)) & 0x0f0f_0f0f_0f0f_0f0f;
-        v = (v | (v << 2)) & 0x3333_3333_3333_3333;
-        (v | (v << 1)) & 0x5555_5555_5555_5555
+    /// The batch of `n` rays drawn with `seed` (`cpu::sample_rays`: uniform pixels with
+    /// replacement, ordered by view and Z-order — neighbouring invocations of a kernel then trace
+    /// nearby rays, and the walks diverge less; docs/tuning.md). The order changes no loss: a
+    /// batch's gradient is a sum over its rays.
+    pub fn sample(&self, seed: u64, n: usize) -> Result<SampledRays> {
+        sample_rays(&self.set, seed, n)
     }
-    spread(x) | (spread(y) << 1)
 }
 
 /// Every ray of one view, row by row.
@@ -137,38 +131,4 @@ pub fn view_rays(split: &Split, scene: &SceneBox, view: usize) -> RayBatch {
         }
     }
     b
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn morton_interleaves_x_then_y() {
-        assert_eq!(morton2(0, 0), 0);
-        assert_eq!(morton2(1, 0), 1);
-        assert_eq!(morton2(0, 1), 2);
-        assert_eq!(morton2(3, 3), 15);
-        assert_eq!(morton2(0xffff, 0), 0x5555_5555);
-        assert_eq!(morton2(u32::MAX, u32::MAX), u64::MAX);
-    }
-
-    #[test]
-    fn pixels_come_sorted_by_view_and_z_order() {
-        let mut s = RaySampler {
-            rng: Pcg64::seed_from_u64(5),
-            width: 37,
-            height: 23,
-            n_pixels: 37 * 23 * 4,
-        };
-        let px = s.sample_pixels(3000);
-        assert_eq!(px.len(), 3000);
-        assert!(px
-            .windows(2)
-            .all(|w| (w[0].view, morton2(w[0].x, w[0].y)) <= (w[1].view, morton2(w[1].x, w[1].y))));
-        assert!(px.iter().all(|p| p.view < 4 && p.x < 37 && p.y < 23));
-        // The order runs across all four views.
-        assert_eq!(px.last().unwrap().view, 3);
-        assert_eq!(px[0].view, 0);
-    }
 }

@@ -115,10 +115,16 @@ impl GpuBuffer {
 
     /// Copy `data` to the start of the buffer (the device must not be using it).
     pub fn write<T: Pod>(&self, data: &[T]) -> Result<()> {
+        self.write_at(0, data)
+    }
+
+    /// Copy `data` into the buffer from byte `offset` on (a multiple of 4; the device must not be
+    /// using the buffer).
+    pub fn write_at<T: Pod>(&self, offset: u64, data: &[T]) -> Result<()> {
         let bytes: &[u8] = bytemuck::cast_slice(data);
         anyhow::ensure!(
-            bytes.len() as u64 <= self.size,
-            "write of {} bytes into a {}-byte buffer",
+            offset.is_multiple_of(4) && offset + bytes.len() as u64 <= self.size,
+            "write of {} bytes at {offset} into a {}-byte buffer",
             bytes.len(),
             self.size
         );
@@ -126,7 +132,9 @@ impl GpuBuffer {
             return Ok(());
         }
         if let Some(p) = self.mapped() {
-            unsafe { std::ptr::copy_nonoverlapping(bytes.as_ptr(), p, bytes.len()) };
+            unsafe {
+                std::ptr::copy_nonoverlapping(bytes.as_ptr(), p.add(offset as usize), bytes.len())
+            };
             return Ok(());
         }
         let staging = GpuBuffer::new(
@@ -137,7 +145,7 @@ impl GpuBuffer {
         )?;
         staging.write(bytes)?;
         let mut b = self.gpu.batch()?;
-        b.copy_region(&staging, 0, self, 0, bytes.len() as u64);
+        b.copy_region(&staging, 0, self, offset, bytes.len() as u64);
         b.submit()?;
         Ok(())
     }

@@ -3,7 +3,8 @@
 //! submission with timestamp queries (`batch`), per-kernel profiles (`profile`), and what the Vulkan
 //! backends share: per-batch ray buffers (`ray_buffers`), per-step results copied back at the end
 //! of a batch (`readback`), the `optim_args` recording (`optim_args`), the host time of a training
-//! step by phase (`step_times`).
+//! step by phase (`step_times`), the training views and the batches sampled from them
+//! (`train_views`).
 
 mod batch;
 mod buffer;
@@ -15,6 +16,7 @@ mod profile;
 mod ray_buffers;
 mod readback;
 mod step_times;
+mod train_views;
 
 pub use batch::{Batch, BatchTimes};
 pub use buffer::GpuBuffer;
@@ -25,6 +27,7 @@ pub use profile::Profile;
 pub use ray_buffers::RayBuffers;
 pub use readback::Readback;
 pub use step_times::{Phase, PhaseClock, StepTimes};
+pub use train_views::{TrainRays, TrainViewBuffers};
 
 use std::sync::OnceLock;
 

@@ -1,12 +1,15 @@
-//! The Vulkan stage-1 backend: grid, gradients and optimiser state live in device buffers; a
-//! training step is one batch (occupancy → train → TV → RMSProp) and one submission.
+//! The Vulkan stage-1 backend: grid, gradients, optimiser state and the training views live in
+//! device buffers; a training step is one batch (occupancy → sample_rays → train → TV → RMSProp)
+//! and one submission.
 
 use super::{march_params, Gradients, Plenoxels, StepParams, StepStats};
 use crate::abi::buffers::PlenoxelParams;
 use crate::cpu::background::Background;
 use crate::cpu::step::{STEP_FLAGS, STEP_N, STEP_STATS, TOUCH_ALL};
+use crate::data::TrainViews;
 use crate::gpu::{
-    record_optim_args, Batch, Gpu, GpuBuffer, Phase, PhaseClock, RayBuffers, Readback,
+    record_optim_args, Batch, Gpu, GpuBuffer, Phase, PhaseClock, RayBuffers, Readback, TrainRays,
+    TrainViewBuffers,
 };
 use crate::grid::{Grid, SH_DIM};
 use crate::kernels;
@@ -42,6 +45,9 @@ pub struct VulkanPlenoxels {
     rays: RayBuffers,
     /// A training step's per-ray losses and counters, copied back at the end of its batch.
     readback: Readback,
+    /// The training views and sampled batches (uploaded by the first sampled step; kept by
+    /// `load`).
+    views: Option<TrainViewBuffers>,
 }
 
 impl VulkanPlenoxels {
@@ -69,6 +75,7 @@ impl VulkanPlenoxels {
             bg_learned: false,
             rays: RayBuffers::new(3 * std::mem::size_of::<f32>()),
             readback: Readback::default(),
+            views: None,
             meta: Grid {
                 links: Vec::new(),
                 density: Vec::new(),
@@ -148,20 +155,15 @@ impl VulkanPlenoxels {
         Ok((b, addrs))
     }
 
-    /// Upload a batch and record occupancy + the fused train kernel (gradients += data term).
+    /// Start a batch with the step reset, the occupancy refresh and the training rays (uploaded,
+    /// or drawn by `sample_rays`), then the fused train kernel (gradients += data term).
     fn record_train(
         &mut self,
-        rays: &[f32],
-        targets: &[f32],
+        src: TrainRays,
         stop_thresh: f32,
         clock: &mut PhaseClock,
     ) -> Result<Batch> {
-        let n = rays.len() / 6;
-        ensure!(
-            n > 0 && targets.len() == 3 * n,
-            "batch of {n} rays with {} targets",
-            targets.len() / 3
-        );
+        let n = src.len();
         let mp = march_params(&self.meta, stop_thresh);
         self.params.write(&[PlenoxelParams {
             scale: mp.scale,
@@ -169,7 +171,27 @@ impl VulkanPlenoxels {
             stop_thresh,
             grad_scale: 2.0 / (3.0 * n as f32),
         }])?;
-        let (mut b, [ray_buf, target_buf, loss_buf]) = self.begin(rays, Some(targets), clock)?;
+        let (mut b, [ray_buf, target_buf, loss_buf]) = match src {
+            TrainRays::Host { rays, targets } => {
+                ensure!(
+                    n > 0 && targets.len() == 3 * n,
+                    "batch of {n} rays with {} targets",
+                    targets.len() / 3
+                );
+                self.begin(rays, Some(targets), clock)?
+            }
+            TrainRays::Sampled { id, set, seed, n } => {
+                TrainViewBuffers::ensure(&mut self.views, &self.gpu, id, set, n)?;
+                let [_, _, out] = self.rays.reserve(&self.gpu, n)?;
+                clock.mark(Phase::Upload);
+                let mut b = self.gpu.batch()?;
+                self.record_step_reset(&mut b);
+                self.record_occupancy(&mut b)?;
+                let views = self.views.as_ref().expect("ensured");
+                let [rays, targets] = views.record_sample(&mut b, seed, n)?;
+                (b, [rays, targets, out])
+            }
+        };
         b.dispatch_1d(
             &kernels::plenoxel_train::INFO,
             &kernels::plenoxel_train::Push {
@@ -193,23 +215,12 @@ impl VulkanPlenoxels {
         Ok(b)
     }
 
-    /// Per-ray squared error of the last training pass over `n` rays.
-    fn ray_loss(&self, n: usize) -> Result<Vec<f32>> {
-        let mut loss: Vec<f32> = self.rays.out().download()?;
-        loss.truncate(n);
-        Ok(loss)
-    }
-}
-
-impl Plenoxels for VulkanPlenoxels {
-    fn name(&self) -> &'static str {
-        "vulkan"
-    }
-
-    fn step(&mut self, rays: &[f32], targets: &[f32], p: &StepParams) -> Result<StepStats> {
-        let n = rays.len() / 6;
+    /// One training step on `src`'s rays: occupancy → sampling (when drawn on the device) →
+    /// train → TV → RMSProp, one submission; the per-ray losses and counters come back with it.
+    fn train_step(&mut self, src: TrainRays, p: &StepParams) -> Result<StepStats> {
+        let n = src.len();
         let mut clock = PhaseClock::start();
-        let mut b = self.record_train(rays, targets, p.stop_thresh, &mut clock)?;
+        let mut b = self.record_train(src, p.stop_thresh, &mut clock)?;
         if let Some(t) = p.tv {
             let span = t.count + self.meta.res[1] * self.meta.res[2];
             for (data, grad, channels, lambda) in [
@@ -275,10 +286,54 @@ impl Plenoxels for VulkanPlenoxels {
         })
     }
 
+    /// The last sampled batch's rays, targets and pixel keys (`n` of each).
+    pub fn sampled_batch(&self, n: usize) -> Result<(Vec<f32>, Vec<f32>, Vec<u64>)> {
+        let views = self.views.as_ref();
+        let views = views.ok_or_else(|| anyhow::anyhow!("no batch was sampled"))?;
+        views.download_batch(n)
+    }
+
+    /// Per-ray squared error of the last training pass over `n` rays.
+    fn ray_loss(&self, n: usize) -> Result<Vec<f32>> {
+        let mut loss: Vec<f32> = self.rays.out().download()?;
+        loss.truncate(n);
+        Ok(loss)
+    }
+}
+
+impl Plenoxels for VulkanPlenoxels {
+    fn name(&self) -> &'static str {
+        "vulkan"
+    }
+
+    fn step(&mut self, rays: &[f32], targets: &[f32], p: &StepParams) -> Result<StepStats> {
+        self.train_step(TrainRays::Host { rays, targets }, p)
+    }
+
+    fn step_sampled(
+        &mut self,
+        views: &TrainViews,
+        seed: u64,
+        n: usize,
+        p: &StepParams,
+    ) -> Result<StepStats> {
+        let src = TrainRays::Sampled {
+            id: views.id(),
+            set: views.set(),
+            seed,
+            n,
+        };
+        self.train_step(src, p)
+    }
+
     fn gradients(&mut self, rays: &[f32], targets: &[f32], stop_thresh: f32) -> Result<Gradients> {
         let n = rays.len() / 6;
-        self.record_train(rays, targets, stop_thresh, &mut PhaseClock::start())?
-            .submit()?;
+        self.record_train(
+            TrainRays::Host { rays, targets },
+            stop_thresh,
+            &mut PhaseClock::start(),
+        )?
+        .submit()?;
         let mut bg: Background = self.bg.download()?[0];
         let g = Gradients {
             ray_loss: self.ray_loss(n)?,
@@ -391,6 +446,7 @@ impl Plenoxels for VulkanPlenoxels {
             fresh.state_sh.write(&ss)?;
         }
         fresh.set_background(bg)?;
+        fresh.views = self.views.take();
         *self = fresh;
         Ok(())
     }

@@ -18,6 +18,8 @@ use crate::cpu::surface_fwd::{SurfCounts, SurfaceParams};
 use crate::cpu::surface_reg::{NormalChunk, NormalPrefix, OpacityChunk};
 use crate::cpu::surface_train::{SurfaceLoss, TrainCounts};
 use crate::cpu::TvChunk;
+use crate::data::TrainViews;
+use crate::gpu::{Phase, PhaseClock};
 use crate::grid::surface::SurfaceGrid;
 use anyhow::Result;
 
@@ -156,6 +158,23 @@ pub trait SurfaceBackend {
         targets: &[f32],
         p: &SurfaceStepParams,
     ) -> Result<SurfaceStepStats>;
+    /// One optimisation step on the batch of `n` rays drawn from `views` with `seed`
+    /// (`cpu::sample_rays`). This default draws it with the twin on the host (the CPU backend);
+    /// the Vulkan backend draws it on the device, from views it uploads once.
+    fn step_sampled(
+        &mut self,
+        views: &TrainViews,
+        seed: u64,
+        n: usize,
+        p: &SurfaceStepParams,
+    ) -> Result<SurfaceStepStats> {
+        let mut clock = PhaseClock::start();
+        let batch = views.sample(seed, n)?;
+        clock.mark(Phase::Sampling);
+        let mut stats = self.step(&batch.rays, &batch.targets, p)?;
+        stats.host.add(&clock.times);
+        Ok(stats)
+    }
     /// Render rays (composited on the background): 3 floats per ray, and the counters of
     /// `surface_fwd`.
     fn render(&mut self, rays: &[f32], a: f32, stop_thresh: f32) -> Result<(Vec<f32>, SurfCounts)>;

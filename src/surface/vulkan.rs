@@ -1,9 +1,9 @@
-//! The Vulkan stage-2 backend: grid, gradients and optimiser state live in device buffers; a
-//! training step is one batch and one submission: step reset → (surface_live_cells and
-//! surface_blocks when δ may have drifted past their margin) → surface_train → regularisers (Lδ
-//! through the two surface_delta_tv passes, TVα through `tv`, Lα through
-//! surface_opacity_reg, Ln1/Ln2 through the three surface_normal_reg_* passes, each over its
-//! chunk's window) → surface_rmsprop: δ and σα on the rows the regularisers' chunks cover
+//! The Vulkan stage-2 backend: grid, gradients, optimiser state and the training views live in
+//! device buffers; a training step is one batch and one submission: step reset → sample_rays
+//! (when the batch is drawn on the device) → (surface_live_cells and surface_blocks when δ may
+//! have drifted past their margin) → surface_train → regularisers (Lδ through the two
+//! surface_delta_tv passes, TVα through `tv`, Lα through surface_opacity_reg, Ln1/Ln2 through
+//! the three surface_normal_reg_* passes, each over its chunk's window) → surface_rmsprop: δ and σα on the rows the regularisers' chunks cover
 //! ([`RegPlan`]), then (optim_args → indirect) the flagged groups of the touched vertices.
 
 use super::delta_tv::{record_delta_tv, DeltaTvIo, Q_FLOATS};
@@ -23,7 +23,11 @@ use crate::cpu::surface_fwd::SurfaceParams;
 use crate::cpu::surface_reg::{row_slots, NormalPrefix};
 use crate::cpu::surface_train::{SurfaceLoss, SURF_MAX_HITS};
 use crate::cpu::SurfaceRmsProp;
-use crate::gpu::{Batch, BatchTimes, Gpu, GpuBuffer, Phase, PhaseClock, RayBuffers, Readback};
+use crate::data::TrainViews;
+use crate::gpu::{
+    Batch, BatchTimes, Gpu, GpuBuffer, Phase, PhaseClock, RayBuffers, Readback, TrainRays,
+    TrainViewBuffers,
+};
 use crate::grid::surface::SurfaceGrid;
 use crate::grid::SH_DIM;
 use crate::kernels;
@@ -126,6 +130,9 @@ pub struct VulkanSurface {
     /// A training step's per-ray losses, regulariser values and counters, copied back at the end
     /// of its batch.
     readback: Readback,
+    /// The training views and sampled batches (uploaded by the first sampled step; kept by
+    /// `load`).
+    views: Option<TrainViewBuffers>,
 }
 
 impl VulkanSurface {
@@ -200,6 +207,7 @@ impl VulkanSurface {
             reg_skipped: gpu.zeros::<u32>(1)?,
             rays: RayBuffers::new(std::mem::size_of::<SurfOut>()),
             readback: Readback::default(),
+            views: None,
             meta: SurfaceGrid {
                 links: Vec::new(),
                 delta: Vec::new(),
@@ -226,29 +234,37 @@ impl VulkanSurface {
         );
         let addrs = self.rays.upload(&self.gpu, rays, targets)?;
         clock.mark(Phase::Upload);
+        let b = self.begin_batch()?;
+        Ok((b, addrs))
+    }
+
+    /// A batch starting with the step reset (touched count) and the counters' reset.
+    fn begin_batch(&self) -> Result<Batch> {
         let mut b = self.gpu.batch()?;
         b.fill_zero_range(&self.step, 0, 4 * STEP_N as u64);
         b.fill_zero(&self.stats);
         b.fill_zero(&self.reg_loss);
         b.fill_zero(&self.reg_skipped);
-        Ok((b, addrs))
+        Ok(b)
     }
 
-    /// Upload a batch and record the fused training pass (gradients += data term).
+    /// Start a batch with the resets and the training rays (uploaded, or drawn by
+    /// `sample_rays`), then record the fused training pass (gradients += data term).
     fn record_train(
         &mut self,
-        rays: &[f32],
-        targets: &[f32],
+        src: TrainRays,
         p: &SurfaceStepParams,
         clock: &mut PhaseClock,
     ) -> Result<Batch> {
-        let n = rays.len() / 6;
-        ensure!(
-            n > 0 && targets.len() == 3 * n && rays.len() == 6 * n,
-            "batch of {} ray floats with {} target floats",
-            rays.len(),
-            targets.len()
-        );
+        let n = src.len();
+        if let TrainRays::Host { rays, targets } = src {
+            ensure!(
+                n > 0 && targets.len() == 3 * n && rays.len() == 6 * n,
+                "batch of {} ray floats with {} target floats",
+                rays.len(),
+                targets.len()
+            );
+        }
         ensure!(
             p.a <= SURF_MAX_HITS as f32,
             "truncation parameter a = {} exceeds the {SURF_MAX_HITS} hits a ray records",
@@ -259,7 +275,18 @@ impl VulkanSurface {
         clock.mark(Phase::Record);
         self.params
             .write(&[surf_params(&sp, &batch_loss(n, p), n)])?;
-        let (mut b, [ray_buf, target_buf, out_buf]) = self.begin(rays, Some(targets), clock)?;
+        let (mut b, [ray_buf, target_buf, out_buf]) = match src {
+            TrainRays::Host { rays, targets } => self.begin(rays, Some(targets), clock)?,
+            TrainRays::Sampled { id, set, seed, n } => {
+                TrainViewBuffers::ensure(&mut self.views, &self.gpu, id, set, n)?;
+                let [_, _, out] = self.rays.reserve(&self.gpu, n)?;
+                clock.mark(Phase::Upload);
+                let mut b = self.begin_batch()?;
+                let views = self.views.as_ref().expect("ensured");
+                let [rays, targets] = views.record_sample(&mut b, seed, n)?;
+                (b, [rays, targets, out])
+            }
+        };
         if let Some(margin) = self.refresh.before_pass(p.lr_delta, p.beta) {
             self.record_blocks(&mut b, margin)?;
         }
@@ -445,8 +472,12 @@ impl VulkanSurface {
         p: &SurfaceStepParams,
     ) -> Result<SurfaceGradients> {
         let n = rays.len() / 6;
-        self.record_train(rays, targets, p, &mut PhaseClock::start())?
-            .submit()?;
+        self.record_train(
+            TrainRays::Host { rays, targets },
+            p,
+            &mut PhaseClock::start(),
+        )?
+        .submit()?;
         let rows = self.rows;
         let g = SurfaceGradients {
             ray_loss: self.ray_loss(n)?,
@@ -475,16 +506,16 @@ impl VulkanSurface {
         Ok(self.step.download_range::<u32>(STEP_COUNT, 1)?[0])
     }
 
-    /// One training step, returning its statistics and the device times of its dispatches.
+    /// One training step on `src`'s rays, returning its statistics and the device times of its
+    /// dispatches.
     pub fn step_timed(
         &mut self,
-        rays: &[f32],
-        targets: &[f32],
+        src: TrainRays,
         p: &SurfaceStepParams,
     ) -> Result<(SurfaceStepStats, BatchTimes)> {
-        let n = rays.len() / 6;
+        let n = src.len();
         let mut clock = PhaseClock::start();
-        let mut b = self.record_train(rays, targets, p, &mut clock)?;
+        let mut b = self.record_train(src, p, &mut clock)?;
         let plan = RegPlan::new(p, &self.normal_prefix, self.axis_reach);
         self.record_regularisers(&mut b, p, &plan)?;
         self.record_rmsprop(&mut b, p, &plan)?;
@@ -548,7 +579,23 @@ impl SurfaceBackend for VulkanSurface {
         targets: &[f32],
         p: &SurfaceStepParams,
     ) -> Result<SurfaceStepStats> {
-        Ok(self.step_timed(rays, targets, p)?.0)
+        Ok(self.step_timed(TrainRays::Host { rays, targets }, p)?.0)
+    }
+
+    fn step_sampled(
+        &mut self,
+        views: &TrainViews,
+        seed: u64,
+        n: usize,
+        p: &SurfaceStepParams,
+    ) -> Result<SurfaceStepStats> {
+        let src = TrainRays::Sampled {
+            id: views.id(),
+            set: views.set(),
+            seed,
+            n,
+        };
+        Ok(self.step_timed(src, p)?.0)
     }
 
     fn render(&mut self, rays: &[f32], a: f32, stop_thresh: f32) -> Result<(Vec<f32>, SurfCounts)> {
@@ -626,6 +673,7 @@ impl SurfaceBackend for VulkanSurface {
             }
         }
         fresh.set_background(bg)?;
+        fresh.views = self.views.take();
         *self = fresh;
         Ok(())
     }

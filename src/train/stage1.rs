@@ -7,7 +7,7 @@ use super::config::Stage1Config;
 use super::progress::{Progress, Throughput};
 use super::render::{psnr, render_split, RenderedSplit};
 use crate::abi::buffers::PlenoxelPerRay;
-use crate::data::{BackgroundMode, Dataset, RaySampler, Split};
+use crate::data::{BackgroundMode, Dataset, Split, TrainViews};
 use crate::grid::{checkpoint, dilate, upsample, Grid};
 use crate::plenoxel::{Plenoxels, StepParams, TvParams};
 use crate::run::train_log;
@@ -50,7 +50,8 @@ pub struct Stage1Report {
     pub bytes_per_vertex: f64,
 }
 
-/// Seeded per step, so a resumed run draws the same batches as an uninterrupted one.
+/// Seeded per step, so a resumed run draws the same batches as an uninterrupted one: its first
+/// draw seeds the step's ray batch (`cpu::sample_rays`, a function of that seed alone).
 pub(crate) fn step_rng(seed: u64, step: u32) -> Pcg64 {
     Pcg64::seed_from_u64(seed ^ (step as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15))
 }
@@ -178,6 +179,7 @@ pub fn train(
     let mut mse = f64::NAN;
     let log_path = out.join(TRAIN_LOG);
     let mut log = train_log::open(&log_path, TRAIN_LOG_HEADER, start_step)?;
+    let views = TrainViews::new(&data.train, &data.scene)?;
     let t_train = Instant::now();
     if start_step == 0 {
         backend.set_background(BackgroundRecord::start_on(data).kernel())?;
@@ -193,12 +195,7 @@ pub fn train(
         }
         let t = Instant::now();
         let mut rng = step_rng(cfg.seed, step);
-        let batch = RaySampler::new(&data.train, rng.random()).next_batch(
-            &data.train,
-            &data.scene,
-            cfg.batch as usize,
-        );
-        let (rays, targets) = (batch.flat_rays(), batch.flat_targets());
+        let batch_seed: u64 = rng.random();
         let tv_on = !(cfg.tv_until_upsample && cfg.upsample.iter().any(|(s, _)| *s <= step));
         let slots = cfg.res_at(step).pow(3);
         let count = ((slots as f32 * cfg.tv_fraction) as u32).max(1);
@@ -208,9 +205,10 @@ pub fn train(
             lambda_sigma: cfg.tv_sigma,
             lambda_sh: cfg.tv_sh,
         });
-        let stats = backend.step(
-            &rays,
-            &targets,
+        let stats = backend.step_sampled(
+            &views,
+            batch_seed,
+            cfg.batch as usize,
             &StepParams {
                 lr_sigma: cfg.lr_sigma.at(step),
                 lr_sh: cfg.lr_sh.at(step),
@@ -234,7 +232,7 @@ pub fn train(
         let elapsed = t_train.elapsed().as_secs_f64();
         writeln!(log, "{},{mse:e},{:.4},{elapsed:.3}", step + 1, psnr(mse))
             .with_context(|| format!("writing {}", log_path.display()))?;
-        throughput.add(step, batch.len(), secs);
+        throughput.add(step, cfg.batch as usize, secs);
         sample_totals.add(&stats.counts);
         progress.step(step as u64 + 1, mse, throughput.rays_per_s());
         report.train_seconds += secs;

@@ -10,7 +10,7 @@ use super::stage1::step_rng;
 use super::surface_config::SurfaceConfig;
 use crate::abi::buffers::TrainPerRay;
 use crate::cpu::surface_reg::{delta_tv_chunk, opacity_tv_chunk, OpacityChunk};
-use crate::data::{BackgroundMode, Dataset, RaySampler};
+use crate::data::{BackgroundMode, Dataset, TrainViews};
 use crate::grid::checkpoint;
 use crate::grid::surface::SurfaceGrid;
 use crate::run::train_log;
@@ -170,21 +170,18 @@ pub fn train(
     let grid0 = backend.grid()?;
     let (res, rows) = (grid0.res, grid0.delta.len() as u32);
     drop(grid0);
+    let views = TrainViews::new(&data.train, &data.scene)?;
     for step in start_step..cfg.iters {
         let t = Instant::now();
         let mut rng = step_rng(cfg.seed, step);
-        let batch = RaySampler::new(&data.train, rng.random()).next_batch(
-            &data.train,
-            &data.scene,
-            cfg.batch as usize,
-        );
+        let batch_seed: u64 = rng.random();
         let draws = [
             rng.random::<u32>().into(),
             rng.random::<u32>().into(),
             rng.random(),
         ];
         let p = step_params(cfg, res, rows, step, cfg.a.at(step), draws);
-        let stats = backend.step(&batch.flat_rays(), &batch.flat_targets(), &p)?;
+        let stats = backend.step_sampled(&views, batch_seed, cfg.batch as usize, &p)?;
         if !(stats.mse.is_finite() && stats.entropy.is_finite() && stats.consistency.is_finite()) {
             bail!(
                 "non-finite loss at step {step} (mse {}, entropy {}, consistency {}); the last \
@@ -197,7 +194,7 @@ pub fn train(
         }
         mse = stats.mse;
         let secs = t.elapsed().as_secs_f64();
-        throughput.add(step, batch.len(), secs);
+        throughput.add(step, cfg.batch as usize, secs);
         totals.add(&stats.counts);
         writeln!(
             log,

@@ -641,7 +641,7 @@ fn drop_alpha(data: &Path, backdrop: [f32; 3]) {
 #[test]
 fn learned_background_converges_from_grey_on_the_device() {
     use alphasurf::cpu::background::Background;
-    use alphasurf::data::{BackgroundMode, Dataset, LoadOptions, RaySampler};
+    use alphasurf::data::{BackgroundMode, Dataset, LoadOptions, TrainViews};
     use alphasurf::grid::Grid;
     use alphasurf::plenoxel::{Plenoxels, StepParams, VulkanPlenoxels};
     use alphasurf::train::Stage1Config;
@@ -669,9 +669,8 @@ fn learned_background_converges_from_grey_on_the_device() {
     let grid = Grid::sphere(32, [0.0; 3], [d.scene.radius; 3], 1.0, cfg.init_sigma);
     let mut vk = VulkanPlenoxels::new(gpu, grid).unwrap();
     vk.set_background(Background::new([0.5; 3], true)).unwrap();
-    let mut sampler = RaySampler::new(&d.train, 3);
+    let views = TrainViews::new(&d.train, &d.scene).unwrap();
     for step in 0..200 {
-        let batch = sampler.next_batch(&d.train, &d.scene, 2048);
         let p = StepParams {
             lr_sigma: cfg.lr_sigma.at(step),
             lr_sh: cfg.lr_sh.at(step),
@@ -681,8 +680,7 @@ fn learned_background_converges_from_grey_on_the_device() {
             tv: None,
             lr_bg: cfg.lr_sh.at(step),
         };
-        vk.step(&batch.flat_rays(), &batch.flat_targets(), &p)
-            .unwrap();
+        vk.step_sampled(&views, 3 + step as u64, 2048, &p).unwrap();
     }
     let bg = vk.background().unwrap();
     eprintln!(

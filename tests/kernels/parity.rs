@@ -68,6 +68,7 @@ rows!(
     surface_normal_reg_pairs,
     surface_normal_reg_gather,
     surface_rmsprop,
+    sample_rays,
 );
 
 #[test]

@@ -2,9 +2,10 @@
 //! `../shared/fixtures/thin_lyre` (a missing fixture fails these tests).
 
 use crate::data_common::fixture;
+use alphasurf::cpu::sample_rays::key_pixel;
 use alphasurf::data::image::decode_file;
 use alphasurf::data::inspect::inspect;
-use alphasurf::data::{Camera, Dataset, LoadOptions, RaySampler, Split};
+use alphasurf::data::{Camera, Dataset, LoadOptions, Split, TrainViews};
 use glam::{Mat4, Vec3, Vec4};
 use std::sync::OnceLock;
 
@@ -245,30 +246,91 @@ fn inspect_estimates_object_bounds() {
 #[test]
 fn sampler_is_seeded_uniform_and_matches_pixels() {
     let ds = dataset();
-    let batch = |seed| RaySampler::new(&ds.train, seed).next_batch(&ds.train, &ds.scene, 4096);
+    let views = TrainViews::new(&ds.train, &ds.scene).unwrap();
+    let batch = |seed| views.sample(seed, 4096).unwrap();
     let (a, b, c) = (batch(1), batch(1), batch(2));
     assert_eq!(a, b);
     assert_ne!(a, c);
-    let mut s = RaySampler::new(&ds.train, 3);
-    let px = s.sample_pixels(200_000);
+    // A second set over the same split draws the same batch (a function of the seed alone).
+    assert_eq!(
+        TrainViews::new(&ds.train, &ds.scene)
+            .unwrap()
+            .sample(1, 4096)
+            .unwrap(),
+        a
+    );
+    let bits = views.set().key_bits();
+    let big = views.sample(3, 200_000).unwrap();
     let mut per_view = vec![0usize; 100];
-    for p in &px {
-        per_view[p.view as usize] += 1;
-        assert!(p.x < 256 && p.y < 256);
+    for &k in &big.keys {
+        let (v, x, y) = key_pixel(k, bits);
+        per_view[v as usize] += 1;
+        assert!(x < 256 && y < 256);
     }
     // Uniform over views: each gets 2000 ± 5σ (σ ≈ 44).
     assert!(
         per_view.iter().all(|&n| (1780..=2220).contains(&n)),
         "{per_view:?}"
     );
-    // Rays: scaled origins, unit directions, the pixel's colour.
-    let mut s = RaySampler::new(&ds.train, 9);
-    let p = s.sample_pixels(1)[0];
-    let b = RaySampler::new(&ds.train, 9).next_batch(&ds.train, &ds.scene, 1);
-    let f = &ds.train.frames[p.view as usize];
-    let o = Vec3::from_array(b.origins[0]);
-    assert!((o - f.camera.centre() * (2.0 / 3.0)).length() < 1e-5);
-    assert!((Vec3::from_array(b.dirs[0]).length() - 1.0).abs() < 1e-5);
-    assert_eq!(b.rgb[0], f.image.rgb(p.x, p.y));
-    assert_eq!(b.alpha[0], f.image.alpha(p.x, p.y));
+    // Rays: exactly the camera's pixel ray in the scaled world, and the pixel's colour.
+    for (i, &k) in a.keys.iter().enumerate() {
+        let (v, x, y) = key_pixel(k, bits);
+        let f = &ds.train.frames[v as usize];
+        let (o, d) = f.camera.pixel_ray(x, y);
+        let mut want = ds.scene.to_scaled(o).to_array().to_vec();
+        want.extend(d.to_array());
+        assert_eq!(&a.rays[6 * i..6 * i + 6], want.as_slice(), "ray {i}");
+        assert_eq!(&a.targets[3 * i..3 * i + 3], f.image.rgb(x, y).as_slice());
+    }
+}
+
+/// The Vulkan backend draws the twin's batch from the fixture's views (100 views of 256², a
+/// batch of two sort runs), the CPU backend trains on it (the same first-step loss), and a
+/// restart — new views, new backend, straight to a later step's seed — draws that step's batch
+/// again, as a resumed run must.
+#[test]
+fn device_batches_are_the_twins_and_a_restart_draws_them_again() {
+    use alphasurf::check::sample_rays::{DIR_ABS, TARGET_ABS};
+    use alphasurf::grid::Grid;
+    use alphasurf::plenoxel::{CpuPlenoxels, Plenoxels, StepParams, VulkanPlenoxels};
+    let ds = dataset();
+    let gpu = alphasurf::gpu::test_gpu();
+    let grid = Grid::sphere(32, [0.0; 3], [1.0; 3], 1.0, 0.1);
+    let p = StepParams {
+        lr_sigma: 10.0,
+        lr_sh: 1e-2,
+        beta: 0.95,
+        eps: 1e-8,
+        stop_thresh: 1e-4,
+        tv: None,
+        lr_bg: 1e-2,
+    };
+    let n = 5000;
+    let views = TrainViews::new(&ds.train, &ds.scene).unwrap();
+    let mut vk = VulkanPlenoxels::new(gpu, grid.clone()).unwrap();
+    let mut cpu = CpuPlenoxels::new(grid.clone());
+    let first_vk = vk.step_sampled(&views, 5, n, &p).unwrap().mse;
+    let first_cpu = cpu.step_sampled(&views, 5, n, &p).unwrap().mse;
+    assert!(
+        (first_vk - first_cpu).abs() <= 1e-5 * first_cpu,
+        "first-step MSE: vulkan {first_vk}, cpu {first_cpu}"
+    );
+    vk.step_sampled(&views, 6, n, &p).unwrap();
+    let (rays, targets, keys) = vk.sampled_batch(n).unwrap();
+    let twin = views.sample(6, n).unwrap();
+    assert_eq!(keys, twin.keys);
+    let close = |a: &[f32], b: &[f32], tol: f64| {
+        a.iter()
+            .zip(b)
+            .all(|(x, y)| (*x as f64 - *y as f64).abs() <= tol)
+    };
+    assert!(close(&rays, &twin.rays, DIR_ABS));
+    assert!(close(&targets, &twin.targets, TARGET_ABS));
+
+    let views2 = TrainViews::new(&ds.train, &ds.scene).unwrap();
+    let mut vk2 = VulkanPlenoxels::new(gpu, grid).unwrap();
+    vk2.step_sampled(&views2, 6, n, &p).unwrap();
+    assert_eq!(vk2.sampled_batch(n).unwrap(), (rays, targets, keys));
+    let msgs = gpu.validation_messages();
+    assert!(msgs.is_empty(), "validation messages: {msgs:#?}");
 }

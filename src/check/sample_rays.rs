@@ -1,0 +1,115 @@
+//! Parity of `glsl/sample_rays.comp` with `cpu::sample_rays`: the sorted pixel keys identical
+//! (integers: the same draws, the same order), origins identical (a copy of the camera's), unit
+//! directions within 4 ulp of 1 (2^-21: the kernel's division, square root and reciprocal may
+//! each be off by up to ~1 ulp where the driver does not round them exactly; its products and
+//! sums are `precise`), targets within 1 ulp of 1 (a byte over 255).
+
+use super::{CheckRow, Compare};
+use crate::abi::buffers::SampleCamera;
+use crate::abi::consts::SAMPLE_SORT_RAYS;
+use crate::cpu::sample_rays::{sample_rays, SampleSet};
+use crate::data::camera::look_at;
+use crate::gpu::{Gpu, TrainViewBuffers};
+use anyhow::Result;
+use glam::Vec3;
+use rand::{Rng, SeedableRng};
+use rand_pcg::Pcg64;
+
+/// Tolerance of the directions' components.
+pub const DIR_ABS: f64 = 4.0 * f32::EPSILON as f64;
+/// Tolerance of the targets.
+pub const TARGET_ABS: f64 = f32::EPSILON as f64;
+
+/// Views of `w`×`h` random pixels seen by cameras on a sphere of radius 4 looking at the origin
+/// with random focal lengths and principal points.
+fn views(rng: &mut Pcg64, n_views: usize, w: u32, h: u32) -> (Vec<Vec<u8>>, Vec<SampleCamera>) {
+    let images = (0..n_views)
+        .map(|_| (0..4 * w * h).map(|_| rng.random::<u8>()).collect())
+        .collect();
+    let cams = (0..n_views)
+        .map(|_| {
+            let eye = Vec3::new(
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+                rng.random_range(0.2..1.0),
+            )
+            .normalize()
+                * 4.0;
+            let m = look_at(eye, Vec3::ZERO, Vec3::Z);
+            SampleCamera {
+                x_axis: m.x_axis.truncate().to_array(),
+                y_axis: m.y_axis.truncate().to_array(),
+                z_axis: m.z_axis.truncate().to_array(),
+                origin: (eye * (2.0 / 3.0)).to_array(),
+                focal: [rng.random_range(20.0..80.0), rng.random_range(20.0..80.0)],
+                centre: [
+                    rng.random_range(0.3..0.7) * w as f32,
+                    rng.random_range(0.3..0.7) * h as f32,
+                ],
+            }
+        })
+        .collect();
+    (images, cams)
+}
+
+/// The `check-kernels` row: 7 views of 37×23 pixels, a batch of 2·SAMPLE_SORT_RAYS + 1808 rays
+/// (two full runs and a partial one, padded to a power of two in the sort).
+pub fn check(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
+    let mut rng = Pcg64::seed_from_u64(seed);
+    let (w, h) = (37, 23);
+    let (images, cams) = views(&mut rng, 7, w, h);
+    let set = SampleSet {
+        width: w,
+        height: h,
+        images: images.iter().map(|i| i.as_slice()).collect(),
+        cams,
+    };
+    let n = 2 * SAMPLE_SORT_RAYS as usize + 1808;
+    let batch_seed: u64 = rng.random();
+    let want = sample_rays(&set, batch_seed, n)?;
+
+    let mut slot = None;
+    let views = TrainViewBuffers::ensure(&mut slot, gpu, u64::MAX - seed, &set, n)?;
+    let mut b = gpu.batch()?;
+    views.record_sample(&mut b, batch_seed, n)?;
+    b.submit()?;
+    let (rays, targets, keys) = views.download_batch(n)?;
+
+    let mut cmp = Compare::new(0.0, 0.0);
+    let mut key_mismatches = 0;
+    for (i, (g, c)) in keys.iter().zip(&want.keys).enumerate() {
+        cmp.compared += 1;
+        if g != c {
+            key_mismatches += 1;
+            cmp.failures += 1;
+            if cmp.first_failure.is_none() {
+                cmp.first_failure = Some(format!("ray {i} key: gpu {g:#x} cpu {c:#x}"));
+            }
+        }
+    }
+    let ulp = |g: f64, c: f64| (g - c).abs() / f32::EPSILON as f64;
+    let (mut dir_ulp, mut target_ulp) = (0f64, 0f64);
+    for i in 0..n {
+        for k in 0..6 {
+            let (g, c) = (rays[6 * i + k] as f64, want.rays[6 * i + k] as f64);
+            cmp.tol.abs = if k < 3 { 0.0 } else { DIR_ABS };
+            cmp.value(g, c, || format!("ray {i} component {k}"));
+            dir_ulp = dir_ulp.max(ulp(g, c));
+        }
+        for k in 0..3 {
+            let (g, c) = (targets[3 * i + k] as f64, want.targets[3 * i + k] as f64);
+            cmp.tol.abs = TARGET_ABS;
+            cmp.value(g, c, || format!("ray {i} target {k}"));
+            target_ulp = target_ulp.max(ulp(g, c));
+        }
+    }
+    cmp.tol.abs = DIR_ABS;
+    let note = format!(
+        "{n} rays over 7 views of {w}×{h}: keys {} of {n} identical; rays at most {dir_ulp:.2}, \
+         targets {target_ulp:.2} ulp(1) apart; tolerances: keys and origins exact, directions \
+         {:.0} ulp(1), targets 1 ulp(1)",
+        n - key_mismatches,
+        DIR_ABS / f32::EPSILON as f64
+    );
+    Ok(cmp.row(crate::kernels::sample_rays::INFO.name, n, note))
+}

@@ -1,0 +1,150 @@
+//! The training views on the device, uploaded once per run: every view's RGBA8 image (a u32 per
+//! pixel) and camera, and the buffers `sample_rays` draws each training batch into (rays, targets
+//! and the sorted pixel keys, in device-local memory), so a step neither samples nor uploads on
+//! the host.
+
+use super::{Batch, Gpu, GpuBuffer};
+use crate::cpu::sample_rays::SampleSet;
+use crate::kernels::sample_rays::{Push, INFO};
+use anyhow::{ensure, Result};
+
+/// One set of training views on the device and the batch buffers.
+pub struct TrainViewBuffers {
+    /// The id of the set uploaded (`data::TrainViews::id`).
+    id: u64,
+    pixels: GpuBuffer,
+    cams: GpuBuffer,
+    width: u32,
+    height: u32,
+    n_pixels: u64,
+    key_bits: u32,
+    /// Batch buffers and the rays they hold, allocated by the first batch.
+    batch: Option<BatchBuffers>,
+}
+
+struct BatchBuffers {
+    capacity: usize,
+    rays: GpuBuffer,
+    targets: GpuBuffer,
+    keys: GpuBuffer,
+}
+
+impl TrainViewBuffers {
+    /// Upload `set` (the views of set `id`): its images one view at a time into one buffer.
+    pub fn upload(gpu: &Gpu, id: u64, set: &SampleSet) -> Result<Self> {
+        set.validate()?;
+        let view_bytes = 4 * set.width as u64 * set.height as u64;
+        let pixels = gpu.zeros::<u32>((set.n_pixels() as usize).max(1))?;
+        for (v, img) in set.images.iter().enumerate() {
+            pixels.write_at(v as u64 * view_bytes, img)?;
+        }
+        Ok(TrainViewBuffers {
+            id,
+            pixels,
+            cams: gpu.upload(&set.cams)?,
+            width: set.width,
+            height: set.height,
+            n_pixels: set.n_pixels(),
+            key_bits: set.key_bits(),
+            batch: None,
+        })
+    }
+
+    /// The buffers of set `id` with room for a batch of `n` rays, uploading `set` into `slot`
+    /// unless it holds them already (submits its own copies: call it before recording a batch).
+    pub fn ensure<'a>(
+        slot: &'a mut Option<TrainViewBuffers>,
+        gpu: &Gpu,
+        id: u64,
+        set: &SampleSet,
+        n: usize,
+    ) -> Result<&'a mut TrainViewBuffers> {
+        ensure!(
+            n > 0 && n <= u32::MAX as usize,
+            "a batch of {n} rays (1 to 2^32 − 1)"
+        );
+        if slot.as_ref().is_none_or(|v| v.id != id) {
+            *slot = None; // free the old set first
+            *slot = Some(TrainViewBuffers::upload(gpu, id, set)?);
+        }
+        let v = slot.as_mut().expect("just set");
+        if v.batch.as_ref().is_none_or(|bb| bb.capacity < n) {
+            let cap = n.next_power_of_two();
+            v.batch = None;
+            v.batch = Some(BatchBuffers {
+                capacity: cap,
+                rays: gpu.zeros::<f32>(6 * cap)?,
+                targets: gpu.zeros::<f32>(3 * cap)?,
+                keys: gpu.zeros::<u64>(cap)?,
+            });
+        }
+        Ok(v)
+    }
+
+    /// Record drawing the batch of `n` rays of `seed` (`sample_rays`; [`ensure`](Self::ensure)
+    /// made room for them); returns the device addresses of its rays and targets, for the
+    /// kernels recorded after it.
+    pub fn record_sample(&self, b: &mut Batch, seed: u64, n: usize) -> Result<[u64; 2]> {
+        let bb = self.batch.as_ref().filter(|bb| bb.capacity >= n && n > 0);
+        let bb = bb.ok_or_else(|| anyhow::anyhow!("no room was made for a batch of {n} rays"))?;
+        let runs = (n as u32).div_ceil(crate::abi::consts::SAMPLE_SORT_RAYS);
+        b.dispatch(
+            &INFO,
+            &Push {
+                pixels: self.pixels.address(),
+                cams: self.cams.address(),
+                rays: bb.rays.address(),
+                targets: bb.targets.address(),
+                keys: bb.keys.address(),
+                seed,
+                n_pixels: self.n_pixels,
+                width: self.width,
+                height: self.height,
+                n_rays: n as u32,
+                key_bits: self.key_bits,
+            },
+            [runs, 1, 1],
+        )?;
+        Ok([bb.rays.address(), bb.targets.address()])
+    }
+
+    /// The last batch's rays, targets and keys (`n` of each), once its batch has completed.
+    pub fn download_batch(&self, n: usize) -> Result<(Vec<f32>, Vec<f32>, Vec<u64>)> {
+        let bb = self.batch.as_ref().filter(|bb| bb.capacity >= n);
+        let bb = bb.ok_or_else(|| anyhow::anyhow!("no batch of {n} rays was sampled"))?;
+        Ok((
+            bb.rays.download_range(0, 6 * n)?,
+            bb.targets.download_range(0, 3 * n)?,
+            bb.keys.download_range(0, n)?,
+        ))
+    }
+}
+
+/// The rays of a training pass on a Vulkan backend.
+#[derive(Clone, Copy)]
+pub enum TrainRays<'a> {
+    /// Rays (6 floats each) and targets (3 floats each) from the host, uploaded.
+    Host { rays: &'a [f32], targets: &'a [f32] },
+    /// The batch of `n` rays drawn with `seed` on the device from the views of set `id`.
+    Sampled {
+        id: u64,
+        set: &'a SampleSet<'a>,
+        seed: u64,
+        n: usize,
+    },
+}
+
+impl TrainRays<'_> {
+    /// Number of rays.
+    pub fn len(&self) -> usize {
+        match self {
+            TrainRays::Host { rays, .. } => rays.len() / 6,
+            TrainRays::Sampled { n, .. } => *n,
+        }
+    }
+
+    /// Whether there are none.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
