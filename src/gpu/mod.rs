@@ -6,6 +6,7 @@
 //! step by phase (`step_times`), the training views and the batches sampled from them
 //! (`train_views`).
 
+mod background_step;
 mod batch;
 mod buffer;
 mod context;
@@ -18,6 +19,7 @@ mod readback;
 mod step_times;
 mod train_views;
 
+pub use background_step::record_background_step;
 pub use batch::{Batch, BatchTimes};
 pub use buffer::GpuBuffer;
 pub use context::{list_devices, Gpu, GpuOptions};

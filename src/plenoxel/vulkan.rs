@@ -8,8 +8,8 @@ use crate::cpu::background::Background;
 use crate::cpu::step::{STEP_FLAGS, STEP_N, STEP_STATS, TOUCH_ALL};
 use crate::data::TrainViews;
 use crate::gpu::{
-    record_optim_args, Batch, Gpu, GpuBuffer, Phase, PhaseClock, RayBuffers, Readback, TrainRays,
-    TrainViewBuffers,
+    record_background_step, record_optim_args, Batch, Gpu, GpuBuffer, Phase, PhaseClock,
+    RayBuffers, Readback, TrainRays, TrainViewBuffers,
 };
 use crate::grid::{Grid, SH_DIM};
 use crate::kernels;
@@ -247,17 +247,7 @@ impl VulkanPlenoxels {
         }
         self.record_rmsprop(&mut b, p)?;
         if self.bg_learned {
-            b.dispatch_1d(
-                &kernels::background_step::INFO,
-                &kernels::background_step::Push {
-                    bg: self.bg.address(),
-                    lr: p.lr_bg,
-                    beta: p.beta,
-                    eps: p.eps,
-                    ..Default::default()
-                },
-                3,
-            )?;
+            record_background_step(&mut b, &self.bg, p.lr_bg, p.beta, p.eps)?;
         }
         self.readback.record(
             &self.gpu,

@@ -25,8 +25,8 @@ use crate::cpu::surface_train::{SurfaceLoss, SURF_MAX_HITS};
 use crate::cpu::SurfaceRmsProp;
 use crate::data::TrainViews;
 use crate::gpu::{
-    Batch, BatchTimes, Gpu, GpuBuffer, Phase, PhaseClock, RayBuffers, Readback, TrainRays,
-    TrainViewBuffers,
+    record_background_step, Batch, BatchTimes, Gpu, GpuBuffer, Phase, PhaseClock, RayBuffers,
+    Readback, TrainRays, TrainViewBuffers,
 };
 use crate::grid::surface::SurfaceGrid;
 use crate::grid::SH_DIM;
@@ -520,17 +520,7 @@ impl VulkanSurface {
         self.record_regularisers(&mut b, p, &plan)?;
         self.record_rmsprop(&mut b, p, &plan)?;
         if self.bg_learned {
-            b.dispatch_1d(
-                &kernels::background_step::INFO,
-                &kernels::background_step::Push {
-                    bg: self.bg.address(),
-                    lr: p.lr_bg,
-                    beta: p.beta,
-                    eps: p.eps,
-                    ..Default::default()
-                },
-                3,
-            )?;
+            record_background_step(&mut b, &self.bg, p.lr_bg, p.beta, p.eps)?;
         }
         self.readback.record(
             &self.gpu,
