@@ -7,7 +7,7 @@ use crate::data::{Dataset, LoadOptions};
 use crate::gpu::Gpu;
 use crate::run::{self, read_info};
 use crate::train::{render_split, BackgroundRecord, RenderedSplit, Stage1Config};
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use std::path::PathBuf;
 
 /// Options of `render` (its command-line flags).
@@ -36,15 +36,20 @@ pub fn render(opts: &RenderOptions, gpu: Option<&Gpu>) -> Result<RenderedSplit> 
     let ckpt_path = run::dir::stage1_checkpoint(&opts.run, "render")?;
     let ckpt = crate::grid::checkpoint::load(&ckpt_path)?;
     let bg = BackgroundRecord::from_meta(&ckpt.meta, &ckpt_path)?;
-    let data_dir = match &opts.data {
-        Some(d) => d.clone(),
-        None => read_info(&opts.run).context("(or pass --data)")?.data,
+    let info = read_info(&opts.run);
+    let data_dir = match (&opts.data, &info) {
+        (Some(d), _) => d.clone(),
+        (None, Ok(i)) => i.data.clone(),
+        (None, Err(e)) => bail!("{e:#} (or pass --data)"),
     };
+    // The images at the size the run was trained on, so the PSNR is the one training reported.
+    let downscale = info.as_ref().map_or(1, |i| i.downscale);
     run::outputs::check_output_dir(&opts.out, &[&ckpt_path, &data_dir])?;
     let data = Dataset::load(
         &data_dir,
         &LoadOptions {
             background: bg.mode,
+            downscale,
             ..Default::default()
         },
     )?;

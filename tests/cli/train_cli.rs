@@ -120,6 +120,31 @@ fn train_render_export_import_on_both_backends() {
         .expect("mean PSNR line");
     assert!((mean - pv).abs() < 0.01, "render {mean} vs train {pv}");
 
+    // A run trained on downscaled images renders (and scores) at that size.
+    let rd = dir.path().join("half");
+    train(&data, &rd, "cpu", &["--iters", "20", "--downscale", "2"]);
+    let pd = metrics(&rd)["test_psnr"].as_f64().unwrap();
+    let out_half = run_ok(
+        bin()
+            .args(["render", "--backend", "cpu", "--run"])
+            .arg(&rd)
+            .arg("--out")
+            .arg(dir.path().join("rh")),
+    );
+    let mean_half: f64 = out_half
+        .lines()
+        .find_map(|l| l.strip_prefix("mean PSNR "))
+        .and_then(|l| l.split_whitespace().next())
+        .and_then(|v| v.parse().ok())
+        .expect("mean PSNR line");
+    assert!(
+        (mean_half - pd).abs() < 0.01,
+        "render {mean_half} vs train {pd} at downscale 2"
+    );
+    let full = image::image_dimensions(rv.join("test/r_0.png")).unwrap();
+    let half = image::image_dimensions(dir.path().join("rh/r_0.png")).unwrap();
+    assert_eq!(half, (full.0 / 2, full.1 / 2));
+
     // export → import round trip renders the same.
     let ck = dir.path().join("ckpt.npz");
     run_ok(
