@@ -70,6 +70,16 @@ fn train(data: &Path, out: &Path, backend: &str, extra: &[&str]) -> String {
     )
 }
 
+/// Runs `render` and returns the mean PSNR it prints.
+fn render_mean_psnr(cmd: &mut std::process::Command) -> f64 {
+    run_ok(cmd)
+        .lines()
+        .find_map(|l| l.strip_prefix("mean PSNR "))
+        .and_then(|l| l.split_whitespace().next())
+        .and_then(|v| v.parse().ok())
+        .expect("mean PSNR line")
+}
+
 #[test]
 fn train_render_export_import_on_both_backends() {
     let dir = tempfile::tempdir().unwrap();
@@ -105,38 +115,26 @@ fn train_render_export_import_on_both_backends() {
     assert!(rv.join("test/r_0.png").exists());
 
     // render reproduces the training run's test PSNR.
-    let out = run_ok(
+    let mean = render_mean_psnr(
         bin()
             .args(["render", "--run"])
             .arg(&rv)
             .arg("--out")
             .arg(dir.path().join("r")),
     );
-    let mean: f64 = out
-        .lines()
-        .find_map(|l| l.strip_prefix("mean PSNR "))
-        .and_then(|l| l.split_whitespace().next())
-        .and_then(|v| v.parse().ok())
-        .expect("mean PSNR line");
     assert!((mean - pv).abs() < 0.01, "render {mean} vs train {pv}");
 
     // A run trained on downscaled images renders (and scores) at that size.
     let rd = dir.path().join("half");
     train(&data, &rd, "cpu", &["--iters", "20", "--downscale", "2"]);
     let pd = metrics(&rd)["test_psnr"].as_f64().unwrap();
-    let out_half = run_ok(
+    let mean_half = render_mean_psnr(
         bin()
             .args(["render", "--backend", "cpu", "--run"])
             .arg(&rd)
             .arg("--out")
             .arg(dir.path().join("rh")),
     );
-    let mean_half: f64 = out_half
-        .lines()
-        .find_map(|l| l.strip_prefix("mean PSNR "))
-        .and_then(|l| l.split_whitespace().next())
-        .and_then(|v| v.parse().ok())
-        .expect("mean PSNR line");
     assert!(
         (mean_half - pd).abs() < 0.01,
         "render {mean_half} vs train {pd} at downscale 2"
@@ -510,19 +508,13 @@ fn black_background_trains_and_renders_on_black() {
     eprintln!("black: test PSNR {psnr:.3} dB, render corner {c:?}");
     assert!(c.iter().all(|&v| v < 0.05), "render corner {c:?}");
     // `render` composites the data and the views on the run's background: the same PSNR.
-    let out = run_ok(
+    let mean = render_mean_psnr(
         bin()
             .args(["render", "--run"])
             .arg(&run)
             .arg("--out")
             .arg(dir.path().join("r")),
     );
-    let mean: f64 = out
-        .lines()
-        .find_map(|l| l.strip_prefix("mean PSNR "))
-        .and_then(|l| l.split_whitespace().next())
-        .and_then(|v| v.parse().ok())
-        .expect("mean PSNR line");
     assert!((mean - psnr).abs() < 0.01, "render {mean} vs train {psnr}");
     // Resuming under another background is refused, naming both.
     let out = bin()
