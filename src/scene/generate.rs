@@ -128,7 +128,7 @@ pub fn generate(out: &Path, opts: &GenerateOptions) -> anyhow::Result<GenerateRe
         );
     }
     check_memory(&scene, opts)?;
-    check_output_dir(out)?;
+    check_scene_folder(out)?;
     std::fs::create_dir_all(out)
         .with_context(|| format!("{}: cannot create directory", out.display()))?;
     let splits = opts.split_views();
@@ -265,7 +265,7 @@ pub fn sample_gt(scene: &Scene, spacing: f64, seed: u64) -> (Vec<[f32; 3]>, Vec<
 
 /// `out` must be new, empty, or a scene this command wrote before (its `scene.json` names the
 /// generator): files of anything else (a real dataset, a run) are never replaced.
-fn check_output_dir(out: &Path) -> anyhow::Result<()> {
+fn check_scene_folder(out: &Path) -> anyhow::Result<()> {
     if !out.exists() {
         return Ok(());
     }
