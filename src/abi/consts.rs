@@ -122,6 +122,12 @@ abi_consts! {
     /// sorted in runs of this many rays.
     SAMPLE_SORT_RAYS: u32 = 4096;
 
+    // Loss sums (cpu::loss_sum, glsl/loss_sum.comp).
+    /// Invocations of the one `loss_sum` workgroup (its local size) and its partial sums.
+    LOSS_SUM_THREADS: u32 = 256;
+    /// Per-ray loss fields `loss_sum` adds up at most.
+    LOSS_SUM_FIELDS: u32 = 4;
+
     // Stage-2 regularisers and optimiser (surface::{delta_tv, rmsprop}, cpu::surface_reg).
     /// Floats per row of Lδ's directions scratch `q` (x, y, z and a pad: two aligned 64-bit
     /// words).

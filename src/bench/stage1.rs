@@ -3,10 +3,11 @@
 
 use crate::abi::buffers::PlenoxelPerRay;
 use crate::data::{Dataset, LoadOptions, TrainViews};
-use crate::gpu::{Phase, PhaseClock, StepTimes};
+use crate::gpu::StepTimes;
 use crate::grid::Grid;
 use crate::plenoxel::{Plenoxels, StepParams};
 use crate::scene::{generate, GenerateOptions, SceneKind};
+use crate::train::progress::READ_EVERY;
 use crate::train::Stage1Config;
 use anyhow::Result;
 use std::path::Path;
@@ -104,8 +105,9 @@ impl StepFigures {
 }
 
 /// `steps + 1` stage-1 training steps (no TV, the learning rates of the schedule's end) of
-/// `batch` rays drawn with seeds 7, 8, … (on the device on Vulkan, by the twin on the CPU); the
-/// first is untimed (first-dispatch compilation on lavapipe).
+/// `batch` rays drawn with seeds 7, 8, … (on the device on Vulkan, by the twin on the CPU), run as
+/// training runs them (submitted without waiting, figures read every `READ_EVERY` steps); the
+/// first is untimed (first-dispatch compilation on lavapipe). The wall time is the whole loop's.
 pub fn time_steps(
     backend: &mut dyn Plenoxels,
     data: &Dataset,
@@ -115,38 +117,31 @@ pub fn time_steps(
 ) -> Result<Figures> {
     let mut f = Figures::default();
     let mut times = StepFigures::default();
-    let mut secs = 0.0;
     let views = TrainViews::new(&data.train, &data.scene)?;
-    for step in 0..=steps {
-        let wall = Instant::now();
-        let mut clock = PhaseClock::start();
-        let p = StepParams {
-            lr_sigma: cfg.lr_sigma.at(cfg.iters),
-            lr_sh: cfg.lr_sh.at(cfg.iters),
-            beta: cfg.beta,
-            eps: cfg.eps,
-            stop_thresh: cfg.stop_thresh,
-            tv: None,
-            lr_bg: cfg.lr_sh.at(cfg.iters),
-        };
-        clock.mark(Phase::Bookkeeping);
-        let t = Instant::now();
-        let s = backend.step_sampled(&views, 7 + step as u64, batch as usize, &p)?;
-        let step_secs = t.elapsed().as_secs_f64();
-        clock.absorb(&s.host);
-        if step == 0 {
-            continue;
+    let p = StepParams {
+        lr_sigma: cfg.lr_sigma.at(cfg.iters),
+        lr_sh: cfg.lr_sh.at(cfg.iters),
+        beta: cfg.beta,
+        eps: cfg.eps,
+        stop_thresh: cfg.stop_thresh,
+        tv: None,
+        lr_bg: cfg.lr_sh.at(cfg.iters),
+    };
+    backend.step_sampled(&views, 7, batch as usize, &p)?;
+    backend.take_stats()?;
+    let wall = Instant::now();
+    for step in 1..=steps {
+        backend.step_sampled(&views, 7 + step as u64, batch as usize, &p)?;
+        if step % READ_EVERY == 0 || step == steps {
+            for s in backend.take_stats()? {
+                f.mean_mse += s.mse / steps as f64;
+                f.per_ray.add(&s.counts);
+                times.add(0.0, &s.host, s.device_ns);
+            }
         }
-        secs += step_secs;
-        f.mean_mse += s.mse / steps as f64;
-        f.per_ray.add(&s.counts);
-        clock.mark(Phase::Bookkeeping);
-        times.add(
-            wall.elapsed().as_secs_f64() * 1e3,
-            &clock.times,
-            s.device_ns,
-        );
     }
+    let secs = wall.elapsed().as_secs_f64();
+    times.wall_ms_per_step = secs * 1e3;
     f.rays_per_s = (batch * steps) as f64 / secs;
     f.per_ray = f.per_ray.scaled(1.0 / (batch * steps) as f64);
     f.times = times.per_step(steps);

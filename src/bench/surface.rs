@@ -20,12 +20,11 @@
 use super::stage1::{thin_scene, time_steps, warm_config, StepFigures};
 use crate::abi::buffers::{TrainCounts, TrainPerRay};
 use crate::data::TrainViews;
-use crate::gpu::{Gpu, Phase, PhaseClock, TrainRays};
+use crate::gpu::Gpu;
 use crate::grid::surface::SurfaceGrid;
 use crate::plenoxel::{CpuPlenoxels, Plenoxels, VulkanPlenoxels};
-use crate::surface::{
-    CpuSurface, SurfaceBackend, SurfaceRegs, SurfaceStepParams, SurfaceStepStats, VulkanSurface,
-};
+use crate::surface::{CpuSurface, SurfaceBackend, SurfaceRegs, SurfaceStepParams, VulkanSurface};
+use crate::train::progress::READ_EVERY;
 use crate::train::surface_config::SurfaceConfig;
 use crate::train::{stage1, stage2, Category, Preset};
 use anyhow::{ensure, Result};
@@ -89,13 +88,16 @@ fn step_params(
     stage2::step_params(cfg, res, rows, 0, a, [draw, draw >> 17, draw >> 7])
 }
 
-/// One backend step: the batch's seed, parameters.
-type StepFn<'a> = dyn FnMut(u64, &SurfaceStepParams) -> Result<SurfaceStepStats> + 'a;
-
-/// `steps + 1` stage-2 steps (the first untimed) on the batches drawn with seeds 11, 12, …;
-/// `regs`: with the regularisers, else the data term alone.
+/// `steps + 1` stage-2 steps (the first untimed) on the batches of `n` rays drawn from `views`
+/// with seeds 11, 12, …, run as training runs them (submitted without waiting, figures read every
+/// `READ_EVERY` steps); `regs`: with the regularisers, else the data term alone. The wall time is
+/// the whole loop's; `after_warm_up` is called between the untimed step and the timed ones.
+#[allow(clippy::too_many_arguments)]
 fn time_surface(
-    step: &mut StepFn,
+    backend: &mut dyn SurfaceBackend,
+    after_warm_up: &mut dyn FnMut(),
+    views: &TrainViews,
+    n: usize,
     grid: &SurfaceGrid,
     cfg: &SurfaceConfig,
     args: &SurfaceBenchArgs,
@@ -103,38 +105,53 @@ fn time_surface(
 ) -> Result<Figures> {
     let mut f = Figures::default();
     let mut times = StepFigures::default();
-    let mut secs = 0.0;
     let mut counts = TrainPerRay::default();
-    for i in 0..=args.steps {
-        let wall = Instant::now();
-        let mut clock = PhaseClock::start();
+    let params = |i: u32| {
         let mut p = step_params(cfg, grid.res, grid.delta.len() as u32, args.a, i);
         if !regs {
             p.regs = SurfaceRegs::default();
         }
-        clock.mark(Phase::Bookkeeping);
-        let t = Instant::now();
-        let s = step(11 + i as u64, &p)?;
-        let step_secs = t.elapsed().as_secs_f64();
-        clock.absorb(&s.host);
-        if i == 0 {
-            continue; // warm-up: first-dispatch compilation on lavapipe
+        p
+    };
+    // Warm-up: first-dispatch compilation on lavapipe.
+    backend.step_sampled(views, 11, n, &params(0))?;
+    backend.take_stats()?;
+    after_warm_up();
+    let wall = Instant::now();
+    for i in 1..=args.steps {
+        backend.step_sampled(views, 11 + i as u64, n, &params(i))?;
+        if i % READ_EVERY == 0 || i == args.steps {
+            for s in backend.take_stats()? {
+                f.mean_mse += s.mse / args.steps as f64;
+                counts.add(&s.counts);
+                times.add(0.0, &s.host, s.device_ns);
+            }
         }
-        secs += step_secs;
-        f.mean_mse += s.mse / args.steps as f64;
-        counts.add(&s.counts);
-        clock.mark(Phase::Bookkeeping);
-        times.add(
-            wall.elapsed().as_secs_f64() * 1e3,
-            &clock.times,
-            s.device_ns,
-        );
     }
+    let secs = wall.elapsed().as_secs_f64();
+    times.wall_ms_per_step = secs * 1e3;
     let rays = (args.batch * args.steps) as f64;
     f.rays_per_s = rays / secs;
     f.times = times.per_step(args.steps);
     f.per_ray = counts.scaled(1.0 / rays);
     Ok(f)
+}
+
+/// Device ns per kernel that `gpu` ran since `before` (a `Profile::totals` snapshot).
+fn kernel_ns_since(gpu: &Gpu, before: &[(&'static str, u64, f64)]) -> BTreeMap<&'static str, f64> {
+    let mut ns: BTreeMap<&'static str, f64> = gpu
+        .profile()
+        .totals()
+        .into_iter()
+        .map(|(k, _, t)| (k, t))
+        .collect();
+    for (k, _, t) in before {
+        if let Some(v) = ns.get_mut(k) {
+            *v -= t;
+        }
+    }
+    ns.retain(|_, v| *v > 0.0);
+    ns
 }
 
 /// Run the benchmark and print it.
@@ -201,29 +218,19 @@ fn run_in(gpu: &Gpu, args: &SurfaceBenchArgs, dir: &std::path::Path) -> Result<(
     let time_vulkan = |regs: bool| -> Result<Figures> {
         let mut vk = VulkanSurface::new(gpu, grid.clone())?;
         vk.load(grid.clone(), Some(state.clone()))?;
-        let mut kernel_ns: BTreeMap<&'static str, f64> = BTreeMap::new();
-        let mut first = true;
+        // The warm-up step is timed by the profile too: take the snapshot after it.
+        let mut before = Vec::new();
         let mut f = time_surface(
-            &mut |seed, p| {
-                let src = TrainRays::Sampled {
-                    id: views.id(),
-                    set: views.set(),
-                    seed,
-                    n,
-                };
-                let (s, times) = vk.step_timed(src, p)?;
-                if !std::mem::take(&mut first) {
-                    for (k, ns) in times.dispatches {
-                        *kernel_ns.entry(k).or_default() += ns;
-                    }
-                }
-                Ok(s)
-            },
+            &mut vk,
+            &mut || before = gpu.profile().totals(),
+            &views,
+            n,
             &grid,
             &scfg,
             args,
             regs,
         )?;
+        let kernel_ns = kernel_ns_since(gpu, &before);
         f.device_ms_per_step = kernel_ns
             .into_iter()
             .map(|(k, ns)| (k, ns / 1e6 / args.steps as f64))
@@ -256,13 +263,7 @@ fn run_in(gpu: &Gpu, args: &SurfaceBenchArgs, dir: &std::path::Path) -> Result<(
     eprintln!("bench surface: timing the CPU backend");
     let mut cpu = CpuSurface::new(grid.clone())?;
     cpu.load(grid.clone(), Some(state))?;
-    let fc = time_surface(
-        &mut |seed, p| cpu.step_sampled(&views, seed, n, p),
-        &grid,
-        &scfg,
-        args,
-        true,
-    )?;
+    let fc = time_surface(&mut cpu, &mut || (), &views, n, &grid, &scfg, args, true)?;
 
     println!(
         "stage-2 training at {}³ ({} allocated vertices, {} levels), {} steps of {} rays, a = {}, \

@@ -8,6 +8,7 @@ pub mod cubic_solve;
 pub mod dda_walk;
 pub mod extract_points;
 pub mod fill_pattern;
+pub mod loss_sum;
 pub mod plenoxel;
 pub mod sample_rays;
 pub mod sh_eval;
@@ -76,6 +77,7 @@ pub const CHECKS: &[(&str, CheckFn)] = &[
     ),
     ("surface_rmsprop", surface_reg::check_rmsprop),
     ("sample_rays", sample_rays::check),
+    ("loss_sum", loss_sum::check),
 ];
 
 /// Relative L2 distance ‖a − b‖/‖b‖ (0 when both vanish, ∞ when only `b` does).

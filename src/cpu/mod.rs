@@ -11,6 +11,7 @@ pub mod cubic_solve;
 mod dda_walk;
 pub mod extract_points;
 mod fill_pattern;
+mod loss_sum;
 pub mod plenoxel;
 mod rmsprop;
 pub mod sample_rays;
@@ -26,6 +27,7 @@ mod tv;
 
 pub use dda_walk::dda_walk;
 pub use fill_pattern::fill_pattern;
+pub use loss_sum::loss_sum;
 pub use rmsprop::{
     rmsprop_one, rmsprop_sparse, surface_rmsprop_sparse, RmsProp, Stage1Params, Stage2Params,
     SurfaceRmsProp,

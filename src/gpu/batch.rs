@@ -1,8 +1,9 @@
-//! A batch: one command buffer holding many dispatches (and fills/copies), with a memory barrier
-//! after each and a timestamp pair around each dispatch, submitted once and waited on once. One
-//! submit+wait costs ~90–150 µs on lavapipe, a dispatch inside a batch ~12–30 µs, so a training
-//! step is one batch.
-
+//! A batch: one command buffer holding many dispatches (and fills, copies, in-stream buffer
+//! updates), with a memory barrier after each and a timestamp pair around each dispatch,
+//! submitted once. A submission and its wait cost several times a dispatch inside a batch
+//! (docs/results.md), so a training step is one batch. `submit_async` returns without waiting, so the host can
+//! record the next step while the device runs this one; the command pool, query pool and fence a
+//! batch uses are reused from batch to batch.
 use super::buffer::GpuBuffer;
 use super::context::Gpu;
 use super::step_times::{Phase, PhaseClock, StepTimes};
@@ -41,75 +42,158 @@ impl BatchTimes {
     }
 }
 
-/// Commands being recorded; nothing runs until `submit`.
+/// A command pool with its one command buffer, timestamp queries and fence: what a batch records
+/// into and submits with. Frames are created on first need and reused by later batches (kept in
+/// the context), so a training step creates no Vulkan object.
+pub(super) struct Frame {
+    pool: vk::CommandPool,
+    cmd: vk::CommandBuffer,
+    queries: Option<vk::QueryPool>,
+    fence: vk::Fence,
+}
+
+impl Frame {
+    fn new(gpu: &Gpu) -> Result<Frame> {
+        let inner = &gpu.inner;
+        let dev = &inner.device;
+        // Vulkan pools need external synchronisation for recording, so one pool per frame lets
+        // batches be recorded on several threads at once.
+        let pool = unsafe {
+            dev.create_command_pool(
+                &vk::CommandPoolCreateInfo::default()
+                    .queue_family_index(inner.info.queue_family.expect("checked at start"))
+                    .flags(vk::CommandPoolCreateFlags::TRANSIENT),
+                None,
+            )
+        }
+        .context("creating a command pool")?;
+        let mut frame = Frame {
+            pool,
+            cmd: vk::CommandBuffer::null(),
+            queries: None,
+            fence: vk::Fence::null(),
+        };
+        // On an error below, `destroy` frees what was created.
+        let made = (|| -> Result<()> {
+            frame.cmd = unsafe {
+                dev.allocate_command_buffers(
+                    &vk::CommandBufferAllocateInfo::default()
+                        .command_pool(pool)
+                        .level(vk::CommandBufferLevel::PRIMARY)
+                        .command_buffer_count(1),
+                )
+            }
+            .context("allocating a command buffer")?[0];
+            frame.fence = unsafe { dev.create_fence(&vk::FenceCreateInfo::default(), None) }
+                .context("creating a fence")?;
+            if inner.info.timestamp_period_ns.is_some() {
+                frame.queries = Some(
+                    unsafe {
+                        dev.create_query_pool(
+                            &vk::QueryPoolCreateInfo::default()
+                                .query_type(vk::QueryType::TIMESTAMP)
+                                .query_count(2 * MAX_TIMED),
+                            None,
+                        )
+                    }
+                    .context("creating a timestamp query pool")?,
+                );
+            }
+            Ok(())
+        })();
+        match made {
+            Ok(()) => Ok(frame),
+            Err(e) => {
+                frame.destroy(dev);
+                Err(e)
+            }
+        }
+    }
+
+    /// Free the frame's objects (the device must be done with them).
+    pub(super) fn destroy(self, dev: &ash::Device) {
+        unsafe {
+            if let Some(q) = self.queries {
+                dev.destroy_query_pool(q, None);
+            }
+            if self.fence != vk::Fence::null() {
+                dev.destroy_fence(self.fence, None);
+            }
+            // Destroying the pool frees its command buffer.
+            dev.destroy_command_pool(self.pool, None);
+        }
+    }
+}
+
+impl Gpu {
+    /// A frame from the context's spares, or a new one.
+    fn take_frame(&self) -> Result<Frame> {
+        let spare = self.inner.frames.lock().unwrap().pop();
+        match spare {
+            Some(f) => Ok(f),
+            None => Frame::new(self),
+        }
+    }
+
+    /// Give a frame the device is done with back to the spares.
+    fn return_frame(&self, f: Frame) {
+        self.inner.frames.lock().unwrap().push(f);
+    }
+}
+
+/// Commands being recorded; nothing runs until `submit` (or `submit_async`).
 pub struct Batch {
     gpu: Gpu,
+    /// Taken by `submit_async`; a batch dropped unsubmitted gives it back.
+    frame: Option<Frame>,
     cmd: vk::CommandBuffer,
-    /// The batch's own command pool: Vulkan pools need external synchronisation for recording,
-    /// so one pool per batch lets batches be recorded on several threads at once.
-    pool: vk::CommandPool,
     queries: Option<vk::QueryPool>,
     timed: Vec<&'static str>,
-    submitted: bool,
+}
+
+/// A submitted batch the host has not waited for yet. Dropping it waits.
+pub struct InFlight {
+    gpu: Gpu,
+    frame: Option<Frame>,
+    timed: Vec<&'static str>,
+    /// Host time of the submission (record, submit) and of waiting for the fence.
+    host: StepTimes,
+    /// Whether the fence has been waited for.
+    complete: bool,
 }
 
 impl Gpu {
     /// Start recording a batch.
     pub fn batch(&self) -> Result<Batch> {
         let dev = &self.inner.device;
-        let pool = unsafe {
-            dev.create_command_pool(
-                &vk::CommandPoolCreateInfo::default()
-                    .queue_family_index(self.inner.info.queue_family.expect("checked at start"))
-                    .flags(vk::CommandPoolCreateFlags::TRANSIENT),
-                None,
-            )
+        let frame = self.take_frame()?;
+        let begun = unsafe {
+            dev.reset_command_pool(frame.pool, vk::CommandPoolResetFlags::empty())
+                .and_then(|_| {
+                    dev.begin_command_buffer(
+                        frame.cmd,
+                        &vk::CommandBufferBeginInfo::default()
+                            .flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT),
+                    )
+                })
+        };
+        if let Err(e) = begun {
+            frame.destroy(dev);
+            return Err(e).context("starting a command buffer");
         }
-        .context("creating a command pool")?;
-        let cmd = unsafe {
-            dev.allocate_command_buffers(
-                &vk::CommandBufferAllocateInfo::default()
-                    .command_pool(pool)
-                    .level(vk::CommandBufferLevel::PRIMARY)
-                    .command_buffer_count(1),
-            )
-        };
-        let cmd = match cmd {
-            Ok(c) => c[0],
-            Err(e) => {
-                unsafe { dev.destroy_command_pool(pool, None) };
-                return Err(e).context("allocating a command buffer");
-            }
-        };
-        unsafe {
-            dev.begin_command_buffer(
-                cmd,
-                &vk::CommandBufferBeginInfo::default()
-                    .flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT),
-            )
-        }?;
-        let queries = if self.inner.info.timestamp_period_ns.is_some() {
-            let pool = unsafe {
-                dev.create_query_pool(
-                    &vk::QueryPoolCreateInfo::default()
-                        .query_type(vk::QueryType::TIMESTAMP)
-                        .query_count(2 * MAX_TIMED),
-                    None,
-                )
-            }?;
-            unsafe { dev.cmd_reset_query_pool(cmd, pool, 0, 2 * MAX_TIMED) };
-            Some(pool)
-        } else {
-            None
-        };
-        Ok(Batch {
+        if let Some(q) = frame.queries {
+            unsafe { dev.cmd_reset_query_pool(frame.cmd, q, 0, 2 * MAX_TIMED) };
+        }
+        let b = Batch {
             gpu: self.clone(),
-            cmd,
-            pool,
-            queries,
+            cmd: frame.cmd,
+            queries: frame.queries,
+            frame: Some(frame),
             timed: Vec::new(),
-            submitted: false,
-        })
+        };
+        // Order this batch after whatever earlier submissions on the queue still run.
+        b.barrier();
+        Ok(b)
     }
 
     /// Run one 1-D dispatch of `n` threads and wait for it.
@@ -269,14 +353,50 @@ impl Batch {
         self.barrier();
     }
 
+    /// Record writing `data` (at most 65536 bytes, a multiple of 4) into `buf` at byte `offset`,
+    /// in the command stream: a step's parameters written this way cannot race with an earlier
+    /// step still running on the device.
+    pub fn update<T: Pod>(&mut self, buf: &GpuBuffer, offset: u64, data: &[T]) -> Result<()> {
+        let bytes: &[u8] = bytemuck::cast_slice(data);
+        ensure!(
+            bytes.len() <= 65536 && bytes.len().is_multiple_of(4) && offset.is_multiple_of(4),
+            "an in-stream buffer update takes at most 65536 bytes in 4-byte words at a 4-byte \
+             offset, got {} bytes at {offset}",
+            bytes.len()
+        );
+        ensure!(
+            offset + bytes.len() as u64 <= buf.size(),
+            "an update of {} bytes at {offset} overruns a buffer of {}",
+            bytes.len(),
+            buf.size()
+        );
+        if !bytes.is_empty() {
+            unsafe {
+                self.gpu
+                    .inner
+                    .device
+                    .cmd_update_buffer(self.cmd, buf.handle(), offset, bytes)
+            };
+            self.barrier();
+        }
+        Ok(())
+    }
+
     /// Submit, wait for completion, and return the device time of each timed dispatch.
-    pub fn submit(mut self) -> Result<BatchTimes> {
+    pub fn submit(self) -> Result<BatchTimes> {
+        self.submit_async()?.wait()
+    }
+
+    /// Submit without waiting: the host may record and submit the next batch while this one
+    /// runs (batches on the queue run in order; each starts with a full barrier).
+    pub fn submit_async(mut self) -> Result<InFlight> {
         let mut clock = PhaseClock::start();
-        let inner = &self.gpu.inner;
-        let dev = &inner.device;
+        let gpu = self.gpu.clone();
+        let dev = &gpu.inner.device;
         let to_host = [vk::MemoryBarrier::default()
             .src_access_mask(vk::AccessFlags::SHADER_WRITE | vk::AccessFlags::TRANSFER_WRITE)
             .dst_access_mask(vk::AccessFlags::HOST_READ)];
+        let frame = self.frame.take().expect("a batch is submitted once");
         unsafe {
             dev.cmd_pipeline_barrier(
                 self.cmd,
@@ -287,61 +407,132 @@ impl Batch {
                 &[],
                 &[],
             );
-            dev.end_command_buffer(self.cmd)?;
+        }
+        let ended = unsafe { dev.end_command_buffer(self.cmd) }
+            .and_then(|_| unsafe { dev.reset_fences(&[frame.fence]) });
+        if let Err(e) = ended {
+            frame.destroy(dev);
+            return Err(e).context("ending a command buffer");
         }
         clock.mark(Phase::Record);
-        let fence = unsafe { dev.create_fence(&vk::FenceCreateInfo::default(), None) }?;
         let cmds = [self.cmd];
         let submit = [vk::SubmitInfo::default().command_buffers(&cmds)];
         let result = {
-            let queue = inner.queue.lock().unwrap();
-            unsafe { dev.queue_submit(*queue, &submit, fence) }
+            let queue = gpu.inner.queue.lock().unwrap();
+            unsafe { dev.queue_submit(*queue, &submit, frame.fence) }
         };
-        clock.mark(Phase::Submit);
-        let result = result.and_then(|_| unsafe { dev.wait_for_fences(&[fence], true, u64::MAX) });
-        unsafe { dev.destroy_fence(fence, None) };
-        self.submitted = true;
-        result.context("submitting a batch to the Vulkan queue")?;
-        clock.mark(Phase::Wait);
-
-        let mut times = BatchTimes::default();
-        if let (Some(q), false) = (self.queries, self.timed.is_empty()) {
-            let period = inner.info.timestamp_period_ns.unwrap_or(1.0) as f64;
-            let mut raw = vec![0u64; 2 * self.timed.len()];
-            unsafe {
-                dev.get_query_pool_results(
-                    q,
-                    0,
-                    &mut raw,
-                    vk::QueryResultFlags::TYPE_64 | vk::QueryResultFlags::WAIT,
-                )
-            }
-            .context("reading timestamp queries")?;
-            for (i, name) in self.timed.iter().enumerate() {
-                let ns = raw[2 * i + 1].saturating_sub(raw[2 * i]) as f64 * period;
-                inner.profile.add(name, ns);
-                times.dispatches.push((name, ns));
-            }
+        if let Err(e) = result {
+            // Never submitted: the frame is free again.
+            gpu.return_frame(frame);
+            return Err(e).context("submitting a batch to the Vulkan queue");
         }
+        clock.mark(Phase::Submit);
+        Ok(InFlight {
+            gpu: gpu.clone(),
+            frame: Some(frame),
+            timed: std::mem::take(&mut self.timed),
+            host: clock.times,
+            complete: false,
+        })
+    }
+}
+
+impl InFlight {
+    /// Wait for the batch's fence (the device is then done with it); its timestamps stay
+    /// unread until [`Self::wait`].
+    pub fn wait_fence(&mut self) -> Result<()> {
+        if self.complete {
+            return Ok(());
+        }
+        let mut clock = PhaseClock::start();
+        let frame = self
+            .frame
+            .as_ref()
+            .expect("a batch in flight has its frame");
+        unsafe {
+            self.gpu
+                .inner
+                .device
+                .wait_for_fences(&[frame.fence], true, u64::MAX)
+        }
+        .context("waiting for a batch on the Vulkan queue")?;
+        clock.mark(Phase::Wait);
+        self.host.add(&clock.times);
+        self.complete = true;
+        Ok(())
+    }
+
+    /// Wait for the batch to complete; returns the device time of each timed dispatch and the
+    /// host time of its submission and of the waits. (Reading a batch's timestamps once later
+    /// batches are queued behind it can wait for those too — lavapipe does — so a loop with
+    /// batches in flight waits for their fences first and reads the timestamps after.)
+    pub fn wait(mut self) -> Result<BatchTimes> {
+        // A failed wait means a lost device: the frame is not given back, so its objects are
+        // never reused.
+        self.wait_fence()?;
+        let mut clock = PhaseClock::start();
+        let gpu = self.gpu.clone();
+        let inner = &gpu.inner;
+        let dev = &inner.device;
+        let frame = self.frame.take().expect("waited once");
+        let mut times = BatchTimes::default();
+        let read = match (frame.queries, self.timed.is_empty()) {
+            (Some(q), false) => {
+                let period = inner.info.timestamp_period_ns.unwrap_or(1.0) as f64;
+                let mut raw = vec![0u64; 2 * self.timed.len()];
+                // After the fence the results are available; should a driver not have them
+                // yet, wait for them.
+                let mut read = |flags| unsafe {
+                    dev.get_query_pool_results(
+                        q,
+                        0,
+                        &mut raw,
+                        vk::QueryResultFlags::TYPE_64 | flags,
+                    )
+                };
+                let r = match read(vk::QueryResultFlags::empty()) {
+                    Err(vk::Result::NOT_READY) => read(vk::QueryResultFlags::WAIT),
+                    r => r,
+                };
+                if r.is_ok() {
+                    for (i, name) in self.timed.iter().enumerate() {
+                        let ns = raw[2 * i + 1].saturating_sub(raw[2 * i]) as f64 * period;
+                        inner.profile.add(name, ns);
+                        times.dispatches.push((name, ns));
+                    }
+                }
+                r
+            }
+            _ => Ok(()),
+        };
+        gpu.return_frame(frame);
+        read.context("reading timestamp queries")?;
         clock.mark(Phase::Readback);
-        times.host = clock.times;
+        times.host = self.host;
+        times.host.add(&clock.times);
         Ok(times)
+    }
+}
+
+impl Drop for InFlight {
+    fn drop(&mut self) {
+        if let Some(frame) = self.frame.take() {
+            let dev = &self.gpu.inner.device;
+            if unsafe { dev.wait_for_fences(&[frame.fence], true, u64::MAX) }.is_ok() {
+                self.gpu.return_frame(frame);
+            }
+            // Else the device may still use the frame: its objects are not reused.
+        }
     }
 }
 
 impl Drop for Batch {
     fn drop(&mut self) {
-        let inner = &self.gpu.inner;
-        unsafe {
-            if !self.submitted {
-                // Recorded but never submitted: ending it is enough to free it.
-                let _ = inner.device.end_command_buffer(self.cmd);
-            }
-            if let Some(q) = self.queries {
-                inner.device.destroy_query_pool(q, None);
-            }
-            // Destroying the pool frees its command buffer.
-            inner.device.destroy_command_pool(self.pool, None);
+        if let Some(frame) = self.frame.take() {
+            // Recorded but never submitted: ending the buffer is enough; the next batch resets
+            // the pool.
+            let _ = unsafe { self.gpu.inner.device.end_command_buffer(self.cmd) };
+            self.gpu.return_frame(frame);
         }
     }
 }

@@ -1,6 +1,7 @@
 //! The Vulkan context: logical device, compute queue, allocator, and the compute
 //! pipelines built lazily from the kernel table (push constants only; buffers by device address).
 
+use super::batch::Frame;
 use super::device::{self, DeviceInfo};
 use super::instance::Instance;
 use super::profile::Profile;
@@ -37,6 +38,8 @@ pub(super) struct Inner {
     pub queue: Mutex<vk::Queue>,
     pub allocator: ManuallyDrop<Mutex<Allocator>>,
     pub pipelines: Mutex<HashMap<&'static str, Pipeline>>,
+    /// Spare batch frames (command pool, buffer, queries, fence) for the next batches.
+    pub frames: Mutex<Vec<Frame>>,
     pub live_buffers: AtomicUsize,
     pub profile: Profile,
     pub force_staging: bool,
@@ -151,6 +154,7 @@ impl Gpu {
                 queue: Mutex::new(queue),
                 allocator: ManuallyDrop::new(Mutex::new(allocator)),
                 pipelines: Mutex::new(HashMap::new()),
+                frames: Mutex::new(Vec::new()),
                 live_buffers: AtomicUsize::new(0),
                 profile: Profile::default(),
                 force_staging: opts.force_staging,
@@ -245,6 +249,9 @@ impl Drop for Inner {
     fn drop(&mut self) {
         unsafe {
             let _ = self.device.device_wait_idle();
+            for f in self.frames.get_mut().unwrap().drain(..) {
+                f.destroy(&self.device);
+            }
             for (_, p) in self.pipelines.get_mut().unwrap().drain() {
                 self.device.destroy_pipeline(p.pipeline, None);
                 self.device.destroy_pipeline_layout(p.layout, None);

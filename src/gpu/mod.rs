@@ -1,17 +1,20 @@
 //! Vulkan compute runtime: instance and device choice (`device`), the context with its allocator
 //! and pipelines (`context`), RAII buffers addressed by device address (`buffer`), batched
 //! submission with timestamp queries (`batch`), per-kernel profiles (`profile`), and what the Vulkan
-//! backends share: per-batch ray buffers (`ray_buffers`), per-step results copied back at the end
-//! of a batch (`readback`), the `optim_args` recording (`optim_args`), the host time of a training
-//! step by phase (`step_times`), the training views and the batches sampled from them
-//! (`train_views`).
+//! backends share: per-batch ray buffers (`ray_buffers`), per-step results in a ring of
+//! host-visible slots (`readback`) with the step's loss summed on the device (`loss_sum`), the
+//! steps submitted and not yet read (`in_flight`), the `optim_args` recording (`optim_args`), the
+//! host time of a training step by phase (`step_times`), the training views and the batches
+//! sampled from them (`train_views`).
 
 mod background_step;
 mod batch;
 mod buffer;
 mod context;
 mod device;
+mod in_flight;
 mod instance;
+mod loss_sum;
 mod optim_args;
 mod profile;
 mod ray_buffers;
@@ -20,14 +23,16 @@ mod step_times;
 mod train_views;
 
 pub use background_step::record_background_step;
-pub use batch::{Batch, BatchTimes};
+pub use batch::{Batch, BatchTimes, InFlight};
 pub use buffer::GpuBuffer;
 pub use context::{list_devices, Gpu, GpuOptions};
 pub use device::{pick_default, DeviceInfo, DeviceKind};
+pub use in_flight::{StepMeta, StepsInFlight, MAX_IN_FLIGHT};
+pub use loss_sum::record_loss_sum;
 pub use optim_args::record_optim_args;
 pub use profile::Profile;
 pub use ray_buffers::RayBuffers;
-pub use readback::Readback;
+pub use readback::{Readback, STEP_SLOTS};
 pub use step_times::{Phase, PhaseClock, StepTimes};
 pub use train_views::{TrainRays, TrainViewBuffers};
 

@@ -5,6 +5,7 @@ use crate::cpu::background::{self, Background};
 use crate::cpu::plenoxel::{self as twin, TrainGrads};
 use crate::cpu::step::TOUCH_ALL;
 use crate::cpu::{rmsprop_sparse, tv, RmsProp, Stage1Params, TvChunk};
+use crate::data::TrainViews;
 use crate::gpu::{Phase, PhaseClock};
 use crate::grid::{Grid, SH_DIM};
 use crate::math::plenoxel::{GridRef, PlenoxelCounts};
@@ -20,6 +21,8 @@ pub struct CpuPlenoxels {
     state_sh: Vec<f32>,
     touched: Vec<u32>,
     bg: Background,
+    /// Figures of the `step_sampled` steps not yet taken.
+    done: Vec<StepStats>,
 }
 
 impl CpuPlenoxels {
@@ -38,6 +41,7 @@ impl CpuPlenoxels {
             state_sh: Vec::new(),
             touched: Vec::new(),
             bg: Background::new([1.0; 3], false),
+            done: Vec::new(),
         };
         b.load(grid, None).expect("a fresh state always fits");
         b
@@ -169,6 +173,26 @@ impl Plenoxels for CpuPlenoxels {
             device_ns: 0.0,
             host: clock.times,
         })
+    }
+
+    fn step_sampled(
+        &mut self,
+        views: &TrainViews,
+        seed: u64,
+        n: usize,
+        p: &StepParams,
+    ) -> Result<()> {
+        let mut clock = PhaseClock::start();
+        let batch = views.sample(seed, n)?;
+        clock.mark(Phase::Sampling);
+        let mut stats = self.step(&batch.rays, &batch.targets, p)?;
+        stats.host.add(&clock.times);
+        self.done.push(stats);
+        Ok(())
+    }
+
+    fn take_stats(&mut self) -> Result<Vec<StepStats>> {
+        Ok(std::mem::take(&mut self.done))
     }
 
     fn gradients(&mut self, rays: &[f32], targets: &[f32], stop_thresh: f32) -> Result<Gradients> {

@@ -10,7 +10,6 @@ pub use vulkan::VulkanPlenoxels;
 use crate::cpu::background::Background;
 use crate::cpu::plenoxel::MarchParams;
 use crate::data::TrainViews;
-use crate::gpu::{Phase, PhaseClock};
 use crate::grid::Grid;
 use crate::math::plenoxel::PlenoxelCounts;
 use anyhow::Result;
@@ -71,22 +70,20 @@ pub trait Plenoxels {
     /// One optimisation step on a batch: `rays` 6 floats per ray, `targets` 3 per ray.
     fn step(&mut self, rays: &[f32], targets: &[f32], p: &StepParams) -> Result<StepStats>;
     /// One optimisation step on the batch of `n` rays drawn from `views` with `seed`
-    /// (`cpu::sample_rays`). This default draws it with the twin on the host (the CPU backend);
-    /// the Vulkan backend draws it on the device, from views it uploads once.
+    /// (`cpu::sample_rays`): the CPU backend draws it with the twin on the host; the Vulkan
+    /// backend draws it on the device, from views it uploads once, and returns once the step is
+    /// submitted (the device may still run it). Its figures come with [`Self::take_stats`].
     fn step_sampled(
         &mut self,
         views: &TrainViews,
         seed: u64,
         n: usize,
         p: &StepParams,
-    ) -> Result<StepStats> {
-        let mut clock = PhaseClock::start();
-        let batch = views.sample(seed, n)?;
-        clock.mark(Phase::Sampling);
-        let mut stats = self.step(&batch.rays, &batch.targets, p)?;
-        stats.host.add(&clock.times);
-        Ok(stats)
-    }
+    ) -> Result<()>;
+    /// The figures of every `step_sampled` step since the last call, in order (waits for the
+    /// steps still running). A backend keeps at most [`crate::gpu::STEP_SLOTS`] steps' figures
+    /// on the device and reads them into host memory when that many have not been taken.
+    fn take_stats(&mut self) -> Result<Vec<StepStats>>;
     /// The data-term gradients of a batch without updating anything: per-ray squared error,
     /// dL/dσ, dL/dSH and, when it is learned, dL/dbg (L = mean squared error over rays and
     /// channels), and the sample counts.

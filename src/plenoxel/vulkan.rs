@@ -8,16 +8,27 @@ use crate::cpu::background::Background;
 use crate::cpu::step::{STEP_FLAGS, STEP_N, STEP_STATS, TOUCH_ALL};
 use crate::data::TrainViews;
 use crate::gpu::{
-    record_background_step, record_optim_args, Batch, Gpu, GpuBuffer, Phase, PhaseClock,
-    RayBuffers, Readback, TrainRays, TrainViewBuffers,
+    record_background_step, record_loss_sum, record_optim_args, Batch, BatchTimes, Gpu, GpuBuffer,
+    Phase, PhaseClock, RayBuffers, Readback, StepMeta, StepsInFlight, TrainRays, TrainViewBuffers,
+    STEP_SLOTS,
 };
 use crate::grid::{Grid, SH_DIM};
 use crate::kernels;
 use crate::math::plenoxel::{occ_dims, PlenoxelCounts};
 use anyhow::{ensure, Result};
+use std::cell::RefCell;
 
 /// Device-resident stage-1 state.
 pub struct VulkanPlenoxels {
+    /// Steps submitted and not yet read. First, so that dropping the backend waits for them
+    /// before any buffer they use is freed. In a `RefCell` because reading state (`grid`, …)
+    /// must wait for them too.
+    steps: RefCell<StepsInFlight>,
+    /// Figures of completed steps not yet taken.
+    done: Vec<(StepStats, BatchTimes)>,
+    /// View set and batch size of the last sampled step: a step of another shape may reallocate
+    /// buffers the steps in flight use, so it waits for them first.
+    shape: Option<(u64, usize)>,
     gpu: Gpu,
     meta: Grid,
     links: GpuBuffer,
@@ -32,7 +43,7 @@ pub struct VulkanPlenoxels {
     step: GpuBuffer,
     /// Indirect dispatch arguments of rmsprop_sparse.
     args: GpuBuffer,
-    /// plenoxel_train's params buffer (written before each training batch).
+    /// plenoxel_train's params buffer (written in each training batch's command stream).
     params: GpuBuffer,
     /// The background (`Background`): read by the render and training kernels, and, when
     /// learned, its gradient accumulated and stepped on the device (`background_step`) so that a
@@ -43,7 +54,8 @@ pub struct VulkanPlenoxels {
     /// Per-batch rays, targets and per-ray output: rgb (3 floats) for render, the squared error
     /// (1 float) for training.
     rays: RayBuffers,
-    /// A training step's per-ray losses and counters, copied back at the end of its batch.
+    /// Per training step since the figures were last read, a slot: the squared-error sum and
+    /// the counters.
     readback: Readback,
     /// The training views and sampled batches (uploaded by the first sampled step; kept by
     /// `load`).
@@ -55,6 +67,9 @@ impl VulkanPlenoxels {
         let n = grid.allocated();
         let nb = occ_dims(grid.res);
         Ok(VulkanPlenoxels {
+            steps: RefCell::default(),
+            done: Vec::new(),
+            shape: None,
             gpu: gpu.clone(),
             links: gpu.upload(&grid.links)?,
             density: gpu.upload(&grid.density)?,
@@ -74,7 +89,11 @@ impl VulkanPlenoxels {
             bg: gpu.upload(&[Background::new([1.0; 3], false)])?,
             bg_learned: false,
             rays: RayBuffers::new(3 * std::mem::size_of::<f32>()),
-            readback: Readback::default(),
+            readback: Readback::new(
+                gpu,
+                &[4, std::mem::size_of::<PlenoxelCounts>() as u64],
+                STEP_SLOTS,
+            )?,
             views: None,
             meta: Grid {
                 links: Vec::new(),
@@ -165,12 +184,12 @@ impl VulkanPlenoxels {
     ) -> Result<Batch> {
         let n = src.len();
         let mp = march_params(&self.meta, stop_thresh);
-        self.params.write(&[PlenoxelParams {
+        let params = PlenoxelParams {
             scale: mp.scale,
             offset: mp.offset,
             stop_thresh,
             grad_scale: 2.0 / (3.0 * n as f32),
-        }])?;
+        };
         let (mut b, [ray_buf, target_buf, loss_buf]) = match src {
             TrainRays::Host { rays, targets } => {
                 ensure!(
@@ -192,6 +211,7 @@ impl VulkanPlenoxels {
                 (b, [rays, targets, out])
             }
         };
+        b.update(&self.params, 0, &[params])?;
         b.dispatch_1d(
             &kernels::plenoxel_train::INFO,
             &kernels::plenoxel_train::Push {
@@ -215,11 +235,55 @@ impl VulkanPlenoxels {
         Ok(b)
     }
 
-    /// One training step on `src`'s rays: occupancy → sampling (when drawn on the device) →
-    /// train → TV → RMSProp, one submission; the per-ray losses and counters come back with it.
-    fn train_step(&mut self, src: TrainRays, p: &StepParams) -> Result<StepStats> {
+    /// Wait for the steps in flight (before the host reads, writes or frees what they use).
+    fn settle(&self) -> Result<()> {
+        self.steps.borrow_mut().settle()
+    }
+
+    /// Read the figures of every step submitted since the last read into `done`.
+    fn collect(&mut self) -> Result<()> {
+        let steps = self.steps.get_mut().take()?;
+        for (slot, (meta, times)) in steps.into_iter().enumerate() {
+            let mut clock = PhaseClock::start();
+            let sum: Vec<f32> = self.readback.part(slot, 0)?;
+            let counts = self.readback.part::<PlenoxelCounts>(slot, 1)?[0];
+            clock.mark(Phase::Readback);
+            let mut host = meta.host;
+            host.add(&times.host);
+            host.add(&clock.times);
+            let stats = StepStats {
+                mse: sum[0] as f64 / (3 * meta.n.max(1)) as f64,
+                counts,
+                device_ns: times.total_ns(),
+                host,
+            };
+            self.done.push((stats, times));
+        }
+        Ok(())
+    }
+
+    /// Record and submit one training step on `src`'s rays without waiting for it: occupancy →
+    /// sampling (when drawn on the device) → train → TV → RMSProp, one submission (up to
+    /// `MAX_IN_FLIGHT` run on the device while the host records the next); its figures come back
+    /// with [`Self::take_timed`].
+    pub fn submit_step(&mut self, src: TrainRays, p: &StepParams) -> Result<()> {
         let n = src.len();
         let mut clock = PhaseClock::start();
+        match &src {
+            // Host rays are written into buffers an earlier step may still read.
+            TrainRays::Host { .. } => self.settle()?,
+            // Another view set or batch size may reallocate buffers steps in flight use.
+            TrainRays::Sampled { id, n, .. } => {
+                if self.shape != Some((*id, *n)) {
+                    self.settle()?;
+                    self.shape = Some((*id, *n));
+                }
+            }
+        }
+        if self.steps.get_mut().pending() == self.readback.slots() {
+            self.collect()?;
+        }
+        let slot = self.steps.get_mut().pending();
         let mut b = self.record_train(src, p.stop_thresh, &mut clock)?;
         if let Some(t) = p.tv {
             let span = t.count + self.meta.res[1] * self.meta.res[2];
@@ -249,35 +313,42 @@ impl VulkanPlenoxels {
         if self.bg_learned {
             record_background_step(&mut b, &self.bg, p.lr_bg, p.beta, p.eps)?;
         }
-        self.readback.record(
-            &self.gpu,
-            &mut b,
-            &[
-                (self.rays.out(), 0, 4 * n as u64),
-                (
-                    &self.step,
-                    4 * STEP_STATS as u64,
-                    std::mem::size_of::<PlenoxelCounts>() as u64,
-                ),
-            ],
-        )?;
+        // The step's figures into its slot: the squared error summed on the device, the
+        // counters copied.
+        let out = self.rays.out().address();
+        record_loss_sum(&mut b, out, self.readback.address(slot, 0), n, 1, 1)?;
+        self.readback
+            .copy(&mut b, slot, 1, &self.step, 4 * STEP_STATS as u64);
         clock.mark(Phase::Record);
-        let times = b.submit()?;
-        clock.absorb(&times.host);
-        let loss: Vec<f32> = self.readback.part(0)?;
-        let mse = loss.iter().map(|&l| l as f64).sum::<f64>() / (3 * n) as f64;
-        let counts = self.readback.part::<PlenoxelCounts>(1)?[0];
-        clock.mark(Phase::Readback);
-        Ok(StepStats {
-            mse,
-            counts,
-            device_ns: times.total_ns(),
-            host: clock.times,
-        })
+        let f = b.submit_async()?;
+        self.steps.get_mut().push(
+            f,
+            StepMeta {
+                n,
+                host: clock.times,
+            },
+        )
+    }
+
+    /// The figures of every step submitted since they were last taken, in order, with the
+    /// device times of their dispatches (waits for the steps in flight).
+    pub fn take_timed(&mut self) -> Result<Vec<(StepStats, BatchTimes)>> {
+        self.collect()?;
+        Ok(std::mem::take(&mut self.done))
+    }
+
+    /// One training step on `src`'s rays, waited for: its figures.
+    fn train_step(&mut self, src: TrainRays, p: &StepParams) -> Result<StepStats> {
+        self.submit_step(src, p)?;
+        let last = self.take_timed()?.pop();
+        Ok(last
+            .ok_or_else(|| anyhow::anyhow!("a submitted step left no figures"))?
+            .0)
     }
 
     /// The last sampled batch's rays, targets and pixel keys (`n` of each).
     pub fn sampled_batch(&self, n: usize) -> Result<(Vec<f32>, Vec<f32>, Vec<u64>)> {
+        self.settle()?;
         let views = self.views.as_ref();
         let views = views.ok_or_else(|| anyhow::anyhow!("no batch was sampled"))?;
         views.download_batch(n)
@@ -306,17 +377,22 @@ impl Plenoxels for VulkanPlenoxels {
         seed: u64,
         n: usize,
         p: &StepParams,
-    ) -> Result<StepStats> {
+    ) -> Result<()> {
         let src = TrainRays::Sampled {
             id: views.id(),
             set: views.set(),
             seed,
             n,
         };
-        self.train_step(src, p)
+        self.submit_step(src, p)
+    }
+
+    fn take_stats(&mut self) -> Result<Vec<StepStats>> {
+        Ok(self.take_timed()?.into_iter().map(|(s, _)| s).collect())
     }
 
     fn gradients(&mut self, rays: &[f32], targets: &[f32], stop_thresh: f32) -> Result<Gradients> {
+        self.settle()?;
         let n = rays.len() / 6;
         self.record_train(
             TrainRays::Host { rays, targets },
@@ -348,6 +424,7 @@ impl Plenoxels for VulkanPlenoxels {
     }
 
     fn render(&mut self, rays: &[f32], stop_thresh: f32) -> Result<(Vec<f32>, PlenoxelCounts)> {
+        self.settle()?;
         let n = rays.len() / 6;
         let mp = march_params(&self.meta, stop_thresh);
         let (mut b, [ray_buf, _, out_buf]) = self.begin(rays, None, &mut PhaseClock::start())?;
@@ -378,6 +455,7 @@ impl Plenoxels for VulkanPlenoxels {
     }
 
     fn max_weights(&mut self, rays: &[f32], stop_thresh: f32) -> Result<Vec<f32>> {
+        self.settle()?;
         let n = rays.len() / 6;
         let mp = march_params(&self.meta, stop_thresh);
         let out = self.gpu.zeros::<u32>(self.allocated())?;
@@ -409,6 +487,7 @@ impl Plenoxels for VulkanPlenoxels {
     }
 
     fn grid(&self) -> Result<Grid> {
+        self.settle()?;
         Ok(Grid {
             links: self.links.download()?,
             density: self.density.download()?,
@@ -418,6 +497,7 @@ impl Plenoxels for VulkanPlenoxels {
     }
 
     fn optimizer_state(&self) -> Result<(Vec<f32>, Vec<f32>)> {
+        self.settle()?;
         Ok((self.state_density.download()?, self.state_sh.download()?))
     }
 
@@ -429,6 +509,8 @@ impl Plenoxels for VulkanPlenoxels {
                 "optimizer state does not match the grid"
             );
         }
+        // The figures of the steps so far stay (read now: the buffers they sit in go).
+        self.collect()?;
         let bg = self.background()?;
         let mut fresh = VulkanPlenoxels::new(&self.gpu, grid)?;
         if let Some((sd, ss)) = state {
@@ -437,15 +519,18 @@ impl Plenoxels for VulkanPlenoxels {
         }
         fresh.set_background(bg)?;
         fresh.views = self.views.take();
+        fresh.done = std::mem::take(&mut self.done);
         *self = fresh;
         Ok(())
     }
 
     fn background(&self) -> Result<Background> {
+        self.settle()?;
         Ok(self.bg.download()?[0])
     }
 
     fn set_background(&mut self, bg: Background) -> Result<()> {
+        self.settle()?;
         self.bg.write(&[bg])?;
         self.bg_learned = bg.learned();
         Ok(())

@@ -14,6 +14,7 @@ use crate::cpu::surface_reg::{
 };
 use crate::cpu::surface_train::{train, SurfaceGrads};
 use crate::cpu::{surface_rmsprop_sparse, tv, Stage2Params, SurfaceRmsProp};
+use crate::data::TrainViews;
 use crate::gpu::{Phase, PhaseClock};
 use crate::grid::surface::SurfaceGrid;
 use crate::grid::SH_DIM;
@@ -48,6 +49,8 @@ pub struct CpuSurface {
     blocks: Vec<u32>,
     refresh: BlockRefresh,
     bg: Background,
+    /// Figures of the `step_sampled` steps not yet taken.
+    done: Vec<SurfaceStepStats>,
 }
 
 impl CpuSurface {
@@ -71,6 +74,7 @@ impl CpuSurface {
             state: [vec![0.0; n], vec![0.0; n], vec![0.0; n * SH_DIM]],
             touched: vec![0; n],
             bg: Background::new([1.0; 3], false),
+            done: Vec::new(),
         })
     }
 
@@ -218,6 +222,26 @@ impl SurfaceBackend for CpuSurface {
         Ok(stats)
     }
 
+    fn step_sampled(
+        &mut self,
+        views: &TrainViews,
+        seed: u64,
+        n: usize,
+        p: &SurfaceStepParams,
+    ) -> Result<()> {
+        let mut clock = PhaseClock::start();
+        let batch = views.sample(seed, n)?;
+        clock.mark(Phase::Sampling);
+        let mut stats = self.step(&batch.rays, &batch.targets, p)?;
+        stats.host.add(&clock.times);
+        self.done.push(stats);
+        Ok(())
+    }
+
+    fn take_stats(&mut self) -> Result<Vec<SurfaceStepStats>> {
+        Ok(std::mem::take(&mut self.done))
+    }
+
     fn render(&mut self, rays: &[f32], a: f32, stop_thresh: f32) -> Result<(Vec<f32>, SurfCounts)> {
         let sp = surface_params(&self.grid, a, stop_thresh, self.bg.rgb);
         self.refresh_blocks(0.0, 0.0)?;
@@ -249,10 +273,11 @@ impl SurfaceBackend for CpuSurface {
             state[0].len() == n && state[1].len() == n && state[2].len() == n * SH_DIM,
             "optimizer state does not match the surface grid"
         );
-        let bg = self.bg;
+        let (bg, done) = (self.bg, std::mem::take(&mut self.done));
         *self = CpuSurface::new(grid)?;
         self.state = state;
         self.bg = bg;
+        self.done = done;
         Ok(())
     }
 

@@ -19,7 +19,6 @@ use crate::cpu::surface_reg::{NormalChunk, NormalPrefix, OpacityChunk};
 use crate::cpu::surface_train::{SurfaceLoss, TrainCounts};
 use crate::cpu::TvChunk;
 use crate::data::TrainViews;
-use crate::gpu::{Phase, PhaseClock};
 use crate::grid::surface::SurfaceGrid;
 use anyhow::Result;
 
@@ -159,22 +158,20 @@ pub trait SurfaceBackend {
         p: &SurfaceStepParams,
     ) -> Result<SurfaceStepStats>;
     /// One optimisation step on the batch of `n` rays drawn from `views` with `seed`
-    /// (`cpu::sample_rays`). This default draws it with the twin on the host (the CPU backend);
-    /// the Vulkan backend draws it on the device, from views it uploads once.
+    /// (`cpu::sample_rays`): the CPU backend draws it with the twin on the host; the Vulkan
+    /// backend draws it on the device, from views it uploads once, and returns once the step is
+    /// submitted (the device may still run it). Its figures come with [`Self::take_stats`].
     fn step_sampled(
         &mut self,
         views: &TrainViews,
         seed: u64,
         n: usize,
         p: &SurfaceStepParams,
-    ) -> Result<SurfaceStepStats> {
-        let mut clock = PhaseClock::start();
-        let batch = views.sample(seed, n)?;
-        clock.mark(Phase::Sampling);
-        let mut stats = self.step(&batch.rays, &batch.targets, p)?;
-        stats.host.add(&clock.times);
-        Ok(stats)
-    }
+    ) -> Result<()>;
+    /// The figures of every `step_sampled` step since the last call, in order (waits for the
+    /// steps still running). A backend keeps at most [`crate::gpu::STEP_SLOTS`] steps' figures
+    /// on the device and reads them into host memory when that many have not been taken.
+    fn take_stats(&mut self) -> Result<Vec<SurfaceStepStats>>;
     /// Render rays (composited on the background): 3 floats per ray, and the counters of
     /// `surface_fwd`.
     fn render(&mut self, rays: &[f32], a: f32, stop_thresh: f32) -> Result<(Vec<f32>, SurfCounts)>;

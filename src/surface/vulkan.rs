@@ -25,8 +25,8 @@ use crate::cpu::surface_train::{SurfaceLoss, SURF_MAX_HITS};
 use crate::cpu::SurfaceRmsProp;
 use crate::data::TrainViews;
 use crate::gpu::{
-    record_background_step, Batch, BatchTimes, Gpu, GpuBuffer, Phase, PhaseClock, RayBuffers,
-    Readback, TrainRays, TrainViewBuffers,
+    record_background_step, record_loss_sum, Batch, BatchTimes, Gpu, GpuBuffer, Phase, PhaseClock,
+    RayBuffers, Readback, StepMeta, StepsInFlight, TrainRays, TrainViewBuffers, STEP_SLOTS,
 };
 use crate::grid::surface::SurfaceGrid;
 use crate::grid::SH_DIM;
@@ -36,6 +36,7 @@ use crate::math::surface_blocks::{
     surf_blocks_per_axis, surf_live_words, SURF_BLOCK_SHIFT_VULKAN, SURF_BOX_WORDS,
 };
 use anyhow::{ensure, Result};
+use std::cell::RefCell;
 
 /// The params buffer of `surface_fwd` and `surface_train` for a batch of `n_rays`: the levels
 /// zero-padded to [`SURF_MAX_LEVELS`]; `loss` zero for a render.
@@ -75,6 +76,15 @@ pub struct SurfaceGradients {
 
 /// Device-resident stage-2 state.
 pub struct VulkanSurface {
+    /// Steps submitted and not yet read. First, so that dropping the backend waits for them
+    /// before any buffer they use is freed. In a `RefCell` because reading state (`grid`, …)
+    /// must wait for them too.
+    steps: RefCell<StepsInFlight>,
+    /// Figures of completed steps not yet taken.
+    done: Vec<(SurfaceStepStats, BatchTimes)>,
+    /// View set and batch size of the last sampled step: a step of another shape may reallocate
+    /// buffers the steps in flight use, so it waits for them first.
+    shape: Option<(u64, usize)>,
     gpu: Gpu,
     /// The grid without its arrays (resolution, bounds, levels).
     meta: SurfaceGrid,
@@ -100,7 +110,8 @@ pub struct VulkanSurface {
     step: GpuBuffer,
     /// Indirect dispatch arguments of surface_rmsprop.
     args: GpuBuffer,
-    /// The params buffer of surface_fwd and surface_train (written before each batch).
+    /// The params buffer of surface_fwd and surface_train (written in each batch's command
+    /// stream).
     params: GpuBuffer,
     /// The background (`Background`): read by surface_fwd and surface_train, and, when learned,
     /// its gradient accumulated and stepped on the device (`background_step`), so that a step
@@ -127,8 +138,8 @@ pub struct VulkanSurface {
     /// Per-batch rays, targets and per-ray output: `RayLoss` (16 bytes) for training, `SurfOut`
     /// (20 bytes) for rendering.
     rays: RayBuffers,
-    /// A training step's per-ray losses, regulariser values and counters, copied back at the end
-    /// of its batch.
+    /// Per training step since the figures were last read, a slot: the loss sums (squared
+    /// error, entropy, consistency), the regulariser values, the counters.
     readback: Readback,
     /// The training views and sampled batches (uploaded by the first sampled step; kept by
     /// `load`).
@@ -163,6 +174,9 @@ impl VulkanSurface {
         let normal_prefix = NormalPrefix::new(&grid.links, &row_slot, grid.res);
         let axis_nbrs = axis_neighbours(&grid.links, &row_slot, grid.res);
         Ok(VulkanSurface {
+            steps: RefCell::default(),
+            done: Vec::new(),
+            shape: None,
             gpu: gpu.clone(),
             rows: n,
             links: gpu.upload(&grid.links)?,
@@ -206,7 +220,11 @@ impl VulkanSurface {
             reg_loss: gpu.zeros::<f32>(2)?,
             reg_skipped: gpu.zeros::<u32>(1)?,
             rays: RayBuffers::new(std::mem::size_of::<SurfOut>()),
-            readback: Readback::default(),
+            readback: Readback::new(
+                gpu,
+                &[16, 8, std::mem::size_of::<TrainCounts>() as u64],
+                STEP_SLOTS,
+            )?,
             views: None,
             meta: SurfaceGrid {
                 links: Vec::new(),
@@ -273,8 +291,7 @@ impl VulkanSurface {
         // The colour is the device's (`bg`); surface_fwd and surface_train read it there.
         let sp = surface_params(&self.meta, p.a, p.stop_thresh, [1.0; 3]);
         clock.mark(Phase::Record);
-        self.params
-            .write(&[surf_params(&sp, &batch_loss(n, p), n)])?;
+        let params = surf_params(&sp, &batch_loss(n, p), n);
         let (mut b, [ray_buf, target_buf, out_buf]) = match src {
             TrainRays::Host { rays, targets } => self.begin(rays, Some(targets), clock)?,
             TrainRays::Sampled { id, set, seed, n } => {
@@ -287,6 +304,7 @@ impl VulkanSurface {
                 (b, [rays, targets, out])
             }
         };
+        b.update(&self.params, 0, &[params])?;
         if let Some(margin) = self.refresh.before_pass(p.lr_delta, p.beta) {
             self.record_blocks(&mut b, margin)?;
         }
@@ -471,6 +489,7 @@ impl VulkanSurface {
         targets: &[f32],
         p: &SurfaceStepParams,
     ) -> Result<SurfaceGradients> {
+        self.settle()?;
         let n = rays.len() / 6;
         self.record_train(
             TrainRays::Host { rays, targets },
@@ -503,18 +522,63 @@ impl VulkanSurface {
 
     /// Number of vertices touched by the last step (read from the step record).
     pub fn last_touched(&self) -> Result<u32> {
+        self.settle()?;
         Ok(self.step.download_range::<u32>(STEP_COUNT, 1)?[0])
     }
 
-    /// One training step on `src`'s rays, returning its statistics and the device times of its
-    /// dispatches.
-    pub fn step_timed(
-        &mut self,
-        src: TrainRays,
-        p: &SurfaceStepParams,
-    ) -> Result<(SurfaceStepStats, BatchTimes)> {
+    /// Wait for the steps in flight (before the host reads, writes or frees what they use).
+    fn settle(&self) -> Result<()> {
+        self.steps.borrow_mut().settle()
+    }
+
+    /// Read the figures of every step submitted since the last read into `done`.
+    fn collect(&mut self) -> Result<()> {
+        let steps = self.steps.get_mut().take()?;
+        for (slot, (meta, times)) in steps.into_iter().enumerate() {
+            let mut clock = PhaseClock::start();
+            let sums: Vec<f32> = self.readback.part(slot, 0)?;
+            let reg: Vec<f32> = self.readback.part(slot, 1)?;
+            let counts = self.readback.part::<TrainCounts>(slot, 2)?[0];
+            clock.mark(Phase::Readback);
+            let nf = meta.n.max(1) as f64;
+            let mut host = meta.host;
+            host.add(&times.host);
+            host.add(&clock.times);
+            let stats = SurfaceStepStats {
+                mse: sums[0] as f64 / (3.0 * nf),
+                entropy: sums[1] as f64 / nf,
+                consistency: sums[2] as f64 / nf,
+                reg_loss: reg.iter().map(|&x| x as f64).sum(),
+                counts,
+                device_ns: times.total_ns(),
+                host,
+            };
+            self.done.push((stats, times));
+        }
+        Ok(())
+    }
+
+    /// Record and submit one training step on `src`'s rays without waiting for it (up to
+    /// `MAX_IN_FLIGHT` steps run on the device while the host records the next); its figures
+    /// come back with [`Self::take_timed`].
+    pub fn submit_step(&mut self, src: TrainRays, p: &SurfaceStepParams) -> Result<()> {
         let n = src.len();
         let mut clock = PhaseClock::start();
+        match &src {
+            // Host rays are written into buffers an earlier step may still read.
+            TrainRays::Host { .. } => self.settle()?,
+            // Another view set or batch size may reallocate buffers steps in flight use.
+            TrainRays::Sampled { id, n, .. } => {
+                if self.shape != Some((*id, *n)) {
+                    self.settle()?;
+                    self.shape = Some((*id, *n));
+                }
+            }
+        }
+        if self.steps.get_mut().pending() == self.readback.slots() {
+            self.collect()?;
+        }
+        let slot = self.steps.get_mut().pending();
         let mut b = self.record_train(src, p, &mut clock)?;
         let plan = RegPlan::new(p, &self.normal_prefix, self.axis_reach);
         self.record_regularisers(&mut b, p, &plan)?;
@@ -522,39 +586,42 @@ impl VulkanSurface {
         if self.bg_learned {
             record_background_step(&mut b, &self.bg, p.lr_bg, p.beta, p.eps)?;
         }
-        self.readback.record(
-            &self.gpu,
-            &mut b,
-            &[
-                (
-                    self.rays.out(),
-                    0,
-                    (n * std::mem::size_of::<RayLoss>()) as u64,
-                ),
-                (&self.reg_loss, 0, self.reg_loss.size()),
-                (&self.stats, 0, std::mem::size_of::<TrainCounts>() as u64),
-            ],
-        )?;
+        // The step's figures into its slot: per-ray losses summed on the device, the
+        // regulariser values and counters copied.
+        let stride = (std::mem::size_of::<RayLoss>() / 4) as u32;
+        let out = self.rays.out().address();
+        record_loss_sum(&mut b, out, self.readback.address(slot, 0), n, stride, 3)?;
+        self.readback.copy(&mut b, slot, 1, &self.reg_loss, 0);
+        self.readback.copy(&mut b, slot, 2, &self.stats, 0);
         clock.mark(Phase::Record);
-        let times = b.submit()?;
-        clock.absorb(&times.host);
+        let f = b.submit_async()?;
         self.refresh.after_update(p.lr_delta, p.beta);
-        let loss: Vec<RayLoss> = self.readback.part(0)?;
-        let nf = n as f64;
-        let sum = |f: fn(&RayLoss) -> f32| loss.iter().map(|l| f(l) as f64).sum::<f64>();
-        let reg: Vec<f32> = self.readback.part(1)?;
-        let mut stats = SurfaceStepStats {
-            mse: sum(|l| l.sq_err) / (3.0 * nf),
-            reg_loss: reg.iter().map(|&x| x as f64).sum(),
-            entropy: sum(|l| l.entropy) / nf,
-            consistency: sum(|l| l.consistency) / nf,
-            counts: self.readback.part::<TrainCounts>(2)?[0],
-            device_ns: times.total_ns(),
-            host: Default::default(),
-        };
-        clock.mark(Phase::Readback);
-        stats.host = clock.times;
-        Ok((stats, times))
+        self.steps.get_mut().push(
+            f,
+            StepMeta {
+                n,
+                host: clock.times,
+            },
+        )
+    }
+
+    /// The figures of every step submitted since they were last taken, in order, with the
+    /// device times of their dispatches (waits for the steps in flight).
+    pub fn take_timed(&mut self) -> Result<Vec<(SurfaceStepStats, BatchTimes)>> {
+        self.collect()?;
+        Ok(std::mem::take(&mut self.done))
+    }
+
+    /// One training step on `src`'s rays, waited for: its figures and the device times of its
+    /// dispatches.
+    pub fn step_timed(
+        &mut self,
+        src: TrainRays,
+        p: &SurfaceStepParams,
+    ) -> Result<(SurfaceStepStats, BatchTimes)> {
+        self.submit_step(src, p)?;
+        let last = self.take_timed()?.pop();
+        last.ok_or_else(|| anyhow::anyhow!("a submitted step left no figures"))
     }
 }
 
@@ -578,17 +645,22 @@ impl SurfaceBackend for VulkanSurface {
         seed: u64,
         n: usize,
         p: &SurfaceStepParams,
-    ) -> Result<SurfaceStepStats> {
+    ) -> Result<()> {
         let src = TrainRays::Sampled {
             id: views.id(),
             set: views.set(),
             seed,
             n,
         };
-        Ok(self.step_timed(src, p)?.0)
+        self.submit_step(src, p)
+    }
+
+    fn take_stats(&mut self) -> Result<Vec<SurfaceStepStats>> {
+        Ok(self.take_timed()?.into_iter().map(|(s, _)| s).collect())
     }
 
     fn render(&mut self, rays: &[f32], a: f32, stop_thresh: f32) -> Result<(Vec<f32>, SurfCounts)> {
+        self.settle()?;
         let n = rays.len() / 6;
         let sp = surface_params(&self.meta, a, stop_thresh, [1.0; 3]);
         let no_loss = SurfaceLoss {
@@ -628,6 +700,7 @@ impl SurfaceBackend for VulkanSurface {
     }
 
     fn grid(&self) -> Result<SurfaceGrid> {
+        self.settle()?;
         let rows = self.rows;
         Ok(SurfaceGrid {
             links: self.links.download()?,
@@ -639,6 +712,7 @@ impl SurfaceBackend for VulkanSurface {
     }
 
     fn optimizer_state(&self) -> Result<SurfaceState> {
+        self.settle()?;
         let rows = self.rows;
         Ok([
             self.state[0].download_range(0, rows)?,
@@ -655,6 +729,8 @@ impl SurfaceBackend for VulkanSurface {
                 "optimizer state does not match the surface grid"
             );
         }
+        // The figures of the steps so far stay (read now: the buffers they sit in go).
+        self.collect()?;
         let bg = self.background()?;
         let mut fresh = VulkanSurface::new(&self.gpu, grid)?;
         if let Some(s) = state {
@@ -664,15 +740,18 @@ impl SurfaceBackend for VulkanSurface {
         }
         fresh.set_background(bg)?;
         fresh.views = self.views.take();
+        fresh.done = std::mem::take(&mut self.done);
         *self = fresh;
         Ok(())
     }
 
     fn background(&self) -> Result<Background> {
+        self.settle()?;
         Ok(self.bg.download()?[0])
     }
 
     fn set_background(&mut self, bg: Background) -> Result<()> {
+        self.settle()?;
         self.bg.write(&[bg])?;
         self.bg_learned = bg.learned();
         Ok(())

@@ -3,6 +3,7 @@
 //! With it, the training throughput both stages count the same way ([`Throughput`]).
 
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use std::time::Instant;
 
 /// Progress of a training stage.
 pub struct Progress {
@@ -113,4 +114,63 @@ impl Throughput {
 fn console_is_terminal() -> bool {
     use std::io::IsTerminal;
     std::io::stderr().is_terminal()
+}
+
+/// Steps between reads of the training figures (loss, counters): the backends keep them on the
+/// device meanwhile, so a step never waits for the host to read them. At most
+/// `gpu::STEP_SLOTS`.
+pub const READ_EVERY: u32 = 16;
+
+/// The steps submitted since the figures were last read, and the wall time they took: a group
+/// of at most [`READ_EVERY`] steps, read together at the end of the run, before a checkpoint
+/// or an upsampling, and every `READ_EVERY` steps.
+pub struct StepGroup {
+    steps: Vec<u32>,
+    since: Instant,
+}
+
+impl Default for StepGroup {
+    fn default() -> Self {
+        StepGroup {
+            steps: Vec::new(),
+            since: Instant::now(),
+        }
+    }
+}
+
+impl StepGroup {
+    /// Step `step` was submitted.
+    pub fn push(&mut self, step: u32) {
+        self.steps.push(step);
+    }
+
+    /// Whether the figures are to be read after step `step` of `iters` (`checkpoint`: one is
+    /// written after it).
+    pub fn due(&self, step: u32, iters: u32, checkpoint: bool) -> bool {
+        checkpoint || step + 1 == iters || self.steps.len() >= READ_EVERY as usize
+    }
+
+    /// The group's steps and their wall seconds since the group started; a new group starts now.
+    pub fn take(&mut self) -> (Vec<u32>, f64) {
+        let secs = self.since.elapsed().as_secs_f64();
+        self.since = Instant::now();
+        (std::mem::take(&mut self.steps), secs)
+    }
+
+    /// Start the group's clock again (after work that is not training: a checkpoint, an
+    /// upsampling), once its steps have been read.
+    pub fn restart(&mut self) {
+        self.since = Instant::now();
+    }
+}
+
+/// Pair a group's steps with the figures a backend returned for them.
+pub fn pair<S>(steps: Vec<u32>, stats: Vec<S>) -> anyhow::Result<Vec<(u32, S)>> {
+    anyhow::ensure!(
+        steps.len() == stats.len(),
+        "the backend returned the figures of {} steps for {} submitted",
+        stats.len(),
+        steps.len()
+    );
+    Ok(steps.into_iter().zip(stats).collect())
 }

@@ -4,7 +4,7 @@
 
 use super::background::{self, BackgroundRecord};
 use super::config::Stage1Config;
-use super::progress::{Progress, Throughput};
+use super::progress::{pair, Progress, StepGroup, Throughput};
 use super::render::{psnr, render_split, RenderedSplit};
 use crate::abi::buffers::PlenoxelPerRay;
 use crate::data::{BackgroundMode, Dataset, Split, TrainViews};
@@ -184,6 +184,7 @@ pub fn train(
     if start_step == 0 {
         backend.set_background(BackgroundRecord::start_on(data).kernel())?;
     }
+    let mut group = StepGroup::default();
     for step in start_step..cfg.iters {
         if let Some((_, r)) = cfg.upsample.iter().find(|(s, _)| *s == step) {
             let t = Instant::now();
@@ -192,8 +193,8 @@ pub fn train(
             ));
             upsample_step(backend, data, cfg, *r)?;
             report.upsample_seconds += t.elapsed().as_secs_f64();
+            group.restart();
         }
-        let t = Instant::now();
         let mut rng = step_rng(cfg.seed, step);
         let batch_seed: u64 = rng.random();
         let tv_on = !(cfg.tv_until_upsample && cfg.upsample.iter().any(|(s, _)| *s <= step));
@@ -205,7 +206,7 @@ pub fn train(
             lambda_sigma: cfg.tv_sigma,
             lambda_sh: cfg.tv_sh,
         });
-        let stats = backend.step_sampled(
+        backend.step_sampled(
             &views,
             batch_seed,
             cfg.batch as usize,
@@ -220,27 +221,39 @@ pub fn train(
                 lr_bg: cfg.lr_sh.at(step),
             },
         )?;
-        if !stats.mse.is_finite() {
-            bail!(
-                "non-finite loss at step {step} ({}); the last good checkpoint is {}",
-                stats.mse,
-                out.join(CHECKPOINT).display()
-            );
+        group.push(step);
+        let checkpoint = (step + 1) % cfg.checkpoint_every == 0 && step + 1 < cfg.iters;
+        // The figures of the last upsampled grid's steps must be read before it is replaced.
+        let upsample_next = cfg.upsample.iter().any(|(s, _)| *s == step + 1);
+        if group.due(step, cfg.iters, checkpoint || upsample_next) {
+            let (steps, secs) = group.take();
+            let n = steps.len();
+            let before = t_train.elapsed().as_secs_f64() - secs;
+            for (i, (s, stats)) in pair(steps, backend.take_stats()?)?.into_iter().enumerate() {
+                if !stats.mse.is_finite() {
+                    bail!(
+                        "non-finite loss at step {s} ({}); the last good checkpoint is {}",
+                        stats.mse,
+                        out.join(CHECKPOINT).display()
+                    );
+                }
+                mse = stats.mse;
+                // The group's wall time, spread evenly over its steps.
+                let elapsed = before + secs * (i + 1) as f64 / n as f64;
+                writeln!(log, "{},{mse:e},{:.4},{elapsed:.3}", s + 1, psnr(mse))
+                    .with_context(|| format!("writing {}", log_path.display()))?;
+                throughput.add(s, cfg.batch as usize, secs / n as f64);
+                sample_totals.add(&stats.counts);
+            }
+            progress.step(step as u64 + 1, mse, throughput.rays_per_s());
+            report.train_seconds += secs;
         }
-        mse = stats.mse;
-        let secs = t.elapsed().as_secs_f64();
-        let elapsed = t_train.elapsed().as_secs_f64();
-        writeln!(log, "{},{mse:e},{:.4},{elapsed:.3}", step + 1, psnr(mse))
-            .with_context(|| format!("writing {}", log_path.display()))?;
-        throughput.add(step, cfg.batch as usize, secs);
-        sample_totals.add(&stats.counts);
-        progress.step(step as u64 + 1, mse, throughput.rays_per_s());
-        report.train_seconds += secs;
-        if (step + 1) % cfg.checkpoint_every == 0 && step + 1 < cfg.iters {
+        if checkpoint {
             let t = Instant::now();
             train_log::flush(&mut log, &log_path)?;
             save(backend, cfg, data.background, out, step + 1)?;
             report.checkpoint_seconds += t.elapsed().as_secs_f64();
+            group.restart();
         }
     }
     progress.finish();

@@ -4,7 +4,7 @@
 //! rendered and metrics.json written.
 
 use super::background::{self, BackgroundRecord};
-use super::progress::{Progress, Throughput};
+use super::progress::{pair, Progress, StepGroup, Throughput};
 use super::render::{render_split_with, RenderedSplit};
 use super::stage1::step_rng;
 use super::surface_config::SurfaceConfig;
@@ -171,8 +171,8 @@ pub fn train(
     let (res, rows) = (grid0.res, grid0.delta.len() as u32);
     drop(grid0);
     let views = TrainViews::new(&data.train, &data.scene)?;
+    let mut group = StepGroup::default();
     for step in start_step..cfg.iters {
-        let t = Instant::now();
         let mut rng = step_rng(cfg.seed, step);
         let batch_seed: u64 = rng.random();
         let draws = [
@@ -181,40 +181,53 @@ pub fn train(
             rng.random(),
         ];
         let p = step_params(cfg, res, rows, step, cfg.a.at(step), draws);
-        let stats = backend.step_sampled(&views, batch_seed, cfg.batch as usize, &p)?;
-        if !(stats.mse.is_finite() && stats.entropy.is_finite() && stats.consistency.is_finite()) {
-            bail!(
-                "non-finite loss at step {step} (mse {}, entropy {}, consistency {}); the last \
-                 good checkpoint is {}",
-                stats.mse,
-                stats.entropy,
-                stats.consistency,
-                out.join(CHECKPOINT).display()
-            );
+        backend.step_sampled(&views, batch_seed, cfg.batch as usize, &p)?;
+        group.push(step);
+        let checkpoint = (step + 1) % cfg.checkpoint_every == 0 && step + 1 < cfg.iters;
+        if group.due(step, cfg.iters, checkpoint) {
+            let (steps, secs) = group.take();
+            let n = steps.len();
+            let before = t_start.elapsed().as_secs_f64() - secs;
+            for (i, (s, stats)) in pair(steps, backend.take_stats()?)?.into_iter().enumerate() {
+                if !(stats.mse.is_finite()
+                    && stats.entropy.is_finite()
+                    && stats.consistency.is_finite())
+                {
+                    bail!(
+                        "non-finite loss at step {s} (mse {}, entropy {}, consistency {}); the \
+                         last good checkpoint is {}",
+                        stats.mse,
+                        stats.entropy,
+                        stats.consistency,
+                        out.join(CHECKPOINT).display()
+                    );
+                }
+                mse = stats.mse;
+                throughput.add(s, cfg.batch as usize, secs / n as f64);
+                totals.add(&stats.counts);
+                writeln!(
+                    log,
+                    "{},{:.6e},{:.3},{:.5},{:.5},{:.4e},{:.3}",
+                    s + 1,
+                    mse,
+                    super::psnr(mse),
+                    stats.entropy,
+                    stats.consistency,
+                    stats.reg_loss,
+                    // The group's wall time, spread evenly over its steps.
+                    before + secs * (i + 1) as f64 / n as f64
+                )
+                .with_context(|| format!("writing {}", log_path.display()))?;
+            }
+            progress.step(step as u64 + 1, mse, throughput.rays_per_s());
+            report.train_seconds += secs;
         }
-        mse = stats.mse;
-        let secs = t.elapsed().as_secs_f64();
-        throughput.add(step, cfg.batch as usize, secs);
-        totals.add(&stats.counts);
-        writeln!(
-            log,
-            "{},{:.6e},{:.3},{:.5},{:.5},{:.4e},{:.3}",
-            step + 1,
-            mse,
-            super::psnr(mse),
-            stats.entropy,
-            stats.consistency,
-            stats.reg_loss,
-            t_start.elapsed().as_secs_f64()
-        )
-        .with_context(|| format!("writing {}", log_path.display()))?;
-        progress.step(step as u64 + 1, mse, throughput.rays_per_s());
-        report.train_seconds += secs;
-        if (step + 1) % cfg.checkpoint_every == 0 && step + 1 < cfg.iters {
+        if checkpoint {
             let t = Instant::now();
             train_log::flush(&mut log, &log_path)?;
             save(backend, cfg, data.background, out, step + 1)?;
             report.checkpoint_seconds += t.elapsed().as_secs_f64();
+            group.restart();
         }
     }
     progress.finish();

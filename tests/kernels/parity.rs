@@ -54,6 +54,7 @@ rows!(
     rmsprop_sparse,
     tv,
     background_step,
+    loss_sum,
     cubic_solve,
     extract_points,
     surface_blocks,
