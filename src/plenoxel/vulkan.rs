@@ -1,11 +1,13 @@
 //! The Vulkan stage-1 backend: grid, gradients, optimiser state and the training views live in
-//! device buffers; a training step is one batch (occupancy → sample_rays → train → TV → RMSProp)
-//! and one submission.
+//! device buffers; a training step is one batch (step reset → sample_rays when the batch is drawn
+//! on the device → the kernels of the step's [`PlenoxelPlan`], in its order) and one submission.
 
+use super::plan::{PlenoxelPass, PlenoxelPlan, TvField};
 use super::{march_params, Gradients, Plenoxels, StepParams, StepStats};
 use crate::abi::buffers::PlenoxelParams;
 use crate::cpu::background::Background;
-use crate::cpu::step::{STEP_FLAGS, STEP_N, STEP_STATS, TOUCH_ALL};
+use crate::cpu::step::{STEP_FLAGS, STEP_N, STEP_STATS};
+use crate::cpu::{RmsProp, TvChunk};
 use crate::data::TrainViews;
 use crate::gpu::{
     record_background_step, record_optim_args, Batch, Gpu, GpuBuffer, Phase, PhaseClock,
@@ -117,7 +119,7 @@ impl VulkanPlenoxels {
     }
 
     /// Record the sparse RMSProp step over the vertices touched this step.
-    fn record_rmsprop(&self, b: &mut Batch, p: &StepParams) -> Result<()> {
+    fn record_rmsprop(&self, b: &mut Batch, p: &RmsProp) -> Result<()> {
         record_optim_args(b, &self.step, &self.args)?;
         b.dispatch_indirect(
             &kernels::rmsprop_sparse::INFO,
@@ -138,9 +140,9 @@ impl VulkanPlenoxels {
         )
     }
 
-    /// Upload rays (and targets), start a batch and record the step reset and the occupancy
-    /// refresh every march kernel needs first (the upload charged to `clock`). Returns the batch
-    /// and the device addresses of the rays, targets and per-ray output.
+    /// Upload rays (and targets), start a batch and record the step reset (the upload charged to
+    /// `clock`). Returns the batch and the device addresses of the rays, targets and per-ray
+    /// output.
     fn begin(
         &mut self,
         rays: &[f32],
@@ -151,34 +153,21 @@ impl VulkanPlenoxels {
         clock.mark(Phase::Upload);
         let mut b = self.gpu.batch()?;
         self.record_step_reset(&mut b);
-        self.record_occupancy(&mut b)?;
         Ok((b, addrs))
     }
 
-    /// Start a batch with the step reset, the occupancy refresh and the training rays (uploaded,
-    /// or drawn by `sample_rays`), then the fused train kernel (gradients += data term).
-    fn record_train(
-        &mut self,
-        src: TrainRays,
-        stop_thresh: f32,
-        clock: &mut PhaseClock,
-    ) -> Result<Batch> {
-        let n = src.len();
-        let mp = march_params(&self.meta, stop_thresh);
-        self.params.write(&[PlenoxelParams {
-            scale: mp.scale,
-            offset: mp.offset,
-            stop_thresh,
-            grad_scale: 2.0 / (3.0 * n as f32),
-        }])?;
-        let (mut b, [ray_buf, target_buf, loss_buf]) = match src {
+    /// Start a batch with the step reset and the training rays (uploaded, or drawn by
+    /// `sample_rays`). Returns it with the addresses of rays, targets and per-ray output.
+    fn begin_train(&mut self, src: TrainRays, clock: &mut PhaseClock) -> Result<(Batch, [u64; 3])> {
+        match src {
             TrainRays::Host { rays, targets } => {
+                let n = src.len();
                 ensure!(
                     n > 0 && targets.len() == 3 * n,
                     "batch of {n} rays with {} targets",
                     targets.len() / 3
                 );
-                self.begin(rays, Some(targets), clock)?
+                self.begin(rays, Some(targets), clock)
             }
             TrainRays::Sampled { id, set, seed, n } => {
                 TrainViewBuffers::ensure(&mut self.views, &self.gpu, id, set, n)?;
@@ -186,12 +175,56 @@ impl VulkanPlenoxels {
                 clock.mark(Phase::Upload);
                 let mut b = self.gpu.batch()?;
                 self.record_step_reset(&mut b);
-                self.record_occupancy(&mut b)?;
                 let views = self.views.as_ref().expect("ensured");
                 let [rays, targets] = views.record_sample(&mut b, seed, n)?;
-                (b, [rays, targets, out])
+                Ok((b, [rays, targets, out]))
             }
-        };
+        }
+    }
+
+    /// Start the batch of `src`'s rays and record `plan`'s passes on it, in order.
+    fn record_plan(
+        &mut self,
+        src: TrainRays,
+        plan: &PlenoxelPlan,
+        clock: &mut PhaseClock,
+    ) -> Result<Batch> {
+        let n = src.len();
+        let (mut b, rays) = self.begin_train(src, clock)?;
+        for pass in plan.passes() {
+            match pass {
+                PlenoxelPass::Occupancy => self.record_occupancy(&mut b)?,
+                PlenoxelPass::Train {
+                    stop_thresh,
+                    grad_scale,
+                } => self.record_train(&mut b, *stop_thresh, *grad_scale, rays, n)?,
+                PlenoxelPass::Tv { field, chunk } => self.record_tv(&mut b, *field, chunk)?,
+                PlenoxelPass::RmsProp(h) => self.record_rmsprop(&mut b, h)?,
+                PlenoxelPass::Background { lr, beta, eps } => {
+                    record_background_step(&mut b, &self.bg, *lr, *beta, *eps)?
+                }
+            }
+        }
+        Ok(b)
+    }
+
+    /// Write the params buffer for a training pass over `n` rays and record the fused train
+    /// kernel (gradients += data term).
+    fn record_train(
+        &self,
+        b: &mut Batch,
+        stop_thresh: f32,
+        grad_scale: f32,
+        [ray_buf, target_buf, loss_buf]: [u64; 3],
+        n: usize,
+    ) -> Result<()> {
+        let mp = march_params(&self.meta, stop_thresh);
+        self.params.write(&[PlenoxelParams {
+            scale: mp.scale,
+            offset: mp.offset,
+            stop_thresh,
+            grad_scale,
+        }])?;
         b.dispatch_1d(
             &kernels::plenoxel_train::INFO,
             &kernels::plenoxel_train::Push {
@@ -211,44 +244,41 @@ impl VulkanPlenoxels {
                 n_rays: n as u32,
             },
             n as u32,
-        )?;
-        Ok(b)
+        )
     }
 
-    /// One training step on `src`'s rays: occupancy → sampling (when drawn on the device) →
-    /// train → TV → RMSProp, one submission; the per-ray losses and counters come back with it.
+    /// Record TV on `field` over `c`'s slots (the dispatch covers the chunk and the slots whose
+    /// forward neighbours lie in it).
+    fn record_tv(&self, b: &mut Batch, field: TvField, c: &TvChunk) -> Result<()> {
+        let (data, grad) = match field {
+            TvField::Density => (&self.density, &self.grad_density),
+            TvField::Sh => (&self.sh, &self.grad_sh),
+        };
+        b.dispatch_1d(
+            &kernels::tv::INFO,
+            &kernels::tv::Push {
+                links: self.links.address(),
+                data: data.address(),
+                grad: grad.address(),
+                step: self.step.address(),
+                res: c.res,
+                start: c.start,
+                count: c.count,
+                channels: c.channels,
+                scale: c.scale,
+                touch_bits: c.touch,
+            },
+            c.count + c.res[1] * c.res[2],
+        )
+    }
+
+    /// One training step on `src`'s rays: the step's plan recorded on one batch, one
+    /// submission; the per-ray losses and counters come back with it.
     fn train_step(&mut self, src: TrainRays, p: &StepParams) -> Result<StepStats> {
         let n = src.len();
         let mut clock = PhaseClock::start();
-        let mut b = self.record_train(src, p.stop_thresh, &mut clock)?;
-        if let Some(t) = p.tv {
-            let span = t.count + self.meta.res[1] * self.meta.res[2];
-            for (data, grad, channels, lambda) in [
-                (&self.density, &self.grad_density, 1u32, t.lambda_sigma),
-                (&self.sh, &self.grad_sh, SH_DIM as u32, t.lambda_sh),
-            ] {
-                b.dispatch_1d(
-                    &kernels::tv::INFO,
-                    &kernels::tv::Push {
-                        links: self.links.address(),
-                        data: data.address(),
-                        grad: grad.address(),
-                        step: self.step.address(),
-                        res: self.meta.res,
-                        start: t.start,
-                        count: t.count,
-                        channels,
-                        scale: lambda / t.count.max(1) as f32,
-                        touch_bits: TOUCH_ALL,
-                    },
-                    span,
-                )?;
-            }
-        }
-        self.record_rmsprop(&mut b, p)?;
-        if self.bg_learned {
-            record_background_step(&mut b, &self.bg, p.lr_bg, p.beta, p.eps)?;
-        }
+        let plan = PlenoxelPlan::step(p, self.meta.res, n, self.bg_learned)?;
+        let mut b = self.record_plan(src, &plan, &mut clock)?;
         self.readback.record(
             &self.gpu,
             &mut b,
@@ -318,12 +348,10 @@ impl Plenoxels for VulkanPlenoxels {
 
     fn gradients(&mut self, rays: &[f32], targets: &[f32], stop_thresh: f32) -> Result<Gradients> {
         let n = rays.len() / 6;
-        self.record_train(
-            TrainRays::Host { rays, targets },
-            stop_thresh,
-            &mut PhaseClock::start(),
-        )?
-        .submit()?;
+        let plan = PlenoxelPlan::gradients(stop_thresh, n);
+        let src = TrainRays::Host { rays, targets };
+        self.record_plan(src, &plan, &mut PhaseClock::start())?
+            .submit()?;
         let mut bg: Background = self.bg.download()?[0];
         let g = Gradients {
             ray_loss: self.ray_loss(n)?,
@@ -351,6 +379,7 @@ impl Plenoxels for VulkanPlenoxels {
         let n = rays.len() / 6;
         let mp = march_params(&self.meta, stop_thresh);
         let (mut b, [ray_buf, _, out_buf]) = self.begin(rays, None, &mut PhaseClock::start())?;
+        self.record_occupancy(&mut b)?;
         b.dispatch_1d(
             &kernels::plenoxel_fwd::INFO,
             &kernels::plenoxel_fwd::Push {
@@ -382,6 +411,7 @@ impl Plenoxels for VulkanPlenoxels {
         let mp = march_params(&self.meta, stop_thresh);
         let out = self.gpu.zeros::<u32>(self.allocated())?;
         let (mut b, [ray_buf, _, _]) = self.begin(rays, None, &mut PhaseClock::start())?;
+        self.record_occupancy(&mut b)?;
         b.dispatch_1d(
             &kernels::plenoxel_weights::INFO,
             &kernels::plenoxel_weights::Push {
