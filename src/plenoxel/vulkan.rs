@@ -6,7 +6,7 @@ use super::plan::{PlenoxelPass, PlenoxelPlan, TvField};
 use super::{march_params, Gradients, Plenoxels, StepParams, StepStats};
 use crate::abi::buffers::PlenoxelParams;
 use crate::cpu::background::Background;
-use crate::cpu::step::{STEP_FLAGS, STEP_N, STEP_STATS};
+use crate::cpu::step::{step_record, StepHeader, STEP_FLAGS, STEP_RESET_BYTES};
 use crate::cpu::{RmsProp, TvChunk};
 use crate::data::TrainViews;
 use crate::gpu::{
@@ -30,7 +30,8 @@ pub struct VulkanPlenoxels {
     grad_sh: GpuBuffer,
     state_density: GpuBuffer,
     state_sh: GpuBuffer,
-    /// Step record (glsl/lib/step.glsl): touched count, sample counters, n, flags, list.
+    /// Step record (glsl/lib/step.glsl): `StepHeader` (touched count, sample counters, n),
+    /// flags, list.
     step: GpuBuffer,
     /// Indirect dispatch arguments of rmsprop_sparse.
     args: GpuBuffer,
@@ -66,11 +67,7 @@ impl VulkanPlenoxels {
             grad_sh: gpu.zeros::<f32>(n * SH_DIM)?,
             state_density: gpu.zeros::<f32>(n)?,
             state_sh: gpu.zeros::<f32>(n * SH_DIM)?,
-            step: {
-                let mut init = vec![0u32; STEP_FLAGS + 2 * n];
-                init[STEP_N] = n as u32;
-                gpu.upload(&init)?
-            },
+            step: gpu.upload(&step_record(n, &[]))?,
             args: gpu.zeros::<u32>(3)?,
             params: gpu.host_to_device::<PlenoxelParams>(1)?,
             bg: gpu.upload(&[Background::new([1.0; 3], false)])?,
@@ -107,15 +104,12 @@ impl VulkanPlenoxels {
     }
 
     fn read_stats(&self) -> Result<PlenoxelCounts> {
-        // The counters sit at u32 index STEP_STATS of the step record.
-        let words = std::mem::size_of::<PlenoxelCounts>() / 4;
-        let v: Vec<u32> = self.step.download_range(STEP_STATS, words)?;
-        Ok(bytemuck::pod_read_unaligned(bytemuck::cast_slice(&v)))
+        Ok(self.step.download_range::<StepHeader>(0, 1)?[0].stats)
     }
 
     /// Record clearing the step's touched count and sample counters.
     fn record_step_reset(&self, b: &mut Batch) {
-        b.fill_zero_range(&self.step, 0, 4 * STEP_N as u64);
+        b.fill_zero_range(&self.step, 0, STEP_RESET_BYTES);
     }
 
     /// Record the sparse RMSProp step over the vertices touched this step.
@@ -286,7 +280,7 @@ impl VulkanPlenoxels {
                 (self.rays.out(), 0, 4 * n as u64),
                 (
                     &self.step,
-                    4 * STEP_STATS as u64,
+                    std::mem::offset_of!(StepHeader, stats) as u64,
                     std::mem::size_of::<PlenoxelCounts>() as u64,
                 ),
             ],

@@ -18,7 +18,7 @@ use super::{
 };
 use crate::abi::buffers::{RayLoss, SurfCounts, SurfOut, SurfParams, TrainCounts};
 use crate::cpu::background::Background;
-use crate::cpu::step::{STEP_COUNT, STEP_FLAGS, STEP_N};
+use crate::cpu::step::{step_record, StepHeader, STEP_FLAGS, STEP_RESET_BYTES};
 use crate::cpu::surface_blocks::{alloc_box, complete_cells};
 use crate::cpu::surface_delta_tv::{axis_neighbours, forward_reach};
 use crate::cpu::surface_fwd::SurfaceParams;
@@ -98,7 +98,7 @@ pub struct VulkanSurface {
     sh: GpuBuffer,
     grad: [GpuBuffer; 3],
     state: [GpuBuffer; 3],
-    /// Step record (glsl/lib/step.glsl): touched count, n, flags, list.
+    /// Step record (glsl/lib/step.glsl): `StepHeader`, flags, list.
     step: GpuBuffer,
     /// Indirect dispatch arguments of surface_rmsprop.
     args: GpuBuffer,
@@ -190,8 +190,8 @@ impl VulkanSurface {
             grad: zeros3()?,
             state: zeros3()?,
             step: {
-                let mut init = vec![0u32; STEP_FLAGS + 2 * rows];
-                init[STEP_N] = n as u32;
+                let mut init = step_record(n, &[]);
+                init.resize(STEP_FLAGS + 2 * rows, 0);
                 gpu.upload(&init)?
             },
             args: gpu.zeros::<u32>(3)?,
@@ -243,7 +243,7 @@ impl VulkanSurface {
     /// A batch starting with the step reset (touched count) and the counters' reset.
     fn begin_batch(&self) -> Result<Batch> {
         let mut b = self.gpu.batch()?;
-        b.fill_zero_range(&self.step, 0, 4 * STEP_N as u64);
+        b.fill_zero_range(&self.step, 0, STEP_RESET_BYTES);
         b.fill_zero(&self.stats);
         b.fill_zero(&self.reg_loss);
         b.fill_zero(&self.reg_skipped);
@@ -505,7 +505,7 @@ impl VulkanSurface {
 
     /// Number of vertices touched by the last step (read from the step record).
     pub fn last_touched(&self) -> Result<u32> {
-        Ok(self.step.download_range::<u32>(STEP_COUNT, 1)?[0])
+        Ok(self.step.download_range::<StepHeader>(0, 1)?[0].count)
     }
 
     /// Start the batch of a training step on `src`'s rays and record the step's plan; the
