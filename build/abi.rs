@@ -21,6 +21,12 @@ macro_rules! abi_structs {
         #[allow(dead_code)]
         #[repr(C)]
         pub struct $name { $(pub $field: $fty,)* }
+        /// A member of a struct declared after this one.
+        impl crate::abi::GlslType for $name {
+            fn declare(name: &str) -> String {
+                format!("{} {name}", stringify!($name))
+            }
+        }
         impl $name {
             fn layout(counters: bool) -> crate::abi::Layout {
                 crate::abi::Layout {
@@ -184,8 +190,9 @@ impl Layout {
     }
 
     /// The struct, a `<Name>Buf` buffer reference to an array of it and, for counters,
-    /// `<NAME>_ZERO` and `<NAME>_SUBGROUP_ADD(buf, c)` (adds c summed over the subgroup into
-    /// `buf.v[0]`, one atomic per counter; needs the subgroup arithmetic extension where used).
+    /// `<NAME>_ZERO` and `<NAME>_SUBGROUP_ADD(dst, c)` (adds c summed over the subgroup into the
+    /// struct `dst` in a buffer, one atomic per counter; needs the subgroup arithmetic extension
+    /// where used).
     fn glsl(&self, out: &mut String) {
         writeln!(out, "struct {} {{", self.name).unwrap();
         for m in &self.members {
@@ -204,7 +211,7 @@ impl Layout {
             writeln!(out, "#define {upper}_ZERO {}({zeros})", self.name).unwrap();
             write!(
                 out,
-                "#define {upper}_SUBGROUP_ADD(buf, c) {{ \\\n    {} s_; \\\n",
+                "#define {upper}_SUBGROUP_ADD(dst, c) {{ \\\n    {} s_; \\\n",
                 self.name
             )
             .unwrap();
@@ -213,7 +220,7 @@ impl Layout {
             }
             writeln!(out, "    if (subgroupElect()) {{ \\").unwrap();
             for m in &self.members {
-                writeln!(out, "        atomicAdd((buf).v[0].{0}, s_.{0}); \\", m.name).unwrap();
+                writeln!(out, "        atomicAdd((dst).{0}, s_.{0}); \\", m.name).unwrap();
             }
             writeln!(out, "    }} \\\n}}").unwrap();
         }

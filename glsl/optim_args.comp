@@ -7,14 +7,14 @@
 layout(local_size_x = 1) in;
 
 layout(push_constant, scalar) uniform Push {
-    U32Buf step;
+    StepRecord step;
     U32Buf args;
 } pc;
 
 #include "step.glsl"
 
 void main() {
-    uint groups = (pc.step.v[STEP_COUNT] + 63u) / 64u;
+    uint groups = (pc.step.head.count + 63u) / 64u;
     uint gx = min(groups, DISPATCH_ROW_GROUPS);
     pc.args.v[0] = gx;
     pc.args.v[1] = gx == 0u ? 0u : (groups + gx - 1u) / gx;

@@ -17,7 +17,7 @@ layout(push_constant, scalar) uniform Push {
     U32Buf occ;
     F32Buf rays;
     F32Buf rgb;
-    U32Buf step;
+    StepRecord step;
     BackgroundBuf bg;
     uvec3 res;
     vec3 scale;

@@ -27,7 +27,7 @@ layout(push_constant, scalar) uniform Push {
     F32Buf grad_density;
     F32Buf grad_sh;
     F32Buf ray_loss;
-    U32Buf step;
+    StepRecord step;
     PlenoxelParamsBuf params;
     BackgroundBuf bg;
     uvec3 res;

@@ -18,7 +18,7 @@ layout(push_constant, scalar) uniform Push {
     F32Buf grad_sh;
     F32Buf state_density;
     F32Buf state_sh;
-    U32Buf step;
+    StepRecord step;
     float lr_sigma;
     float lr_sh;
     float beta;
@@ -30,9 +30,9 @@ layout(push_constant, scalar) uniform Push {
 
 void main() {
     uint i = flat_id();
-    if (i >= pc.step.v[STEP_COUNT]) return;
-    uint v = pc.step.v[STEP_FLAGS + pc.step.v[STEP_N] + i];
+    if (i >= pc.step.head.count) return;
+    uint v = pc.step.flags[pc.step.head.n + i];
     RMSPROP_UPDATE(pc.density, pc.grad_density, pc.state_density, v, pc.lr_sigma);
     RMSPROP_UPDATE_SH27(pc.sh, pc.grad_sh, pc.state_sh, v, pc.lr_sh);
-    pc.step.v[STEP_FLAGS + v] = 0u;
+    pc.step.flags[v] = 0u;
 }

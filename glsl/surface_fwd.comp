@@ -149,5 +149,5 @@ void main() {
     o.transmittance = T;
     o.hits = j;
     pc.out_rays.v[r] = o;
-    SURF_COUNTS_SUBGROUP_ADD(pc.stats, cnt);
+    SURF_COUNTS_SUBGROUP_ADD(pc.stats.v[0], cnt);
 }

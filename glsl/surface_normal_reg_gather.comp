@@ -27,7 +27,7 @@ layout(push_constant, scalar) uniform Push {
     U64Buf nbr;
     F32Buf corners;
     F32Buf grad;
-    U32Buf step;
+    StepRecord step;
     uint n_corners;
     uint first;
     uint work;

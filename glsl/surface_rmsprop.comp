@@ -35,7 +35,7 @@ layout(push_constant, scalar) uniform Push {
     F32Buf state_delta;
     F32Buf state_opacity;
     F32Buf state_sh;
-    U32Buf step;
+    StepRecord step;
     float lr_delta;
     float lr_opacity;
     float lr_sh;
@@ -89,9 +89,9 @@ void main() {
         }
         return;
     }
-    if (i >= pc.step.v[STEP_COUNT]) return;
-    uint v = pc.step.v[STEP_FLAGS + pc.step.v[STEP_N] + i];
-    uint m = pc.step.v[STEP_FLAGS + v];
+    if (i >= pc.step.head.count) return;
+    uint v = pc.step.flags[pc.step.head.n + i];
+    uint m = pc.step.flags[v];
     if (range_contains(pc.delta_start, pc.delta_len, pc.rows, v)) m &= ~TOUCH_DELTA;
     if (range_contains(pc.opacity_start, pc.opacity_len, pc.rows, v)) m &= ~TOUCH_OPACITY;
     if ((m & TOUCH_DELTA) != 0u) RMSPROP_UPDATE(pc.delta, pc.grad_delta, pc.state_delta, v, pc.lr_delta);
@@ -99,5 +99,5 @@ void main() {
         RMSPROP_UPDATE(pc.opacity, pc.grad_opacity, pc.state_opacity, v, pc.lr_opacity);
     }
     if ((m & TOUCH_SH) != 0u) RMSPROP_UPDATE_SH27(pc.sh, pc.grad_sh, pc.state_sh, v, pc.lr_sh);
-    pc.step.v[STEP_FLAGS + v] = 0u;
+    pc.step.flags[v] = 0u;
 }

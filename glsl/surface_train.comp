@@ -59,7 +59,7 @@ layout(push_constant, scalar) uniform Push {
     F32Buf grad_sh;
     RayLossBuf out_rays;
     TrainCountsBuf stats;
-    U32Buf step;
+    StepRecord step;
     BackgroundBuf bg;
     uint n;
     uint block_shift;
@@ -445,5 +445,5 @@ void main() {
     }
     cnt.atomic_adds += flush(cur, y, acc_d, acc_a, acc_c, nz_d, nz_a, nz_c);
     if (learn_bg) BACKGROUND_GRAD_ADD(pc.bg, d_c * t_last);
-    TRAIN_COUNTS_SUBGROUP_ADD(pc.stats, cnt);
+    TRAIN_COUNTS_SUBGROUP_ADD(pc.stats.v[0], cnt);
 }

@@ -18,7 +18,7 @@ layout(push_constant, scalar) uniform Push {
     I32Buf links;
     F32Buf data;
     F32Buf grad;
-    U32Buf step;
+    StepRecord step;
     uvec3 res;
     uint start;
     uint count;

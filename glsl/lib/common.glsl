@@ -13,6 +13,12 @@ layout(buffer_reference, scalar, buffer_reference_align = 4) buffer I32Buf { int
 // 64-bit words of an 8-byte aligned buffer: lavapipe loads and stores memory one component at a
 // time, so moving floats in pairs halves the memory operations (SH27_LOAD, RMSPROP_UPDATE_SH27).
 layout(buffer_reference, scalar, buffer_reference_align = 8) buffer U64Buf { uint64_t v[]; };
+// The step record (step.glsl): its header (StepHeader, src/abi/buffers.rs), then the touched
+// flags of the head.n vertices, then the touched list (head.count entries used): flags[n + i].
+layout(buffer_reference, scalar, buffer_reference_align = 4) buffer StepRecord {
+    StepHeader head;
+    uint flags[];
+};
 
 // Flat invocation index for 1-D work split over a 2-D dispatch grid (each dimension is limited to
 // 65535 workgroups); the host side is `gpu::Batch::dispatch_1d`, which fills rows of exactly

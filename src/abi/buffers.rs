@@ -3,8 +3,9 @@
 //! layout, with a `<Name>Buf` buffer reference over an array of it) and fails the build when a
 //! kernel's SPIR-V places a member at another offset than this `#[repr(C)]` struct.
 //!
-//! Member types: `u32`, `i32`, `f32`, `[T; 2..=4]` of those (GLSL `uvec`/`ivec`/`vec`) or
-//! `[T; N]` for other N (a GLSL array). `counters` structs hold `u32` counters only.
+//! Member types: `u32`, `i32`, `f32`, `[T; 2..=4]` of those (GLSL `uvec`/`ivec`/`vec`),
+//! `[T; N]` for other N (a GLSL array), or a struct declared above. `counters` structs hold `u32`
+//! counters only.
 
 use super::consts::SURF_MAX_LEVELS;
 
@@ -96,7 +97,7 @@ abi_structs! {
     }
 
     /// Counters of the stage-1 march (plenoxel_fwd, plenoxel_train), summed over rays; kept in
-    /// the step record from `STEP_STATS` on.
+    /// the step record's header (`StepHeader::stats`).
     counters PlenoxelCounts / PlenoxelPerRay {
         /// Samples shaded (σ > SIGMA_EPS).
         shaded,
@@ -106,6 +107,20 @@ abi_structs! {
         skipped,
         /// Gradient atomic adds (training).
         atomic_adds,
+    }
+
+    /// The header of the step record the training kernels of a step share (glsl/lib/step.glsl,
+    /// twin `cpu::step`); the touched flags (`n`) and the touched list (`n`) follow it
+    /// (`StepRecord` in glsl/lib/common.glsl). The host zeroes `count` and `stats` each step.
+    struct StepHeader {
+        /// Vertices touched this step: the length of the touched list.
+        count: u32,
+        /// Counters of the stage-1 march.
+        stats: PlenoxelCounts,
+        /// Vertex count: the length of the flags, and where the list starts after them.
+        n: u32,
+        /// Unused: the flags start 32 bytes in.
+        pad: [u32; 2],
     }
 
     /// Counters of `surface_fwd`, summed over rays.

@@ -65,13 +65,8 @@ abi_consts! {
     /// (plenoxel_train).
     REPLAY: usize = 32;
 
-    // Step record and touched flags (cpu::step, glsl/lib/step.glsl).
-    /// Step-buffer layout (u32 indices): touched count, 4 counters (samples shaded, empty,
-    /// skipped; gradient atomic adds), vertex count, then the flags (n) and the list (n).
-    STEP_COUNT: usize = 0;
-    STEP_STATS: usize = 1;
-    STEP_N: usize = 5;
-    STEP_FLAGS: usize = 8;
+    // Touched flags of the step record (cpu::step, glsl/lib/step.glsl; its header is
+    // `buffers::StepHeader`).
     /// Touched-flag bits: stage 1's one group, stage 2's three (the optimiser updates only the
     /// groups of a vertex that received a gradient).
     TOUCH_ALL: u32 = 1;

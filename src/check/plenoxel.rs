@@ -7,7 +7,7 @@
 use super::{grad_outliers, rel_l2, CheckRow, Compare, TEST_BACKGROUND};
 use crate::cpu::background::{self, Background};
 use crate::cpu::plenoxel as twin;
-use crate::cpu::step::{optim_args, STEP_COUNT, STEP_FLAGS, STEP_N, TOUCH_ALL};
+use crate::cpu::step::{optim_args, step_record, StepHeader, STEP_FLAGS, TOUCH_ALL};
 use crate::cpu::{rmsprop_sparse, tv, RmsProp, Stage1Params, TvChunk};
 use crate::gpu::{record_optim_args, Gpu, GpuBuffer};
 use crate::grid::{Grid, SH_DIM};
@@ -242,14 +242,8 @@ pub fn check_weights(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
 
 /// A step buffer (glsl/lib/step.glsl) for `n` vertices with the given vertices touched.
 fn step_buffer(n: usize, touched: &[usize]) -> Vec<u32> {
-    let mut v = vec![0u32; STEP_FLAGS + 2 * n];
-    v[STEP_N] = n as u32;
-    v[STEP_COUNT] = touched.len() as u32;
-    for (i, &t) in touched.iter().enumerate() {
-        v[STEP_FLAGS + t] = 1;
-        v[STEP_FLAGS + n + i] = t as u32;
-    }
-    v
+    let touched: Vec<(usize, u32)> = touched.iter().map(|&t| (t, TOUCH_ALL)).collect();
+    step_record(n, &touched)
 }
 
 pub fn check_optim_args(gpu: &Gpu, _seed: u64) -> Result<CheckRow> {
@@ -266,9 +260,10 @@ pub fn check_optim_args(gpu: &Gpu, _seed: u64) -> Result<CheckRow> {
         5_000_000,
     ];
     for &count in &counts {
-        let mut step = vec![0u32; STEP_FLAGS];
-        step[STEP_COUNT] = count;
-        let sb = gpu.upload(&step)?;
+        let sb = gpu.upload(&[StepHeader {
+            count,
+            ..Default::default()
+        }])?;
         let args = gpu.zeros::<u32>(3)?;
         gpu.run_1d(
             &kernels::optim_args::INFO,

@@ -6,7 +6,7 @@
 
 use super::{rel_l2, CheckRow, Compare};
 use crate::cpu::step::RowRange;
-use crate::cpu::step::{optim_args, STEP_COUNT, STEP_FLAGS, STEP_N};
+use crate::cpu::step::{optim_args, step_record, STEP_FLAGS};
 use crate::cpu::surface_delta_tv::{axis_neighbours, delta_tv, forward_reach, DeltaTvChunk};
 use crate::cpu::surface_reg::delta_tv_chunk;
 use crate::cpu::surface_reg::{
@@ -88,9 +88,7 @@ pub fn reg_grid(seed: u64, res: u32, band: f32) -> RegGrid {
 
 /// A step buffer (step.glsl) for n vertices with nothing touched.
 pub fn empty_step(n: usize) -> Vec<u32> {
-    let mut v = vec![0u32; STEP_FLAGS + 2 * n];
-    v[STEP_N] = n as u32;
-    v
+    step_record(n, &[])
 }
 
 /// Random initial gradients, so the checks see that the kernels add.
@@ -568,14 +566,14 @@ fn rmsprop_case(
         }
     }
     // Touched vertices get the group bits 1..=7 in turn.
-    let touched_list: Vec<usize> = (0..n).rev().filter(|v| v % 3 != 1).collect();
-    let mut step = empty_step(n);
+    let touched_list: Vec<(usize, u32)> = (0..n)
+        .rev()
+        .filter(|v| v % 3 != 1)
+        .map(|v| (v, 1 + (v as u32 / 3) % 7))
+        .collect();
+    let step = step_record(n, &touched_list);
     let mut flags = vec![0u32; n];
-    step[STEP_COUNT] = touched_list.len() as u32;
-    for (i, &v) in touched_list.iter().enumerate() {
-        let bits = 1 + (v as u32 / 3) % 7;
-        step[STEP_FLAGS + v] = bits;
-        step[STEP_FLAGS + n + i] = v as u32;
+    for &(v, bits) in &touched_list {
         flags[v] = bits;
     }
     let bufs: Vec<GpuBuffer> = p.iter().map(|v| gpu.upload(v)).collect::<Result<_>>()?;

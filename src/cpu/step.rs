@@ -5,11 +5,38 @@ use rayon::prelude::*;
 use std::ops::Range;
 use std::sync::atomic::{AtomicU32, Ordering};
 
+pub use crate::abi::buffers::StepHeader;
 use crate::abi::consts::DISPATCH_ROW_GROUPS;
-pub use crate::abi::consts::{
-    STEP_COUNT, STEP_FLAGS, STEP_N, STEP_STATS, TOUCH_ALL, TOUCH_DELTA, TOUCH_OPACITY, TOUCH_SH,
-    TOUCH_SURFACE,
-};
+pub use crate::abi::consts::{TOUCH_ALL, TOUCH_DELTA, TOUCH_OPACITY, TOUCH_SH, TOUCH_SURFACE};
+
+/// Index in u32 words of the touched flags in the step record: after its header.
+pub const STEP_FLAGS: usize = std::mem::size_of::<StepHeader>() / 4;
+
+/// Bytes from the start of the step record that a step starts from zero: the header's touched
+/// count and counters, which precede `n`.
+pub const STEP_RESET_BYTES: u64 = std::mem::offset_of!(StepHeader, n) as u64;
+
+const _: () = assert!(
+    std::mem::offset_of!(StepHeader, count) < STEP_RESET_BYTES as usize
+        && std::mem::offset_of!(StepHeader, stats) < STEP_RESET_BYTES as usize
+);
+
+/// A step record (glsl/lib/step.glsl) for `n` vertices, as u32 words: the header with `touched`'s
+/// count, then the flags and the list with `touched`'s (vertex, flag bits) in list order.
+pub fn step_record(n: usize, touched: &[(usize, u32)]) -> Vec<u32> {
+    let head = StepHeader {
+        count: touched.len() as u32,
+        n: n as u32,
+        ..Default::default()
+    };
+    let mut v: Vec<u32> = bytemuck::cast_slice(&[head]).to_vec();
+    v.resize(STEP_FLAGS + 2 * n, 0);
+    for (i, &(vertex, bits)) in touched.iter().enumerate() {
+        v[STEP_FLAGS + vertex] = bits;
+        v[STEP_FLAGS + n + i] = vertex as u32;
+    }
+    v
+}
 
 /// The vertex rows (start + i) mod rows, i < len (start < rows, len ≤ rows; len = 0: none) —
 /// the chunks of the stage-2 regularisers and the rows whose δ RMSProp updates densely.
@@ -93,6 +120,17 @@ pub fn optim_args(count: u32) -> [u32; 3] {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn step_record_lays_out_header_flags_and_list() {
+        let v = step_record(5, &[(3, 2), (0, 1)]);
+        assert_eq!(v.len(), STEP_FLAGS + 10);
+        let head: StepHeader = bytemuck::pod_read_unaligned(bytemuck::cast_slice(&v[..STEP_FLAGS]));
+        assert_eq!((head.count, head.n), (2, 5));
+        assert_eq!(head.stats, Default::default());
+        assert_eq!(&v[STEP_FLAGS..STEP_FLAGS + 5], [1, 0, 0, 2, 0]);
+        assert_eq!(&v[STEP_FLAGS + 5..STEP_FLAGS + 7], [3, 0]);
+    }
 
     #[test]
     fn row_ranges_visit_each_row_once() {

@@ -1,10 +1,10 @@
 //! The CPU stage-1 backend: the kernels' rayon twins over host arrays.
 
+use super::plan::{batch_grad_scale, PlenoxelPass, PlenoxelPlan, TvField};
 use super::{march_params, Gradients, Plenoxels, StateFn, StepParams, StepStats};
 use crate::cpu::background::{self, Background};
-use crate::cpu::plenoxel::{self as twin, TrainGrads};
-use crate::cpu::step::TOUCH_ALL;
-use crate::cpu::{rmsprop_sparse, tv, RmsProp, Stage1Params, TvChunk};
+use crate::cpu::plenoxel::{self as twin, MarchParams, TrainGrads};
+use crate::cpu::{rmsprop_sparse, tv, Stage1Params};
 use crate::data::TrainViews;
 use crate::gpu::{Phase, PhaseClock};
 use crate::grid::{Grid, SH_DIM};
@@ -54,6 +54,67 @@ impl CpuPlenoxels {
     fn view(&self) -> GridRef<'_> {
         grid_ref(&self.grid, &self.occ)
     }
+
+    /// Run `plan`'s passes in order, the kernels' twins, on the batch `rays`, `targets`; returns
+    /// the training pass's per-ray squared errors and counters.
+    fn run_plan(
+        &mut self,
+        plan: &PlenoxelPlan,
+        rays: &[f32],
+        targets: &[f32],
+    ) -> Result<(Vec<f32>, PlenoxelCounts)> {
+        let mut out = Default::default();
+        for pass in plan.passes() {
+            match pass {
+                PlenoxelPass::Occupancy => self.refresh_occupancy(),
+                PlenoxelPass::Train {
+                    stop_thresh,
+                    grad_scale,
+                } => {
+                    let learned = self.bg.learned();
+                    let grads = TrainGrads {
+                        density: &mut self.grad_density,
+                        sh: &mut self.grad_sh,
+                        touched: &mut self.touched,
+                        background: learned.then_some(&mut self.bg.grad),
+                    };
+                    out = data_term(
+                        &grid_ref(&self.grid, &self.occ),
+                        &march_params(&self.grid, *stop_thresh),
+                        rays,
+                        targets,
+                        *grad_scale,
+                        self.bg.rgb,
+                        grads,
+                    )?;
+                }
+                PlenoxelPass::Tv { field, chunk } => {
+                    let g = &self.grid;
+                    let (data, grad) = match field {
+                        TvField::Density => (&g.density, &mut self.grad_density),
+                        TvField::Sh => (&g.sh, &mut self.grad_sh),
+                    };
+                    tv(&g.links, data, grad, &mut self.touched, chunk);
+                }
+                PlenoxelPass::RmsProp(h) => rmsprop_sparse(
+                    Stage1Params {
+                        density: &mut self.grid.density,
+                        sh: &mut self.grid.sh,
+                        grad_density: &mut self.grad_density,
+                        grad_sh: &mut self.grad_sh,
+                        state_density: &mut self.state_density,
+                        state_sh: &mut self.state_sh,
+                    },
+                    &mut self.touched,
+                    h,
+                ),
+                PlenoxelPass::Background { lr, beta, eps } => {
+                    background::step(&mut self.bg, *lr, *beta, *eps);
+                }
+            }
+        }
+        Ok(out)
+    }
 }
 
 fn grid_ref<'a>(grid: &'a Grid, occ: &'a [u32]) -> GridRef<'a> {
@@ -68,11 +129,11 @@ fn grid_ref<'a>(grid: &'a Grid, occ: &'a [u32]) -> GridRef<'a> {
 
 /// The data term (MSE) pass shared by `step` and `gradients`: per-ray squared error and counters.
 fn data_term(
-    grid: &Grid,
-    occ: &[u32],
+    g: &GridRef,
+    mp: &MarchParams,
     rays: &[f32],
     targets: &[f32],
-    stop_thresh: f32,
+    grad_scale: f32,
     bg: [f32; 3],
     grads: TrainGrads,
 ) -> Result<(Vec<f32>, PlenoxelCounts)> {
@@ -82,16 +143,7 @@ fn data_term(
         "batch of {n} rays with {} targets",
         targets.len() / 3
     );
-    let mp = march_params(grid, stop_thresh);
-    Ok(twin::train(
-        &grid_ref(grid, occ),
-        rays,
-        targets,
-        &mp,
-        2.0 / (3.0 * n as f32),
-        bg,
-        grads,
-    ))
+    Ok(twin::train(g, rays, targets, mp, grad_scale, bg, grads))
 }
 
 impl Plenoxels for CpuPlenoxels {
@@ -101,70 +153,9 @@ impl Plenoxels for CpuPlenoxels {
 
     fn step(&mut self, rays: &[f32], targets: &[f32], p: &StepParams) -> Result<StepStats> {
         let mut clock = PhaseClock::start();
-        self.refresh_occupancy();
-        let learned = self.bg.learned();
-        let grads = TrainGrads {
-            density: &mut self.grad_density,
-            sh: &mut self.grad_sh,
-            touched: &mut self.touched,
-            background: learned.then_some(&mut self.bg.grad),
-        };
-        let (loss, counts) = data_term(
-            &self.grid,
-            &self.occ,
-            rays,
-            targets,
-            p.stop_thresh,
-            self.bg.rgb,
-            grads,
-        )?;
+        let plan = PlenoxelPlan::step(p, self.grid.res, rays.len() / 6, self.bg.learned())?;
+        let (loss, counts) = self.run_plan(&plan, rays, targets)?;
         let n = loss.len();
-        if let Some(t) = p.tv {
-            let chunk = |channels: u32, lambda: f32| TvChunk {
-                res: self.grid.res,
-                start: t.start,
-                count: t.count,
-                channels,
-                scale: lambda / t.count.max(1) as f32,
-                touch: TOUCH_ALL,
-            };
-            let g = &self.grid;
-            let touched = &mut self.touched;
-            tv(
-                &g.links,
-                &g.density,
-                &mut self.grad_density,
-                touched,
-                &chunk(1, t.lambda_sigma),
-            );
-            tv(
-                &g.links,
-                &g.sh,
-                &mut self.grad_sh,
-                touched,
-                &chunk(SH_DIM as u32, t.lambda_sh),
-            );
-        }
-        rmsprop_sparse(
-            Stage1Params {
-                density: &mut self.grid.density,
-                sh: &mut self.grid.sh,
-                grad_density: &mut self.grad_density,
-                grad_sh: &mut self.grad_sh,
-                state_density: &mut self.state_density,
-                state_sh: &mut self.state_sh,
-            },
-            &mut self.touched,
-            &RmsProp {
-                lr_sigma: p.lr_sigma,
-                lr_sh: p.lr_sh,
-                beta: p.beta,
-                eps: p.eps,
-            },
-        );
-        if learned {
-            background::step(&mut self.bg, p.lr_bg, p.beta, p.eps);
-        }
         let mse = loss.iter().map(|&l| l as f64).sum::<f64>() / (3 * n) as f64;
         clock.mark(Phase::Compute);
         Ok(StepStats {
@@ -207,11 +198,11 @@ impl Plenoxels for CpuPlenoxels {
             background: self.bg.learned().then_some(&mut background),
         };
         let (ray_loss, counts) = data_term(
-            &self.grid,
-            &self.occ,
+            &grid_ref(&self.grid, &self.occ),
+            &march_params(&self.grid, stop_thresh),
             rays,
             targets,
-            stop_thresh,
+            batch_grad_scale(rays.len() / 6),
             self.bg.rgb,
             grads,
         )?;

@@ -2,6 +2,7 @@
 //! kernels (one submission per training step) and a CPU implementation running their twins.
 
 mod cpu;
+pub mod plan;
 mod vulkan;
 
 pub use cpu::CpuPlenoxels;

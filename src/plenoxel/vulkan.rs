@@ -1,11 +1,13 @@
 //! The Vulkan stage-1 backend: grid, gradients, optimiser state and the training views live in
-//! device buffers; a training step is one batch (occupancy → sample_rays → train → TV → RMSProp)
-//! and one submission.
+//! device buffers; a training step is one batch (step reset → sample_rays when the batch is drawn
+//! on the device → the kernels of the step's [`PlenoxelPlan`], in its order) and one submission.
 
+use super::plan::{PlenoxelPass, PlenoxelPlan, TvField};
 use super::{march_params, Gradients, Plenoxels, StepParams, StepStats};
 use crate::abi::buffers::PlenoxelParams;
 use crate::cpu::background::Background;
-use crate::cpu::step::{STEP_FLAGS, STEP_N, STEP_STATS, TOUCH_ALL};
+use crate::cpu::step::{step_record, StepHeader, STEP_FLAGS, STEP_RESET_BYTES};
+use crate::cpu::{RmsProp, TvChunk};
 use crate::data::TrainViews;
 use crate::gpu::{
     record_background_step, record_loss_sum, record_optim_args, Batch, BatchTimes, Gpu, GpuBuffer,
@@ -39,7 +41,8 @@ pub struct VulkanPlenoxels {
     grad_sh: GpuBuffer,
     state_density: GpuBuffer,
     state_sh: GpuBuffer,
-    /// Step record (glsl/lib/step.glsl): touched count, sample counters, n, flags, list.
+    /// Step record (glsl/lib/step.glsl): `StepHeader` (touched count, sample counters, n),
+    /// flags, list.
     step: GpuBuffer,
     /// Indirect dispatch arguments of rmsprop_sparse.
     args: GpuBuffer,
@@ -79,11 +82,7 @@ impl VulkanPlenoxels {
             grad_sh: gpu.zeros::<f32>(n * SH_DIM)?,
             state_density: gpu.zeros::<f32>(n)?,
             state_sh: gpu.zeros::<f32>(n * SH_DIM)?,
-            step: {
-                let mut init = vec![0u32; STEP_FLAGS + 2 * n];
-                init[STEP_N] = n as u32;
-                gpu.upload(&init)?
-            },
+            step: gpu.upload(&step_record(n, &[]))?,
             args: gpu.zeros::<u32>(3)?,
             params: gpu.host_to_device::<PlenoxelParams>(1)?,
             bg: gpu.upload(&[Background::new([1.0; 3], false)])?,
@@ -124,19 +123,16 @@ impl VulkanPlenoxels {
     }
 
     fn read_stats(&self) -> Result<PlenoxelCounts> {
-        // The counters sit at u32 index STEP_STATS of the step record.
-        let words = std::mem::size_of::<PlenoxelCounts>() / 4;
-        let v: Vec<u32> = self.step.download_range(STEP_STATS, words)?;
-        Ok(bytemuck::pod_read_unaligned(bytemuck::cast_slice(&v)))
+        Ok(self.step.download_range::<StepHeader>(0, 1)?[0].stats)
     }
 
     /// Record clearing the step's touched count and sample counters.
     fn record_step_reset(&self, b: &mut Batch) {
-        b.fill_zero_range(&self.step, 0, 4 * STEP_N as u64);
+        b.fill_zero_range(&self.step, 0, STEP_RESET_BYTES);
     }
 
     /// Record the sparse RMSProp step over the vertices touched this step.
-    fn record_rmsprop(&self, b: &mut Batch, p: &StepParams) -> Result<()> {
+    fn record_rmsprop(&self, b: &mut Batch, p: &RmsProp) -> Result<()> {
         record_optim_args(b, &self.step, &self.args)?;
         b.dispatch_indirect(
             &kernels::rmsprop_sparse::INFO,
@@ -157,9 +153,9 @@ impl VulkanPlenoxels {
         )
     }
 
-    /// Upload rays (and targets), start a batch and record the step reset and the occupancy
-    /// refresh every march kernel needs first (the upload charged to `clock`). Returns the batch
-    /// and the device addresses of the rays, targets and per-ray output.
+    /// Upload rays (and targets), start a batch and record the step reset (the upload charged to
+    /// `clock`). Returns the batch and the device addresses of the rays, targets and per-ray
+    /// output.
     fn begin(
         &mut self,
         rays: &[f32],
@@ -170,34 +166,21 @@ impl VulkanPlenoxels {
         clock.mark(Phase::Upload);
         let mut b = self.gpu.batch()?;
         self.record_step_reset(&mut b);
-        self.record_occupancy(&mut b)?;
         Ok((b, addrs))
     }
 
-    /// Start a batch with the step reset, the occupancy refresh and the training rays (uploaded,
-    /// or drawn by `sample_rays`), then the fused train kernel (gradients += data term).
-    fn record_train(
-        &mut self,
-        src: TrainRays,
-        stop_thresh: f32,
-        clock: &mut PhaseClock,
-    ) -> Result<Batch> {
-        let n = src.len();
-        let mp = march_params(&self.meta, stop_thresh);
-        let params = PlenoxelParams {
-            scale: mp.scale,
-            offset: mp.offset,
-            stop_thresh,
-            grad_scale: 2.0 / (3.0 * n as f32),
-        };
-        let (mut b, [ray_buf, target_buf, loss_buf]) = match src {
+    /// Start a batch with the step reset and the training rays (uploaded, or drawn by
+    /// `sample_rays`). Returns it with the addresses of rays, targets and per-ray output.
+    fn begin_train(&mut self, src: TrainRays, clock: &mut PhaseClock) -> Result<(Batch, [u64; 3])> {
+        match src {
             TrainRays::Host { rays, targets } => {
+                let n = src.len();
                 ensure!(
                     n > 0 && targets.len() == 3 * n,
                     "batch of {n} rays with {} targets",
                     targets.len() / 3
                 );
-                self.begin(rays, Some(targets), clock)?
+                self.begin(rays, Some(targets), clock)
             }
             TrainRays::Sampled { id, set, seed, n } => {
                 TrainViewBuffers::ensure(&mut self.views, &self.gpu, id, set, n)?;
@@ -205,13 +188,60 @@ impl VulkanPlenoxels {
                 clock.mark(Phase::Upload);
                 let mut b = self.gpu.batch()?;
                 self.record_step_reset(&mut b);
-                self.record_occupancy(&mut b)?;
                 let views = self.views.as_ref().expect("ensured");
                 let [rays, targets] = views.record_sample(&mut b, seed, n)?;
-                (b, [rays, targets, out])
+                Ok((b, [rays, targets, out]))
             }
-        };
-        b.update(&self.params, 0, &[params])?;
+        }
+    }
+
+    /// Start the batch of `src`'s rays and record `plan`'s passes on it, in order.
+    fn record_plan(
+        &mut self,
+        src: TrainRays,
+        plan: &PlenoxelPlan,
+        clock: &mut PhaseClock,
+    ) -> Result<Batch> {
+        let n = src.len();
+        let (mut b, rays) = self.begin_train(src, clock)?;
+        for pass in plan.passes() {
+            match pass {
+                PlenoxelPass::Occupancy => self.record_occupancy(&mut b)?,
+                PlenoxelPass::Train {
+                    stop_thresh,
+                    grad_scale,
+                } => self.record_train(&mut b, *stop_thresh, *grad_scale, rays, n)?,
+                PlenoxelPass::Tv { field, chunk } => self.record_tv(&mut b, *field, chunk)?,
+                PlenoxelPass::RmsProp(h) => self.record_rmsprop(&mut b, h)?,
+                PlenoxelPass::Background { lr, beta, eps } => {
+                    record_background_step(&mut b, &self.bg, *lr, *beta, *eps)?
+                }
+            }
+        }
+        Ok(b)
+    }
+
+    /// Write the params buffer for a training pass over `n` rays (in the command stream) and
+    /// record the fused train kernel (gradients += data term).
+    fn record_train(
+        &self,
+        b: &mut Batch,
+        stop_thresh: f32,
+        grad_scale: f32,
+        [ray_buf, target_buf, loss_buf]: [u64; 3],
+        n: usize,
+    ) -> Result<()> {
+        let mp = march_params(&self.meta, stop_thresh);
+        b.update(
+            &self.params,
+            0,
+            &[PlenoxelParams {
+                scale: mp.scale,
+                offset: mp.offset,
+                stop_thresh,
+                grad_scale,
+            }],
+        )?;
         b.dispatch_1d(
             &kernels::plenoxel_train::INFO,
             &kernels::plenoxel_train::Push {
@@ -231,8 +261,32 @@ impl VulkanPlenoxels {
                 n_rays: n as u32,
             },
             n as u32,
-        )?;
-        Ok(b)
+        )
+    }
+
+    /// Record TV on `field` over `c`'s slots (the dispatch covers the chunk and the slots whose
+    /// forward neighbours lie in it).
+    fn record_tv(&self, b: &mut Batch, field: TvField, c: &TvChunk) -> Result<()> {
+        let (data, grad) = match field {
+            TvField::Density => (&self.density, &self.grad_density),
+            TvField::Sh => (&self.sh, &self.grad_sh),
+        };
+        b.dispatch_1d(
+            &kernels::tv::INFO,
+            &kernels::tv::Push {
+                links: self.links.address(),
+                data: data.address(),
+                grad: grad.address(),
+                step: self.step.address(),
+                res: c.res,
+                start: c.start,
+                count: c.count,
+                channels: c.channels,
+                scale: c.scale,
+                touch_bits: c.touch,
+            },
+            c.count + c.res[1] * c.res[2],
+        )
     }
 
     /// Wait for the steps in flight (before the host reads, writes or frees what they use).
@@ -262,13 +316,13 @@ impl VulkanPlenoxels {
         Ok(())
     }
 
-    /// Record and submit one training step on `src`'s rays without waiting for it: occupancy →
-    /// sampling (when drawn on the device) → train → TV → RMSProp, one submission (up to
-    /// `MAX_IN_FLIGHT` run on the device while the host records the next); its figures come back
-    /// with [`Self::take_timed`].
+    /// Record the step's plan on one batch and submit it without waiting (up to
+    /// `MAX_IN_FLIGHT` steps run on the device while the host records the next); its figures
+    /// come back with [`Self::take_timed`].
     pub fn submit_step(&mut self, src: TrainRays, p: &StepParams) -> Result<()> {
         let n = src.len();
         let mut clock = PhaseClock::start();
+        let plan = PlenoxelPlan::step(p, self.meta.res, n, self.bg_learned)?;
         match &src {
             // Host rays are written into buffers an earlier step may still read.
             TrainRays::Host { .. } => self.settle()?,
@@ -284,41 +338,13 @@ impl VulkanPlenoxels {
             self.collect()?;
         }
         let slot = self.steps.get_mut().pending();
-        let mut b = self.record_train(src, p.stop_thresh, &mut clock)?;
-        if let Some(t) = p.tv {
-            let span = t.count + self.meta.res[1] * self.meta.res[2];
-            for (data, grad, channels, lambda) in [
-                (&self.density, &self.grad_density, 1u32, t.lambda_sigma),
-                (&self.sh, &self.grad_sh, SH_DIM as u32, t.lambda_sh),
-            ] {
-                b.dispatch_1d(
-                    &kernels::tv::INFO,
-                    &kernels::tv::Push {
-                        links: self.links.address(),
-                        data: data.address(),
-                        grad: grad.address(),
-                        step: self.step.address(),
-                        res: self.meta.res,
-                        start: t.start,
-                        count: t.count,
-                        channels,
-                        scale: lambda / t.count.max(1) as f32,
-                        touch_bits: TOUCH_ALL,
-                    },
-                    span,
-                )?;
-            }
-        }
-        self.record_rmsprop(&mut b, p)?;
-        if self.bg_learned {
-            record_background_step(&mut b, &self.bg, p.lr_bg, p.beta, p.eps)?;
-        }
+        let mut b = self.record_plan(src, &plan, &mut clock)?;
         // The step's figures into its slot: the squared error summed on the device, the
         // counters copied.
         let out = self.rays.out().address();
         record_loss_sum(&mut b, out, self.readback.address(slot, 0), n, 1, 1)?;
-        self.readback
-            .copy(&mut b, slot, 1, &self.step, 4 * STEP_STATS as u64);
+        let stats = std::mem::offset_of!(StepHeader, stats) as u64;
+        self.readback.copy(&mut b, slot, 1, &self.step, stats);
         clock.mark(Phase::Record);
         let f = b.submit_async()?;
         self.steps.get_mut().push(
@@ -394,12 +420,10 @@ impl Plenoxels for VulkanPlenoxels {
     fn gradients(&mut self, rays: &[f32], targets: &[f32], stop_thresh: f32) -> Result<Gradients> {
         self.settle()?;
         let n = rays.len() / 6;
-        self.record_train(
-            TrainRays::Host { rays, targets },
-            stop_thresh,
-            &mut PhaseClock::start(),
-        )?
-        .submit()?;
+        let plan = PlenoxelPlan::gradients(stop_thresh, n);
+        let src = TrainRays::Host { rays, targets };
+        self.record_plan(src, &plan, &mut PhaseClock::start())?
+            .submit()?;
         let mut bg: Background = self.bg.download()?[0];
         let g = Gradients {
             ray_loss: self.ray_loss(n)?,
@@ -428,6 +452,7 @@ impl Plenoxels for VulkanPlenoxels {
         let n = rays.len() / 6;
         let mp = march_params(&self.meta, stop_thresh);
         let (mut b, [ray_buf, _, out_buf]) = self.begin(rays, None, &mut PhaseClock::start())?;
+        self.record_occupancy(&mut b)?;
         b.dispatch_1d(
             &kernels::plenoxel_fwd::INFO,
             &kernels::plenoxel_fwd::Push {
@@ -460,6 +485,7 @@ impl Plenoxels for VulkanPlenoxels {
         let mp = march_params(&self.meta, stop_thresh);
         let out = self.gpu.zeros::<u32>(self.allocated())?;
         let (mut b, [ray_buf, _, _]) = self.begin(rays, None, &mut PhaseClock::start())?;
+        self.record_occupancy(&mut b)?;
         b.dispatch_1d(
             &kernels::plenoxel_weights::INFO,
             &kernels::plenoxel_weights::Push {

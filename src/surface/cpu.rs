@@ -1,8 +1,9 @@
 //! The CPU stage-2 backend: the kernels' twins on a host-resident surface grid.
 
+use super::plan::{PlanGrid, SurfacePass, SurfacePlan};
 use super::{
-    batch_loss, surface_params, BlockRefresh, RegPlan, SurfaceBackend, SurfaceState,
-    SurfaceStateFn, SurfaceStepParams, SurfaceStepStats,
+    surface_params, BlockRefresh, SurfaceBackend, SurfaceState, SurfaceStateFn, SurfaceStepParams,
+    SurfaceStepStats,
 };
 use crate::abi::surface_grid::SurfaceGridRef;
 use crate::cpu::background::{self, Background};
@@ -12,8 +13,8 @@ use crate::cpu::surface_fwd::{render, SurfCounts};
 use crate::cpu::surface_reg::{
     normal_reg_passes, row_slots, surface_opacity_reg, NormalPrefix, NormalScratch,
 };
-use crate::cpu::surface_train::{train, SurfaceGrads};
-use crate::cpu::{surface_rmsprop_sparse, tv, Stage2Params, SurfaceRmsProp};
+use crate::cpu::surface_train::{train, RayLoss, SurfaceGrads, TrainCounts};
+use crate::cpu::{surface_rmsprop_sparse, tv, Stage2Params};
 use crate::data::TrainViews;
 use crate::gpu::{Phase, PhaseClock};
 use crate::grid::surface::SurfaceGrid;
@@ -81,88 +82,135 @@ impl CpuSurface {
     /// Rebuild the block masks when δ may have drifted past their margin.
     fn refresh_blocks(&mut self, lr_delta: f32, beta: f32) -> Result<()> {
         if let Some(margin) = self.refresh.before_pass(lr_delta, beta) {
-            self.blocks = build_blocks(
-                &grid_ref(&self.grid),
-                &self.grid.levels,
-                margin,
-                SURF_BLOCK_SHIFT_CPU,
-            )?;
+            self.build_blocks(margin)?;
         }
         Ok(())
     }
 
-    /// The per-vertex regularisers' gradients; returns the Lα + Ln loss.
-    fn regularise(&mut self, p: &SurfaceStepParams, plan: &RegPlan) -> Result<f64> {
-        let g = &self.grid;
-        let [gd, go, _] = &mut self.grad;
-        if let Some(c) = p.regs.delta_tv {
-            ensure!(
-                c.rows as usize == g.delta.len() && c.start < c.rows.max(1),
-                "Lδ chunk over {} rows from {} on a grid of {}",
-                c.rows,
-                c.start,
-                g.delta.len()
-            );
-            delta_tv(
-                &self.axis_nbrs,
-                &g.delta,
-                gd,
-                &c,
-                self.axis_reach,
-                &mut self.delta_dirs,
-            );
-        }
-        if let Some(c) = p.regs.opacity_tv {
-            tv(&g.links, &g.opacity, go, &mut self.touched, &c);
-        }
-        let mut loss = 0.0;
-        if let Some(c) = p.regs.opacity_log {
-            loss += surface_opacity_reg(&g.opacity, &mut self.grad[1], &c);
-        }
-        if let Some(chunk) = &plan.normals {
-            let st = normal_reg_passes(
-                &self.normals,
-                &g.delta,
-                &mut self.grad[0],
-                &mut self.touched,
-                chunk,
-                &mut self.normal_scratch,
-            );
-            loss += st.loss;
-        }
-        Ok(loss)
+    fn build_blocks(&mut self, margin: f32) -> Result<()> {
+        self.blocks = build_blocks(
+            &grid_ref(&self.grid),
+            &self.grid.levels,
+            margin,
+            SURF_BLOCK_SHIFT_CPU,
+        )?;
+        Ok(())
     }
 
-    /// RMSProp on the touched groups of every vertex (δ on every row of the plan's δ rows too),
-    /// then clear flags and gradients.
-    fn optimise(&mut self, p: &SurfaceStepParams, plan: &RegPlan) {
-        let [gd, go, gs] = &mut self.grad;
-        let [sd, so, ss] = &mut self.state;
-        let g = &mut self.grid;
-        surface_rmsprop_sparse(
-            Stage2Params {
-                delta: &mut g.delta,
-                opacity: &mut g.opacity,
-                sh: &mut g.sh,
-                grad_delta: gd,
-                grad_opacity: go,
-                grad_sh: gs,
-                state_delta: sd,
-                state_opacity: so,
-                state_sh: ss,
-            },
-            &mut self.touched,
-            &SurfaceRmsProp {
-                lr_delta: p.lr_delta,
-                lr_opacity: p.lr_opacity,
-                lr_sh: p.lr_sh,
-                beta: p.beta,
-                eps: p.eps,
-                delta_rows: plan.delta_rows,
-                opacity_rows: plan.opacity_rows,
-            },
-        );
+    /// The plan of a step with `p` on `n_rays` rays.
+    fn plan(&mut self, p: &SurfaceStepParams, n_rays: usize) -> Result<SurfacePlan> {
+        let g = PlanGrid {
+            res: self.grid.res,
+            rows: self.grid.delta.len() as u32,
+            normals: &self.normals,
+            delta_reach: self.axis_reach,
+        };
+        SurfacePlan::step(p, &g, n_rays, self.bg.learned(), &mut self.refresh)
     }
+
+    /// Run `plan`'s passes in order, the kernels' twins, on the batch `rays`, `targets`.
+    fn run_plan(
+        &mut self,
+        plan: &SurfacePlan,
+        rays: &[f32],
+        targets: &[f32],
+    ) -> Result<PassOutput> {
+        let mut out = PassOutput::default();
+        for pass in plan.passes() {
+            match pass {
+                SurfacePass::Blocks { margin } => self.build_blocks(*margin)?,
+                SurfacePass::Train {
+                    a,
+                    stop_thresh,
+                    loss,
+                } => {
+                    let sp = surface_params(&self.grid, *a, *stop_thresh, self.bg.rgb);
+                    let learned = self.bg.learned();
+                    let [gd, go, gs] = &mut self.grad;
+                    (out.losses, out.counts) = train(
+                        &grid_ref(&self.grid),
+                        rays,
+                        targets,
+                        &sp,
+                        loss,
+                        Some(SkipRef {
+                            words: &self.blocks,
+                            shift: SURF_BLOCK_SHIFT_CPU,
+                        }),
+                        SurfaceGrads {
+                            delta: gd,
+                            opacity: go,
+                            sh: gs,
+                            touched: &mut self.touched,
+                            background: learned.then_some(&mut self.bg.grad),
+                        },
+                    )?;
+                }
+                SurfacePass::DeltaTv(c) => delta_tv(
+                    &self.axis_nbrs,
+                    &self.grid.delta,
+                    &mut self.grad[0],
+                    c,
+                    self.axis_reach,
+                    &mut self.delta_dirs,
+                ),
+                SurfacePass::OpacityTv(c) => tv(
+                    &self.grid.links,
+                    &self.grid.opacity,
+                    &mut self.grad[1],
+                    &mut self.touched,
+                    c,
+                ),
+                SurfacePass::OpacityLog(c) => {
+                    out.reg_loss += surface_opacity_reg(&self.grid.opacity, &mut self.grad[1], c);
+                }
+                SurfacePass::Normals(c) => {
+                    out.reg_loss += normal_reg_passes(
+                        &self.normals,
+                        &self.grid.delta,
+                        &mut self.grad[0],
+                        &mut self.touched,
+                        c,
+                        &mut self.normal_scratch,
+                    )
+                    .loss;
+                }
+                SurfacePass::RmsProp(h) => {
+                    let [gd, go, gs] = &mut self.grad;
+                    let [sd, so, ss] = &mut self.state;
+                    let g = &mut self.grid;
+                    surface_rmsprop_sparse(
+                        Stage2Params {
+                            delta: &mut g.delta,
+                            opacity: &mut g.opacity,
+                            sh: &mut g.sh,
+                            grad_delta: gd,
+                            grad_opacity: go,
+                            grad_sh: gs,
+                            state_delta: sd,
+                            state_opacity: so,
+                            state_sh: ss,
+                        },
+                        &mut self.touched,
+                        h,
+                    );
+                }
+                SurfacePass::Background { lr, beta, eps } => {
+                    background::step(&mut self.bg, *lr, *beta, *eps);
+                }
+            }
+        }
+        Ok(out)
+    }
+}
+
+/// What a step's passes produce on the CPU: the training pass's per-ray losses and counters,
+/// and the Lα + Ln loss.
+#[derive(Default)]
+struct PassOutput {
+    losses: Vec<RayLoss>,
+    counts: TrainCounts,
+    reg_loss: f64,
 }
 
 impl SurfaceBackend for CpuSurface {
@@ -177,35 +225,13 @@ impl SurfaceBackend for CpuSurface {
         p: &SurfaceStepParams,
     ) -> Result<SurfaceStepStats> {
         let mut clock = PhaseClock::start();
-        let sp = surface_params(&self.grid, p.a, p.stop_thresh, self.bg.rgb);
         let n = rays.len() / 6;
-        let learned = self.bg.learned();
-        self.refresh_blocks(p.lr_delta, p.beta)?;
-        let [gd, go, gs] = &mut self.grad;
-        let (losses, counts) = train(
-            &grid_ref(&self.grid),
-            rays,
-            targets,
-            &sp,
-            &batch_loss(n, p),
-            Some(SkipRef {
-                words: &self.blocks,
-                shift: SURF_BLOCK_SHIFT_CPU,
-            }),
-            SurfaceGrads {
-                delta: gd,
-                opacity: go,
-                sh: gs,
-                touched: &mut self.touched,
-                background: learned.then_some(&mut self.bg.grad),
-            },
-        )?;
-        let plan = RegPlan::new(p, &self.normals, self.axis_reach);
-        let reg_loss = self.regularise(p, &plan)?;
-        self.optimise(p, &plan);
-        if learned {
-            background::step(&mut self.bg, p.lr_bg, p.beta, p.eps);
-        }
+        let plan = self.plan(p, n)?;
+        let PassOutput {
+            losses,
+            counts,
+            reg_loss,
+        } = self.run_plan(&plan, rays, targets)?;
         self.refresh.after_update(p.lr_delta, p.beta);
         let nf = n.max(1) as f64;
         let mut stats = SurfaceStepStats {

@@ -4,6 +4,7 @@
 mod cpu;
 pub mod delta_tv;
 pub mod normal_reg;
+pub mod plan;
 pub mod rmsprop;
 pub mod skip;
 mod vulkan;
@@ -12,10 +13,9 @@ pub use cpu::CpuSurface;
 pub use vulkan::{surf_params, SurfaceGradients, VulkanSurface};
 
 use crate::cpu::background::Background;
-use crate::cpu::step::RowRange;
 use crate::cpu::surface_delta_tv::DeltaTvChunk;
 use crate::cpu::surface_fwd::{SurfCounts, SurfaceParams};
-use crate::cpu::surface_reg::{NormalChunk, NormalPrefix, OpacityChunk};
+use crate::cpu::surface_reg::OpacityChunk;
 use crate::cpu::surface_train::{SurfaceLoss, TrainCounts};
 use crate::cpu::TvChunk;
 use crate::data::TrainViews;
@@ -53,66 +53,6 @@ pub struct SurfaceStepParams {
     pub regs: SurfaceRegs,
     /// RMSProp rate of a learned background (`background_step`; unused when it is fixed).
     pub lr_bg: f32,
-}
-
-/// The rows whose δ a step's RMSProp updates flagged or not (`SurfaceRmsProp::delta_rows`), and
-/// whether the normal regularisers' rows lie within them, so that they need not flag δ (flagging
-/// costs one list entry, and one invocation, per vertex): Lδ's window (every row for a whole-grid
-/// Lδ; `delta_reach`: its `forward_reach`), widened over the normal chunk's corner window when
-/// that starts at the same row (`step_params` draws one start for both), or that corner window
-/// alone without Lδ. A row of the range without a δ gradient sees only its RMS state decay.
-pub fn delta_rows(
-    delta_tv: Option<&DeltaTvChunk>,
-    delta_reach: u32,
-    normals: Option<&NormalChunk>,
-) -> (RowRange, bool) {
-    let mut range = delta_tv.map(|c| c.window(delta_reach));
-    let mut inside = false;
-    if let Some(n) = normals {
-        let corners = n.rows_from_start(n.corner_window);
-        match &mut range {
-            None => {
-                range = Some(corners);
-                inside = true;
-            }
-            Some(r) if r.len == r.rows || r.start == corners.start => {
-                r.len = r.len.max(corners.len);
-                inside = true;
-            }
-            Some(_) => {}
-        }
-    }
-    (range.unwrap_or_default(), inside)
-}
-
-/// Where a step's regularisers work: the normal regularisers' chunk (None when off or empty),
-/// flagging δ only where the δ rows do not cover it; the δ rows ([`delta_rows`]); the σα rows
-/// (Lα's chunk; RMSProp updates σα there flagged or not).
-pub struct RegPlan {
-    pub normals: Option<NormalChunk>,
-    pub delta_rows: RowRange,
-    pub opacity_rows: RowRange,
-}
-
-impl RegPlan {
-    /// The plan of `p`'s regularisers on the grid of `prefix`, with Lδ's `delta_reach`.
-    pub fn new(p: &SurfaceStepParams, prefix: &NormalPrefix, delta_reach: u32) -> Self {
-        let mut normals = p
-            .regs
-            .normals
-            .map(|(start, count, l1, l2)| prefix.chunk(start, count, l1, l2))
-            .filter(|c| c.count.min(c.rows) > 0);
-        let (delta_rows, inside) =
-            delta_rows(p.regs.delta_tv.as_ref(), delta_reach, normals.as_ref());
-        if let (Some(c), true) = (&mut normals, inside) {
-            c.touch = 0;
-        }
-        RegPlan {
-            normals,
-            delta_rows,
-            opacity_rows: p.regs.opacity_log.map(|c| c.range()).unwrap_or_default(),
-        }
-    }
 }
 
 use crate::abi::consts::OPACITY_REG_ROWS;

@@ -1,28 +1,30 @@
 //! The Vulkan stage-2 backend: grid, gradients, optimiser state and the training views live in
 //! device buffers; a training step is one batch and one submission: step reset → sample_rays
-//! (when the batch is drawn on the device) → (surface_live_cells and surface_blocks when δ may
-//! have drifted past their margin) → surface_train → regularisers (Lδ through the two
-//! surface_delta_tv passes, TVα through `tv`, Lα through surface_opacity_reg, Ln1/Ln2 through
-//! the three surface_normal_reg_* passes, each over its chunk's window) → surface_rmsprop: δ and σα on the rows the regularisers' chunks cover
-//! ([`RegPlan`]), then (optim_args → indirect) the flagged groups of the touched vertices.
+//! (when the batch is drawn on the device) → the kernels of the step's [`SurfacePlan`], in its
+//! order (the skip structure through surface_live_cells, surface_blocks and the radius passes;
+//! surface_train; Lδ through the two surface_delta_tv passes, TVα through `tv`, Lα through
+//! surface_opacity_reg, Ln1/Ln2 through the three surface_normal_reg_* passes, each over its
+//! chunk's window; surface_rmsprop: δ and σα on the rows the regularisers' chunks cover, then
+//! (optim_args → indirect) the flagged groups of the touched vertices; background_step).
 
 use super::delta_tv::{record_delta_tv, DeltaTvIo, Q_FLOATS};
 use super::normal_reg::{record_normal_reg, upload_nonempty, NormalRegBuffers, NormalRegIo};
+use super::plan::{PlanGrid, SurfacePass, SurfacePlan};
 use super::rmsprop::{record_surface_rmsprop, SurfaceOptimIo};
 use super::skip::{record_skip_structure, SkipIo};
 use super::{
-    batch_loss, opacity_reg_invocations, surface_params, BlockRefresh, RegPlan, SurfaceBackend,
-    SurfaceState, SurfaceStepParams, SurfaceStepStats,
+    opacity_reg_invocations, surface_params, BlockRefresh, SurfaceBackend, SurfaceState,
+    SurfaceStepParams, SurfaceStepStats,
 };
 use crate::abi::buffers::{RayLoss, SurfCounts, SurfOut, SurfParams, TrainCounts};
 use crate::cpu::background::Background;
-use crate::cpu::step::{STEP_COUNT, STEP_FLAGS, STEP_N};
+use crate::cpu::step::{step_record, StepHeader, STEP_FLAGS, STEP_RESET_BYTES};
 use crate::cpu::surface_blocks::{alloc_box, complete_cells};
 use crate::cpu::surface_delta_tv::{axis_neighbours, forward_reach};
 use crate::cpu::surface_fwd::SurfaceParams;
 use crate::cpu::surface_reg::{row_slots, NormalPrefix};
-use crate::cpu::surface_train::{SurfaceLoss, SURF_MAX_HITS};
-use crate::cpu::SurfaceRmsProp;
+use crate::cpu::surface_train::SurfaceLoss;
+use crate::cpu::TvChunk;
 use crate::data::TrainViews;
 use crate::gpu::{
     record_background_step, record_loss_sum, Batch, BatchTimes, Gpu, GpuBuffer, Phase, PhaseClock,
@@ -106,12 +108,12 @@ pub struct VulkanSurface {
     sh: GpuBuffer,
     grad: [GpuBuffer; 3],
     state: [GpuBuffer; 3],
-    /// Step record (glsl/lib/step.glsl): touched count, n, flags, list.
+    /// Step record (glsl/lib/step.glsl): `StepHeader`, flags, list.
     step: GpuBuffer,
     /// Indirect dispatch arguments of surface_rmsprop.
     args: GpuBuffer,
-    /// The params buffer of surface_fwd and surface_train (written in each batch's command
-    /// stream).
+    /// The params buffer of surface_fwd and surface_train (written in each training batch's
+    /// command stream, before a render).
     params: GpuBuffer,
     /// The background (`Background`): read by surface_fwd and surface_train, and, when learned,
     /// its gradient accumulated and stepped on the device (`background_step`), so that a step
@@ -202,8 +204,8 @@ impl VulkanSurface {
             grad: zeros3()?,
             state: zeros3()?,
             step: {
-                let mut init = vec![0u32; STEP_FLAGS + 2 * rows];
-                init[STEP_N] = n as u32;
+                let mut init = step_record(n, &[]);
+                init.resize(STEP_FLAGS + 2 * rows, 0);
                 gpu.upload(&init)?
             },
             args: gpu.zeros::<u32>(3)?,
@@ -259,7 +261,7 @@ impl VulkanSurface {
     /// A batch starting with the step reset (touched count) and the counters' reset.
     fn begin_batch(&self) -> Result<Batch> {
         let mut b = self.gpu.batch()?;
-        b.fill_zero_range(&self.step, 0, 4 * STEP_N as u64);
+        b.fill_zero_range(&self.step, 0, STEP_RESET_BYTES);
         b.fill_zero(&self.stats);
         b.fill_zero(&self.reg_loss);
         b.fill_zero(&self.reg_skipped);
@@ -267,13 +269,8 @@ impl VulkanSurface {
     }
 
     /// Start a batch with the resets and the training rays (uploaded, or drawn by
-    /// `sample_rays`), then record the fused training pass (gradients += data term).
-    fn record_train(
-        &mut self,
-        src: TrainRays,
-        p: &SurfaceStepParams,
-        clock: &mut PhaseClock,
-    ) -> Result<Batch> {
+    /// `sample_rays`). Returns it with the addresses of rays, targets and per-ray output.
+    fn begin_train(&mut self, src: TrainRays, clock: &mut PhaseClock) -> Result<(Batch, [u64; 3])> {
         let n = src.len();
         if let TrainRays::Host { rays, targets } = src {
             ensure!(
@@ -283,17 +280,9 @@ impl VulkanSurface {
                 targets.len()
             );
         }
-        ensure!(
-            p.a <= SURF_MAX_HITS as f32,
-            "truncation parameter a = {} exceeds the {SURF_MAX_HITS} hits a ray records",
-            p.a
-        );
-        // The colour is the device's (`bg`); surface_fwd and surface_train read it there.
-        let sp = surface_params(&self.meta, p.a, p.stop_thresh, [1.0; 3]);
         clock.mark(Phase::Record);
-        let params = surf_params(&sp, &batch_loss(n, p), n);
-        let (mut b, [ray_buf, target_buf, out_buf]) = match src {
-            TrainRays::Host { rays, targets } => self.begin(rays, Some(targets), clock)?,
+        match src {
+            TrainRays::Host { rays, targets } => self.begin(rays, Some(targets), clock),
             TrainRays::Sampled { id, set, seed, n } => {
                 TrainViewBuffers::ensure(&mut self.views, &self.gpu, id, set, n)?;
                 let [_, _, out] = self.rays.reserve(&self.gpu, n)?;
@@ -301,13 +290,99 @@ impl VulkanSurface {
                 let mut b = self.begin_batch()?;
                 let views = self.views.as_ref().expect("ensured");
                 let [rays, targets] = views.record_sample(&mut b, seed, n)?;
-                (b, [rays, targets, out])
+                Ok((b, [rays, targets, out]))
             }
-        };
-        b.update(&self.params, 0, &[params])?;
-        if let Some(margin) = self.refresh.before_pass(p.lr_delta, p.beta) {
-            self.record_blocks(&mut b, margin)?;
         }
+    }
+
+    /// The grid as the step plans see it.
+    fn plan_grid(&self) -> PlanGrid<'_> {
+        PlanGrid {
+            res: self.meta.res,
+            rows: self.rows as u32,
+            normals: &self.normal_prefix,
+            delta_reach: self.axis_reach,
+        }
+    }
+
+    /// Record `plan`'s passes in order on the batch of `n` rays at `rays` (addresses of rays,
+    /// targets and per-ray output).
+    fn record_plan(
+        &self,
+        b: &mut Batch,
+        plan: &SurfacePlan,
+        rays: [u64; 3],
+        n: usize,
+    ) -> Result<()> {
+        for pass in plan.passes() {
+            match pass {
+                SurfacePass::Blocks { margin } => self.record_blocks(b, *margin)?,
+                SurfacePass::Train {
+                    a,
+                    stop_thresh,
+                    loss,
+                } => self.record_train(b, *a, *stop_thresh, loss, rays, n)?,
+                SurfacePass::DeltaTv(c) => {
+                    record_delta_tv(b, &self.delta_tv_io(), c, self.axis_reach)?
+                }
+                SurfacePass::OpacityTv(c) => self.record_opacity_tv(b, c)?,
+                SurfacePass::OpacityLog(c) => b.dispatch_1d(
+                    &kernels::surface_opacity_reg::INFO,
+                    &kernels::surface_opacity_reg::Push {
+                        opacity: self.opacity.address(),
+                        grad: self.grad[1].address(),
+                        loss: self.reg_loss.address(),
+                        rows: c.rows,
+                        start: c.start,
+                        count: c.count,
+                        lambda: c.lambda,
+                    },
+                    opacity_reg_invocations(c),
+                )?,
+                SurfacePass::Normals(c) => {
+                    let io = NormalRegIo {
+                        delta: self.delta.address(),
+                        grad: self.grad[0].address(),
+                        step: self.step.address(),
+                        loss: self.reg_loss.address() + 4,
+                        skipped: self.reg_skipped.address(),
+                    };
+                    record_normal_reg(b, &self.normal_bufs, &io, c)?;
+                }
+                SurfacePass::RmsProp(h) => {
+                    let io = SurfaceOptimIo {
+                        params: [
+                            self.delta.address(),
+                            self.opacity.address(),
+                            self.sh.address(),
+                        ],
+                        grads: self.grad.each_ref().map(|g| g.address()),
+                        states: self.state.each_ref().map(|g| g.address()),
+                    };
+                    record_surface_rmsprop(b, &io, &self.step, &self.args, h)?;
+                }
+                SurfacePass::Background { lr, beta, eps } => {
+                    record_background_step(b, &self.bg, *lr, *beta, *eps)?
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Write the params buffer for a training pass over `n` rays (in the command stream) and
+    /// record `surface_train`.
+    fn record_train(
+        &self,
+        b: &mut Batch,
+        a: f32,
+        stop_thresh: f32,
+        loss: &SurfaceLoss,
+        [ray_buf, target_buf, out_buf]: [u64; 3],
+        n: usize,
+    ) -> Result<()> {
+        // The colour is the device's (`bg`); surface_fwd and surface_train read it there.
+        let sp = surface_params(&self.meta, a, stop_thresh, [1.0; 3]);
+        b.update(&self.params, 0, &[surf_params(&sp, loss, n)])?;
         b.dispatch_1d(
             &kernels::surface_train::INFO,
             &kernels::surface_train::Push {
@@ -330,8 +405,36 @@ impl VulkanSurface {
                 block_shift: SURF_BLOCK_SHIFT_VULKAN,
             },
             n as u32,
-        )?;
-        Ok(b)
+        )
+    }
+
+    /// Record TVα. Its chunk is dispatched over its intersection with the span of allocated
+    /// slots: a slot outside it holds no vertex, and every term of the chunk (a vertex and its
+    /// forward neighbours) lies inside it, so the gradient is the whole chunk's.
+    fn record_opacity_tv(&self, b: &mut Batch, c: &TvChunk) -> Result<()> {
+        let res = self.meta.res;
+        let (first, last) = self.allocated_span;
+        let start = c.start.max(first);
+        let end = c.start.saturating_add(c.count).min(last + 1);
+        if start >= end {
+            return Ok(());
+        }
+        b.dispatch_1d(
+            &kernels::tv::INFO,
+            &kernels::tv::Push {
+                links: self.links.address(),
+                data: self.opacity.address(),
+                grad: self.grad[1].address(),
+                step: self.step.address(),
+                res,
+                start,
+                count: end - start,
+                channels: 1,
+                scale: c.scale,
+                touch_bits: c.touch,
+            },
+            end - start + res[1] * res[2],
+        )
     }
 
     /// Device address of the skip structure (after the complete-cell bits).
@@ -372,107 +475,6 @@ impl VulkanSurface {
         }
     }
 
-    /// Record the per-vertex regularisers (the same chunks and scales as `CpuSurface`).
-    fn record_regularisers(
-        &self,
-        b: &mut Batch,
-        p: &SurfaceStepParams,
-        plan: &RegPlan,
-    ) -> Result<()> {
-        let res = self.meta.res;
-        if let (Some(c), true) = (p.regs.delta_tv, self.rows > 0) {
-            record_delta_tv(b, &self.delta_tv_io(), &c, self.axis_reach)?;
-        }
-        // TVα's chunk is dispatched over its intersection with the span of allocated slots: a
-        // slot outside it holds no vertex, and every term of the chunk (a vertex and its forward
-        // neighbours) lies inside it, so the gradient is the whole chunk's.
-        if let Some(c) = p.regs.opacity_tv {
-            ensure!(
-                c.res == res && c.channels == 1,
-                "TV chunk for a {:?} grid with {} channels on a {res:?} grid",
-                c.res,
-                c.channels
-            );
-            let (first, last) = self.allocated_span;
-            let start = c.start.max(first);
-            let end = c.start.saturating_add(c.count).min(last + 1);
-            if self.rows > 0 && start < end {
-                b.dispatch_1d(
-                    &kernels::tv::INFO,
-                    &kernels::tv::Push {
-                        links: self.links.address(),
-                        data: self.opacity.address(),
-                        grad: self.grad[1].address(),
-                        step: self.step.address(),
-                        res,
-                        start,
-                        count: end - start,
-                        channels: 1,
-                        scale: c.scale,
-                        touch_bits: c.touch,
-                    },
-                    end - start + res[1] * res[2],
-                )?;
-            }
-        }
-        let rows = self.rows as u32;
-        if let (Some(c), true) = (p.regs.opacity_log, rows > 0) {
-            ensure!(
-                c.rows == rows,
-                "Lα chunk over {} rows on a grid of {rows}",
-                c.rows
-            );
-            b.dispatch_1d(
-                &kernels::surface_opacity_reg::INFO,
-                &kernels::surface_opacity_reg::Push {
-                    opacity: self.opacity.address(),
-                    grad: self.grad[1].address(),
-                    loss: self.reg_loss.address(),
-                    rows,
-                    start: c.start,
-                    count: c.count,
-                    lambda: c.lambda,
-                },
-                opacity_reg_invocations(&c),
-            )?;
-        }
-        if let Some(c) = &plan.normals {
-            let io = NormalRegIo {
-                delta: self.delta.address(),
-                grad: self.grad[0].address(),
-                step: self.step.address(),
-                loss: self.reg_loss.address() + 4,
-                skipped: self.reg_skipped.address(),
-            };
-            record_normal_reg(b, &self.normal_bufs, &io, c)?;
-        }
-        Ok(())
-    }
-
-    /// Record the RMSProp step: δ and σα on the plan's rows, then the flagged groups of the
-    /// vertices touched this step.
-    fn record_rmsprop(&self, b: &mut Batch, p: &SurfaceStepParams, plan: &RegPlan) -> Result<()> {
-        let io = SurfaceOptimIo {
-            params: [
-                self.delta.address(),
-                self.opacity.address(),
-                self.sh.address(),
-            ],
-            grads: self.grad.each_ref().map(|g| g.address()),
-            states: self.state.each_ref().map(|g| g.address()),
-        };
-        let h = SurfaceRmsProp {
-            lr_delta: p.lr_delta,
-            lr_opacity: p.lr_opacity,
-            lr_sh: p.lr_sh,
-            beta: p.beta,
-            eps: p.eps,
-            delta_rows: plan.delta_rows,
-            opacity_rows: plan.opacity_rows,
-        };
-        record_surface_rmsprop(b, &io, &self.step, &self.args, &h)
-    }
-
     fn read_train_counts(&self) -> Result<TrainCounts> {
         Ok(self.stats.download_range::<TrainCounts>(0, 1)?[0])
     }
@@ -491,12 +493,13 @@ impl VulkanSurface {
     ) -> Result<SurfaceGradients> {
         self.settle()?;
         let n = rays.len() / 6;
-        self.record_train(
-            TrainRays::Host { rays, targets },
-            p,
-            &mut PhaseClock::start(),
-        )?
-        .submit()?;
+        let mut refresh = self.refresh;
+        let plan = SurfacePlan::gradients(p, n, &mut refresh)?;
+        let src = TrainRays::Host { rays, targets };
+        let (mut b, io) = self.begin_train(src, &mut PhaseClock::start())?;
+        self.record_plan(&mut b, &plan, io, n)?;
+        self.refresh = refresh;
+        b.submit()?;
         let rows = self.rows;
         let g = SurfaceGradients {
             ray_loss: self.ray_loss(n)?,
@@ -523,7 +526,24 @@ impl VulkanSurface {
     /// Number of vertices touched by the last step (read from the step record).
     pub fn last_touched(&self) -> Result<u32> {
         self.settle()?;
-        Ok(self.step.download_range::<u32>(STEP_COUNT, 1)?[0])
+        Ok(self.step.download_range::<StepHeader>(0, 1)?[0].count)
+    }
+
+    /// Start the batch of a training step on `src`'s rays and record the step's plan; the
+    /// skip structure counts as rebuilt once the plan is recorded.
+    fn record_step(
+        &mut self,
+        src: TrainRays,
+        p: &SurfaceStepParams,
+        clock: &mut PhaseClock,
+    ) -> Result<Batch> {
+        let n = src.len();
+        let mut refresh = self.refresh;
+        let plan = SurfacePlan::step(p, &self.plan_grid(), n, self.bg_learned, &mut refresh)?;
+        let (mut b, io) = self.begin_train(src, clock)?;
+        self.record_plan(&mut b, &plan, io, n)?;
+        self.refresh = refresh;
+        Ok(b)
     }
 
     /// Wait for the steps in flight (before the host reads, writes or frees what they use).
@@ -558,7 +578,7 @@ impl VulkanSurface {
         Ok(())
     }
 
-    /// Record and submit one training step on `src`'s rays without waiting for it (up to
+    /// Record one training step on `src`'s rays and submit it without waiting (up to
     /// `MAX_IN_FLIGHT` steps run on the device while the host records the next); its figures
     /// come back with [`Self::take_timed`].
     pub fn submit_step(&mut self, src: TrainRays, p: &SurfaceStepParams) -> Result<()> {
@@ -579,13 +599,7 @@ impl VulkanSurface {
             self.collect()?;
         }
         let slot = self.steps.get_mut().pending();
-        let mut b = self.record_train(src, p, &mut clock)?;
-        let plan = RegPlan::new(p, &self.normal_prefix, self.axis_reach);
-        self.record_regularisers(&mut b, p, &plan)?;
-        self.record_rmsprop(&mut b, p, &plan)?;
-        if self.bg_learned {
-            record_background_step(&mut b, &self.bg, p.lr_bg, p.beta, p.eps)?;
-        }
+        let mut b = self.record_step(src, p, &mut clock)?;
         // The step's figures into its slot: per-ray losses summed on the device, the
         // regulariser values and counters copied.
         let stride = (std::mem::size_of::<RayLoss>() / 4) as u32;
