@@ -6,6 +6,7 @@
 //! batch uses are reused from batch to batch.
 use super::buffer::GpuBuffer;
 use super::context::Gpu;
+use super::frame::Frame;
 use super::step_times::{Phase, PhaseClock, StepTimes};
 use crate::abi::consts::DISPATCH_ROW_GROUPS;
 use crate::kernels::KernelInfo;
@@ -42,96 +43,20 @@ impl BatchTimes {
     }
 }
 
-/// A command pool with its one command buffer, timestamp queries and fence: what a batch records
-/// into and submits with. Frames are created on first need and reused by later batches (kept in
-/// the context), so a training step creates no Vulkan object.
-pub(super) struct Frame {
-    pool: vk::CommandPool,
-    cmd: vk::CommandBuffer,
-    queries: Option<vk::QueryPool>,
-    fence: vk::Fence,
-}
-
-impl Frame {
-    fn new(gpu: &Gpu) -> Result<Frame> {
-        let inner = &gpu.inner;
-        let dev = &inner.device;
-        // Vulkan pools need external synchronisation for recording, so one pool per frame lets
-        // batches be recorded on several threads at once.
-        let pool = unsafe {
-            dev.create_command_pool(
-                &vk::CommandPoolCreateInfo::default()
-                    .queue_family_index(inner.info.queue_family.expect("checked at start"))
-                    .flags(vk::CommandPoolCreateFlags::TRANSIENT),
-                None,
-            )
-        }
-        .context("creating a command pool")?;
-        let mut frame = Frame {
-            pool,
-            cmd: vk::CommandBuffer::null(),
-            queries: None,
-            fence: vk::Fence::null(),
-        };
-        // On an error below, `destroy` frees what was created.
-        let made = (|| -> Result<()> {
-            frame.cmd = unsafe {
-                dev.allocate_command_buffers(
-                    &vk::CommandBufferAllocateInfo::default()
-                        .command_pool(pool)
-                        .level(vk::CommandBufferLevel::PRIMARY)
-                        .command_buffer_count(1),
-                )
-            }
-            .context("allocating a command buffer")?[0];
-            frame.fence = unsafe { dev.create_fence(&vk::FenceCreateInfo::default(), None) }
-                .context("creating a fence")?;
-            if inner.info.timestamp_period_ns.is_some() {
-                frame.queries = Some(
-                    unsafe {
-                        dev.create_query_pool(
-                            &vk::QueryPoolCreateInfo::default()
-                                .query_type(vk::QueryType::TIMESTAMP)
-                                .query_count(2 * MAX_TIMED),
-                            None,
-                        )
-                    }
-                    .context("creating a timestamp query pool")?,
-                );
-            }
-            Ok(())
-        })();
-        match made {
-            Ok(()) => Ok(frame),
-            Err(e) => {
-                frame.destroy(dev);
-                Err(e)
-            }
-        }
-    }
-
-    /// Free the frame's objects (the device must be done with them).
-    pub(super) fn destroy(self, dev: &ash::Device) {
-        unsafe {
-            if let Some(q) = self.queries {
-                dev.destroy_query_pool(q, None);
-            }
-            if self.fence != vk::Fence::null() {
-                dev.destroy_fence(self.fence, None);
-            }
-            // Destroying the pool frees its command buffer.
-            dev.destroy_command_pool(self.pool, None);
-        }
-    }
-}
-
 impl Gpu {
     /// A frame from the context's spares, or a new one.
     fn take_frame(&self) -> Result<Frame> {
         let spare = self.inner.frames.lock().unwrap().pop();
         match spare {
             Some(f) => Ok(f),
-            None => Frame::new(self),
+            None => {
+                let info = &self.inner.info;
+                Frame::new(
+                    &self.inner.device,
+                    info.queue_family.expect("checked at start"),
+                    info.timestamp_period_ns.is_some().then_some(2 * MAX_TIMED),
+                )
+            }
         }
     }
 

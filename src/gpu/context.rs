@@ -1,7 +1,7 @@
 //! The Vulkan context: logical device, compute queue, allocator, and the compute
 //! pipelines built lazily from the kernel table (push constants only; buffers by device address).
 
-use super::batch::Frame;
+use super::frame::Frame;
 use super::device::{self, DeviceInfo};
 use super::instance::Instance;
 use super::profile::Profile;

@@ -12,6 +12,7 @@ mod batch;
 mod buffer;
 mod context;
 mod device;
+mod frame;
 mod in_flight;
 mod instance;
 mod loss_sum;
