@@ -15,8 +15,9 @@ fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let arg = |i: usize, default: usize| -> Result<usize> {
         args.get(i).map_or(Ok(default), |s| {
-            s.parse()
-                .with_context(|| format!("'{s}' is not a count; usage: time_sample_rays [RAYS] [REPS]"))
+            s.parse().with_context(|| {
+                format!("'{s}' is not a count; usage: time_sample_rays [RAYS] [REPS]")
+            })
         })
     };
     let (n, reps) = (arg(0, 4096)?, arg(1, 60)?);
@@ -52,6 +53,8 @@ fn main() -> Result<()> {
     let mut slot = None;
     let views = TrainViewBuffers::ensure(&mut slot, &gpu, 1, &set, n)?;
     let (mut device_ms, mut twin_ms, mut identical) = (Vec::new(), Vec::new(), 0);
+    // Device ms of each dispatch of the draw, per draw.
+    let mut dispatch_ms: Vec<Vec<f64>> = Vec::new();
     // Draw 0 is untimed (first-dispatch compilation on lavapipe).
     for seed in 0..=reps as u64 {
         let mut b = gpu.batch()?;
@@ -64,6 +67,10 @@ fn main() -> Result<()> {
             continue;
         }
         device_ms.push(times.total_ns() / 1e6);
+        dispatch_ms.resize(times.dispatches.len(), Vec::new());
+        for (d, (_, ns)) in dispatch_ms.iter_mut().zip(&times.dispatches) {
+            d.push(ns / 1e6);
+        }
         twin_ms.push(twin);
         identical += (views.download_batch(n)?.2 == want.keys) as usize;
     }
@@ -78,6 +85,10 @@ fn main() -> Result<()> {
         gpu.info().name
     );
     println!("  device ms per draw: min {d_min:.3}, median {d_med:.3}");
+    for (i, d) in dispatch_ms.iter_mut().enumerate() {
+        let (min, med) = stats(d);
+        println!("    dispatch {i}: min {min:.3}, median {med:.3}");
+    }
     println!("  CPU twin ms per draw: min {t_min:.3}, median {t_med:.3}");
     println!("  draws whose keys equal the twin's: {identical} of {reps}");
     Ok(())
