@@ -112,10 +112,14 @@ abi_consts! {
     SURF_BLOCK_BIG: f32 = f32::MAX;
 
     // Training-ray sampling (cpu::sample_rays, glsl/sample_rays.comp).
-    /// Rays one workgroup of sample_rays draws and sorts in shared memory (4096 64-bit keys:
-    /// 32 KiB, within the shared memory lavapipe and NVIDIA GPUs offer); a larger batch is
-    /// sorted in runs of this many rays.
-    SAMPLE_SORT_RAYS: u32 = 4096;
+    /// Side of sample_rays' sort: its workgroup size, the keys each invocation of the sort holds
+    /// in registers, and the square root of a run's length.
+    SAMPLE_SORT_SIDE: u32 = 64;
+    /// Rays of a sorted run: a batch is ordered by key within each run of this many rays (a
+    /// larger batch is sorted per run, not as a whole); one workgroup sorts a run in its
+    /// registers and shared memory (4096 64-bit keys: 32 KiB, within the shared memory lavapipe
+    /// and NVIDIA GPUs offer).
+    SAMPLE_SORT_RAYS: u32 = SAMPLE_SORT_SIDE * SAMPLE_SORT_SIDE;
 
     // Loss sums (cpu::loss_sum, glsl/loss_sum.comp).
     /// Invocations of the one `loss_sum` workgroup (its local size) and its partial sums.

@@ -59,6 +59,7 @@ pub const CHECKS: &[(&str, CheckFn)] = &[
     ("rmsprop_sparse", plenoxel::check_rmsprop),
     ("tv", plenoxel::check_tv),
     ("background_step", plenoxel::check_background_step),
+    ("loss_sum", loss_sum::check),
     ("cubic_solve", cubic_solve::check),
     ("extract_points", extract_points::check),
     ("surface_blocks", surface_blocks::check),
@@ -77,7 +78,7 @@ pub const CHECKS: &[(&str, CheckFn)] = &[
     ),
     ("surface_rmsprop", surface_reg::check_rmsprop),
     ("sample_rays", sample_rays::check),
-    ("loss_sum", loss_sum::check),
+    ("sample_rays_sort", sample_rays::check_sort),
 ];
 
 /// Relative L2 distance ‖a − b‖/‖b‖ (0 when both vanish, ∞ when only `b` does).

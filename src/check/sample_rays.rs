@@ -1,4 +1,5 @@
-//! Parity of `glsl/sample_rays.comp` with `cpu::sample_rays`: the sorted pixel keys identical
+//! Parity of the whole draw (`glsl/sample_rays.comp`'s two passes around
+//! `glsl/sample_rays_sort.comp`) with `cpu::sample_rays`: the sorted pixel keys identical
 //! (integers: the same draws, the same order), origins identical (a copy of the camera's), unit
 //! directions within 4 ulp of 1 (2^-21: the kernel's division, square root and reciprocal may
 //! each be off by up to ~1 ulp where the driver does not round them exactly; its products and
@@ -7,9 +8,9 @@
 use super::{CheckRow, Compare};
 use crate::abi::buffers::SampleCamera;
 use crate::abi::consts::SAMPLE_SORT_RAYS;
-use crate::cpu::sample_rays::{sample_rays, SampleSet};
+use crate::cpu::sample_rays::{sample_rays, sort_runs, SampleSet};
 use crate::data::camera::look_at;
-use crate::gpu::{Gpu, TrainViewBuffers};
+use crate::gpu::{record_sort_runs, Gpu, TrainViewBuffers};
 use anyhow::Result;
 use glam::Vec3;
 use rand::{Rng, SeedableRng};
@@ -52,8 +53,8 @@ fn views(rng: &mut Pcg64, n_views: usize, w: u32, h: u32) -> (Vec<Vec<u8>>, Vec<
     (images, cams)
 }
 
-/// The `check-kernels` row: 7 views of 37×23 pixels, a batch of 2·SAMPLE_SORT_RAYS + 1808 rays
-/// (two full runs and a partial one, padded to a power of two in the sort).
+/// The `check-kernels` row of `sample_rays`, the whole draw: 7 views of 37×23 pixels, a batch of
+/// 2·SAMPLE_SORT_RAYS + 1808 rays (two full runs and a partial one, padded in the sort).
 pub fn check(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
     let mut rng = Pcg64::seed_from_u64(seed);
     let (w, h) = (37, 23);
@@ -112,4 +113,50 @@ pub fn check(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
         DIR_ABS / f32::EPSILON as f64
     );
     Ok(cmp.row(crate::kernels::sample_rays::INFO.name, n, note))
+}
+
+/// The `check-kernels` row of `sample_rays_sort`: batches of 2·SAMPLE_SORT_RAYS + 1808 keys (two
+/// full runs and a partial one) and of 37 keys, drawn to repeat (a third from 0..50), to reach
+/// both ends of the range (0 and all-ones, the padding's value) and to fill it; sorted per run,
+/// they must equal the twin's exactly.
+pub fn check_sort(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
+    let mut rng = Pcg64::seed_from_u64(seed);
+    let mut cmp = Compare::new(0.0, 0.0);
+    let mut cases = 0;
+    for n in [2 * SAMPLE_SORT_RAYS as usize + 1808, 37] {
+        let keys: Vec<u64> = (0..n)
+            .map(|_| match rng.random_range(0..6) {
+                0 | 1 => rng.random_range(0..50),
+                2 => 0,
+                3 => u64::MAX,
+                _ => rng.random(),
+            })
+            .collect();
+        let mut want = keys.clone();
+        sort_runs(&mut want);
+        let src = gpu.upload(&keys)?;
+        let dst = gpu.zeros::<u64>(n)?;
+        let mut b = gpu.batch()?;
+        record_sort_runs(&mut b, &src, &dst, n)?;
+        b.submit()?;
+        let got: Vec<u64> = dst.download()?;
+        for (i, (g, c)) in got.iter().zip(&want).enumerate() {
+            cmp.compared += 1;
+            if g != c {
+                cmp.failures += 1;
+                if cmp.first_failure.is_none() {
+                    cmp.first_failure =
+                        Some(format!("batch of {n}, key {i}: gpu {g:#x} cpu {c:#x}"));
+                }
+            }
+        }
+        cases += n;
+    }
+    let note = format!(
+        "{cases} keys in batches of {} and 37, sorted per run of {SAMPLE_SORT_RAYS}: {} differ \
+         (tolerance: none, integers)",
+        2 * SAMPLE_SORT_RAYS + 1808,
+        cmp.failures
+    );
+    Ok(cmp.row(crate::kernels::sample_rays_sort::INFO.name, cases, note))
 }

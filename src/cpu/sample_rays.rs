@@ -140,10 +140,17 @@ fn ray_of(set: &SampleSet, key: u64) -> ([f32; 6], [f32; 3]) {
     (ray, std::array::from_fn(|k| px[k] as f32 / 255.0))
 }
 
+/// Sorts `keys` ascending in runs of [`SAMPLE_SORT_RAYS`] (the last may be shorter): the twin of
+/// `glsl/sample_rays_sort.comp`, the middle step of the kernel's draw.
+pub fn sort_runs(keys: &mut [u64]) {
+    keys.par_chunks_mut(SAMPLE_SORT_RAYS as usize)
+        .for_each(|r| r.sort_unstable());
+}
+
 /// Draws `n` rays with `seed`: ray i picks pixel splitmix64(seed, i) mod n_pixels (uniform over
 /// every pixel of the set, with replacement; the bias of the modulo is below n_pixels / 2^64);
 /// each run of [`SAMPLE_SORT_RAYS`] rays is sorted by key (the key determines the pixel, so the
-/// sorted run is unique and any sort gives the kernel's bitonic order).
+/// sorted run is unique and any sort gives the kernel's bitonic order, [`sort_runs`]).
 pub fn sample_rays(set: &SampleSet, seed: u64, n: usize) -> Result<SampledRays> {
     set.validate()?;
     ensure!(
@@ -158,7 +165,7 @@ pub fn sample_rays(set: &SampleSet, seed: u64, n: usize) -> Result<SampledRays> 
         .with_min_len(run)
         .map(|i| draw_key(set, seed, i))
         .collect();
-    keys.par_chunks_mut(run).for_each(|r| r.sort_unstable());
+    sort_runs(&mut keys);
     let (rays, targets): (Vec<[f32; 6]>, Vec<[f32; 3]>) = keys
         .par_iter()
         .with_min_len(run)

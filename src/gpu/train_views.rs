@@ -4,9 +4,15 @@
 //! the host.
 
 use super::{Batch, Gpu, GpuBuffer};
+use crate::abi::buffers::SampleCamera;
+use crate::abi::consts::{SAMPLE_SORT_RAYS, SAMPLE_SORT_SIDE};
 use crate::cpu::sample_rays::SampleSet;
-use crate::kernels::sample_rays::{Push, INFO};
+use crate::kernels::{sample_rays, sample_rays_sort};
 use anyhow::{ensure, Result};
+
+// glsl/sample_rays_sort.comp's register passes cover log2(SAMPLE_SORT_SIDE) = 6 bits, and
+// glsl/sample_rays.comp reads a camera as 8 aligned 64-bit words.
+const _: () = assert!(SAMPLE_SORT_SIDE == 64 && std::mem::size_of::<SampleCamera>() == 64);
 
 /// One set of training views on the device and the batch buffers.
 pub struct TrainViewBuffers {
@@ -27,6 +33,9 @@ struct BatchBuffers {
     rays: GpuBuffer,
     targets: GpuBuffer,
     keys: GpuBuffer,
+    /// The batch's keys as drawn (`sample_rays` pass 0), which `sample_rays_sort` sorts into
+    /// `keys`.
+    scratch: GpuBuffer,
 }
 
 impl TrainViewBuffers {
@@ -76,35 +85,39 @@ impl TrainViewBuffers {
                 rays: gpu.zeros::<f32>(6 * cap)?,
                 targets: gpu.zeros::<f32>(3 * cap)?,
                 keys: gpu.zeros::<u64>(cap)?,
+                scratch: gpu.zeros::<u64>(cap)?,
             });
         }
         Ok(v)
     }
 
-    /// Record drawing the batch of `n` rays of `seed` (`sample_rays`; [`ensure`](Self::ensure)
-    /// made room for them); returns the device addresses of its rays and targets, for the
-    /// kernels recorded after it.
+    /// Record drawing the batch of `n` rays of `seed` (`sample_rays` pass 0, `sample_rays_sort`,
+    /// `sample_rays` pass 1; [`ensure`](Self::ensure) made room for them); returns the device
+    /// addresses of its rays and targets, for the kernels recorded after it.
     pub fn record_sample(&self, b: &mut Batch, seed: u64, n: usize) -> Result<[u64; 2]> {
         let bb = self.batch.as_ref().filter(|bb| bb.capacity >= n && n > 0);
         let bb = bb.ok_or_else(|| anyhow::anyhow!("no room was made for a batch of {n} rays"))?;
-        let runs = (n as u32).div_ceil(crate::abi::consts::SAMPLE_SORT_RAYS);
-        b.dispatch(
-            &INFO,
-            &Push {
-                pixels: self.pixels.address(),
-                cams: self.cams.address(),
-                rays: bb.rays.address(),
-                targets: bb.targets.address(),
-                keys: bb.keys.address(),
-                seed,
-                n_pixels: self.n_pixels,
-                width: self.width,
-                height: self.height,
-                n_rays: n as u32,
-                key_bits: self.key_bits,
-            },
-            [runs, 1, 1],
-        )?;
+        let mut push = sample_rays::Push {
+            pixels: self.pixels.address(),
+            cams: self.cams.address(),
+            rays: bb.rays.address(),
+            targets: bb.targets.address(),
+            keys: bb.keys.address(),
+            scratch: bb.scratch.address(),
+            seed,
+            n_pixels: self.n_pixels,
+            width: self.width,
+            height: self.height,
+            n_rays: n as u32,
+            key_bits: self.key_bits,
+            pass: 0,
+            ..Default::default()
+        };
+        // Draw the keys into scratch, sort them into keys per run, write their rays.
+        b.dispatch_1d(&sample_rays::INFO, &push, n as u32)?;
+        record_sort_runs(b, &bb.scratch, &bb.keys, n)?;
+        push.pass = 1;
+        b.dispatch_1d(&sample_rays::INFO, &push, n as u32)?;
         Ok([bb.rays.address(), bb.targets.address()])
     }
 
@@ -118,6 +131,26 @@ impl TrainViewBuffers {
             bb.keys.download_range(0, n)?,
         ))
     }
+}
+
+/// Record sorting the first `n` keys of `src` into `dst` per run of [`SAMPLE_SORT_RAYS`]
+/// (`sample_rays_sort`).
+pub fn record_sort_runs(b: &mut Batch, src: &GpuBuffer, dst: &GpuBuffer, n: usize) -> Result<()> {
+    let bytes = 8 * n as u64;
+    ensure!(
+        n > 0 && n <= u32::MAX as usize && src.size() >= bytes && dst.size() >= bytes,
+        "sorting {n} keys from a buffer of {} bytes into one of {}",
+        src.size(),
+        dst.size()
+    );
+    let push = sample_rays_sort::Push {
+        src: src.address(),
+        dst: dst.address(),
+        n: n as u32,
+        ..Default::default()
+    };
+    let runs = (n as u32).div_ceil(SAMPLE_SORT_RAYS);
+    b.dispatch_1d(&sample_rays_sort::INFO, &push, runs * SAMPLE_SORT_SIDE)
 }
 
 /// The rays of a training pass on a Vulkan backend.

@@ -70,6 +70,7 @@ rows!(
     surface_normal_reg_gather,
     surface_rmsprop,
     sample_rays,
+    sample_rays_sort,
 );
 
 #[test]
