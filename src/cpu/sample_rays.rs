@@ -157,8 +157,8 @@ pub fn sample_rays(set: &SampleSet, seed: u64, n: usize) -> Result<SampledRays> 
         n > 0 && n <= u32::MAX as usize,
         "a batch of {n} rays (1 to 2^32 − 1)"
     );
-    // A run per task: splitting a default batch (one run, ~0.3 ms) across threads costs more
-    // than it saves.
+    // A run per task: a default batch is one run, too little work to gain from splitting it
+    // across threads.
     let run = SAMPLE_SORT_RAYS as usize;
     let mut keys: Vec<u64> = (0..n as u32)
         .into_par_iter()

@@ -268,7 +268,7 @@ impl SurfaceConfig {
                     _ => 1e3,
                 };
                 // Colour must re-fit from volume to surface rendering in 1500 steps.
-                c.lr_sh = DelayedExp::constant(3e-3);
+                c.lr_sh = DelayedExp::constant(1e-2);
                 c.init.alpha_init_scale = fast_alpha_init_scale(category);
                 // RMSProp leaves a vertex's σα alone in steps that give it no gradient, so its
                 // state does not decay between Lα visits: a larger chunk keeps the fading rate.
@@ -355,8 +355,8 @@ mod tests {
         let fast_tr = SurfaceConfig::preset(Preset::Fast, Category::Translucent).unwrap();
         assert!((fast_tr.lambda_alpha - 1e-7).abs() < 1e-14);
         for c in [&fast, &fast_syn, &fast_tr] {
-            assert_eq!(c.lr_sh.at(0), 3e-3);
-            assert_eq!(c.lr_sh.at(1400), 3e-3);
+            assert_eq!(c.lr_sh.at(0), 1e-2);
+            assert_eq!(c.lr_sh.at(1400), 1e-2);
         }
         assert_eq!(thin.lr_sh.at(0), 1e-3);
         assert_eq!((fast.normal_fraction, fast.delta_fraction), (0.1, 1.0));
