@@ -1,8 +1,8 @@
 //! The Vulkan context: logical device, compute queue, allocator, and the compute
 //! pipelines built lazily from the kernel table (push constants only; buffers by device address).
 
-use super::frame::Frame;
 use super::device::{self, DeviceInfo};
+use super::frame::Frame;
 use super::instance::Instance;
 use super::profile::Profile;
 use crate::kernels::KernelInfo;

@@ -3,7 +3,7 @@
 //! last [`StepsInFlight::take`], its readback slot (the steps' order), its batch size and the host
 //! time of its recording.
 
-use super::{BatchTimes, InFlight, StepTimes};
+use super::{BatchTimes, InFlight, StepTimes, TrainRays};
 use anyhow::Result;
 
 /// Batches a backend keeps on the queue before waiting for the oldest.
@@ -24,12 +24,30 @@ pub struct StepsInFlight {
     steps: Vec<(InFlight, StepMeta)>,
     /// Steps from the first whose fence has not been waited for.
     complete: usize,
+    /// View set and batch size of the last sampled step.
+    shape: Option<(u64, usize)>,
 }
 
 impl StepsInFlight {
     /// Steps submitted since the last `take` (the readback slot of the next one).
     pub fn pending(&self) -> usize {
         self.steps.len()
+    }
+
+    /// Before recording a step on `src`'s rays: wait for the steps in flight where the step's
+    /// buffers may change under them — host rays are written into buffers an earlier step may
+    /// still read, and another view set or batch size may reallocate the batch buffers.
+    pub fn before_step(&mut self, src: &TrainRays) -> Result<()> {
+        match src {
+            TrainRays::Host { .. } => self.settle(),
+            TrainRays::Sampled { id, n, .. } => {
+                if self.shape != Some((*id, *n)) {
+                    self.settle()?;
+                    self.shape = Some((*id, *n));
+                }
+                Ok(())
+            }
+        }
     }
 
     /// Add a submitted step; waits for the oldest steps beyond [`MAX_IN_FLIGHT`].

@@ -34,7 +34,7 @@ pub use optim_args::record_optim_args;
 pub use profile::Profile;
 pub use ray_buffers::RayBuffers;
 pub use readback::{Readback, STEP_SLOTS};
-pub use step_times::{Phase, PhaseClock, StepTimes};
+pub use step_times::{timed, Phase, PhaseClock, StepTimes};
 pub use train_views::{record_sort_runs, TrainRays, TrainViewBuffers};
 
 use std::sync::OnceLock;

@@ -156,6 +156,17 @@ impl PhaseClock {
     }
 }
 
+/// `f()`, with the host time it took charged to `phase`.
+pub fn timed<T>(
+    phase: Phase,
+    f: impl FnOnce() -> anyhow::Result<T>,
+) -> anyhow::Result<(T, StepTimes)> {
+    let mut clock = PhaseClock::start();
+    let v = f()?;
+    clock.mark(phase);
+    Ok((v, clock.times))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -6,7 +6,7 @@ use crate::cpu::background::{self, Background};
 use crate::cpu::plenoxel::{self as twin, MarchParams, TrainGrads};
 use crate::cpu::{rmsprop_sparse, tv, Stage1Params};
 use crate::data::TrainViews;
-use crate::gpu::{Phase, PhaseClock};
+use crate::gpu::{timed, Phase, PhaseClock};
 use crate::grid::{Grid, SH_DIM};
 use crate::math::plenoxel::{GridRef, PlenoxelCounts};
 use anyhow::{ensure, Result};
@@ -173,11 +173,9 @@ impl Plenoxels for CpuPlenoxels {
         n: usize,
         p: &StepParams,
     ) -> Result<()> {
-        let mut clock = PhaseClock::start();
-        let batch = views.sample(seed, n)?;
-        clock.mark(Phase::Sampling);
+        let (batch, sampling) = timed(Phase::Sampling, || views.sample(seed, n))?;
         let mut stats = self.step(&batch.rays, &batch.targets, p)?;
-        stats.host.add(&clock.times);
+        stats.host.add(&sampling);
         self.done.push(stats);
         Ok(())
     }

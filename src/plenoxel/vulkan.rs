@@ -28,9 +28,6 @@ pub struct VulkanPlenoxels {
     steps: RefCell<StepsInFlight>,
     /// Figures of completed steps not yet taken.
     done: Vec<(StepStats, BatchTimes)>,
-    /// View set and batch size of the last sampled step: a step of another shape may reallocate
-    /// buffers the steps in flight use, so it waits for them first.
-    shape: Option<(u64, usize)>,
     gpu: Gpu,
     meta: Grid,
     links: GpuBuffer,
@@ -72,7 +69,6 @@ impl VulkanPlenoxels {
         Ok(VulkanPlenoxels {
             steps: RefCell::default(),
             done: Vec::new(),
-            shape: None,
             gpu: gpu.clone(),
             links: gpu.upload(&grid.links)?,
             density: gpu.upload(&grid.density)?,
@@ -323,17 +319,7 @@ impl VulkanPlenoxels {
         let n = src.len();
         let mut clock = PhaseClock::start();
         let plan = PlenoxelPlan::step(p, self.meta.res, n, self.bg_learned)?;
-        match &src {
-            // Host rays are written into buffers an earlier step may still read.
-            TrainRays::Host { .. } => self.settle()?,
-            // Another view set or batch size may reallocate buffers steps in flight use.
-            TrainRays::Sampled { id, n, .. } => {
-                if self.shape != Some((*id, *n)) {
-                    self.settle()?;
-                    self.shape = Some((*id, *n));
-                }
-            }
-        }
+        self.steps.get_mut().before_step(&src)?;
         if self.steps.get_mut().pending() == self.readback.slots() {
             self.collect()?;
         }

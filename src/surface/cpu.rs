@@ -16,7 +16,7 @@ use crate::cpu::surface_reg::{
 use crate::cpu::surface_train::{train, RayLoss, SurfaceGrads, TrainCounts};
 use crate::cpu::{surface_rmsprop_sparse, tv, Stage2Params};
 use crate::data::TrainViews;
-use crate::gpu::{Phase, PhaseClock};
+use crate::gpu::{timed, Phase, PhaseClock};
 use crate::grid::surface::SurfaceGrid;
 use crate::grid::SH_DIM;
 use crate::math::surface_blocks::{SkipRef, SURF_BLOCK_SHIFT_CPU};
@@ -255,11 +255,9 @@ impl SurfaceBackend for CpuSurface {
         n: usize,
         p: &SurfaceStepParams,
     ) -> Result<()> {
-        let mut clock = PhaseClock::start();
-        let batch = views.sample(seed, n)?;
-        clock.mark(Phase::Sampling);
+        let (batch, sampling) = timed(Phase::Sampling, || views.sample(seed, n))?;
         let mut stats = self.step(&batch.rays, &batch.targets, p)?;
-        stats.host.add(&clock.times);
+        stats.host.add(&sampling);
         self.done.push(stats);
         Ok(())
     }

@@ -84,9 +84,6 @@ pub struct VulkanSurface {
     steps: RefCell<StepsInFlight>,
     /// Figures of completed steps not yet taken.
     done: Vec<(SurfaceStepStats, BatchTimes)>,
-    /// View set and batch size of the last sampled step: a step of another shape may reallocate
-    /// buffers the steps in flight use, so it waits for them first.
-    shape: Option<(u64, usize)>,
     gpu: Gpu,
     /// The grid without its arrays (resolution, bounds, levels).
     meta: SurfaceGrid,
@@ -178,7 +175,6 @@ impl VulkanSurface {
         Ok(VulkanSurface {
             steps: RefCell::default(),
             done: Vec::new(),
-            shape: None,
             gpu: gpu.clone(),
             rows: n,
             links: gpu.upload(&grid.links)?,
@@ -584,17 +580,7 @@ impl VulkanSurface {
     pub fn submit_step(&mut self, src: TrainRays, p: &SurfaceStepParams) -> Result<()> {
         let n = src.len();
         let mut clock = PhaseClock::start();
-        match &src {
-            // Host rays are written into buffers an earlier step may still read.
-            TrainRays::Host { .. } => self.settle()?,
-            // Another view set or batch size may reallocate buffers steps in flight use.
-            TrainRays::Sampled { id, n, .. } => {
-                if self.shape != Some((*id, *n)) {
-                    self.settle()?;
-                    self.shape = Some((*id, *n));
-                }
-            }
-        }
+        self.steps.get_mut().before_step(&src)?;
         if self.steps.get_mut().pending() == self.readback.slots() {
             self.collect()?;
         }
