@@ -24,8 +24,9 @@ pub const CHECKPOINT: &str = crate::run::dir::STAGE1_CHECKPOINT;
 
 /// Per-step training log inside a run directory: CSV with the header [`TRAIN_LOG_HEADER`], one
 /// row per step (`step` = steps done, `psnr_batch` = PSNR of that step's batch MSE, `elapsed_s` =
-/// seconds since this process started training). A resumed run cuts it back to the checkpoint's
-/// step and appends to it (see [`crate::run::train_log`]).
+/// seconds since this process started training; the figures are read in groups of up to
+/// `READ_EVERY` steps, whose wall time is spread evenly over them). A resumed run cuts it back to
+/// the checkpoint's step and appends to it (see [`crate::run::train_log`]).
 pub const TRAIN_LOG: &str = crate::run::dir::TRAIN_LOG;
 
 /// Header line of [`TRAIN_LOG`].

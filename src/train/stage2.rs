@@ -25,7 +25,8 @@ use std::time::Instant;
 /// File name of the stage-2 checkpoint inside a run directory.
 pub const CHECKPOINT: &str = crate::run::dir::STAGE2_CHECKPOINT;
 /// Per-step log: step, mse, batch PSNR, entropy, consistency, regulariser loss (Lα + Ln),
-/// seconds since the start (header [`LOG_HEADER`]); cut back to the checkpoint on resume.
+/// seconds since the start (a group of up to `READ_EVERY` steps read together shares its wall
+/// time evenly; header [`LOG_HEADER`]); cut back to the checkpoint on resume.
 pub const LOG: &str = crate::run::dir::TRAIN_LOG;
 /// Header line of [`LOG`].
 pub const LOG_HEADER: &str = "step,mse,psnr_batch,entropy,consistency,reg_loss,elapsed_s";
