@@ -86,6 +86,7 @@ impl VulkanPlenoxels {
             rays: RayBuffers::new(3 * std::mem::size_of::<f32>()),
             readback: Readback::new(
                 gpu,
+                // The squared-error sum (one float), the counters.
                 &[4, std::mem::size_of::<PlenoxelCounts>() as u64],
                 STEP_SLOTS,
             )?,
@@ -350,9 +351,11 @@ impl VulkanPlenoxels {
     }
 
     /// One training step on `src`'s rays, waited for: its figures.
+    /// The figures of earlier steps not yet taken stay for `take_stats`.
     fn train_step(&mut self, src: TrainRays, p: &StepParams) -> Result<StepStats> {
         self.submit_step(src, p)?;
-        let last = self.take_timed()?.pop();
+        self.collect()?;
+        let last = self.done.pop();
         Ok(last
             .ok_or_else(|| anyhow::anyhow!("a submitted step left no figures"))?
             .0)

@@ -17,6 +17,7 @@ use super::{
     SurfaceStepParams, SurfaceStepStats,
 };
 use crate::abi::buffers::{RayLoss, SurfCounts, SurfOut, SurfParams, TrainCounts};
+use crate::abi::consts::LOSS_SUM_FIELDS;
 use crate::cpu::background::Background;
 use crate::cpu::step::{step_record, StepHeader, STEP_FLAGS, STEP_RESET_BYTES};
 use crate::cpu::surface_blocks::{alloc_box, complete_cells};
@@ -39,6 +40,9 @@ use crate::math::surface_blocks::{
 };
 use anyhow::{ensure, Result};
 use std::cell::RefCell;
+
+/// Regulariser values a step writes: Lα, Ln.
+const REG_VALUES: usize = 2;
 
 /// The params buffer of `surface_fwd` and `surface_train` for a batch of `n_rays`: the levels
 /// zero-padded to [`SURF_MAX_LEVELS`]; `loss` zero for a render.
@@ -215,12 +219,16 @@ impl VulkanSurface {
             tv_dirs: gpu.zeros::<f32>(Q_FLOATS * n.max(1))?,
             normal_bufs: NormalRegBuffers::new(gpu, &normal_prefix)?,
             normal_prefix,
-            reg_loss: gpu.zeros::<f32>(2)?,
+            reg_loss: gpu.zeros::<f32>(REG_VALUES)?,
             reg_skipped: gpu.zeros::<u32>(1)?,
             rays: RayBuffers::new(std::mem::size_of::<SurfOut>()),
             readback: Readback::new(
                 gpu,
-                &[16, 8, std::mem::size_of::<TrainCounts>() as u64],
+                &[
+                    4 * LOSS_SUM_FIELDS as u64,
+                    4 * REG_VALUES as u64,
+                    std::mem::size_of::<TrainCounts>() as u64,
+                ],
                 STEP_SLOTS,
             )?,
             views: None,
@@ -613,14 +621,15 @@ impl VulkanSurface {
     }
 
     /// One training step on `src`'s rays, waited for: its figures and the device times of its
-    /// dispatches.
+    /// dispatches. The figures of earlier steps not yet taken stay for `take_stats`.
     pub fn step_timed(
         &mut self,
         src: TrainRays,
         p: &SurfaceStepParams,
     ) -> Result<(SurfaceStepStats, BatchTimes)> {
         self.submit_step(src, p)?;
-        let last = self.take_timed()?.pop();
+        self.collect()?;
+        let last = self.done.pop();
         last.ok_or_else(|| anyhow::anyhow!("a submitted step left no figures"))
     }
 }

@@ -284,19 +284,10 @@ fn sampler_is_seeded_uniform_and_matches_pixels() {
     }
 }
 
-/// The Vulkan backend draws the twin's batch from the fixture's views (100 views of 256², a
-/// batch of two sort runs), the CPU backend trains on it (the same first-step loss), and a
-/// restart — new views, new backend, straight to a later step's seed — draws that step's batch
-/// again, as a resumed run must.
-#[test]
-fn device_batches_are_the_twins_and_a_restart_draws_them_again() {
-    use alphasurf::check::sample_rays::{DIR_ABS, TARGET_ABS};
-    use alphasurf::grid::Grid;
-    use alphasurf::plenoxel::{CpuPlenoxels, Plenoxels, StepParams, VulkanPlenoxels};
-    let ds = dataset();
-    let gpu = alphasurf::gpu::test_gpu();
-    let grid = Grid::sphere(32, [0.0; 3], [1.0; 3], 1.0, 0.1);
-    let p = StepParams {
+/// The stage-1 start both training tests share: a sphere on a 32³ grid, fixed rates, no TV.
+fn stage1_start() -> (alphasurf::grid::Grid, alphasurf::plenoxel::StepParams) {
+    let grid = alphasurf::grid::Grid::sphere(32, [0.0; 3], [1.0; 3], 1.0, 0.1);
+    let p = alphasurf::plenoxel::StepParams {
         lr_sigma: 10.0,
         lr_sh: 1e-2,
         beta: 0.95,
@@ -305,6 +296,20 @@ fn device_batches_are_the_twins_and_a_restart_draws_them_again() {
         tv: None,
         lr_bg: 1e-2,
     };
+    (grid, p)
+}
+
+/// The Vulkan backend draws the twin's batch from the fixture's views (100 views of 256², a
+/// batch of two sort runs), the CPU backend trains on it (the same first-step loss), and a
+/// restart — new views, new backend, straight to a later step's seed — draws that step's batch
+/// again, as a resumed run must.
+#[test]
+fn device_batches_are_the_twins_and_a_restart_draws_them_again() {
+    use alphasurf::check::sample_rays::{DIR_ABS, TARGET_ABS};
+    use alphasurf::plenoxel::{CpuPlenoxels, Plenoxels, VulkanPlenoxels};
+    let ds = dataset();
+    let gpu = alphasurf::gpu::test_gpu();
+    let (grid, p) = stage1_start();
     let n = 5000;
     let views = TrainViews::new(&ds.train, &ds.scene).unwrap();
     let mut vk = VulkanPlenoxels::new(gpu, grid.clone()).unwrap();
@@ -352,20 +357,10 @@ const DENSITY_REL: f32 = 1e-4;
 #[test]
 fn steps_in_flight_match_steps_waited_for() {
     use alphasurf::gpu::STEP_SLOTS;
-    use alphasurf::grid::Grid;
-    use alphasurf::plenoxel::{Plenoxels, StepParams, VulkanPlenoxels};
+    use alphasurf::plenoxel::{Plenoxels, VulkanPlenoxels};
     let ds = dataset();
     let gpu = alphasurf::gpu::test_gpu();
-    let grid = Grid::sphere(32, [0.0; 3], [1.0; 3], 1.0, 0.1);
-    let p = StepParams {
-        lr_sigma: 10.0,
-        lr_sh: 1e-2,
-        beta: 0.95,
-        eps: 1e-8,
-        stop_thresh: 1e-4,
-        tv: None,
-        lr_bg: 1e-2,
-    };
+    let (grid, p) = stage1_start();
     let (n, steps) = (1024, STEP_SLOTS as u64 + 8);
     let views = TrainViews::new(&ds.train, &ds.scene).unwrap();
     let mut waited = VulkanPlenoxels::new(gpu, grid.clone()).unwrap();
@@ -404,6 +399,13 @@ fn steps_in_flight_match_steps_waited_for() {
         "worst relative mse difference {worst:e}, largest relative density difference {diff:e}"
     );
     assert!(diff <= DENSITY_REL, "density differs by {diff} (relative)");
+    // A step on host rays in between keeps the queued steps' figures for `take_stats`.
+    for s in 0..3 {
+        queued.step_sampled(&views, steps + s, n, &p).unwrap();
+    }
+    let host = views.sample(steps + 3, n).unwrap();
+    queued.step(&host.rays, &host.targets, &p).unwrap();
+    assert_eq!(queued.take_stats().unwrap().len(), 3);
     let msgs = gpu.validation_messages();
     assert!(msgs.is_empty(), "validation messages: {msgs:#?}");
 }
