@@ -223,6 +223,16 @@ mod tests {
         NormalPrefix::new(&links, &row_slots(&links, 64), RES)
     }
 
+    /// The test grid: every one of its 64 vertices allocated.
+    fn grid(normals: &NormalPrefix) -> PlanGrid<'_> {
+        PlanGrid {
+            res: RES,
+            rows: 64,
+            normals,
+            delta_reach: 16,
+        }
+    }
+
     fn params(regs: SurfaceRegs) -> SurfaceStepParams {
         SurfaceStepParams {
             lr_delta: 1e-3,
@@ -273,12 +283,7 @@ mod tests {
     #[test]
     fn passes_follow_the_step_order() {
         let normals = prefix();
-        let g = PlanGrid {
-            res: RES,
-            rows: 64,
-            normals: &normals,
-            delta_reach: 16,
-        };
+        let g = grid(&normals);
         let mut refresh = BlockRefresh::default();
         let p = params(all_regs());
         let first = SurfacePlan::step(&p, &g, 100, true, &mut refresh).unwrap();
@@ -341,12 +346,7 @@ mod tests {
     #[test]
     fn normal_chunk_outside_the_delta_rows_flags_delta() {
         let normals = prefix();
-        let g = PlanGrid {
-            res: RES,
-            rows: 64,
-            normals: &normals,
-            delta_reach: 16,
-        };
+        let g = grid(&normals);
         let mut regs = all_regs();
         // Lδ over 8 rows from row 40, normals from row 5: disjoint starts.
         regs.delta_tv = Some(DeltaTvChunk {
@@ -367,12 +367,7 @@ mod tests {
     #[test]
     fn invalid_chunks_are_refused_before_the_masks_are_claimed() {
         let normals = prefix();
-        let g = PlanGrid {
-            res: RES,
-            rows: 64,
-            normals: &normals,
-            delta_reach: 16,
-        };
+        let g = grid(&normals);
         let mut refresh = BlockRefresh::default();
         let refused = |regs: SurfaceRegs, a: f32, refresh: &mut BlockRefresh| {
             let p = SurfaceStepParams { a, ..params(regs) };

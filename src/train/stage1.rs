@@ -224,7 +224,7 @@ pub fn train(
         )?;
         group.push(step);
         let checkpoint = (step + 1) % cfg.checkpoint_every == 0 && step + 1 < cfg.iters;
-        // The figures of the last upsampled grid's steps must be read before it is replaced.
+        // Read the group before an upsampling, so that its wall time is the training's alone.
         let upsample_next = cfg.upsample.iter().any(|(s, _)| *s == step + 1);
         if group.due(step, cfg.iters, checkpoint || upsample_next) {
             let (steps, secs) = group.take();
