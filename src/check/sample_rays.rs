@@ -1,5 +1,6 @@
 //! Parity of the whole draw (`glsl/sample_rays.comp`'s two passes around
-//! `glsl/sample_rays_sort.comp`) with `cpu::sample_rays`: the sorted pixel keys identical
+//! `glsl/sample_rays_sort.comp`, and pass 1 alone on keys drawn on the host, `gpu::KeyDraw`)
+//! with `cpu::sample_rays`: the sorted pixel keys identical
 //! (integers: the same draws, the same order), origins identical (a copy of the camera's), unit
 //! directions within 4 ulp of 1 (2^-21: the kernel's division, square root and reciprocal may
 //! each be off by up to ~1 ulp where the driver does not round them exactly; its products and
@@ -10,7 +11,7 @@ use crate::abi::buffers::SampleCamera;
 use crate::abi::consts::SAMPLE_SORT_RAYS;
 use crate::cpu::sample_rays::{sample_rays, sort_runs, SampleSet};
 use crate::data::camera::look_at;
-use crate::gpu::{record_sort_runs, Gpu, TrainViewBuffers};
+use crate::gpu::{record_sort_runs, Gpu, KeyDraw, TrainViewBuffers};
 use anyhow::Result;
 use glam::Vec3;
 use rand::{Rng, SeedableRng};
@@ -69,50 +70,56 @@ pub fn check(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
     let batch_seed: u64 = rng.random();
     let want = sample_rays(&set, batch_seed, n)?;
 
-    let mut slot = None;
-    let views = TrainViewBuffers::ensure(&mut slot, gpu, u64::MAX - seed, &set, n)?;
-    let mut b = gpu.batch()?;
-    views.record_sample(&mut b, batch_seed, n)?;
-    b.submit()?;
-    let (rays, targets, keys) = views.download_batch(n)?;
-
     let mut cmp = Compare::new(0.0, 0.0);
     let mut key_mismatches = 0;
-    for (i, (g, c)) in keys.iter().zip(&want.keys).enumerate() {
-        cmp.compared += 1;
-        if g != c {
-            key_mismatches += 1;
-            cmp.failures += 1;
-            if cmp.first_failure.is_none() {
-                cmp.first_failure = Some(format!("ray {i} key: gpu {g:#x} cpu {c:#x}"));
-            }
-        }
-    }
     let ulp = |g: f64, c: f64| (g - c).abs() / f32::EPSILON as f64;
     let (mut dir_ulp, mut target_ulp) = (0f64, 0f64);
-    for i in 0..n {
-        for k in 0..6 {
-            let (g, c) = (rays[6 * i + k] as f64, want.rays[6 * i + k] as f64);
-            cmp.tol.abs = if k < 3 { 0.0 } else { DIR_ABS };
-            cmp.value(g, c, || format!("ray {i} component {k}"));
-            dir_ulp = dir_ulp.max(ulp(g, c));
+    // Both ways of drawing the keys, whichever the device uses in training.
+    for key_draw in [KeyDraw::Device, KeyDraw::Host] {
+        let mut slot = None;
+        let views = TrainViewBuffers::ensure(&mut slot, gpu, u64::MAX - seed, &set, n)?;
+        views.key_draw = key_draw;
+        let mut b = gpu.batch()?;
+        views.record_sample(&mut b, &set, batch_seed, n)?;
+        b.submit()?;
+        let (rays, targets, keys) = views.download_batch(n)?;
+
+        for (i, (g, c)) in keys.iter().zip(&want.keys).enumerate() {
+            cmp.compared += 1;
+            if g != c {
+                key_mismatches += 1;
+                cmp.failures += 1;
+                if cmp.first_failure.is_none() {
+                    cmp.first_failure =
+                        Some(format!("{key_draw:?} keys, ray {i}: gpu {g:#x} cpu {c:#x}"));
+                }
+            }
         }
-        for k in 0..3 {
-            let (g, c) = (targets[3 * i + k] as f64, want.targets[3 * i + k] as f64);
-            cmp.tol.abs = TARGET_ABS;
-            cmp.value(g, c, || format!("ray {i} target {k}"));
-            target_ulp = target_ulp.max(ulp(g, c));
+        for i in 0..n {
+            for k in 0..6 {
+                let (g, c) = (rays[6 * i + k] as f64, want.rays[6 * i + k] as f64);
+                cmp.tol.abs = if k < 3 { 0.0 } else { DIR_ABS };
+                cmp.value(g, c, || format!("{key_draw:?} keys, ray {i} component {k}"));
+                dir_ulp = dir_ulp.max(ulp(g, c));
+            }
+            for k in 0..3 {
+                let (g, c) = (targets[3 * i + k] as f64, want.targets[3 * i + k] as f64);
+                cmp.tol.abs = TARGET_ABS;
+                cmp.value(g, c, || format!("{key_draw:?} keys, ray {i} target {k}"));
+                target_ulp = target_ulp.max(ulp(g, c));
+            }
         }
     }
     cmp.tol.abs = DIR_ABS;
     let note = format!(
-        "{n} rays over 7 views of {w}×{h}: keys {} of {n} identical; rays at most {dir_ulp:.2}, \
-         targets {target_ulp:.2} ulp(1) apart; tolerances: keys and origins exact, directions \
-         {:.0} ulp(1), targets 1 ulp(1)",
-        n - key_mismatches,
+        "{n} rays over 7 views of {w}×{h}, keys drawn on the device and on the host: keys {} of \
+         {} identical; rays at most {dir_ulp:.2}, targets {target_ulp:.2} ulp(1) apart; \
+         tolerances: keys and origins exact, directions {:.0} ulp(1), targets 1 ulp(1)",
+        2 * n - key_mismatches,
+        2 * n,
         DIR_ABS / f32::EPSILON as f64
     );
-    Ok(cmp.row(crate::kernels::sample_rays::INFO.name, n, note))
+    Ok(cmp.row(crate::kernels::sample_rays::INFO.name, 2 * n, note))
 }
 
 /// The `check-kernels` row of `sample_rays_sort`: batches of 2·SAMPLE_SORT_RAYS + 1808 keys (two

@@ -147,11 +147,9 @@ pub fn sort_runs(keys: &mut [u64]) {
         .for_each(|r| r.sort_unstable());
 }
 
-/// Draws `n` rays with `seed`: ray i picks pixel splitmix64(seed, i) mod n_pixels (uniform over
-/// every pixel of the set, with replacement; the bias of the modulo is below n_pixels / 2^64);
-/// each run of [`SAMPLE_SORT_RAYS`] rays is sorted by key (the key determines the pixel, so the
-/// sorted run is unique and any sort gives the kernel's bitonic order, [`sort_runs`]).
-pub fn sample_rays(set: &SampleSet, seed: u64, n: usize) -> Result<SampledRays> {
+/// The keys of the batch of `n` rays drawn with `seed`, sorted per run: the first two steps of
+/// [`sample_rays`] (the kernel's pass 0 and `sample_rays_sort`).
+pub fn sorted_keys(set: &SampleSet, seed: u64, n: usize) -> Result<Vec<u64>> {
     set.validate()?;
     ensure!(
         n > 0 && n <= u32::MAX as usize,
@@ -159,16 +157,24 @@ pub fn sample_rays(set: &SampleSet, seed: u64, n: usize) -> Result<SampledRays> 
     );
     // A run per task: a default batch is one run, too little work to gain from splitting it
     // across threads.
-    let run = SAMPLE_SORT_RAYS as usize;
     let mut keys: Vec<u64> = (0..n as u32)
         .into_par_iter()
-        .with_min_len(run)
+        .with_min_len(SAMPLE_SORT_RAYS as usize)
         .map(|i| draw_key(set, seed, i))
         .collect();
     sort_runs(&mut keys);
+    Ok(keys)
+}
+
+/// Draws `n` rays with `seed`: ray i picks pixel splitmix64(seed, i) mod n_pixels (uniform over
+/// every pixel of the set, with replacement; the bias of the modulo is below n_pixels / 2^64);
+/// each run of [`SAMPLE_SORT_RAYS`] rays is sorted by key (the key determines the pixel, so the
+/// sorted run is unique and any sort gives the kernel's bitonic order, [`sort_runs`]).
+pub fn sample_rays(set: &SampleSet, seed: u64, n: usize) -> Result<SampledRays> {
+    let keys = sorted_keys(set, seed, n)?;
     let (rays, targets): (Vec<[f32; 6]>, Vec<[f32; 3]>) = keys
         .par_iter()
-        .with_min_len(run)
+        .with_min_len(SAMPLE_SORT_RAYS as usize)
         .map(|&k| ray_of(set, k))
         .unzip();
     Ok(SampledRays {

@@ -21,7 +21,9 @@ pub enum Phase {
 /// Host wall time of a training step (or of several, summed) per phase, in milliseconds.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
 pub struct StepTimes {
-    /// Drawing the ray batch on the host (views, pixels, the view/Z-order sort) and flattening it.
+    /// Drawing the ray batch on the host (views, pixels, the view/Z-order sort) and flattening it;
+    /// for a batch drawn on a Vulkan device, recording the draw (with the keys drawn on the host
+    /// on a CPU device, `gpu::KeyDraw`).
     pub sampling: f64,
     /// Writing rays, targets and step parameters into device buffers (through a staging buffer
     /// and its own submission where device memory is not host-visible).

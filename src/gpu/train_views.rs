@@ -1,18 +1,47 @@
 //! The training views on the device, uploaded once per run: every view's RGBA8 image (a u32 per
 //! pixel) and camera, and the buffers `sample_rays` draws each training batch into (rays, targets
 //! and the sorted pixel keys, in device-local memory), so a step neither samples nor uploads on
-//! the host.
+//! the host. On a CPU implementation of Vulkan (lavapipe) the keys are the exception: see
+//! [`KeyDraw`].
 
+use super::DeviceKind;
 use super::{Batch, Gpu, GpuBuffer};
 use crate::abi::buffers::SampleCamera;
 use crate::abi::consts::{SAMPLE_SORT_RAYS, SAMPLE_SORT_SIDE};
-use crate::cpu::sample_rays::SampleSet;
+use crate::cpu::sample_rays::{sorted_keys, SampleSet};
 use crate::kernels::{sample_rays, sample_rays_sort};
 use anyhow::{ensure, Result};
 
 // glsl/sample_rays_sort.comp's register passes cover log2(SAMPLE_SORT_SIDE) = 6 bits, and
 // glsl/sample_rays.comp reads a camera as 8 aligned 64-bit words.
 const _: () = assert!(SAMPLE_SORT_SIDE == 64 && std::mem::size_of::<SampleCamera>() == 64);
+
+/// Where a batch's sorted keys are drawn; its rays and targets are always written by
+/// `sample_rays` pass 1.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum KeyDraw {
+    /// `sample_rays` pass 0 and `sample_rays_sort` on the device.
+    Device,
+    /// The twin (`cpu::sample_rays::sorted_keys`, the same keys bit for bit) on the host, written
+    /// into the batch in its command stream. The default on a CPU device: there a workgroup runs
+    /// on one thread, so the sort's single workgroup per run costs several times the host's sort
+    /// (docs/results.md, "Training batches drawn on the device"), and the host is the device's
+    /// processor anyway.
+    Host,
+}
+
+impl KeyDraw {
+    /// The default for a device of `kind`.
+    pub fn for_device(kind: DeviceKind) -> KeyDraw {
+        match kind {
+            DeviceKind::Cpu => KeyDraw::Host,
+            _ => KeyDraw::Device,
+        }
+    }
+}
+
+/// Keys per in-stream update (`Batch::update` takes at most 65536 bytes).
+const UPDATE_KEYS: usize = 65536 / 8;
 
 /// One set of training views on the device and the batch buffers.
 pub struct TrainViewBuffers {
@@ -24,6 +53,8 @@ pub struct TrainViewBuffers {
     height: u32,
     n_pixels: u64,
     key_bits: u32,
+    /// Where the keys are drawn.
+    pub key_draw: KeyDraw,
     /// Batch buffers and the rays they hold, allocated by the first batch.
     batch: Option<BatchBuffers>,
 }
@@ -55,6 +86,7 @@ impl TrainViewBuffers {
             height: set.height,
             n_pixels: set.n_pixels(),
             key_bits: set.key_bits(),
+            key_draw: KeyDraw::for_device(gpu.info().kind),
             batch: None,
         })
     }
@@ -91,10 +123,17 @@ impl TrainViewBuffers {
         Ok(v)
     }
 
-    /// Record drawing the batch of `n` rays of `seed` (`sample_rays` pass 0, `sample_rays_sort`,
-    /// `sample_rays` pass 1; [`ensure`](Self::ensure) made room for them); returns the device
-    /// addresses of its rays and targets, for the kernels recorded after it.
-    pub fn record_sample(&self, b: &mut Batch, seed: u64, n: usize) -> Result<[u64; 2]> {
+    /// Record drawing the batch of `n` rays of `seed` from `set` (the views this set holds):
+    /// `sample_rays` pass 0 and `sample_rays_sort`, or the keys from the host ([`KeyDraw`]),
+    /// then `sample_rays` pass 1 ([`ensure`](Self::ensure) made room for them); returns the
+    /// device addresses of its rays and targets, for the kernels recorded after it.
+    pub fn record_sample(
+        &self,
+        b: &mut Batch,
+        set: &SampleSet,
+        seed: u64,
+        n: usize,
+    ) -> Result<[u64; 2]> {
         let bb = self.batch.as_ref().filter(|bb| bb.capacity >= n && n > 0);
         let bb = bb.ok_or_else(|| anyhow::anyhow!("no room was made for a batch of {n} rays"))?;
         let mut push = sample_rays::Push {
@@ -113,9 +152,25 @@ impl TrainViewBuffers {
             pass: 0,
             ..Default::default()
         };
-        // Draw the keys into scratch, sort them into keys per run, write their rays.
-        b.dispatch_1d(&sample_rays::INFO, &push, n as u32)?;
-        record_sort_runs(b, &bb.scratch, &bb.keys, n)?;
+        match self.key_draw {
+            // Draw the keys into scratch, sort them into keys per run.
+            KeyDraw::Device => {
+                b.dispatch_1d(&sample_rays::INFO, &push, n as u32)?;
+                record_sort_runs(b, &bb.scratch, &bb.keys, n)?;
+            }
+            // In the command stream: an earlier step still in flight may read the keys.
+            KeyDraw::Host => {
+                ensure!(
+                    set.n_pixels() == self.n_pixels && set.key_bits() == self.key_bits,
+                    "the keys of a batch drawn from other views than the ones uploaded"
+                );
+                let keys = sorted_keys(set, seed, n)?;
+                for (i, chunk) in keys.chunks(UPDATE_KEYS).enumerate() {
+                    b.update(&bb.keys, 8 * (i * UPDATE_KEYS) as u64, chunk)?;
+                }
+            }
+        }
+        // Write the rays of the sorted keys.
         push.pass = 1;
         b.dispatch_1d(&sample_rays::INFO, &push, n as u32)?;
         Ok([bb.rays.address(), bb.targets.address()])

@@ -186,7 +186,8 @@ impl VulkanPlenoxels {
                 let mut b = self.gpu.batch()?;
                 self.record_step_reset(&mut b);
                 let views = self.views.as_ref().expect("ensured");
-                let [rays, targets] = views.record_sample(&mut b, seed, n)?;
+                let [rays, targets] = views.record_sample(&mut b, set, seed, n)?;
+                clock.mark(Phase::Sampling);
                 Ok((b, [rays, targets, out]))
             }
         }

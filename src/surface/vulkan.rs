@@ -293,7 +293,8 @@ impl VulkanSurface {
                 clock.mark(Phase::Upload);
                 let mut b = self.begin_batch()?;
                 let views = self.views.as_ref().expect("ensured");
-                let [rays, targets] = views.record_sample(&mut b, seed, n)?;
+                let [rays, targets] = views.record_sample(&mut b, set, seed, n)?;
+                clock.mark(Phase::Sampling);
                 Ok((b, [rays, targets, out]))
             }
         }
