@@ -56,8 +56,9 @@ pub fn check_step_times(what: &str, o: &Value, vulkan: bool) {
         "{what}: device {device} ms, wall {wall} ms"
     );
     if vulkan {
-        // The batch is drawn on the device (sample_rays): no host sampling.
-        assert_eq!(ms("sampling"), 0.0, "{what}: {o}");
+        // Sampling is recording the batch's draw (and on lavapipe, a CPU device, drawing its
+        // keys: gpu::KeyDraw); the rays are written on the device.
+        assert!(ms("sampling") > 0.0, "{what}: {o}");
         assert!(ms("wait") > 0.0 && ms("record") > 0.0, "{what}: {o}");
         assert_eq!(ms("compute"), 0.0, "{what}");
     } else {
