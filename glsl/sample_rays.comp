@@ -2,8 +2,11 @@
 // sample_rays — draws a batch of training rays on the device (CPU twin: cpu::sample_rays), in
 // three dispatches (gpu::TrainViewBuffers::record_sample): pass 0 of this kernel, then
 // sample_rays_sort, then pass 1 of this kernel; the parity row checks the whole draw.
-// Ray i of the batch picks pixel splitmix64(seed + (i + 1)·γ) mod n_pixels over all pixels of
-// the split (uniform with replacement, a counter-based draw: no state between batches), as the
+// Ray i of the batch hashes h = splitmix64(seed + (i + 1)·γ) (a counter-based draw: no state
+// between batches) and picks pixel h mod n_pixels over all pixels of the split (uniform with
+// replacement) or, when the high 32 bits of h are below focus_threshold, the focus pixel
+// focus[h mod n_focus] (cpu::sample_rays::Focus: a share of the batch from the pixels the object
+// covers), as the
 // key (view << 2·key_bits) | morton(x, y), which determines the pixel. Each run of
 // SAMPLE_SORT_RAYS rays is sorted by key (the last run may be shorter), so within a run the rays
 // are ordered by view and Z-order (neighbouring invocations of the training kernels trace nearby
@@ -14,7 +17,8 @@
 // direction = normalize(R·((x + ½ − cx)/fx, −(y + ½ − cy)/fy, −1)) as data::Camera::pixel_ray,
 // target = the pixel's composited RGB / 255.
 // Inputs: pixels (RGBA8 packed in a u32 per pixel, views × height × width, row-major), cams
-// (SampleCamera per view), keys (pass 1). Outputs: scratch (the drawn keys, pass 0), rays (6
+// (SampleCamera per view), focus (flat pixel indices, pass 0; unread when focus_threshold is 0),
+// keys (pass 1). Outputs: scratch (the drawn keys, pass 0), rays (6
 // floats) and targets (3 floats) (pass 1).
 #include "common.glsl"
 layout(local_size_x = 256) in;
@@ -26,6 +30,7 @@ layout(push_constant, scalar) uniform Push {
     F32Buf targets;
     U64Buf keys;
     U64Buf scratch;
+    U32Buf focus;
     uint64_t seed;
     uint64_t n_pixels;
     uint width;
@@ -34,6 +39,8 @@ layout(push_constant, scalar) uniform Push {
     // Bits of a pixel coordinate: max(width, height) − 1 < 2^key_bits ≤ 2^16.
     uint key_bits;
     uint pass;
+    uint n_focus;
+    uint focus_threshold;
 } pc;
 
 // SplitMix64's output function (Steele, Lea & Flood 2014) on the counter seed + (i + 1)·γ.
@@ -65,7 +72,13 @@ void draw() {
     const uint r = flat_id();
     if (r >= pc.n_rays) return;
     const uint64_t per_view = uint64_t(pc.width) * uint64_t(pc.height);
-    uint64_t p = splitmix64(pc.seed, r) % pc.n_pixels;
+    const uint64_t h = splitmix64(pc.seed, r);
+    uint64_t p;
+    if (uint(h >> 32) < pc.focus_threshold) {
+        p = uint64_t(pc.focus.v[uint(h % uint64_t(pc.n_focus))]);
+    } else {
+        p = h % pc.n_pixels;
+    }
     uint64_t view = p / per_view;
     uint rest = uint(p - view * per_view);
     uint morton = spread_bits(rest % pc.width) | (spread_bits(rest / pc.width) << 1);

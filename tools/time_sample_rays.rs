@@ -7,7 +7,7 @@
 //! whether every draw's keys equal the twin's. A measurement tool, not a test: figures go to docs/results.md.
 
 use alphasurf::abi::buffers::SampleCamera;
-use alphasurf::cpu::sample_rays::{sample_rays, SampleSet};
+use alphasurf::cpu::sample_rays::{sample_rays, Focus, SampleSet};
 use alphasurf::gpu::{Gpu, KeyDraw, TrainViewBuffers};
 use anyhow::{ensure, Context, Result};
 use std::time::Instant;
@@ -48,6 +48,7 @@ fn main() -> Result<()> {
         height: h,
         images: images.iter().map(|i| i.as_slice()).collect(),
         cams: (0..n_views).map(cam).collect(),
+        focus: Focus::none(),
     };
 
     let gpu = Gpu::new(&Default::default())?;

@@ -1,6 +1,7 @@
 //! Parity of the whole draw (`glsl/sample_rays.comp`'s two passes around
-//! `glsl/sample_rays_sort.comp`, and pass 1 alone on keys drawn on the host, `gpu::KeyDraw`)
-//! with `cpu::sample_rays`: the sorted pixel keys identical
+//! `glsl/sample_rays_sort.comp`, and pass 1 alone on keys drawn on the host, `gpu::KeyDraw`;
+//! uniform, and with a focus on a random fifth of the pixels) with `cpu::sample_rays`: the
+//! sorted pixel keys identical
 //! (integers: the same draws, the same order), origins identical (a copy of the camera's), unit
 //! directions within 4 ulp of 1 (2^-21: the kernel's division, square root and reciprocal may
 //! each be off by up to ~1 ulp where the driver does not round them exactly; its products and
@@ -9,7 +10,7 @@
 use super::{CheckRow, Compare};
 use crate::abi::buffers::SampleCamera;
 use crate::abi::consts::SAMPLE_SORT_RAYS;
-use crate::cpu::sample_rays::{sample_rays, sort_runs, SampleSet};
+use crate::cpu::sample_rays::{sample_rays, sort_runs, Focus, SampleSet};
 use crate::data::camera::look_at;
 use crate::gpu::{record_sort_runs, Gpu, KeyDraw, TrainViewBuffers};
 use anyhow::Result;
@@ -60,24 +61,39 @@ pub fn check(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
     let mut rng = Pcg64::seed_from_u64(seed);
     let (w, h) = (37, 23);
     let (images, cams) = views(&mut rng, 7, w, h);
-    let set = SampleSet {
+    let mut set = SampleSet {
         width: w,
         height: h,
         images: images.iter().map(|i| i.as_slice()).collect(),
         cams,
+        focus: Focus::none(),
     };
     let n = 2 * SAMPLE_SORT_RAYS as usize + 1808;
     let batch_seed: u64 = rng.random();
-    let want = sample_rays(&set, batch_seed, n)?;
+    // A fifth of the pixels, scattered, with half of the batch drawn from them: both branches of
+    // the draw in one batch.
+    let n_pixels = set.n_pixels();
+    let focus_pixels: Vec<u32> = (0..n_pixels as u32)
+        .filter(|_| rng.random::<f32>() < 0.2)
+        .collect();
+    let focus = Focus::new(focus_pixels, 0.5, n_pixels)?;
 
     let mut cmp = Compare::new(0.0, 0.0);
     let mut key_mismatches = 0;
     let ulp = |g: f64, c: f64| (g - c).abs() / f32::EPSILON as f64;
     let (mut dir_ulp, mut target_ulp) = (0f64, 0f64);
-    // Both ways of drawing the keys, whichever the device uses in training.
-    for key_draw in [KeyDraw::Device, KeyDraw::Host] {
+    // Both ways of drawing the keys, whichever the device uses in training, uniform and focused.
+    let cases = [KeyDraw::Device, KeyDraw::Host]
+        .into_iter()
+        .flat_map(|k| [(k, Focus::none()), (k, focus.clone())]);
+    for (key_draw, focus) in cases {
+        let focused = !focus.is_none();
+        set.focus = focus;
+        let want = sample_rays(&set, batch_seed, n)?;
+        let key_draw_name = format!("{key_draw:?}{}", if focused { " focused" } else { "" });
         let mut slot = None;
-        let views = TrainViewBuffers::ensure(&mut slot, gpu, u64::MAX - seed, &set, n)?;
+        let id = u64::MAX - 2 * seed - focused as u64;
+        let views = TrainViewBuffers::ensure(&mut slot, gpu, id, &set, n)?;
         views.key_draw = key_draw;
         let mut b = gpu.batch()?;
         views.record_sample(&mut b, &set, batch_seed, n)?;
@@ -90,8 +106,9 @@ pub fn check(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
                 key_mismatches += 1;
                 cmp.failures += 1;
                 if cmp.first_failure.is_none() {
-                    cmp.first_failure =
-                        Some(format!("{key_draw:?} keys, ray {i}: gpu {g:#x} cpu {c:#x}"));
+                    cmp.first_failure = Some(format!(
+                        "{key_draw_name} keys, ray {i}: gpu {g:#x} cpu {c:#x}"
+                    ));
                 }
             }
         }
@@ -99,27 +116,31 @@ pub fn check(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
             for k in 0..6 {
                 let (g, c) = (rays[6 * i + k] as f64, want.rays[6 * i + k] as f64);
                 cmp.tol.abs = if k < 3 { 0.0 } else { DIR_ABS };
-                cmp.value(g, c, || format!("{key_draw:?} keys, ray {i} component {k}"));
+                cmp.value(g, c, || {
+                    format!("{key_draw_name} keys, ray {i} component {k}")
+                });
                 dir_ulp = dir_ulp.max(ulp(g, c));
             }
             for k in 0..3 {
                 let (g, c) = (targets[3 * i + k] as f64, want.targets[3 * i + k] as f64);
                 cmp.tol.abs = TARGET_ABS;
-                cmp.value(g, c, || format!("{key_draw:?} keys, ray {i} target {k}"));
+                cmp.value(g, c, || format!("{key_draw_name} keys, ray {i} target {k}"));
                 target_ulp = target_ulp.max(ulp(g, c));
             }
         }
     }
     cmp.tol.abs = DIR_ABS;
     let note = format!(
-        "{n} rays over 7 views of {w}×{h}, keys drawn on the device and on the host: keys {} of \
-         {} identical; rays at most {dir_ulp:.2}, targets {target_ulp:.2} ulp(1) apart; \
-         tolerances: keys and origins exact, directions {:.0} ulp(1), targets 1 ulp(1)",
-        2 * n - key_mismatches,
-        2 * n,
+        "{n} rays over 7 views of {w}×{h}, keys drawn on the device and on the host, uniform and \
+         with half from a focus of {} pixels: keys {} of {} identical; rays at most \
+         {dir_ulp:.2}, targets {target_ulp:.2} ulp(1) apart; tolerances: keys and origins exact, \
+         directions {:.0} ulp(1), targets 1 ulp(1)",
+        focus.pixels().len(),
+        4 * n - key_mismatches,
+        4 * n,
         DIR_ABS / f32::EPSILON as f64
     );
-    Ok(cmp.row(crate::kernels::sample_rays::INFO.name, 2 * n, note))
+    Ok(cmp.row(crate::kernels::sample_rays::INFO.name, 4 * n, note))
 }
 
 /// The `check-kernels` row of `sample_rays_sort`: batches of 2·SAMPLE_SORT_RAYS + 1808 keys (two

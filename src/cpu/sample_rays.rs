@@ -1,5 +1,6 @@
 //! Twin of `glsl/sample_rays.comp`: a batch of training rays drawn from a split's pixels by a
-//! counter-based hash of (seed, ray index), ordered by (view, Z-order) in runs of
+//! counter-based hash of (seed, ray index) — uniformly, or with a share of the batch from the
+//! pixels the object covers ([`Focus`]) — ordered by (view, Z-order) in runs of
 //! [`SAMPLE_SORT_RAYS`], with their rays and target colours.
 
 use crate::abi::buffers::SampleCamera;
@@ -15,6 +16,114 @@ pub struct SampleSet<'a> {
     /// One `width·height·4`-byte image per view.
     pub images: Vec<&'a [u8]>,
     pub cams: Vec<SampleCamera>,
+    /// Pixels a share of each batch is drawn from ([`Focus::none`]: every ray uniform).
+    pub focus: Focus,
+}
+
+/// Pixels that a share of each batch is drawn from, uniformly among them; the rest of the batch
+/// stays uniform over every pixel. Ray i is drawn from the focus pixels when the high 32 bits of
+/// its hash h = splitmix64(seed, i) are below `threshold` (a share threshold / 2^32 of the
+/// rays), as pixel `pixels[h mod len]`; otherwise as pixel h mod n_pixels.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Focus {
+    pixels: Vec<u32>,
+    threshold: u32,
+    n_pixels: u64,
+}
+
+impl Focus {
+    /// No focus: every ray uniform over all pixels.
+    pub fn none() -> Focus {
+        Focus::default()
+    }
+
+    /// A share `share` ∈ [0, 1] of each batch drawn from `pixels` (flat indices view·w·h + y·w +
+    /// x into a set of `n_pixels` pixels, fewer than 2^32). No pixels, or a share of 0, is no
+    /// focus.
+    pub fn new(pixels: Vec<u32>, share: f32, n_pixels: u64) -> Result<Focus> {
+        ensure!(
+            (0.0..=1.0).contains(&share),
+            "the focus share must be in [0, 1], got {share}"
+        );
+        ensure!(
+            (n_pixels <= 1 << 32 && pixels.len() <= u32::MAX as usize) || pixels.is_empty(),
+            "a focus of {} pixels over {n_pixels}: at most 2^32 − 1 of 2^32",
+            pixels.len()
+        );
+        if let Some(&p) = pixels.iter().find(|&&p| p as u64 >= n_pixels) {
+            anyhow::bail!("focus pixel {p} is outside the set's {n_pixels} pixels");
+        }
+        let threshold = (share as f64 * 4_294_967_296.0)
+            .round()
+            .min(u32::MAX as f64) as u32;
+        if pixels.is_empty() || threshold == 0 {
+            return Ok(Focus::none());
+        }
+        Ok(Focus {
+            pixels,
+            threshold,
+            n_pixels,
+        })
+    }
+
+    /// The pixels of `images` (RGBA8 views of `width`×`height`) whose alpha is above 0, each
+    /// grown by `radius` pixels to a (2·radius + 1)² square within its view, with a share
+    /// `share` of each batch. Images without alpha (255 everywhere) cover every pixel, and every
+    /// pixel covered is no focus: the draw is then uniform.
+    pub fn covered(
+        images: &[&[u8]],
+        width: u32,
+        height: u32,
+        radius: u32,
+        share: f32,
+    ) -> Result<Focus> {
+        let (w, h, r) = (width as usize, height as usize, radius as usize);
+        let per_view = w * h;
+        let n_pixels = (images.len() * per_view) as u64;
+        let per_image: Vec<Vec<u32>> = images
+            .par_iter()
+            .enumerate()
+            .map(|(v, img)| {
+                let mut mask = vec![false; per_view];
+                for y in 0..h {
+                    for x in 0..w {
+                        if img[4 * (y * w + x) + 3] == 0 {
+                            continue;
+                        }
+                        for yy in y.saturating_sub(r)..(y + r + 1).min(h) {
+                            mask[yy * w + x.saturating_sub(r)..yy * w + (x + r + 1).min(w)]
+                                .fill(true);
+                        }
+                    }
+                }
+                let base = (v * per_view) as u32;
+                (0..per_view as u32)
+                    .filter(|&p| mask[p as usize])
+                    .map(|p| base + p)
+                    .collect()
+            })
+            .collect();
+        let pixels: Vec<u32> = per_image.concat();
+        if pixels.len() as u64 == n_pixels {
+            return Ok(Focus::none());
+        }
+        Focus::new(pixels, share, n_pixels)
+    }
+
+    /// The focus pixels (flat indices, ascending when made by [`covered`](Self::covered)).
+    pub fn pixels(&self) -> &[u32] {
+        &self.pixels
+    }
+
+    /// Rays whose hash has its high 32 bits below this are drawn from the focus pixels.
+    pub fn threshold(&self) -> u32 {
+        self.threshold
+    }
+
+    /// Whether every ray is drawn uniformly.
+    pub fn is_none(&self) -> bool {
+        self.pixels.is_empty()
+    }
 }
 
 impl SampleSet<'_> {
@@ -52,6 +161,12 @@ impl SampleSet<'_> {
             "{} cameras for {} images; every image must hold {bytes} bytes",
             self.cams.len(),
             self.images.len()
+        );
+        ensure!(
+            self.focus.is_none() || self.focus.n_pixels == self.n_pixels(),
+            "a focus made for {} pixels on a set of {}",
+            self.focus.n_pixels,
+            self.n_pixels()
         );
         Ok(())
     }
@@ -112,7 +227,13 @@ pub fn key_pixel(key: u64, bits: u32) -> (u32, u32, u32) {
 /// The key of ray `i` of the batch drawn with `seed`.
 fn draw_key(set: &SampleSet, seed: u64, i: u32) -> u64 {
     let per_view = set.width as u64 * set.height as u64;
-    let p = splitmix64(seed, i) % set.n_pixels();
+    let h = splitmix64(seed, i);
+    let f = &set.focus;
+    let p = if ((h >> 32) as u32) < f.threshold {
+        f.pixels[(h % f.pixels.len() as u64) as usize] as u64
+    } else {
+        h % set.n_pixels()
+    };
     let view = p / per_view;
     let rest = (p - view * per_view) as u32;
     pixel_key(
@@ -167,7 +288,8 @@ pub fn sorted_keys(set: &SampleSet, seed: u64, n: usize) -> Result<Vec<u64>> {
 }
 
 /// Draws `n` rays with `seed`: ray i picks pixel splitmix64(seed, i) mod n_pixels (uniform over
-/// every pixel of the set, with replacement; the bias of the modulo is below n_pixels / 2^64);
+/// every pixel of the set, with replacement; the bias of the modulo is below n_pixels / 2^64),
+/// or a focus pixel for the share of the rays [`Focus`] says;
 /// each run of [`SAMPLE_SORT_RAYS`] rays is sorted by key (the key determines the pixel, so the
 /// sorted run is unique and any sort gives the kernel's bitonic order, [`sort_runs`]).
 pub fn sample_rays(set: &SampleSet, seed: u64, n: usize) -> Result<SampledRays> {
@@ -202,6 +324,7 @@ mod tests {
             height: h,
             images: images.iter().map(|i| i.as_slice()).collect(),
             cams: vec![cam; images.len()],
+            focus: Focus::none(),
         }
     }
 
@@ -284,6 +407,83 @@ mod tests {
             let len = d.iter().map(|v| v * v).sum::<f32>().sqrt();
             assert!((len - 1.0).abs() < 1e-6);
         }
+    }
+
+    #[test]
+    fn covered_pixels_are_alpha_above_zero_grown_by_the_radius() {
+        let (w, h) = (8u32, 6u32);
+        let mut a = vec![0u8; 4 * 48];
+        a[4 * 16 + 3] = 1; // (0, 2): the square is cut at the left edge
+        let mut b = vec![0u8; 4 * 48];
+        b[4 * (5 * 8 + 7) + 3] = 255; // (7, 5): the bottom-right corner
+        let f = Focus::covered(&[&a, &b], w, h, 1, 0.5).unwrap();
+        let want: Vec<u32> = [
+            (0, 0, 1),
+            (0, 0, 2),
+            (0, 0, 3),
+            (0, 1, 1),
+            (0, 1, 2),
+            (0, 1, 3),
+        ]
+        .iter()
+        .chain(&[(1, 6, 4), (1, 7, 4), (1, 6, 5), (1, 7, 5)])
+        .map(|&(v, x, y)| v * 48 + y * 8 + x)
+        .collect();
+        let mut got = f.pixels().to_vec();
+        got.sort_unstable();
+        let mut want = want;
+        want.sort_unstable();
+        assert_eq!(got, want);
+        assert_eq!(f.threshold(), 1 << 31);
+        // Radius 0: the pixels themselves; alpha everywhere, or a share of 0: no focus.
+        let f0 = Focus::covered(&[&a, &b], w, h, 0, 0.5).unwrap();
+        assert_eq!(f0.pixels(), &[16, 48 + 47]);
+        let opaque = vec![255u8; 4 * 48];
+        assert!(Focus::covered(&[&opaque], w, h, 0, 0.5).unwrap().is_none());
+        assert!(Focus::covered(&[&a], w, h, 1, 0.0).unwrap().is_none());
+        assert!(Focus::covered(&[&a], w, h, 1, 1.5).is_err());
+        assert!(Focus::new(vec![48], 0.5, 48).is_err());
+    }
+
+    #[test]
+    fn a_focus_draws_its_share_from_its_pixels_and_none_draws_as_before() {
+        let (w, h) = (16u32, 16u32);
+        let images: Vec<Vec<u8>> = (0..2).map(|_| vec![0u8; 4 * 256]).collect();
+        let mut s = set(&images, w, h);
+        let n = 1usize << 16;
+        let uniform = sample_rays(&s, 7, n).unwrap();
+        // A focus of 10 pixels of view 1 with share 0.75: those pixels get 0.75 + 0.25·10/512 of
+        // the rays, each of them equally often; the rest stay uniform over all 512.
+        let focus: Vec<u32> = (0..10).map(|i| 256 + 25 * i).collect();
+        s.focus = Focus::new(focus.clone(), 0.75, 512).unwrap();
+        let b = sample_rays(&s, 7, n).unwrap();
+        let mut counts = [0f64; 10];
+        let mut outside = 0f64;
+        for &k in &b.keys {
+            let (v, x, y) = key_pixel(k, s.key_bits());
+            let p = v * 256 + y * w + x;
+            match focus.iter().position(|&f| f == p) {
+                Some(j) => counts[j] += 1.0,
+                None => outside += 1.0,
+            }
+        }
+        let share = counts.iter().sum::<f64>() / n as f64;
+        let want = 0.75 + 0.25 * 10.0 / 512.0;
+        // 5 standard deviations of a binomial share over 65536 rays: 0.0085.
+        assert!(
+            (share - want).abs() < 0.0085,
+            "focus share {share}, want {want}"
+        );
+        let e = counts.iter().sum::<f64>() / 10.0;
+        let chi2: f64 = counts.iter().map(|&o| (o - e) * (o - e) / e).sum();
+        assert!(chi2 < 27.9, "χ² = {chi2:.1} over 9 dof");
+        assert!(outside > 0.0);
+        // No focus: the uniform batch, bit for bit.
+        s.focus = Focus::none();
+        assert_eq!(sample_rays(&s, 7, n).unwrap(), uniform);
+        // A focus made for another set is refused.
+        s.focus = Focus::new(focus, 0.75, 256 * 3).unwrap();
+        assert!(sample_rays(&s, 7, 16).is_err());
     }
 
     #[test]

@@ -1,12 +1,13 @@
 //! Rays for training and rendering: a split's views as the seeded sampler of training batches
-//! reads them (uniform over all pixels of the split, with replacement; deterministic for a seed),
+//! reads them (uniform over all pixels of the split with replacement, or with a share from the
+//! pixels the object covers; deterministic for a seed),
 //! and the rays of a whole view. Rays are in the scaled world (Blender units × `SceneBox::scale`)
 //! with unit directions.
 
 use super::camera::SceneBox;
 use super::dataset::Split;
 use crate::abi::buffers::SampleCamera;
-use crate::cpu::sample_rays::{sample_rays, SampleSet, SampledRays};
+use crate::cpu::sample_rays::{sample_rays, Focus, SampleSet, SampledRays};
 use anyhow::{Context, Result};
 use std::sync::atomic::{AtomicU64, Ordering};
 
@@ -58,6 +59,13 @@ impl RayBatch {
     }
 }
 
+/// Covered pixels grow by this many pixels in [`TrainViews::focused`]: a thin part that a grid
+/// renders a little too wide shows on the background pixels beside it, which the focus then
+/// samples as well.
+pub const FOCUS_GROW: u32 = 2;
+
+static NEXT_ID: AtomicU64 = AtomicU64::new(1);
+
 /// A split's training views as the ray sampler reads them (`cpu::sample_rays`, and the device
 /// copy the Vulkan backends keep of it): every view's image (borrowed) and its camera in the
 /// scaled world. Each set has an id of its own, so a backend uploads one set once per run.
@@ -70,7 +78,6 @@ impl<'a> TrainViews<'a> {
     /// The views of `split` in the scaled world of `scene`. Errors name the split's source when
     /// its images cannot be sampled (over 65536 pixels per axis).
     pub fn new(split: &'a Split, scene: &SceneBox) -> Result<TrainViews<'a>> {
-        static NEXT_ID: AtomicU64 = AtomicU64::new(1);
         let set = SampleSet {
             width: split.width(),
             height: split.height(),
@@ -94,6 +101,7 @@ impl<'a> TrainViews<'a> {
                     }
                 })
                 .collect(),
+            focus: Focus::none(),
         };
         set.validate()
             .with_context(|| format!("{} split of {}", split.name, split.source.display()))?;
@@ -101,6 +109,17 @@ impl<'a> TrainViews<'a> {
             id: NEXT_ID.fetch_add(1, Ordering::Relaxed),
             set,
         })
+    }
+
+    /// The same views with a share `share` ∈ [0, 1] of each batch drawn from the pixels the
+    /// object covers (alpha above 0, grown by [`FOCUS_GROW`] pixels; `cpu::sample_rays::Focus`),
+    /// the rest uniform over all pixels. Views without alpha, or a share of 0, draw uniformly.
+    /// The result is a set of its own (a new [`id`](Self::id)).
+    pub fn focused(mut self, share: f32) -> Result<TrainViews<'a>> {
+        let s = &self.set;
+        self.set.focus = Focus::covered(&s.images, s.width, s.height, FOCUS_GROW, share)?;
+        self.id = NEXT_ID.fetch_add(1, Ordering::Relaxed);
+        Ok(self)
     }
 
     /// Identifies this set among those made in this process.

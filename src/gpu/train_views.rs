@@ -49,6 +49,10 @@ pub struct TrainViewBuffers {
     id: u64,
     pixels: GpuBuffer,
     cams: GpuBuffer,
+    /// The set's focus pixels (one unread element when it has none) and threshold.
+    focus: GpuBuffer,
+    n_focus: u32,
+    focus_threshold: u32,
     width: u32,
     height: u32,
     n_pixels: u64,
@@ -78,10 +82,19 @@ impl TrainViewBuffers {
         for (v, img) in set.images.iter().enumerate() {
             pixels.write_at(v as u64 * view_bytes, img)?;
         }
+        let f = &set.focus;
+        let focus = if f.is_none() {
+            gpu.zeros::<u32>(1)?
+        } else {
+            gpu.upload(f.pixels())?
+        };
         Ok(TrainViewBuffers {
             id,
             pixels,
             cams: gpu.upload(&set.cams)?,
+            focus,
+            n_focus: f.pixels().len() as u32,
+            focus_threshold: f.threshold(),
             width: set.width,
             height: set.height,
             n_pixels: set.n_pixels(),
@@ -143,6 +156,9 @@ impl TrainViewBuffers {
             targets: bb.targets.address(),
             keys: bb.keys.address(),
             scratch: bb.scratch.address(),
+            focus: self.focus.address(),
+            n_focus: self.n_focus,
+            focus_threshold: self.focus_threshold,
             seed,
             n_pixels: self.n_pixels,
             width: self.width,
@@ -161,7 +177,10 @@ impl TrainViewBuffers {
             // In the command stream: an earlier step still in flight may read the keys.
             KeyDraw::Host => {
                 ensure!(
-                    set.n_pixels() == self.n_pixels && set.key_bits() == self.key_bits,
+                    set.n_pixels() == self.n_pixels
+                        && set.key_bits() == self.key_bits
+                        && set.focus.threshold() == self.focus_threshold
+                        && set.focus.pixels().len() as u32 == self.n_focus,
                     "the keys of a batch drawn from other views than the ones uploaded"
                 );
                 let keys = sorted_keys(set, seed, n)?;

@@ -171,7 +171,7 @@ pub fn train(
     let grid0 = backend.grid()?;
     let (res, rows) = (grid0.res, grid0.delta.len() as u32);
     drop(grid0);
-    let views = TrainViews::new(&data.train, &data.scene)?;
+    let views = TrainViews::new(&data.train, &data.scene)?.focused(cfg.ray_focus)?;
     let mut group = StepGroup::default();
     for step in start_step..cfg.iters {
         let mut rng = step_rng(cfg.seed, step);

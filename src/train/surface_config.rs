@@ -44,6 +44,11 @@ pub struct SurfaceConfig {
     pub iters: u32,
     /// Rays per batch.
     pub batch: u32,
+    /// The share of each batch drawn from the pixels the object covers (alpha above 0 in the
+    /// training images, grown by `data::sampler::FOCUS_GROW` pixels); the rest is uniform over every
+    /// pixel. 0: uniform, as the paper (and views without alpha always are).
+    #[serde(default)]
+    pub ray_focus: f32,
     pub lr_delta: DelayedExp,
     pub lr_opacity: DelayedExp,
     pub lr_sh: DelayedExp,
@@ -107,6 +112,7 @@ impl SurfaceConfig {
             init: SurfaceInit::default(),
             iters: 50_000,
             batch: 5000,
+            ray_focus: 0.0,
             lr_delta: DelayedExp {
                 init: 1e-5,
                 last: 1e-5,
@@ -225,6 +231,7 @@ impl SurfaceConfig {
             );
         }
         for (name, v) in [
+            ("ray_focus", self.ray_focus),
             ("delta_fraction", self.delta_fraction),
             ("tv_alpha_fraction", self.tv_alpha_fraction),
             ("alpha_fraction", self.alpha_fraction),
