@@ -17,9 +17,10 @@
 // direction = normalize(R·((x + ½ − cx)/fx, −(y + ½ − cy)/fy, −1)) as data::Camera::pixel_ray,
 // target = the pixel's composited RGB / 255.
 // Inputs: pixels (RGBA8 packed in a u32 per pixel, views × height × width, row-major), cams
-// (SampleCamera per view), focus (flat pixel indices, pass 0; unread when focus_threshold is 0),
-// keys (pass 1). Outputs: scratch (the drawn keys, pass 0), rays (6
-// floats) and targets (3 floats) (pass 1).
+// (SampleCamera per view), focus (flat pixel indices, ascending; unread when focus_threshold is
+// 0), keys (pass 1). Outputs: scratch (the drawn keys, pass 0), rays (6
+// floats), targets (3 floats) and, with a focus, weights (pass 1: the ray's importance weight,
+// w_focus for a focus pixel, found by binary search, else w_other).
 #include "common.glsl"
 layout(local_size_x = 256) in;
 
@@ -31,6 +32,7 @@ layout(push_constant, scalar) uniform Push {
     U64Buf keys;
     U64Buf scratch;
     U32Buf focus;
+    F32Buf weights;
     uint64_t seed;
     uint64_t n_pixels;
     uint width;
@@ -41,6 +43,8 @@ layout(push_constant, scalar) uniform Push {
     uint pass;
     uint n_focus;
     uint focus_threshold;
+    float w_focus;
+    float w_other;
 } pc;
 
 // SplitMix64's output function (Steele, Lea & Flood 2014) on the counter seed + (i + 1)·γ.
@@ -125,6 +129,20 @@ void write_ray() {
     const uint64_t per_view = uint64_t(pc.width) * uint64_t(pc.height);
     uint64_t pixel = uint64_t(view) * per_view + uint64_t(y * pc.width + x);
     uint px = U32Buf(uint64_t(pc.pixels) + 4ul * pixel).v[0];
+    if (pc.focus_threshold != 0u) {
+        // Lower bound of the pixel in the ascending focus table.
+        uint lo = 0u, hi = pc.n_focus;
+        while (lo < hi) {
+            uint mid = lo + (hi - lo) / 2u;
+            if (uint64_t(pc.focus.v[mid]) < pixel) {
+                lo = mid + 1u;
+            } else {
+                hi = mid;
+            }
+        }
+        bool hit = lo < pc.n_focus && uint64_t(pc.focus.v[lo]) == pixel;
+        pc.weights.v[at] = hit ? pc.w_focus : pc.w_other;
+    }
     pc.targets.v[3u * at + 0u] = float(px & 0xffu) / 255.0;
     pc.targets.v[3u * at + 1u] = float((px >> 8) & 0xffu) / 255.0;
     pc.targets.v[3u * at + 2u] = float((px >> 16) & 0xffu) / 255.0;

@@ -26,8 +26,10 @@
 // (static: the walk covers only the ray's span inside it, surf_box_span); block_shift; delta,
 // opacity (raw σα), sh (27) per allocated vertex;
 // params (SurfParams: scale, offset, a, stop_thresh, the loss weights grad_scale, lambda_h,
-// lambda_c, n_rays, the levels; n_levels used); rays (6 floats), targets (3 floats); bg (the
-// background composited behind the last hit: C = Σ w_j c_j + T·bg.rgb).
+// lambda_c, n_rays, the levels; n_levels used; the address of the per-ray importance weights ω
+// of a focused batch, gpu::TrainViewBuffers, 0: ω = 1: the ray's loss terms are ω times the
+// unweighted ones, its gradients and the RayLoss it reports alike); rays (6 floats), targets
+// (3 floats); bg (the background composited behind the last hit: C = Σ w_j c_j + T·bg.rgb).
 // Outputs: grad_delta, grad_opacity, grad_sh += (float atomics), touched list (step buffer);
 // when bg.learn ≠ 0, bg.grad += Σ_rays dL/dC·T (subgroup-reduced float atomics);
 // out_rays[r] = RayLoss (squared error, entropy, consistency, hits composited); stats
@@ -175,6 +177,8 @@ void main() {
     vec3 rd = vec3(pc.rays.v[6u * r + 3u], pc.rays.v[6u * r + 4u], pc.rays.v[6u * r + 5u]);
     vec3 target = vec3(pc.targets.v[3u * r], pc.targets.v[3u * r + 1u], pc.targets.v[3u * r + 2u]);
     SurfParams prm = pc.params.v[0];
+    const uint64_t weights = packUint2x32(prm.weights);
+    float omega = weights != 0ul ? F32Buf(weights).v[r] : 1.0;
     vec3 scale = prm.scale;
     vec3 offset = prm.offset;
     float a = prm.a;
@@ -307,15 +311,16 @@ void main() {
     precise vec3 diff = total - target;
     RayLoss o;
     precise float sq = diff.x * diff.x + diff.y * diff.y + diff.z * diff.z;
-    o.sq_err = sq;
+    o.sq_err = omega * sq;
     o.entropy = 0.0;
     o.consistency = 0.0;
     o.hits = nh;
-    precise vec3 d_c = prm.grad_scale * diff;
+    float grad_scale = prm.grad_scale * omega;
+    precise vec3 d_c = grad_scale * diff;
     bool learn_bg = pc.bg.v[0].learn != 0u;
 
     // Entropy of the normalised weights and ∂(λH·LH)/∂w_j.
-    float lambda_h = prm.lambda_h;
+    float lambda_h = prm.lambda_h * omega;
     float e[SURF_MAX_HITS];
     [[unroll]] for (uint k = 0u; k < SURF_MAX_HITS; k++) e[k] = 0.0;
     precise float wsum = 0.0;
@@ -330,7 +335,7 @@ void main() {
                 H -= pk * log(pk);
             }
         }
-        o.entropy = H;
+        o.entropy = omega * H;
         [[unroll]] for (uint k = 0u; k < SURF_MAX_HITS; k++) {
             if (k < nh && wj[k] > 0.0) {
                 precise float ek = -lambda_h * (log(wj[k] / wsum) + H) / wsum;
@@ -340,7 +345,7 @@ void main() {
     }
     // Lc: depths in scene units, mode m = first largest weight; ∂/∂t_m is summed apart (the same
     // additions in the same order) and stored after the loop.
-    float lambda_c = prm.lambda_c;
+    float lambda_c = prm.lambda_c * omega;
     float d_t[SURF_MAX_HITS];
     [[unroll]] for (uint k = 0u; k < SURF_MAX_HITS; k++) d_t[k] = 0.0;
     if (lambda_c != 0.0 && nh > 1u) {
@@ -370,7 +375,7 @@ void main() {
         [[unroll]] for (uint k = 0u; k < SURF_MAX_HITS; k++) {
             if (k == m) d_t[k] = dtm;
         }
-        o.consistency = lc;
+        o.consistency = omega * lc;
     }
     pc.out_rays.v[r] = o;
 

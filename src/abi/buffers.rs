@@ -34,6 +34,9 @@ abi_structs! {
         n_levels: u32,
         /// Level values τ_i, zero-padded past `n_levels`.
         levels: [f32; SURF_MAX_LEVELS],
+        /// `surface_train`: the device address of the per-ray importance weights of a focused
+        /// batch (low, high 32 bits); 0: every weight is 1.
+        weights: [u32; 2],
     }
 
     /// The params buffer of `plenoxel_train` (its push block would pass lavapipe's 128-byte

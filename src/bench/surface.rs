@@ -205,7 +205,8 @@ fn run_in(gpu: &Gpu, args: &SurfaceBenchArgs, dir: &std::path::Path) -> Result<(
         "bench surface: {} stage-2 warm-up steps (CPU)",
         args.warm_steps
     );
-    let views = TrainViews::new(&data.train, &data.scene)?;
+    // Batches drawn as training draws them (the preset's focus on the object's pixels).
+    let views = TrainViews::new(&data.train, &data.scene)?.focused(scfg.ray_focus)?;
     let n = args.batch as usize;
     for i in 0..args.warm_steps {
         let p = step_params(&scfg, res, rows, args.a, i);

@@ -1,7 +1,7 @@
 //! Parity of the whole draw (`glsl/sample_rays.comp`'s two passes around
 //! `glsl/sample_rays_sort.comp`, and pass 1 alone on keys drawn on the host, `gpu::KeyDraw`;
 //! uniform, and with a focus on a random fifth of the pixels) with `cpu::sample_rays`: the
-//! sorted pixel keys identical
+//! sorted pixel keys and the importance weights identical
 //! (integers: the same draws, the same order), origins identical (a copy of the camera's), unit
 //! directions within 4 ulp of 1 (2^-21: the kernel's division, square root and reciprocal may
 //! each be off by up to ~1 ulp where the driver does not round them exactly; its products and
@@ -98,7 +98,18 @@ pub fn check(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
         let mut b = gpu.batch()?;
         views.record_sample(&mut b, &set, batch_seed, n)?;
         b.submit()?;
-        let (rays, targets, keys) = views.download_batch(n)?;
+        let got = views.download_batch(n)?;
+        let (rays, targets, keys) = (&got.rays, &got.targets, &got.keys);
+        if got.weights != want.weights {
+            cmp.failures += 1;
+            if cmp.first_failure.is_none() {
+                cmp.first_failure = Some(format!(
+                    "{key_draw_name}: importance weights differ ({} on the device, {} in the twin)",
+                    got.weights.len(),
+                    want.weights.len()
+                ));
+            }
+        }
 
         for (i, (g, c)) in keys.iter().zip(&want.keys).enumerate() {
             cmp.compared += 1;

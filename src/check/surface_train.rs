@@ -35,7 +35,9 @@ use super::{grad_outliers, rel_l2, CheckRow, Compare, TEST_BACKGROUND};
 use crate::cpu::background::Background;
 use crate::cpu::surface_blocks::build_blocks;
 use crate::cpu::surface_fwd::SurfaceParams;
-use crate::cpu::surface_train::{hit_point, trace_ray, train, RayLoss, SurfaceGrads, TrainCounts};
+use crate::cpu::surface_train::{
+    hit_point, trace_ray, train, RayLoss, SurfaceGrads, TrainCounts, TrainInput,
+};
 use crate::gpu::Gpu;
 use crate::grid::surface::SurfaceGrid;
 use crate::grid::SH_DIM;
@@ -106,6 +108,7 @@ pub fn cpu_train(
     grid: &SurfaceGrid,
     rays: &[f32],
     targets: &[f32],
+    weights: Option<&[f32]>,
     p: &SurfaceStepParams,
 ) -> Result<CpuTrain> {
     let rows = grid.delta.len();
@@ -117,8 +120,11 @@ pub fn cpu_train(
     let blocks = build_blocks(&grid.as_ref(), &grid.levels, 0.0, SURF_BLOCK_SHIFT_VULKAN)?;
     let (ray_loss, counts) = train(
         &grid.as_ref(),
-        rays,
-        targets,
+        TrainInput {
+            rays,
+            targets,
+            weights,
+        },
         &surface_params(grid, p.a, p.stop_thresh, TEST_BACKGROUND),
         &batch_loss(rays.len() / 6, p),
         Some(SkipRef {
@@ -207,16 +213,31 @@ struct PassNote {
     counts: TrainCounts,
 }
 
-/// The rays (and targets) with the given indices.
-fn subset(rays: &[f32], targets: &[f32], idx: &[usize]) -> (Vec<f32>, Vec<f32>) {
-    (
-        idx.iter()
-            .flat_map(|&i| rays[6 * i..6 * i + 6].to_vec())
-            .collect(),
-        idx.iter()
-            .flat_map(|&i| targets[3 * i..3 * i + 3].to_vec())
-            .collect(),
-    )
+/// A batch for a pass: rays, targets and optional per-ray importance weights.
+struct RaySet {
+    rays: Vec<f32>,
+    targets: Vec<f32>,
+    weights: Option<Vec<f32>>,
+}
+
+impl RaySet {
+    /// The rays (targets, weights) with the given indices.
+    fn subset(&self, idx: &[usize]) -> RaySet {
+        RaySet {
+            rays: idx
+                .iter()
+                .flat_map(|&i| self.rays[6 * i..6 * i + 6].to_vec())
+                .collect(),
+            targets: idx
+                .iter()
+                .flat_map(|&i| self.targets[3 * i..3 * i + 3].to_vec())
+                .collect(),
+            weights: self
+                .weights
+                .as_ref()
+                .map(|w| idx.iter().map(|&i| w[i]).collect()),
+        }
+    }
 }
 
 /// Gradients of both backends on `rays`: relative L2 per parameter type; a failure message when
@@ -266,28 +287,30 @@ struct Pass<'a> {
 fn run_pass(
     gpu: &Gpu,
     grid: &SurfaceGrid,
-    rays: &[f32],
-    targets: &[f32],
+    all: &RaySet,
     pass: &Pass,
     cmp: &mut Compare,
 ) -> Result<PassNote> {
     let (p, what, all_guarded) = (pass.p, pass.what, pass.all_guarded);
-    let train_gpu = |rays: &[f32], targets: &[f32]| {
+    let train_gpu = |b: &RaySet| {
         let mut vk = VulkanSurface::new(gpu, grid.clone())?;
         vk.set_background(test_background())?;
-        vk.gradients(rays, targets, p)
+        vk.gradients(&b.rays, &b.targets, b.weights.as_deref(), p)
     };
+    let train_cpu = |b: &RaySet| cpu_train(grid, &b.rays, &b.targets, b.weights.as_deref(), p);
     // 1: every ray; keep those whose hit counts agree.
-    let want = cpu_train(grid, rays, targets, p)?;
-    let got = train_gpu(rays, targets)?;
-    let keep: Vec<usize> = (0..rays.len() / 6)
+    let want = train_cpu(all)?;
+    let got = train_gpu(all)?;
+    let n_rays = all.rays.len() / 6;
+    let keep: Vec<usize> = (0..n_rays)
         .filter(|&i| got.ray_loss[i].hits == want.ray_loss[i].hits)
         .collect();
-    let excused = rays.len() / 6 - keep.len();
+    let excused = n_rays - keep.len();
     // 2: the agreeing rays: losses, counters, touched flags, gradients within 1e-3.
-    let (rays_k, targets_k) = subset(rays, targets, &keep);
-    let want = cpu_train(grid, &rays_k, &targets_k, p)?;
-    let got = train_gpu(&rays_k, &targets_k)?;
+    let kept = all.subset(&keep);
+    let rays_k = &kept.rays;
+    let want = train_cpu(&kept)?;
+    let got = train_gpu(&kept)?;
     let mut errs = Vec::new();
     for (i, (g, w)) in got.ray_loss.iter().zip(&want.ray_loss).enumerate() {
         if g.hits != w.hits {
@@ -347,9 +370,9 @@ fn run_pass(
     let rel = if good.is_empty() {
         [0.0; 3]
     } else {
-        let (rays_g, targets_g) = subset(&rays_k, &targets_k, &good);
-        let want = cpu_train(grid, &rays_g, &targets_g, p)?;
-        let got = train_gpu(&rays_g, &targets_g)?;
+        let good = kept.subset(&good);
+        let want = train_cpu(&good)?;
+        let got = train_gpu(&good)?;
         compare_grads(&got, &want, 1e-4, what, &mut errs)
     };
     for msg in errs {
@@ -429,16 +452,35 @@ pub fn check(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
     for (variant, grid, rays) in &variants {
         let mut rng = Pcg64::seed_from_u64(seed ^ 0x7a26_e7a5);
         let targets: Vec<f32> = (0..rays.len() / 6 * 3).map(|_| rng.random()).collect();
+        // The random scene's rays carry importance weights (a focused batch's): every per-ray
+        // term and output is ω times the unweighted one on both sides.
+        let weights = (*variant == "random").then(|| {
+            (0..rays.len() / 6)
+                .map(|i| 0.25 + 0.5 * (i % 7) as f32)
+                .collect()
+        });
+        let batch = RaySet {
+            rays: rays.clone(),
+            targets,
+            weights,
+        };
         for (a, stop) in [(3.5f32, 1e-4f32), (8.0, 1e-3)] {
             let p = pass_params(a, stop, 0.5, 0.2);
-            let what = format!("{variant} a {a}");
+            let what = format!(
+                "{variant}{} a {a}",
+                if batch.weights.is_some() {
+                    " weighted"
+                } else {
+                    ""
+                }
+            );
             let guard = *variant == "guard";
             let pass = Pass {
                 p: &p,
                 what: &what,
                 all_guarded: guard,
             };
-            let n = run_pass(gpu, grid, rays, &targets, &pass, &mut cmp)?;
+            let n = run_pass(gpu, grid, &batch, &pass, &mut cmp)?;
             excused += n.excused;
             ill += n.ill;
             cases += n.kept;

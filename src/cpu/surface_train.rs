@@ -228,13 +228,17 @@ fn shade(g: &SurfaceGridRef, h: &Hit, dn: [f32; 3], y: &[f32; 9], a: f32, j: usi
 /// cell, with the same result).
 pub fn train(
     g: &SurfaceGridRef,
-    rays: &[f32],
-    targets: &[f32],
+    batch: TrainInput,
     p: &SurfaceParams,
     loss: &SurfaceLoss,
     blocks: Option<SkipRef>,
     grads: SurfaceGrads,
 ) -> Result<(Vec<RayLoss>, TrainCounts)> {
+    let TrainInput {
+        rays,
+        targets,
+        weights,
+    } = batch;
     validate_inputs(g, rays, p)?;
     validate_blocks(g, blocks)?;
     ensure!(
@@ -246,6 +250,12 @@ pub fn train(
         targets.len() * 2 == rays.len(),
         "{} targets for {} rays",
         targets.len() / 3,
+        rays.len() / 6
+    );
+    ensure!(
+        weights.is_none_or(|w| w.len() * 6 == rays.len()),
+        "{} weights for {} rays",
+        weights.map_or(0, |w| w.len()),
         rays.len() / 6
     );
     let rows = g.delta.len();
@@ -265,17 +275,30 @@ pub fn train(
     let res: Vec<(RayLoss, [f32; 3], TrainCounts)> = rays
         .par_chunks_exact(6)
         .zip(targets.par_chunks_exact(3))
-        .map(|(r, t)| {
-            train_ray(
+        .enumerate()
+        .map(|(i, (r, t))| {
+            // The ray's loss terms are ω times the unweighted ones (the kernel's order: each
+            // weight times ω, then the reported terms times ω).
+            let omega = weights.map_or(1.0, |w| w[i]);
+            let weighted = SurfaceLoss {
+                grad_scale: loss.grad_scale * omega,
+                lambda_h: loss.lambda_h * omega,
+                lambda_c: loss.lambda_c * omega,
+            };
+            let (mut rl, d_bg, counts) = train_ray(
                 g,
                 [r[0], r[1], r[2]],
                 [r[3], r[4], r[5]],
                 [t[0], t[1], t[2]],
                 p,
-                loss,
+                &weighted,
                 blocks,
                 &out,
-            )
+            );
+            rl.sq_err *= omega;
+            rl.entropy *= omega;
+            rl.consistency *= omega;
+            (rl, d_bg, counts)
         })
         .collect();
     if let Some(gb) = grads.background {
@@ -289,6 +312,15 @@ pub fn train(
         .iter()
         .fold(TrainCounts::default(), |a, (_, _, c)| a + *c);
     Ok((res.into_iter().map(|o| o.0).collect(), counts))
+}
+
+/// A training batch: rays (6 floats each), their targets (3 floats each) and, for a focused
+/// batch, each ray's importance weight ω (`cpu::sample_rays::Focus`; `None`: ω = 1).
+#[derive(Clone, Copy, Debug)]
+pub struct TrainInput<'a> {
+    pub rays: &'a [f32],
+    pub targets: &'a [f32],
+    pub weights: Option<&'a [f32]>,
 }
 
 /// The gradient arrays as atomics.

@@ -35,7 +35,7 @@ pub use profile::Profile;
 pub use ray_buffers::RayBuffers;
 pub use readback::{Readback, STEP_SLOTS};
 pub use step_times::{timed, Phase, PhaseClock, StepTimes};
-pub use train_views::{record_sort_runs, KeyDraw, TrainRays, TrainViewBuffers};
+pub use train_views::{record_sort_runs, KeyDraw, SampledAt, TrainRays, TrainViewBuffers};
 
 use std::sync::OnceLock;
 

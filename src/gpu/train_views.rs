@@ -8,7 +8,7 @@ use super::DeviceKind;
 use super::{Batch, Gpu, GpuBuffer};
 use crate::abi::buffers::SampleCamera;
 use crate::abi::consts::{SAMPLE_SORT_RAYS, SAMPLE_SORT_SIDE};
-use crate::cpu::sample_rays::{sorted_keys, SampleSet};
+use crate::cpu::sample_rays::{sorted_keys, SampleSet, SampledRays};
 use crate::kernels::{sample_rays, sample_rays_sort};
 use anyhow::{ensure, Result};
 
@@ -43,6 +43,15 @@ impl KeyDraw {
 /// Keys per in-stream update (`Batch::update` takes at most 65536 bytes).
 const UPDATE_KEYS: usize = 65536 / 8;
 
+/// Device addresses of a recorded batch: rays (6 floats each), targets (3 floats each) and
+/// per-ray importance weights (0: the set has no focus, every weight is 1).
+#[derive(Clone, Copy, Debug)]
+pub struct SampledAt {
+    pub rays: u64,
+    pub targets: u64,
+    pub weights: u64,
+}
+
 /// One set of training views on the device and the batch buffers.
 pub struct TrainViewBuffers {
     /// The id of the set uploaded (`data::TrainViews::id`).
@@ -53,6 +62,8 @@ pub struct TrainViewBuffers {
     focus: GpuBuffer,
     n_focus: u32,
     focus_threshold: u32,
+    /// Importance weights of a focus pixel and of any other (`Focus::weights`).
+    focus_weights: (f32, f32),
     width: u32,
     height: u32,
     n_pixels: u64,
@@ -68,6 +79,8 @@ struct BatchBuffers {
     rays: GpuBuffer,
     targets: GpuBuffer,
     keys: GpuBuffer,
+    /// Per-ray importance weights (written only for a set with a focus).
+    weights: GpuBuffer,
     /// The batch's keys as drawn (`sample_rays` pass 0), which `sample_rays_sort` sorts into
     /// `keys`.
     scratch: GpuBuffer,
@@ -95,6 +108,7 @@ impl TrainViewBuffers {
             focus,
             n_focus: f.pixels().len() as u32,
             focus_threshold: f.threshold(),
+            focus_weights: f.weights(),
             width: set.width,
             height: set.height,
             n_pixels: set.n_pixels(),
@@ -130,6 +144,7 @@ impl TrainViewBuffers {
                 rays: gpu.zeros::<f32>(6 * cap)?,
                 targets: gpu.zeros::<f32>(3 * cap)?,
                 keys: gpu.zeros::<u64>(cap)?,
+                weights: gpu.zeros::<f32>(cap)?,
                 scratch: gpu.zeros::<u64>(cap)?,
             });
         }
@@ -139,14 +154,14 @@ impl TrainViewBuffers {
     /// Record drawing the batch of `n` rays of `seed` from `set` (the views this set holds):
     /// `sample_rays` pass 0 and `sample_rays_sort`, or the keys from the host ([`KeyDraw`]),
     /// then `sample_rays` pass 1 ([`ensure`](Self::ensure) made room for them); returns the
-    /// device addresses of its rays and targets, for the kernels recorded after it.
+    /// device addresses of its rays, targets and weights, for the kernels recorded after it.
     pub fn record_sample(
         &self,
         b: &mut Batch,
         set: &SampleSet,
         seed: u64,
         n: usize,
-    ) -> Result<[u64; 2]> {
+    ) -> Result<SampledAt> {
         let bb = self.batch.as_ref().filter(|bb| bb.capacity >= n && n > 0);
         let bb = bb.ok_or_else(|| anyhow::anyhow!("no room was made for a batch of {n} rays"))?;
         let mut push = sample_rays::Push {
@@ -157,8 +172,11 @@ impl TrainViewBuffers {
             keys: bb.keys.address(),
             scratch: bb.scratch.address(),
             focus: self.focus.address(),
+            weights: bb.weights.address(),
             n_focus: self.n_focus,
             focus_threshold: self.focus_threshold,
+            w_focus: self.focus_weights.0,
+            w_other: self.focus_weights.1,
             seed,
             n_pixels: self.n_pixels,
             width: self.width,
@@ -192,18 +210,32 @@ impl TrainViewBuffers {
         // Write the rays of the sorted keys.
         push.pass = 1;
         b.dispatch_1d(&sample_rays::INFO, &push, n as u32)?;
-        Ok([bb.rays.address(), bb.targets.address()])
+        Ok(SampledAt {
+            rays: bb.rays.address(),
+            targets: bb.targets.address(),
+            weights: if self.focus_threshold != 0 {
+                bb.weights.address()
+            } else {
+                0
+            },
+        })
     }
 
-    /// The last batch's rays, targets and keys (`n` of each), once its batch has completed.
-    pub fn download_batch(&self, n: usize) -> Result<(Vec<f32>, Vec<f32>, Vec<u64>)> {
+    /// The last batch of `n` rays (its weights empty without a focus), once its batch has
+    /// completed.
+    pub fn download_batch(&self, n: usize) -> Result<SampledRays> {
         let bb = self.batch.as_ref().filter(|bb| bb.capacity >= n);
         let bb = bb.ok_or_else(|| anyhow::anyhow!("no batch of {n} rays was sampled"))?;
-        Ok((
-            bb.rays.download_range(0, 6 * n)?,
-            bb.targets.download_range(0, 3 * n)?,
-            bb.keys.download_range(0, n)?,
-        ))
+        Ok(SampledRays {
+            keys: bb.keys.download_range(0, n)?,
+            rays: bb.rays.download_range(0, 6 * n)?,
+            targets: bb.targets.download_range(0, 3 * n)?,
+            weights: if self.focus_threshold != 0 {
+                bb.weights.download_range(0, n)?
+            } else {
+                Vec::new()
+            },
+        })
     }
 }
 

@@ -6,6 +6,7 @@ use super::plan::{PlenoxelPass, PlenoxelPlan, TvField};
 use super::{march_params, Gradients, Plenoxels, StepParams, StepStats};
 use crate::abi::buffers::PlenoxelParams;
 use crate::cpu::background::Background;
+use crate::cpu::sample_rays::SampledRays;
 use crate::cpu::step::{step_record, StepHeader, STEP_FLAGS, STEP_RESET_BYTES};
 use crate::cpu::{RmsProp, TvChunk};
 use crate::data::TrainViews;
@@ -180,15 +181,20 @@ impl VulkanPlenoxels {
                 self.begin(rays, Some(targets), clock)
             }
             TrainRays::Sampled { id, set, seed, n } => {
+                // Stage 1 trains on uniform batches: its kernel takes no importance weights.
+                ensure!(
+                    set.focus.is_none(),
+                    "stage 1 draws its batches uniformly (a focused set was given)"
+                );
                 TrainViewBuffers::ensure(&mut self.views, &self.gpu, id, set, n)?;
                 let [_, _, out] = self.rays.reserve(&self.gpu, n)?;
                 clock.mark(Phase::Upload);
                 let mut b = self.gpu.batch()?;
                 self.record_step_reset(&mut b);
                 let views = self.views.as_ref().expect("ensured");
-                let [rays, targets] = views.record_sample(&mut b, set, seed, n)?;
+                let at = views.record_sample(&mut b, set, seed, n)?;
                 clock.mark(Phase::Sampling);
-                Ok((b, [rays, targets, out]))
+                Ok((b, [at.rays, at.targets, out]))
             }
         }
     }
@@ -362,8 +368,8 @@ impl VulkanPlenoxels {
             .0)
     }
 
-    /// The last sampled batch's rays, targets and pixel keys (`n` of each).
-    pub fn sampled_batch(&self, n: usize) -> Result<(Vec<f32>, Vec<f32>, Vec<u64>)> {
+    /// The last sampled batch of `n` rays.
+    pub fn sampled_batch(&self, n: usize) -> Result<SampledRays> {
         self.settle()?;
         let views = self.views.as_ref();
         let views = views.ok_or_else(|| anyhow::anyhow!("no batch was sampled"))?;

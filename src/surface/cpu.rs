@@ -13,7 +13,7 @@ use crate::cpu::surface_fwd::{render, SurfCounts};
 use crate::cpu::surface_reg::{
     normal_reg_passes, row_slots, surface_opacity_reg, NormalPrefix, NormalScratch,
 };
-use crate::cpu::surface_train::{train, RayLoss, SurfaceGrads, TrainCounts};
+use crate::cpu::surface_train::{train, RayLoss, SurfaceGrads, TrainCounts, TrainInput};
 use crate::cpu::{surface_rmsprop_sparse, tv, Stage2Params};
 use crate::data::TrainViews;
 use crate::gpu::{timed, Phase, PhaseClock};
@@ -108,12 +108,14 @@ impl CpuSurface {
         SurfacePlan::step(p, &g, n_rays, self.bg.learned(), &mut self.refresh)
     }
 
-    /// Run `plan`'s passes in order, the kernels' twins, on the batch `rays`, `targets`.
+    /// Run `plan`'s passes in order, the kernels' twins, on the batch `rays`, `targets` (with
+    /// per-ray importance `weights`, if any).
     fn run_plan(
         &mut self,
         plan: &SurfacePlan,
         rays: &[f32],
         targets: &[f32],
+        weights: Option<&[f32]>,
     ) -> Result<PassOutput> {
         let mut out = PassOutput::default();
         for pass in plan.passes() {
@@ -129,8 +131,11 @@ impl CpuSurface {
                     let [gd, go, gs] = &mut self.grad;
                     (out.losses, out.counts) = train(
                         &grid_ref(&self.grid),
-                        rays,
-                        targets,
+                        TrainInput {
+                            rays,
+                            targets,
+                            weights,
+                        },
                         &sp,
                         loss,
                         Some(SkipRef {
@@ -202,6 +207,38 @@ impl CpuSurface {
         }
         Ok(out)
     }
+
+    /// One training step on a batch with optional per-ray importance weights.
+    fn step_weighted(
+        &mut self,
+        rays: &[f32],
+        targets: &[f32],
+        weights: Option<&[f32]>,
+        p: &SurfaceStepParams,
+    ) -> Result<SurfaceStepStats> {
+        let mut clock = PhaseClock::start();
+        let n = rays.len() / 6;
+        let plan = self.plan(p, n)?;
+        let PassOutput {
+            losses,
+            counts,
+            reg_loss,
+        } = self.run_plan(&plan, rays, targets, weights)?;
+        self.refresh.after_update(p.lr_delta, p.beta);
+        let nf = n.max(1) as f64;
+        let mut stats = SurfaceStepStats {
+            mse: losses.iter().map(|l| l.sq_err as f64).sum::<f64>() / (3.0 * nf),
+            entropy: losses.iter().map(|l| l.entropy as f64).sum::<f64>() / nf,
+            consistency: losses.iter().map(|l| l.consistency as f64).sum::<f64>() / nf,
+            reg_loss,
+            counts,
+            device_ns: 0.0,
+            host: Default::default(),
+        };
+        clock.mark(Phase::Compute);
+        stats.host = clock.times;
+        Ok(stats)
+    }
 }
 
 /// What a step's passes produce on the CPU: the training pass's per-ray losses and counters,
@@ -224,28 +261,7 @@ impl SurfaceBackend for CpuSurface {
         targets: &[f32],
         p: &SurfaceStepParams,
     ) -> Result<SurfaceStepStats> {
-        let mut clock = PhaseClock::start();
-        let n = rays.len() / 6;
-        let plan = self.plan(p, n)?;
-        let PassOutput {
-            losses,
-            counts,
-            reg_loss,
-        } = self.run_plan(&plan, rays, targets)?;
-        self.refresh.after_update(p.lr_delta, p.beta);
-        let nf = n.max(1) as f64;
-        let mut stats = SurfaceStepStats {
-            mse: losses.iter().map(|l| l.sq_err as f64).sum::<f64>() / (3.0 * nf),
-            entropy: losses.iter().map(|l| l.entropy as f64).sum::<f64>() / nf,
-            consistency: losses.iter().map(|l| l.consistency as f64).sum::<f64>() / nf,
-            reg_loss,
-            counts,
-            device_ns: 0.0,
-            host: Default::default(),
-        };
-        clock.mark(Phase::Compute);
-        stats.host = clock.times;
-        Ok(stats)
+        self.step_weighted(rays, targets, None, p)
     }
 
     fn step_sampled(
@@ -256,7 +272,8 @@ impl SurfaceBackend for CpuSurface {
         p: &SurfaceStepParams,
     ) -> Result<()> {
         let (batch, sampling) = timed(Phase::Sampling, || views.sample(seed, n))?;
-        let mut stats = self.step(&batch.rays, &batch.targets, p)?;
+        let weights = (!batch.weights.is_empty()).then_some(batch.weights.as_slice());
+        let mut stats = self.step_weighted(&batch.rays, &batch.targets, weights, p)?;
         stats.host.add(&sampling);
         self.done.push(stats);
         Ok(())

@@ -62,6 +62,7 @@ pub fn surf_params(sp: &SurfaceParams, loss: &SurfaceLoss, n_rays: usize) -> Sur
         n_rays: n_rays as u32,
         n_levels: sp.levels.len() as u32,
         levels,
+        weights: [0, 0],
     }
 }
 
@@ -147,6 +148,16 @@ pub struct VulkanSurface {
     /// The training views and sampled batches (uploaded by the first sampled step; kept by
     /// `load`).
     views: Option<TrainViewBuffers>,
+}
+
+/// Device addresses of a training batch: rays (6 floats each), targets (3 floats each),
+/// per-ray importance weights (0: every weight 1) and the per-ray output.
+#[derive(Clone, Copy, Debug)]
+struct RayIo {
+    rays: u64,
+    targets: u64,
+    weights: u64,
+    out: u64,
 }
 
 impl VulkanSurface {
@@ -250,16 +261,24 @@ impl VulkanSurface {
         rays: &[f32],
         targets: Option<&[f32]>,
         clock: &mut PhaseClock,
-    ) -> Result<(Batch, [u64; 3])> {
+    ) -> Result<(Batch, RayIo)> {
         ensure!(
             rays.len().is_multiple_of(6),
             "rays must be 6 floats each, got {} floats",
             rays.len()
         );
-        let addrs = self.rays.upload(&self.gpu, rays, targets)?;
+        let [rays, targets, out] = self.rays.upload(&self.gpu, rays, targets)?;
         clock.mark(Phase::Upload);
         let b = self.begin_batch()?;
-        Ok((b, addrs))
+        Ok((
+            b,
+            RayIo {
+                rays,
+                targets,
+                weights: 0,
+                out,
+            },
+        ))
     }
 
     /// A batch starting with the step reset (touched count) and the counters' reset.
@@ -273,8 +292,8 @@ impl VulkanSurface {
     }
 
     /// Start a batch with the resets and the training rays (uploaded, or drawn by
-    /// `sample_rays`). Returns it with the addresses of rays, targets and per-ray output.
-    fn begin_train(&mut self, src: TrainRays, clock: &mut PhaseClock) -> Result<(Batch, [u64; 3])> {
+    /// `sample_rays`). Returns it with the addresses of rays, targets, weights and per-ray output.
+    fn begin_train(&mut self, src: TrainRays, clock: &mut PhaseClock) -> Result<(Batch, RayIo)> {
         let n = src.len();
         if let TrainRays::Host { rays, targets } = src {
             ensure!(
@@ -293,9 +312,17 @@ impl VulkanSurface {
                 clock.mark(Phase::Upload);
                 let mut b = self.begin_batch()?;
                 let views = self.views.as_ref().expect("ensured");
-                let [rays, targets] = views.record_sample(&mut b, set, seed, n)?;
+                let at = views.record_sample(&mut b, set, seed, n)?;
                 clock.mark(Phase::Sampling);
-                Ok((b, [rays, targets, out]))
+                Ok((
+                    b,
+                    RayIo {
+                        rays: at.rays,
+                        targets: at.targets,
+                        weights: at.weights,
+                        out,
+                    },
+                ))
             }
         }
     }
@@ -310,15 +337,8 @@ impl VulkanSurface {
         }
     }
 
-    /// Record `plan`'s passes in order on the batch of `n` rays at `rays` (addresses of rays,
-    /// targets and per-ray output).
-    fn record_plan(
-        &self,
-        b: &mut Batch,
-        plan: &SurfacePlan,
-        rays: [u64; 3],
-        n: usize,
-    ) -> Result<()> {
+    /// Record `plan`'s passes in order on the batch of `n` rays at `rays`.
+    fn record_plan(&self, b: &mut Batch, plan: &SurfacePlan, rays: RayIo, n: usize) -> Result<()> {
         for pass in plan.passes() {
             match pass {
                 SurfacePass::Blocks { margin } => self.record_blocks(b, *margin)?,
@@ -382,12 +402,16 @@ impl VulkanSurface {
         a: f32,
         stop_thresh: f32,
         loss: &SurfaceLoss,
-        [ray_buf, target_buf, out_buf]: [u64; 3],
+        io: RayIo,
         n: usize,
     ) -> Result<()> {
         // The colour is the device's (`bg`); surface_fwd and surface_train read it there.
         let sp = surface_params(&self.meta, a, stop_thresh, [1.0; 3]);
-        b.update(&self.params, 0, &[surf_params(&sp, loss, n)])?;
+        let prm = SurfParams {
+            weights: [io.weights as u32, (io.weights >> 32) as u32],
+            ..surf_params(&sp, loss, n)
+        };
+        b.update(&self.params, 0, &[prm])?;
         b.dispatch_1d(
             &kernels::surface_train::INFO,
             &kernels::surface_train::Push {
@@ -397,12 +421,12 @@ impl VulkanSurface {
                 opacity: self.opacity.address(),
                 sh: self.sh.address(),
                 params: self.params.address(),
-                rays: ray_buf,
-                targets: target_buf,
+                rays: io.rays,
+                targets: io.targets,
                 grad_delta: self.grad[0].address(),
                 grad_opacity: self.grad[1].address(),
                 grad_sh: self.grad[2].address(),
-                out_rays: out_buf,
+                out_rays: io.out,
                 stats: self.stats.address(),
                 step: self.step.address(),
                 bg: self.bg.address(),
@@ -488,20 +512,31 @@ impl VulkanSurface {
         self.rays.out().download_range(0, n)
     }
 
-    /// The training pass alone (no regulariser, no update): per-ray losses, the gradients, the
-    /// touched flags and the counters; gradients and flags are cleared afterwards.
+    /// The training pass alone (no regulariser, no update) on rays with optional per-ray
+    /// importance `weights`: per-ray losses, the gradients, the touched flags and the counters;
+    /// gradients and flags are cleared afterwards.
     pub fn gradients(
         &mut self,
         rays: &[f32],
         targets: &[f32],
+        weights: Option<&[f32]>,
         p: &SurfaceStepParams,
     ) -> Result<SurfaceGradients> {
         self.settle()?;
         let n = rays.len() / 6;
+        ensure!(
+            weights.is_none_or(|w| w.len() == n),
+            "{} weights for {n} rays",
+            weights.map_or(0, |w| w.len())
+        );
         let mut refresh = self.refresh;
         let plan = SurfacePlan::gradients(p, n, &mut refresh)?;
         let src = TrainRays::Host { rays, targets };
-        let (mut b, io) = self.begin_train(src, &mut PhaseClock::start())?;
+        let (mut b, mut io) = self.begin_train(src, &mut PhaseClock::start())?;
+        let weight_buf = weights.map(|w| self.gpu.upload(w)).transpose()?;
+        if let Some(w) = &weight_buf {
+            io.weights = w.address();
+        }
         self.record_plan(&mut b, &plan, io, n)?;
         self.refresh = refresh;
         b.submit()?;
@@ -679,7 +714,7 @@ impl SurfaceBackend for VulkanSurface {
             lambda_c: 0.0,
         };
         self.params.write(&[surf_params(&sp, &no_loss, n)])?;
-        let (mut b, [ray_buf, _, out_buf]) = self.begin(rays, None, &mut PhaseClock::start())?;
+        let (mut b, io) = self.begin(rays, None, &mut PhaseClock::start())?;
         if let Some(margin) = self.refresh.before_pass(0.0, 0.0) {
             self.record_blocks(&mut b, margin)?;
         }
@@ -691,8 +726,8 @@ impl SurfaceBackend for VulkanSurface {
                 opacity: self.opacity.address(),
                 sh: self.sh.address(),
                 params: self.params.address(),
-                rays: ray_buf,
-                out_rays: out_buf,
+                rays: io.rays,
+                out_rays: io.out,
                 stats: self.stats.address(),
                 bg: self.bg.address(),
                 n: self.meta.res[0],

@@ -167,6 +167,8 @@ mod tests {
         assert_eq!(s1.preset, Preset::Imported);
         let s2: SurfaceConfig = serde_json::from_str(STAGE2_SAVED).unwrap();
         assert_eq!((s2.preset, s2.category), (Preset::Fast, Category::Thin));
+        // Written before batches could be focused: uniform.
+        assert_eq!(s2.ray_focus, 0.0);
         let again: serde_json::Value = serde_json::to_value(&s2).unwrap();
         assert_eq!(
             (&again["preset"], &again["category"]),

@@ -45,8 +45,10 @@ pub struct SurfaceConfig {
     /// Rays per batch.
     pub batch: u32,
     /// The share of each batch drawn from the pixels the object covers (alpha above 0 in the
-    /// training images, grown by `data::sampler::FOCUS_GROW` pixels); the rest is uniform over every
-    /// pixel. 0: uniform, as the paper (and views without alpha always are).
+    /// training images, grown by `data::sampler::FOCUS_GROW` pixels), in [0, 1); the rest is
+    /// uniform over every pixel, and each ray's loss is importance-weighted so that a batch's
+    /// loss is the uniform batch's in expectation (`cpu::sample_rays::Focus`). 0: uniform, as the
+    /// paper (views without alpha always are).
     #[serde(default)]
     pub ray_focus: f32,
     pub lr_delta: DelayedExp,
@@ -230,8 +232,12 @@ impl SurfaceConfig {
                 "{name} must be finite and ≥ 0, got {v}"
             );
         }
+        ensure!(
+            (0.0..1.0).contains(&self.ray_focus),
+            "ray_focus must be in [0, 1), got {}",
+            self.ray_focus
+        );
         for (name, v) in [
-            ("ray_focus", self.ray_focus),
             ("delta_fraction", self.delta_fraction),
             ("tv_alpha_fraction", self.tv_alpha_fraction),
             ("alpha_fraction", self.alpha_fraction),
@@ -276,6 +282,11 @@ impl SurfaceConfig {
                 };
                 // Colour must re-fit from volume to surface rendering in 1500 steps.
                 c.lr_sh = DelayedExp::constant(1e-2);
+                // 1500 steps of uniform batches shade the object's pixels (a tenth of a view's,
+                // or less) less than once each: three quarters of each batch are drawn from the
+                // pixels the object covers, importance-weighted so that the loss is the uniform
+                // batch's in expectation.
+                c.ray_focus = 0.75;
                 c.init.alpha_init_scale = fast_alpha_init_scale(category);
                 // RMSProp leaves a vertex's σα alone in steps that give it no gradient, so its
                 // state does not decay between Lα visits: a larger chunk keeps the fading rate.
@@ -373,6 +384,24 @@ mod tests {
         old.as_object_mut().unwrap().remove("delta_fraction");
         let read: SurfaceConfig = serde_json::from_value(old).unwrap();
         assert_eq!(read, fast);
+    }
+
+    #[test]
+    fn only_the_fast_preset_focuses_its_batches() {
+        for cat in [Category::Thin, Category::Translucent, Category::Real] {
+            assert_eq!(SurfaceConfig::paper(cat).ray_focus, 0.0);
+            let fast = SurfaceConfig::preset(Preset::Fast, cat).unwrap();
+            assert_eq!(fast.ray_focus, 0.75);
+            fast.validate().unwrap();
+            for bad in [1.0, -0.1, f32::NAN] {
+                let c = SurfaceConfig {
+                    ray_focus: bad,
+                    ..fast.clone()
+                };
+                let e = c.validate().unwrap_err().to_string();
+                assert!(e.contains("ray_focus"), "{e}");
+            }
+        }
     }
 
     #[test]

@@ -17,7 +17,7 @@ use alphasurf::abi::surface_grid::SurfaceGridRef;
 use alphasurf::check::TEST_BACKGROUND;
 use alphasurf::cpu::surface_fwd::SurfaceParams;
 use alphasurf::cpu::surface_train::{
-    hit_point, trace_ray, train, SurfaceGrads, SurfaceLoss, Trace,
+    hit_point, trace_ray, train, SurfaceGrads, SurfaceLoss, Trace, TrainInput,
 };
 use alphasurf::math::dda::ray_unit;
 use alphasurf::math::sh::sh_basis;
@@ -236,6 +236,8 @@ fn cpu_backward_matches_f64_central_differences() {
     // Rays entering through x = −1 heading roughly +x, kept when smooth.
     let mut rays = Vec::new();
     let mut targets = Vec::new();
+    // Importance weights of a focused batch: every per-ray term is ω times the unweighted one.
+    let mut weights = Vec::new();
     let mut traces = Vec::new();
     let mut multi = 0;
     while traces.len() < 120 {
@@ -258,6 +260,7 @@ fn cpu_backward_matches_f64_central_differences() {
         multi += (tr.n > 1) as usize;
         rays.extend_from_slice(&[ro[0], ro[1], ro[2], rd[0], rd[1], rd[2]]);
         targets.extend_from_slice(&target);
+        weights.push(rng.random_range(0.2f32..3.0));
         traces.push((tr, rd, target));
     }
     assert!(multi > 60, "only {multi} rays with several hits");
@@ -277,8 +280,11 @@ fn cpu_backward_matches_f64_central_differences() {
     let mut gbg = [0f32; 3];
     let (losses, counts) = train(
         &g,
-        &rays,
-        &targets,
+        TrainInput {
+            rays: &rays,
+            targets: &targets,
+            weights: Some(&weights),
+        },
         &p,
         &lp,
         None,
@@ -298,7 +304,10 @@ fn cpu_backward_matches_f64_central_differences() {
     let total = |q: &Params64| -> f64 {
         traces
             .iter()
-            .map(|(tr, rd, t)| ray_loss64(tr, *rd, *t, &levels, p.a as f64, &lp, q, false).unwrap())
+            .zip(&weights)
+            .map(|((tr, rd, t), &w)| {
+                w as f64 * ray_loss64(tr, *rd, *t, &levels, p.a as f64, &lp, q, false).unwrap()
+            })
             .sum()
     };
     let h = 1e-5;

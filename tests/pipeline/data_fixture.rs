@@ -323,21 +323,21 @@ fn device_batches_are_the_twins_and_a_restart_draws_them_again() {
         "first-step MSE: vulkan {first_vk}, cpu {first_cpu}"
     );
     vk.step_sampled(&views, 6, n, &p).unwrap();
-    let (rays, targets, keys) = vk.sampled_batch(n).unwrap();
+    let batch = vk.sampled_batch(n).unwrap();
     let twin = views.sample(6, n).unwrap();
-    assert_eq!(keys, twin.keys);
+    assert_eq!(batch.keys, twin.keys);
     let close = |a: &[f32], b: &[f32], tol: f64| {
         a.iter()
             .zip(b)
             .all(|(x, y)| (*x as f64 - *y as f64).abs() <= tol)
     };
-    assert!(close(&rays, &twin.rays, DIR_ABS));
-    assert!(close(&targets, &twin.targets, TARGET_ABS));
+    assert!(close(&batch.rays, &twin.rays, DIR_ABS));
+    assert!(close(&batch.targets, &twin.targets, TARGET_ABS));
 
     let views2 = TrainViews::new(&ds.train, &ds.scene).unwrap();
     let mut vk2 = VulkanPlenoxels::new(gpu, grid).unwrap();
     vk2.step_sampled(&views2, 6, n, &p).unwrap();
-    assert_eq!(vk2.sampled_batch(n).unwrap(), (rays, targets, keys));
+    assert_eq!(vk2.sampled_batch(n).unwrap(), batch);
     let msgs = gpu.validation_messages();
     assert!(msgs.is_empty(), "validation messages: {msgs:#?}");
 }
