@@ -111,7 +111,7 @@ impl<'a> TrainViews<'a> {
         })
     }
 
-    /// The same views with a share `share` ∈ [0, 1] of each batch drawn from the pixels the
+    /// The same views with a share `share` ∈ [0, 1) of each batch drawn from the pixels the
     /// object covers (alpha above 0, grown by [`FOCUS_GROW`] pixels; `cpu::sample_rays::Focus`),
     /// the rest uniform over all pixels. Views without alpha, or a share of 0, draw uniformly.
     /// The result is a set of its own (a new [`id`](Self::id)).
