@@ -135,15 +135,9 @@ impl Focus {
         )
     }
 
-    /// The importance weight of the pixel with flat index `p` ([`weights`](Self::weights)).
-    pub fn weight_of(&self, p: u64) -> f32 {
-        let (w_focus, w_other) = self.weights();
-        let hit = p <= u32::MAX as u64 && self.pixels.binary_search(&(p as u32)).is_ok();
-        if hit {
-            w_focus
-        } else {
-            w_other
-        }
+    /// Whether the pixel with flat index `p` is a focus pixel.
+    pub fn contains(&self, p: u64) -> bool {
+        p <= u32::MAX as u64 && self.pixels.binary_search(&(p as u32)).is_ok()
     }
 
     /// Rays whose hash has its high 32 bits below this are drawn from the focus pixels.
@@ -336,11 +330,16 @@ pub fn sample_rays(set: &SampleSet, seed: u64, n: usize) -> Result<SampledRays> 
         Vec::new()
     } else {
         let (per_view, bits) = (set.width as u64 * set.height as u64, set.key_bits());
+        let (w_focus, w_other) = set.focus.weights();
         keys.par_iter()
             .map(|&k| {
                 let (v, x, y) = key_pixel(k, bits);
-                set.focus
-                    .weight_of(v as u64 * per_view + (y * set.width + x) as u64)
+                let p = v as u64 * per_view + (y * set.width + x) as u64;
+                if set.focus.contains(p) {
+                    w_focus
+                } else {
+                    w_other
+                }
             })
             .collect()
     };

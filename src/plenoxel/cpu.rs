@@ -173,6 +173,7 @@ impl Plenoxels for CpuPlenoxels {
         n: usize,
         p: &StepParams,
     ) -> Result<()> {
+        super::uniform_views(views)?;
         let (batch, sampling) = timed(Phase::Sampling, || views.sample(seed, n))?;
         let mut stats = self.step(&batch.rays, &batch.targets, p)?;
         stats.host.add(&sampling);

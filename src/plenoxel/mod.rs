@@ -74,6 +74,7 @@ pub trait Plenoxels {
     /// (`cpu::sample_rays`): the CPU backend draws it with the twin on the host; the Vulkan
     /// backend draws it on the device, from views it uploads once, and returns once the step is
     /// submitted (the device may still run it). Its figures come with [`Self::take_stats`].
+    /// Stage 1 trains on uniform batches: views with a focus are refused ([`uniform_views`]).
     fn step_sampled(
         &mut self,
         views: &TrainViews,
@@ -113,6 +114,16 @@ pub trait Plenoxels {
 }
 
 /// Ray → grid mapping of a grid: grid = p·scale + offset.
+/// Stage 1's kernel and twin take no importance weights, so its batches must be drawn
+/// uniformly: an error for views with a focus (`data::TrainViews::focused`).
+pub fn uniform_views(views: &TrainViews) -> Result<()> {
+    anyhow::ensure!(
+        views.set().focus.is_none(),
+        "stage 1 draws its batches uniformly (focused views were given)"
+    );
+    Ok(())
+}
+
 pub fn march_params(g: &Grid, stop_thresh: f32) -> MarchParams {
     MarchParams {
         scale: std::array::from_fn(|i| g.res[i] as f32 / (2.0 * g.radius[i])),

@@ -181,11 +181,6 @@ impl VulkanPlenoxels {
                 self.begin(rays, Some(targets), clock)
             }
             TrainRays::Sampled { id, set, seed, n } => {
-                // Stage 1 trains on uniform batches: its kernel takes no importance weights.
-                ensure!(
-                    set.focus.is_none(),
-                    "stage 1 draws its batches uniformly (a focused set was given)"
-                );
                 TrainViewBuffers::ensure(&mut self.views, &self.gpu, id, set, n)?;
                 let [_, _, out] = self.rays.reserve(&self.gpu, n)?;
                 clock.mark(Phase::Upload);
@@ -400,6 +395,7 @@ impl Plenoxels for VulkanPlenoxels {
         n: usize,
         p: &StepParams,
     ) -> Result<()> {
+        super::uniform_views(views)?;
         let src = TrainRays::Sampled {
             id: views.id(),
             set: views.set(),

@@ -322,6 +322,18 @@ fn device_batches_are_the_twins_and_a_restart_draws_them_again() {
         (first_vk - first_cpu).abs() <= 1e-5 * first_cpu,
         "first-step MSE: vulkan {first_vk}, cpu {first_cpu}"
     );
+    // Stage 1 takes no importance weights: focused views are refused by both backends.
+    let focused = TrainViews::new(&ds.train, &ds.scene)
+        .unwrap()
+        .focused(0.5)
+        .unwrap();
+    assert!(!focused.set().focus.is_none());
+    for e in [
+        vk.step_sampled(&focused, 6, n, &p).unwrap_err(),
+        cpu.step_sampled(&focused, 6, n, &p).unwrap_err(),
+    ] {
+        assert!(e.to_string().contains("uniformly"), "{e}");
+    }
     vk.step_sampled(&views, 6, n, &p).unwrap();
     let batch = vk.sampled_batch(n).unwrap();
     let twin = views.sample(6, n).unwrap();
