@@ -52,7 +52,8 @@ pub enum Command {
     /// stage-1 run) or both — with a progress bar, periodic atomic checkpoints (`--resume`), test
     /// renders, metrics.json and train_log.csv.
     Train(TrainOptions),
-    /// Render a split of a trained run to PNG and print per-view and mean PSNR.
+    /// Render a split of a trained run (stage 1: the density grid; stage 2: the surfaces) to PNG and
+    /// print per-view and mean PSNR.
     Render(RenderOptions),
     /// Extract the level-set surfaces of a trained grid as a point cloud (binary PLY in Blender
     /// units with level, alpha and normals); for a stage-1 grid, the Plenoxels baseline σ = τ.

@@ -1,19 +1,28 @@
-//! `render` as a library call: a split of a trained stage-1 run rendered to PNG, with PSNR: the
-//! images composited, and the views rendered, on the run's background.
+//! `render` as a library call: a split of a trained run rendered to PNG, with PSNR: the images
+//! composited, and the views rendered, on the run's background. A stage-1 run renders its density
+//! grid; a stage-2 run its surfaces, truncated as at the checkpoint's step (after training: as
+//! the test renders `train` wrote).
 
-use super::train_stage1::make_backend;
+use super::{train_stage1, train_stage2};
 use crate::backend::Backend;
 use crate::data::{Dataset, LoadOptions};
 use crate::gpu::Gpu;
+use crate::grid::checkpoint;
+use crate::grid::surface::SurfaceGrid;
+use crate::run::dir::{ALL_STAGE1, ALL_STAGE2, STAGE2_CHECKPOINT};
 use crate::run::{self, read_info};
-use crate::train::{render_split, BackgroundRecord, RenderedSplit, Stage1Config};
+use crate::train::{
+    render_split, render_split_with, stage2, BackgroundRecord, RenderedSplit, Stage1Config,
+    SurfaceConfig,
+};
 use anyhow::{bail, Result};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// Options of `render` (its command-line flags).
 #[derive(clap::Args, Debug)]
 pub struct RenderOptions {
-    /// A run directory written by `train`.
+    /// A run directory written by `train`: a stage-1 run (its density grid) or a stage-2 run (its
+    /// surfaces).
     #[arg(long)]
     pub run: PathBuf,
     /// Which split: train, val or test.
@@ -30,12 +39,61 @@ pub struct RenderOptions {
     pub backend: Backend,
 }
 
+/// The grid a run directory holds, with its background.
+enum Trained {
+    Density {
+        grid: crate::grid::Grid,
+        stop_thresh: f32,
+    },
+    Surface {
+        grid: SurfaceGrid,
+        /// Truncation at the checkpoint's step.
+        a: f32,
+        stop_thresh: f32,
+    },
+}
+
+/// Load the checkpoint of the run `run`: its surface.npz (stage 2) if there is one, else its
+/// plenoxels.npz (stage 1).
+fn load_run(run: &Path) -> Result<(Trained, BackgroundRecord, PathBuf)> {
+    let surface = stage2::checkpoint_path(run);
+    if surface.is_file() {
+        let ck = SurfaceGrid::load(&surface)?;
+        let (step, cfg) =
+            checkpoint::meta_step_config::<SurfaceConfig>(&ck.meta, "surface", &surface)?;
+        let bg = BackgroundRecord::from_meta(&ck.meta, &surface)?;
+        let trained = Trained::Surface {
+            grid: ck.grid,
+            a: cfg.a.at(step),
+            stop_thresh: cfg.stop_thresh,
+        };
+        return Ok((trained, bg, surface));
+    }
+    if run.join(ALL_STAGE2).join(STAGE2_CHECKPOINT).is_file() {
+        bail!(
+            "{} is a `--stage all` run: give its stage-1 run {} or its stage-2 run {}",
+            run.display(),
+            run.join(ALL_STAGE1).display(),
+            run.join(ALL_STAGE2).display()
+        );
+    }
+    let path = run::dir::stage1_checkpoint(run, "render")?;
+    let ck = checkpoint::load(&path)?;
+    let bg = BackgroundRecord::from_meta(&ck.meta, &path)?;
+    let stop_thresh = serde_json::from_value::<Stage1Config>(ck.meta["config"].clone())
+        .map(|c| c.stop_thresh)
+        .unwrap_or(1e-7);
+    let trained = Trained::Density {
+        grid: ck.grid,
+        stop_thresh,
+    };
+    Ok((trained, bg, path))
+}
+
 /// Render the split `opts.split` of the run `opts.run` into `opts.out` on `gpu` (`None`: the CPU
 /// twins); returns the per-view and mean PSNR.
 pub fn render(opts: &RenderOptions, gpu: Option<&Gpu>) -> Result<RenderedSplit> {
-    let ckpt_path = run::dir::stage1_checkpoint(&opts.run, "render")?;
-    let ckpt = crate::grid::checkpoint::load(&ckpt_path)?;
-    let bg = BackgroundRecord::from_meta(&ckpt.meta, &ckpt_path)?;
+    let (trained, bg, ckpt_path) = load_run(&opts.run)?;
     let info = read_info(&opts.run);
     let data_dir = match (&opts.data, &info) {
         (Some(d), _) => d.clone(),
@@ -59,11 +117,25 @@ pub fn render(opts: &RenderOptions, gpu: Option<&Gpu>) -> Result<RenderedSplit> 
         "test" => &data.test,
         s => bail!("--split {s}: expected train, val or test"),
     };
-    let stop = serde_json::from_value::<Stage1Config>(ckpt.meta["config"].clone())
-        .map(|c| c.stop_thresh)
-        .unwrap_or(1e-7);
-    let mut backend = make_backend(gpu, ckpt.grid)?;
-    backend.set_background(bg.kernel())?;
-    let r = render_split(backend.as_mut(), &data, split, stop, &opts.out)?;
-    Ok(r)
+    match trained {
+        Trained::Density { grid, stop_thresh } => {
+            let mut backend = train_stage1::make_backend(gpu, grid)?;
+            backend.set_background(bg.kernel())?;
+            render_split(backend.as_mut(), &data, split, stop_thresh, &opts.out)
+        }
+        Trained::Surface {
+            grid,
+            a,
+            stop_thresh,
+        } => {
+            let mut backend = train_stage2::make_backend(gpu, grid)?;
+            backend.set_background(bg.kernel())?;
+            render_split_with(
+                &mut |rays| Ok(backend.render(rays, a, stop_thresh)?.0),
+                &data,
+                split,
+                &opts.out,
+            )
+        }
+    }
 }

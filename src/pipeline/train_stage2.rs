@@ -18,7 +18,10 @@ use std::path::Path;
 use std::time::Instant;
 
 /// The Vulkan backend on `gpu`, or the CPU backend when there is none.
-fn make_backend(gpu: Option<&Gpu>, grid: SurfaceGrid) -> Result<Box<dyn SurfaceBackend>> {
+pub(super) fn make_backend(
+    gpu: Option<&Gpu>,
+    grid: SurfaceGrid,
+) -> Result<Box<dyn SurfaceBackend>> {
     Ok(match gpu {
         Some(gpu) => {
             grid.validate()?;

@@ -401,14 +401,14 @@ fn stage_all_resumes_across_the_boundary_and_locks_its_run() {
         log_steps(&out.join("surface/train_log.csv")),
         (1..=15).collect::<Vec<_>>()
     );
-    // 12. render and export on a stage-2 run name it (and its stage-1 run).
+    // 12. render on a `--stage all` run names both stages' runs; export on a stage-2 run names it.
     refused(
         bin()
             .args(["render", "--backend", "cpu", "--run"])
-            .arg(out.join("surface"))
+            .arg(&out)
             .arg("--out")
             .arg(dir.path().join("r")),
-        &["stage-2", "plenoxels"],
+        &["--stage all", "plenoxels", "surface"],
     );
     refused(
         bin()

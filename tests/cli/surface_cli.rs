@@ -127,6 +127,31 @@ fn stage_all_extract_eval_and_resume() {
     assert_eq!(log.lines().count(), 121, "header + one line per step");
     assert!(out.join("surface/test/r_0.png").exists());
 
+    // `render` on the stage-2 run draws the test views `train` drew: the same PSNR (same grid,
+    // same truncation, same deterministic renderer).
+    let renders = dir.path().join("renders");
+    let text = run_ok(
+        bin()
+            .args(["render", "--backend", "cpu", "--run"])
+            .arg(out.join("surface"))
+            .arg("--out")
+            .arg(&renders),
+    );
+    let mean = text
+        .lines()
+        .find_map(|l| l.strip_prefix("mean PSNR "))
+        .and_then(|l| l.split(' ').next())
+        .and_then(|v| v.parse::<f64>().ok())
+        .unwrap_or_else(|| panic!("no mean PSNR in {text}"));
+    assert!(
+        (mean - p2).abs() < 0.006,
+        "render {mean} dB, train {p2:.4} dB"
+    );
+    assert_eq!(
+        std::fs::read(renders.join("r_0.png")).unwrap(),
+        std::fs::read(out.join("surface/test/r_0.png")).unwrap()
+    );
+
     // The αSurf point cloud, then its error against the ground truth.
     let ply = dir.path().join("surface.ply");
     let text = run_ok(
