@@ -1,5 +1,6 @@
 //! `extract`: the library call and what it prints (levels, counts per level, timings, `--json`).
 
+use crate::eval::hidden::HiddenStats;
 use crate::gpu::Gpu;
 use crate::pipeline::extract::{extract, ExtractOptions, MeshReport, PointsReport};
 use anyhow::Result;
@@ -37,6 +38,7 @@ pub fn run(opts: &ExtractOptions, gpu: Option<&Gpu>) -> Result<()> {
         j["rays_per_axis"] = json!(p.rays_per_axis);
         j["backend"] = json!(p.backend);
         j["kernel"] = json!(p.kernel);
+        j["hidden"] = json!(p.hidden);
         j["thin"] = json!(p.thin);
         j["points"] = json!(p.points);
     }
@@ -44,6 +46,7 @@ pub fn run(opts: &ExtractOptions, gpu: Option<&Gpu>) -> Result<()> {
         print_mesh(m, &r.levels);
         j["mesh"] = json!(m.out);
         j["mesh_stats"] = json!(m.stats);
+        j["mesh_hidden"] = json!(m.hidden);
     }
     println!("total {:.2} s (load {:.0} ms)", r.total_s, r.load_ms);
     if opts.json {
@@ -64,6 +67,9 @@ fn print_points(p: &PointsReport, levels: &[f32]) {
         "{}² rays per axis and cell on {}: {} raw points in {:.1} ms (kernel {:.1} ms device)",
         p.rays_per_axis, p.backend, p.kernel.points, p.kernel.wall_ms, p.kernel.device_ms
     );
+    if let Some(h) = &p.hidden {
+        print_hidden(h, "points");
+    }
     for (l, n) in levels.iter().zip(&p.thin.per_level) {
         println!("  level {l:>8}: {n:>9} points");
     }
@@ -77,7 +83,19 @@ fn print_points(p: &PointsReport, levels: &[f32]) {
     );
 }
 
+/// The hidden-surface trimming's counts (cells holding `what`).
+fn print_hidden(h: &HiddenStats, what: &str) {
+    println!(
+        "hidden surfaces: of {} cells with {what}, {} seen by a training camera, {} unseen but \
+         open, {} hidden (enclosed, dropped) in {:.0} ms",
+        h.cells, h.seen, h.open, h.hidden, h.wall_ms
+    );
+}
+
 fn print_mesh(m: &MeshReport, levels: &[f32]) {
+    if let Some(h) = &m.hidden {
+        print_hidden(h, "faces");
+    }
     println!(
         "mesh (marching tetrahedra, on the cpu): {} vertices, {} faces, area {:.4} in {:.1} ms; \
          wrote {} in {:.1} ms",

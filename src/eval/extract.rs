@@ -182,15 +182,24 @@ impl GridFrame {
     /// Continuous grid coordinates → Blender units ([`crate::grid::Grid::grid_to_world`], then
     /// undo the scene scale).
     pub fn to_blender(&self, g: [f32; 3]) -> [f32; 3] {
-        let grid = crate::grid::Grid {
+        self.grid().grid_to_world(g).map(|w| w / self.scene_scale)
+    }
+
+    /// Blender units → continuous grid coordinates (the inverse of [`GridFrame::to_blender`]).
+    pub fn blender_to_grid(&self, p: [f32; 3]) -> [f32; 3] {
+        self.grid().world_to_grid(p.map(|x| x * self.scene_scale))
+    }
+
+    /// An empty grid over the frame's box (for its coordinate maps).
+    fn grid(&self) -> crate::grid::Grid {
+        crate::grid::Grid {
             res: self.res,
             center: self.center,
             radius: self.radius,
             links: Vec::new(),
             density: Vec::new(),
             sh: Vec::new(),
-        };
-        grid.grid_to_world(g).map(|w| w / self.scene_scale)
+        }
     }
 
     /// A gradient with respect to grid coordinates → unit normal in world units (0 when the

@@ -1,9 +1,10 @@
 //! Extraction and evaluation of point clouds: level-set point extraction with dense virtual rays
 //! ([`extract`]), nearest neighbours through a k-d tree ([`knn`]), greedy radius thinning
-//! ([`thin`]), the Chamfer / F-score metrics of method.md §4 ([`metrics`]) and their split over
+//! ([`thin`]), the trimming of surfaces hidden from every training view ([`hidden`]), the Chamfer / F-score metrics of method.md §4 ([`metrics`]) and their split over
 //! a scene's objects ([`objects`]).
 
 pub mod extract;
+pub mod hidden;
 pub mod knn;
 pub mod metrics;
 pub mod objects;

@@ -41,6 +41,37 @@ impl Mesh {
         self
     }
 
+    /// Keep the faces for which `keep` holds (by index), and the vertices they use.
+    pub fn retain_faces(&mut self, keep: impl Fn(usize) -> bool) {
+        self.faces = (0..self.faces.len())
+            .filter(|&i| keep(i))
+            .map(|i| self.faces[i])
+            .collect();
+        let mut new_index = vec![u32::MAX; self.positions.len()];
+        let mut next = 0u32;
+        for f in &mut self.faces {
+            for v in f.iter_mut() {
+                if new_index[*v as usize] == u32::MAX {
+                    new_index[*v as usize] = next;
+                    next += 1;
+                }
+                *v = new_index[*v as usize];
+            }
+        }
+        let mut order: Vec<(u32, usize)> = new_index
+            .iter()
+            .enumerate()
+            .filter(|(_, &n)| n != u32::MAX)
+            .map(|(old, &n)| (n, old))
+            .collect();
+        order.sort_unstable();
+        let pick = |v: &[f32]| order.iter().map(|&(_, o)| v[o]).collect::<Vec<f32>>();
+        self.positions = order.iter().map(|&(_, o)| self.positions[o]).collect();
+        self.normals = order.iter().map(|&(_, o)| self.normals[o]).collect();
+        self.level = pick(&self.level);
+        self.alpha = pick(&self.alpha);
+    }
+
     /// Area of each face.
     pub fn face_areas(&self) -> Vec<f64> {
         self.faces
@@ -110,26 +141,60 @@ pub struct MeshStats {
 pub fn level_set_mesh(inp: &MeshInput, frame: &GridFrame) -> anyhow::Result<(Mesh, MeshStats)> {
     let t0 = std::time::Instant::now();
     let mesh = march(inp)?.to_blender(frame);
-    let mut per_level = vec![0usize; inp.levels.len()];
-    for f in &mesh.faces {
-        let l = mesh.level[f[0] as usize];
-        if let Some(i) = inp.levels.iter().position(|&x| x == l) {
-            per_level[i] += 1;
+    let stats = MeshStats::of(&mesh, inp.levels, t0.elapsed().as_secs_f64() * 1e3);
+    Ok((mesh, stats))
+}
+
+impl MeshStats {
+    /// The counts and area of `mesh` with levels `levels`, made in `wall_ms`.
+    pub fn of(mesh: &Mesh, levels: &[f32], wall_ms: f64) -> MeshStats {
+        let mut per_level = vec![0usize; levels.len()];
+        for f in &mesh.faces {
+            let l = mesh.level[f[0] as usize];
+            if let Some(i) = levels.iter().position(|&x| x == l) {
+                per_level[i] += 1;
+            }
+        }
+        MeshStats {
+            vertices: mesh.positions.len(),
+            faces: mesh.faces.len(),
+            per_level,
+            area: mesh.face_areas().iter().sum(),
+            wall_ms,
         }
     }
-    let stats = MeshStats {
-        vertices: mesh.positions.len(),
-        faces: mesh.faces.len(),
-        per_level,
-        area: mesh.face_areas().iter().sum(),
-        wall_ms: t0.elapsed().as_secs_f64() * 1e3,
-    };
-    Ok((mesh, stats))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn retained_faces_keep_their_vertices_in_order() {
+        let mut m = Mesh {
+            positions: (0..5).map(|i| [i as f32, 0.0, 0.0]).collect(),
+            normals: (0..5).map(|i| [0.0, i as f32, 0.0]).collect(),
+            level: vec![0.0, 1.0, 2.0, 3.0, 4.0],
+            alpha: vec![0.5, 0.6, 0.7, 0.8, 0.9],
+            faces: vec![[0, 1, 2], [2, 3, 4], [4, 1, 3]],
+        };
+        m.retain_faces(|i| i != 0);
+        assert_eq!(m.faces, vec![[0, 1, 2], [2, 3, 1]]);
+        assert_eq!(
+            m.positions,
+            vec![
+                [2.0, 0.0, 0.0],
+                [3.0, 0.0, 0.0],
+                [4.0, 0.0, 0.0],
+                [1.0, 0.0, 0.0]
+            ]
+        );
+        assert_eq!(m.normals[3], [0.0, 1.0, 0.0]);
+        assert_eq!(m.level, vec![2.0, 3.0, 4.0, 1.0]);
+        assert_eq!(m.alpha, vec![0.7, 0.8, 0.9, 0.6]);
+        m.retain_faces(|_| false);
+        assert!(m.faces.is_empty() && m.positions.is_empty() && m.alpha.is_empty());
+    }
 
     #[test]
     fn samples_are_uniform_by_area_and_reproducible() {

@@ -7,17 +7,18 @@
 
 use crate::backend::Backend;
 use crate::cpu::extract_points::ExtractInput;
-use crate::data::SceneBox;
+use crate::data::{Dataset, LoadOptions, SceneBox};
 use crate::eval::extract::{
     allocated_cells, extract_sorted, to_cloud, ExtractBackend, GridFrame, KernelStats, ThinStats,
 };
+use crate::eval::hidden::{visible_cells, HiddenStats, HiddenTrim, Occupancy};
 use crate::gpu::Gpu;
 use crate::grid::surface::SurfaceGrid;
 use crate::grid::{checkpoint, npz, Grid};
 use crate::mesh::ply::write_mesh_ply;
 use crate::mesh::{level_set_mesh, MeshInput, MeshStats};
-use crate::train::{stage1, stage2};
-use anyhow::{ensure, Context, Result};
+use crate::train::{stage1, stage2, Category};
+use anyhow::{bail, ensure, Context, Result};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -73,15 +74,35 @@ pub struct ExtractOptions {
     /// Initial capacity of the device point buffer (default: min(upper bound, 2²¹) points).
     #[arg(long, hide = true)]
     pub capacity: Option<usize>,
+    /// Drop the points of cells that no training view sees and that other surfaces enclose (the
+    /// inner level sets of solids; an unseen underside open below stays). `auto`: on for a
+    /// stage-2 run of category thin, off otherwise (semi-transparent layers are seen through;
+    /// stage-1 grids are the paper's Plenoxels baseline). Needs the training cameras.
+    #[arg(long, value_enum, default_value_t = TrimHidden::Auto)]
+    pub trim_hidden: TrimHidden,
+    /// The dataset whose training cameras `--trim-hidden` uses (default: the run's).
+    #[arg(long)]
+    pub data: Option<PathBuf>,
     /// Print one JSON object with the counts and timings as the last stdout line.
     #[arg(long)]
     pub json: bool,
 }
 
-/// The field to extract: a stage-1 density grid, or a stage-2 surface grid.
+/// `--trim-hidden`.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum TrimHidden {
+    /// On for stage-2 runs of category thin, off otherwise.
+    Auto,
+    On,
+    Off,
+}
+
+/// The field to extract: a stage-1 density grid, or a stage-2 surface grid (with the category
+/// it trained for, when its checkpoint names one).
 enum Field {
     Density(Grid),
-    Surface(SurfaceGrid),
+    Surface(SurfaceGrid, Option<Category>),
 }
 
 /// Load the grid named by `--run` or `--ckpt`.
@@ -92,7 +113,9 @@ fn load_grid(opts: &ExtractOptions) -> Result<(Field, PathBuf)> {
     let run = opts.run.as_ref().context("give --run or --ckpt")?;
     let surface = stage2::checkpoint_path(run);
     if surface.exists() {
-        return Ok((Field::Surface(SurfaceGrid::load(&surface)?.grid), surface));
+        let ck = SurfaceGrid::load(&surface)?;
+        let category = serde_json::from_value(ck.meta["config"]["category"].clone()).ok();
+        return Ok((Field::Surface(ck.grid, category), surface));
     }
     let path = stage1::checkpoint_path(run);
     ensure!(
@@ -119,6 +142,8 @@ impl ExtractOptions {
             thin_radius: DEFAULT_THIN_RADIUS,
             scene_scale: None,
             capacity: None,
+            trim_hidden: TrimHidden::Auto,
+            data: None,
             json: false,
         }
     }
@@ -154,6 +179,8 @@ pub struct PointsReport {
     /// The device's name, or "cpu".
     pub backend: String,
     pub kernel: KernelStats,
+    /// The hidden-surface trimming (`--trim-hidden`), when on.
+    pub hidden: Option<HiddenStats>,
     pub thin: ThinStats,
     /// Points written.
     pub points: usize,
@@ -165,6 +192,8 @@ pub struct PointsReport {
 #[derive(Clone, Debug, Serialize)]
 pub struct MeshReport {
     pub out: PathBuf,
+    /// The hidden-surface trimming (`--trim-hidden`), when on.
+    pub hidden: Option<HiddenStats>,
     pub stats: MeshStats,
     pub write_ms: f64,
 }
@@ -215,12 +244,12 @@ pub fn extract(opts: &ExtractOptions, gpu: Option<&Gpu>) -> Result<ExtractReport
     let load_ms = t0.elapsed().as_secs_f64() * 1e3;
     let (res, center, radius, links) = match &field {
         Field::Density(g) => (g.res, g.center, g.radius, &g.links),
-        Field::Surface(g) => (g.res, g.center, g.radius, &g.links),
+        Field::Surface(g, _) => (g.res, g.center, g.radius, &g.links),
     };
     let cells = allocated_cells(res, links)?;
     let (values, opacity, levels) = match &field {
         Field::Density(g) => (&g.density, None, opts.levels.clone().unwrap_or(vec![50.0])),
-        Field::Surface(g) => {
+        Field::Surface(g, _) => {
             ensure!(
                 opts.levels.is_none(),
                 "--levels applies to stage-1 grids; {} has its own levels {:?}",
@@ -241,6 +270,12 @@ pub fn extract(opts: &ExtractOptions, gpu: Option<&Gpu>) -> Result<ExtractReport
         radius,
         scene_scale,
     };
+    let trim = match (opts.trim_hidden, &field) {
+        (TrimHidden::On, _) | (TrimHidden::Auto, Field::Surface(_, Some(Category::Thin))) => {
+            Some(training_cameras(opts, &frame)?)
+        }
+        _ => None,
+    };
     let surfaces = Surfaces {
         cells: &cells,
         links,
@@ -249,6 +284,7 @@ pub fn extract(opts: &ExtractOptions, gpu: Option<&Gpu>) -> Result<ExtractReport
         levels: &levels,
         res,
         frame,
+        cameras: trim.as_deref(),
     };
     let points = match &opts.out {
         Some(out) => Some(write_points(opts, &surfaces, out, gpu)?),
@@ -260,7 +296,7 @@ pub fn extract(opts: &ExtractOptions, gpu: Option<&Gpu>) -> Result<ExtractReport
     };
     Ok(ExtractReport {
         grid: path,
-        surface: matches!(field, Field::Surface(_)),
+        surface: matches!(field, Field::Surface(..)),
         res,
         levels,
         min_alpha: opts.min_alpha,
@@ -282,6 +318,41 @@ struct Surfaces<'a> {
     levels: &'a [f32],
     res: [u32; 3],
     frame: GridFrame,
+    /// Training camera centres in grid coordinates, when hidden surfaces are trimmed.
+    cameras: Option<&'a [[f32; 3]]>,
+}
+
+/// The training cameras' centres in grid coordinates, from `--data` or the run's dataset.
+fn training_cameras(opts: &ExtractOptions, frame: &GridFrame) -> Result<Vec<[f32; 3]>> {
+    let info = opts.run.as_ref().map(|r| crate::run::read_info(r));
+    let (dir, downscale) = match (&opts.data, info) {
+        (Some(d), info) => (
+            d.clone(),
+            info.and_then(|i| i.ok()).map_or(1, |i| i.downscale),
+        ),
+        (None, Some(Ok(i))) => (i.data, i.downscale),
+        (None, Some(Err(e))) => bail!(
+            "--trim-hidden needs the training cameras: {e:#} (pass --data, or --trim-hidden off)"
+        ),
+        (None, None) => bail!(
+            "--trim-hidden needs the training cameras: pass --data with --ckpt (or --trim-hidden \
+             off)"
+        ),
+    };
+    let data = Dataset::load(
+        &dir,
+        &LoadOptions {
+            downscale,
+            ..Default::default()
+        },
+    )
+    .context("--trim-hidden needs the training cameras (or pass --trim-hidden off)")?;
+    Ok(data
+        .train
+        .frames
+        .iter()
+        .map(|f| frame.blender_to_grid(f.camera.centre().to_array()))
+        .collect())
 }
 
 /// The thinned point cloud of the surfaces (virtual rays on `gpu`), written to `out`.
@@ -305,7 +376,24 @@ fn write_points(
         Some(g) => ExtractBackend::Vulkan(g),
         None => ExtractBackend::Cpu,
     };
-    let (points, kernel) = extract_sorted(backend, &inp, opts.capacity)?;
+    let (mut points, kernel) = extract_sorted(backend, &inp, opts.capacity)?;
+    let hidden = s.cameras.map(|cameras| {
+        let mut cells: Vec<u32> = points.iter().map(|p| p.cell).collect();
+        cells.sort_unstable();
+        cells.dedup();
+        let occ = Occupancy::new(s.res, cells.iter().copied());
+        let (keep, stats) = visible_cells(&occ, &cells, cameras, &HiddenTrim::default());
+        let dropped = Occupancy::new(
+            s.res,
+            cells
+                .iter()
+                .zip(&keep)
+                .filter(|(_, &k)| !k)
+                .map(|(&c, _)| c),
+        );
+        points.retain(|p| !dropped.holds(p.cell));
+        stats
+    });
     let (cloud, thin) = to_cloud(&points, s.levels, &s.frame, opts.thin_radius)?;
     ensure!(
         !cloud.points.is_empty(),
@@ -320,6 +408,7 @@ fn write_points(
         rays_per_axis: opts.rays_per_axis,
         backend: gpu.map_or("cpu".to_string(), |g| g.info().name.clone()),
         kernel,
+        hidden,
         thin,
         points: cloud.points.len(),
         thin_radius: opts.thin_radius,
@@ -338,7 +427,35 @@ fn write_mesh(opts: &ExtractOptions, s: &Surfaces, out: &Path) -> Result<MeshRep
         res: s.res,
         min_opacity: opts.min_alpha,
     };
-    let (mesh, stats) = level_set_mesh(&inp, &s.frame)?;
+    let (mut mesh, mut stats) = level_set_mesh(&inp, &s.frame)?;
+    let hidden = s.cameras.map(|cameras| {
+        // Each face in the cell of its centroid.
+        let cell_of = |f: &[u32; 3]| {
+            let c: [f32; 3] = std::array::from_fn(|i| {
+                f.iter()
+                    .map(|&v| mesh.positions[v as usize][i])
+                    .sum::<f32>()
+                    / 3.0
+            });
+            let g = s.frame.blender_to_grid(c);
+            let q: [u32; 3] =
+                std::array::from_fn(|i| (g[i].floor().max(0.0) as u32).min(s.res[i] - 2));
+            (q[0] * s.res[1] + q[1]) * s.res[2] + q[2]
+        };
+        let face_cells: Vec<u32> = mesh.faces.iter().map(cell_of).collect();
+        let mut cells = face_cells.clone();
+        cells.sort_unstable();
+        cells.dedup();
+        let occ = Occupancy::new(s.res, cells.iter().copied());
+        let (keep, hidden) = visible_cells(&occ, &cells, cameras, &HiddenTrim::default());
+        let kept = Occupancy::new(
+            s.res,
+            cells.iter().zip(&keep).filter(|(_, &k)| k).map(|(&c, _)| c),
+        );
+        mesh.retain_faces(|i| kept.holds(face_cells[i]));
+        stats = MeshStats::of(&mesh, s.levels, stats.wall_ms + hidden.wall_ms);
+        hidden
+    });
     ensure!(
         !mesh.faces.is_empty(),
         "no surface faces at levels {:?} (field range {:?}); nothing written",
@@ -350,6 +467,7 @@ fn write_mesh(opts: &ExtractOptions, s: &Surfaces, out: &Path) -> Result<MeshRep
     Ok(MeshReport {
         out: out.to_path_buf(),
         stats,
+        hidden,
         write_ms: t_w.elapsed().as_secs_f64() * 1e3,
     })
 }

@@ -162,6 +162,62 @@ fn stage_all_extract_eval_and_resume() {
             .arg(&ply),
     );
     assert!(text.contains("αSurf levels"), "{text}");
+    // A thin run trims hidden surfaces by default, with the training cameras of its dataset.
+    let hidden = text
+        .lines()
+        .find(|l| l.starts_with("hidden surfaces:"))
+        .unwrap_or_else(|| panic!("no hidden-surface line in {text}"));
+    let numbers: Vec<usize> = hidden
+        .split(|c: char| !c.is_ascii_digit())
+        .filter_map(|w| w.parse().ok())
+        .collect();
+    // "of C cells …, S seen …, O unseen but open, H hidden …": every cell in one class, most seen.
+    let [c, s, o, h] = numbers[..4] else {
+        panic!("{hidden}")
+    };
+    assert!(c > 0 && s + o + h == c && s > c / 2, "{hidden}");
+    let plain = dir.path().join("plain.ply");
+    let text = run_ok(
+        bin()
+            .args([
+                "extract",
+                "--backend",
+                "cpu",
+                "--trim-hidden",
+                "off",
+                "--run",
+            ])
+            .arg(out.join("surface"))
+            .arg("--out")
+            .arg(&plain),
+    );
+    assert!(!text.contains("hidden surfaces"), "{text}");
+    let count = |p: &std::path::Path| {
+        let bytes = std::fs::read(p).unwrap();
+        let head = String::from_utf8_lossy(&bytes[..bytes.len().min(400)]).to_string();
+        head.lines()
+            .find_map(|l| l.strip_prefix("element vertex "))
+            .and_then(|n| n.trim().parse::<usize>().ok())
+            .unwrap()
+    };
+    assert!(count(&plain) >= count(&ply), "trimming added points");
+    // The cameras come from --data when given: a missing dataset is a clear error.
+    let (ok, text) = run(bin()
+        .args([
+            "extract",
+            "--backend",
+            "cpu",
+            "--trim-hidden",
+            "on",
+            "--run",
+        ])
+        .arg(out.join("surface"))
+        .args(["--data", "/nonexistent/dataset", "--out"])
+        .arg(dir.path().join("y.ply")));
+    assert!(
+        !ok && text.contains("/nonexistent/dataset") && text.contains("--trim-hidden off"),
+        "{text}"
+    );
     let text = run_ok(
         bin()
             .args(["eval", "--json", "--pred"])
