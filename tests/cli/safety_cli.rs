@@ -474,6 +474,22 @@ fn bad_inputs_are_clear_errors() {
             .arg("--out")
             .arg(dir.path().join("imported")),
     );
+    // An svox2 checkpoint has no run, so no training cameras: trimming needs --data.
+    refused(
+        bin()
+            .args([
+                "extract",
+                "--trim-hidden",
+                "on",
+                "--backend",
+                "cpu",
+                "--ckpt",
+            ])
+            .arg(&ok)
+            .arg("--out")
+            .arg(dir.path().join("hidden.ply")),
+        &["--trim-hidden", "--data"],
+    );
 
     // 7. eval with no distance under --max-dist (a cloud in millimetres).
     let gt = data.join("gt_points.ply");
