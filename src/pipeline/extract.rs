@@ -3,7 +3,8 @@
 //! run's levels, trimmed by raw opacity σα ≥ `--min-alpha`. For a stage-1 density grid this is the
 //! Plenoxels baseline "Plen (σ = τ)": the surfaces σ = τ for each `--levels` value, with no opacity
 //! trimming. With `--mesh` the same surfaces are also (or instead) written as a triangle mesh
-//! ([`crate::mesh`]).
+//! ([`crate::mesh`]). With `--trim-hidden` (by default for thin stage-2 runs) the cells no
+//! training camera sees inside other surfaces are dropped from both ([`crate::eval::hidden`]).
 
 use crate::backend::Backend;
 use crate::cpu::extract_points::ExtractInput;
