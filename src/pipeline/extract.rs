@@ -78,7 +78,8 @@ pub struct ExtractOptions {
     /// Drop the points of cells that no training view sees and that other surfaces enclose (the
     /// inner level sets of solids; an unseen underside open below stays). `auto`: on for a
     /// stage-2 run of category thin, off otherwise (semi-transparent layers are seen through;
-    /// stage-1 grids are the paper's Plenoxels baseline). Needs the training cameras.
+    /// stage-1 grids are the paper's Plenoxels baseline). Needs the training cameras: without
+    /// them `on` is an error and `auto` warns and keeps every cell.
     #[arg(long, value_enum, default_value_t = TrimHidden::Auto)]
     pub trim_hidden: TrimHidden,
     /// The dataset whose training cameras `--trim-hidden` uses (default: the run's).
@@ -271,9 +272,18 @@ pub fn extract(opts: &ExtractOptions, gpu: Option<&Gpu>) -> Result<ExtractReport
         radius,
         scene_scale,
     };
+    // `on` needs the cameras; `auto` goes on without them (a run moved away from its dataset
+    // still extracts), and says so.
     let trim = match (opts.trim_hidden, &field) {
-        (TrimHidden::On, _) | (TrimHidden::Auto, Field::Surface(_, Some(Category::Thin))) => {
-            Some(training_cameras(opts, &frame)?)
+        (TrimHidden::On, _) => Some(training_cameras(opts, &frame)?),
+        (TrimHidden::Auto, Field::Surface(_, Some(Category::Thin))) => {
+            match training_cameras(opts, &frame) {
+                Ok(c) => Some(c),
+                Err(e) => {
+                    eprintln!("warning: hidden surfaces not trimmed: {e:#}");
+                    None
+                }
+            }
         }
         _ => None,
     };

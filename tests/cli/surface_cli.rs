@@ -201,7 +201,7 @@ fn stage_all_extract_eval_and_resume() {
             .unwrap()
     };
     assert!(count(&plain) >= count(&ply), "trimming added points");
-    // The cameras come from --data when given: a missing dataset is a clear error.
+    // The cameras come from --data when given: a missing dataset is a clear error with `on`.
     let (ok, text) = run(bin()
         .args([
             "extract",
@@ -218,6 +218,20 @@ fn stage_all_extract_eval_and_resume() {
         !ok && text.contains("/nonexistent/dataset") && text.contains("--trim-hidden off"),
         "{text}"
     );
+    // With `auto` it is a warning, and every cell is kept.
+    let untrimmed = dir.path().join("untrimmed.ply");
+    let text = run_ok(
+        bin()
+            .args(["extract", "--backend", "cpu", "--run"])
+            .arg(out.join("surface"))
+            .args(["--data", "/nonexistent/dataset", "--out"])
+            .arg(&untrimmed),
+    );
+    assert!(
+        text.contains("warning: hidden surfaces not trimmed") && !text.contains("hidden surfaces:"),
+        "{text}"
+    );
+    assert_eq!(count(&untrimmed), count(&plain));
     let text = run_ok(
         bin()
             .args(["eval", "--json", "--pred"])
