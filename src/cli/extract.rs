@@ -39,6 +39,7 @@ pub fn run(opts: &ExtractOptions, gpu: Option<&Gpu>) -> Result<()> {
         j["backend"] = json!(p.backend);
         j["kernel"] = json!(p.kernel);
         j["hidden"] = json!(p.hidden);
+        j["outer_dropped"] = json!(p.outer_dropped);
         j["thin"] = json!(p.thin);
         j["points"] = json!(p.points);
     }
@@ -47,6 +48,7 @@ pub fn run(opts: &ExtractOptions, gpu: Option<&Gpu>) -> Result<()> {
         j["mesh"] = json!(m.out);
         j["mesh_stats"] = json!(m.stats);
         j["mesh_hidden"] = json!(m.hidden);
+        j["mesh_outer_dropped"] = json!(m.outer_dropped);
     }
     println!("total {:.2} s (load {:.0} ms)", r.total_s, r.load_ms);
     if opts.json {
@@ -69,6 +71,11 @@ fn print_points(p: &PointsReport, levels: &[f32]) {
     );
     if let Some(h) = &p.hidden {
         print_hidden(h, "points");
+    }
+    if let Some(n) = p.outer_dropped {
+        println!(
+            "outermost level: {n} points dropped around parts thick enough for a higher level"
+        );
     }
     for (l, n) in levels.iter().zip(&p.thin.per_level) {
         println!("  level {l:>8}: {n:>9} points");
@@ -95,6 +102,9 @@ fn print_hidden(h: &HiddenStats, what: &str) {
 fn print_mesh(m: &MeshReport, levels: &[f32]) {
     if let Some(h) = &m.hidden {
         print_hidden(h, "faces");
+    }
+    if let Some(n) = m.outer_dropped {
+        println!("outermost level: {n} faces dropped around parts thick enough for a higher level");
     }
     println!(
         "mesh (marching tetrahedra, on the cpu): {} vertices, {} faces, area {:.4} in {:.1} ms; \

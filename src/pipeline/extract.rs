@@ -13,6 +13,7 @@ use crate::eval::extract::{
     allocated_cells, extract_sorted, to_cloud, ExtractBackend, GridFrame, KernelStats, ThinStats,
 };
 use crate::eval::hidden::{visible_cells, HiddenStats, HiddenTrim, Occupancy};
+use crate::eval::outer_level::{drop_outer_halo, Field as OuterField, REACH};
 use crate::gpu::Gpu;
 use crate::grid::surface::SurfaceGrid;
 use crate::grid::{checkpoint, npz, Grid};
@@ -80,8 +81,15 @@ pub struct ExtractOptions {
     /// stage-2 run of category thin, off otherwise (semi-transparent layers are seen through;
     /// stage-1 grids are the paper's Plenoxels baseline). Needs the training cameras: without
     /// them `on` is an error and `auto` warns and keeps every cell.
-    #[arg(long, value_enum, default_value_t = TrimHidden::Auto)]
-    pub trim_hidden: TrimHidden,
+    #[arg(long, value_enum, default_value_t = Switch::Auto)]
+    pub trim_hidden: Switch,
+    /// Drop the points of the outermost level where, within 1.5 cells inward along the normal,
+    /// the field reaches the level two above it: around a part that thick, the outermost level
+    /// is a shell about a cell out, and the higher levels locate the part; thin wires, whose
+    /// field peaks below that level, keep it. `auto`: on for a stage-2 run of category thin, off
+    /// otherwise (a semi-transparent layer's outer level is often its only good one).
+    #[arg(long, value_enum, default_value_t = Switch::Auto)]
+    pub trim_outer: Switch,
     /// The dataset whose training cameras `--trim-hidden` uses (default: the run's).
     #[arg(long)]
     pub data: Option<PathBuf>,
@@ -90,10 +98,10 @@ pub struct ExtractOptions {
     pub json: bool,
 }
 
-/// `--trim-hidden`.
+/// `--trim-hidden`, `--trim-outer`.
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "lowercase")]
-pub enum TrimHidden {
+pub enum Switch {
     /// On for stage-2 runs of category thin, off otherwise.
     Auto,
     On,
@@ -144,7 +152,8 @@ impl ExtractOptions {
             thin_radius: DEFAULT_THIN_RADIUS,
             scene_scale: None,
             capacity: None,
-            trim_hidden: TrimHidden::Auto,
+            trim_hidden: Switch::Auto,
+            trim_outer: Switch::Auto,
             data: None,
             json: false,
         }
@@ -183,6 +192,8 @@ pub struct PointsReport {
     pub kernel: KernelStats,
     /// The hidden-surface trimming (`--trim-hidden`), when on.
     pub hidden: Option<HiddenStats>,
+    /// Points of the outermost level dropped as a halo (`--trim-outer`), when on.
+    pub outer_dropped: Option<usize>,
     pub thin: ThinStats,
     /// Points written.
     pub points: usize,
@@ -196,6 +207,8 @@ pub struct MeshReport {
     pub out: PathBuf,
     /// The hidden-surface trimming (`--trim-hidden`), when on.
     pub hidden: Option<HiddenStats>,
+    /// Faces of the outermost level dropped as a halo (`--trim-outer`), when on.
+    pub outer_dropped: Option<usize>,
     pub stats: MeshStats,
     pub write_ms: f64,
 }
@@ -275,8 +288,8 @@ pub fn extract(opts: &ExtractOptions, gpu: Option<&Gpu>) -> Result<ExtractReport
     // `on` needs the cameras; `auto` goes on without them (a run moved away from its dataset
     // still extracts), and says so.
     let trim = match (opts.trim_hidden, &field) {
-        (TrimHidden::On, _) => Some(training_cameras(opts, &frame)?),
-        (TrimHidden::Auto, Field::Surface(_, Some(Category::Thin))) => {
+        (Switch::On, _) => Some(training_cameras(opts, &frame)?),
+        (Switch::Auto, Field::Surface(_, Some(Category::Thin))) => {
             match training_cameras(opts, &frame) {
                 Ok(c) => Some(c),
                 Err(e) => {
@@ -287,6 +300,12 @@ pub fn extract(opts: &ExtractOptions, gpu: Option<&Gpu>) -> Result<ExtractReport
         }
         _ => None,
     };
+    let thin = matches!(field, Field::Surface(_, Some(Category::Thin)));
+    let trim_outer = match opts.trim_outer {
+        Switch::On => true,
+        Switch::Auto => thin,
+        Switch::Off => false,
+    };
     let surfaces = Surfaces {
         cells: &cells,
         links,
@@ -296,6 +315,7 @@ pub fn extract(opts: &ExtractOptions, gpu: Option<&Gpu>) -> Result<ExtractReport
         res,
         frame,
         cameras: trim.as_deref(),
+        trim_outer,
     };
     let points = match &opts.out {
         Some(out) => Some(write_points(opts, &surfaces, out, gpu)?),
@@ -331,6 +351,18 @@ struct Surfaces<'a> {
     frame: GridFrame,
     /// Training camera centres in grid coordinates, when hidden surfaces are trimmed.
     cameras: Option<&'a [[f32; 3]]>,
+    /// Drop the outermost level's halo around thick parts ([`crate::eval::outer_level`]).
+    trim_outer: bool,
+}
+
+impl Surfaces<'_> {
+    fn field(&self) -> OuterField<'_> {
+        OuterField {
+            res: self.res,
+            links: self.links,
+            values: self.values,
+        }
+    }
 }
 
 /// The training cameras' centres in grid coordinates, from `--data` or the run's dataset.
@@ -405,6 +437,9 @@ fn write_points(
         points.retain(|p| !dropped.holds(p.cell));
         stats
     });
+    let outer_dropped = s
+        .trim_outer
+        .then(|| drop_outer_halo(&mut points, &s.field(), s.levels, REACH));
     let (cloud, thin) = to_cloud(&points, s.levels, &s.frame, opts.thin_radius)?;
     ensure!(
         !cloud.points.is_empty(),
@@ -420,6 +455,7 @@ fn write_points(
         backend: gpu.map_or("cpu".to_string(), |g| g.info().name.clone()),
         kernel,
         hidden,
+        outer_dropped,
         thin,
         points: cloud.points.len(),
         thin_radius: opts.thin_radius,
@@ -467,6 +503,38 @@ fn write_mesh(opts: &ExtractOptions, s: &Surfaces, out: &Path) -> Result<MeshRep
         stats = MeshStats::of(&mesh, s.levels, stats.wall_ms + hidden.wall_ms);
         hidden
     });
+    let outer_dropped = (s.trim_outer && s.levels.len() >= 3).then(|| {
+        // A face of the outermost level, from its centroid along its vertices' mean normal (a
+        // world direction; to grid coordinates by the box's per-axis scale).
+        let t0 = Instant::now();
+        let field = s.field();
+        let outer = s.levels[0];
+        let halo: Vec<bool> = mesh
+            .faces
+            .iter()
+            .map(|f| {
+                if mesh.level[f[0] as usize] != outer {
+                    return false;
+                }
+                let mean = |v: &[[f32; 3]]| -> [f32; 3] {
+                    std::array::from_fn(|i| f.iter().map(|&k| v[k as usize][i]).sum::<f32>() / 3.0)
+                };
+                let o = s.frame.blender_to_grid(mean(&mesh.positions));
+                let n = mean(&mesh.normals);
+                let dir =
+                    std::array::from_fn(|i| n[i] * 2.0 * s.frame.radius[i] / s.frame.res[i] as f32);
+                field.reaches(o, dir, s.levels[2], REACH)
+            })
+            .collect();
+        let before = mesh.faces.len();
+        mesh.retain_faces(|i| !halo[i]);
+        stats = MeshStats::of(
+            &mesh,
+            s.levels,
+            stats.wall_ms + t0.elapsed().as_secs_f64() * 1e3,
+        );
+        before - mesh.faces.len()
+    });
     ensure!(
         !mesh.faces.is_empty(),
         "no surface faces at levels {:?} (field range {:?}); nothing written",
@@ -479,6 +547,7 @@ fn write_mesh(opts: &ExtractOptions, s: &Surfaces, out: &Path) -> Result<MeshRep
         out: out.to_path_buf(),
         stats,
         hidden,
+        outer_dropped,
         write_ms: t_w.elapsed().as_secs_f64() * 1e3,
     })
 }

@@ -233,9 +233,10 @@ fn check_stage(dir: &Path, gt: &Path, run: &Path, levels: Option<&str>, name: &s
         cmd.args(["--levels", l]);
     }
     let j = last_json(&run_ok(&mut cmd));
-    // Hidden surfaces are trimmed by default on stage-2 thin runs only, from points and mesh.
+    // Hidden surfaces and the outermost level's halo are trimmed by default on stage-2 thin runs
+    // only, from points and mesh.
     let trimmed = name == "thin-surface";
-    for key in ["hidden", "mesh_hidden"] {
+    for key in ["hidden", "mesh_hidden", "outer_dropped", "mesh_outer_dropped"] {
         assert_eq!(!j[key].is_null(), trimmed, "{name}: {key} {}", j[key]);
     }
     let n_points = j["points"].as_u64().unwrap() as usize;

@@ -176,6 +176,7 @@ fn stage_all_extract_eval_and_resume() {
         panic!("{hidden}")
     };
     assert!(c > 0 && s + o + h == c && s > c / 2, "{hidden}");
+    assert!(text.contains("outermost level:"), "{text}");
     let plain = dir.path().join("plain.ply");
     let text = run_ok(
         bin()
