@@ -76,18 +76,19 @@ pub struct ExtractOptions {
     /// Initial capacity of the device point buffer (default: min(upper bound, 2²¹) points).
     #[arg(long, hide = true)]
     pub capacity: Option<usize>,
-    /// Drop the points of cells that no training view sees and that other surfaces enclose (the
-    /// inner level sets of solids; an unseen underside open below stays). `auto`: on for a
-    /// stage-2 run of category thin, off otherwise (semi-transparent layers are seen through;
-    /// stage-1 grids are the paper's Plenoxels baseline). Needs the training cameras: without
-    /// them `on` is an error and `auto` warns and keeps every cell.
+    /// Drop the points (and mesh faces) of cells that no training view sees and that other
+    /// surfaces enclose (the inner level sets of solids; an unseen underside open below stays).
+    /// `auto`: on for a stage-2 run of category thin, off otherwise (semi-transparent layers are
+    /// seen through; stage-1 grids are the paper's Plenoxels baseline). Needs the training
+    /// cameras: without them `on` is an error and `auto` warns and keeps every cell.
     #[arg(long, value_enum, default_value_t = Switch::Auto)]
     pub trim_hidden: Switch,
-    /// Drop the points of the outermost level where, within 1.5 cells inward along the normal,
-    /// the field reaches the level two above it: around a part that thick, the outermost level
-    /// is a shell about a cell out, and the higher levels locate the part; thin wires, whose
-    /// field peaks below that level, keep it. `auto`: on for a stage-2 run of category thin, off
-    /// otherwise (a semi-transparent layer's outer level is often its only good one).
+    /// Drop the points (and mesh faces) of the outermost level where, within 1.5 cells inward
+    /// along the normal, the field reaches the level two above it: around a part that thick,
+    /// the outermost level is a shell about a cell out, and the higher levels locate the part;
+    /// thin wires, whose field peaks below that level, keep it. `auto`: on for a stage-2 run of
+    /// category thin, off otherwise (a semi-transparent layer's outer level is often its only
+    /// good one).
     #[arg(long, value_enum, default_value_t = Switch::Auto)]
     pub trim_outer: Switch,
     /// The dataset whose training cameras `--trim-hidden` uses (default: the run's).

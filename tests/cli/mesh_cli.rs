@@ -236,7 +236,12 @@ fn check_stage(dir: &Path, gt: &Path, run: &Path, levels: Option<&str>, name: &s
     // Hidden surfaces and the outermost level's halo are trimmed by default on stage-2 thin runs
     // only, from points and mesh.
     let trimmed = name == "thin-surface";
-    for key in ["hidden", "mesh_hidden", "outer_dropped", "mesh_outer_dropped"] {
+    for key in [
+        "hidden",
+        "mesh_hidden",
+        "outer_dropped",
+        "mesh_outer_dropped",
+    ] {
         assert_eq!(!j[key].is_null(), trimmed, "{name}: {key} {}", j[key]);
     }
     let n_points = j["points"].as_u64().unwrap() as usize;
