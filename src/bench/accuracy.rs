@@ -11,6 +11,7 @@
 
 use crate::backend::Backend;
 use crate::pipeline::demo::{alphasurf_row, plenoxels_levels, Row, LEVELS};
+use crate::pipeline::extract::Switch;
 use crate::pipeline::steps::{Steps, TrainSize, TrainedRun};
 use crate::pipeline::Devices;
 use crate::train::{Category, Preset};
@@ -89,14 +90,19 @@ struct Stage1Record {
     levels: Vec<LevelScore>,
 }
 
+/// The level with the lowest finite Chamfer distance.
+fn best_of(levels: &[LevelScore]) -> Option<&LevelScore> {
+    levels
+        .iter()
+        .filter_map(|l| Some((l, l.chamfer_e2.filter(|c| c.is_finite())?)))
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .map(|(l, _)| l)
+}
+
 impl Stage1Record {
     /// The level with the lowest finite Chamfer distance.
     fn best(&self) -> Option<&LevelScore> {
-        self.levels
-            .iter()
-            .filter_map(|l| Some((l, l.chamfer_e2.filter(|c| c.is_finite())?)))
-            .min_by(|a, b| a.1.total_cmp(&b.1))
-            .map(|(l, _)| l)
+        best_of(&self.levels)
     }
 }
 
@@ -126,6 +132,11 @@ pub struct SceneResult {
     pub settings: Settings,
     /// Every level of the sweep.
     pub levels: Vec<LevelScore>,
+    /// The same sweep with the levels' hidden cells trimmed (`extract --trim-hidden on`), as
+    /// αSurf's own extraction trims them (thin scenes; empty otherwise): the like-for-like
+    /// baseline.
+    #[serde(default)]
+    pub trimmed_levels: Vec<LevelScore>,
     pub best_level: Option<f32>,
     pub best_chamfer_e2: Option<f64>,
     pub best_f1: Option<f64>,
@@ -145,6 +156,16 @@ impl SceneResult {
     /// αSurf's Chamfer over the best level's.
     pub fn ratio(&self) -> Option<f64> {
         Some(self.alphasurf_chamfer_e2? / self.best_chamfer_e2?)
+    }
+
+    /// The best level of the trimmed sweep.
+    pub fn trimmed_best(&self) -> Option<&LevelScore> {
+        best_of(&self.trimmed_levels)
+    }
+
+    /// αSurf's Chamfer over the best trimmed level's.
+    pub fn trimmed_ratio(&self) -> Option<f64> {
+        Some(self.alphasurf_chamfer_e2? / self.trimmed_best()?.chamfer_e2?)
     }
 
     fn level(&self, l: f32) -> Option<f64> {
@@ -173,6 +194,8 @@ pub struct CategoryMean {
     pub best_chamfer_e2: Option<f64>,
     pub alphasurf_chamfer_e2: Option<f64>,
     pub ratio: Option<f64>,
+    /// The mean of the scenes' ratios to their best trimmed level (every scene has one).
+    pub trimmed_ratio: Option<f64>,
     pub stage1_psnr: f64,
     pub stage2_psnr: Option<f64>,
 }
@@ -235,6 +258,7 @@ pub fn summarise(scenes: Vec<SceneResult>) -> Summary {
                 best_chamfer_e2: mean_all(ss.iter().map(|s| s.best_chamfer_e2)),
                 alphasurf_chamfer_e2: mean_all(ss.iter().map(|s| s.alphasurf_chamfer_e2)),
                 ratio: mean_all(ss.iter().map(|s| s.ratio())),
+                trimmed_ratio: mean_all(ss.iter().map(|s| s.trimmed_ratio())),
                 stage1_psnr: ss.iter().map(|s| s.stage1_psnr).sum::<f64>() / ss.len() as f64,
                 stage2_psnr: mean_all(ss.iter().map(|s| s.stage2_psnr)),
                 category,
@@ -259,13 +283,13 @@ pub fn table(s: &Summary) -> String {
         .map(|c| (c.category, c.fixed_level))
         .collect();
     let mut t = String::from(
-        "| scene | category | αSurf | best Plen (σ) | Plen at the category's σ | ratio | F1 αSurf / best | PSNR stage 1 → 2 | wall |\n\
-         |---|---|---:|---:|---:|---:|---:|---:|---:|\n",
+        "| scene | category | αSurf | best Plen (σ) | Plen at the category's σ | ratio | vs levels trimmed (σ) | F1 αSurf / best | PSNR stage 1 → 2 | wall |\n\
+         |---|---|---:|---:|---:|---:|---:|---:|---:|---:|\n",
     );
     for r in &s.scenes {
         let fl = fixed.get(&r.settings.category).copied().flatten();
         t += &format!(
-            "| {} | {} | {} | {} ({}) | {} ({}) | {}× | {} / {} | {:.2} → {} dB | {:.0} s |\n",
+            "| {} | {} | {} | {} ({}) | {} ({}) | {}× | {} | {} / {} | {:.2} → {} dB | {:.0} s |\n",
             r.scene,
             r.settings.category,
             num(r.alphasurf_chamfer_e2, 4),
@@ -274,6 +298,10 @@ pub fn table(s: &Summary) -> String {
             num(fl.and_then(|l| r.level(l)), 4),
             fl.map_or("—".into(), |l| l.to_string()),
             num(r.ratio(), 3),
+            match (r.trimmed_ratio(), r.trimmed_best()) {
+                (Some(x), Some(b)) => format!("{x:.3}× ({})", b.level),
+                _ => "—".into(),
+            },
             num(r.alphasurf_f1, 3),
             num(r.best_f1, 3),
             r.stage1_psnr,
@@ -283,7 +311,7 @@ pub fn table(s: &Summary) -> String {
     }
     for c in &s.categories {
         t += &format!(
-            "| **mean** ({} scene{}) | {} | {} | {} | {} ({}) | {}× | | {:.2} → {} dB | |\n",
+            "| **mean** ({} scene{}) | {} | {} | {} | {} ({}) | {}× | {} | | {:.2} → {} dB | |\n",
             c.scenes,
             if c.scenes == 1 { "" } else { "s" },
             c.category,
@@ -292,6 +320,7 @@ pub fn table(s: &Summary) -> String {
             num(c.fixed_level_chamfer_e2, 4),
             c.fixed_level.map_or("—".into(), |l| l.to_string()),
             num(c.ratio, 3),
+            c.trimmed_ratio.map_or("—".into(), |x| format!("{x:.3}×")),
             c.stage1_psnr,
             num(c.stage2_psnr, 2),
         );
@@ -365,6 +394,35 @@ fn stage1(
     Ok((run, rec))
 }
 
+/// Level `level` of the stage-1 run extracted with its hidden cells trimmed (into `out`), scored.
+fn trimmed_level(steps: &Steps, s1: &TrainedRun, gt: &Path, out: &Path, level: f32) -> LevelScore {
+    let ply = out.join(format!("points_sigma{level}_trimmed.ply"));
+    let r = steps
+        .extract_trimmed(&s1.dir, &ply, Some(&[level]), Switch::On)
+        .and_then(|_| steps.eval(&ply, gt));
+    match r {
+        Ok(m) => {
+            eprintln!(
+                "  Plen σ = {level}, hidden cells trimmed: Chamfer ×10⁻² {:.4}",
+                m.chamfer * 100.0
+            );
+            LevelScore {
+                level,
+                chamfer_e2: Some(m.chamfer * 100.0),
+                f1: Some(m.f1),
+            }
+        }
+        Err(e) => {
+            eprintln!("  Plen σ = {level}, hidden cells trimmed: {e:#}");
+            LevelScore {
+                level,
+                chamfer_e2: None,
+                f1: None,
+            }
+        }
+    }
+}
+
 fn score(rows: &[Row], level: f32) -> LevelScore {
     let r = rows.iter().find(|r| r.level == Some(level));
     LevelScore {
@@ -401,6 +459,15 @@ fn scene(
     );
     let (s1, rec) = stage1(steps, &settings.stage1, &stage1_dir(args, out))?;
     let best = rec.best();
+    // The like-for-like baseline where αSurf's extraction trims hidden cells (thin).
+    let trimmed_levels = if settings.category == Category::Thin {
+        LEVELS
+            .iter()
+            .map(|&l| trimmed_level(steps, &s1, &gt, out, l))
+            .collect()
+    } else {
+        Vec::new()
+    };
     // A stage-2 run without result.json was interrupted: `train --overwrite` starts it again.
     let s2_dir = out.join("alphasurf");
     let mut set = args.surface_set.clone();
@@ -427,6 +494,7 @@ fn scene(
         best_chamfer_e2: best.and_then(|b| b.chamfer_e2),
         best_f1: best.and_then(|b| b.f1),
         levels: rec.levels,
+        trimmed_levels,
         alphasurf_chamfer_e2: surf.as_ref().and_then(|r| r.chamfer_e2),
         alphasurf_f1: surf.as_ref().and_then(|r| r.f1),
         stage1_psnr: s1.test_psnr,
@@ -572,6 +640,7 @@ mod tests {
                     f1: Some(0.5),
                 })
                 .collect(),
+            trimmed_levels: Vec::new(),
             best_level: Some(best.0),
             best_chamfer_e2: Some(best.1),
             best_f1: Some(0.5),
@@ -624,6 +693,30 @@ mod tests {
             t.contains("| b | thin | 1.5000 | 1.2000 (50) | 1.2000 (50) | 1.250× |"),
             "{t}"
         );
+    }
+
+    #[test]
+    fn the_trimmed_levels_give_the_like_for_like_ratio() {
+        let mut a = result("a", Category::Thin, &[(30.0, 0.5), (50.0, 0.6)], 0.4);
+        a.trimmed_levels = [(30.0, 0.45), (50.0, 0.8)]
+            .iter()
+            .map(|&(level, c)| LevelScore {
+                level,
+                chamfer_e2: Some(c),
+                f1: None,
+            })
+            .collect();
+        assert_eq!(a.trimmed_best().map(|b| b.level), Some(30.0));
+        assert!((a.trimmed_ratio().unwrap() - 0.4 / 0.45).abs() < 1e-12);
+        let b = result("b", Category::Thin, &[(30.0, 1.0)], 0.5);
+        let s = summarise(vec![a.clone(), b]);
+        // One scene without a trimmed sweep: no mean.
+        assert_eq!(s.categories[0].trimmed_ratio, None);
+        let t = table(&s);
+        assert!(t.contains("| 0.800× | 0.889× (30) |"), "{t}");
+        assert!(t.contains("| 0.500× | — |"), "{t}");
+        let s = summarise(vec![a]);
+        assert!((s.categories[0].trimmed_ratio.unwrap() - 0.4 / 0.45).abs() < 1e-12);
     }
 
     #[test]

@@ -3,7 +3,7 @@
 //! one schedule.
 
 use super::evaluate::{evaluate, EvaluateOptions};
-use super::extract::{extract, ExtractOptions, DEFAULT_RAYS_PER_AXIS};
+use super::extract::{extract, ExtractOptions, Switch, DEFAULT_RAYS_PER_AXIS};
 use super::metrics::{self, Stage1Metrics};
 use super::train::train;
 use super::train_options::{Stage, TrainOptions};
@@ -205,10 +205,22 @@ impl<'g> Steps<'g> {
 
     /// `extract --run RUN --out PLY [--levels …]`; returns its wall time.
     pub fn extract(&self, run: &Path, ply: &Path, levels: Option<&[f32]>) -> Result<f64> {
+        self.extract_trimmed(run, ply, levels, Switch::Auto)
+    }
+
+    /// `extract` with `--trim-hidden trim`.
+    pub fn extract_trimmed(
+        &self,
+        run: &Path,
+        ply: &Path,
+        levels: Option<&[f32]>,
+        trim: Switch,
+    ) -> Result<f64> {
         let opts = ExtractOptions {
             levels: levels.map(<[f32]>::to_vec),
             rays_per_axis: self.rays_per_axis,
             backend: self.backend(),
+            trim_hidden: trim,
             ..ExtractOptions::for_run(run.to_path_buf(), ply.to_path_buf())
         };
         let t = Instant::now();
