@@ -14,6 +14,7 @@
 //! extracted cells themselves, so what hides a cell is the extracted surfaces, at any opacity:
 //! this suits opaque (thin) objects, not semi-transparent layers, which the views see through.
 
+use crate::grid::slot_vertex;
 use rayon::prelude::*;
 
 /// The trimming's parameters (in cells of the grid).
@@ -110,8 +111,7 @@ impl Occupancy {
     }
 
     fn coords(&self, slot: u32) -> [i64; 3] {
-        let [_, ry, rz] = self.res;
-        [slot / (ry * rz), (slot / rz) % ry, slot % rz].map(|v| v as i64)
+        slot_vertex(self.res, slot as usize).map(|v| v as i64)
     }
 }
 
@@ -128,9 +128,27 @@ pub fn sphere_directions(n: u32) -> Vec<[f32; 3]> {
         .collect()
 }
 
+/// The cells to keep of a grid of `res` vertices whose points (or faces) lie in the cells
+/// `item_cells` (corner-000 slots, one per item, in any order and repeated): those seen from one
+/// of `cameras` (camera centres in grid coordinates) or open (see the module comment).
+pub fn kept_cells(
+    res: [u32; 3],
+    item_cells: &[u32],
+    cameras: &[[f32; 3]],
+    t: &HiddenTrim,
+) -> (Occupancy, HiddenStats) {
+    let mut cells = item_cells.to_vec();
+    cells.par_sort_unstable();
+    cells.dedup();
+    let occ = Occupancy::new(res, cells.iter().copied());
+    let (keep, stats) = visible_cells(&occ, &cells, cameras, t);
+    let kept = cells.iter().zip(&keep).filter(|(_, &k)| k).map(|(&c, _)| c);
+    (Occupancy::new(res, kept), stats)
+}
+
 /// For each of `cells` (corner-000 slots of the occupied cells), whether to keep it: seen from
 /// one of `cameras` (camera centres in grid coordinates) or open (see the module comment).
-pub fn visible_cells(
+fn visible_cells(
     occ: &Occupancy,
     cells: &[u32],
     cameras: &[[f32; 3]],

@@ -7,7 +7,9 @@
 //! the only surface there and stays.
 
 use crate::cpu::extract_points::ExtractPoint;
+use crate::grid::slot_vertex;
 use crate::math::trilerp::trilerp;
+use rayon::prelude::*;
 
 /// Cells inward along the normal within which the higher level is looked for.
 pub const REACH: f32 = 1.5;
@@ -48,8 +50,7 @@ impl Field<'_> {
 
     /// Whether the field reaches `tau` within `reach` cells of point `p` along its gradient.
     fn point_reaches(&self, p: &ExtractPoint, tau: f32, reach: f32) -> bool {
-        let [_, ry, rz] = self.res;
-        let v = [p.cell / (ry * rz), (p.cell / rz) % ry, p.cell % rz];
+        let v = slot_vertex(self.res, p.cell as usize);
         let o: [f32; 3] = std::array::from_fn(|i| v[i] as f32 + p.local[i]);
         self.reaches(o, p.grad, tau, reach)
     }
@@ -82,10 +83,17 @@ pub fn drop_outer_halo(
     if levels.len() < 3 {
         return 0;
     }
-    let before = points.len();
     let tau = levels[2];
-    points.retain(|p| p.level != 0 || !field.point_reaches(p, tau, reach));
-    before - points.len()
+    let halo: Vec<bool> = points
+        .par_iter()
+        .map(|p| p.level == 0 && field.point_reaches(p, tau, reach))
+        .collect();
+    let mut i = 0;
+    points.retain(|_| {
+        i += 1;
+        !halo[i - 1]
+    });
+    halo.iter().filter(|&&h| h).count()
 }
 
 #[cfg(test)]

@@ -30,6 +30,17 @@ pub struct Grid {
     pub sh: Vec<f32>,
 }
 
+/// Vertex coordinates (x, y, z) of index `slot` into the `links` of a grid of `res` vertices
+/// (x-major, z fastest).
+pub fn slot_vertex(res: [u32; 3], slot: usize) -> [u32; 3] {
+    let (ry, rz) = (res[1] as usize, res[2] as usize);
+    [
+        (slot / (ry * rz)) as u32,
+        ((slot / rz) % ry) as u32,
+        (slot % rz) as u32,
+    ]
+}
+
 impl Grid {
     /// Total number of vertex slots in `links`.
     pub fn slots(&self) -> usize {
@@ -48,13 +59,7 @@ impl Grid {
 
     /// Vertex coordinates of a `links` index.
     pub fn vertex(&self, slot: usize) -> [u32; 3] {
-        let z = slot % self.res[2] as usize;
-        let xy = slot / self.res[2] as usize;
-        [
-            (xy / self.res[1] as usize) as u32,
-            (xy % self.res[1] as usize) as u32,
-            z as u32,
-        ]
+        slot_vertex(self.res, slot)
     }
 
     /// Scene position → continuous grid coordinates.

@@ -109,13 +109,7 @@ fn edge_key(l: usize, cell: u32, p: usize, q: usize, res: [u32; 3]) -> u64 {
 
 /// Vertex coordinates of a `links` slot.
 fn slot_xyz(slot: u32, res: [u32; 3]) -> [f32; 3] {
-    let s = slot as usize;
-    let (ry, rz) = (res[1] as usize, res[2] as usize);
-    [
-        (s / (ry * rz)) as f32,
-        ((s / rz) % ry) as f32,
-        (s % rz) as f32,
-    ]
+    crate::grid::slot_vertex(res, slot as usize).map(|v| v as f32)
 }
 
 /// Faces (as vertex keys) and vertex uses of one cell.

@@ -12,7 +12,7 @@ use crate::data::{Dataset, LoadOptions, SceneBox};
 use crate::eval::extract::{
     allocated_cells, extract_sorted, to_cloud, ExtractBackend, GridFrame, KernelStats, ThinStats,
 };
-use crate::eval::hidden::{visible_cells, HiddenStats, HiddenTrim, Occupancy};
+use crate::eval::hidden::{kept_cells, HiddenStats, HiddenTrim};
 use crate::eval::outer_level::{drop_outer_halo, Field as OuterField, REACH};
 use crate::gpu::Gpu;
 use crate::grid::surface::SurfaceGrid;
@@ -422,20 +422,9 @@ fn write_points(
     };
     let (mut points, kernel) = extract_sorted(backend, &inp, opts.capacity)?;
     let hidden = s.cameras.map(|cameras| {
-        let mut cells: Vec<u32> = points.iter().map(|p| p.cell).collect();
-        cells.sort_unstable();
-        cells.dedup();
-        let occ = Occupancy::new(s.res, cells.iter().copied());
-        let (keep, stats) = visible_cells(&occ, &cells, cameras, &HiddenTrim::default());
-        let dropped = Occupancy::new(
-            s.res,
-            cells
-                .iter()
-                .zip(&keep)
-                .filter(|(_, &k)| !k)
-                .map(|(&c, _)| c),
-        );
-        points.retain(|p| !dropped.holds(p.cell));
+        let cells: Vec<u32> = points.iter().map(|p| p.cell).collect();
+        let (kept, stats) = kept_cells(s.res, &cells, cameras, &HiddenTrim::default());
+        points.retain(|p| kept.holds(p.cell));
         stats
     });
     let outer_dropped = s
@@ -491,15 +480,7 @@ fn write_mesh(opts: &ExtractOptions, s: &Surfaces, out: &Path) -> Result<MeshRep
             (q[0] * s.res[1] + q[1]) * s.res[2] + q[2]
         };
         let face_cells: Vec<u32> = mesh.faces.iter().map(cell_of).collect();
-        let mut cells = face_cells.clone();
-        cells.sort_unstable();
-        cells.dedup();
-        let occ = Occupancy::new(s.res, cells.iter().copied());
-        let (keep, hidden) = visible_cells(&occ, &cells, cameras, &HiddenTrim::default());
-        let kept = Occupancy::new(
-            s.res,
-            cells.iter().zip(&keep).filter(|(_, &k)| k).map(|(&c, _)| c),
-        );
+        let (kept, hidden) = kept_cells(s.res, &face_cells, cameras, &HiddenTrim::default());
         mesh.retain_faces(|i| kept.holds(face_cells[i]));
         stats = MeshStats::of(&mesh, s.levels, stats.wall_ms + hidden.wall_ms);
         hidden
