@@ -10,10 +10,9 @@
 //! (x, y) (pixel centres at integers, OpenCV); ours are at +0.5, so cx = K₀₂ + 0.5, cy = K₁₂ + 0.5.
 
 use super::camera::{Camera, SceneBox};
-use super::dataset::Splits;
 use super::distortion::Distortion;
 use super::error::DataError;
-use super::views::{self, View};
+use super::views::{self, Posed, View};
 use crate::grid::npz::NpzReader;
 use glam::{DMat3, DMat4, DVec3, DVec4, Mat4};
 use std::path::{Path, PathBuf};
@@ -24,8 +23,9 @@ pub const CAMERAS: &str = "cameras_sphere.npz";
 /// Largest |skew| / fx accepted (the skew is dropped; our cameras have none).
 pub const MAX_SKEW: f64 = 1e-3;
 
-/// The splits and scene box of the IDR dataset `root`.
-pub fn load(root: &Path, k: u32, bg: [f32; 3]) -> Result<(Splits, SceneBox), DataError> {
+/// The posed views and scene box of the IDR dataset `root` (`k`: the requested downscale, which
+/// picks the image folder); of the images only their sizes are read (headers).
+pub fn posed(root: &Path, k: u32) -> Result<Posed, DataError> {
     let npz_path = root.join(CAMERAS);
     let fail = |msg: String| DataError::Format {
         path: npz_path.clone(),
@@ -123,10 +123,12 @@ pub fn load(root: &Path, k: u32, bg: [f32; 3]) -> Result<(Splits, SceneBox), Dat
         centre: (c / s).as_vec3(),
         radius: 1.0,
     };
-    Ok((
-        views::load_splits(root, &npz_path, posed, &folders, k, bg)?,
+    Ok(Posed {
+        views: posed,
+        folders,
+        source: npz_path,
         scene,
-    ))
+    })
 }
 
 fn is_index(s: &str) -> bool {

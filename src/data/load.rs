@@ -6,6 +6,7 @@ use super::dataset::{peak_rss_bytes, Dataset, LoadOptions, LoadReport};
 use super::error::DataError;
 use super::layout::{self, Layout};
 use anyhow::Context;
+use glam::Mat4;
 use std::path::Path;
 use std::time::Instant;
 
@@ -14,6 +15,31 @@ impl Dataset {
     pub fn load(root: &Path, opts: &LoadOptions) -> anyhow::Result<Dataset> {
         load(root, opts).with_context(|| format!("loading dataset {}", root.display()))
     }
+
+    /// The training split's camera-to-world poses, the same views in the same order as
+    /// [`Dataset::load`] gives them, without decoding any image (IDR reads the images' headers for
+    /// their sizes): for what needs only where the cameras stand, such as extraction's
+    /// hidden-surface trim, on captures too large to load for that.
+    pub fn train_poses(root: &Path) -> anyhow::Result<Vec<Mat4>> {
+        train_poses(root)
+            .with_context(|| format!("reading the cameras of dataset {}", root.display()))
+    }
+}
+
+fn train_poses(root: &Path) -> Result<Vec<Mat4>, DataError> {
+    if !root.is_dir() {
+        return Err(DataError::MissingDir {
+            path: root.to_path_buf(),
+        });
+    }
+    let views = match layout::detect(root)? {
+        Layout::NerfSynthetic => return super::nerf_synthetic::train_poses(root),
+        Layout::Colmap { sparse, .. } => {
+            super::colmap::posed(root, &sparse, 1)?.train_views(root)?
+        }
+        Layout::Idr => super::idr::posed(root, 1)?.train_views(root)?,
+    };
+    Ok(views.iter().map(|v| v.camera.c2w).collect())
 }
 
 fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset, DataError> {
@@ -38,8 +64,10 @@ fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset, DataError> {
             super::nerf_synthetic::load_splits(root, k, bg)?,
             SceneBox::default(),
         ),
-        Layout::Colmap { sparse, .. } => super::colmap::load(root, sparse, k, bg)?,
-        Layout::Idr => super::idr::load(root, k, bg)?,
+        Layout::Colmap { sparse, .. } => {
+            super::colmap::posed(root, sparse, k)?.load(root, k, bg)?
+        }
+        Layout::Idr => super::idr::posed(root, k)?.load(root, k, bg)?,
     };
     // A learned background is for images without alpha: where alpha (or a mask) says which
     // pixels are background, its colour is known and white or black composites them exactly,

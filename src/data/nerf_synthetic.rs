@@ -75,8 +75,18 @@ struct FrameJson {
     intr: Intrinsics,
 }
 
-/// Loads `transforms_<name>.json` and its images; `Ok(None)` if the file does not exist.
-fn load_split(root: &Path, name: &str, k: u32, bg: [f32; 3]) -> Result<Option<Split>, DataError> {
+/// The training split's camera-to-world poses, in file order, without reading any image.
+pub(super) fn train_poses(root: &Path) -> Result<Vec<Mat4>, DataError> {
+    let (_, jobs) = parse_split(root, "train")?.ok_or_else(|| missing(root, "train"))?;
+    Ok(jobs.into_iter().map(|(_, c2w, _)| c2w).collect())
+}
+
+/// One frame before decoding: its image file, camera-to-world pose and intrinsics.
+type FrameJob = (PathBuf, Mat4, Intrinsics);
+
+/// Parses and checks `transforms_<name>.json` (poses, image paths, intrinsics) without reading
+/// any image; `Ok(None)` if the file does not exist.
+fn parse_split(root: &Path, name: &str) -> Result<Option<(PathBuf, Vec<FrameJob>)>, DataError> {
     let json = root.join(format!("transforms_{name}.json"));
     if !json.exists() {
         return Ok(None);
@@ -101,13 +111,21 @@ fn load_split(root: &Path, name: &str, k: u32, bg: [f32; 3]) -> Result<Option<Sp
             split: name.into(),
         });
     }
-    // Validate everything cheap before decoding any image.
     let mut jobs = Vec::with_capacity(parsed.frames.len());
     for (i, fr) in parsed.frames.iter().enumerate() {
         let c2w = parse_transform(&json, i, &fr.transform_matrix)?;
         let file = resolve_image(root, &json, i, &fr.file_path)?;
         jobs.push((file, c2w, fr.intr.or(parsed.intr)));
     }
+    Ok(Some((json, jobs)))
+}
+
+/// Loads `transforms_<name>.json` and its images; `Ok(None)` if the file does not exist.
+fn load_split(root: &Path, name: &str, k: u32, bg: [f32; 3]) -> Result<Option<Split>, DataError> {
+    // Everything cheap is validated before any image is decoded.
+    let Some((json, jobs)) = parse_split(root, name)? else {
+        return Ok(None);
+    };
     // Decode in parallel; report the first failing frame in file order (deterministic).
     let frames: Vec<Result<Frame, DataError>> = jobs
         .into_par_iter()

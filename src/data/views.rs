@@ -3,7 +3,7 @@
 //! undistortion, the held-out split (`split.json`, else every 8th view by name, as in LLFF and
 //! mip-NeRF practice) and parallel decoding.
 
-use super::camera::Camera;
+use super::camera::{Camera, SceneBox};
 use super::dataset::{Frame, Split, Splits};
 use super::distortion::{undistort, Distortion, Pinhole};
 use super::error::DataError;
@@ -34,6 +34,31 @@ pub struct View {
     pub camera: Camera,
     /// Its lens distortion (undistorted on load).
     pub distortion: Distortion,
+}
+
+/// What a COLMAP or IDR reader hands over before any image is read.
+pub struct Posed {
+    /// The posed views.
+    pub views: Vec<View>,
+    /// Where their images (and masks) are.
+    pub folders: Folders,
+    /// The file that listed them (named in errors).
+    pub source: PathBuf,
+    /// The layout's own scene normalisation.
+    pub scene: SceneBox,
+}
+
+impl Posed {
+    /// Decodes the views into splits (`k`: the requested downscale; `bg`: the background).
+    pub fn load(self, root: &Path, k: u32, bg: [f32; 3]) -> Result<(Splits, SceneBox), DataError> {
+        let splits = load_splits(root, &self.source, self.views, &self.folders, k, bg)?;
+        Ok((splits, self.scene))
+    }
+
+    /// The training split's views, without reading any image.
+    pub fn train_views(self, root: &Path) -> Result<Vec<View>, DataError> {
+        train_views(root, &self.source, self.views)
+    }
 }
 
 /// The image and mask folders to read, and the factor they are already downscaled by.
@@ -79,16 +104,17 @@ struct SplitFile {
     test: Vec<String>,
 }
 
-/// Loads `views` into splits. `source` is the file that listed them (named in errors); `k` the
-/// requested downscale, of which `folders.prescaled` is already done by the files.
-pub fn load_splits(
-    root: &Path,
-    source: &Path,
-    mut views: Vec<View>,
-    folders: &Folders,
-    k: u32,
-    bg: [f32; 3],
-) -> Result<Splits, DataError> {
+/// Which views make which split: the views sorted by name (duplicates refused), the split file's
+/// names when it exists, else every [`HOLDOUT_EVERY`]-th view held out for testing.
+struct Assigned {
+    train: Vec<usize>,
+    val: Option<Vec<usize>>,
+    test: Vec<usize>,
+    /// The file the assignment comes from (the split file, else `source`), named in errors.
+    src: PathBuf,
+}
+
+fn assign(root: &Path, source: &Path, views: &mut [View]) -> Result<Assigned, DataError> {
     views.sort_by(|a, b| a.name.cmp(&b.name));
     if let Some(w) = views.windows(2).find(|w| w[0].name == w[1].name) {
         return Err(DataError::CountMismatch {
@@ -97,27 +123,63 @@ pub fn load_splits(
         });
     }
     let split_file = root.join(SPLIT_FILE);
-    let (train, val, test) = if split_file.exists() {
-        assign_from_file(&split_file, &views)?
-    } else {
-        if views.len() < 2 {
-            return Err(DataError::CountMismatch {
-                path: source.to_path_buf(),
-                msg: format!(
-                    "{} posed image(s): at least 2 are needed (one to train on, one held out)",
-                    views.len()
-                ),
-            });
-        }
-        let (test, train): (Vec<usize>, Vec<usize>) =
-            (0..views.len()).partition(|i| i % HOLDOUT_EVERY == 0);
-        (train, None, test)
-    };
-    let src = if split_file.exists() {
-        split_file
-    } else {
-        source.to_path_buf()
-    };
+    if split_file.exists() {
+        let (train, val, test) = assign_from_file(&split_file, views)?;
+        return Ok(Assigned {
+            train,
+            val,
+            test,
+            src: split_file,
+        });
+    }
+    if views.len() < 2 {
+        return Err(DataError::CountMismatch {
+            path: source.to_path_buf(),
+            msg: format!(
+                "{} posed image(s): at least 2 are needed (one to train on, one held out)",
+                views.len()
+            ),
+        });
+    }
+    let (test, train): (Vec<usize>, Vec<usize>) =
+        (0..views.len()).partition(|i| i % HOLDOUT_EVERY == 0);
+    Ok(Assigned {
+        train,
+        val: None,
+        test,
+        src: source.to_path_buf(),
+    })
+}
+
+/// The training split's views, in the order [`load_splits`] gives them, without reading any
+/// image. `source` is the file that listed them (named in errors).
+fn train_views(root: &Path, source: &Path, mut views: Vec<View>) -> Result<Vec<View>, DataError> {
+    let a = assign(root, source, &mut views)?;
+    if a.train.is_empty() {
+        return Err(DataError::EmptySplit {
+            path: a.src,
+            split: "train".into(),
+        });
+    }
+    Ok(a.train.iter().map(|&i| views[i].clone()).collect())
+}
+
+/// Loads `views` into splits. `source` is the file that listed them (named in errors); `k` the
+/// requested downscale, of which `folders.prescaled` is already done by the files.
+fn load_splits(
+    root: &Path,
+    source: &Path,
+    mut views: Vec<View>,
+    folders: &Folders,
+    k: u32,
+    bg: [f32; 3],
+) -> Result<Splits, DataError> {
+    let Assigned {
+        train,
+        val,
+        test,
+        src,
+    } = assign(root, source, &mut views)?;
     let split = |name: &str, idx: Vec<usize>| -> Result<Split, DataError> {
         if idx.is_empty() {
             return Err(DataError::EmptySplit {

@@ -8,7 +8,7 @@
 
 use crate::backend::Backend;
 use crate::cpu::extract_points::ExtractInput;
-use crate::data::{Dataset, LoadOptions, SceneBox};
+use crate::data::{Dataset, SceneBox};
 use crate::eval::extract::{
     allocated_cells, extract_sorted, to_cloud, ExtractBackend, GridFrame, KernelStats, ThinStats,
 };
@@ -369,12 +369,9 @@ impl Surfaces<'_> {
 /// The training cameras' centres in grid coordinates, from `--data` or the run's dataset.
 fn training_cameras(opts: &ExtractOptions, frame: &GridFrame) -> Result<Vec<[f32; 3]>> {
     let info = opts.run.as_ref().map(|r| crate::run::read_info(r));
-    let (dir, downscale) = match (&opts.data, info) {
-        (Some(d), info) => (
-            d.clone(),
-            info.and_then(|i| i.ok()).map_or(1, |i| i.downscale),
-        ),
-        (None, Some(Ok(i))) => (i.data, i.downscale),
+    let dir = match (&opts.data, info) {
+        (Some(d), _) => d.clone(),
+        (None, Some(Ok(i))) => i.data,
         (None, Some(Err(e))) => bail!(
             "--trim-hidden needs the training cameras: {e:#} (pass --data, or --trim-hidden off)"
         ),
@@ -383,19 +380,11 @@ fn training_cameras(opts: &ExtractOptions, frame: &GridFrame) -> Result<Vec<[f32
              off)"
         ),
     };
-    let data = Dataset::load(
-        &dir,
-        &LoadOptions {
-            downscale,
-            ..Default::default()
-        },
-    )
-    .context("--trim-hidden needs the training cameras (or pass --trim-hidden off)")?;
-    Ok(data
-        .train
-        .frames
+    let poses = Dataset::train_poses(&dir)
+        .context("--trim-hidden needs the training cameras (or pass --trim-hidden off)")?;
+    Ok(poses
         .iter()
-        .map(|f| frame.blender_to_grid(f.camera.centre().to_array()))
+        .map(|c2w| frame.blender_to_grid(c2w.w_axis.truncate().to_array()))
         .collect())
 }
 

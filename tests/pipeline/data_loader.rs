@@ -254,3 +254,77 @@ fn colmap_opencv_images_are_undistorted_on_load() {
         "undistorted image off the pattern by {worst}/255"
     );
 }
+
+/// `Dataset::train_poses` gives the training views' poses exactly as `Dataset::load` does (same
+/// views, same order) in every layout, with and without a split file, and reads no pixels:
+/// with every image file overwritten by garbage it still answers (IDR excepted: it reads the
+/// images' headers for their sizes) while `Dataset::load` fails.
+#[test]
+fn training_poses_match_the_loaded_ones_without_decoding_images() {
+    let src = tempfile::tempdir().unwrap();
+    write_dataset(src.path(), 9, 8, 6);
+    let loaded = |dir: &std::path::Path| -> Vec<glam::Mat4> {
+        let ds = Dataset::load(dir, &LoadOptions::default()).unwrap();
+        ds.train.frames.iter().map(|f| f.camera.c2w).collect()
+    };
+    let spoil = |dir: &std::path::Path| {
+        for e in walkdir(dir) {
+            if e.extension().is_some_and(|x| x == "png" || x == "jpg") {
+                std::fs::write(&e, b"not an image").unwrap();
+            }
+        }
+    };
+    let mut dirs: Vec<(String, tempfile::TempDir, std::path::PathBuf, bool)> = Vec::new();
+    for target in [Target::ColmapText, Target::ColmapBinary, Target::Idr] {
+        let (keep, dir) = converted(src.path(), target);
+        dirs.push((format!("{target:?}"), keep, dir, target != Target::Idr));
+    }
+    let (keep, dir) = converted(src.path(), Target::ColmapBinary);
+    std::fs::remove_file(dir.join("split.json")).unwrap();
+    dirs.push(("colmap, every 8th held out".into(), keep, dir, true));
+    let copy = tempfile::tempdir().unwrap();
+    copy_tree(src.path(), copy.path());
+    let nerf = copy.path().to_path_buf();
+    dirs.push(("nerf-synthetic".into(), copy, nerf, true));
+    for (name, _keep, dir, spoilable) in &dirs {
+        let want = loaded(dir);
+        assert!(!want.is_empty(), "{name}");
+        assert_eq!(Dataset::train_poses(dir).unwrap(), want, "{name}");
+        if *spoilable {
+            spoil(dir);
+            assert!(
+                Dataset::load(dir, &LoadOptions::default()).is_err(),
+                "{name}"
+            );
+            assert_eq!(
+                Dataset::train_poses(dir).unwrap(),
+                want,
+                "{name}: images spoilt"
+            );
+        }
+    }
+    let missing = src.path().join("nowhere");
+    let e = format!("{:#}", Dataset::train_poses(&missing).unwrap_err());
+    assert!(e.contains("nowhere"), "{e}");
+}
+
+fn walkdir(dir: &std::path::Path) -> Vec<std::path::PathBuf> {
+    let mut out = Vec::new();
+    for e in std::fs::read_dir(dir).unwrap() {
+        let p = e.unwrap().path();
+        if p.is_dir() {
+            out.extend(walkdir(&p));
+        } else {
+            out.push(p);
+        }
+    }
+    out
+}
+
+fn copy_tree(from: &std::path::Path, to: &std::path::Path) {
+    for p in walkdir(from) {
+        let dst = to.join(p.strip_prefix(from).unwrap());
+        std::fs::create_dir_all(dst.parent().unwrap()).unwrap();
+        std::fs::copy(&p, &dst).unwrap();
+    }
+}

@@ -13,10 +13,9 @@ pub mod binary;
 pub mod text;
 
 use super::camera::{Camera, SceneBox};
-use super::dataset::Splits;
 use super::distortion::Distortion;
 use super::error::DataError;
-use super::views::{self, View};
+use super::views::{self, Posed, View};
 use glam::{DMat3, DVec3, Mat4, Vec3};
 use std::collections::HashMap;
 use std::path::{Component, Path, PathBuf};
@@ -75,13 +74,9 @@ pub struct ImageEntry {
     pub name: String,
 }
 
-/// The splits and scene box of the COLMAP dataset `root` with its model in `sparse`.
-pub fn load(
-    root: &Path,
-    sparse: &Path,
-    k: u32,
-    bg: [f32; 3],
-) -> Result<(Splits, SceneBox), DataError> {
+/// The posed views and scene box of the COLMAP dataset `root` with its model in `sparse` (`k`:
+/// the requested downscale, which picks the image folder); no image is read.
+pub fn posed(root: &Path, sparse: &Path, k: u32) -> Result<Posed, DataError> {
     let binary = sparse.join("cameras.bin").is_file();
     let file = |stem: &str| sparse.join(format!("{stem}.{}", if binary { "bin" } else { "txt" }));
     let (cam_file, img_file, pts_file) = (file("cameras"), file("images"), file("points3D"));
@@ -176,10 +171,12 @@ pub fn load(
                 points.len()
             ),
         })?;
-    Ok((
-        views::load_splits(root, &img_file, posed, &folders, k, bg)?,
+    Ok(Posed {
+        views: posed,
+        folders,
+        source: img_file,
         scene,
-    ))
+    })
 }
 
 type Intrinsics = (f32, f32, f32, f32, Distortion);
