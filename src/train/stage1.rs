@@ -1,5 +1,5 @@
 //! The stage-1 (Plenoxels) training loop: batches of training rays, one backend step each,
-//! upsampling with weight pruning on schedule, periodic atomic checkpoints (resumable), NaN/Inf
+//! upsampling with weight pruning on schedule, periodic atomic checkpoints written in the background (resumable), NaN/Inf
 //! detection, and the end-of-run test renders, PSNR and metrics.json.
 
 use super::background::{self, BackgroundRecord};
@@ -9,6 +9,7 @@ use super::render::{psnr, render_split, RenderedSplit};
 use crate::abi::buffers::PlenoxelPerRay;
 use crate::data::{BackgroundMode, Dataset, Split, TrainViews};
 use crate::grid::{checkpoint, dilate, upsample, Grid};
+use crate::io::background_save::BackgroundSave;
 use crate::plenoxel::{Plenoxels, StepParams, TvParams};
 use crate::run::train_log;
 use anyhow::{bail, Context, Result};
@@ -118,7 +119,20 @@ fn check_finite(grid: &Grid, step: u32) -> Result<()> {
     Ok(())
 }
 
-/// Write the checkpoint of `step` atomically (with the background of a run in `mode`).
+/// The metadata of the checkpoint of `step` (with the background of a run in `mode`).
+fn meta(
+    backend: &dyn Plenoxels,
+    cfg: &Stage1Config,
+    mode: BackgroundMode,
+    step: u32,
+) -> Result<serde_json::Value> {
+    let bg = BackgroundRecord::of(mode, &backend.background()?);
+    Ok(json!({
+        "stage": "plenoxels", "step": step, "config": cfg, background::META_KEY: bg
+    }))
+}
+
+/// Write the checkpoint of `step` atomically, now (refuses non-finite values).
 fn save(
     backend: &dyn Plenoxels,
     cfg: &Stage1Config,
@@ -126,16 +140,37 @@ fn save(
     out: &Path,
     step: u32,
 ) -> Result<()> {
-    let bg = BackgroundRecord::of(mode, &backend.background()?);
-    let meta = json!({
-        "stage": "plenoxels", "step": step, "config": cfg, background::META_KEY: bg
-    });
+    let meta = meta(backend, cfg, mode, step)?;
     backend.with_state(&mut |grid, [sd, ss]| {
         check_finite(grid, step)?;
         checkpoint::save(
             &out.join(CHECKPOINT),
             grid,
             &[("rms_density", sd), ("rms_sh", ss)],
+            &meta,
+        )
+    })
+}
+
+/// The checkpoint of `step` as a write for the checkpoint thread: the grid and the running
+/// averages are copied (downloaded from a GPU) now, checked and written atomically there.
+fn snapshot(
+    backend: &dyn Plenoxels,
+    cfg: &Stage1Config,
+    mode: BackgroundMode,
+    out: &Path,
+    step: u32,
+) -> Result<impl FnOnce() -> Result<()> + Send + 'static> {
+    let meta = meta(backend, cfg, mode, step)?;
+    let grid = backend.grid()?;
+    let (sd, ss) = backend.optimizer_state()?;
+    let path = out.join(CHECKPOINT);
+    Ok(move || {
+        check_finite(&grid, step)?;
+        checkpoint::save(
+            &path,
+            &grid,
+            &[("rms_density", &sd), ("rms_sh", &ss)],
             &meta,
         )
     })
@@ -186,6 +221,7 @@ pub fn train(
         backend.set_background(BackgroundRecord::start_on(data).kernel())?;
     }
     let mut group = StepGroup::default();
+    let mut writer = BackgroundSave::default();
     for step in start_step..cfg.iters {
         if let Some((_, r)) = cfg.upsample.iter().find(|(s, _)| *s == step) {
             let t = Instant::now();
@@ -252,7 +288,9 @@ pub fn train(
         if checkpoint {
             let t = Instant::now();
             train_log::flush(&mut log, &log_path)?;
-            save(backend, cfg, data.background, out, step + 1)?;
+            // The previous write first: at most one snapshot is held besides the grid.
+            writer.finish()?;
+            writer.start(snapshot(backend, cfg, data.background, out, step + 1)?)?;
             report.checkpoint_seconds += t.elapsed().as_secs_f64();
             group.restart();
         }
@@ -261,6 +299,7 @@ pub fn train(
     train_log::flush(&mut log, &log_path)?;
     drop(log);
     let t = Instant::now();
+    writer.finish()?;
     save(backend, cfg, data.background, out, cfg.iters)?;
     report.checkpoint_seconds += t.elapsed().as_secs_f64();
 

@@ -1,6 +1,6 @@
 //! The stage-2 (αSurf) training loop: batches of training rays, one backend step each with the
 //! scheduled learning rates, truncation a and regularisers; periodic atomic checkpoints
-//! (resumable); NaN/Inf detection; at the end the α < 0.1 surfaces are dropped, the test split
+//! written in the background (resumable); NaN/Inf detection; at the end the α < 0.1 surfaces are dropped, the test split
 //! rendered and metrics.json written.
 
 use super::background::{self, BackgroundRecord};
@@ -13,6 +13,7 @@ use crate::cpu::surface_reg::{delta_tv_chunk, opacity_tv_chunk, OpacityChunk};
 use crate::data::{BackgroundMode, Dataset, TrainViews};
 use crate::grid::checkpoint;
 use crate::grid::surface::SurfaceGrid;
+use crate::io::background_save::BackgroundSave;
 use crate::run::train_log;
 use crate::surface::{SurfaceBackend, SurfaceRegs, SurfaceStepParams};
 use anyhow::{bail, Context, Result};
@@ -53,8 +54,20 @@ pub fn checkpoint_path(run: &Path) -> PathBuf {
     run.join(CHECKPOINT)
 }
 
-/// Write the checkpoint of `step` atomically (refuses non-finite values), with the background of
-/// a run in `mode`.
+/// The metadata of the checkpoint of `step` (with the background of a run in `mode`).
+fn meta(
+    backend: &dyn SurfaceBackend,
+    cfg: &SurfaceConfig,
+    mode: BackgroundMode,
+    step: u32,
+) -> Result<serde_json::Value> {
+    let bg = BackgroundRecord::of(mode, &backend.background()?);
+    Ok(json!({
+        "stage": "surface", "step": step, "config": cfg, background::META_KEY: bg
+    }))
+}
+
+/// Write the checkpoint of `step` atomically, now (refuses non-finite values).
 fn save(
     backend: &dyn SurfaceBackend,
     cfg: &SurfaceConfig,
@@ -62,10 +75,7 @@ fn save(
     out: &Path,
     step: u32,
 ) -> Result<()> {
-    let bg = BackgroundRecord::of(mode, &backend.background()?);
-    let meta = json!({
-        "stage": "surface", "step": step, "config": cfg, background::META_KEY: bg
-    });
+    let meta = meta(backend, cfg, mode, step)?;
     backend
         .with_state(&mut |grid, [sd, so, ss]| {
             grid.save(
@@ -75,6 +85,29 @@ fn save(
             )
         })
         .with_context(|| format!("after step {step}"))
+}
+
+/// The checkpoint of `step` as a write for the checkpoint thread: the grid and the running
+/// averages are copied (downloaded from a GPU) now, checked and written atomically there.
+fn snapshot(
+    backend: &dyn SurfaceBackend,
+    cfg: &SurfaceConfig,
+    mode: BackgroundMode,
+    out: &Path,
+    step: u32,
+) -> Result<impl FnOnce() -> Result<()> + Send + 'static> {
+    let meta = meta(backend, cfg, mode, step)?;
+    let grid = backend.grid()?;
+    let [sd, so, ss] = backend.optimizer_state()?;
+    let path = out.join(CHECKPOINT);
+    Ok(move || {
+        grid.save(
+            &path,
+            &[("rms_delta", &sd), ("rms_opacity", &so), ("rms_sh", &ss)],
+            &meta,
+        )
+        .with_context(|| format!("after step {step}"))
+    })
 }
 
 /// Restore grid, optimiser state, background and step from a stage-2 checkpoint; returns the
@@ -173,6 +206,7 @@ pub fn train(
     drop(grid0);
     let views = TrainViews::new(&data.train, &data.scene)?.focused(cfg.ray_focus)?;
     let mut group = StepGroup::default();
+    let mut writer = BackgroundSave::default();
     for step in start_step..cfg.iters {
         let mut rng = step_rng(cfg.seed, step);
         let batch_seed: u64 = rng.random();
@@ -226,7 +260,9 @@ pub fn train(
         if checkpoint {
             let t = Instant::now();
             train_log::flush(&mut log, &log_path)?;
-            save(backend, cfg, data.background, out, step + 1)?;
+            // The previous write first: at most one snapshot is held besides the grid.
+            writer.finish()?;
+            writer.start(snapshot(backend, cfg, data.background, out, step + 1)?)?;
             report.checkpoint_seconds += t.elapsed().as_secs_f64();
             group.restart();
         }
@@ -234,6 +270,7 @@ pub fn train(
     progress.finish();
     train_log::flush(&mut log, &log_path)?;
     drop(log);
+    writer.finish()?;
 
     // Drop the surfaces that cannot reach α ≥ prune_alpha; the optimiser state ends with them.
     let mut grid = backend.grid()?;

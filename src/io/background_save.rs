@@ -1,0 +1,95 @@
+//! Checkpoints written on a thread of their own: the training loop hands over a snapshot and
+//! goes on training while it is written. One write at a time; a failed write's error comes back
+//! from the next call.
+
+use anyhow::{anyhow, Context, Result};
+use std::thread::JoinHandle;
+
+/// At most one write in progress, on its own thread.
+#[derive(Default)]
+pub struct BackgroundSave {
+    pending: Option<JoinHandle<Result<()>>>,
+}
+
+impl BackgroundSave {
+    /// Waits for the write in progress (its error, if it failed), then starts `write` on a new
+    /// thread. Writes to the same file therefore land in the order they were started.
+    pub fn start(&mut self, write: impl FnOnce() -> Result<()> + Send + 'static) -> Result<()> {
+        self.finish()?;
+        let handle = std::thread::Builder::new()
+            .name("checkpoint".into())
+            .spawn(write)
+            .context("starting the checkpoint thread")?;
+        self.pending = Some(handle);
+        Ok(())
+    }
+
+    /// Waits for the write in progress; its error if it failed.
+    pub fn finish(&mut self) -> Result<()> {
+        match self.pending.take() {
+            None => Ok(()),
+            Some(h) => h
+                .join()
+                .map_err(|_| anyhow!("the checkpoint thread panicked"))?,
+        }
+    }
+}
+
+impl Drop for BackgroundSave {
+    /// A run that stops early (an error, a non-finite loss) still completes the checkpoint being
+    /// written, so the last good one is on disk when the process exits; its error is printed.
+    fn drop(&mut self) {
+        if let Err(e) = self.finish() {
+            eprintln!("warning: {e:#}");
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::sync::atomic::{AtomicU32, Ordering};
+    use std::sync::Arc;
+    use std::time::Duration;
+
+    #[test]
+    fn writes_run_one_at_a_time_in_order_and_errors_come_back() {
+        let log = Arc::new(std::sync::Mutex::new(Vec::new()));
+        let mut s = BackgroundSave::default();
+        for i in 0..3 {
+            let log = log.clone();
+            s.start(move || {
+                // The first write is the slowest: a later one must still land after it.
+                std::thread::sleep(Duration::from_millis(30 - 10 * i));
+                log.lock().unwrap().push(i);
+                Ok(())
+            })
+            .unwrap();
+        }
+        s.finish().unwrap();
+        assert_eq!(*log.lock().unwrap(), vec![0, 1, 2]);
+
+        s.start(|| anyhow::bail!("disk full")).unwrap();
+        let e = s.start(|| Ok(())).unwrap_err();
+        assert!(format!("{e:#}").contains("disk full"), "{e:#}");
+        s.start(|| anyhow::bail!("disk full again")).unwrap();
+        assert!(format!("{:#}", s.finish().unwrap_err()).contains("again"));
+        assert!(s.finish().is_ok(), "an error is returned once");
+    }
+
+    #[test]
+    fn dropping_waits_for_the_write_in_progress() {
+        let done = Arc::new(AtomicU32::new(0));
+        {
+            let mut s = BackgroundSave::default();
+            let d = done.clone();
+            s.start(move || {
+                std::thread::sleep(Duration::from_millis(50));
+                d.store(1, Ordering::SeqCst);
+                Ok(())
+            })
+            .unwrap();
+        }
+        assert_eq!(done.load(Ordering::SeqCst), 1);
+    }
+}
