@@ -356,12 +356,14 @@ fn device_batches_are_the_twins_and_a_restart_draws_them_again() {
 
 /// Tolerances of `steps_in_flight_match_steps_waited_for`. The gradient scatter's float atomics
 /// add in a different order from run to run on any device, and 40 steps carry the difference
-/// along: on lavapipe two runs differed by up to 2.3e-7 (relative step MSE) and 7.6e-5 to 3.4e-4
-/// (density, values up to ~10²: 4e-6 relative). A step that read another step's parameters, rays
-/// or readback slot would differ by orders of magnitude more.
+/// along: on lavapipe two runs differed by up to 2.3e-7 (relative step MSE); the density's
+/// largest difference relative to max(|σ|, 1) was 2.2e-5 to 7.0e-5 over twelve reruns of the
+/// same queued steps and 1.02e-4 in one CI run (absolute 1.6e-4 to 9.2e-4, on values of
+/// magnitude 20–50). A step that drew another step's rays (its seed changed at step 20) moved
+/// the density by 33 on that measure, five orders of magnitude above the tolerance.
 const MSE_REL: f64 = 1e-5;
-/// Relative to max(|σ|, 1).
-const DENSITY_REL: f32 = 1e-4;
+/// Relative to max(|σ|, 1): ten times the largest run-to-run difference measured.
+const DENSITY_REL: f32 = 1e-3;
 
 /// Steps submitted without waiting (two on the device at a time, figures read at the end, past
 /// the ring of `STEP_SLOTS` slots) train as steps waited for one by one: the same figures, in
