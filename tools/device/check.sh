@@ -1,0 +1,57 @@
+#!/usr/bin/env bash
+# The device checks, one call each (run on the lent GPU machine in the repository root, after
+# tools/device/prepare.sh here; the run tool's command `bash tools/device/check.sh`, carry
+# [".dev"]):
+#   MODE=basic (default)  kernel parity, then issue 20's figures at 128³ (bench plenoxels, bench
+#                         surface); about 7.5 minutes at most, seconds to a minute on a GPU.
+#   MODE=accuracy         issue 19 at 512³: `bench accuracy --res 512` on the scenes in
+#                         .dev/data (9 minutes at most; resumable on the same warm machine).
+# Each step has its own time limit, so one that hangs leaves the others their time. What comes
+# back is $OUT/NAME.log per step (the commands with --json print their JSON object as the log's
+# last line), the 512³ accuracy.json and $OUT/summary.txt: at most six files, under the tool's
+# eight. Without an NVIDIA driver it runs on whatever Vulkan device there is (a dry run here on
+# lavapipe: OUT=/tmp/out bash tools/device/check.sh).
+set -uo pipefail
+cd "$(dirname "$0")/../.."
+OUT=${OUT:-/tmp/device-out}
+mkdir -p "$OUT"
+bin=.dev/alphasurf
+[ -x "$bin" ] || { echo "no $bin: run tools/device/prepare.sh first and carry .dev" >&2; exit 2; }
+if ! ldconfig -p | grep -q libvulkan.so.1; then
+  for f in .dev/debs/*.deb; do dpkg -x "$f" /; done
+  ldconfig
+fi
+icd=/usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json
+[ -f "$icd" ] && export VK_DRIVER_FILES=$icd
+summary=$OUT/summary.txt
+: >"$summary"
+# step NAME SECONDS COMMAND...: runs COMMAND with its output in $OUT/NAME.log, and records its
+# exit status and wall time in the summary.
+step() {
+  local name=$1 limit=$2
+  shift 2
+  local t0=$SECONDS
+  timeout "$limit" "$@" >"$OUT/$name.log" 2>&1
+  local rc=$?
+  echo "$name: exit $rc in $((SECONDS - t0)) s" | tee -a "$summary"
+  return $rc
+}
+case "${MODE:-basic}" in
+basic)
+  step devices 30 "$bin" devices
+  step parity 120 "$bin" check-kernels --json
+  step bench_plenoxels 150 "$bin" bench plenoxels --json --steps 48
+  step bench_surface 150 "$bin" bench surface --json --steps 48 --rounds 1
+  ;;
+accuracy)
+  # Stage 1, the level sweep, stage 2, extract and eval per scene; a scene finished in an
+  # earlier call on the same machine is not redone.
+  step accuracy_512 540 "$bin" bench accuracy --data .dev/data/*/ --res 512 --backend vulkan \
+    --out /tmp/acc512 --json
+  cp /tmp/acc512/accuracy.json "$OUT/accuracy_512.json" 2>/dev/null
+  ;;
+*)
+  echo "MODE is basic or accuracy, not ${MODE}" >&2
+  exit 2
+  ;;
+esac
