@@ -38,6 +38,12 @@ fn check_name(name: &str) -> Result<()> {
 /// copy gigabytes).
 pub type OptimRefs<'a> = [(&'a str, &'a [f32])];
 
+/// Bytes a copy of a training state holds: `slots` links, and `rows` vertices of `channels`
+/// floats each, twice (the values and their RMSProp averages).
+pub fn state_bytes(slots: u64, rows: u64, channels: u64) -> u64 {
+    4 * (slots + 2 * rows * channels)
+}
+
 /// Write a checkpoint atomically to `path`. Refuses (leaving any previous checkpoint intact) an
 /// invalid or non-finite grid, non-finite optimiser state, or bad/duplicate names.
 pub fn save(path: &Path, grid: &Grid, optim: &OptimRefs, meta: &serde_json::Value) -> Result<()> {

@@ -7,6 +7,7 @@ use crate::cpu::plenoxel::{self as twin, MarchParams, TrainGrads};
 use crate::cpu::{rmsprop_sparse, tv, Stage1Params};
 use crate::data::TrainViews;
 use crate::gpu::{timed, Phase, PhaseClock};
+use crate::grid::checkpoint::state_bytes;
 use crate::grid::{Grid, SH_DIM};
 use crate::math::plenoxel::{GridRef, PlenoxelCounts};
 use anyhow::{ensure, Result};
@@ -232,6 +233,15 @@ impl Plenoxels for CpuPlenoxels {
 
     fn optimizer_state(&self) -> Result<(Vec<f32>, Vec<f32>)> {
         Ok((self.state_density.clone(), self.state_sh.clone()))
+    }
+
+    fn state_bytes(&self) -> u64 {
+        let g = &self.grid;
+        state_bytes(
+            g.links.len() as u64,
+            g.allocated() as u64,
+            1 + SH_DIM as u64,
+        )
     }
 
     fn with_state(&self, f: &mut StateFn) -> Result<()> {

@@ -98,6 +98,8 @@ pub trait Plenoxels {
     fn grid(&self) -> Result<Grid>;
     /// RMSProp running averages (σ, SH).
     fn optimizer_state(&self) -> Result<(Vec<f32>, Vec<f32>)>;
+    /// Bytes of a copy of the grid and the running averages (what a checkpoint holds).
+    fn state_bytes(&self) -> u64;
     /// Call `f` with the grid and the running averages (σ, SH): borrowed where the backend holds
     /// them in host memory (checkpoints of large grids copy nothing), else downloaded.
     fn with_state(&self, f: &mut StateFn) -> Result<()> {

@@ -41,6 +41,17 @@ pub fn check_fits(what: &str, bytes: f64, available: Option<u64>) -> Result<()> 
     Ok(())
 }
 
+/// Whether a copy of `bytes` leaves as much again of this machine's available memory (a
+/// checkpoint copied to be written in the background must not push the run out of memory);
+/// unknown availability counts as room.
+pub fn room_for_copy(bytes: u64) -> bool {
+    has_room(bytes, available_bytes())
+}
+
+fn has_room(bytes: u64, available: Option<u64>) -> bool {
+    available.is_none_or(|a| bytes <= a / 2)
+}
+
 /// [`check_fits`] against this machine's available memory.
 pub fn ensure_fits(what: &str, bytes: f64) -> Result<()> {
     check_fits(what, bytes, available_bytes())
@@ -49,6 +60,14 @@ pub fn ensure_fits(what: &str, bytes: f64) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_copy_needs_as_much_again_available() {
+        assert!(has_room(1 << 20, Some(2 << 20)));
+        assert!(!has_room((1 << 20) + 1, Some(2 << 20)));
+        assert!(!has_room(u64::MAX, Some(u64::MAX)));
+        assert!(has_room(u64::MAX, None));
+    }
 
     #[test]
     fn estimates_past_available_memory_are_refused() {

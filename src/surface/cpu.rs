@@ -17,6 +17,7 @@ use crate::cpu::surface_train::{train, RayLoss, SurfaceGrads, TrainCounts, Train
 use crate::cpu::{surface_rmsprop_sparse, tv, Stage2Params};
 use crate::data::TrainViews;
 use crate::gpu::{timed, Phase, PhaseClock};
+use crate::grid::checkpoint::state_bytes;
 use crate::grid::surface::SurfaceGrid;
 use crate::grid::SH_DIM;
 use crate::math::surface_blocks::{SkipRef, SURF_BLOCK_SHIFT_CPU};
@@ -300,6 +301,15 @@ impl SurfaceBackend for CpuSurface {
 
     fn optimizer_state(&self) -> Result<SurfaceState> {
         Ok(self.state.clone())
+    }
+
+    fn state_bytes(&self) -> u64 {
+        let g = &self.grid;
+        state_bytes(
+            g.links.len() as u64,
+            g.delta.len() as u64,
+            2 + SH_DIM as u64,
+        )
     }
 
     fn with_state(&self, f: &mut SurfaceStateFn) -> Result<()> {

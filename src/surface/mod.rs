@@ -119,6 +119,8 @@ pub trait SurfaceBackend {
     fn grid(&self) -> Result<SurfaceGrid>;
     /// RMSProp running averages.
     fn optimizer_state(&self) -> Result<SurfaceState>;
+    /// Bytes of a copy of the grid and the running averages (what a checkpoint holds).
+    fn state_bytes(&self) -> u64;
     /// Call `f` with the grid and the running averages (δ, σα, SH): borrowed where the backend
     /// holds them in host memory (checkpoints of large grids copy nothing), else downloaded.
     fn with_state(&self, f: &mut SurfaceStateFn) -> Result<()> {

@@ -31,6 +31,7 @@ use crate::gpu::{
     record_background_step, record_loss_sum, Batch, BatchTimes, Gpu, GpuBuffer, Phase, PhaseClock,
     RayBuffers, Readback, StepMeta, StepsInFlight, TrainRays, TrainViewBuffers, STEP_SLOTS,
 };
+use crate::grid::checkpoint::state_bytes;
 use crate::grid::surface::SurfaceGrid;
 use crate::grid::SH_DIM;
 use crate::kernels;
@@ -754,6 +755,11 @@ impl SurfaceBackend for VulkanSurface {
             sh: self.sh.download_range(0, rows * SH_DIM)?,
             ..self.meta.clone()
         })
+    }
+
+    fn state_bytes(&self) -> u64 {
+        let slots = self.meta.res.iter().map(|&r| r as u64).product();
+        state_bytes(slots, self.rows as u64, 2 + SH_DIM as u64)
     }
 
     fn optimizer_state(&self) -> Result<SurfaceState> {

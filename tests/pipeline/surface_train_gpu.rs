@@ -252,3 +252,32 @@ fn cpu_backend_checks_links_when_made() {
     );
     assert_eq!(first, again);
 }
+
+/// Both backends of each stage count a checkpoint's copy (`state_bytes`, which decides whether
+/// it is written in the background) as the bytes of the arrays a checkpoint holds.
+#[test]
+fn state_bytes_are_the_checkpoint_arrays() {
+    use alphasurf::plenoxel::{CpuPlenoxels, Plenoxels, VulkanPlenoxels};
+    let gpu = test_gpu();
+    let g0 = scene_grid(&test_scene(11, 24));
+    let (vk, cpu) = (
+        VulkanSurface::new(gpu, g0.clone()).unwrap(),
+        CpuSurface::new(g0.clone()).unwrap(),
+    );
+    let [sd, so, ss] = cpu.optimizer_state().unwrap();
+    let arrays = [&g0.delta, &g0.opacity, &g0.sh, &sd, &so, &ss];
+    let want = 4 * (g0.links.len() + arrays.iter().map(|a| a.len()).sum::<usize>()) as u64;
+    assert_eq!(cpu.state_bytes(), want);
+    assert_eq!(vk.state_bytes(), want);
+
+    let g = alphasurf::grid::Grid::sphere(32, [0.0; 3], [1.0; 3], 1.0, 0.1);
+    let (vk, cpu) = (
+        VulkanPlenoxels::new(gpu, g.clone()).unwrap(),
+        CpuPlenoxels::new(g.clone()),
+    );
+    let (sd, ss) = cpu.optimizer_state().unwrap();
+    let arrays = [&g.density, &g.sh, &sd, &ss];
+    let want = 4 * (g.links.len() + arrays.iter().map(|a| a.len()).sum::<usize>()) as u64;
+    assert_eq!(cpu.state_bytes(), want);
+    assert_eq!(vk.state_bytes(), want);
+}
