@@ -40,8 +40,14 @@ pub fn run_render(opts: &RenderOptions, gpu: Option<&Gpu>) -> Result<()> {
     for (i, p) in r.psnr.iter().enumerate() {
         println!("{} view {i:>3}: PSNR {p:.2} dB", r.split);
     }
+    let n = opts.pixel_samples;
+    let samples = if n > 1 {
+        format!(" ({n}×{n} rays per pixel)")
+    } else {
+        String::new()
+    };
     println!(
-        "mean PSNR {:.2} dB over {} views -> {}",
+        "mean PSNR {:.2} dB over {} views{samples} -> {}",
         r.mean_psnr,
         r.psnr.len(),
         opts.out.display()

@@ -13,7 +13,7 @@ use crate::run::dir::{ALL_STAGE1, ALL_STAGE2, STAGE2_CHECKPOINT};
 use crate::run::{self, read_info};
 use crate::train::{
     render_split, render_split_with, stage2, BackgroundRecord, RenderedSplit, Stage1Config,
-    SurfaceConfig,
+    SurfaceConfig, MAX_PIXEL_SAMPLES,
 };
 use anyhow::{bail, Result};
 use std::path::{Path, PathBuf};
@@ -37,6 +37,11 @@ pub struct RenderOptions {
     /// Where the kernels run.
     #[arg(long, value_enum, default_value_t = Backend::Auto)]
     pub backend: Backend,
+    /// N×N rays per pixel on a regular grid inside it, averaged: an anti-aliased render (the
+    /// development set's images are pixel averages, as a path tracer filters them). 1 is one ray
+    /// through the pixel centre, as `train` renders its test views and reports their PSNR.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=MAX_PIXEL_SAMPLES as i64))]
+    pub pixel_samples: u32,
 }
 
 /// The grid a run directory holds, with its background.
@@ -121,7 +126,14 @@ pub fn render(opts: &RenderOptions, gpu: Option<&Gpu>) -> Result<RenderedSplit> 
         Trained::Density { grid, stop_thresh } => {
             let mut backend = train_stage1::make_backend(gpu, grid)?;
             backend.set_background(bg.kernel())?;
-            render_split(backend.as_mut(), &data, split, stop_thresh, &opts.out)
+            render_split(
+                backend.as_mut(),
+                &data,
+                split,
+                stop_thresh,
+                &opts.out,
+                opts.pixel_samples,
+            )
         }
         Trained::Surface {
             grid,
@@ -135,6 +147,7 @@ pub fn render(opts: &RenderOptions, gpu: Option<&Gpu>) -> Result<RenderedSplit> 
                 &data,
                 split,
                 &opts.out,
+                opts.pixel_samples,
             )
         }
     }

@@ -14,6 +14,6 @@ pub mod surface_config;
 pub use background::BackgroundRecord;
 pub use config::Stage1Config;
 pub use preset::{Category, Preset};
-pub use render::{psnr, render_split, render_split_with, RenderedSplit};
+pub use render::{psnr, render_split, render_split_with, RenderedSplit, MAX_PIXEL_SAMPLES};
 pub use schedule::DelayedExp;
 pub use surface_config::SurfaceConfig;

@@ -14,44 +14,108 @@ pub struct RenderedSplit {
     pub mean_psnr: f64,
 }
 
+/// View `view` of `split` rendered with `per_axis`² rays per pixel, averaged (see
+/// [`render_split_with`]); rgb per pixel, row by row.
+fn render_averaged(
+    render: &mut dyn FnMut(&[f32]) -> Result<Vec<f32>>,
+    data: &Dataset,
+    split: &Split,
+    view: usize,
+    per_axis: u32,
+) -> Result<Vec<f32>> {
+    let camera = &split.frames[view].camera;
+    let (w, n) = (split.width() as usize, per_axis as usize);
+    let per_pixel = n * n;
+    let pixels = w * split.height() as usize;
+    let block = (RENDER_CHUNK / per_pixel).max(1);
+    let mut rgb = Vec::with_capacity(3 * pixels);
+    for start in (0..pixels).step_by(block) {
+        let end = (start + block).min(pixels);
+        let mut rays = Vec::with_capacity(6 * per_pixel * (end - start));
+        for p in start..end {
+            let (x, y) = ((p % w) as f32, (p / w) as f32);
+            for k in 0..per_pixel {
+                let off = |j: usize| (j as f32 + 0.5) / n as f32;
+                let (o, d) = camera.ray_at(x + off(k % n), y + off(k / n));
+                rays.extend_from_slice(&data.scene.to_scaled(o).to_array());
+                rays.extend_from_slice(&d.to_array());
+            }
+        }
+        let colours = render(&rays)?;
+        for px in colours.chunks_exact(3 * per_pixel) {
+            for c in 0..3 {
+                let sum: f32 = px
+                    .iter()
+                    .skip(c)
+                    .step_by(3)
+                    .map(|v| v.clamp(0.0, 1.0))
+                    .sum();
+                rgb.push(sum / per_pixel as f32);
+            }
+        }
+    }
+    Ok(rgb)
+}
+
 /// PSNR in dB of a mean squared error on [0, 1] colours.
 pub fn psnr(mse: f64) -> f64 {
     -10.0 * mse.max(1e-20).log10()
 }
 
-/// Render every view of `split` through a stage-1 backend into `out/r_<i>.png` and measure PSNR.
+/// Render every view of `split` through a stage-1 backend into `out/r_<i>.png` and measure PSNR
+/// (`per_axis`: see [`render_split_with`]).
 pub fn render_split(
     backend: &mut dyn Plenoxels,
     data: &Dataset,
     split: &Split,
     stop_thresh: f32,
     out: &Path,
+    per_axis: u32,
 ) -> Result<RenderedSplit> {
     render_split_with(
         &mut |rays| Ok(backend.render(rays, stop_thresh)?.0),
         data,
         split,
         out,
+        per_axis,
     )
 }
 
+/// Rays per call of the renderer.
+const RENDER_CHUNK: usize = 131_072;
+
+/// Largest `per_axis` of [`render_split_with`] (64 rays per pixel).
+pub const MAX_PIXEL_SAMPLES: u32 = 8;
+
 /// Render every view of `split` with `render` (rays, 6 floats each → rgb, 3 floats each) into
-/// `out/r_<i>.png` and measure PSNR.
+/// `out/r_<i>.png` and measure PSNR. `per_axis` = 1: one ray through each pixel's centre (what
+/// training renders); n > 1: n×n rays on a regular grid inside the pixel (offsets (k + ½)/n),
+/// their colours clamped to [0, 1] and averaged: the pixel's mean, as a renderer that filters
+/// over the pixel (Cycles) makes the images.
 pub fn render_split_with(
     render: &mut dyn FnMut(&[f32]) -> Result<Vec<f32>>,
     data: &Dataset,
     split: &Split,
     out: &Path,
+    per_axis: u32,
 ) -> Result<RenderedSplit> {
+    anyhow::ensure!(
+        (1..=MAX_PIXEL_SAMPLES).contains(&per_axis),
+        "{per_axis}×{per_axis} samples per pixel: 1 to {MAX_PIXEL_SAMPLES} per axis"
+    );
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let mut psnrs = Vec::new();
     for (i, frame) in split.frames.iter().enumerate() {
         let b = view_rays(split, &data.scene, i);
-        let rays = b.flat_rays();
-        let mut rgb = Vec::with_capacity(3 * b.len());
-        for chunk in rays.chunks(6 * 131_072) {
-            rgb.extend(render(chunk)?);
-        }
+        let rgb = if per_axis == 1 {
+            let mut rgb = Vec::with_capacity(3 * b.len());
+            for chunk in b.flat_rays().chunks(6 * RENDER_CHUNK) {
+                rgb.extend(render(chunk)?);
+            }
+            rgb
+        } else {
+            render_averaged(render, data, split, i, per_axis)?
+        };
         let mse = rgb
             .iter()
             .zip(b.rgb.iter().flatten())

@@ -315,6 +315,7 @@ pub fn train(
         &data.test,
         cfg.stop_thresh,
         &out.join("test"),
+        1,
     )?;
     report.render_seconds = t.elapsed().as_secs_f64();
     let grid = backend.grid()?;

@@ -299,6 +299,7 @@ pub fn train(
         data,
         &data.test,
         &out.join("test"),
+        1,
     )?;
     report.render_seconds = t.elapsed().as_secs_f64();
     report.steps = cfg.iters;

@@ -151,6 +151,40 @@ fn stage_all_extract_eval_and_resume() {
         std::fs::read(renders.join("r_0.png")).unwrap(),
         std::fs::read(out.join("surface/test/r_0.png")).unwrap()
     );
+    // Anti-aliased: 2×2 rays per pixel, another image; 0 is refused.
+    let aa = dir.path().join("renders_aa");
+    let text = run_ok(
+        bin()
+            .args([
+                "render",
+                "--backend",
+                "cpu",
+                "--pixel-samples",
+                "2",
+                "--run",
+            ])
+            .arg(out.join("surface"))
+            .arg("--out")
+            .arg(&aa),
+    );
+    assert!(text.contains("(2×2 rays per pixel)"), "{text}");
+    assert_ne!(
+        std::fs::read(aa.join("r_0.png")).unwrap(),
+        std::fs::read(renders.join("r_0.png")).unwrap()
+    );
+    let (ok, text) = run(bin()
+        .args([
+            "render",
+            "--backend",
+            "cpu",
+            "--pixel-samples",
+            "0",
+            "--run",
+        ])
+        .arg(out.join("surface"))
+        .arg("--out")
+        .arg(dir.path().join("renders_0")));
+    assert!(!ok && text.contains("--pixel-samples"), "{text}");
 
     // The αSurf point cloud, then its error against the ground truth.
     let ply = dir.path().join("surface.ply");

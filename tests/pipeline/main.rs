@@ -11,6 +11,7 @@ mod data_fixture;
 mod data_loader;
 mod data_ply;
 mod eval;
+mod render_samples;
 mod scene_generate;
 mod scene_shapes;
 mod surface_train_gpu;
