@@ -49,7 +49,8 @@ pub enum Category {
     Thin,
     /// Semi-transparent objects.
     Translucent,
-    /// The synthetic set-up (= thin).
+    /// Opaque objects: the paper's synthetic set-up (thin's under `--preset paper`; `fast` starts
+    /// σα lower and fades unseen surfaces faster, and `extract` trims nothing by default).
     Synthetic,
     /// Real captures.
     Real,
