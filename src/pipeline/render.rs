@@ -40,8 +40,13 @@ pub struct RenderOptions {
     /// N×N rays per pixel on a regular grid inside it, averaged: an anti-aliased render (the
     /// development set's images are pixel averages, as a path tracer filters them). 1 is one ray
     /// through the pixel centre, as `train` renders its test views and reports their PSNR.
-    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=MAX_PIXEL_SAMPLES as i64))]
+    #[arg(long, default_value_t = 1, value_parser = pixel_samples())]
     pub pixel_samples: u32,
+}
+
+/// `--pixel-samples`: 1 to [`MAX_PIXEL_SAMPLES`].
+fn pixel_samples() -> clap::builder::RangedI64ValueParser<u32> {
+    clap::value_parser!(u32).range(1..=MAX_PIXEL_SAMPLES as i64)
 }
 
 /// The grid a run directory holds, with its background.

@@ -1,6 +1,7 @@
 //! The stage-1 (Plenoxels) training loop: batches of training rays, one backend step each,
-//! upsampling with weight pruning on schedule, periodic atomic checkpoints written in the background (resumable), NaN/Inf
-//! detection, and the end-of-run test renders, PSNR and metrics.json.
+//! upsampling with weight pruning on schedule, periodic atomic checkpoints written in the
+//! background (resumable), NaN/Inf detection, and the end-of-run test renders, PSNR and
+//! metrics.json.
 
 use super::background::{self, BackgroundRecord};
 use super::config::Stage1Config;

@@ -1,7 +1,7 @@
 //! The stage-2 (αSurf) training loop: batches of training rays, one backend step each with the
-//! scheduled learning rates, truncation a and regularisers; periodic atomic checkpoints
-//! written in the background (resumable); NaN/Inf detection; at the end the α < 0.1 surfaces are dropped, the test split
-//! rendered and metrics.json written.
+//! scheduled learning rates, truncation a and regularisers; periodic atomic checkpoints written
+//! in the background (resumable); NaN/Inf detection; at the end the α < 0.1 surfaces are
+//! dropped, the test split rendered and metrics.json written.
 
 use super::background::{self, BackgroundRecord};
 use super::progress::{pair, Progress, StepGroup, Throughput};
