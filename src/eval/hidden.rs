@@ -205,19 +205,26 @@ mod tests {
         (c[0] * RES[1] + c[1]) * RES[2] + c[2]
     }
 
-    /// The cells of a closed cubic shell [lo, hi]³ (its faces one cell thick).
-    fn shell(lo: u32, hi: u32) -> Vec<u32> {
+    /// The cells of the box lo..hi per axis (hi excluded), in x, y, z order.
+    fn cuboid(lo: [u32; 3], hi: [u32; 3]) -> Vec<[u32; 3]> {
         let mut v = Vec::new();
-        for i in lo..=hi {
-            for j in lo..=hi {
-                for k in lo..=hi {
-                    if [i, j, k].iter().any(|&x| x == lo || x == hi) {
-                        v.push(slot([i, j, k]));
-                    }
+        for i in lo[0]..hi[0] {
+            for j in lo[1]..hi[1] {
+                for k in lo[2]..hi[2] {
+                    v.push([i, j, k]);
                 }
             }
         }
         v
+    }
+
+    /// The cells of a closed cubic shell [lo, hi]³ (its faces one cell thick).
+    fn shell(lo: u32, hi: u32) -> Vec<u32> {
+        cuboid([lo; 3], [hi + 1; 3])
+            .into_iter()
+            .filter(|c| c.iter().any(|&x| x == lo || x == hi))
+            .map(slot)
+            .collect()
     }
 
     fn keep_of(cells: &[u32], cameras: &[[f32; 3]]) -> Vec<bool> {
@@ -261,14 +268,7 @@ mod tests {
 
     #[test]
     fn the_core_of_a_solid_block_is_hidden() {
-        let mut block = Vec::new();
-        for i in 6..26 {
-            for j in 6..26 {
-                for k in 6..26 {
-                    block.push(slot([i, j, k]));
-                }
-            }
-        }
+        let block: Vec<u32> = cuboid([6; 3], [26; 3]).into_iter().map(slot).collect();
         let keep = keep_of(&block, &AROUND);
         let at = |c| block.iter().position(|&s| s == slot(c)).unwrap();
         assert!(!keep[at([16, 16, 16])], "the core was kept");
@@ -278,14 +278,10 @@ mod tests {
     #[test]
     fn an_unseen_underside_open_below_is_kept() {
         // A slab seen only from above (+z): no camera sees its bottom face, which is open below.
-        let mut slab = Vec::new();
-        for i in 8..24 {
-            for j in 8..24 {
-                for k in 8..12 {
-                    slab.push(slot([i, j, k]));
-                }
-            }
-        }
+        let slab: Vec<u32> = cuboid([8, 8, 8], [24, 24, 12])
+            .into_iter()
+            .map(slot)
+            .collect();
         let keep = keep_of(&slab, &[[16.5, 16.5, 60.0], [40.0, 16.5, 50.0]]);
         let bottom: Vec<bool> = slab
             .iter()

@@ -112,6 +112,14 @@ mod tests {
         (links, values)
     }
 
+    fn field<'a>(links: &'a [i32], values: &'a [f32]) -> Field<'a> {
+        Field {
+            res: RES,
+            links,
+            values,
+        }
+    }
+
     fn point(x: f32, level: u32) -> ExtractPoint {
         let cell = x.floor() as u32;
         ExtractPoint {
@@ -130,30 +138,18 @@ mod tests {
         // Thick: a ramp of 40 a cell from x = 4, the outer level at x = 4.25, the third (50) at
         // 5.25, a cell further in.
         let (links, values) = field_of(|x| (40.0 * (x as f32 - 4.0)).clamp(0.0, 80.0));
-        let f = Field {
-            res: RES,
-            links: &links,
-            values: &values,
-        };
+        let f = field(&links, &values);
         let mut pts = vec![point(4.25, 0), point(4.75, 1), point(5.25, 2)];
         assert_eq!(drop_outer_halo(&mut pts, &f, &levels, REACH), 1);
         assert_eq!(pts.iter().map(|p| p.level).collect::<Vec<_>>(), [1, 2]);
         // Thin: a peak of 40 at x = 6, never reaching 50.
         let (links, values) = field_of(|x| if x == 6 { 40.0 } else { 0.0 });
-        let f = Field {
-            res: RES,
-            links: &links,
-            values: &values,
-        };
+        let f = field(&links, &values);
         let mut pts = vec![point(5.25, 0)];
         assert_eq!(drop_outer_halo(&mut pts, &f, &levels, REACH), 0);
         // The ramp 2 cells further in than the reach: the outer level stays too.
         let (links, values) = field_of(|x| if x >= 8 { 60.0 } else { 10.0 });
-        let f = Field {
-            res: RES,
-            links: &links,
-            values: &values,
-        };
+        let f = field(&links, &values);
         let mut pts = vec![point(5.0, 0)];
         assert_eq!(drop_outer_halo(&mut pts, &f, &levels, REACH), 0);
         // Two levels only: nothing to compare with.
@@ -167,11 +163,7 @@ mod tests {
         // Remove the vertices from x = 5 on: the search meets no allocated cell inward.
         let plane = (RES[1] * RES[2]) as usize;
         links[5 * plane..].iter_mut().for_each(|l| *l = -1);
-        let f = Field {
-            res: RES,
-            links: &links,
-            values: &values,
-        };
+        let f = field(&links, &values);
         let mut pts = vec![point(4.5, 0)];
         assert_eq!(drop_outer_halo(&mut pts, &f, &[10.0, 30.0, 50.0], REACH), 0);
     }

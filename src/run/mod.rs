@@ -1,7 +1,9 @@
 //! What a command owns on disk and the limits it runs within: run directories (marker, lock,
 //! file names, refusal rules, `--overwrite`), guards for output paths, the training log's
-//! resume-time cut, and memory estimates for flags that size allocations.
+//! resume-time cut, memory estimates for flags that size allocations, and the thread that writes
+//! checkpoints while training goes on.
 
+pub mod checkpoint_writer;
 pub mod dir;
 pub mod files;
 pub mod lock;

@@ -10,9 +10,8 @@ use super::render::{psnr, render_split, RenderedSplit};
 use crate::abi::buffers::PlenoxelPerRay;
 use crate::data::{BackgroundMode, Dataset, Split, TrainViews};
 use crate::grid::{checkpoint, dilate, upsample, Grid};
-use crate::io::background_save::BackgroundSave;
 use crate::plenoxel::{Plenoxels, StepParams, TvParams};
-use crate::run::memory;
+use crate::run::checkpoint_writer::BackgroundSave;
 use crate::run::train_log;
 use anyhow::{bail, Context, Result};
 use rand::{Rng, SeedableRng};
@@ -290,13 +289,11 @@ pub fn train(
         if checkpoint {
             let t = Instant::now();
             train_log::flush(&mut log, &log_path)?;
-            // The previous write first: at most one snapshot is held besides the grid.
-            writer.finish()?;
-            if memory::room_for_copy(backend.state_bytes()) {
-                writer.start(snapshot(backend, cfg, data.background, out, step + 1)?)?;
-            } else {
-                save(backend, cfg, data.background, out, step + 1)?;
-            }
+            writer.checkpoint(
+                backend.state_bytes(),
+                || snapshot(backend, cfg, data.background, out, step + 1),
+                || save(backend, cfg, data.background, out, step + 1),
+            )?;
             report.checkpoint_seconds += t.elapsed().as_secs_f64();
             group.restart();
         }

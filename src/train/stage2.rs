@@ -13,8 +13,7 @@ use crate::cpu::surface_reg::{delta_tv_chunk, opacity_tv_chunk, OpacityChunk};
 use crate::data::{BackgroundMode, Dataset, TrainViews};
 use crate::grid::checkpoint;
 use crate::grid::surface::SurfaceGrid;
-use crate::io::background_save::BackgroundSave;
-use crate::run::memory;
+use crate::run::checkpoint_writer::BackgroundSave;
 use crate::run::train_log;
 use crate::surface::{SurfaceBackend, SurfaceRegs, SurfaceStepParams};
 use anyhow::{bail, Context, Result};
@@ -261,13 +260,11 @@ pub fn train(
         if checkpoint {
             let t = Instant::now();
             train_log::flush(&mut log, &log_path)?;
-            // The previous write first: at most one snapshot is held besides the grid.
-            writer.finish()?;
-            if memory::room_for_copy(backend.state_bytes()) {
-                writer.start(snapshot(backend, cfg, data.background, out, step + 1)?)?;
-            } else {
-                save(backend, cfg, data.background, out, step + 1)?;
-            }
+            writer.checkpoint(
+                backend.state_bytes(),
+                || snapshot(backend, cfg, data.background, out, step + 1),
+                || save(backend, cfg, data.background, out, step + 1),
+            )?;
             report.checkpoint_seconds += t.elapsed().as_secs_f64();
             group.restart();
         }

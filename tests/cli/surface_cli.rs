@@ -127,16 +127,22 @@ fn stage_all_extract_eval_and_resume() {
     assert_eq!(log.lines().count(), 121, "header + one line per step");
     assert!(out.join("surface/test/r_0.png").exists());
 
+    // `render [FLAGS]` of the stage-2 run into `dir/NAME`.
+    let render = |name: &str, flags: &[&str]| {
+        let mut c = bin();
+        c.args(["render", "--backend", "cpu"])
+            .args(flags)
+            .arg("--run")
+            .arg(out.join("surface"))
+            .arg("--out")
+            .arg(dir.path().join(name));
+        run(&mut c)
+    };
     // `render` on the stage-2 run draws the test views `train` drew: the same PSNR (same grid,
     // same truncation, same deterministic renderer).
     let renders = dir.path().join("renders");
-    let text = run_ok(
-        bin()
-            .args(["render", "--backend", "cpu", "--run"])
-            .arg(out.join("surface"))
-            .arg("--out")
-            .arg(&renders),
-    );
+    let (ok, text) = render("renders", &[]);
+    assert!(ok, "{text}");
     let mean = text
         .lines()
         .find_map(|l| l.strip_prefix("mean PSNR "))
@@ -153,37 +159,13 @@ fn stage_all_extract_eval_and_resume() {
     );
     // Anti-aliased: 2×2 rays per pixel, another image; 0 is refused.
     let aa = dir.path().join("renders_aa");
-    let text = run_ok(
-        bin()
-            .args([
-                "render",
-                "--backend",
-                "cpu",
-                "--pixel-samples",
-                "2",
-                "--run",
-            ])
-            .arg(out.join("surface"))
-            .arg("--out")
-            .arg(&aa),
-    );
-    assert!(text.contains("(2×2 rays per pixel)"), "{text}");
+    let (ok, text) = render("renders_aa", &["--pixel-samples", "2"]);
+    assert!(ok && text.contains("(2×2 rays per pixel)"), "{text}");
     assert_ne!(
         std::fs::read(aa.join("r_0.png")).unwrap(),
         std::fs::read(renders.join("r_0.png")).unwrap()
     );
-    let (ok, text) = run(bin()
-        .args([
-            "render",
-            "--backend",
-            "cpu",
-            "--pixel-samples",
-            "0",
-            "--run",
-        ])
-        .arg(out.join("surface"))
-        .arg("--out")
-        .arg(dir.path().join("renders_0")));
+    let (ok, text) = render("renders_0", &["--pixel-samples", "0"]);
     assert!(!ok && text.contains("--pixel-samples"), "{text}");
 
     // The αSurf point cloud, then its error against the ground truth.

@@ -2,6 +2,7 @@
 //! goes on training while it is written. One write at a time; a failed write's error comes back
 //! from the next call.
 
+use super::memory;
 use anyhow::{anyhow, Context, Result};
 use std::thread::JoinHandle;
 
@@ -22,6 +23,27 @@ impl BackgroundSave {
             .context("starting the checkpoint thread")?;
         self.pending = Some(handle);
         Ok(())
+    }
+
+    /// Writes a checkpoint of `bytes` (grid and optimiser state): after the write in progress,
+    /// so that at most one copy is held besides the grid, either on the thread, from the copy
+    /// `snapshot` makes, or now with `in_place` when a copy would leave less than as much again
+    /// of the memory available ([`memory::room_for_copy`]).
+    pub fn checkpoint<W>(
+        &mut self,
+        bytes: u64,
+        snapshot: impl FnOnce() -> Result<W>,
+        in_place: impl FnOnce() -> Result<()>,
+    ) -> Result<()>
+    where
+        W: FnOnce() -> Result<()> + Send + 'static,
+    {
+        self.finish()?;
+        if memory::room_for_copy(bytes) {
+            self.start(snapshot()?)
+        } else {
+            in_place()
+        }
     }
 
     /// Waits for the write in progress; its error if it failed.
