@@ -28,6 +28,7 @@ fn render_averaged(
     let per_pixel = n * n;
     let pixels = w * split.height() as usize;
     let block = (RENDER_CHUNK / per_pixel).max(1);
+    let off = |j: usize| (j as f32 + 0.5) / n as f32;
     let mut rgb = Vec::with_capacity(3 * pixels);
     for start in (0..pixels).step_by(block) {
         let end = (start + block).min(pixels);
@@ -35,7 +36,6 @@ fn render_averaged(
         for p in start..end {
             let (x, y) = ((p % w) as f32, (p / w) as f32);
             for k in 0..per_pixel {
-                let off = |j: usize| (j as f32 + 0.5) / n as f32;
                 let (o, d) = camera.ray_at(x + off(k % n), y + off(k / n));
                 rays.extend_from_slice(&data.scene.to_scaled(o).to_array());
                 rays.extend_from_slice(&d.to_array());
