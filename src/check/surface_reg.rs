@@ -10,11 +10,12 @@ use crate::cpu::step::{optim_args, step_record, STEP_FLAGS};
 use crate::cpu::surface_delta_tv::{axis_neighbours, delta_tv, forward_reach, DeltaTvChunk};
 use crate::cpu::surface_reg::delta_tv_chunk;
 use crate::cpu::surface_reg::{
-    normal_reg_passes, row_slots, surface_opacity_reg, NormalChunk, NormalPrefix, NormalScratch,
-    OpacityChunk, CORNERS_STRIDE, NORMALS_STRIDE,
+    normal_reg_passes, surface_opacity_reg, NormalChunk, NormalPrefix, NormalScratch, OpacityChunk,
+    CORNERS_STRIDE, NORMALS_STRIDE,
 };
 use crate::cpu::{surface_rmsprop_sparse, tv, Stage2Params, SurfaceRmsProp, TvChunk};
 use crate::gpu::{Gpu, GpuBuffer};
+use crate::grid::row_slots;
 use crate::grid::SH_DIM;
 use crate::kernels;
 use crate::surface::delta_tv::{record_delta_tv, DeltaTvIo, Q_FLOATS};

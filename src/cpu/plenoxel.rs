@@ -4,13 +4,14 @@
 
 use super::atomic;
 use super::step::touch;
+use crate::grid::row_slots;
 use crate::math::plenoxel::{
     march_init, march_next, occ_dims, sample_alpha, sample_at, sample_color_raw, GridRef, March,
     PlenoxelCounts, OCC_SHIFT, SIGMA_EPS,
 };
 use crate::math::sh::sh_basis;
 use rayon::prelude::*;
-use std::sync::atomic::AtomicU32;
+use std::sync::atomic::{AtomicU32, Ordering};
 
 use crate::abi::consts::REPLAY;
 
@@ -29,31 +30,53 @@ fn ray(rays: &[f32], r: usize) -> ([f32; 3], [f32; 3]) {
     ([v[0], v[1], v[2]], [v[3], v[4], v[5]])
 }
 
-/// Twin of `occupancy.comp`.
+/// Twin of `occupancy.comp`: 1 for each 2^OCC_SHIFT-cell block whose vertex box (the block's
+/// cells' corners) holds an allocated vertex with density above SIGMA_EPS/2, else 0. The kernel
+/// looks at each block's box; this scatters from the allocated rows instead ([`occupancy_rows`]),
+/// which gives the same words and reads no links.
 pub fn occupancy(links: &[i32], density: &[f32], res: [u32; 3]) -> Vec<u32> {
+    occupancy_rows(links, &row_slots(links, density.len()), density, res)
+}
+
+/// [`occupancy`] from the rows' slots (`grid::row_slots`, kept by a training loop: the
+/// allocation alone decides them): each row above the threshold that a link names marks the
+/// blocks whose vertex box holds it — along each axis, the block of its cell, and the block
+/// before when the vertex is that block's far corner (x a multiple of 2^OCC_SHIFT).
+pub fn occupancy_rows(links: &[i32], slots: &[u32], density: &[f32], res: [u32; 3]) -> Vec<u32> {
     let nb = occ_dims(res);
-    let n = (nb[0] * nb[1] * nb[2]) as usize;
-    (0..n)
-        .into_par_iter()
-        .map(|id| {
-            let id = id as u32;
-            let b = [id / (nb[1] * nb[2]), (id / nb[2]) % nb[1], id % nb[2]];
-            let lo = b.map(|x| x << OCC_SHIFT);
-            let hi: [u32; 3] = std::array::from_fn(|i| (lo[i] + (1 << OCC_SHIFT)).min(res[i] - 1));
-            for x in lo[0]..=hi[0] {
-                for y in lo[1]..=hi[1] {
-                    let base = (x * res[1] + y) * res[2];
-                    for z in lo[2]..=hi[2] {
-                        let l = links[(base + z) as usize];
-                        if l >= 0 && density[l as usize] > 0.5 * SIGMA_EPS {
-                            return 1;
+    let occ: Vec<AtomicU32> = (0..nb[0] * nb[1] * nb[2])
+        .map(|_| AtomicU32::new(0))
+        .collect();
+    let mask = (1u32 << OCC_SHIFT) - 1;
+    slots
+        .par_iter()
+        .zip(density.par_iter())
+        .enumerate()
+        .filter(|&(r, (&s, &d))| d > 0.5 * SIGMA_EPS && links[s as usize] == r as i32)
+        .for_each(|(_, (&s, _))| {
+            let v = [s / (res[1] * res[2]), (s / res[2]) % res[1], s % res[2]];
+            // The blocks along each axis: v >> OCC_SHIFT (when it is a block: the last vertex
+            // of an axis whose cells fill the blocks is no block's first corner), and the one
+            // before at a block boundary.
+            let axis = |i: usize| {
+                let b = v[i] >> OCC_SHIFT;
+                let own = (b < nb[i]).then_some(b);
+                let before = (v[i] & mask == 0 && b > 0).then(|| b - 1);
+                [own, before]
+            };
+            let (ax, ay, az) = (axis(0), axis(1), axis(2));
+            for bx in ax.into_iter().flatten() {
+                for by in ay.into_iter().flatten() {
+                    for bz in az.into_iter().flatten() {
+                        let o = &occ[((bx * nb[1] + by) * nb[2] + bz) as usize];
+                        if o.load(Ordering::Relaxed) == 0 {
+                            o.store(1, Ordering::Relaxed);
                         }
                     }
                 }
             }
-            0
-        })
-        .collect()
+        });
+    occ.into_iter().map(AtomicU32::into_inner).collect()
 }
 
 /// The forward march of one ray (both kernels' first loop): accumulated colour (background not
@@ -331,4 +354,87 @@ pub fn max_weights(g: &GridRef, rays: &[f32], mp: &MarchParams) -> Vec<f32> {
         }
     });
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+
+    /// Each block's word by its definition: a scan of its vertex box.
+    fn by_definition(links: &[i32], density: &[f32], res: [u32; 3]) -> Vec<u32> {
+        let nb = occ_dims(res);
+        let mut out = Vec::new();
+        for bx in 0..nb[0] {
+            for by in 0..nb[1] {
+                for bz in 0..nb[2] {
+                    let lo = [bx, by, bz].map(|b| b << OCC_SHIFT);
+                    let hi: [u32; 3] =
+                        std::array::from_fn(|i| (lo[i] + (1 << OCC_SHIFT)).min(res[i] - 1));
+                    let mut any = 0;
+                    for x in lo[0]..=hi[0] {
+                        for y in lo[1]..=hi[1] {
+                            for z in lo[2]..=hi[2] {
+                                let l = links[((x * res[1] + y) * res[2] + z) as usize];
+                                if l >= 0 && density[l as usize] > 0.5 * SIGMA_EPS {
+                                    any = 1;
+                                }
+                            }
+                        }
+                    }
+                    out.push(any);
+                }
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn occupancy_from_the_rows_is_the_box_scan() {
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(3);
+        // Axes whose cells do and do not fill their blocks (17 vertices: 16 cells, two blocks;
+        // 20: 19 cells; 9: one block), sparse and dense allocations, rows no link names.
+        for res in [[17u32, 20, 9], [9, 17, 26], [2, 2, 2]] {
+            for (alloc, above) in [(0.05f32, 0.5f32), (0.6, 0.1), (1.0, 0.02)] {
+                let slots = (res[0] * res[1] * res[2]) as usize;
+                let mut links = vec![-1i32; slots];
+                let mut rows = 0;
+                for l in links.iter_mut() {
+                    if rng.random::<f32>() < alloc {
+                        *l = rows;
+                        rows += 1;
+                    }
+                }
+                // Two rows more than the links name: never occupy anything.
+                let density: Vec<f32> = (0..rows + 2)
+                    .map(|_| {
+                        if rng.random::<f32>() < above {
+                            SIGMA_EPS
+                        } else {
+                            0.5 * SIGMA_EPS
+                        }
+                    })
+                    .collect();
+                let want = by_definition(&links, &density, res);
+                assert_eq!(occupancy(&links, &density, res), want, "{res:?} {alloc}");
+                assert!(want.contains(&1) || rows == 0 || above < 0.05);
+            }
+        }
+        // One vertex alone above the threshold, at block boundaries (shared by two blocks per
+        // axis), inside a block and on the grid's last vertex.
+        let res = [17u32, 20, 9];
+        for v in [
+            [8u32, 8, 8],
+            [0, 0, 0],
+            [16, 19, 8],
+            [8, 3, 0],
+            [5, 16, 8],
+            [16, 8, 4],
+        ] {
+            let mut links = vec![-1i32; (res[0] * res[1] * res[2]) as usize];
+            links[((v[0] * res[1] + v[1]) * res[2] + v[2]) as usize] = 0;
+            let want = by_definition(&links, &[SIGMA_EPS], res);
+            assert_eq!(occupancy(&links, &[SIGMA_EPS], res), want, "vertex {v:?}");
+        }
+    }
 }

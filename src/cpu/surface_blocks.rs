@@ -20,7 +20,8 @@ use rayon::prelude::*;
 /// then the `nb`³ block masks of 2^shift-cell blocks, `nb = ceil((n−1)/2^shift)`, x-major: bit i
 /// set iff τ_i ∈ [bmin − margin, bmax + margin] over the block's allocated vertices (0 if none),
 /// with the empty radius of a mask-0 block above (`surf_block_radii`), then the allocated box
-/// ([`alloc_box`]). Pass `margin = 0` for the structure of the current δ.
+/// ([`alloc_box`]). Pass `margin = 0` for the structure of the current δ. A training loop that
+/// rebuilds it keeps a [`SkipAllocation`] instead: this is one built and used once.
 pub fn build_blocks(
     g: &SurfaceGridRef,
     levels: &[f32],
@@ -28,52 +29,141 @@ pub fn build_blocks(
     shift: u32,
 ) -> Result<Vec<u32>> {
     g.validate()?;
-    ensure!(
-        levels.len() <= SURF_MAX_LEVELS,
-        "at most {SURF_MAX_LEVELS} levels, got {}",
-        levels.len()
-    );
-    ensure!(
-        margin >= 0.0 && margin.is_finite(),
-        "block margin must be finite and ≥ 0, got {margin}"
-    );
-    let n = g.n;
-    ensure!(
-        (1..=8).contains(&shift),
-        "block shift {shift}: want 2 to 256 cells per block edge"
-    );
-    let nb = surf_blocks_per_axis(n, shift);
-    let mut out = live_cells(g, levels, margin);
-    let words = out.len();
-    out.extend(
-        (0..nb * nb * nb)
+    SkipAllocation::new(g.links, g.n, shift)?.build(g.links, g.delta, levels, margin)
+}
+
+/// What the skip structure ([`build_blocks`]) takes from the allocation alone, which training
+/// never changes: the complete-cell bits ([`complete_cells`], as the kernels read them), the
+/// allocated rows of each block's vertex box, and the allocated box. A rebuild then reads the δ of
+/// allocated vertices only, not the n³ links (at 256³ with 0.7 % of the slots allocated, most of
+/// a rebuild's time was reading links).
+pub struct SkipAllocation {
+    n: u32,
+    shift: u32,
+    complete: Vec<u32>,
+    /// Per block (x-major), the rows of the allocated vertices of its box: `rows[starts[b] ..
+    /// starts[b + 1]]`.
+    starts: Vec<u32>,
+    rows: Vec<u32>,
+    alloc_box: [u32; SURF_BOX_WORDS],
+}
+
+impl SkipAllocation {
+    /// The allocation's part of the skip structure of the `n`³ grid `links` (checked by the
+    /// caller: every link is −1 or a row) for blocks of 2^`shift` cells.
+    pub fn new(links: &[i32], n: u32, shift: u32) -> Result<SkipAllocation> {
+        ensure!(
+            (1..=8).contains(&shift),
+            "block shift {shift}: want 2 to 256 cells per block edge"
+        );
+        ensure!(
+            links.len() == (n as usize).pow(3),
+            "{} links for a grid of {n}³ vertices",
+            links.len()
+        );
+        let nb = surf_blocks_per_axis(n, shift);
+        let per_block: Vec<Vec<u32>> = (0..nb * nb * nb)
             .into_par_iter()
             .map(|b| {
                 let l = [b / (nb * nb), (b / nb) % nb, b % nb].map(|x| (x as i32) << shift);
                 let (lo, hi) = surf_block_box(l, n as i32, shift, 0);
                 let (v0, v1) = (lo.map(|x| x as u32), hi.map(|x| x as u32));
-                let (mut bmin, mut bmax) = (SURF_BLOCK_BIG, -SURF_BLOCK_BIG);
+                let mut rows = Vec::new();
                 for x in v0[0]..=v1[0] {
                     for y in v0[1]..=v1[1] {
                         let row = ((x * n + y) * n) as usize;
                         for z in v0[2]..=v1[2] {
-                            let k = g.links[row + z as usize];
-                            if k < 0 {
-                                continue;
+                            let k = links[row + z as usize];
+                            if k >= 0 {
+                                rows.push(k as u32);
                             }
-                            let d = g.delta[k as usize];
-                            bmin = bmin.min(d);
-                            bmax = bmax.max(d);
                         }
                     }
                 }
-                surf_block_mask(bmin, bmax, margin, levels)
+                rows
             })
-            .collect::<Vec<u32>>(),
-    );
-    surf_block_radii(&mut out[words..], nb);
-    out.extend(alloc_box(g.links, n));
-    Ok(out)
+            .collect();
+        let mut starts = Vec::with_capacity(per_block.len() + 1);
+        starts.push(0u32);
+        for r in &per_block {
+            starts.push(starts.last().copied().unwrap_or(0) + r.len() as u32);
+        }
+        let complete = complete_cells(links, n);
+        Ok(SkipAllocation {
+            n,
+            shift,
+            complete,
+            starts,
+            rows: per_block.concat(),
+            alloc_box: alloc_box(links, n),
+        })
+    }
+
+    /// The skip structure of [`build_blocks`] for the δ of this allocation's rows (`links`: the
+    /// allocation this was made from).
+    pub fn build(
+        &self,
+        links: &[i32],
+        delta: &[f32],
+        levels: &[f32],
+        margin: f32,
+    ) -> Result<Vec<u32>> {
+        ensure!(
+            levels.len() <= SURF_MAX_LEVELS,
+            "at most {SURF_MAX_LEVELS} levels, got {}",
+            levels.len()
+        );
+        ensure!(
+            margin >= 0.0 && margin.is_finite(),
+            "block margin must be finite and ≥ 0, got {margin}"
+        );
+        ensure!(
+            links.len() == (self.n as usize).pow(3)
+                && self.rows.iter().all(|&r| (r as usize) < delta.len()),
+            "a grid of {} links and {} δ rows for a skip allocation of {}³ vertices",
+            links.len(),
+            delta.len(),
+            self.n
+        );
+        let nn = self.n as usize;
+        let range = |rows: &mut dyn Iterator<Item = &u32>| {
+            rows.fold((SURF_BLOCK_BIG, -SURF_BLOCK_BIG), |(lo, hi), &r| {
+                let d = delta[r as usize];
+                (lo.min(d), hi.max(d))
+            })
+        };
+        // Live cells: only the complete ones can be live.
+        let mut out: Vec<u32> = self
+            .complete
+            .par_iter()
+            .enumerate()
+            .map(|(w, &bits)| {
+                if bits == 0 {
+                    return 0;
+                }
+                let mut live = 0u32;
+                for b in (0..32).filter(|b| bits >> b & 1 != 0) {
+                    let ci = 32 * w + b;
+                    let corners: [u32; 8] = std::array::from_fn(|k| {
+                        links[ci + (k >> 2) * nn * nn + ((k >> 1) & 1) * nn + (k & 1)] as u32
+                    });
+                    let (cmin, cmax) = range(&mut corners.iter());
+                    if surf_block_mask(cmin, cmax, margin, levels) != 0 {
+                        live |= 1 << b;
+                    }
+                }
+                live
+            })
+            .collect();
+        let words = out.len();
+        out.par_extend(self.starts.par_windows(2).map(|s| {
+            let (bmin, bmax) = range(&mut self.rows[s[0] as usize..s[1] as usize].iter());
+            surf_block_mask(bmin, bmax, margin, levels)
+        }));
+        surf_block_radii(&mut out[words..], surf_blocks_per_axis(self.n, self.shift));
+        out.extend(self.alloc_box);
+        Ok(out)
+    }
 }
 
 /// The box of the allocated vertices (`math::surface_blocks::SURF_BOX_WORDS`): lo x, y, z, hi x,
@@ -104,56 +194,24 @@ pub fn alloc_box(links: &[i32], n: u32) -> [u32; SURF_BOX_WORDS] {
     [lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]]
 }
 
-/// The live-cell words of [`build_blocks`] (as `surface_live_cells.comp`, which reads the cells'
-/// allocation from precomputed complete-cell bits instead of the links: the same bits).
-fn live_cells(g: &SurfaceGridRef, levels: &[f32], margin: f32) -> Vec<u32> {
-    let n = g.n as usize;
-    let cells = n * n * n;
-    (0..surf_live_words(g.n) as usize)
+/// Bit i of word i/32 set when the cell whose lower corner is slot i (x-major, `n`³ slots) has
+/// its 8 corners allocated: `surface_live_cells` reads these instead of the links.
+pub fn complete_cells(links: &[i32], n: u32) -> Vec<u32> {
+    if n < 2 {
+        return vec![0; surf_live_words(n) as usize];
+    }
+    let n = n as usize;
+    let (nz, nyz) = (n, n * n);
+    (0..surf_live_words(n as u32) as usize)
         .into_par_iter()
         .map(|w| {
             let mut bits = 0u32;
             for b in 0..32 {
-                let ci = 32 * w + b;
-                if ci >= cells {
-                    break;
-                }
-                let (x, y, z) = (ci / (n * n), (ci / n) % n, ci % n);
+                let s = 32 * w + b;
+                let (x, y, z) = (s / nyz, (s / nz) % n, s % n);
                 if x + 1 >= n || y + 1 >= n || z + 1 >= n {
                     continue;
                 }
-                let (mut cmin, mut cmax) = (SURF_BLOCK_BIG, -SURF_BLOCK_BIG);
-                let mut complete = true;
-                for k in 0..8 {
-                    let s = ci + (k >> 2) * n * n + ((k >> 1) & 1) * n + (k & 1);
-                    let l = g.links[s];
-                    if l < 0 {
-                        complete = false;
-                        break;
-                    }
-                    let d = g.delta[l as usize];
-                    cmin = cmin.min(d);
-                    cmax = cmax.max(d);
-                }
-                if complete && surf_block_mask(cmin, cmax, margin, levels) != 0 {
-                    bits |= 1 << b;
-                }
-            }
-            bits
-        })
-        .collect()
-}
-
-/// Bit i of word i/32 set when the cell whose lower corner is slot i (x-major, `n`³ slots) has
-/// its 8 corners allocated: `surface_live_cells` reads these instead of the links.
-pub fn complete_cells(links: &[i32], n: u32) -> Vec<u32> {
-    let mut bits = vec![0u32; surf_live_words(n) as usize];
-    let n = n as usize;
-    let (nz, nyz) = (n, n * n);
-    for x in 0..n.saturating_sub(1) {
-        for y in 0..n - 1 {
-            for z in 0..n - 1 {
-                let s = (x * n + y) * n + z;
                 let corners = [
                     s,
                     s + 1,
@@ -165,12 +223,12 @@ pub fn complete_cells(links: &[i32], n: u32) -> Vec<u32> {
                     s + nyz + nz + 1,
                 ];
                 if corners.iter().all(|&c| links[c] >= 0) {
-                    bits[s / 32] |= 1 << (s % 32);
+                    bits |= 1 << b;
                 }
             }
-        }
-    }
-    bits
+            bits
+        })
+        .collect()
 }
 
 #[cfg(test)]
@@ -217,5 +275,109 @@ mod tests {
         // An unallocated corner kills the cell whatever its range.
         links[13] = -1;
         assert_eq!(live(&links, &delta, &[0.5], 0.0), 0);
+    }
+
+    /// The skip structure's words by their definitions, cell by cell and block by block over
+    /// the links (radii and box as `build_blocks` adds them).
+    fn by_definition(
+        n: u32,
+        links: &[i32],
+        delta: &[f32],
+        levels: &[f32],
+        margin: f32,
+    ) -> Vec<u32> {
+        let nn = n as usize;
+        let slot = |x: usize, y: usize, z: usize| (x * nn + y) * nn + z;
+        let mut out = vec![0u32; surf_live_words(n) as usize];
+        for x in 0..nn - 1 {
+            for y in 0..nn - 1 {
+                for z in 0..nn - 1 {
+                    let ls: Vec<i32> = (0..8)
+                        .map(|k| links[slot(x + (k >> 2), y + ((k >> 1) & 1), z + (k & 1))])
+                        .collect();
+                    if ls.iter().any(|&l| l < 0) {
+                        continue;
+                    }
+                    let d: Vec<f32> = ls.iter().map(|&l| delta[l as usize]).collect();
+                    let (lo, hi) = (
+                        d.iter().copied().fold(f32::MAX, f32::min),
+                        d.iter().copied().fold(f32::MIN, f32::max),
+                    );
+                    if levels.iter().any(|&t| lo - margin <= t && t <= hi + margin) {
+                        let s = slot(x, y, z);
+                        out[s / 32] |= 1 << (s % 32);
+                    }
+                }
+            }
+        }
+        let shift = SURF_BLOCK_SHIFT_CPU;
+        let nb = surf_blocks_per_axis(n, shift) as usize;
+        let words = out.len();
+        for b in 0..nb * nb * nb {
+            let bl = [b / (nb * nb), (b / nb) % nb, b % nb];
+            let lo = bl.map(|v| v << shift);
+            let hi = bl.map(|v| ((v + 1) << shift).min(nn - 1));
+            let mut d = Vec::new();
+            for x in lo[0]..=hi[0] {
+                for y in lo[1]..=hi[1] {
+                    for z in lo[2]..=hi[2] {
+                        if links[slot(x, y, z)] >= 0 {
+                            d.push(delta[links[slot(x, y, z)] as usize]);
+                        }
+                    }
+                }
+            }
+            let mut mask = 0u32;
+            if !d.is_empty() {
+                let (dl, dh) = (
+                    d.iter().copied().fold(f32::MAX, f32::min),
+                    d.iter().copied().fold(f32::MIN, f32::max),
+                );
+                for (i, &t) in levels.iter().enumerate() {
+                    if dl - margin <= t && t <= dh + margin {
+                        mask |= 1 << i;
+                    }
+                }
+            }
+            out.push(mask);
+        }
+        surf_block_radii(&mut out[words..], nb as u32);
+        out.extend(alloc_box(links, n));
+        out
+    }
+
+    #[test]
+    fn a_kept_allocation_rebuilds_the_structure_its_definition_gives() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(7);
+        // 21 and 18 vertices: blocks of 8 cells that do and do not fill the grid; a third of the
+        // slots unallocated, whole blocks of them in one corner.
+        for n in [21u32, 18] {
+            let nn = n as usize;
+            let mut links = vec![-1i32; nn * nn * nn];
+            let mut rows = 0;
+            for (s, l) in links.iter_mut().enumerate() {
+                let (x, y, z) = (s / (nn * nn), (s / nn) % nn, s % nn);
+                if (x < 9 && y < 9 && z < 9) || rng.random::<f32>() < 0.3 {
+                    continue;
+                }
+                *l = rows;
+                rows += 1;
+            }
+            let levels = [-0.5f32, 0.0, 0.7];
+            let skip = SkipAllocation::new(&links, n, SURF_BLOCK_SHIFT_CPU).unwrap();
+            // δ changes between rebuilds, as training moves it; the allocation does not.
+            for round in 0..3 {
+                let delta: Vec<f32> = (0..rows).map(|_| rng.random_range(-2.0..2.0f32)).collect();
+                for margin in [0.0, 0.05, 0.6] {
+                    let want = by_definition(n, &links, &delta, &levels, margin);
+                    let got = skip.build(&links, &delta, &levels, margin).unwrap();
+                    assert_eq!(got, want, "n {n}, round {round}, margin {margin}");
+                    assert!(want[..surf_live_words(n) as usize].iter().any(|&w| w != 0));
+                }
+            }
+            // A δ with fewer rows than the links name is refused, not read past.
+            assert!(skip.build(&links, &[0.0; 3], &levels, 0.0).is_err());
+        }
     }
 }

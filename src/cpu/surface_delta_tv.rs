@@ -19,7 +19,7 @@ use rayon::prelude::*;
 pub const AXIS_NBRS: usize = 6;
 
 /// Per vertex row, the rows of its axis neighbours +x, +y, +z, −x, −y, −z (−1: outside the grid
-/// or unallocated). `row_slot`: the slot of each row (`surface_reg::row_slots`).
+/// or unallocated). `row_slot`: the slot of each row (`grid::row_slots`).
 pub fn axis_neighbours(links: &[i32], row_slot: &[u32], res: [u32; 3]) -> Vec<i32> {
     let (ry, rz) = (res[1] as usize, res[2] as usize);
     let stride = [ry * rz, rz, 1];

@@ -575,17 +575,6 @@ pub fn surface_normal_reg(
     normal_reg_passes(&p, delta, grad, touched, c, &mut NormalScratch::default())
 }
 
-/// The slot of each allocated vertex row (the inverse of `links`), for [`surface_normal_reg`].
-pub fn row_slots(links: &[i32], rows: usize) -> Vec<u32> {
-    let mut out = vec![0u32; rows];
-    for (s, &l) in links.iter().enumerate() {
-        if l >= 0 {
-            out[l as usize] = s as u32;
-        }
-    }
-    out
-}
-
 /// The [`DeltaTvChunk`] of Lδ (method.md §3.4): TV on δ, forward differences scaled by κ = N/256
 /// (N = the largest resolution, the grid's N for cubic grids), mean over a chunk of `fraction`
 /// of the `rows` allocated vertices (at least one; every vertex at 1) from row `draw` mod rows:

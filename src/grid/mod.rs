@@ -41,6 +41,17 @@ pub fn slot_vertex(res: [u32; 3], slot: usize) -> [u32; 3] {
     ]
 }
 
+/// The slot of each of `rows` vertex rows (the inverse of `links`); 0 for a row no link names.
+pub fn row_slots(links: &[i32], rows: usize) -> Vec<u32> {
+    let mut out = vec![0u32; rows];
+    for (s, &l) in links.iter().enumerate() {
+        if l >= 0 {
+            out[l as usize] = s as u32;
+        }
+    }
+    out
+}
+
 impl Grid {
     /// Total number of vertex slots in `links`.
     pub fn slots(&self) -> usize {

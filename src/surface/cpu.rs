@@ -7,17 +7,18 @@ use super::{
 };
 use crate::abi::surface_grid::SurfaceGridRef;
 use crate::cpu::background::{self, Background};
-use crate::cpu::surface_blocks::build_blocks;
+use crate::cpu::surface_blocks::SkipAllocation;
 use crate::cpu::surface_delta_tv::{axis_neighbours, delta_tv, forward_reach};
 use crate::cpu::surface_fwd::{render, SurfCounts};
 use crate::cpu::surface_reg::{
-    normal_reg_passes, row_slots, surface_opacity_reg, NormalPrefix, NormalScratch,
+    normal_reg_passes, surface_opacity_reg, NormalPrefix, NormalScratch,
 };
 use crate::cpu::surface_train::{train, RayLoss, SurfaceGrads, TrainCounts, TrainInput};
 use crate::cpu::{surface_rmsprop_sparse, tv, Stage2Params};
 use crate::data::TrainViews;
 use crate::gpu::{timed, Phase, PhaseClock};
 use crate::grid::checkpoint::state_bytes;
+use crate::grid::row_slots;
 use crate::grid::surface::SurfaceGrid;
 use crate::grid::SH_DIM;
 use crate::math::surface_blocks::{SkipRef, SURF_BLOCK_SHIFT_CPU};
@@ -47,8 +48,10 @@ pub struct CpuSurface {
     /// chunk's rows): Lδ's q, the normal regularisers' normals and corners.
     delta_dirs: Vec<f32>,
     normal_scratch: NormalScratch,
-    /// The block masks the walks skip with, and when to rebuild them.
+    /// The block masks the walks skip with, what of them the allocation fixes, and when to
+    /// rebuild them.
     blocks: Vec<u32>,
+    skip: SkipAllocation,
     refresh: BlockRefresh,
     bg: Background,
     /// Figures of the `step_sampled` steps not yet taken.
@@ -70,6 +73,7 @@ impl CpuSurface {
             delta_dirs: Vec::new(),
             normal_scratch: NormalScratch::default(),
             blocks: Vec::new(),
+            skip: SkipAllocation::new(&grid.links, grid.res[0], SURF_BLOCK_SHIFT_CPU)?,
             refresh: BlockRefresh::default(),
             grid,
             grad: [vec![0.0; n], vec![0.0; n], vec![0.0; n * SH_DIM]],
@@ -89,12 +93,8 @@ impl CpuSurface {
     }
 
     fn build_blocks(&mut self, margin: f32) -> Result<()> {
-        self.blocks = build_blocks(
-            &grid_ref(&self.grid),
-            &self.grid.levels,
-            margin,
-            SURF_BLOCK_SHIFT_CPU,
-        )?;
+        let g = &self.grid;
+        self.blocks = self.skip.build(&g.links, &g.delta, &g.levels, margin)?;
         Ok(())
     }
 

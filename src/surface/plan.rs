@@ -212,7 +212,8 @@ fn delta_rows(
 mod tests {
     use super::*;
     use crate::cpu::step::TOUCH_DELTA;
-    use crate::cpu::surface_reg::{delta_tv_chunk, opacity_tv_chunk, row_slots};
+    use crate::cpu::surface_reg::{delta_tv_chunk, opacity_tv_chunk};
+    use crate::grid::row_slots;
     use crate::surface::SurfaceRegs;
 
     const RES: [u32; 3] = [4, 4, 4];

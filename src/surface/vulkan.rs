@@ -23,7 +23,7 @@ use crate::cpu::step::{step_record, StepHeader, STEP_FLAGS, STEP_RESET_BYTES};
 use crate::cpu::surface_blocks::{alloc_box, complete_cells};
 use crate::cpu::surface_delta_tv::{axis_neighbours, forward_reach};
 use crate::cpu::surface_fwd::SurfaceParams;
-use crate::cpu::surface_reg::{row_slots, NormalPrefix};
+use crate::cpu::surface_reg::NormalPrefix;
 use crate::cpu::surface_train::SurfaceLoss;
 use crate::cpu::TvChunk;
 use crate::data::TrainViews;
@@ -32,6 +32,7 @@ use crate::gpu::{
     RayBuffers, Readback, StepMeta, StepsInFlight, TrainRays, TrainViewBuffers, STEP_SLOTS,
 };
 use crate::grid::checkpoint::state_bytes;
+use crate::grid::row_slots;
 use crate::grid::surface::SurfaceGrid;
 use crate::grid::SH_DIM;
 use crate::kernels;

@@ -9,10 +9,11 @@ use alphasurf::check::surface_reg::{gpu_delta_tv, gpu_normal_reg, RegGrid};
 use alphasurf::cpu::step::{RowRange, TOUCH_DELTA, TOUCH_OPACITY, TOUCH_SURFACE};
 use alphasurf::cpu::surface_delta_tv::{axis_neighbours, delta_tv, forward_reach};
 use alphasurf::cpu::surface_reg::{
-    delta_tv_chunk, opacity_tv_chunk, row_slots, surface_normal_reg, surface_opacity_reg, tv_loss,
+    delta_tv_chunk, opacity_tv_chunk, surface_normal_reg, surface_opacity_reg, tv_loss,
     NormalChunk, NormalPrefix, NormalRegStats, OpacityChunk, NBR_B, NBR_STRIDE,
 };
 use alphasurf::cpu::{surface_rmsprop_sparse, tv, Stage2Params, SurfaceRmsProp, TvChunk};
+use alphasurf::grid::row_slots;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
 
