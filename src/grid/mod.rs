@@ -182,6 +182,14 @@ impl Grid {
         if let Some(bad) = self.links.iter().find(|&&l| l as i64 >= n) {
             return Err(format!("link {bad} points past the {n} allocated vertices"));
         }
+        // Each vertex has one slot: the kernels (TV's gather) add to a vertex's gradient from its
+        // slot alone.
+        let mut seen = vec![false; self.density.len()];
+        for &l in &self.links {
+            if l >= 0 && std::mem::replace(&mut seen[l as usize], true) {
+                return Err(format!("links: row {l} is used by two vertices"));
+            }
+        }
         if self.radius.iter().any(|&r| !(r.is_finite() && r > 0.0))
             || self.center.iter().any(|c| !c.is_finite())
         {
@@ -229,5 +237,17 @@ mod tests {
                 kept && g.vertex(s)[0] < 8 && g.links[s] >= 0
             );
         }
+    }
+
+    #[test]
+    fn a_row_named_by_two_slots_is_refused() {
+        let mut g = Grid::sphere(8, [0.0; 3], [1.0; 3], 1.0, 0.1);
+        let (a, b) = {
+            let mut linked = (0..g.slots()).filter(|&s| g.links[s] >= 0);
+            (linked.next().unwrap(), linked.next().unwrap())
+        };
+        g.links[b] = g.links[a];
+        let err = g.validate().unwrap_err();
+        assert!(err.contains("used by two vertices"), "{err}");
     }
 }
