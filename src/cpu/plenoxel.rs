@@ -35,14 +35,26 @@ fn ray(rays: &[f32], r: usize) -> ([f32; 3], [f32; 3]) {
 /// looks at each block's box; this scatters from the allocated rows instead ([`occupancy_rows`]),
 /// which gives the same words and reads no links.
 pub fn occupancy(links: &[i32], density: &[f32], res: [u32; 3]) -> Vec<u32> {
-    occupancy_rows(links, &row_slots(links, density.len()), density, res)
+    occupancy_rows(&occupancy_slots(links, density.len()), density, res)
 }
 
-/// [`occupancy`] from the rows' slots (`grid::row_slots`, kept by a training loop: the
-/// allocation alone decides them): each row above the threshold that a link names marks the
-/// blocks whose vertex box holds it — along each axis, the block of its cell, and the block
-/// before when the vertex is that block's far corner (x a multiple of 2^OCC_SHIFT).
-pub fn occupancy_rows(links: &[i32], slots: &[u32], density: &[f32], res: [u32; 3]) -> Vec<u32> {
+/// The slot of each of `rows` rows (`grid::row_slots`), `u32::MAX` for a row no link names: what
+/// [`occupancy_rows`] scatters from. The allocation alone decides it: a training loop keeps it.
+pub fn occupancy_slots(links: &[i32], rows: usize) -> Vec<u32> {
+    let mut slots = row_slots(links, rows);
+    for (r, s) in slots.iter_mut().enumerate() {
+        if links.get(*s as usize) != Some(&(r as i32)) {
+            *s = u32::MAX;
+        }
+    }
+    slots
+}
+
+/// [`occupancy`] from the rows' slots ([`occupancy_slots`]): each row above the threshold that
+/// has a slot marks the blocks whose vertex box holds it — along each axis, the block of its
+/// cell, and the block before when the vertex is that block's far corner (x a multiple of
+/// 2^OCC_SHIFT).
+pub fn occupancy_rows(slots: &[u32], density: &[f32], res: [u32; 3]) -> Vec<u32> {
     let nb = occ_dims(res);
     let occ: Vec<AtomicU32> = (0..nb[0] * nb[1] * nb[2])
         .map(|_| AtomicU32::new(0))
@@ -51,9 +63,8 @@ pub fn occupancy_rows(links: &[i32], slots: &[u32], density: &[f32], res: [u32; 
     slots
         .par_iter()
         .zip(density.par_iter())
-        .enumerate()
-        .filter(|&(r, (&s, &d))| d > 0.5 * SIGMA_EPS && links[s as usize] == r as i32)
-        .for_each(|(_, (&s, _))| {
+        .filter(|&(&s, &d)| s != u32::MAX && d > 0.5 * SIGMA_EPS)
+        .for_each(|(&s, _)| {
             let v = [s / (res[1] * res[2]), (s / res[2]) % res[1], s % res[2]];
             // The blocks along each axis: v >> OCC_SHIFT (when it is a block: the last vertex
             // of an axis whose cells fill the blocks is no block's first corner), and the one
@@ -433,8 +444,10 @@ mod tests {
         ] {
             let mut links = vec![-1i32; (res[0] * res[1] * res[2]) as usize];
             links[((v[0] * res[1] + v[1]) * res[2] + v[2]) as usize] = 0;
-            let want = by_definition(&links, &[SIGMA_EPS], res);
-            assert_eq!(occupancy(&links, &[SIGMA_EPS], res), want, "vertex {v:?}");
+            // A second row above the threshold that no link names occupies nothing.
+            let density = [SIGMA_EPS; 2];
+            let want = by_definition(&links, &density, res);
+            assert_eq!(occupancy(&links, &density, res), want, "vertex {v:?}");
         }
     }
 }

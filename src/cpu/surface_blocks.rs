@@ -45,6 +45,8 @@ pub struct SkipAllocation {
     /// starts[b + 1]]`.
     starts: Vec<u32>,
     rows: Vec<u32>,
+    /// Rows a δ must have: one more than the largest row a link names.
+    rows_needed: usize,
     alloc_box: [u32; SURF_BOX_WORDS],
 }
 
@@ -95,6 +97,11 @@ impl SkipAllocation {
             complete,
             starts,
             rows: per_block.concat(),
+            rows_needed: links
+                .iter()
+                .map(|&l| (l + 1).max(0) as usize)
+                .max()
+                .unwrap_or(0),
             alloc_box: alloc_box(links, n),
         })
     }
@@ -118,19 +125,19 @@ impl SkipAllocation {
             "block margin must be finite and ≥ 0, got {margin}"
         );
         ensure!(
-            links.len() == (self.n as usize).pow(3)
-                && self.rows.iter().all(|&r| (r as usize) < delta.len()),
+            links.len() == (self.n as usize).pow(3) && self.rows_needed <= delta.len(),
             "a grid of {} links and {} δ rows for a skip allocation of {}³ vertices",
             links.len(),
             delta.len(),
             self.n
         );
         let nn = self.n as usize;
-        let range = |rows: &mut dyn Iterator<Item = &u32>| {
-            rows.fold((SURF_BLOCK_BIG, -SURF_BLOCK_BIG), |(lo, hi), &r| {
-                let d = delta[r as usize];
-                (lo.min(d), hi.max(d))
-            })
+        let range = |rows: &[u32]| {
+            rows.iter()
+                .fold((SURF_BLOCK_BIG, -SURF_BLOCK_BIG), |(lo, hi), &r| {
+                    let d = delta[r as usize];
+                    (lo.min(d), hi.max(d))
+                })
         };
         // Live cells: only the complete ones can be live.
         let mut out: Vec<u32> = self
@@ -147,7 +154,7 @@ impl SkipAllocation {
                     let corners: [u32; 8] = std::array::from_fn(|k| {
                         links[ci + (k >> 2) * nn * nn + ((k >> 1) & 1) * nn + (k & 1)] as u32
                     });
-                    let (cmin, cmax) = range(&mut corners.iter());
+                    let (cmin, cmax) = range(&corners);
                     if surf_block_mask(cmin, cmax, margin, levels) != 0 {
                         live |= 1 << b;
                     }
@@ -157,7 +164,7 @@ impl SkipAllocation {
             .collect();
         let words = out.len();
         out.par_extend(self.starts.par_windows(2).map(|s| {
-            let (bmin, bmax) = range(&mut self.rows[s[0] as usize..s[1] as usize].iter());
+            let (bmin, bmax) = range(&self.rows[s[0] as usize..s[1] as usize]);
             surf_block_mask(bmin, bmax, margin, levels)
         }));
         surf_block_radii(&mut out[words..], surf_blocks_per_axis(self.n, self.shift));

@@ -8,7 +8,7 @@ use crate::cpu::{rmsprop_sparse, tv, Stage1Params};
 use crate::data::TrainViews;
 use crate::gpu::{timed, Phase, PhaseClock};
 use crate::grid::checkpoint::state_bytes;
-use crate::grid::{row_slots, Grid, SH_DIM};
+use crate::grid::{Grid, SH_DIM};
 use crate::math::plenoxel::{GridRef, PlenoxelCounts};
 use anyhow::{ensure, Result};
 
@@ -16,7 +16,8 @@ use anyhow::{ensure, Result};
 pub struct CpuPlenoxels {
     grid: Grid,
     occ: Vec<u32>,
-    /// Each row's slot in the links: the occupancy twin scatters from the rows.
+    /// Each row's slot in the links (`twin::occupancy_slots`): the occupancy twin scatters
+    /// from the rows.
     slots: Vec<u32>,
     grad_density: Vec<f32>,
     grad_sh: Vec<f32>,
@@ -52,12 +53,7 @@ impl CpuPlenoxels {
     }
 
     fn refresh_occupancy(&mut self) {
-        self.occ = twin::occupancy_rows(
-            &self.grid.links,
-            &self.slots,
-            &self.grid.density,
-            self.grid.res,
-        );
+        self.occ = twin::occupancy_rows(&self.slots, &self.grid.density, self.grid.res);
     }
 
     fn view(&self) -> GridRef<'_> {
@@ -268,7 +264,7 @@ impl Plenoxels for CpuPlenoxels {
         self.state_density = sd;
         self.state_sh = ss;
         self.touched = vec![0; n];
-        self.slots = row_slots(&grid.links, n);
+        self.slots = twin::occupancy_slots(&grid.links, n);
         self.grid = grid;
         self.refresh_occupancy();
         Ok(())
