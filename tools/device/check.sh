@@ -6,9 +6,14 @@
 #                         surface); about 7.5 minutes at most, seconds to a minute on a GPU.
 #   MODE=accuracy         issue 19 at 512³: `bench accuracy --res 512` on the scenes in
 #                         .dev/data (9 minutes at most; resumable on the same warm machine).
+#   MODE=all              one call for a 15-minute lease: basic's steps with tighter limits,
+#                         then `bench accuracy --res 512` on the first scene in .dev/data
+#                         (ACC_S seconds, default 300), then `train --stage surface --preset
+#                         paper` from that scene's 512³ stage 1 (PAPER_S seconds, default 150;
+#                         its log's "step" lines carry the rays/s reached). At most 9.5 minutes.
 # Each step has its own time limit, so one that hangs leaves the others their time. What comes
 # back is $OUT/NAME.log per step (the commands with --json print their JSON object as the log's
-# last line), the 512³ accuracy.json and $OUT/summary.txt: at most six files, under the tool's
+# last line), the 512³ accuracy.json and $OUT/summary.txt: at most seven files, under the tool's
 # eight. Without an NVIDIA driver it runs on whatever Vulkan device there is (a dry run here on
 # lavapipe: OUT=/tmp/out bash tools/device/check.sh).
 set -uo pipefail
@@ -50,8 +55,22 @@ accuracy)
     --out /tmp/acc512 --json
   cp /tmp/acc512/accuracy.json "$OUT/accuracy_512.json" 2>/dev/null
   ;;
+all)
+  step parity 90 "$bin" check-kernels --json
+  step bench_plenoxels 60 "$bin" bench plenoxels --json --steps 48
+  step bench_surface 60 "$bin" bench surface --json --steps 48 --rounds 1
+  scene=$(ls -d .dev/data/*/ | head -1)
+  name=$(basename "$scene")
+  step accuracy_512 "${ACC_S:-300}" "$bin" bench accuracy --data "$scene" --res 512 \
+    --backend vulkan --out /tmp/acc512 --json
+  cp /tmp/acc512/accuracy.json "$OUT/accuracy_512.json" 2>/dev/null
+  category=${name%%_*}
+  step paper_stage2_512 "${PAPER_S:-150}" "$bin" train --stage surface \
+    --init "/tmp/acc512/$name/plenoxels" --data "$scene" --out /tmp/paper_s2 \
+    --category "$category" --preset paper --backend vulkan --overwrite
+  ;;
 *)
-  echo "MODE is basic or accuracy, not ${MODE}" >&2
+  echo "MODE is basic, accuracy or all, not ${MODE}" >&2
   exit 2
   ;;
 esac
