@@ -11,6 +11,11 @@
 #                         (ACC_S seconds, default 300), then `train --stage surface --preset
 #                         paper` from that scene's 512³ stage 1 (PAPER_S seconds, default 150;
 #                         its log's "step" lines carry the rays/s reached). At most 9.5 minutes.
+#   MODE=paper_stage1     `train --stage plenoxels --preset paper --res 512` on the first scene
+#                         (128k steps of 5000 rays), PAPER1_S seconds (default 540); a later call
+#                         on the same warm machine resumes it from its last checkpoint.
+# ACC_FLAGS adds flags to `bench accuracy` (e.g. ACC_FLAGS="--batch 16384": stage 1 with 4× the
+# rays); its output folder is named after them, so runs with other flags are not reused.
 # Each step has its own time limit, so one that hangs leaves the others their time. What comes
 # back is $OUT/NAME.log per step (the commands with --json print their JSON object as the log's
 # last line), the 512³ accuracy.json and $OUT/summary.txt: at most seven files, under the tool's
@@ -41,6 +46,7 @@ step() {
   echo "$name: exit $rc in $((SECONDS - t0)) s" | tee -a "$summary"
   return $rc
 }
+acc_out=/tmp/acc512$(printf %s "${ACC_FLAGS:-}" | tr -cd 'a-z0-9')
 case "${MODE:-basic}" in
 basic)
   step devices 30 "$bin" devices
@@ -52,8 +58,8 @@ accuracy)
   # Stage 1, the level sweep, stage 2, extract and eval per scene; a scene finished in an
   # earlier call on the same machine is not redone.
   step accuracy_512 540 "$bin" bench accuracy --data .dev/data/*/ --res 512 --backend vulkan \
-    --out /tmp/acc512 --json
-  cp /tmp/acc512/accuracy.json "$OUT/accuracy_512.json" 2>/dev/null
+    --out "$acc_out" ${ACC_FLAGS:-} --json
+  cp "$acc_out/accuracy.json" "$OUT/accuracy_512.json" 2>/dev/null
   ;;
 all)
   step parity 90 "$bin" check-kernels --json
@@ -62,15 +68,22 @@ all)
   scene=$(ls -d .dev/data/*/ | head -1)
   name=$(basename "$scene")
   step accuracy_512 "${ACC_S:-300}" "$bin" bench accuracy --data "$scene" --res 512 \
-    --backend vulkan --out /tmp/acc512 --json
-  cp /tmp/acc512/accuracy.json "$OUT/accuracy_512.json" 2>/dev/null
+    --backend vulkan --out "$acc_out" ${ACC_FLAGS:-} --json
+  cp "$acc_out/accuracy.json" "$OUT/accuracy_512.json" 2>/dev/null
   category=${name%%_*}
   step paper_stage2_512 "${PAPER_S:-150}" "$bin" train --stage surface \
-    --init "/tmp/acc512/$name/plenoxels" --data "$scene" --out /tmp/paper_s2 \
+    --init "$acc_out/$name/plenoxels" --data "$scene" --out /tmp/paper_s2 \
     --category "$category" --preset paper --backend vulkan --overwrite
   ;;
+paper_stage1)
+  scene=$(ls -d .dev/data/*/ | head -1)
+  again=--overwrite
+  [ -f /tmp/paper_s1/plenoxels.npz ] && again=--resume
+  step paper_stage1_512 "${PAPER1_S:-540}" "$bin" train --stage plenoxels --preset paper \
+    --res 512 --data "$scene" --out /tmp/paper_s1 --backend vulkan $again
+  ;;
 *)
-  echo "MODE is basic, accuracy or all, not ${MODE}" >&2
+  echo "MODE is basic, accuracy, all or paper_stage1, not ${MODE}" >&2
   exit 2
   ;;
 esac
