@@ -39,7 +39,8 @@ pub struct AccuracyArgs {
     /// Stage-1 steps (default: the preset's).
     #[arg(long)]
     pub iters: Option<u32>,
-    /// Rays per batch of both stages (default: the presets').
+    /// Rays per batch of both stages (default: the presets'); `--surface-set batch=N` sets
+    /// stage 2's alone.
     #[arg(long)]
     pub batch: Option<u32>,
     /// Schedule of both stages.
@@ -442,6 +443,13 @@ fn stage1_dir(args: &AccuracyArgs, out: &Path) -> PathBuf {
     }
 }
 
+/// Stage 2's `--set` list: `--batch`, then `--surface-set` (applied in order, so
+/// `--surface-set batch=N` gives stage 2 its own batch).
+fn surface_overrides(args: &AccuracyArgs) -> Vec<String> {
+    let batch = args.batch.map(|b| format!("batch={b}"));
+    batch.into_iter().chain(args.surface_set.iter().cloned()).collect()
+}
+
 /// One scene, end to end.
 fn scene(
     steps: &Steps,
@@ -470,8 +478,7 @@ fn scene(
     };
     // A stage-2 run without result.json was interrupted: `train --overwrite` starts it again.
     let s2_dir = out.join("alphasurf");
-    let mut set = args.surface_set.clone();
-    set.extend(args.batch.map(|b| format!("batch={b}")));
+    let set = surface_overrides(args);
     let s2 = steps.train_surface(
         &s1.dir,
         data,
@@ -612,6 +619,26 @@ pub fn run(args: &AccuracyArgs, devices: &mut Devices) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_stage_2_batch_overrides_the_shared_one() {
+        #[derive(clap::Parser)]
+        struct Cli {
+            #[command(flatten)]
+            args: AccuracyArgs,
+        }
+        let parse = |extra: &[&str]| {
+            let base = ["bench", "--data", "d"];
+            let cli: Cli = clap::Parser::parse_from(base.iter().chain(extra));
+            surface_overrides(&cli.args)
+        };
+        assert!(parse(&[]).is_empty());
+        assert_eq!(parse(&["--batch", "16384"]), ["batch=16384"]);
+        assert_eq!(
+            parse(&["--batch", "16384", "--surface-set", "batch=4096"]),
+            ["batch=16384", "batch=4096"]
+        );
+    }
 
     fn result(scene: &str, category: Category, levels: &[(f32, f64)], surf: f64) -> SceneResult {
         let best = levels.iter().min_by(|a, b| a.1.total_cmp(&b.1)).unwrap();
