@@ -447,7 +447,10 @@ fn stage1_dir(args: &AccuracyArgs, out: &Path) -> PathBuf {
 /// `--surface-set batch=N` gives stage 2 its own batch).
 fn surface_overrides(args: &AccuracyArgs) -> Vec<String> {
     let batch = args.batch.map(|b| format!("batch={b}"));
-    batch.into_iter().chain(args.surface_set.iter().cloned()).collect()
+    batch
+        .into_iter()
+        .chain(args.surface_set.iter().cloned())
+        .collect()
 }
 
 /// One scene, end to end.
