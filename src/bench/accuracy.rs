@@ -12,6 +12,7 @@
 use crate::backend::Backend;
 use crate::pipeline::demo::{alphasurf_row, plenoxels_levels, Row, LEVELS};
 use crate::pipeline::extract::Switch;
+use crate::pipeline::metrics::{self, Stage1Metrics, Stage1Seconds, Stage2Metrics, Stage2Seconds};
 use crate::pipeline::steps::{Steps, TrainSize, TrainedRun};
 use crate::pipeline::Devices;
 use crate::train::{Category, Preset};
@@ -89,6 +90,9 @@ struct Stage1Record {
     settings: Stage1Settings,
     wall_s: f64,
     levels: Vec<LevelScore>,
+    /// The sweep's wall time (0 in records written before it).
+    #[serde(default)]
+    levels_s: f64,
 }
 
 /// The level with the lowest finite Chamfer distance.
@@ -151,6 +155,45 @@ pub struct SceneResult {
     pub wall_s: f64,
     /// Why stage 2 or its evaluation failed.
     pub error: Option<String>,
+    /// Where the wall time went (absent in results written before it).
+    #[serde(default)]
+    pub time: Option<SceneTime>,
+}
+
+/// Where a scene's wall time went, seconds: each training run's phases (its metrics.json) and
+/// the scoring around them.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct SceneTime {
+    pub stage1: Option<Stage1Seconds>,
+    /// Extraction and eval of every level of stage 1 (0 when its record predates the timing).
+    pub levels_s: f64,
+    /// The same with the levels' hidden cells trimmed (thin scenes).
+    pub trimmed_levels_s: f64,
+    pub stage2: Option<Stage2Seconds>,
+    /// αSurf's extraction and eval.
+    pub alphasurf_score_s: f64,
+}
+
+impl SceneTime {
+    /// One line: each part's seconds, the training runs' phases in brackets.
+    pub fn line(&self) -> String {
+        let s1 = self.stage1.as_ref().map_or("—".into(), |t| {
+            format!(
+                "{:.1} s (load {:.1}, train {:.1}, upsample {:.1}, checkpoints {:.1}, test renders {:.1})",
+                t.total, t.load, t.train, t.upsample, t.checkpoint, t.render_test
+            )
+        });
+        let s2 = self.stage2.as_ref().map_or("—".into(), |t| {
+            format!(
+                "{:.1} s (load {:.1}, train {:.1}, checkpoints {:.1}, test renders {:.1})",
+                t.total, t.load, t.train, t.checkpoint, t.render_test
+            )
+        });
+        format!(
+            "stage 1 {s1}; level sweep {:.1} s, trimmed {:.1} s; stage 2 {s2}; αSurf extract + eval {:.1} s",
+            self.levels_s, self.trimmed_levels_s, self.alphasurf_score_s
+        )
+    }
 }
 
 impl SceneResult {
@@ -385,11 +428,13 @@ fn stage1(
     };
     let run = steps.train_plenoxels(&settings.data, dir, &size)?;
     let gt = settings.data.join("gt_points.ply");
+    let t = Instant::now();
     let rows = plenoxels_levels(steps, &run, &gt, &LEVELS);
     let rec = Stage1Record {
         settings: settings.clone(),
         wall_s: run.wall_s,
         levels: LEVELS.iter().map(|&l| score(&rows, l)).collect(),
+        levels_s: t.elapsed().as_secs_f64(),
     };
     write_json(&dir.join("stage1.json"), &rec)?;
     Ok((run, rec))
@@ -471,6 +516,7 @@ fn scene(
     let (s1, rec) = stage1(steps, &settings.stage1, &stage1_dir(args, out))?;
     let best = rec.best();
     // The like-for-like baseline where αSurf's extraction trims hidden cells (thin).
+    let t = Instant::now();
     let trimmed_levels = if settings.category == Category::Thin {
         LEVELS
             .iter()
@@ -479,6 +525,7 @@ fn scene(
     } else {
         Vec::new()
     };
+    let trimmed_levels_s = t.elapsed().as_secs_f64();
     // A stage-2 run without result.json was interrupted: `train --overwrite` starts it again.
     let s2_dir = out.join("alphasurf");
     let set = surface_overrides(args);
@@ -490,6 +537,7 @@ fn scene(
         args.surface_iters,
         &set,
     );
+    let t = Instant::now();
     let (surf, s2_wall, error) = match &s2 {
         Ok(s2) => {
             let r = alphasurf_row(steps, &s1, s2, &gt);
@@ -497,6 +545,19 @@ fn scene(
             (Some(r), s2.wall_s, e)
         }
         Err(e) => (None, 0.0, Some(format!("{e:#}"))),
+    };
+    let time = SceneTime {
+        stage1: metrics::read::<Stage1Metrics>(&s1.dir)
+            .ok()
+            .map(|m| m.wall_seconds),
+        levels_s: rec.levels_s,
+        trimmed_levels_s,
+        stage2: s2
+            .as_ref()
+            .ok()
+            .and_then(|r| metrics::read::<Stage2Metrics>(&r.dir).ok())
+            .map(|m| m.wall_seconds),
+        alphasurf_score_s: t.elapsed().as_secs_f64(),
     };
     Ok(SceneResult {
         scene: scene_name(data),
@@ -512,6 +573,7 @@ fn scene(
         train_wall_s: s1.wall_s + s2_wall,
         wall_s: t0.elapsed().as_secs_f64(),
         error,
+        time: Some(time),
         settings,
     })
 }
@@ -607,6 +669,9 @@ pub fn run(args: &AccuracyArgs, devices: &mut Devices) -> Result<()> {
             r.stage1_psnr,
             num(r.stage2_psnr, 2)
         );
+        if let Some(t) = &r.time {
+            eprintln!("  time: {}", t.line());
+        }
         results.push(r);
     }
     let summary = summarise(results);
@@ -622,6 +687,29 @@ pub fn run(args: &AccuracyArgs, devices: &mut Devices) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn records_written_before_the_time_breakdown_still_read() {
+        let mut r = result("thin_fan", Category::Thin, &[(50.0, 0.5)], 0.35);
+        let mut v = serde_json::to_value(&r).unwrap();
+        v.as_object_mut().unwrap().remove("time");
+        let back: SceneResult = serde_json::from_value(v).unwrap();
+        assert!(back.time.is_none());
+        let rec = r#"{"settings":{"data":"d","res":256,"iters":null,"batch":null,
+            "preset":"fast","seed":0,"backend":"cpu"},"wall_s":130.7,"levels":[]}"#;
+        let rec: Stage1Record = serde_json::from_str(rec).unwrap();
+        assert_eq!(rec.levels_s, 0.0);
+        r.time = Some(SceneTime {
+            stage1: None,
+            levels_s: 12.31,
+            trimmed_levels_s: 3.5,
+            stage2: None,
+            alphasurf_score_s: 4.0,
+        });
+        let line = r.time.as_ref().unwrap().line();
+        assert!(line.contains("level sweep 12.3 s, trimmed 3.5 s"), "{line}");
+        assert!(line.contains("αSurf extract + eval 4.0 s"), "{line}");
+    }
 
     #[test]
     fn a_stage_2_batch_overrides_the_shared_one() {
@@ -681,6 +769,7 @@ mod tests {
             train_wall_s: 1.0,
             wall_s: 2.0,
             error: None,
+            time: None,
         }
     }
 
