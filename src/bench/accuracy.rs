@@ -10,8 +10,9 @@
 //! (`--stage1-from`), so stage-2 changes are compared on the same stage-1 grids.
 
 use crate::backend::Backend;
-use crate::pipeline::demo::{alphasurf_row, plenoxels_levels, Row, LEVELS};
-use crate::pipeline::extract::Switch;
+use crate::pipeline::demo::{
+    alphasurf_row, plenoxels_levels, plenoxels_levels_trimmed, Row, LEVELS,
+};
 use crate::pipeline::metrics::{self, Stage1Metrics, Stage1Seconds, Stage2Metrics, Stage2Seconds};
 use crate::pipeline::steps::{Steps, TrainSize, TrainedRun};
 use crate::pipeline::Devices;
@@ -440,35 +441,6 @@ fn stage1(
     Ok((run, rec))
 }
 
-/// Level `level` of the stage-1 run extracted with its hidden cells trimmed (into `out`), scored.
-fn trimmed_level(steps: &Steps, s1: &TrainedRun, gt: &Path, out: &Path, level: f32) -> LevelScore {
-    let ply = out.join(format!("points_sigma{level}_trimmed.ply"));
-    let r = steps
-        .extract_trimmed(&s1.dir, &ply, Some(&[level]), Switch::On)
-        .and_then(|_| steps.eval(&ply, gt));
-    match r {
-        Ok(m) => {
-            eprintln!(
-                "  Plen σ = {level}, hidden cells trimmed: Chamfer ×10⁻² {:.4}",
-                m.chamfer * 100.0
-            );
-            LevelScore {
-                level,
-                chamfer_e2: Some(m.chamfer * 100.0),
-                f1: Some(m.f1),
-            }
-        }
-        Err(e) => {
-            eprintln!("  Plen σ = {level}, hidden cells trimmed: {e:#}");
-            LevelScore {
-                level,
-                chamfer_e2: None,
-                f1: None,
-            }
-        }
-    }
-}
-
 fn score(rows: &[Row], level: f32) -> LevelScore {
     let r = rows.iter().find(|r| r.level == Some(level));
     LevelScore {
@@ -518,10 +490,8 @@ fn scene(
     // The like-for-like baseline where αSurf's extraction trims hidden cells (thin).
     let t = Instant::now();
     let trimmed_levels = if settings.category == Category::Thin {
-        LEVELS
-            .iter()
-            .map(|&l| trimmed_level(steps, &s1, &gt, out, l))
-            .collect()
+        let rows = plenoxels_levels_trimmed(steps, &s1, &gt, &LEVELS, out);
+        LEVELS.iter().map(|&l| score(&rows, l)).collect()
     } else {
         Vec::new()
     };

@@ -128,8 +128,29 @@ pub fn evaluate_groups(
 ) -> Result<Metrics> {
     anyhow::ensure!(!pred.is_empty(), "the predicted point cloud is empty");
     anyhow::ensure!(!gt.is_empty(), "the ground-truth point cloud is empty");
-    let (gt_index, pred_index) = rayon::join(|| PointIndex::new(gt), || PointIndex::new(pred));
-    let (d2s, nearest_gt) = gt_index?.nearest_with_index(pred);
+    evaluate_indexed(pred, gt, &PointIndex::new(gt)?, groups, opts)
+}
+
+/// [`evaluate_groups`] with the GT cloud's k-d tree built once by the caller (`gt_index` over
+/// `gt`), for scoring many predicted clouds against one ground truth.
+pub fn evaluate_indexed(
+    pred: &[[f32; 3]],
+    gt: &[[f32; 3]],
+    gt_index: &PointIndex,
+    groups: Option<(&[String], &[u32])>,
+    opts: &EvalOptions,
+) -> Result<Metrics> {
+    anyhow::ensure!(!pred.is_empty(), "the predicted point cloud is empty");
+    anyhow::ensure!(
+        gt_index.len() == gt.len(),
+        "a k-d tree of {} points for {} GT points",
+        gt_index.len(),
+        gt.len()
+    );
+    let ((d2s, nearest_gt), pred_index) = rayon::join(
+        || gt_index.nearest_with_index(pred),
+        || PointIndex::new(pred),
+    );
     let s2d = pred_index?.nearest_distances(gt);
     let mut m = from_distances(&d2s, &s2d, opts);
     if let Some((names, of_gt)) = groups {

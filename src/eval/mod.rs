@@ -13,5 +13,5 @@ pub mod outer_level;
 pub mod thin;
 
 pub use knn::PointIndex;
-pub use metrics::{evaluate, evaluate_groups, EvalOptions, Metrics};
+pub use metrics::{evaluate, evaluate_groups, evaluate_indexed, EvalOptions, Metrics};
 pub use thin::{thin, thin_levels};

@@ -7,7 +7,7 @@
 //! compared through points drawn on it uniformly by area.
 
 use crate::eval::objects::{load_groups, GtGroups};
-use crate::eval::{evaluate_groups, thin, EvalOptions, Metrics};
+use crate::eval::{evaluate_indexed, thin, EvalOptions, Metrics, PointIndex};
 use crate::io::read_points;
 use crate::mesh::ply::{has_faces, read_mesh_ply};
 use anyhow::{ensure, Result};
@@ -163,54 +163,123 @@ pub struct Evaluation {
     pub nn_s: f64,
 }
 
-/// Score the cloud `opts.pred` against `opts.gt`.
-pub fn evaluate(opts: &EvaluateOptions) -> Result<Evaluation> {
+/// A ground-truth cloud prepared once — read (or drawn on its mesh), thinned, split over its
+/// objects and indexed — to score many predicted clouds against (a level sweep).
+pub struct GroundTruth {
+    path: PathBuf,
+    cloud: Loaded,
+    groups: Option<ObjectSplit>,
+    note: Option<String>,
+    index: PointIndex,
+    /// Seconds reading, thinning and indexing it.
+    pub load_s: f64,
+}
+
+impl GroundTruth {
+    /// The cloud `opts.gt` (with `opts.downsample`, `opts.mesh_samples` and `opts.scene`).
+    pub fn load(opts: &EvaluateOptions) -> Result<GroundTruth> {
+        check(opts)?;
+        let t = Instant::now();
+        let cloud = load(&opts.gt, opts.downsample, opts.mesh_samples)?;
+        ensure!(
+            !cloud.points.is_empty(),
+            "{}: the ground-truth point cloud is empty",
+            opts.gt.display()
+        );
+        let mut note = None;
+        let groups = groups(opts, cloud.n_raw, &cloud.kept, &mut note)?;
+        let index = PointIndex::new(&cloud.points)?;
+        Ok(GroundTruth {
+            path: opts.gt.clone(),
+            cloud,
+            groups,
+            note,
+            index,
+            load_s: t.elapsed().as_secs_f64(),
+        })
+    }
+
+    /// The file it was read from.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Score the cloud `opts.pred` against this ground truth (`opts.gt` must name it).
+    pub fn score(&self, opts: &EvaluateOptions) -> Result<Evaluation> {
+        check(opts)?;
+        ensure!(
+            opts.gt == self.path,
+            "scoring against {} with a ground truth loaded from {}",
+            opts.gt.display(),
+            self.path.display()
+        );
+        let t = Instant::now();
+        let pred = load(&opts.pred, opts.downsample, opts.mesh_samples)?;
+        self.score_loaded(opts, pred, t.elapsed().as_secs_f64())
+    }
+
+    /// Score `pred`, read and thinned in `load_s` seconds.
+    fn score_loaded(
+        &self,
+        opts: &EvaluateOptions,
+        pred: Loaded,
+        load_s: f64,
+    ) -> Result<Evaluation> {
+        let t = Instant::now();
+        let m = evaluate_indexed(
+            &pred.points,
+            &self.cloud.points,
+            &self.index,
+            self.groups
+                .as_ref()
+                .map(|g| (g.names.as_slice(), g.labels.as_slice())),
+            &EvalOptions {
+                max_dist: opts.max_dist,
+                threshold: opts.threshold,
+            },
+        )?;
+        let nn_s = t.elapsed().as_secs_f64();
+        ensure!(
+            m.d2s_used > 0 && m.s2d_used > 0,
+            "no usable distance: {} of {} predicted and {} of {} ground-truth points lie within \
+             --max-dist {} of the other cloud, so the Chamfer distance is undefined (are both \
+             clouds in Blender units? a cloud in millimetres is 1000× too large)",
+            m.d2s_used,
+            m.n_pred,
+            m.s2d_used,
+            m.n_gt,
+            opts.max_dist
+        );
+        Ok(Evaluation {
+            metrics: m,
+            n_pred_raw: pred.n_raw,
+            n_gt_raw: self.cloud.n_raw,
+            pred_mesh_faces: pred.mesh_faces,
+            gt_mesh_faces: self.cloud.mesh_faces,
+            objects_from: self.groups.as_ref().map(|g| g.path.clone()),
+            note: self.note.clone(),
+            load_s,
+            nn_s,
+        })
+    }
+}
+
+fn check(opts: &EvaluateOptions) -> Result<()> {
     ensure!(
         opts.max_dist > 0.0 && opts.threshold > 0.0 && opts.downsample >= 0.0,
         "--max-dist and --threshold must be positive, --downsample ≥ 0"
     );
-    let t0 = Instant::now();
+    Ok(())
+}
+
+/// Score the cloud `opts.pred` against `opts.gt` (both read, and GT indexed, in parallel).
+pub fn evaluate(opts: &EvaluateOptions) -> Result<Evaluation> {
+    check(opts)?;
+    let t = Instant::now();
     let (pred, gt) = rayon::join(
         || load(&opts.pred, opts.downsample, opts.mesh_samples),
-        || load(&opts.gt, opts.downsample, opts.mesh_samples),
+        || GroundTruth::load(opts),
     );
     let (pred, gt) = (pred?, gt?);
-    let mut note = None;
-    let groups = groups(opts, gt.n_raw, &gt.kept, &mut note)?;
-    let load_s = t0.elapsed().as_secs_f64();
-    let t1 = Instant::now();
-    let m = evaluate_groups(
-        &pred.points,
-        &gt.points,
-        groups
-            .as_ref()
-            .map(|g| (g.names.as_slice(), g.labels.as_slice())),
-        &EvalOptions {
-            max_dist: opts.max_dist,
-            threshold: opts.threshold,
-        },
-    )?;
-    let nn_s = t1.elapsed().as_secs_f64();
-    ensure!(
-        m.d2s_used > 0 && m.s2d_used > 0,
-        "no usable distance: {} of {} predicted and {} of {} ground-truth points lie within \
-         --max-dist {} of the other cloud, so the Chamfer distance is undefined (are both clouds \
-         in Blender units? a cloud in millimetres is 1000× too large)",
-        m.d2s_used,
-        m.n_pred,
-        m.s2d_used,
-        m.n_gt,
-        opts.max_dist
-    );
-    Ok(Evaluation {
-        metrics: m,
-        n_pred_raw: pred.n_raw,
-        n_gt_raw: gt.n_raw,
-        pred_mesh_faces: pred.mesh_faces,
-        gt_mesh_faces: gt.mesh_faces,
-        objects_from: groups.map(|g| g.path),
-        note,
-        load_s,
-        nn_s,
-    })
+    gt.score_loaded(opts, pred, t.elapsed().as_secs_f64())
 }

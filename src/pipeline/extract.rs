@@ -227,19 +227,7 @@ pub fn extract(opts: &ExtractOptions, gpu: Option<&Gpu>) -> Result<ExtractReport
         opts.thin_radius >= 0.0 && opts.thin_radius.is_finite(),
         "--thin-radius must be ≥ 0"
     );
-    let recorded = opts
-        .run
-        .as_ref()
-        .and_then(|r| crate::run::read_info(r).ok())
-        .and_then(|info| info.scene_scale);
-    let scene_scale = opts
-        .scene_scale
-        .or(recorded)
-        .unwrap_or(SceneBox::default().scale);
-    ensure!(
-        scene_scale > 0.0 && scene_scale.is_finite(),
-        "--scene-scale must be positive"
-    );
+    let scene_scale = scene_scale(opts)?;
     ensure!(
         opts.min_alpha.is_finite(),
         "--min-alpha must be a finite number, got {}",
@@ -258,10 +246,7 @@ pub fn extract(opts: &ExtractOptions, gpu: Option<&Gpu>) -> Result<ExtractReport
         crate::run::outputs::check_output_file(out, &[&path])?;
     }
     let load_ms = t0.elapsed().as_secs_f64() * 1e3;
-    let (res, center, radius, links) = match &field {
-        Field::Density(g) => (g.res, g.center, g.radius, &g.links),
-        Field::Surface(g, _) => (g.res, g.center, g.radius, &g.links),
-    };
+    let (res, links) = field.res_links();
     let cells = allocated_cells(res, links)?;
     let (values, opacity, levels) = match &field {
         Field::Density(g) => (&g.density, None, opts.levels.clone().unwrap_or(vec![50.0])),
@@ -280,12 +265,7 @@ pub fn extract(opts: &ExtractOptions, gpu: Option<&Gpu>) -> Result<ExtractReport
         levels.iter().all(|l| l.is_finite()),
         "--levels: every level must be finite, got {levels:?}"
     );
-    let frame = GridFrame {
-        res,
-        center,
-        radius,
-        scene_scale,
-    };
+    let frame = field.frame(scene_scale);
     // `on` needs the cameras; `auto` goes on without them (a run moved away from its dataset
     // still extracts), and says so.
     let trim = match (opts.trim_hidden, &field) {
@@ -301,12 +281,6 @@ pub fn extract(opts: &ExtractOptions, gpu: Option<&Gpu>) -> Result<ExtractReport
         }
         _ => None,
     };
-    let thin = matches!(field, Field::Surface(_, Some(Category::Thin)));
-    let trim_outer = match opts.trim_outer {
-        Switch::On => true,
-        Switch::Auto => thin,
-        Switch::Off => false,
-    };
     let surfaces = Surfaces {
         cells: &cells,
         links,
@@ -316,7 +290,7 @@ pub fn extract(opts: &ExtractOptions, gpu: Option<&Gpu>) -> Result<ExtractReport
         res,
         frame,
         cameras: trim.as_deref(),
-        trim_outer,
+        trim_outer: trim_outer(opts, &field),
     };
     let points = match &opts.out {
         Some(out) => Some(write_points(opts, &surfaces, out, gpu)?),
@@ -339,6 +313,128 @@ pub fn extract(opts: &ExtractOptions, gpu: Option<&Gpu>) -> Result<ExtractReport
         load_ms,
         total_s: t0.elapsed().as_secs_f64(),
     })
+}
+
+/// Dataset units → grid-scene scale: `--scene-scale`, else the run's recorded one, else the
+/// NeRF-synthetic box's.
+fn scene_scale(opts: &ExtractOptions) -> Result<f32> {
+    let recorded = opts
+        .run
+        .as_ref()
+        .and_then(|r| crate::run::read_info(r).ok())
+        .and_then(|info| info.scene_scale);
+    let scale = opts
+        .scene_scale
+        .or(recorded)
+        .unwrap_or(SceneBox::default().scale);
+    ensure!(
+        scale > 0.0 && scale.is_finite(),
+        "--scene-scale must be positive"
+    );
+    Ok(scale)
+}
+
+/// Whether the outermost level's halo is dropped (`--trim-outer`; `auto`: thin stage-2 runs).
+fn trim_outer(opts: &ExtractOptions, field: &Field) -> bool {
+    match opts.trim_outer {
+        Switch::On => true,
+        Switch::Auto => matches!(field, Field::Surface(_, Some(Category::Thin))),
+        Switch::Off => false,
+    }
+}
+
+impl Field {
+    fn res_links(&self) -> ([u32; 3], &[i32]) {
+        match self {
+            Field::Density(g) => (g.res, &g.links),
+            Field::Surface(g, _) => (g.res, &g.links),
+        }
+    }
+
+    fn frame(&self, scene_scale: f32) -> GridFrame {
+        let (res, center, radius) = match self {
+            Field::Density(g) => (g.res, g.center, g.radius),
+            Field::Surface(g, _) => (g.res, g.center, g.radius),
+        };
+        GridFrame {
+            res,
+            center,
+            radius,
+            scene_scale,
+        }
+    }
+}
+
+/// One cloud of a level sweep: level `level` of a stage-1 grid into `out`, with the cells no
+/// training view sees inside other surfaces trimmed (`extract --trim-hidden on`) or not (`off`).
+pub struct LevelJob {
+    pub level: f32,
+    pub trim_hidden: bool,
+    pub out: PathBuf,
+}
+
+/// `extract --levels L --trim-hidden on|off --out P` for each job, from one load of the stage-1
+/// grid `opts` names (its other options apply to every job): the Plenoxels level sweep. The
+/// grid, its cells and the training cameras are read once; each job has its own result (a
+/// level with no surface fails alone) with its seconds: the shared load's and its own, what
+/// the job alone would have taken.
+pub fn extract_levels(
+    opts: &ExtractOptions,
+    jobs: &[LevelJob],
+    gpu: Option<&Gpu>,
+) -> Result<Vec<Result<(PointsReport, f64)>>> {
+    let t0 = Instant::now();
+    ensure!(
+        (1..=64).contains(&opts.rays_per_axis),
+        "--rays-per-axis must be in 1..=64, got {}",
+        opts.rays_per_axis
+    );
+    ensure!(
+        opts.thin_radius >= 0.0 && opts.thin_radius.is_finite(),
+        "--thin-radius must be ≥ 0"
+    );
+    let frame_scale = scene_scale(opts)?;
+    let (field, path) = load_grid(opts)?;
+    let Field::Density(grid) = &field else {
+        bail!(
+            "{}: a level sweep takes a stage-1 density grid",
+            path.display()
+        );
+    };
+    let cells = allocated_cells(grid.res, &grid.links)?;
+    let frame = field.frame(frame_scale);
+    let cameras = jobs
+        .iter()
+        .any(|j| j.trim_hidden)
+        .then(|| training_cameras(opts, &frame).map_err(|e| format!("{e:#}")));
+    let outer = trim_outer(opts, &field);
+    let load_s = t0.elapsed().as_secs_f64();
+    Ok(jobs
+        .iter()
+        .map(|job| {
+            let t = Instant::now();
+            ensure!(job.level.is_finite(), "level {} is not finite", job.level);
+            crate::run::outputs::check_output_file(&job.out, &[&path])?;
+            let trim = match (&cameras, job.trim_hidden) {
+                (Some(Ok(c)), true) => Some(c.as_slice()),
+                (Some(Err(e)), true) => bail!("{e}"),
+                _ => None,
+            };
+            let surfaces = Surfaces {
+                cells: &cells,
+                links: &grid.links,
+                values: &grid.density,
+                opacity: None,
+                levels: &[job.level],
+                res: grid.res,
+                frame,
+                cameras: trim,
+                trim_outer: outer,
+            };
+            let report = write_points(opts, &surfaces, &job.out, gpu)?;
+            Ok((report, load_s + t.elapsed().as_secs_f64()))
+        })
+        .collect())
 }
 
 /// The level sets to extract: the field on the allocated vertices and where it lies.

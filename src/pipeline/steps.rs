@@ -2,8 +2,8 @@
 //! make-scene, stage 1, stage 2, extract and eval as library calls on one resolved backend and
 //! one schedule.
 
-use super::evaluate::{evaluate, EvaluateOptions};
-use super::extract::{extract, ExtractOptions, Switch, DEFAULT_RAYS_PER_AXIS};
+use super::evaluate::{evaluate, EvaluateOptions, GroundTruth};
+use super::extract::{extract, extract_levels, ExtractOptions, LevelJob, DEFAULT_RAYS_PER_AXIS};
 use super::metrics::{self, Stage1Metrics};
 use super::train::train;
 use super::train_options::{Stage, TrainOptions};
@@ -205,22 +205,10 @@ impl<'g> Steps<'g> {
 
     /// `extract --run RUN --out PLY [--levels …]`; returns its wall time.
     pub fn extract(&self, run: &Path, ply: &Path, levels: Option<&[f32]>) -> Result<f64> {
-        self.extract_trimmed(run, ply, levels, Switch::Auto)
-    }
-
-    /// `extract` with `--trim-hidden trim`.
-    pub fn extract_trimmed(
-        &self,
-        run: &Path,
-        ply: &Path,
-        levels: Option<&[f32]>,
-        trim: Switch,
-    ) -> Result<f64> {
         let opts = ExtractOptions {
             levels: levels.map(<[f32]>::to_vec),
             rays_per_axis: self.rays_per_axis,
             backend: self.backend(),
-            trim_hidden: trim,
             ..ExtractOptions::for_run(run.to_path_buf(), ply.to_path_buf())
         };
         let t = Instant::now();
@@ -245,5 +233,29 @@ impl<'g> Steps<'g> {
     /// `eval --pred PLY --gt GT`.
     pub fn eval(&self, pred: &Path, gt: &Path) -> Result<Metrics> {
         Ok(evaluate(&EvaluateOptions::new(pred.to_path_buf(), gt.to_path_buf()))?.metrics)
+    }
+
+    /// The cloud `gt` read, thinned and indexed once, to [`Steps::eval_against`] many clouds.
+    pub fn ground_truth(&self, gt: &Path) -> Result<GroundTruth> {
+        GroundTruth::load(&EvaluateOptions::new(PathBuf::new(), gt.to_path_buf()))
+    }
+
+    /// `eval --pred PLY --gt GT` against a ground truth loaded once.
+    pub fn eval_against(&self, pred: &Path, gt: &GroundTruth) -> Result<Metrics> {
+        let opts = EvaluateOptions::new(pred.to_path_buf(), gt.path().to_path_buf());
+        Ok(gt.score(&opts)?.metrics)
+    }
+
+    /// `extract --levels L --trim-hidden on|off --out P` for each job from one load of the
+    /// stage-1 run `run`; each job's result with its seconds.
+    pub fn extract_levels(&self, run: &Path, jobs: &[LevelJob]) -> Result<Vec<Result<f64>>> {
+        let opts = ExtractOptions {
+            rays_per_axis: self.rays_per_axis,
+            backend: self.backend(),
+            out: None,
+            ..ExtractOptions::for_run(run.to_path_buf(), PathBuf::new())
+        };
+        let done = extract_levels(&opts, jobs, self.gpu)?;
+        Ok(done.into_iter().map(|r| r.map(|(_, s)| s)).collect())
     }
 }

@@ -117,6 +117,8 @@ fn bench_accuracy_scores_each_scene_and_resumes() {
         .map(|c| c["category"].as_str().unwrap())
         .collect();
     assert_eq!(cats, ["thin", "translucent"]);
+    assert_eq!(scenes[0]["scene"], "thin_a");
+    sweep_matches_single_extractions(&out.join("thin_a"), &thin, &scenes[0]);
 
     // A rerun with the same settings trains nothing and gives the same table.
     let (again, err) = bench(&[&thin, &tr], &out, &[]);
@@ -152,6 +154,58 @@ fn bench_accuracy_scores_each_scene_and_resumes() {
             .unwrap();
     assert_eq!(result["settings"]["stage1"]["seed"], 2);
     assert_eq!(result["settings"]["seed"], 2);
+}
+
+/// The level sweeps (the grid and the ground truth read once) give what `extract --levels L
+/// [--trim-hidden on]` then `eval` give level by level: the same clouds byte for byte, the same
+/// Chamfer distances.
+fn sweep_matches_single_extractions(scene_out: &Path, data: &Path, result: &serde_json::Value) {
+    let run = scene_out.join("plenoxels");
+    let gt = data.join("gt_points.ply");
+    let mut compared = 0;
+    for (key, trim, ply) in [
+        ("levels", "off", "plenoxels/points_sigma{}.ply"),
+        ("trimmed_levels", "on", "points_sigma{}_trimmed.ply"),
+    ] {
+        for l in result[key].as_array().unwrap() {
+            let Some(chamfer) = l["chamfer_e2"].as_f64() else {
+                continue;
+            };
+            let level = l["level"].as_f64().unwrap();
+            let swept = scene_out.join(ply.replace("{}", &level.to_string()));
+            let single = scene_out.join(format!("single_{key}_{level}.ply"));
+            run_ok(
+                bin()
+                    .args([
+                        "extract",
+                        "--backend",
+                        "cpu",
+                        "--trim-hidden",
+                        trim,
+                        "--run",
+                    ])
+                    .arg(&run)
+                    .args(["--levels", &level.to_string(), "--out"])
+                    .arg(&single),
+            );
+            assert_eq!(
+                std::fs::read(&swept).unwrap(),
+                std::fs::read(&single).unwrap(),
+                "{key} {level}"
+            );
+            let (o, _) = run_ok(
+                bin()
+                    .args(["eval", "--json", "--pred"])
+                    .arg(&single)
+                    .arg("--gt")
+                    .arg(&gt),
+            );
+            let e: serde_json::Value = serde_json::from_str(o.lines().last().unwrap()).unwrap();
+            assert_eq!(e["chamfer_e2"].as_f64().unwrap(), chamfer, "{key} {level}");
+            compared += 1;
+        }
+    }
+    assert!(compared >= 4, "only {compared} levels had clouds");
 }
 
 #[test]

@@ -11,7 +11,7 @@ pub mod table;
 pub use table::{objects_table, table};
 
 use super::device::Devices;
-use super::extract::DEFAULT_RAYS_PER_AXIS;
+use super::extract::{LevelJob, DEFAULT_RAYS_PER_AXIS};
 use super::steps::{SceneSize, Steps, TrainSize, TrainedRun};
 use crate::backend::Backend;
 use crate::eval::Metrics;
@@ -176,11 +176,17 @@ impl Row {
 }
 
 /// Extract and evaluate one point cloud: `extract` then `eval`. Failures are kept in the row.
-fn extract_eval(steps: &Steps, run: &TrainedRun, gt: &Path, mut row: Row, train_s: f64) -> Row {
+fn extract_eval(steps: &Steps, run: &TrainedRun, gt: &Path, row: Row, train_s: f64) -> Row {
     let levels = row.level.map(|l| vec![l]);
     let r = steps
         .extract(&run.dir, &row.ply, levels.as_deref())
         .and_then(|extract_s| Ok((extract_s, steps.eval(&row.ply, gt)?)));
+    scored(row, run, r, train_s)
+}
+
+/// The row with its figures (`r`: the extraction's seconds and the metrics), or its failure;
+/// each printed.
+fn scored(mut row: Row, run: &TrainedRun, r: Result<(f64, Metrics)>, train_s: f64) -> Row {
     row.test_psnr = Some(run.test_psnr);
     match r {
         Ok((extract_s, m)) => {
@@ -202,18 +208,80 @@ fn extract_eval(steps: &Steps, run: &TrainedRun, gt: &Path, mut row: Row, train_
     row
 }
 
-/// The Plenoxels baseline "Plen (σ = τ)": extract and evaluate the stage-1 grid at each level.
+/// The Plenoxels baseline "Plen (σ = τ)": the stage-1 grid extracted at each level and evaluated.
 pub fn plenoxels_levels(steps: &Steps, s1: &TrainedRun, gt: &Path, levels: &[f32]) -> Vec<Row> {
-    levels
+    let rows = levels
         .iter()
         .map(|&l| {
-            let row = Row::new(
+            Row::new(
                 format!("Plen σ = {l}"),
                 "plenoxels",
                 Some(l),
                 s1.dir.join(format!("points_sigma{l}.ply")),
-            );
-            extract_eval(steps, s1, gt, row, s1.wall_s)
+            )
+        })
+        .collect();
+    level_sweep(steps, s1, gt, rows, false)
+}
+
+/// The same levels with their hidden cells trimmed (`extract --trim-hidden on`), as αSurf's
+/// extraction trims them on thin scenes; the clouds go to `dir`.
+pub fn plenoxels_levels_trimmed(
+    steps: &Steps,
+    s1: &TrainedRun,
+    gt: &Path,
+    levels: &[f32],
+    dir: &Path,
+) -> Vec<Row> {
+    let rows = levels
+        .iter()
+        .map(|&l| {
+            Row::new(
+                format!("Plen σ = {l}, hidden cells trimmed"),
+                "plenoxels_trimmed",
+                Some(l),
+                dir.join(format!("points_sigma{l}_trimmed.ply")),
+            )
+        })
+        .collect();
+    level_sweep(steps, s1, gt, rows, true)
+}
+
+/// Extract and evaluate each row's level of the stage-1 run `s1` (into the row's PLY; with the
+/// hidden cells trimmed when `trim_hidden`): the grid read once, the ground truth read once.
+/// Failures are kept in their rows.
+fn level_sweep(
+    steps: &Steps,
+    s1: &TrainedRun,
+    gt: &Path,
+    rows: Vec<Row>,
+    trim_hidden: bool,
+) -> Vec<Row> {
+    let jobs: Vec<LevelJob> = rows
+        .iter()
+        .map(|r| LevelJob {
+            level: r.level.unwrap_or(f32::NAN),
+            trim_hidden,
+            out: r.ply.clone(),
+        })
+        .collect();
+    let extracted = match steps.extract_levels(&s1.dir, &jobs) {
+        Ok(each) => each,
+        Err(e) => jobs.iter().map(|_| Err(anyhow::anyhow!("{e:#}"))).collect(),
+    };
+    let truth = extracted
+        .iter()
+        .any(Result::is_ok)
+        .then(|| steps.ground_truth(gt).map_err(|e| format!("{e:#}")));
+    rows.into_iter()
+        .zip(extracted)
+        .map(|(row, extract)| {
+            let r = extract.and_then(|extract_s| match &truth {
+                Some(Ok(truth)) => Ok((extract_s, steps.eval_against(&row.ply, truth)?)),
+                Some(Err(e)) => Err(anyhow::anyhow!("{e}")),
+                None => Err(anyhow::anyhow!("the ground truth was not read")),
+            });
+            scored(row, s1, r, s1.wall_s)
         })
         .collect()
 }
