@@ -157,6 +157,7 @@ impl TrainOptions {
                 .iter_mut()
                 .for_each(|u| u.1 = (u.1 as u64 * r as u64 / last as u64) as u32);
         }
+        cfg.batch = cfg.batch_for_grid();
         if let Some(c) = self.checkpoint_every {
             if c == 0 {
                 bail!("--checkpoint-every must be at least 1");
@@ -303,4 +304,30 @@ fn set_field(cfg: &SurfaceConfig, kv: &str) -> Result<SurfaceConfig> {
     );
     *slot = value;
     serde_json::from_value(v).with_context(|| format!("--set {kv}: invalid value for {key}"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn batch(preset: Preset, res: Option<u32>, batch: Option<u32>) -> u32 {
+        let opts = TrainOptions {
+            preset: Some(preset),
+            res,
+            batch,
+            ..TrainOptions::new(Stage::Plenoxels, "d".into(), "o".into())
+        };
+        opts.stage1_config().unwrap().batch
+    }
+
+    #[test]
+    fn fast_sends_more_rays_to_grids_above_256() {
+        assert_eq!(batch(Preset::Fast, None, None), 4096);
+        assert_eq!(batch(Preset::Fast, Some(256), None), 4096);
+        assert_eq!(batch(Preset::Fast, Some(384), None), 9216);
+        assert_eq!(batch(Preset::Fast, Some(512), None), 16384);
+        assert_eq!(batch(Preset::Fast, Some(512), Some(1000)), 1000);
+        assert_eq!(batch(Preset::Paper, None, None), 5000);
+        assert_eq!(batch(Preset::Paper, Some(1024), None), 5000);
+    }
 }

@@ -5,6 +5,9 @@ use super::preset::Preset;
 use super::schedule::DelayedExp;
 use serde::{Deserialize, Serialize};
 
+/// The largest final grid at which `fast`'s stage 1 keeps its batch of rays per step.
+const FAST_BATCH_RES: u64 = 256;
+
 /// Everything that shapes a stage-1 run; stored in checkpoints and metrics.json.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Stage1Config {
@@ -80,7 +83,8 @@ impl Stage1Config {
         }
     }
 
-    /// A CPU-sized schedule: 64³ → 128³, a few thousand steps, faster decays.
+    /// A CPU-sized schedule: 64³ → 128³, a few thousand steps, faster decays (its batch grows
+    /// with grids above 256³: [`Stage1Config::batch_for_grid`]).
     pub fn fast() -> Self {
         Stage1Config {
             preset: Preset::Fast,
@@ -157,6 +161,20 @@ impl Stage1Config {
             anyhow::ensure!(v.is_finite(), "{name} must be finite, got {v}");
         }
         Ok(())
+    }
+
+    /// Rays per step for this schedule's final grid: `fast` sends its batch up to 256³ and,
+    /// above, rays in proportion to the grid's cross-section (res²), about as many per surface
+    /// vertex as at 256³ (16384 at 512³); `paper` keeps its own.
+    pub fn batch_for_grid(&self) -> u32 {
+        let last = self.upsample.last().map_or(self.res, |u| u.1) as u64;
+        match self.preset {
+            Preset::Fast if last > FAST_BATCH_RES => {
+                let scaled = self.batch as u64 * last * last / (FAST_BATCH_RES * FAST_BATCH_RES);
+                scaled.min(u32::MAX as u64) as u32
+            }
+            _ => self.batch,
+        }
     }
 
     /// Resolution in force at step `t`.
