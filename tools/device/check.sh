@@ -14,9 +14,9 @@
 #   MODE=paper_stage1     `train --stage plenoxels --preset paper --res 512` on the first scene
 #                         (128k steps of 5000 rays), PAPER1_S seconds (default 540); a later call
 #                         on the same warm machine resumes it from its last checkpoint.
-# ACC_FLAGS adds flags to `bench accuracy` (e.g. ACC_FLAGS="--batch 16384 --surface-set
-# batch=4096": stage 1 with 4× the rays, stage 2 as before); its output folder is named after
-# them, so runs with other flags are not reused.
+# ACC_FLAGS adds flags to `bench accuracy` (e.g. ACC_FLAGS="--batch 4096": stage 1 with the
+# batch `fast` used at 512³ before 7a7d55b; `--surface-set batch=N` sets stage 2's alone); its
+# output folder is named after them, so runs with other flags are not reused.
 # Each step has its own time limit, so one that hangs leaves the others their time. What comes
 # back is $OUT/NAME.log per step (the commands with --json print their JSON object as the log's
 # last line), the 512³ accuracy.json and $OUT/summary.txt: at most seven files, under the tool's
