@@ -218,15 +218,7 @@ pub struct MeshReport {
 /// twin) and `opts.mesh` (a mesh, on the CPU).
 pub fn extract(opts: &ExtractOptions, gpu: Option<&Gpu>) -> Result<ExtractReport> {
     let t0 = Instant::now();
-    ensure!(
-        (1..=64).contains(&opts.rays_per_axis),
-        "--rays-per-axis must be in 1..=64, got {}",
-        opts.rays_per_axis
-    );
-    ensure!(
-        opts.thin_radius >= 0.0 && opts.thin_radius.is_finite(),
-        "--thin-radius must be ≥ 0"
-    );
+    check_sampling(opts)?;
     let scene_scale = scene_scale(opts)?;
     ensure!(
         opts.min_alpha.is_finite(),
@@ -315,6 +307,20 @@ pub fn extract(opts: &ExtractOptions, gpu: Option<&Gpu>) -> Result<ExtractReport
     })
 }
 
+/// Refuse a ray count or thinning radius no extraction can use.
+fn check_sampling(opts: &ExtractOptions) -> Result<()> {
+    ensure!(
+        (1..=64).contains(&opts.rays_per_axis),
+        "--rays-per-axis must be in 1..=64, got {}",
+        opts.rays_per_axis
+    );
+    ensure!(
+        opts.thin_radius >= 0.0 && opts.thin_radius.is_finite(),
+        "--thin-radius must be ≥ 0"
+    );
+    Ok(())
+}
+
 /// Dataset units → grid-scene scale: `--scene-scale`, else the run's recorded one, else the
 /// NeRF-synthetic box's.
 fn scene_scale(opts: &ExtractOptions) -> Result<f32> {
@@ -384,15 +390,7 @@ pub fn extract_levels(
     gpu: Option<&Gpu>,
 ) -> Result<Vec<Result<(PointsReport, f64)>>> {
     let t0 = Instant::now();
-    ensure!(
-        (1..=64).contains(&opts.rays_per_axis),
-        "--rays-per-axis must be in 1..=64, got {}",
-        opts.rays_per_axis
-    );
-    ensure!(
-        opts.thin_radius >= 0.0 && opts.thin_radius.is_finite(),
-        "--thin-radius must be ≥ 0"
-    );
+    check_sampling(opts)?;
     let frame_scale = scene_scale(opts)?;
     let (field, path) = load_grid(opts)?;
     let Field::Density(grid) = &field else {
