@@ -67,7 +67,8 @@ pub struct TrainOptions {
     /// Final grid resolution (the preset's upsampling schedule is scaled to it).
     #[arg(long)]
     pub res: Option<u32>,
-    /// Rays per batch (overrides the preset).
+    /// Rays per batch, both stages (overrides the presets: `fast` 4096, stage 1 above a 256³ grid
+    /// 4096 × (N/256)², e.g. 16384 at 512³; `paper` 5000).
     #[arg(long)]
     pub batch: Option<u32>,
     #[arg(long, default_value_t = 0)]
