@@ -210,18 +210,7 @@ fn scored(mut row: Row, run: &TrainedRun, r: Result<(f64, Metrics)>, train_s: f6
 
 /// The Plenoxels baseline "Plen (σ = τ)": the stage-1 grid extracted at each level and evaluated.
 pub fn plenoxels_levels(steps: &Steps, s1: &TrainedRun, gt: &Path, levels: &[f32]) -> Vec<Row> {
-    let rows = levels
-        .iter()
-        .map(|&l| {
-            Row::new(
-                format!("Plen σ = {l}"),
-                "plenoxels",
-                Some(l),
-                s1.dir.join(format!("points_sigma{l}.ply")),
-            )
-        })
-        .collect();
-    level_sweep(steps, s1, gt, rows, false)
+    level_sweep(steps, s1, gt, levels, None)
 }
 
 /// The same levels with their hidden cells trimmed (`extract --trim-hidden on`), as αSurf's
@@ -233,53 +222,51 @@ pub fn plenoxels_levels_trimmed(
     levels: &[f32],
     dir: &Path,
 ) -> Vec<Row> {
-    let rows = levels
-        .iter()
-        .map(|&l| {
-            Row::new(
-                format!("Plen σ = {l}, hidden cells trimmed"),
-                "plenoxels_trimmed",
-                Some(l),
-                dir.join(format!("points_sigma{l}_trimmed.ply")),
-            )
-        })
-        .collect();
-    level_sweep(steps, s1, gt, rows, true)
+    level_sweep(steps, s1, gt, levels, Some(dir))
 }
 
-/// Extract and evaluate each row's level of the stage-1 run `s1` (into the row's PLY; with the
-/// hidden cells trimmed when `trim_hidden`): the grid read once, the ground truth read once.
-/// Failures are kept in their rows.
+/// Extract and evaluate the stage-1 run `s1` at each level (into its run directory; with the
+/// hidden cells trimmed into `trimmed_into` when given): the grid read once, the ground truth
+/// read once. Failures are kept in their rows.
 fn level_sweep(
     steps: &Steps,
     s1: &TrainedRun,
     gt: &Path,
-    rows: Vec<Row>,
-    trim_hidden: bool,
+    levels: &[f32],
+    trimmed_into: Option<&Path>,
 ) -> Vec<Row> {
-    let jobs: Vec<LevelJob> = rows
+    let jobs: Vec<LevelJob> = levels
         .iter()
-        .map(|r| LevelJob {
-            level: r.level.unwrap_or(f32::NAN),
-            trim_hidden,
-            out: r.ply.clone(),
+        .map(|&level| LevelJob {
+            level,
+            trim_hidden: trimmed_into.is_some(),
+            out: match trimmed_into {
+                None => s1.dir.join(format!("points_sigma{level}.ply")),
+                Some(dir) => dir.join(format!("points_sigma{level}_trimmed.ply")),
+            },
         })
         .collect();
     let extracted = match steps.extract_levels(&s1.dir, &jobs) {
         Ok(each) => each,
         Err(e) => jobs.iter().map(|_| Err(anyhow::anyhow!("{e:#}"))).collect(),
     };
-    let truth = extracted
-        .iter()
-        .any(Result::is_ok)
-        .then(|| steps.ground_truth(gt).map_err(|e| format!("{e:#}")));
-    rows.into_iter()
+    let truth = steps.ground_truth(gt).map_err(|e| format!("{e:#}"));
+    let (suffix, kind) = match trimmed_into {
+        None => ("", "plenoxels"),
+        Some(_) => (", hidden cells trimmed", "plenoxels_trimmed"),
+    };
+    jobs.into_iter()
         .zip(extracted)
-        .map(|(row, extract)| {
+        .map(|(job, extract)| {
+            let row = Row::new(
+                format!("Plen σ = {}{suffix}", job.level),
+                kind,
+                Some(job.level),
+                job.out,
+            );
             let r = extract.and_then(|extract_s| match &truth {
-                Some(Ok(truth)) => Ok((extract_s, steps.eval_against(&row.ply, truth)?)),
-                Some(Err(e)) => Err(anyhow::anyhow!("{e}")),
-                None => Err(anyhow::anyhow!("the ground truth was not read")),
+                Ok(truth) => Ok((extract_s, steps.eval_against(&row.ply, truth)?)),
+                Err(e) => Err(anyhow::anyhow!("{e}")),
             });
             scored(row, s1, r, s1.wall_s)
         })
