@@ -4,11 +4,13 @@
 //! `links[(x·Y + y)·Z + z]`. World→grid: g = ((p − c)/(2r) + 0.5)·N − 0.5 per axis.
 
 pub mod checkpoint;
+mod mask;
 pub mod npz;
 mod resample;
 pub mod surface;
 
-pub use resample::{dilate, upsample};
+pub use mask::{cells_then_corners, dilate};
+pub use resample::upsample;
 
 /// Coefficients per vertex: 3 channels × 9 degree-2 SH basis functions.
 pub const SH_DIM: usize = 27;

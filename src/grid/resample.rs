@@ -1,43 +1,7 @@
-//! Grid resampling (trilinear, svox2's vertex placement) and 26-neighbourhood mask dilation.
+//! Grid resampling (trilinear, svox2's vertex placement).
 
 use super::{Grid, SH_DIM};
 use rayon::prelude::*;
-
-/// Dilate a vertex mask over the 26-neighbourhood, `times` times.
-pub fn dilate(res: [u32; 3], mask: &[bool], times: usize) -> Vec<bool> {
-    let [rx, ry, rz] = res.map(|r| r as i64);
-    let mut cur = mask.to_vec();
-    for _ in 0..times {
-        let prev = cur;
-        cur = (0..prev.len())
-            .into_par_iter()
-            .map(|s| {
-                let z = s as i64 % rz;
-                let y = (s as i64 / rz) % ry;
-                let x = s as i64 / (rz * ry);
-                for dx in -1..=1 {
-                    for dy in -1..=1 {
-                        for dz in -1..=1 {
-                            let (a, b, c) = (x + dx, y + dy, z + dz);
-                            if a >= 0
-                                && a < rx
-                                && b >= 0
-                                && b < ry
-                                && c >= 0
-                                && c < rz
-                                && prev[((a * ry + b) * rz + c) as usize]
-                            {
-                                return true;
-                            }
-                        }
-                    }
-                }
-                false
-            })
-            .collect();
-    }
-    cur
-}
 
 /// Trilinear sample of all per-vertex channels of `g` at continuous grid coordinates `p`
 /// (clamped into the grid; unallocated corners count as 0). Writes σ then the 27 SH values.
@@ -100,27 +64,66 @@ pub fn upsample(g: &Grid, new_res: u32, keep_old: &[bool]) -> Grid {
         density: Vec::new(),
         sh: Vec::new(),
     };
-    // Any kept old vertex among the 8 around new vertex `s`? Only the kept slots are listed and
-    // only their rows are sampled, so memory stays at the two grids' rows (a per-slot row of
-    // the whole 512³ grid would take 15 GB).
+    // Any kept old vertex among the 8 around new vertex `s`? Per axis, new index j lies in the
+    // old cell [lo, lo + 1] (clamped into the grid), so the test is separable: OR the mask over
+    // the two old indices along z, then y, then x. Only the kept slots are listed and only their
+    // rows are sampled, so memory stays at the two grids' rows (a per-slot row of the whole 512³
+    // grid would take 15 GB).
+    let corners = |axis: usize| -> Vec<[usize; 2]> {
+        let r = g.res[axis];
+        (0..new_res)
+            .map(|j| {
+                let p = coord(axis, j).clamp(0.0, (r - 1) as f32);
+                let lo = (p.floor() as u32).min(r.saturating_sub(2));
+                [lo as usize, (lo + 1).min(r - 1) as usize]
+            })
+            .collect()
+    };
+    let [ox, oy, oz] = g.res.map(|r| r as usize);
+    let n = new_res as usize;
+    let (cx, cy, cz) = (corners(0), corners(1), corners(2));
+    // Over (old x, old y, new z), then (old x, new y, new z).
+    let mut along_z = vec![false; ox * oy * n];
+    along_z.par_chunks_mut(n).enumerate().for_each(|(xy, out)| {
+        let row = &keep_old[xy * oz..(xy + 1) * oz];
+        for (o, [a, b]) in out.iter_mut().zip(&cz) {
+            *o = row[*a] || row[*b];
+        }
+    });
+    let mut along_yz = vec![false; ox * n * n];
+    along_yz
+        .par_chunks_mut(n * n)
+        .enumerate()
+        .for_each(|(x, out)| {
+            for (y, [a, b]) in cy.iter().enumerate() {
+                let (ra, rb) = (
+                    &along_z[(x * oy + a) * n..][..n],
+                    &along_z[(x * oy + b) * n..][..n],
+                );
+                for (o, (p, q)) in out[y * n..(y + 1) * n].iter_mut().zip(ra.iter().zip(rb)) {
+                    *o = *p || *q;
+                }
+            }
+        });
+    drop(along_z);
+    let kept: Vec<usize> = cx
+        .par_iter()
+        .enumerate()
+        .flat_map_iter(|(x, [a, b])| {
+            let (pa, pb) = (
+                &along_yz[a * n * n..][..n * n],
+                &along_yz[b * n * n..][..n * n],
+            );
+            (0..n * n)
+                .filter(move |&i| pa[i] || pb[i])
+                .map(move |i| x * n * n + i)
+        })
+        .collect();
+    drop(along_yz);
     let position = |s: usize| {
         let v = shape.vertex(s);
         [coord(0, v[0]), coord(1, v[1]), coord(2, v[2])]
     };
-    let kept: Vec<usize> = (0..shape.slots())
-        .into_par_iter()
-        .filter(|&s| {
-            let p = position(s);
-            (0..8u32).any(|corner| {
-                let o: [u32; 3] = std::array::from_fn(|i| {
-                    let l = (p[i].clamp(0.0, (g.res[i] - 1) as f32).floor() as u32)
-                        .min(g.res[i].saturating_sub(2));
-                    (l + (corner >> (2 - i) & 1)).min(g.res[i] - 1)
-                });
-                keep_old[g.slot(o[0], o[1], o[2])]
-            })
-        })
-        .collect();
     let mut density = vec![0.0; kept.len()];
     let mut sh = vec![0.0; kept.len() * SH_DIM];
     density
@@ -149,13 +152,43 @@ pub fn upsample(g: &Grid, new_res: u32, keep_old: &[bool]) -> Grid {
 mod tests {
     use super::*;
 
+    use crate::grid::mask::tests::random_mask;
+
     #[test]
-    fn dilation_grows_a_point_to_a_cube() {
-        let res = [7, 7, 7];
-        let mut m = vec![false; 343];
-        m[(3 * 7 + 3) * 7 + 3] = true;
-        let d = dilate(res, &m, 2);
-        assert_eq!(d.iter().filter(|&&b| b).count(), 125);
+    fn upsampling_keeps_the_vertices_whose_old_cell_has_a_kept_corner() {
+        // Against the definition, new vertex by new vertex: its position in old coordinates
+        // (clamped), the old cell holding it, any of the cell's 8 corners kept. Old grids of
+        // odd and even sizes, up by non-integer factors and down.
+        for (old, new_res, seed) in [(6u32, 16u32, 4u64), (7, 10, 5), (9, 5, 6), (8, 16, 7)] {
+            let mut g = Grid::sphere(old, [0.0; 3], [1.0; 3], 10.0, 0.0);
+            g.density
+                .iter_mut()
+                .enumerate()
+                .for_each(|(i, d)| *d = i as f32);
+            let keep = random_mask(g.res, 0.05, seed);
+            let up = upsample(&g, new_res, &keep);
+            let f = 0.5 * old as f32 / new_res as f32;
+            let step = (old as f32 - 2.0 * f) / (new_res - 1) as f32;
+            let mut rows = 0;
+            for s in 0..up.slots() {
+                let v = up.vertex(s);
+                let cell = v.map(|j| {
+                    let p = (f - 0.5 + step * j as f32).clamp(0.0, (old - 1) as f32);
+                    (p.floor() as u32).min(old - 2)
+                });
+                let want = (0..8u32).any(|c| {
+                    let o: [u32; 3] =
+                        std::array::from_fn(|i| (cell[i] + (c >> (2 - i) & 1)).min(old - 1));
+                    keep[g.slot(o[0], o[1], o[2])]
+                });
+                assert_eq!(up.links[s] >= 0, want, "{old}³ → {new_res}³ at {v:?}");
+                if want {
+                    assert_eq!(up.links[s], rows, "rows follow the slot order");
+                    rows += 1;
+                }
+            }
+            assert_eq!(up.allocated(), rows as usize);
+        }
     }
 
     #[test]

@@ -5,9 +5,10 @@
 
 use super::checkpoint::{check_optim, read_extras, write_extras, OptimRefs, META};
 use super::npz::{self, Data, NpzReader};
-use super::{dilate, Grid, SH_DIM};
+use super::{cells_then_corners, dilate, Grid, SH_DIM};
 use crate::abi::surface_grid::SurfaceGridRef;
 use anyhow::{bail, ensure, Context, Result};
+use rayon::prelude::*;
 use std::path::Path;
 
 /// A loaded stage-2 checkpoint.
@@ -114,31 +115,24 @@ impl SurfaceGrid {
     /// where some point can reach the threshold. Returns the number of vertices removed.
     pub fn prune_transparent(&mut self, min_alpha: f32) -> usize {
         let thresh = -(1.0 - min_alpha).ln();
-        let n = self.res[0] as usize;
-        let slot = |x: usize, y: usize, z: usize| (x * n + y) * n + z;
-        let mut keep = vec![false; self.links.len()];
-        for x in 0..n - 1 {
-            for y in 0..n - 1 {
-                for z in 0..n - 1 {
-                    let corners = [0, 1, 2, 3, 4, 5, 6, 7]
-                        .map(|i| slot(x + (i >> 2 & 1), y + (i >> 1 & 1), z + (i & 1)));
-                    let lk = corners.map(|s| self.links[s]);
-                    if lk.iter().any(|&l| l < 0) {
-                        continue;
-                    }
-                    if lk.iter().any(|&l| self.opacity[l as usize] >= thresh) {
-                        corners.iter().for_each(|&s| keep[s] = true);
-                    }
-                }
-            }
-        }
+        let allocated: Vec<bool> = self.links.par_iter().map(|&l| l >= 0).collect();
+        let hot: Vec<bool> = self
+            .links
+            .par_iter()
+            .map(|&l| l >= 0 && self.opacity[l as usize] >= thresh)
+            .collect();
+        let keep = cells_then_corners(self.res, allocated, hot);
         let before = self.delta.len();
         let mut next = SurfaceGrid {
+            res: self.res,
+            center: self.center,
+            radius: self.radius,
             links: vec![-1; self.links.len()],
             delta: Vec::new(),
             opacity: Vec::new(),
             sh: Vec::new(),
-            ..self.clone()
+            levels: self.levels.clone(),
+            gradient_scale: self.gradient_scale,
         };
         for (s, &l) in self.links.iter().enumerate() {
             if l < 0 || !keep[s] {
@@ -200,6 +194,7 @@ impl SurfaceGrid {
             (l >= 0).then(|| g.density[l as usize])
         };
         let keep: Vec<bool> = (0..g.slots())
+            .into_par_iter()
             .map(|s| sigma(s).is_some_and(|v| v > floor))
             .collect();
         let keep = dilate(g.res, &keep, 2);
@@ -245,29 +240,37 @@ impl SurfaceGrid {
     fn mean_gradient_norm(&self) -> f32 {
         let [rx, ry, rz] = self.res.map(|r| r as usize);
         let h: [f64; 3] = std::array::from_fn(|i| 2.0 * self.radius[i] as f64 / self.res[i] as f64);
-        let (mut sum, mut count) = (0.0f64, 0usize);
-        for x in 0..rx.saturating_sub(1) {
-            for y in 0..ry.saturating_sub(1) {
-                for z in 0..rz.saturating_sub(1) {
-                    let s = (x * ry + y) * rz + z;
-                    let l0 = self.links[s];
-                    let nb = [
-                        self.links[s + ry * rz],
-                        self.links[s + rz],
-                        self.links[s + 1],
-                    ];
-                    if l0 < 0 || nb.iter().any(|&l| l < 0) {
-                        continue;
+        // Per x-plane sums, added in plane order: the same figure whatever the threads.
+        let planes: Vec<(f64, usize)> = (0..rx.saturating_sub(1))
+            .into_par_iter()
+            .map(|x| {
+                let (mut sum, mut count) = (0.0f64, 0usize);
+                for y in 0..ry.saturating_sub(1) {
+                    for z in 0..rz.saturating_sub(1) {
+                        let s = (x * ry + y) * rz + z;
+                        let l0 = self.links[s];
+                        let nb = [
+                            self.links[s + ry * rz],
+                            self.links[s + rz],
+                            self.links[s + 1],
+                        ];
+                        if l0 < 0 || nb.iter().any(|&l| l < 0) {
+                            continue;
+                        }
+                        let d0 = self.delta[l0 as usize] as f64;
+                        let g2: f64 = (0..3)
+                            .map(|a| ((self.delta[nb[a] as usize] as f64 - d0) / h[a]).powi(2))
+                            .sum();
+                        sum += g2.sqrt();
+                        count += 1;
                     }
-                    let d0 = self.delta[l0 as usize] as f64;
-                    let g2: f64 = (0..3)
-                        .map(|a| ((self.delta[nb[a] as usize] as f64 - d0) / h[a]).powi(2))
-                        .sum();
-                    sum += g2.sqrt();
-                    count += 1;
                 }
-            }
-        }
+                (sum, count)
+            })
+            .collect();
+        let (sum, count) = planes
+            .iter()
+            .fold((0.0, 0), |(s, c), &(ps, pc)| (s + ps, c + pc));
         (sum / count.max(1) as f64) as f32
     }
 }
