@@ -81,7 +81,8 @@ pub struct TrainOptions {
     /// trained with the scene, for images without alpha (it refuses images with alpha).
     #[arg(long, value_enum, default_value_t = BackgroundMode::White)]
     pub background: BackgroundMode,
-    /// Write a checkpoint every N steps (overrides the preset).
+    /// Write a checkpoint exactly every N steps. Default: the preset's (`fast` 500 steps, `paper`
+    /// 5000), at the first such step a minute or more after the last checkpoint.
     #[arg(long)]
     pub checkpoint_every: Option<u32>,
     /// Continue from the run directory's checkpoint (its configuration wins).
@@ -164,6 +165,7 @@ impl TrainOptions {
                 bail!("--checkpoint-every must be at least 1");
             }
             cfg.checkpoint_every = c;
+            cfg.checkpoint_min_seconds = 0.0;
         }
         if let Some(b) = self.batch {
             if b == 0 {
@@ -253,6 +255,7 @@ impl TrainOptions {
         if let Some(c) = self.checkpoint_every {
             ensure!(c > 0, "--checkpoint-every must be at least 1");
             cfg.checkpoint_every = c;
+            cfg.checkpoint_min_seconds = 0.0;
         }
         for kv in &self.set {
             cfg = set_field(&cfg, kv)?;
@@ -330,5 +333,28 @@ mod tests {
         assert_eq!(batch(Preset::Fast, Some(512), Some(1000)), 1000);
         assert_eq!(batch(Preset::Paper, None, None), 5000);
         assert_eq!(batch(Preset::Paper, Some(1024), None), 5000);
+    }
+
+    #[test]
+    fn an_explicit_checkpoint_interval_is_kept_exactly() {
+        let opts = |every: Option<u32>| TrainOptions {
+            checkpoint_every: every,
+            ..TrainOptions::new(Stage::All, "d".into(), "o".into())
+        };
+        let stage2 = |o: &TrainOptions| o.stage2_config(128).unwrap();
+        let preset = opts(None);
+        let (s1, s2) = (preset.stage1_config().unwrap(), stage2(&preset));
+        assert_eq!(
+            (s1.checkpoint_every, s1.checkpoint_min_seconds),
+            (500, 60.0)
+        );
+        assert_eq!(
+            (s2.checkpoint_every, s2.checkpoint_min_seconds),
+            (500, 60.0)
+        );
+        let given = opts(Some(7));
+        let (s1, s2) = (given.stage1_config().unwrap(), stage2(&given));
+        assert_eq!((s1.checkpoint_every, s1.checkpoint_min_seconds), (7, 0.0));
+        assert_eq!((s2.checkpoint_every, s2.checkpoint_min_seconds), (7, 0.0));
     }
 }

@@ -5,6 +5,37 @@
 use super::memory;
 use anyhow::{anyhow, Context, Result};
 use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+/// When a training loop writes its periodic checkpoints: after every `every` steps, once at
+/// least `min_seconds` have passed since the last checkpoint (or the start); never at the last
+/// step, which the loop saves anyway.
+pub struct Cadence {
+    every: u32,
+    min_gap: Duration,
+    last: Instant,
+}
+
+impl Cadence {
+    pub fn new(every: u32, min_seconds: f32) -> Self {
+        Cadence {
+            every: every.max(1),
+            min_gap: Duration::from_secs_f32(min_seconds.max(0.0)),
+            last: Instant::now(),
+        }
+    }
+
+    /// Whether the checkpoint after step `step` (0-based) of `iters` is due now; when it is,
+    /// the time since the last one starts again.
+    pub fn due(&mut self, step: u32, iters: u32) -> bool {
+        let done = step + 1;
+        let due = done % self.every == 0 && done < iters && self.last.elapsed() >= self.min_gap;
+        if due {
+            self.last = Instant::now();
+        }
+        due
+    }
+}
 
 /// At most one write in progress, on its own thread.
 #[derive(Default)]
@@ -73,6 +104,22 @@ mod tests {
     use std::sync::atomic::{AtomicU32, Ordering};
     use std::sync::Arc;
     use std::time::Duration;
+
+    #[test]
+    fn a_cadence_waits_for_its_steps_and_its_seconds() {
+        let mut c = Cadence::new(5, 0.0);
+        let due: Vec<u32> = (0..20).filter(|&s| c.due(s, 20)).collect();
+        assert_eq!(due, vec![4, 9, 14], "every 5th step, not the last");
+        // A minute between checkpoints: none in a run of milliseconds.
+        let mut c = Cadence::new(5, 60.0);
+        assert!((0..1000).all(|s| !c.due(s, 1000)));
+        // 30 ms: the steps that come due after the gap.
+        let mut c = Cadence::new(1, 0.03);
+        assert!(!c.due(0, 100));
+        std::thread::sleep(Duration::from_millis(40));
+        assert!(c.due(1, 100), "due once the gap has passed");
+        assert!(!c.due(2, 100), "and the gap starts again");
+    }
 
     #[test]
     fn writes_run_one_at_a_time_in_order_and_errors_come_back() {

@@ -5,6 +5,9 @@ use super::preset::Preset;
 use super::schedule::DelayedExp;
 use serde::{Deserialize, Serialize};
 
+/// The presets' least time between periodic checkpoints (both stages), in seconds.
+pub const CHECKPOINT_MIN_SECONDS: f32 = 60.0;
+
 /// The largest final grid at which `fast`'s stage 1 keeps its batch of rays per step.
 const FAST_BATCH_RES: u64 = 256;
 
@@ -39,8 +42,13 @@ pub struct Stage1Config {
     pub prune_pixel_stride: u32,
     pub beta: f32,
     pub eps: f32,
-    /// Write a checkpoint every this many steps (and at the end).
+    /// Write a checkpoint every this many steps (and at the end)…
     pub checkpoint_every: u32,
+    /// …once at least this many seconds have passed since the last one (or the start): a run
+    /// that takes seconds on a GPU does not stop to copy its state every few hundred steps.
+    /// 0: exactly every `checkpoint_every` steps (and in configurations saved before it).
+    #[serde(default)]
+    pub checkpoint_min_seconds: f32,
     pub seed: u64,
 }
 
@@ -79,6 +87,7 @@ impl Stage1Config {
             beta: 0.95,
             eps: 1e-8,
             checkpoint_every: 5000,
+            checkpoint_min_seconds: CHECKPOINT_MIN_SECONDS,
             seed: 0,
         }
     }
@@ -118,6 +127,7 @@ impl Stage1Config {
             beta: 0.95,
             eps: 1e-8,
             checkpoint_every: 500,
+            checkpoint_min_seconds: CHECKPOINT_MIN_SECONDS,
             seed: 0,
         }
     }
@@ -157,9 +167,15 @@ impl Stage1Config {
             ("beta", self.beta),
             ("eps", self.eps),
             ("init_sigma", self.init_sigma),
+            ("checkpoint_min_seconds", self.checkpoint_min_seconds),
         ] {
             anyhow::ensure!(v.is_finite(), "{name} must be finite, got {v}");
         }
+        anyhow::ensure!(
+            self.checkpoint_min_seconds >= 0.0,
+            "checkpoint_min_seconds must not be negative, got {}",
+            self.checkpoint_min_seconds
+        );
         Ok(())
     }
 

@@ -11,7 +11,7 @@ use crate::abi::buffers::PlenoxelPerRay;
 use crate::data::{BackgroundMode, Dataset, Split, TrainViews};
 use crate::grid::{checkpoint, dilate, upsample, Grid};
 use crate::plenoxel::{Plenoxels, StepParams, TvParams};
-use crate::run::checkpoint_writer::BackgroundSave;
+use crate::run::checkpoint_writer::{BackgroundSave, Cadence};
 use crate::run::train_log;
 use anyhow::{bail, Context, Result};
 use rand::{Rng, SeedableRng};
@@ -223,6 +223,7 @@ pub fn train(
     }
     let mut group = StepGroup::default();
     let mut writer = BackgroundSave::default();
+    let mut cadence = Cadence::new(cfg.checkpoint_every, cfg.checkpoint_min_seconds);
     for step in start_step..cfg.iters {
         if let Some((_, r)) = cfg.upsample.iter().find(|(s, _)| *s == step) {
             let t = Instant::now();
@@ -260,7 +261,7 @@ pub fn train(
             },
         )?;
         group.push(step);
-        let checkpoint = (step + 1) % cfg.checkpoint_every == 0 && step + 1 < cfg.iters;
+        let checkpoint = cadence.due(step, cfg.iters);
         // Read the group before an upsampling, so that its wall time is the training's alone.
         let upsample_next = cfg.upsample.iter().any(|(s, _)| *s == step + 1);
         if group.due(step, cfg.iters, checkpoint || upsample_next) {
@@ -301,9 +302,13 @@ pub fn train(
     progress.finish();
     train_log::flush(&mut log, &log_path)?;
     drop(log);
+    // The last checkpoint is written while the test views render.
     let t = Instant::now();
-    writer.finish()?;
-    save(backend, cfg, data.background, out, cfg.iters)?;
+    writer.checkpoint(
+        backend.state_bytes(),
+        || snapshot(backend, cfg, data.background, out, cfg.iters),
+        || save(backend, cfg, data.background, out, cfg.iters),
+    )?;
     report.checkpoint_seconds += t.elapsed().as_secs_f64();
 
     let t = Instant::now();
@@ -316,6 +321,9 @@ pub fn train(
         1,
     )?;
     report.render_seconds = t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    writer.finish()?;
+    report.checkpoint_seconds += t.elapsed().as_secs_f64();
     let grid = backend.grid()?;
     report.steps = cfg.iters;
     report.train_rays_per_s = throughput.rays_per_s().unwrap_or(0.0);

@@ -13,7 +13,7 @@ use crate::cpu::surface_reg::{delta_tv_chunk, opacity_tv_chunk, OpacityChunk};
 use crate::data::{BackgroundMode, Dataset, TrainViews};
 use crate::grid::checkpoint;
 use crate::grid::surface::SurfaceGrid;
-use crate::run::checkpoint_writer::BackgroundSave;
+use crate::run::checkpoint_writer::{BackgroundSave, Cadence};
 use crate::run::train_log;
 use crate::surface::{SurfaceBackend, SurfaceRegs, SurfaceStepParams};
 use anyhow::{bail, Context, Result};
@@ -207,6 +207,7 @@ pub fn train(
     let views = TrainViews::new(&data.train, &data.scene)?.focused(cfg.ray_focus)?;
     let mut group = StepGroup::default();
     let mut writer = BackgroundSave::default();
+    let mut cadence = Cadence::new(cfg.checkpoint_every, cfg.checkpoint_min_seconds);
     for step in start_step..cfg.iters {
         let mut rng = step_rng(cfg.seed, step);
         let batch_seed: u64 = rng.random();
@@ -218,7 +219,7 @@ pub fn train(
         let p = step_params(cfg, res, rows, step, cfg.a.at(step), draws);
         backend.step_sampled(&views, batch_seed, cfg.batch as usize, &p)?;
         group.push(step);
-        let checkpoint = (step + 1) % cfg.checkpoint_every == 0 && step + 1 < cfg.iters;
+        let checkpoint = cadence.due(step, cfg.iters);
         if group.due(step, cfg.iters, checkpoint) {
             let (steps, secs) = group.take();
             let n = steps.len();
@@ -284,9 +285,15 @@ pub fn train(
             cfg.prune_alpha
         );
     }
+    report.allocated_vertices = grid.delta.len();
     backend.load(grid, None)?;
+    // The last checkpoint is written while the test views render.
     let t = Instant::now();
-    save(backend, cfg, data.background, out, cfg.iters)?;
+    writer.checkpoint(
+        backend.state_bytes(),
+        || snapshot(backend, cfg, data.background, out, cfg.iters),
+        || save(backend, cfg, data.background, out, cfg.iters),
+    )?;
     report.checkpoint_seconds += t.elapsed().as_secs_f64();
 
     let t = Instant::now();
@@ -299,11 +306,13 @@ pub fn train(
         1,
     )?;
     report.render_seconds = t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    writer.finish()?;
+    report.checkpoint_seconds += t.elapsed().as_secs_f64();
     report.steps = cfg.iters;
     report.train_rays_per_s = throughput.rays_per_s().unwrap_or(0.0);
     report.final_mse = mse;
     report.test_psnr = rendered.mean_psnr;
     report.per_ray = totals.scaled(1.0 / throughput.rays().max(1) as f64);
-    report.allocated_vertices = backend.grid()?.delta.len();
     Ok((report, rendered))
 }

@@ -2,6 +2,7 @@
 //! (method.md §3.4–3.5) combined with a size preset — `paper` (50k steps of 5000 rays) or `fast`
 //! (a CPU-sized schedule with every step-count scaled by the same factor). One trainer runs both.
 
+use super::config::CHECKPOINT_MIN_SECONDS;
 use super::preset::{Category, Preset};
 use super::schedule::DelayedExp;
 use crate::grid::surface::SurfaceInit;
@@ -82,8 +83,11 @@ pub struct SurfaceConfig {
     pub stop_thresh: f32,
     pub beta: f32,
     pub eps: f32,
-    /// Write a checkpoint every this many steps (and at the end).
+    /// Write a checkpoint every this many steps (and at the end), once at least
+    /// `checkpoint_min_seconds` have passed since the last one (as in stage 1's configuration).
     pub checkpoint_every: u32,
+    #[serde(default)]
+    pub checkpoint_min_seconds: f32,
     pub seed: u64,
 }
 
@@ -152,6 +156,7 @@ impl SurfaceConfig {
             beta: 0.95,
             eps: 1e-8,
             checkpoint_every: 5000,
+            checkpoint_min_seconds: CHECKPOINT_MIN_SECONDS,
             seed: 0,
         };
         match category {
@@ -257,6 +262,11 @@ impl SurfaceConfig {
         ensure!(
             self.iters > 0 && self.batch > 0 && self.checkpoint_every > 0,
             "iters, batch and checkpoint_every must be at least 1"
+        );
+        ensure!(
+            self.checkpoint_min_seconds >= 0.0 && self.checkpoint_min_seconds.is_finite(),
+            "checkpoint_min_seconds must be a finite number of seconds ≥ 0, got {}",
+            self.checkpoint_min_seconds
         );
         Ok(())
     }

@@ -260,7 +260,8 @@ fn non_finite_training_state_stops_the_run_and_keeps_the_last_checkpoint() {
         cfg.iters,
         cfg.batch,
         cfg.checkpoint_every,
-    ) = (16, vec![], 4, 512, 2);
+        cfg.checkpoint_min_seconds,
+    ) = (16, vec![], 4, 512, 2, 0.0);
     let run = dir.path().join("run");
     let grid = alphasurf::grid::Grid::sphere(16, [0.0; 3], [1.0; 3], 1.0, cfg.init_sigma);
     let mut b = CpuPlenoxels::new(grid);
