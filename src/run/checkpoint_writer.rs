@@ -29,7 +29,8 @@ impl Cadence {
     /// the time since the last one starts again.
     pub fn due(&mut self, step: u32, iters: u32) -> bool {
         let done = step + 1;
-        let due = done % self.every == 0 && done < iters && self.last.elapsed() >= self.min_gap;
+        let due =
+            done.is_multiple_of(self.every) && done < iters && self.last.elapsed() >= self.min_gap;
         if due {
             self.last = Instant::now();
         }
