@@ -373,7 +373,8 @@ pub fn table(s: &Summary) -> String {
     t
 }
 
-/// A stored result for these settings, if there is one.
+/// A stored result for these settings, if there is one and it did not fail (a failed scene, e.g.
+/// a full disk, is computed again from its finished stage 1).
 fn stored(path: &Path, settings: &Settings) -> Result<Option<SceneResult>> {
     if !path.exists() {
         return Ok(None);
@@ -387,6 +388,10 @@ fn stored(path: &Path, settings: &Settings) -> Result<Option<SceneResult>> {
             "  {} holds a result for other settings: computing it again",
             path.display()
         );
+        return Ok(None);
+    }
+    if let Some(e) = &r.error {
+        eprintln!("  {} failed before ({e}): computing it again", path.display());
         return Ok(None);
     }
     Ok(Some(r))
@@ -679,6 +684,21 @@ mod tests {
         let line = r.time.as_ref().unwrap().line();
         assert!(line.contains("level sweep 12.3 s, trimmed 3.5 s"), "{line}");
         assert!(line.contains("αSurf extract + eval 4.0 s"), "{line}");
+    }
+
+    #[test]
+    fn a_failed_scene_is_computed_again_a_finished_one_is_not() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("result.json");
+        let mut r = result("thin_fan", Category::Thin, &[(50.0, 0.5)], 0.35);
+        write_json(&path, &r).unwrap();
+        assert!(stored(&path, &r.settings).unwrap().is_some());
+        let mut other = r.settings.clone();
+        other.seed = 1;
+        assert!(stored(&path, &other).unwrap().is_none());
+        r.error = Some("writing surface.npz: No space left on device".into());
+        write_json(&path, &r).unwrap();
+        assert!(stored(&path, &r.settings).unwrap().is_none());
     }
 
     #[test]
