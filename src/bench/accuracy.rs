@@ -391,7 +391,10 @@ fn stored(path: &Path, settings: &Settings) -> Result<Option<SceneResult>> {
         return Ok(None);
     }
     if let Some(e) = &r.error {
-        eprintln!("  {} failed before ({e}): computing it again", path.display());
+        eprintln!(
+            "  {} failed before ({e}): computing it again",
+            path.display()
+        );
         return Ok(None);
     }
     Ok(Some(r))

@@ -43,7 +43,13 @@ fn sample(g: &Grid, p: [f32; 3], out: &mut [f32; 1 + SH_DIM]) {
 /// linspace(f − 0.5, N_old − f − 0.5, N_new)[j] with f = ½·N_old/N_new (svox2), values are
 /// trilinear. Only vertices where `keep_old` (a mask over the old slots, e.g. pruned by render
 /// weight and dilated) has a kept vertex among the 8 surrounding old vertices are allocated.
-pub fn upsample(g: &Grid, new_res: u32, keep_old: &[bool]) -> Grid {
+/// `fits` sees how many that is before their rows are allocated, and may refuse.
+pub fn upsample(
+    g: &Grid,
+    new_res: u32,
+    keep_old: &[bool],
+    fits: impl FnOnce(usize) -> anyhow::Result<()>,
+) -> anyhow::Result<Grid> {
     let res = [new_res; 3];
     let coord = |axis: usize, j: u32| -> f32 {
         let n_old = g.res[axis] as f32;
@@ -120,6 +126,7 @@ pub fn upsample(g: &Grid, new_res: u32, keep_old: &[bool]) -> Grid {
         })
         .collect();
     drop(along_yz);
+    fits(kept.len())?;
     let position = |s: usize| {
         let v = shape.vertex(s);
         [coord(0, v[0]), coord(1, v[1]), coord(2, v[2])]
@@ -140,12 +147,12 @@ pub fn upsample(g: &Grid, new_res: u32, keep_old: &[bool]) -> Grid {
     for (row, &s) in kept.iter().enumerate() {
         links[s] = row as i32;
     }
-    Grid {
+    Ok(Grid {
         links,
         density,
         sh,
         ..shape
-    }
+    })
 }
 
 #[cfg(test)]
@@ -166,7 +173,7 @@ mod tests {
                 .enumerate()
                 .for_each(|(i, d)| *d = i as f32);
             let keep = random_mask(g.res, 0.05, seed);
-            let up = upsample(&g, new_res, &keep);
+            let up = upsample(&g, new_res, &keep, |_| Ok(())).unwrap();
             let f = 0.5 * old as f32 / new_res as f32;
             let step = (old as f32 - 2.0 * f) / (new_res - 1) as f32;
             let mut rows = 0;
@@ -192,6 +199,22 @@ mod tests {
     }
 
     #[test]
+    fn upsampling_asks_before_allocating_and_stops_when_refused() {
+        let g = Grid::sphere(8, [0.0; 3], [1.0; 3], 10.0, 0.0);
+        let mut keep = vec![false; g.slots()];
+        keep[g.slot(3, 4, 5)] = true;
+        let mut seen = None;
+        let up = upsample(&g, 16, &keep, |n| {
+            seen = Some(n);
+            Ok(())
+        })
+        .unwrap();
+        assert_eq!(seen, Some(up.allocated()));
+        let e = upsample(&g, 16, &keep, |n| anyhow::bail!("{n} vertices do not fit")).unwrap_err();
+        assert_eq!(format!("{e:#}"), "64 vertices do not fit");
+    }
+
+    #[test]
     fn upsampling_a_linear_field_is_exact() {
         // σ = x + 2y − z in old grid coordinates is reproduced at the new vertex positions.
         let mut g = Grid::sphere(8, [0.0; 3], [1.0; 3], 10.0, 0.0);
@@ -202,7 +225,7 @@ mod tests {
             g.sh[row * SH_DIM + 5] = v[1] as f32;
         }
         let keep = vec![true; g.slots()];
-        let up = upsample(&g, 16, &keep);
+        let up = upsample(&g, 16, &keep, |_| Ok(())).unwrap();
         assert_eq!(up.allocated(), 16 * 16 * 16);
         let f = 0.5 * 8.0 / 16.0;
         let step = (8.0 - 2.0 * f) / 15.0;
@@ -226,7 +249,7 @@ mod tests {
         let g = Grid::sphere(8, [0.0; 3], [1.0; 3], 10.0, 0.0);
         let mut keep = vec![false; g.slots()];
         keep[g.slot(3, 4, 5)] = true;
-        let up = upsample(&g, 16, &keep);
+        let up = upsample(&g, 16, &keep, |_| Ok(())).unwrap();
         // New vertex j sits at old coordinate j/2 − 0.25: the vertices whose surrounding old
         // cell has (3, 4, 5) as a corner are x 5..=8, y 7..=10, z 9..=12 (4³ = 64).
         assert_eq!(up.allocated(), 64);

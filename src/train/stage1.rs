@@ -9,9 +9,10 @@ use super::progress::{pair, Progress, StepGroup, Throughput};
 use super::render::{psnr, render_split, RenderedSplit};
 use crate::abi::buffers::PlenoxelPerRay;
 use crate::data::{BackgroundMode, Dataset, Split, TrainViews};
-use crate::grid::{checkpoint, dilate, upsample, Grid};
+use crate::grid::{checkpoint, dilate, upsample, Grid, SH_DIM};
 use crate::plenoxel::{Plenoxels, StepParams, TvParams};
 use crate::run::checkpoint_writer::{BackgroundSave, Cadence};
+use crate::run::memory;
 use crate::run::train_log;
 use anyhow::{bail, Context, Result};
 use rand::{Rng, SeedableRng};
@@ -96,7 +97,20 @@ fn upsample_step(
         .map(|&l| l >= 0 && weights[l as usize] >= cfg.prune_weight)
         .collect();
     let keep = dilate(grid.res, &keep, 2);
-    let next = upsample(&grid, new_res, &keep);
+    // Values, running averages and gradients per kept vertex, and the new index volume: refused
+    // before the rows are allocated (a barely trained grid keeps nearly every vertex).
+    let next = upsample(&grid, new_res, &keep, |vertices| {
+        let params = 4.0 * (1 + SH_DIM) as f64;
+        let need = vertices as f64 * 3.0 * params + 4.0 * (new_res as f64).powi(3);
+        memory::ensure_fits(
+            &format!("upsampling to {new_res}³ ({vertices} vertices kept)"),
+            need,
+        )
+        .context(
+            "too few vertices were pruned by training-ray weight before the upsampling \
+             (more --iters, or a smaller --res)",
+        )
+    })?;
     if next.allocated() == 0 {
         bail!(
             "upsampling to {new_res}³ kept no vertex (no training-ray weight reached {}); \
