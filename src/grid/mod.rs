@@ -144,14 +144,12 @@ impl Grid {
         self.sh = sh;
     }
 
-    /// Bytes per allocated vertex: data (σ + SH) plus, when `with_optimizer`, RMSProp's running
-    /// mean of squared gradients and the gradient accumulators (one float each per parameter); the
-    /// `links` volume is amortised over the allocated vertices.
-    pub fn bytes_per_vertex(&self, with_optimizer: bool) -> f64 {
-        let params = (1 + SH_DIM) as f64;
-        let per_param = if with_optimizer { 3.0 } else { 1.0 };
-        let links = 4.0 * self.slots() as f64 / self.allocated().max(1) as f64;
-        4.0 * params * per_param + links
+    /// Bytes a grid of `res` vertices with `rows` of them allocated takes while it trains: the
+    /// `links` volume, and per vertex its data (σ + SH), RMSProp's running mean of squared
+    /// gradients and the gradient accumulators (one float each per parameter).
+    pub fn training_bytes(res: [u32; 3], rows: usize) -> f64 {
+        let slots: f64 = res.iter().map(|&r| r as f64).product();
+        4.0 * slots + rows as f64 * 4.0 * (1 + SH_DIM) as f64 * 3.0
     }
 
     /// Check the invariants a loaded grid must satisfy; the error says which one fails.
@@ -207,6 +205,18 @@ impl Grid {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_training_grid_is_its_checkpoint_state_and_the_gradients() {
+        let g = Grid::sphere(12, [0.0; 3], [1.0; 3], 0.8, 1.0);
+        let rows = g.allocated();
+        let state = checkpoint::state_bytes(g.slots() as u64, rows as u64, 1 + SH_DIM as u64);
+        let gradients = 4 * rows * (1 + SH_DIM);
+        assert_eq!(
+            Grid::training_bytes(g.res, rows),
+            (state as usize + gradients) as f64
+        );
+    }
 
     #[test]
     fn world_grid_roundtrip_and_box_corners() {

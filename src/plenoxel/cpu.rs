@@ -7,7 +7,6 @@ use crate::cpu::plenoxel::{self as twin, MarchParams, TrainGrads};
 use crate::cpu::{rmsprop_sparse, tv, Stage1Params};
 use crate::data::TrainViews;
 use crate::gpu::{timed, Phase, PhaseClock};
-use crate::grid::checkpoint::state_bytes;
 use crate::grid::{Grid, SH_DIM};
 use crate::math::plenoxel::{GridRef, PlenoxelCounts};
 use anyhow::{ensure, Result};
@@ -239,13 +238,8 @@ impl Plenoxels for CpuPlenoxels {
         Ok((self.state_density.clone(), self.state_sh.clone()))
     }
 
-    fn state_bytes(&self) -> u64 {
-        let g = &self.grid;
-        state_bytes(
-            g.links.len() as u64,
-            g.allocated() as u64,
-            1 + SH_DIM as u64,
-        )
+    fn shape(&self) -> ([u32; 3], usize) {
+        (self.grid.res, self.grid.allocated())
     }
 
     fn with_state(&self, f: &mut StateFn) -> Result<()> {

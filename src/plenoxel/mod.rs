@@ -11,7 +11,8 @@ pub use vulkan::VulkanPlenoxels;
 use crate::cpu::background::Background;
 use crate::cpu::plenoxel::MarchParams;
 use crate::data::TrainViews;
-use crate::grid::Grid;
+use crate::grid::checkpoint::state_bytes;
+use crate::grid::{Grid, SH_DIM};
 use crate::math::plenoxel::PlenoxelCounts;
 use anyhow::Result;
 
@@ -98,8 +99,14 @@ pub trait Plenoxels {
     fn grid(&self) -> Result<Grid>;
     /// RMSProp running averages (σ, SH).
     fn optimizer_state(&self) -> Result<(Vec<f32>, Vec<f32>)>;
+    /// Vertices per axis and allocated vertices of the current grid (nothing copied).
+    fn shape(&self) -> ([u32; 3], usize);
     /// Bytes of a copy of the grid and the running averages (what a checkpoint holds).
-    fn state_bytes(&self) -> u64;
+    fn state_bytes(&self) -> u64 {
+        let (res, rows) = self.shape();
+        let slots = res.iter().map(|&r| r as u64).product();
+        state_bytes(slots, rows as u64, 1 + SH_DIM as u64)
+    }
     /// Call `f` with the grid and the running averages (σ, SH): borrowed where the backend holds
     /// them in host memory (checkpoints of large grids copy nothing), else downloaded.
     fn with_state(&self, f: &mut StateFn) -> Result<()> {

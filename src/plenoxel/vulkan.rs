@@ -15,7 +15,6 @@ use crate::gpu::{
     Phase, PhaseClock, RayBuffers, Readback, StepMeta, StepsInFlight, TrainRays, TrainViewBuffers,
     STEP_SLOTS,
 };
-use crate::grid::checkpoint::state_bytes;
 use crate::grid::{Grid, SH_DIM};
 use crate::kernels;
 use crate::math::plenoxel::{occ_dims, PlenoxelCounts};
@@ -515,9 +514,8 @@ impl Plenoxels for VulkanPlenoxels {
         })
     }
 
-    fn state_bytes(&self) -> u64 {
-        let slots = self.meta.res.iter().map(|&r| r as u64).product();
-        state_bytes(slots, self.allocated() as u64, 1 + SH_DIM as u64)
+    fn shape(&self) -> ([u32; 3], usize) {
+        (self.meta.res, self.allocated())
     }
 
     fn optimizer_state(&self) -> Result<(Vec<f32>, Vec<f32>)> {

@@ -9,7 +9,7 @@ use super::progress::{pair, Progress, StepGroup, Throughput};
 use super::render::{psnr, render_split, RenderedSplit};
 use crate::abi::buffers::PlenoxelPerRay;
 use crate::data::{BackgroundMode, Dataset, Split, TrainViews};
-use crate::grid::{checkpoint, dilate, upsample, Grid, SH_DIM};
+use crate::grid::{checkpoint, dilate, upsample, Grid};
 use crate::plenoxel::{Plenoxels, StepParams, TvParams};
 use crate::run::checkpoint_writer::{BackgroundSave, Cadence};
 use crate::run::memory;
@@ -97,14 +97,11 @@ fn upsample_step(
         .map(|&l| l >= 0 && weights[l as usize] >= cfg.prune_weight)
         .collect();
     let keep = dilate(grid.res, &keep, 2);
-    // Values, running averages and gradients per kept vertex, and the new index volume: refused
-    // before the rows are allocated (a barely trained grid keeps nearly every vertex).
+    // Refused before the rows are allocated (a barely trained grid keeps nearly every vertex).
     let next = upsample(&grid, new_res, &keep, |vertices| {
-        let params = 4.0 * (1 + SH_DIM) as f64;
-        let need = vertices as f64 * 3.0 * params + 4.0 * (new_res as f64).powi(3);
         memory::ensure_fits(
             &format!("upsampling to {new_res}³ ({vertices} vertices kept)"),
-            need,
+            Grid::training_bytes([new_res; 3], vertices),
         )
         .context(
             "too few vertices were pruned by training-ray weight before the upsampling \
@@ -338,14 +335,14 @@ pub fn train(
     let t = Instant::now();
     writer.finish()?;
     report.checkpoint_seconds += t.elapsed().as_secs_f64();
-    let grid = backend.grid()?;
+    let (res, rows) = backend.shape();
     report.steps = cfg.iters;
     report.train_rays_per_s = throughput.rays_per_s().unwrap_or(0.0);
     report.final_mse = mse;
     report.test_psnr = rendered.mean_psnr;
     report.samples_per_ray = sample_totals.scaled(1.0 / throughput.rays().max(1) as f64);
-    report.allocated_vertices = grid.allocated();
-    report.bytes_per_vertex = grid.bytes_per_vertex(true);
+    report.allocated_vertices = rows;
+    report.bytes_per_vertex = Grid::training_bytes(res, rows) / rows.max(1) as f64;
     Ok((report, rendered))
 }
 
