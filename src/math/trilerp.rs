@@ -54,18 +54,21 @@ pub fn trilerp_weights(p: [f32; 3]) -> [f32; 8] {
 
 /// Links of the 8 corners of cell `l` in a grid of `res` vertices (x-major: slot
 /// (x·ny + y)·nz + z), in the corner order above; < 0: unallocated.
+#[inline]
 pub fn cell_links(links: &[i32], res: [u32; 3], l: [i32; 3]) -> [i32; 8] {
     let (ny, nz) = (res[1] as usize, res[2] as usize);
     let base = (l[0] as usize * ny + l[1] as usize) * nz + l[2] as usize;
-    let bx = base + ny * nz;
+    let x = ny * nz;
+    // One bounds check for the cell's span of slots instead of one per corner.
+    let c = &links[base..base + x + nz + 2];
     [
-        links[base],
-        links[base + 1],
-        links[base + nz],
-        links[base + nz + 1],
-        links[bx],
-        links[bx + 1],
-        links[bx + nz],
-        links[bx + nz + 1],
+        c[0],
+        c[1],
+        c[nz],
+        c[nz + 1],
+        c[x],
+        c[x + 1],
+        c[x + nz],
+        c[x + nz + 1],
     ]
 }
