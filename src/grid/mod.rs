@@ -144,12 +144,13 @@ impl Grid {
         self.sh = sh;
     }
 
-    /// Bytes a grid of `res` vertices with `rows` of them allocated takes while it trains: the
-    /// `links` volume, and per vertex its data (σ + SH), RMSProp's running mean of squared
-    /// gradients and the gradient accumulators (one float each per parameter).
+    /// Bytes a grid of `res` vertices with `rows` of them allocated takes while it trains: what
+    /// a checkpoint holds (links, values, RMSProp's running averages) plus the gradient
+    /// accumulators (one float per parameter).
     pub fn training_bytes(res: [u32; 3], rows: usize) -> f64 {
-        let slots: f64 = res.iter().map(|&r| r as f64).product();
-        4.0 * slots + rows as f64 * 4.0 * (1 + SH_DIM) as f64 * 3.0
+        let slots = res.iter().map(|&r| r as u64).product();
+        let channels = 1 + SH_DIM as u64;
+        (checkpoint::state_bytes(slots, rows as u64, channels) + 4 * rows as u64 * channels) as f64
     }
 
     /// Check the invariants a loaded grid must satisfy; the error says which one fails.
@@ -207,15 +208,13 @@ mod tests {
     use super::*;
 
     #[test]
-    fn a_training_grid_is_its_checkpoint_state_and_the_gradients() {
-        let g = Grid::sphere(12, [0.0; 3], [1.0; 3], 0.8, 1.0);
-        let rows = g.allocated();
-        let state = checkpoint::state_bytes(g.slots() as u64, rows as u64, 1 + SH_DIM as u64);
-        let gradients = 4 * rows * (1 + SH_DIM);
+    fn a_training_grid_is_its_links_and_three_floats_per_parameter() {
+        // 2·3·4 slots of 4-byte links; 5 rows of 28 parameters, each value, average, gradient.
         assert_eq!(
-            Grid::training_bytes(g.res, rows),
-            (state as usize + gradients) as f64
+            Grid::training_bytes([2, 3, 4], 5),
+            (4 * 24 + 5 * 28 * 3 * 4) as f64
         );
+        assert_eq!(Grid::training_bytes([8; 3], 0), 4.0 * 512.0);
     }
 
     #[test]
