@@ -57,6 +57,10 @@ pub struct AccuracyArgs {
     /// Stage-2 configuration override, passed on as `train --set KEY=VALUE`. Repeatable.
     #[arg(long, value_name = "KEY=VALUE")]
     pub surface_set: Vec<String>,
+    /// Stage-1 configuration override, passed on as `train --plenoxels-set KEY=VALUE`.
+    /// Repeatable.
+    #[arg(long, value_name = "KEY=VALUE")]
+    pub plenoxels_set: Vec<String>,
     /// Where the kernels run (resolved once).
     #[arg(long, value_enum, default_value_t = Backend::Auto)]
     pub backend: Backend,
@@ -83,6 +87,9 @@ pub struct Stage1Settings {
     pub preset: Preset,
     pub seed: u64,
     pub backend: Backend,
+    /// `--plenoxels-set` overrides (absent from records written before it).
+    #[serde(default)]
+    pub set: Vec<String>,
 }
 
 /// A finished stage-1 run and its level sweep (`plenoxels/stage1.json`).
@@ -434,6 +441,7 @@ fn stage1(
         res: settings.res,
         iters: settings.iters,
         batch: settings.batch,
+        set: settings.set.clone(),
     };
     let run = steps.train_plenoxels(&settings.data, dir, &size)?;
     let gt = settings.data.join("gt_points.ply");
@@ -594,6 +602,7 @@ pub fn run(args: &AccuracyArgs, devices: &mut Devices) -> Result<()> {
             preset: args.preset,
             seed: args.seed,
             backend: steps.backend(),
+            set: args.plenoxels_set.clone(),
         };
         if args.stage1_from.is_some() {
             // Another output's stage 1, whatever its seed, as long as the rest matches.
@@ -737,6 +746,7 @@ mod tests {
                     preset: Preset::Fast,
                     seed: 0,
                     backend: Backend::Cpu,
+                    set: vec![],
                 },
                 category,
                 seed: 0,

@@ -351,6 +351,7 @@ pub fn run(args: &TimeVsErrorArgs, devices: &mut Devices) -> Result<()> {
             res: Some(p.res),
             iters: Some(p.iters),
             batch: args.size.batch,
+            set: Vec::new(),
         };
         let s1 = match steps.train_plenoxels(&data, &dir.join("plenoxels"), &tsize) {
             Ok(s1) => s1,

@@ -29,14 +29,16 @@ pub struct SceneSize {
     pub gt_spacing: f64,
 }
 
-/// Stage-1 size overrides (`None` keeps the preset's value).
-#[derive(Clone, Copy, Debug, Default)]
+/// Stage-1 overrides (`None` or empty keeps the preset's values).
+#[derive(Clone, Debug, Default)]
 pub struct TrainSize {
     /// Final grid resolution.
     pub res: Option<u32>,
     pub iters: Option<u32>,
     /// Rays per batch.
     pub batch: Option<u32>,
+    /// `train --plenoxels-set KEY=VALUE` overrides, in order.
+    pub set: Vec<String>,
 }
 
 /// A finished training run.
@@ -154,12 +156,13 @@ impl<'g> Steps<'g> {
         }
     }
 
-    /// Stage 1: `train --stage plenoxels` with the size overrides.
+    /// Stage 1: `train --stage plenoxels` with the overrides.
     pub fn train_plenoxels(&self, data: &Path, out: &Path, size: &TrainSize) -> Result<TrainedRun> {
         let opts = TrainOptions {
             res: size.res,
             iters: size.iters,
             batch: size.batch,
+            plenoxels_set: size.set.clone(),
             ..self.train_options(Stage::Plenoxels, data, out)
         };
         let t = Instant::now();

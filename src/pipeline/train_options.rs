@@ -7,6 +7,7 @@ use crate::data::BackgroundMode;
 use crate::run::Open;
 use crate::train::{Category, Preset, Stage1Config, SurfaceConfig};
 use anyhow::{bail, ensure, Context, Result};
+use serde::{de::DeserializeOwned, Serialize};
 use std::path::PathBuf;
 
 /// Which stage to train.
@@ -51,6 +52,11 @@ pub struct TrainOptions {
     /// `--set lambda_h=1e-3 --set lr_delta.init=1e-4`; the value is JSON. Repeatable.
     #[arg(long = "set", value_name = "KEY=VALUE")]
     pub set: Vec<String>,
+    /// Stage 1: override any field of its configuration (as printed in its metrics.json), e.g.
+    /// `--plenoxels-set tv_sigma=1e-6 --plenoxels-set lr_sigma.last=1.0`; the value is JSON,
+    /// applied after `--res`, `--iters` and `--batch`. Repeatable.
+    #[arg(long = "plenoxels-set", value_name = "KEY=VALUE")]
+    pub plenoxels_set: Vec<String>,
     /// Run directory: checkpoints, test renders, metrics.json.
     #[arg(long)]
     pub out: PathBuf,
@@ -119,6 +125,7 @@ impl TrainOptions {
             alpha_init_scale: None,
             surface_iters: None,
             set: Vec::new(),
+            plenoxels_set: Vec::new(),
             out,
             preset: None,
             backend: Backend::Auto,
@@ -173,6 +180,10 @@ impl TrainOptions {
             }
             cfg.batch = b;
         }
+        for kv in &self.plenoxels_set {
+            cfg = set_field(&cfg, kv, "--plenoxels-set")?;
+        }
+        cfg.validate()?;
         Ok(cfg)
     }
 
@@ -198,8 +209,12 @@ impl TrainOptions {
             ];
             ignored.extend(stage2_only.iter().filter(|f| f.1).map(|f| f.0));
         }
-        if self.stage == Stage::Surface && self.res.is_some() {
-            ignored.push("--res");
+        if self.stage == Stage::Surface {
+            let stage1_only = [
+                ("--res", self.res.is_some()),
+                ("--plenoxels-set", !self.plenoxels_set.is_empty()),
+            ];
+            ignored.extend(stage1_only.iter().filter(|f| f.1).map(|f| f.0));
         }
         if self.stage == Stage::All && self.init.is_some() {
             ignored.push("--init");
@@ -216,7 +231,7 @@ impl TrainOptions {
                 },
                 match self.stage {
                     Stage::Plenoxels => "they configure stage 2",
-                    Stage::Surface => "the grid resolution comes from --init",
+                    Stage::Surface => "stage 1 is --init's",
                     Stage::All => "stage 2 starts from this run's own stage 1",
                 },
                 if ignored.len() == 1 { "it" } else { "them" }
@@ -258,7 +273,7 @@ impl TrainOptions {
             cfg.checkpoint_min_seconds = 0.0;
         }
         for kv in &self.set {
-            cfg = set_field(&cfg, kv)?;
+            cfg = set_field(&cfg, kv, "--set")?;
         }
         if let Some(s) = self.alpha_init_scale {
             ensure!(
@@ -286,28 +301,28 @@ fn check_batch_memory(batch: u32) -> Result<()> {
     )
 }
 
-/// `--set key.path=json`: patch one field of the configuration.
-fn set_field(cfg: &SurfaceConfig, kv: &str) -> Result<SurfaceConfig> {
+/// `FLAG key.path=json` (`--set`, `--plenoxels-set`): patch one field of a configuration.
+fn set_field<T: Serialize + DeserializeOwned>(cfg: &T, kv: &str, flag: &str) -> Result<T> {
     let (key, value) = kv
         .split_once('=')
-        .with_context(|| format!("--set {kv}: expected KEY=VALUE"))?;
+        .with_context(|| format!("{flag} {kv}: expected KEY=VALUE"))?;
     let value: serde_json::Value = serde_json::from_str(value)
         .or_else(|_| serde_json::from_str(&format!("\"{value}\"")))
-        .with_context(|| format!("--set {kv}: the value is not JSON"))?;
+        .with_context(|| format!("{flag} {kv}: the value is not JSON"))?;
     let mut v = serde_json::to_value(cfg)?;
     let mut slot = &mut v;
     for part in key.split('.') {
         slot = slot
             .get_mut(part)
-            .with_context(|| format!("--set {kv}: no configuration field {key:?}"))?;
+            .with_context(|| format!("{flag} {kv}: no configuration field {key:?}"))?;
     }
     ensure!(
         std::mem::discriminant(slot) == std::mem::discriminant(&value)
             || (slot.is_number() && value.is_number()),
-        "--set {kv}: {key} is {slot}, not {value}"
+        "{flag} {kv}: {key} is {slot}, not {value}"
     );
     *slot = value;
-    serde_json::from_value(v).with_context(|| format!("--set {kv}: invalid value for {key}"))
+    serde_json::from_value(v).with_context(|| format!("{flag} {kv}: invalid value for {key}"))
 }
 
 #[cfg(test)]
@@ -356,5 +371,33 @@ mod tests {
         let (s1, s2) = (given.stage1_config().unwrap(), stage2(&given));
         assert_eq!((s1.checkpoint_every, s1.checkpoint_min_seconds), (7, 0.0));
         assert_eq!((s2.checkpoint_every, s2.checkpoint_min_seconds), (7, 0.0));
+    }
+
+    #[test]
+    fn plenoxels_set_patches_stage_one_and_names_its_flag() {
+        let opts = |set: &[&str]| TrainOptions {
+            batch: Some(1000),
+            plenoxels_set: set.iter().map(|s| s.to_string()).collect(),
+            ..TrainOptions::new(Stage::Plenoxels, "d".into(), "o".into())
+        };
+        let cfg = opts(&["tv_sigma=1e-6", "lr_sigma.last=1", "batch=512"])
+            .stage1_config()
+            .unwrap();
+        assert_eq!(
+            (cfg.tv_sigma, cfg.lr_sigma.last, cfg.batch),
+            (1e-6, 1.0, 512)
+        );
+        let err = |set: &[&str]| format!("{:#}", opts(set).stage1_config().unwrap_err());
+        assert!(
+            err(&["tv_sigmaa=1"]).contains("--plenoxels-set tv_sigmaa=1: no configuration field")
+        );
+        assert!(err(&["tv_until_upsample=1"]).contains("is false, not 1"));
+        assert!(err(&["tv_fraction=2"]).contains("tv_fraction must be in [0, 1]"));
+        let surface = TrainOptions {
+            plenoxels_set: vec!["tv_sigma=0".into()],
+            ..TrainOptions::new(Stage::Surface, "d".into(), "o".into())
+        };
+        let refused = format!("{:#}", surface.check_stage_flags().unwrap_err());
+        assert!(refused.contains("--plenoxels-set is not used by --stage surface"));
     }
 }

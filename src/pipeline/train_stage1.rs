@@ -127,6 +127,7 @@ fn check_resume_flags(opts: &TrainOptions, cfg: &Stage1Config) -> Result<()> {
         ("--res", opts.res.is_some_and(|r| r != final_res)),
         ("--batch", opts.batch.is_some_and(|b| b != cfg.batch)),
         ("--preset", opts.preset.is_some_and(|p| p != cfg.preset)),
+        ("--plenoxels-set", !opts.plenoxels_set.is_empty()),
     ];
     let named: Vec<&str> = clashes.iter().filter(|c| c.1).map(|c| c.0).collect();
     if !named.is_empty() {

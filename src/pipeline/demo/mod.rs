@@ -118,6 +118,7 @@ impl SizeArgs {
             res: self.grid_res.or(fast.then_some(64)),
             iters: self.iters.or(fast.then_some(1000)),
             batch: self.batch,
+            set: Vec::new(),
         }
     }
 
