@@ -347,6 +347,38 @@ fn converted_layouts_train_to_the_same_figures() {
 /// NeRF-synthetic box's 2/3 was assumed before): halving the recorded scale doubles every point,
 /// and `--scene-scale` still overrides it.
 #[test]
+fn plenoxels_set_reaches_the_run_and_resume_refuses_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = scene(dir.path());
+    let run = dir.path().join("run");
+    train(
+        &data,
+        &run,
+        "cpu",
+        &["--iters", "20", "--plenoxels-set", "tv_sh=0.0025"],
+    );
+    let cfg = &metrics(&run)["config"];
+    assert_eq!(
+        cfg["tv_sh"].as_f64().map(|v| v as f32),
+        Some(0.0025),
+        "{cfg}"
+    );
+    let out = bin()
+        .args(["train", "--resume", "--backend", "cpu", "--data"])
+        .arg(&data)
+        .arg("--out")
+        .arg(&run)
+        .args(["--iters", "30", "--plenoxels-set", "tv_sh=0"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("--plenoxels-set"),
+        "{err}"
+    );
+}
+
+#[test]
 fn extract_uses_the_scene_scale_the_run_recorded() {
     let dir = tempfile::tempdir().unwrap();
     let data = scene(dir.path());
