@@ -342,19 +342,24 @@ fn converted_layouts_train_to_the_same_figures() {
     }
 }
 
-/// A run records the scene box's scale it trained with in `run.json`, and `extract` writes its
-/// points back in dataset units with it (COLMAP and IDR boxes have their own scale; the
-/// NeRF-synthetic box's 2/3 was assumed before): halving the recorded scale doubles every point,
-/// and `--scene-scale` still overrides it.
-#[test]
-fn plenoxels_set_reaches_the_run_and_resume_refuses_it() {
-    let dir = tempfile::tempdir().unwrap();
-    let data = scene(dir.path());
-    let run = dir.path().join("run");
+/// A stage-1 run of `scene` in `dir/run` with `extra` flags: the dataset and the run.
+fn stage1_run(dir: &Path, extra: &[&str]) -> (PathBuf, PathBuf) {
+    let data = scene(dir);
+    let run = dir.join("run");
     train(
         &data,
         &run,
         "cpu",
+        &[&["--stage", "plenoxels"], extra].concat(),
+    );
+    (data, run)
+}
+
+#[test]
+fn plenoxels_set_reaches_the_run_and_resume_refuses_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let (data, run) = stage1_run(
+        dir.path(),
         &["--iters", "20", "--plenoxels-set", "tv_sh=0.0025"],
     );
     let cfg = &metrics(&run)["config"];
@@ -378,17 +383,14 @@ fn plenoxels_set_reaches_the_run_and_resume_refuses_it() {
     );
 }
 
+/// A run records the scene box's scale it trained with in `run.json`, and `extract` writes its
+/// points back in dataset units with it (COLMAP and IDR boxes have their own scale; the
+/// NeRF-synthetic box's 2/3 was assumed before): halving the recorded scale doubles every point,
+/// and `--scene-scale` still overrides it.
 #[test]
 fn extract_uses_the_scene_scale_the_run_recorded() {
     let dir = tempfile::tempdir().unwrap();
-    let data = scene(dir.path());
-    let run = dir.path().join("run");
-    train(
-        &data,
-        &run,
-        "cpu",
-        &["--stage", "plenoxels", "--iters", "40"],
-    );
+    let (_, run) = stage1_run(dir.path(), &["--iters", "40"]);
     let marker = run.join("run.json");
     let mut info: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&marker).unwrap()).unwrap();
