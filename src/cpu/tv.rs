@@ -127,6 +127,9 @@ const PIECE: usize = 4096;
 pub fn tv(links: &[i32], data: &[f32], grad: &mut [f32], touched: &mut [u32], c: &TvChunk) {
     let (ry, rz) = (c.res[1] as usize, c.res[2] as usize);
     let n = c.channels as usize;
+    if n == 0 {
+        return;
+    }
     let slots = links.len();
     let first = (c.start as usize).min(slots);
     let span_end = (c.start as usize + c.count as usize + ry * rz).min(slots);
