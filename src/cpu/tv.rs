@@ -127,9 +127,6 @@ const PIECE: usize = 4096;
 pub fn tv(links: &[i32], data: &[f32], grad: &mut [f32], touched: &mut [u32], c: &TvChunk) {
     let (ry, rz) = (c.res[1] as usize, c.res[2] as usize);
     let n = c.channels as usize;
-    if n == 0 {
-        return;
-    }
     let slots = links.len();
     let first = (c.start as usize).min(slots);
     let span_end = (c.start as usize + c.count as usize + ry * rz).min(slots);
@@ -151,7 +148,8 @@ pub fn tv(links: &[i32], data: &[f32], grad: &mut [f32], touched: &mut [u32], c:
         })
         .collect();
     for (rows, grads) in pieces {
-        for (&l, g) in rows.iter().zip(grads.chunks_exact(n)) {
+        for (i, &l) in rows.iter().enumerate() {
+            let g = &grads[i * n..(i + 1) * n];
             touched[l] |= c.touch;
             for (dst, gv) in grad[l * n..(l + 1) * n].iter_mut().zip(g) {
                 *dst += c.scale * gv;
