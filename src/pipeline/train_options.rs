@@ -73,8 +73,8 @@ pub struct TrainOptions {
     /// Final grid resolution (the preset's upsampling schedule is scaled to it).
     #[arg(long)]
     pub res: Option<u32>,
-    /// Rays per batch, both stages (overrides the presets: `fast` 4096, stage 1 above a 256³ grid
-    /// 4096 × (N/256)², e.g. 16384 at 512³; `paper` 5000).
+    /// Rays per batch, both stages (overrides the presets: `fast` 4096, stage 1 above a 128³ grid
+    /// 4096 × N/128, e.g. 8192 at 256³, 16384 at 512³; `paper` 5000).
     #[arg(long)]
     pub batch: Option<u32>,
     #[arg(long, default_value_t = 0)]
@@ -340,10 +340,11 @@ mod tests {
     }
 
     #[test]
-    fn fast_sends_more_rays_to_grids_above_256() {
+    fn fast_sends_more_rays_to_grids_above_128() {
         assert_eq!(batch(Preset::Fast, None, None), 4096);
-        assert_eq!(batch(Preset::Fast, Some(256), None), 4096);
-        assert_eq!(batch(Preset::Fast, Some(384), None), 9216);
+        assert_eq!(batch(Preset::Fast, Some(64), None), 4096);
+        assert_eq!(batch(Preset::Fast, Some(256), None), 8192);
+        assert_eq!(batch(Preset::Fast, Some(384), None), 12288);
         assert_eq!(batch(Preset::Fast, Some(512), None), 16384);
         assert_eq!(batch(Preset::Fast, Some(512), Some(1000)), 1000);
         assert_eq!(batch(Preset::Paper, None, None), 5000);

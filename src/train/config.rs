@@ -9,7 +9,7 @@ use serde::{Deserialize, Serialize};
 pub const CHECKPOINT_MIN_SECONDS: f32 = 60.0;
 
 /// The largest final grid at which `fast`'s stage 1 keeps its batch of rays per step.
-const FAST_BATCH_RES: u64 = 256;
+const FAST_BATCH_RES: u64 = 128;
 
 /// Everything that shapes a stage-1 run; stored in checkpoints and metrics.json.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -93,7 +93,7 @@ impl Stage1Config {
     }
 
     /// A CPU-sized schedule: 64³ → 128³, a few thousand steps, faster decays (its batch grows
-    /// with grids above 256³: [`Stage1Config::batch_for_grid`]).
+    /// with grids above 128³: [`Stage1Config::batch_for_grid`]).
     pub fn fast() -> Self {
         Stage1Config {
             preset: Preset::Fast,
@@ -179,14 +179,16 @@ impl Stage1Config {
         Ok(())
     }
 
-    /// Rays per step for this schedule's final grid: `fast` sends its batch up to 256³ and,
-    /// above, rays in proportion to the grid's cross-section (res²), about as many per surface
-    /// vertex as at 256³ (16384 at 512³); `paper` keeps its own.
+    /// Rays per step for this schedule's final grid: `fast` sends its batch up to 128³ and,
+    /// above, rays in proportion to the grid's resolution (8192 at 256³, 16384 at 512³): a
+    /// finer grid's density converges only with more rays, and the thin and translucent parts
+    /// of the development set's scenes are reconstructed better for it (docs/tuning.md);
+    /// `paper` keeps its own.
     pub fn batch_for_grid(&self) -> u32 {
         let last = self.upsample.last().map_or(self.res, |u| u.1) as u64;
         match self.preset {
             Preset::Fast if last > FAST_BATCH_RES => {
-                let scaled = self.batch as u64 * last * last / (FAST_BATCH_RES * FAST_BATCH_RES);
+                let scaled = self.batch as u64 * last / FAST_BATCH_RES;
                 scaled.min(u32::MAX as u64) as u32
             }
             _ => self.batch,

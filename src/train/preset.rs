@@ -12,8 +12,9 @@ pub enum Preset {
     /// The paper's: stage 1 svox2's synthetic schedule (256³ → 512³, 128k steps of 5000 rays),
     /// stage 2 50k steps of 5000 rays.
     Paper,
-    /// Sized for a few CPU cores: stage 1 64³ → 128³ in 3000 steps of 4096 rays (more above
-    /// 256³: 16384 at 512³), stage 2 1500 steps of 4096 rays (every schedule scaled alike).
+    /// Sized for a few CPU cores: stage 1 64³ → 128³ in 3000 steps of 4096 rays (more on finer
+    /// grids: 8192 at 256³, 16384 at 512³), stage 2 1500 steps of 4096 rays (every schedule
+    /// scaled alike).
     Fast,
     /// A stage-1 grid brought in from an svox2 checkpoint by `import`: recorded in its
     /// configuration, never chosen on the command line.
