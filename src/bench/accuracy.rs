@@ -14,7 +14,7 @@ use crate::pipeline::demo::{
     alphasurf_row, plenoxels_levels, plenoxels_levels_trimmed, Row, LEVELS,
 };
 use crate::pipeline::metrics::{self, Stage1Metrics, Stage1Seconds, Stage2Metrics, Stage2Seconds};
-use crate::pipeline::steps::{Steps, TrainSize, TrainedRun};
+use crate::pipeline::steps::{Stage1Overrides, Steps, TrainedRun};
 use crate::pipeline::Devices;
 use crate::train::{Category, Preset};
 use anyhow::{bail, ensure, Context, Result};
@@ -437,7 +437,7 @@ fn stage1(
         return Ok((TrainedRun::read_stage1(dir, r.wall_s)?, r));
     }
     // An unfinished or outdated run there is replaced (`train --overwrite`).
-    let size = TrainSize {
+    let size = Stage1Overrides {
         res: settings.res,
         iters: settings.iters,
         batch: settings.batch,

@@ -10,7 +10,7 @@ use crate::backend::Backend;
 use crate::pipeline::demo::{
     alphasurf_row, best_plenoxels, category, first_line, plenoxels_levels, Row, SizeArgs, LEVELS,
 };
-use crate::pipeline::steps::{Steps, TrainSize};
+use crate::pipeline::steps::{Stage1Overrides, Steps};
 use crate::pipeline::Devices;
 use crate::report::plot::{self, Axis, Plot, Series, Style, PALETTE};
 use crate::scene::SceneKind;
@@ -347,7 +347,7 @@ pub fn run(args: &TimeVsErrorArgs, devices: &mut Devices) -> Result<()> {
             p.res,
             p.iters
         );
-        let tsize = TrainSize {
+        let tsize = Stage1Overrides {
             res: Some(p.res),
             iters: Some(p.iters),
             batch: args.size.batch,

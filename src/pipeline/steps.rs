@@ -31,7 +31,7 @@ pub struct SceneSize {
 
 /// Stage-1 overrides (`None` or empty keeps the preset's values).
 #[derive(Clone, Debug, Default)]
-pub struct TrainSize {
+pub struct Stage1Overrides {
     /// Final grid resolution.
     pub res: Option<u32>,
     pub iters: Option<u32>,
@@ -157,12 +157,17 @@ impl<'g> Steps<'g> {
     }
 
     /// Stage 1: `train --stage plenoxels` with the overrides.
-    pub fn train_plenoxels(&self, data: &Path, out: &Path, size: &TrainSize) -> Result<TrainedRun> {
+    pub fn train_plenoxels(
+        &self,
+        data: &Path,
+        out: &Path,
+        stage1: &Stage1Overrides,
+    ) -> Result<TrainedRun> {
         let opts = TrainOptions {
-            res: size.res,
-            iters: size.iters,
-            batch: size.batch,
-            plenoxels_set: size.set.clone(),
+            res: stage1.res,
+            iters: stage1.iters,
+            batch: stage1.batch,
+            plenoxels_set: stage1.set.clone(),
             ..self.train_options(Stage::Plenoxels, data, out)
         };
         let t = Instant::now();

@@ -12,7 +12,7 @@ pub use table::{objects_table, table};
 
 use super::device::Devices;
 use super::extract::{LevelJob, DEFAULT_RAYS_PER_AXIS};
-use super::steps::{SceneSize, Steps, TrainSize, TrainedRun};
+use super::steps::{SceneSize, Stage1Overrides, Steps, TrainedRun};
 use crate::backend::Backend;
 use crate::eval::Metrics;
 use crate::scene::SceneKind;
@@ -113,8 +113,8 @@ impl SizeArgs {
     }
 
     /// The stage-1 size: preset `fast` as is, or 64³ and 1000 steps with `--fast`.
-    pub fn train(&self, fast: bool) -> TrainSize {
-        TrainSize {
+    pub fn train(&self, fast: bool) -> Stage1Overrides {
+        Stage1Overrides {
             res: self.grid_res.or(fast.then_some(64)),
             iters: self.iters.or(fast.then_some(1000)),
             batch: self.batch,
