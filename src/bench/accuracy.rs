@@ -7,7 +7,9 @@
 //! αSurf / best level, F1 of both, stage-1 and stage-2 test PSNR and wall time; then the category
 //! means. Each finished scene leaves `OUT/SCENE/result.json`; a rerun with the same settings
 //! reuses it. A finished stage-1 run is reused while its settings hold, also from another output
-//! (`--stage1-from`), so stage-2 changes are compared on the same stage-1 grids.
+//! (`--stage1-from`), so stage-2 changes are compared on the same stage-1 grids. "Settings" are
+//! the flags and the configuration they give in this build: a run trained under other presets
+//! (an older build) is trained again, never scored as this build's.
 
 use crate::backend::Backend;
 use crate::pipeline::demo::{
@@ -16,7 +18,7 @@ use crate::pipeline::demo::{
 use crate::pipeline::metrics::{self, Stage1Metrics, Stage1Seconds, Stage2Metrics, Stage2Seconds};
 use crate::pipeline::steps::{Stage1Overrides, Steps, TrainedRun};
 use crate::pipeline::Devices;
-use crate::train::{Category, Preset};
+use crate::train::{Category, Preset, Stage1Config, SurfaceConfig};
 use anyhow::{bail, ensure, Context, Result};
 use clap::ValueEnum;
 use serde::{Deserialize, Serialize};
@@ -69,7 +71,8 @@ pub struct AccuracyArgs {
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Reuse the stage-1 runs of an earlier `bench accuracy` output (DIR/SCENE/plenoxels) with
-    /// the same data, resolution, preset and backend, instead of training stage 1.
+    /// the same data, resolution, preset and backend, instead of training stage 1. Refused when
+    /// a run's recorded configuration is not the one this build's preset gives (an older build).
     #[arg(long, value_name = "DIR")]
     pub stage1_from: Option<PathBuf>,
     /// Print one JSON object with every scene as the last stdout line.
@@ -407,6 +410,82 @@ fn stored(path: &Path, settings: &Settings) -> Result<Option<SceneResult>> {
     Ok(Some(r))
 }
 
+/// This build's configurations for a scene's two runs, from its settings.
+struct Expected {
+    stage1: Stage1Config,
+    stage2: SurfaceConfig,
+}
+
+impl Expected {
+    fn new(steps: &Steps, args: &AccuracyArgs, settings: &Settings) -> Result<Expected> {
+        let s = &settings.stage1;
+        let overrides = Stage1Overrides {
+            res: s.res,
+            iters: s.iters,
+            batch: s.batch,
+            set: s.set.clone(),
+        };
+        let mut stage1 = steps.plenoxels_config(&s.data, &overrides)?;
+        stage1.seed = s.seed;
+        let grid_n = stage1.res_at(stage1.iters);
+        let stage2 = steps.surface_config(
+            &s.data,
+            settings.category,
+            settings.surface_iters,
+            &surface_overrides(args),
+            grid_n,
+        )?;
+        Ok(Expected { stage1, stage2 })
+    }
+}
+
+/// The first field in which `there` (a run's recorded configuration) differs from `here`, as
+/// "field: THERE there, HERE here"; `None` when they are the same.
+fn config_difference<T: Serialize>(there: &T, here: &T) -> Option<String> {
+    let (a, b) = (
+        serde_json::to_value(there).ok()?,
+        serde_json::to_value(here).ok()?,
+    );
+    if a == b {
+        return None;
+    }
+    let field = match (a.as_object(), b.as_object()) {
+        (Some(a), Some(b)) => b
+            .iter()
+            .find(|(k, v)| a.get(*k) != Some(*v))
+            .or_else(|| a.iter().find(|(k, _)| !b.contains_key(*k))),
+        _ => None,
+    };
+    Some(match field {
+        Some((k, _)) => {
+            let show = |v: &serde_json::Value| v.get(k).map_or("absent".into(), |x| x.to_string());
+            format!("{k}: {} there, {} here", show(&a), show(&b))
+        }
+        None => format!("{a} there, {b} here"),
+    })
+}
+
+/// How the configuration recorded in the run at `dir` (its metrics.json) differs from `here`;
+/// a run whose configuration cannot be read differs.
+fn run_difference<M, C>(dir: &Path, here: &C, config: impl Fn(M) -> C) -> Option<String>
+where
+    M: serde::de::DeserializeOwned,
+    C: Serialize,
+{
+    match metrics::read::<M>(dir) {
+        Ok(m) => config_difference(&config(m), here),
+        Err(e) => Some(format!("{e:#}")),
+    }
+}
+
+fn stage1_difference(dir: &Path, here: &Stage1Config) -> Option<String> {
+    run_difference(dir, here, |m: Stage1Metrics| m.config)
+}
+
+fn stage2_difference(dir: &Path, here: &SurfaceConfig) -> Option<String> {
+    run_difference(dir, here, |m: Stage2Metrics| m.config)
+}
+
 /// Write `value` as pretty JSON, atomically.
 fn write_json(path: &Path, value: &impl Serialize) -> Result<()> {
     crate::io::atomic::write_bytes(path, serde_json::to_string_pretty(value)?.as_bytes())
@@ -430,11 +509,21 @@ fn read_stage1(dir: &Path) -> Result<Option<Stage1Record>> {
 fn stage1(
     steps: &Steps,
     settings: &Stage1Settings,
+    config: &Stage1Config,
     dir: &Path,
 ) -> Result<(TrainedRun, Stage1Record)> {
     if let Some(r) = read_stage1(dir)?.filter(|r| &r.settings == settings) {
-        eprintln!("  stage 1: reusing {}", dir.display());
-        return Ok((TrainedRun::read_stage1(dir, r.wall_s)?, r));
+        match stage1_difference(dir, config) {
+            None => {
+                eprintln!("  stage 1: reusing {}", dir.display());
+                return Ok((TrainedRun::read_stage1(dir, r.wall_s)?, r));
+            }
+            Some(d) => eprintln!(
+                "  stage 1 in {} was trained with another configuration than this build's \
+                 ({d}): training it again",
+                dir.display()
+            ),
+        }
     }
     // An unfinished or outdated run there is replaced (`train --overwrite`).
     let size = Stage1Overrides {
@@ -492,6 +581,7 @@ fn scene(
     args: &AccuracyArgs,
     out: &Path,
     settings: Settings,
+    expected: &Expected,
 ) -> Result<SceneResult> {
     let t0 = Instant::now();
     let data = &settings.stage1.data;
@@ -501,7 +591,12 @@ fn scene(
         "{}: no gt_points.ply (bench accuracy needs ground truth)",
         data.display()
     );
-    let (s1, rec) = stage1(steps, &settings.stage1, &stage1_dir(args, out))?;
+    let (s1, rec) = stage1(
+        steps,
+        &settings.stage1,
+        &expected.stage1,
+        &stage1_dir(args, out),
+    )?;
     let best = rec.best();
     // The like-for-like baseline where αSurf's extraction trims hidden cells (thin).
     let t = Instant::now();
@@ -629,6 +724,18 @@ pub fn run(args: &AccuracyArgs, devices: &mut Devices) -> Result<()> {
             surface_iters: args.surface_iters,
             surface_set: args.surface_set.clone(),
         };
+        let expected = Expected::new(&steps, args, &settings)?;
+        if args.stage1_from.is_some() {
+            let from = stage1_dir(args, &dir);
+            if let Some(d) = stage1_difference(&from, &expected.stage1) {
+                bail!(
+                    "--stage1-from: {} was trained with another stage-1 configuration than this \
+                     build's ({d}), e.g. by a build with other presets; train stage 1 again \
+                     (leave out --stage1-from)",
+                    from.display()
+                );
+            }
+        }
         let path = dir.join("result.json");
         eprintln!(
             "\n=== bench accuracy [{}/{}] {name} ({}) → {}",
@@ -637,13 +744,33 @@ pub fn run(args: &AccuracyArgs, devices: &mut Devices) -> Result<()> {
             settings.category,
             dir.display()
         );
-        let r = match stored(&path, &settings)? {
+        let r = match stored(&path, &settings)?.filter(|_| {
+            let differs = [
+                (
+                    "stage-1",
+                    stage1_difference(&stage1_dir(args, &dir), &expected.stage1),
+                ),
+                (
+                    "stage-2",
+                    stage2_difference(&dir.join("alphasurf"), &expected.stage2),
+                ),
+            ];
+            let differs = differs.into_iter().find_map(|(s, d)| Some((s, d?)));
+            if let Some((stage, d)) = &differs {
+                eprintln!(
+                    "  {} holds a result whose {stage} run had another configuration than this \
+                     build's ({d}): computing it again",
+                    path.display()
+                );
+            }
+            differs.is_none()
+        }) {
             Some(r) => {
                 eprintln!("  finished before: {}", path.display());
                 r
             }
             None => {
-                let r = scene(&steps, args, &dir, settings)?;
+                let r = scene(&steps, args, &dir, settings, &expected)?;
                 write_json(&path, &r)?;
                 r
             }

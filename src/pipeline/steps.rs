@@ -12,7 +12,7 @@ use crate::backend::Backend;
 use crate::eval::Metrics;
 use crate::gpu::Gpu;
 use crate::scene::{generate, GenerateOptions, SceneKind};
-use crate::train::{Category, Preset};
+use crate::train::{Category, Preset, Stage1Config, SurfaceConfig};
 use anyhow::{bail, Result};
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
@@ -156,6 +156,22 @@ impl<'g> Steps<'g> {
         }
     }
 
+    fn plenoxels_options(&self, data: &Path, out: &Path, stage1: &Stage1Overrides) -> TrainOptions {
+        TrainOptions {
+            res: stage1.res,
+            iters: stage1.iters,
+            batch: stage1.batch,
+            plenoxels_set: stage1.set.clone(),
+            ..self.train_options(Stage::Plenoxels, data, out)
+        }
+    }
+
+    /// The configuration `train_plenoxels` trains with these overrides (this build's presets).
+    pub fn plenoxels_config(&self, data: &Path, stage1: &Stage1Overrides) -> Result<Stage1Config> {
+        self.plenoxels_options(data, Path::new(""), stage1)
+            .stage1_config()
+    }
+
     /// Stage 1: `train --stage plenoxels` with the overrides.
     pub fn train_plenoxels(
         &self,
@@ -163,13 +179,7 @@ impl<'g> Steps<'g> {
         out: &Path,
         stage1: &Stage1Overrides,
     ) -> Result<TrainedRun> {
-        let opts = TrainOptions {
-            res: stage1.res,
-            iters: stage1.iters,
-            batch: stage1.batch,
-            plenoxels_set: stage1.set.clone(),
-            ..self.train_options(Stage::Plenoxels, data, out)
-        };
+        let opts = self.plenoxels_options(data, out, stage1);
         let t = Instant::now();
         let done = train(&opts, self.gpu)?.stage1;
         let wall_s = t.elapsed().as_secs_f64();
@@ -182,6 +192,39 @@ impl<'g> Steps<'g> {
         }
     }
 
+    fn surface_options(
+        &self,
+        init: &Path,
+        data: &Path,
+        out: &Path,
+        category: Category,
+        iters: Option<u32>,
+        set: &[String],
+    ) -> TrainOptions {
+        TrainOptions {
+            init: Some(init.to_path_buf()),
+            category: Some(category),
+            iters,
+            set: set.to_vec(),
+            ..self.train_options(Stage::Surface, data, out)
+        }
+    }
+
+    /// The configuration `train_surface` trains from a stage-1 grid of `grid_n`³ vertices with
+    /// these overrides (this build's presets).
+    pub fn surface_config(
+        &self,
+        data: &Path,
+        category: Category,
+        iters: Option<u32>,
+        set: &[String],
+        grid_n: u32,
+    ) -> Result<SurfaceConfig> {
+        let none = Path::new("");
+        self.surface_options(none, data, none, category, iters, set)
+            .stage2_config(grid_n)
+    }
+
     /// Stage 2 (αSurf): `train --stage surface --init STAGE1_RUN` with `--set` overrides.
     pub fn train_surface(
         &self,
@@ -192,13 +235,7 @@ impl<'g> Steps<'g> {
         iters: Option<u32>,
         set: &[String],
     ) -> Result<TrainedRun> {
-        let opts = TrainOptions {
-            init: Some(init.to_path_buf()),
-            category: Some(category),
-            iters,
-            set: set.to_vec(),
-            ..self.train_options(Stage::Surface, data, out)
-        };
+        let opts = self.surface_options(init, data, out, category, iters, set);
         let t = Instant::now();
         let done = train(&opts, self.gpu)?.stage2;
         let wall_s = t.elapsed().as_secs_f64();

@@ -154,6 +154,54 @@ fn bench_accuracy_scores_each_scene_and_resumes() {
             .unwrap();
     assert_eq!(result["settings"]["stage1"]["seed"], 2);
     assert_eq!(result["settings"]["seed"], 2);
+
+    // A run trained under other presets (an older build) is never scored as this build's: its
+    // recorded configuration is compared with the one these flags give in this build.
+    let edit = |path: &Path, key: &str, field: &str, value: serde_json::Value| {
+        let mut m: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
+        let config = &mut m["config"];
+        match field {
+            "" => config[key] = value,
+            f => config[key][f] = value,
+        }
+        std::fs::write(path, serde_json::to_string(&m).unwrap()).unwrap();
+    };
+    // Stage 2: the scene is computed again on the same stage 1.
+    let s2 = out.join("thin_a/alphasurf/metrics.json");
+    edit(&s2, "lr_opacity", "init", 0.5.into());
+    let (_, err) = bench(&[&thin], &out, &["--seed", "2"]);
+    assert!(
+        err.contains("stage-2 run had another configuration") && err.contains("lr_opacity"),
+        "{err}"
+    );
+    assert!(err.contains("stage 1: reusing"), "{err}");
+    // Stage 1: `--stage1-from` refuses it, and the output's own rerun trains it again.
+    let s1 = out.join("thin_a/plenoxels/metrics.json");
+    edit(&s1, "batch", "", 999.into());
+    let refused = bin()
+        .args(["bench", "accuracy", "--backend", "cpu", "--res", "16"])
+        .args(["--iters", "60", "--surface-iters", "20", "--batch", "1024"])
+        .args(["--seed", "2", "--stage1-from"])
+        .arg(&out)
+        .arg("--out")
+        .arg(dir.path().join("acc3"))
+        .arg("--data")
+        .arg(&thin)
+        .output()
+        .unwrap();
+    let e = String::from_utf8_lossy(&refused.stderr);
+    assert!(!refused.status.success(), "{e}");
+    assert!(e.contains("batch: 999 there, 1024 here"), "{e}");
+    let (_, err) = bench(&[&thin], &out, &["--seed", "2"]);
+    assert!(
+        err.contains("batch: 999 there, 1024 here") && err.contains("training it again"),
+        "{err}"
+    );
+    assert!(err.contains("stage 1 on"), "{err}");
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&s1).unwrap()).unwrap();
+    assert_eq!(m["config"]["batch"], 1024);
 }
 
 /// The level sweeps (the grid and the ground truth read once) give what `extract --levels L
