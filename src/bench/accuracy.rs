@@ -16,7 +16,7 @@ use crate::pipeline::demo::{
     alphasurf_row, plenoxels_levels, plenoxels_levels_trimmed, Row, LEVELS,
 };
 use crate::pipeline::metrics::{self, Stage1Metrics, Stage1Seconds, Stage2Metrics, Stage2Seconds};
-use crate::pipeline::steps::{Stage1Overrides, Steps, TrainedRun};
+use crate::pipeline::steps::{Stage1Overrides, Stage2Overrides, Steps, TrainedRun};
 use crate::pipeline::Devices;
 use crate::train::{Category, Preset, Stage1Config, SurfaceConfig};
 use anyhow::{bail, ensure, Context, Result};
@@ -428,13 +428,7 @@ impl Expected {
         let mut stage1 = steps.plenoxels_config(&s.data, &overrides)?;
         stage1.seed = s.seed;
         let grid_n = stage1.res_at(stage1.iters);
-        let stage2 = steps.surface_config(
-            &s.data,
-            settings.category,
-            settings.surface_iters,
-            &surface_overrides(args),
-            grid_n,
-        )?;
+        let stage2 = steps.surface_config(&s.data, &stage2_overrides(args, settings), grid_n)?;
         Ok(Expected { stage1, stage2 })
     }
 }
@@ -575,6 +569,15 @@ fn surface_overrides(args: &AccuracyArgs) -> Vec<String> {
         .collect()
 }
 
+/// What stage 2 of a scene is trained with.
+fn stage2_overrides(args: &AccuracyArgs, settings: &Settings) -> Stage2Overrides {
+    Stage2Overrides {
+        category: settings.category,
+        iters: settings.surface_iters,
+        set: surface_overrides(args),
+    }
+}
+
 /// One scene, end to end.
 fn scene(
     steps: &Steps,
@@ -609,15 +612,7 @@ fn scene(
     let trimmed_levels_s = t.elapsed().as_secs_f64();
     // A stage-2 run without result.json was interrupted: `train --overwrite` starts it again.
     let s2_dir = out.join("alphasurf");
-    let set = surface_overrides(args);
-    let s2 = steps.train_surface(
-        &s1.dir,
-        data,
-        &s2_dir,
-        settings.category,
-        args.surface_iters,
-        &set,
-    );
+    let s2 = steps.train_surface(&s1.dir, data, &s2_dir, &stage2_overrides(args, &settings));
     let t = Instant::now();
     let (surf, s2_wall, error) = match &s2 {
         Ok(s2) => {

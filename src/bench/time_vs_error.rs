@@ -10,7 +10,7 @@ use crate::backend::Backend;
 use crate::pipeline::demo::{
     alphasurf_row, best_plenoxels, category, first_line, plenoxels_levels, Row, SizeArgs, LEVELS,
 };
-use crate::pipeline::steps::{Stage1Overrides, Steps};
+use crate::pipeline::steps::{Stage1Overrides, Stage2Overrides, Steps};
 use crate::pipeline::Devices;
 use crate::report::plot::{self, Axis, Plot, Series, Style, PALETTE};
 use crate::scene::SceneKind;
@@ -375,14 +375,12 @@ pub fn run(args: &TimeVsErrorArgs, devices: &mut Devices) -> Result<()> {
             continue;
         }
         eprintln!("time-vs-error: stage 2 (αSurf) from {}", s1.dir.display());
-        match steps.train_surface(
-            &s1.dir,
-            &data,
-            &dir.join("alphasurf"),
-            category(args.scene),
-            Some(args.size.surface_iters.unwrap_or((p.iters / 2).max(1))),
-            &args.size.surface_set,
-        ) {
+        let stage2 = Stage2Overrides {
+            category: category(args.scene),
+            iters: Some(args.size.surface_iters.unwrap_or((p.iters / 2).max(1))),
+            set: args.size.surface_set.clone(),
+        };
+        match steps.train_surface(&s1.dir, &data, &dir.join("alphasurf"), &stage2) {
             Ok(s2) => {
                 let r = alphasurf_row(steps, &s1, &s2, &gt);
                 rows.push(BenchRow::from_row(p, &r, Some(s2.train_rays_per_s)));

@@ -41,6 +41,16 @@ pub struct Stage1Overrides {
     pub set: Vec<String>,
 }
 
+/// Stage-2 choices (`None` or empty keeps the preset's values).
+#[derive(Clone, Debug)]
+pub struct Stage2Overrides {
+    pub category: Category,
+    /// Stage-2 steps.
+    pub iters: Option<u32>,
+    /// `train --set KEY=VALUE` overrides, in order.
+    pub set: Vec<String>,
+}
+
 /// A finished training run.
 #[derive(Clone, Debug)]
 pub struct TrainedRun {
@@ -197,15 +207,13 @@ impl<'g> Steps<'g> {
         init: &Path,
         data: &Path,
         out: &Path,
-        category: Category,
-        iters: Option<u32>,
-        set: &[String],
+        stage2: &Stage2Overrides,
     ) -> TrainOptions {
         TrainOptions {
             init: Some(init.to_path_buf()),
-            category: Some(category),
-            iters,
-            set: set.to_vec(),
+            category: Some(stage2.category),
+            iters: stage2.iters,
+            set: stage2.set.clone(),
             ..self.train_options(Stage::Surface, data, out)
         }
     }
@@ -215,27 +223,23 @@ impl<'g> Steps<'g> {
     pub fn surface_config(
         &self,
         data: &Path,
-        category: Category,
-        iters: Option<u32>,
-        set: &[String],
+        stage2: &Stage2Overrides,
         grid_n: u32,
     ) -> Result<SurfaceConfig> {
         let none = Path::new("");
-        self.surface_options(none, data, none, category, iters, set)
+        self.surface_options(none, data, none, stage2)
             .stage2_config(grid_n)
     }
 
-    /// Stage 2 (αSurf): `train --stage surface --init STAGE1_RUN` with `--set` overrides.
+    /// Stage 2 (αSurf): `train --stage surface --init STAGE1_RUN` with the overrides.
     pub fn train_surface(
         &self,
         init: &Path,
         data: &Path,
         out: &Path,
-        category: Category,
-        iters: Option<u32>,
-        set: &[String],
+        stage2: &Stage2Overrides,
     ) -> Result<TrainedRun> {
-        let opts = self.surface_options(init, data, out, category, iters, set);
+        let opts = self.surface_options(init, data, out, stage2);
         let t = Instant::now();
         let done = train(&opts, self.gpu)?.stage2;
         let wall_s = t.elapsed().as_secs_f64();

@@ -12,7 +12,7 @@ pub use table::{objects_table, table};
 
 use super::device::Devices;
 use super::extract::{LevelJob, DEFAULT_RAYS_PER_AXIS};
-use super::steps::{SceneSize, Stage1Overrides, Steps, TrainedRun};
+use super::steps::{SceneSize, Stage1Overrides, Stage2Overrides, Steps, TrainedRun};
 use crate::backend::Backend;
 use crate::eval::Metrics;
 use crate::scene::SceneKind;
@@ -429,14 +429,12 @@ pub fn demo(opts: &DemoOptions, devices: &mut Devices) -> Result<DemoSummary> {
             s2_dir.display()
         ),
     );
-    let s2 = steps.train_surface(
-        &s1.dir,
-        &data,
-        &s2_dir,
-        category(scene),
-        opts.size.surface_iters(opts.fast),
-        &opts.size.surface_set,
-    );
+    let stage2 = Stage2Overrides {
+        category: category(scene),
+        iters: opts.size.surface_iters(opts.fast),
+        set: opts.size.surface_set.clone(),
+    };
+    let s2 = steps.train_surface(&s1.dir, &data, &s2_dir, &stage2);
     if let Err(e) = &s2 {
         eprintln!("demo: STAGE 2 FAILED — the table shows the Plenoxels rows only.\n  {e:#}");
     }
