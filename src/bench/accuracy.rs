@@ -95,6 +95,18 @@ pub struct Stage1Settings {
     pub set: Vec<String>,
 }
 
+impl Stage1Settings {
+    /// The stage-1 flags these settings hold.
+    fn overrides(&self) -> Stage1Overrides {
+        Stage1Overrides {
+            res: self.res,
+            iters: self.iters,
+            batch: self.batch,
+            set: self.set.clone(),
+        }
+    }
+}
+
 /// A finished stage-1 run and its level sweep (`plenoxels/stage1.json`).
 #[derive(Serialize, Deserialize)]
 struct Stage1Record {
@@ -419,13 +431,7 @@ struct Expected {
 impl Expected {
     fn new(steps: &Steps, args: &AccuracyArgs, settings: &Settings) -> Result<Expected> {
         let s = &settings.stage1;
-        let overrides = Stage1Overrides {
-            res: s.res,
-            iters: s.iters,
-            batch: s.batch,
-            set: s.set.clone(),
-        };
-        let mut stage1 = steps.plenoxels_config(&s.data, &overrides)?;
+        let mut stage1 = steps.plenoxels_config(&s.data, &s.overrides())?;
         stage1.seed = s.seed;
         let grid_n = stage1.res_at(stage1.iters);
         let stage2 = steps.surface_config(&s.data, &stage2_overrides(args, settings), grid_n)?;
@@ -520,13 +526,7 @@ fn stage1(
         }
     }
     // An unfinished or outdated run there is replaced (`train --overwrite`).
-    let size = Stage1Overrides {
-        res: settings.res,
-        iters: settings.iters,
-        batch: settings.batch,
-        set: settings.set.clone(),
-    };
-    let run = steps.train_plenoxels(&settings.data, dir, &size)?;
+    let run = steps.train_plenoxels(&settings.data, dir, &settings.overrides())?;
     let gt = settings.data.join("gt_points.ply");
     let t = Instant::now();
     let rows = plenoxels_levels(steps, &run, &gt, &LEVELS);
