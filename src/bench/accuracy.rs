@@ -21,6 +21,7 @@ use crate::pipeline::Devices;
 use crate::train::{Category, Preset, Stage1Config, SurfaceConfig};
 use anyhow::{bail, ensure, Context, Result};
 use clap::ValueEnum;
+use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -439,51 +440,24 @@ impl Expected {
     }
 }
 
-/// The first field in which `there` (a run's recorded configuration) differs from `here`, as
-/// "field: THERE there, HERE here"; `None` when they are the same.
-fn config_difference<T: Serialize>(there: &T, here: &T) -> Option<String> {
-    let (a, b) = (
-        serde_json::to_value(there).ok()?,
-        serde_json::to_value(here).ok()?,
-    );
-    if a == b {
-        return None;
-    }
-    let field = match (a.as_object(), b.as_object()) {
-        (Some(a), Some(b)) => b
-            .iter()
-            .find(|(k, v)| a.get(*k) != Some(*v))
-            .or_else(|| a.iter().find(|(k, _)| !b.contains_key(*k))),
-        _ => None,
+/// How the configuration recorded in the run at `dir` (its metrics.json's `config`) differs
+/// from `here`: the first field that differs, as "field: THERE there, HERE here"; `None` when
+/// they are the same. A run whose configuration cannot be read differs. The record is read as
+/// `C` first, so that its numbers compare at the precision they were written from.
+fn config_difference<C: Serialize + DeserializeOwned>(dir: &Path, here: &C) -> Option<String> {
+    let there = metrics::read::<serde_json::Value>(dir)
+        .and_then(|mut m| Ok(serde_json::from_value::<C>(m["config"].take())?));
+    let there = match there {
+        Ok(c) => serde_json::to_value(c).ok()?,
+        Err(e) => return Some(format!("{e:#}")),
     };
-    Some(match field {
-        Some((k, _)) => {
-            let show = |v: &serde_json::Value| v.get(k).map_or("absent".into(), |x| x.to_string());
-            format!("{k}: {} there, {} here", show(&a), show(&b))
-        }
-        None => format!("{a} there, {b} here"),
-    })
-}
-
-/// How the configuration recorded in the run at `dir` (its metrics.json) differs from `here`;
-/// a run whose configuration cannot be read differs.
-fn run_difference<M, C>(dir: &Path, here: &C, config: impl Fn(M) -> C) -> Option<String>
-where
-    M: serde::de::DeserializeOwned,
-    C: Serialize,
-{
-    match metrics::read::<M>(dir) {
-        Ok(m) => config_difference(&config(m), here),
-        Err(e) => Some(format!("{e:#}")),
-    }
-}
-
-fn stage1_difference(dir: &Path, here: &Stage1Config) -> Option<String> {
-    run_difference(dir, here, |m: Stage1Metrics| m.config)
-}
-
-fn stage2_difference(dir: &Path, here: &SurfaceConfig) -> Option<String> {
-    run_difference(dir, here, |m: Stage2Metrics| m.config)
+    let here = serde_json::to_value(here).ok()?;
+    let (k, _) = (here.as_object().into_iter())
+        .chain(there.as_object())
+        .flatten()
+        .find(|(k, _)| there.get(*k) != here.get(*k))?;
+    let show = |v: &serde_json::Value| v.get(k).map_or("absent".into(), |x| x.to_string());
+    Some(format!("{k}: {} there, {} here", show(&there), show(&here)))
 }
 
 /// Write `value` as pretty JSON, atomically.
@@ -513,7 +487,7 @@ fn stage1(
     dir: &Path,
 ) -> Result<(TrainedRun, Stage1Record)> {
     if let Some(r) = read_stage1(dir)?.filter(|r| &r.settings == settings) {
-        match stage1_difference(dir, config) {
+        match config_difference(dir, config) {
             None => {
                 eprintln!("  stage 1: reusing {}", dir.display());
                 return Ok((TrainedRun::read_stage1(dir, r.wall_s)?, r));
@@ -722,7 +696,7 @@ pub fn run(args: &AccuracyArgs, devices: &mut Devices) -> Result<()> {
         let expected = Expected::new(&steps, args, &settings)?;
         if args.stage1_from.is_some() {
             let from = stage1_dir(args, &dir);
-            if let Some(d) = stage1_difference(&from, &expected.stage1) {
+            if let Some(d) = config_difference(&from, &expected.stage1) {
                 bail!(
                     "--stage1-from: {} was trained with another stage-1 configuration than this \
                      build's ({d}), e.g. by a build with other presets; train stage 1 again \
@@ -743,11 +717,11 @@ pub fn run(args: &AccuracyArgs, devices: &mut Devices) -> Result<()> {
             let differs = [
                 (
                     "stage-1",
-                    stage1_difference(&stage1_dir(args, &dir), &expected.stage1),
+                    config_difference(&stage1_dir(args, &dir), &expected.stage1),
                 ),
                 (
                     "stage-2",
-                    stage2_difference(&dir.join("alphasurf"), &expected.stage2),
+                    config_difference(&dir.join("alphasurf"), &expected.stage2),
                 ),
             ];
             let differs = differs.into_iter().find_map(|(s, d)| Some((s, d?)));
