@@ -106,9 +106,9 @@ fn add_tv_grad(
     }
 }
 
-/// The gradient of the chunk's TV with respect to every channel of the slot's vertex, into `g`.
+/// The gradient of the chunk's TV with respect to every channel of the slot's vertex, added to
+/// `g` (zeros from the caller).
 fn slot_grad(data: &[f32], sl: &SlotLinks, g: &mut [f32]) {
-    g.fill(0.0);
     if let Some(n) = &sl.own {
         add_tv_grad(data, sl.row, n, None, -1.0, g);
     }
