@@ -11,6 +11,11 @@
 #                         (ACC_S seconds, default 300), then `train --stage surface --preset
 #                         paper` from that scene's 512³ stage 1 (PAPER_S seconds, default 150;
 #                         its log's "step" lines carry the rays/s reached). At most 9.5 minutes.
+#   MODE=set              one call for a 15-minute lease when the 512³ set is what is missing:
+#                         parity and the 128³ benches, then `bench accuracy --res 512` on every
+#                         scene in .dev/data (ACC_S seconds, default 420), then the paper stage 1
+#                         below on the first scene for what is left of BUDGET_S (default 540;
+#                         skipped under 30 s). Order the scenes by name in .dev/data.
 #   MODE=paper_stage1     `train --stage plenoxels --preset paper --res 512` on the first scene
 #                         (128k steps of 5000 rays), PAPER1_S seconds (default 540); a later call
 #                         on the same warm machine resumes it from its last checkpoint.
@@ -76,6 +81,19 @@ all)
     --init "$acc_out/$name/plenoxels" --data "$scene" --out /tmp/paper_s2 \
     --category "$category" --preset paper --backend vulkan --overwrite
   ;;
+set)
+  step parity 90 "$bin" check-kernels --json
+  step bench_plenoxels 60 "$bin" bench plenoxels --json --steps 48
+  step bench_surface 60 "$bin" bench surface --json --steps 48 --rounds 1
+  step accuracy_512 "${ACC_S:-420}" "$bin" bench accuracy --data .dev/data/*/ --res 512 \
+    --backend vulkan --out "$acc_out" ${ACC_FLAGS:-} --json
+  cp "$acc_out/accuracy.json" "$OUT/accuracy_512.json" 2>/dev/null
+  left=$((${BUDGET_S:-540} - SECONDS))
+  if [ "$left" -ge 30 ]; then
+    step paper_stage1_512 "$left" "$bin" train --stage plenoxels --preset paper --res 512 \
+      --data "$(ls -d .dev/data/*/ | head -1)" --out /tmp/paper_s1 --backend vulkan --overwrite
+  fi
+  ;;
 paper_stage1)
   scene=$(ls -d .dev/data/*/ | head -1)
   again=--overwrite
@@ -84,7 +102,7 @@ paper_stage1)
     --res 512 --data "$scene" --out /tmp/paper_s1 --backend vulkan $again
   ;;
 *)
-  echo "MODE is basic, accuracy, all or paper_stage1, not ${MODE}" >&2
+  echo "MODE is basic, accuracy, all, set or paper_stage1, not ${MODE}" >&2
   exit 2
   ;;
 esac
