@@ -18,6 +18,7 @@ use crate::pipeline::demo::{
 use crate::pipeline::metrics::{self, Stage1Metrics, Stage1Seconds, Stage2Metrics, Stage2Seconds};
 use crate::pipeline::steps::{Stage1Overrides, Stage2Overrides, Steps, TrainedRun};
 use crate::pipeline::Devices;
+use crate::run::interrupt;
 use crate::train::{Category, Preset, Stage1Config, SurfaceConfig};
 use anyhow::{bail, ensure, Context, Result};
 use clap::ValueEnum;
@@ -587,6 +588,11 @@ fn scene(
     // A stage-2 run without result.json was interrupted: `train --overwrite` starts it again.
     let s2_dir = out.join("alphasurf");
     let s2 = steps.train_surface(&s1.dir, data, &s2_dir, &stage2_overrides(args, &settings));
+    // A stop asked for by a signal ends the bench (a failed stage 2 is the scene's result).
+    let s2 = match s2 {
+        Err(e) if interrupt::cause(&e).is_some() => return Err(e),
+        r => r,
+    };
     let t = Instant::now();
     let (surf, s2_wall, error) = match &s2 {
         Ok(s2) => {

@@ -13,6 +13,7 @@ use crate::pipeline::demo::{
 use crate::pipeline::steps::{Stage1Overrides, Stage2Overrides, Steps};
 use crate::pipeline::Devices;
 use crate::report::plot::{self, Axis, Plot, Series, Style, PALETTE};
+use crate::run::interrupt;
 use crate::scene::SceneKind;
 use anyhow::{bail, Context, Result};
 use serde::Serialize;
@@ -355,6 +356,7 @@ pub fn run(args: &TimeVsErrorArgs, devices: &mut Devices) -> Result<()> {
         };
         let s1 = match steps.train_plenoxels(&data, &dir.join("plenoxels"), &tsize) {
             Ok(s1) => s1,
+            Err(e) if interrupt::cause(&e).is_some() => return Err(e),
             Err(e) => {
                 eprintln!("time-vs-error: stage 1 failed: {e:#}");
                 rows.push(BenchRow::failed(p, "plenoxels_best", format!("{e:#}")));
@@ -385,6 +387,7 @@ pub fn run(args: &TimeVsErrorArgs, devices: &mut Devices) -> Result<()> {
                 let r = alphasurf_row(steps, &s1, &s2, &gt);
                 rows.push(BenchRow::from_row(p, &r, Some(s2.train_rays_per_s)));
             }
+            Err(e) if interrupt::cause(&e).is_some() => return Err(e),
             Err(e) => {
                 let msg = format!("{e:#}");
                 eprintln!("time-vs-error: STAGE 2 FAILED: {msg}");

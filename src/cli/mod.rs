@@ -16,6 +16,7 @@ use crate::pipeline::extract::ExtractOptions;
 use crate::pipeline::render::RenderOptions;
 use crate::pipeline::svox2::{ExportOptions, ImportOptions};
 use crate::pipeline::{Devices, TrainOptions};
+use crate::run::interrupt;
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
@@ -50,7 +51,8 @@ pub enum Command {
     Inspect(inspect::InspectArgs),
     /// Train a reconstruction — stage 1 (Plenoxels), stage 2 (αSurf surfaces, `--init` from a
     /// stage-1 run) or both — with a progress bar, periodic atomic checkpoints (`--resume`), test
-    /// renders, metrics.json and train_log.csv.
+    /// renders, metrics.json and train_log.csv. Ctrl-C (or SIGTERM) checkpoints the step training
+    /// is on and exits with 130 (143); a second one stops at once.
     Train(TrainOptions),
     /// Render a split of a trained run (stage 1: the density grid; stage 2: the surfaces) to PNG and
     /// print per-view and mean PSNR.
@@ -109,7 +111,10 @@ pub fn main() -> ExitCode {
         Ok(code) => code,
         Err(e) => {
             eprintln!("error: {e:#}");
-            ExitCode::FAILURE
+            // A run a signal stopped exits as the signal would have (130 for Ctrl-C).
+            interrupt::cause(&e).map_or(ExitCode::FAILURE, |i| {
+                ExitCode::from(interrupt::exit_code(i))
+            })
         }
     }
 }

@@ -1,11 +1,12 @@
 //! What a command owns on disk and the limits it runs within: run directories (marker, lock,
 //! file names, refusal rules, `--overwrite`), guards for output paths, the training log's
-//! resume-time cut, memory estimates for flags that size allocations, and the thread that writes
-//! checkpoints while training goes on.
+//! resume-time cut, memory estimates for flags that size allocations, the thread that writes
+//! checkpoints while training goes on, and the stop a signal asks of a training loop.
 
 pub mod checkpoint_writer;
 pub mod dir;
 pub mod files;
+pub mod interrupt;
 pub mod lock;
 pub mod memory;
 pub mod outputs;

@@ -12,6 +12,7 @@ use crate::data::{BackgroundMode, Dataset, Split, TrainViews};
 use crate::grid::{checkpoint, dilate, upsample, Grid};
 use crate::plenoxel::{Plenoxels, StepParams, TvParams};
 use crate::run::checkpoint_writer::{BackgroundSave, Cadence};
+use crate::run::interrupt::{self, Interrupted};
 use crate::run::memory;
 use crate::run::train_log;
 use anyhow::{bail, Context, Result};
@@ -220,6 +221,7 @@ pub fn train(
 ) -> Result<(Stage1Report, RenderedSplit)> {
     std::fs::create_dir_all(out)
         .with_context(|| format!("creating run directory {}", out.display()))?;
+    let _catch = interrupt::catch();
     let mut report = Stage1Report::default();
     let mut progress = Progress::new(cfg.iters as u64, start_step as u64, show_progress);
     let mut throughput = Throughput::new(start_step);
@@ -272,7 +274,10 @@ pub fn train(
             },
         )?;
         group.push(step);
-        let checkpoint = cadence.due(step, cfg.iters);
+        // A signal asked for a stop: this step's checkpoint, then out (after the last step the
+        // run ends anyway).
+        let stop = interrupt::requested().filter(|_| step + 1 < cfg.iters);
+        let checkpoint = cadence.due(step, cfg.iters) || stop.is_some();
         // Read the group before an upsampling, so that its wall time is the training's alone.
         let upsample_next = cfg.upsample.iter().any(|(s, _)| *s == step + 1);
         if group.due(step, cfg.iters, checkpoint || upsample_next) {
@@ -308,6 +313,17 @@ pub fn train(
             )?;
             report.checkpoint_seconds += t.elapsed().as_secs_f64();
             group.restart();
+        }
+        if let Some(signal) = stop {
+            writer.finish()?;
+            progress.finish();
+            return Err(Interrupted {
+                signal,
+                done: step + 1,
+                iters: cfg.iters,
+                checkpoint: out.join(CHECKPOINT),
+            }
+            .into());
         }
     }
     progress.finish();

@@ -14,6 +14,7 @@ use crate::data::{BackgroundMode, Dataset, TrainViews};
 use crate::grid::checkpoint;
 use crate::grid::surface::SurfaceGrid;
 use crate::run::checkpoint_writer::{BackgroundSave, Cadence};
+use crate::run::interrupt::{self, Interrupted};
 use crate::run::train_log;
 use crate::surface::{SurfaceBackend, SurfaceRegs, SurfaceStepParams};
 use anyhow::{bail, Context, Result};
@@ -193,6 +194,7 @@ pub fn train(
 ) -> Result<(Stage2Report, RenderedSplit)> {
     std::fs::create_dir_all(out)
         .with_context(|| format!("creating run directory {}", out.display()))?;
+    let _catch = interrupt::catch();
     let log_path = out.join(LOG);
     let mut log = train_log::open(&log_path, LOG_HEADER, start_step)?;
     let mut report = Stage2Report::default();
@@ -219,7 +221,10 @@ pub fn train(
         let p = step_params(cfg, res, rows, step, cfg.a.at(step), draws);
         backend.step_sampled(&views, batch_seed, cfg.batch as usize, &p)?;
         group.push(step);
-        let checkpoint = cadence.due(step, cfg.iters);
+        // A signal asked for a stop: this step's checkpoint, then out (after the last step the
+        // run ends anyway).
+        let stop = interrupt::requested().filter(|_| step + 1 < cfg.iters);
+        let checkpoint = cadence.due(step, cfg.iters) || stop.is_some();
         if group.due(step, cfg.iters, checkpoint) {
             let (steps, secs) = group.take();
             let n = steps.len();
@@ -268,6 +273,17 @@ pub fn train(
             )?;
             report.checkpoint_seconds += t.elapsed().as_secs_f64();
             group.restart();
+        }
+        if let Some(signal) = stop {
+            writer.finish()?;
+            progress.finish();
+            return Err(Interrupted {
+                signal,
+                done: step + 1,
+                iters: cfg.iters,
+                checkpoint: out.join(CHECKPOINT),
+            }
+            .into());
         }
     }
     progress.finish();

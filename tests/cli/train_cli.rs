@@ -1,5 +1,6 @@
 //! End to end at a small size: make-scene → train (Vulkan and CPU backends) → render → export →
-//! import, a run killed with SIGKILL that resumes from its last checkpoint, the scene
+//! import, a run killed with SIGKILL that resumes from its last checkpoint, a run stopped by
+//! SIGINT that checkpoints its step and resumes from it (both stages), the scene
 //! converted to the COLMAP and IDR layouts training to the same figures; `bench plenoxels --json`
 //! at a small size reports consistent figures.
 
@@ -244,6 +245,128 @@ fn sigkill_loses_at_most_the_steps_since_the_last_checkpoint() {
         })
         .collect();
     assert_eq!(steps, (1..=step + 10).collect::<Vec<_>>());
+}
+
+/// Starts a training `cmd` (flags for a run far longer than the test), waits until its training
+/// loop runs (`log` exists: the loop opens it after catching signals) and a little more, sends
+/// SIGINT, and returns the exit code and the step the message says the checkpoint holds.
+fn stop_with_sigint(cmd: &mut Command, log: &Path) -> (Option<i32>, u64, String) {
+    let mut child = cmd
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let start = Instant::now();
+    while !log.exists() {
+        if child.try_wait().unwrap().is_some() {
+            let out = child.wait_with_output().unwrap();
+            panic!(
+                "ended before training: {}",
+                String::from_utf8_lossy(&out.stderr)
+            );
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(120),
+            "no training log after 120 s"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    std::thread::sleep(Duration::from_millis(500));
+    // SAFETY: kill(2) on our own child's pid.
+    assert_eq!(
+        unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGINT) },
+        0
+    );
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr).into_owned();
+    let step = err
+        .split("after step ")
+        .nth(1)
+        .and_then(|t| t.split(' ').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no stop message: {err}"));
+    (out.status.code(), step, err)
+}
+
+/// The steps of a training log's rows, each checked for its column count.
+fn log_steps(run: &Path, columns: usize) -> Vec<u64> {
+    let log = std::fs::read_to_string(run.join("train_log.csv")).unwrap();
+    log.lines()
+        .skip(1)
+        .map(|l| {
+            assert_eq!(l.split(',').count(), columns, "malformed row {l:?}");
+            l.split(',').next().unwrap().parse().unwrap()
+        })
+        .collect()
+}
+
+#[test]
+fn sigint_checkpoints_the_step_it_stops_at_and_resume_goes_on() {
+    let dir = tempfile::tempdir().unwrap();
+    let (data, s1) = stage1_run(dir.path(), &["--iters", "20"]);
+    let train_args = |out: &Path, extra: &[&str]| {
+        let mut c = bin();
+        c.args(["train", "--data"]).arg(&data).arg("--out").arg(out);
+        c.args(["--backend", "cpu", "--batch", "1024", "--quiet"]);
+        c.args(extra);
+        c
+    };
+    // Stage 1 (no periodic checkpoint: the one on disk is the stop's), then stage 2.
+    let run = dir.path().join("stopped1");
+    let (code, step, err) = stop_with_sigint(
+        &mut train_args(
+            &run,
+            &[
+                "--res",
+                "32",
+                "--iters",
+                "1000000",
+                "--checkpoint-every",
+                "1000000",
+            ],
+        ),
+        &run.join("train_log.csv"),
+    );
+    assert_eq!(code, Some(130), "{err}");
+    assert!(
+        err.contains("plenoxels.npz") && err.contains("--resume"),
+        "{err}"
+    );
+    let ck = alphasurf::grid::checkpoint::load(&run.join("plenoxels.npz")).unwrap();
+    assert_eq!(ck.meta["step"].as_u64(), Some(step));
+    assert!(step > 0 && step < 1_000_000, "{err}");
+    assert_eq!(log_steps(&run, 4), (1..=step).collect::<Vec<_>>());
+    let more = (step + 10).to_string();
+    let out = run_ok(&mut train_args(
+        &run,
+        &["--res", "32", "--resume", "--iters", &more],
+    ));
+    assert!(out.contains("stage 1 done"), "{out}");
+    assert_eq!(log_steps(&run, 4), (1..=step + 10).collect::<Vec<_>>());
+
+    let run = dir.path().join("stopped2");
+    let surface = |extra: &[&str]| {
+        let mut c = train_args(&run, &["--stage", "surface", "--init"]);
+        c.arg(&s1).args(["--category", "synthetic"]).args(extra);
+        c
+    };
+    let (code, step, err) = stop_with_sigint(
+        &mut surface(&[
+            "--surface-iters",
+            "1000000",
+            "--checkpoint-every",
+            "1000000",
+        ]),
+        &run.join("train_log.csv"),
+    );
+    assert_eq!(code, Some(130), "{err}");
+    assert!(err.contains("surface.npz"), "{err}");
+    assert!(step > 0 && step < 1_000_000, "{err}");
+    assert_eq!(log_steps(&run, 7), (1..=step).collect::<Vec<_>>());
+    let more = (step + 10).to_string();
+    run_ok(&mut surface(&["--resume", "--surface-iters", &more]));
+    assert_eq!(metrics(&run)["config"]["iters"].as_u64(), Some(step + 10));
+    assert_eq!(log_steps(&run, 7), (1..=step + 10).collect::<Vec<_>>());
 }
 
 #[test]

@@ -15,6 +15,7 @@ use super::extract::{LevelJob, DEFAULT_RAYS_PER_AXIS};
 use super::steps::{SceneSize, Stage1Overrides, Stage2Overrides, Steps, TrainedRun};
 use crate::backend::Backend;
 use crate::eval::Metrics;
+use crate::run::interrupt;
 use crate::scene::SceneKind;
 use crate::train::Category;
 use anyhow::{Context, Result};
@@ -434,7 +435,12 @@ pub fn demo(opts: &DemoOptions, devices: &mut Devices) -> Result<DemoSummary> {
         iters: opts.size.surface_iters(opts.fast),
         set: opts.size.surface_set.clone(),
     };
-    let s2 = steps.train_surface(&s1.dir, &data, &s2_dir, &stage2);
+    let s2 = match steps.train_surface(&s1.dir, &data, &s2_dir, &stage2) {
+        // A stop asked for by a signal ends the demo; a failed stage 2 leaves the table its
+        // Plenoxels rows.
+        Err(e) if interrupt::cause(&e).is_some() => return Err(e),
+        r => r,
+    };
     if let Err(e) = &s2 {
         eprintln!("demo: STAGE 2 FAILED — the table shows the Plenoxels rows only.\n  {e:#}");
     }
