@@ -4,6 +4,7 @@
 //! handler. Outside a training loop (no [`Catch`] alive) both signals keep their usual effect, so
 //! a command that is extracting or evaluating stops at once.
 
+use super::checkpoint_writer::BackgroundSave;
 use anyhow::Error;
 use std::fmt;
 use std::path::PathBuf;
@@ -106,6 +107,28 @@ impl fmt::Display for Interrupted {
 }
 
 impl std::error::Error for Interrupted {}
+
+impl Interrupted {
+    /// The error that ends a run `signal` stopped after `done` of `iters` steps, once the
+    /// checkpoint `writer` is writing to `checkpoint` is on disk (or that write's own error).
+    pub fn after_checkpoint(
+        signal: i32,
+        done: u32,
+        iters: u32,
+        checkpoint: PathBuf,
+        writer: &mut BackgroundSave,
+    ) -> Error {
+        match writer.finish() {
+            Err(e) => e,
+            Ok(()) => Error::new(Interrupted {
+                signal,
+                done,
+                iters,
+                checkpoint,
+            }),
+        }
+    }
+}
 
 /// The [`Interrupted`] that `e` holds, if any (under any context).
 pub fn cause(e: &Error) -> Option<&Interrupted> {

@@ -275,15 +275,15 @@ pub fn train(
             group.restart();
         }
         if let Some(signal) = stop {
-            writer.finish()?;
             progress.finish();
-            return Err(Interrupted {
+            let ck = out.join(CHECKPOINT);
+            return Err(Interrupted::after_checkpoint(
                 signal,
-                done: step + 1,
-                iters: cfg.iters,
-                checkpoint: out.join(CHECKPOINT),
-            }
-            .into());
+                step + 1,
+                cfg.iters,
+                ck,
+                &mut writer,
+            ));
         }
     }
     progress.finish();
