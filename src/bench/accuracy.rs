@@ -448,11 +448,11 @@ impl Expected {
 fn config_difference<C: Serialize + DeserializeOwned>(dir: &Path, here: &C) -> Option<String> {
     let there = metrics::read::<serde_json::Value>(dir)
         .and_then(|mut m| Ok(serde_json::from_value::<C>(m["config"].take())?));
-    let there = match there {
-        Ok(c) => serde_json::to_value(c).ok()?,
+    let both = there.and_then(|c| Ok((serde_json::to_value(c)?, serde_json::to_value(here)?)));
+    let (there, here) = match both {
+        Ok(both) => both,
         Err(e) => return Some(format!("{e:#}")),
     };
-    let here = serde_json::to_value(here).ok()?;
     let (k, _) = (here.as_object().into_iter())
         .chain(there.as_object())
         .flatten()
@@ -587,12 +587,13 @@ fn scene(
     let trimmed_levels_s = t.elapsed().as_secs_f64();
     // A stage-2 run without result.json was interrupted: `train --overwrite` starts it again.
     let s2_dir = out.join("alphasurf");
-    let s2 = steps.train_surface(&s1.dir, data, &s2_dir, &stage2_overrides(args, &settings));
-    // A stop asked for by a signal ends the bench (a failed stage 2 is the scene's result).
-    let s2 = match s2 {
-        Err(e) if interrupt::cause(&e).is_some() => return Err(e),
-        r => r,
-    };
+    // A failed stage 2 is the scene's result; a stop asked for by a signal ends the bench.
+    let s2 = interrupt::unless_stopped(steps.train_surface(
+        &s1.dir,
+        data,
+        &s2_dir,
+        &stage2_overrides(args, &settings),
+    ))?;
     let t = Instant::now();
     let (surf, s2_wall, error) = match &s2 {
         Ok(s2) => {

@@ -354,9 +354,9 @@ pub fn run(args: &TimeVsErrorArgs, devices: &mut Devices) -> Result<()> {
             batch: args.size.batch,
             set: Vec::new(),
         };
-        let s1 = match steps.train_plenoxels(&data, &dir.join("plenoxels"), &tsize) {
+        let s1 = steps.train_plenoxels(&data, &dir.join("plenoxels"), &tsize);
+        let s1 = match interrupt::unless_stopped(s1)? {
             Ok(s1) => s1,
-            Err(e) if interrupt::cause(&e).is_some() => return Err(e),
             Err(e) => {
                 eprintln!("time-vs-error: stage 1 failed: {e:#}");
                 rows.push(BenchRow::failed(p, "plenoxels_best", format!("{e:#}")));
@@ -382,12 +382,12 @@ pub fn run(args: &TimeVsErrorArgs, devices: &mut Devices) -> Result<()> {
             iters: Some(args.size.surface_iters.unwrap_or((p.iters / 2).max(1))),
             set: args.size.surface_set.clone(),
         };
-        match steps.train_surface(&s1.dir, &data, &dir.join("alphasurf"), &stage2) {
+        let s2 = steps.train_surface(&s1.dir, &data, &dir.join("alphasurf"), &stage2);
+        match interrupt::unless_stopped(s2)? {
             Ok(s2) => {
                 let r = alphasurf_row(steps, &s1, &s2, &gt);
                 rows.push(BenchRow::from_row(p, &r, Some(s2.train_rays_per_s)));
             }
-            Err(e) if interrupt::cause(&e).is_some() => return Err(e),
             Err(e) => {
                 let msg = format!("{e:#}");
                 eprintln!("time-vs-error: STAGE 2 FAILED: {msg}");

@@ -135,6 +135,15 @@ pub fn cause(e: &Error) -> Option<&Interrupted> {
     e.chain().find_map(|c| c.downcast_ref::<Interrupted>())
 }
 
+/// `r` for a caller that records a failed training and goes on (the benches, `demo`), unless a
+/// signal stopped it: that error ends the caller too (`?` passes it on).
+pub fn unless_stopped<T>(r: Result<T, Error>) -> Result<Result<T, Error>, Error> {
+    match r {
+        Err(e) if cause(&e).is_some() => Err(e),
+        r => Ok(r),
+    }
+}
+
 /// The exit code of a command stopped by `signal`: 128 + the signal, as shells report it.
 pub fn exit_code(i: &Interrupted) -> u8 {
     u8::try_from(128 + i.signal).unwrap_or(1)
@@ -159,5 +168,11 @@ mod tests {
         assert!(text.contains("after step 40 of 100"), "{text}");
         assert!(text.contains("run/plenoxels.npz") && text.contains("--resume"));
         assert!(cause(&anyhow::anyhow!("disk full")).is_none());
+        // A failure goes back to the caller to record; the stop ends it.
+        assert!(matches!(
+            unless_stopped::<()>(Err(anyhow::anyhow!("disk full"))),
+            Ok(Err(_))
+        ));
+        assert!(unless_stopped::<()>(Err(e)).is_err());
     }
 }

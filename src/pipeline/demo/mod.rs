@@ -435,12 +435,9 @@ pub fn demo(opts: &DemoOptions, devices: &mut Devices) -> Result<DemoSummary> {
         iters: opts.size.surface_iters(opts.fast),
         set: opts.size.surface_set.clone(),
     };
-    let s2 = match steps.train_surface(&s1.dir, &data, &s2_dir, &stage2) {
-        // A stop asked for by a signal ends the demo; a failed stage 2 leaves the table its
-        // Plenoxels rows.
-        Err(e) if interrupt::cause(&e).is_some() => return Err(e),
-        r => r,
-    };
+    // A failed stage 2 leaves the table its Plenoxels rows; a stop asked for by a signal ends
+    // the demo.
+    let s2 = interrupt::unless_stopped(steps.train_surface(&s1.dir, &data, &s2_dir, &stage2))?;
     if let Err(e) = &s2 {
         eprintln!("demo: STAGE 2 FAILED — the table shows the Plenoxels rows only.\n  {e:#}");
     }
