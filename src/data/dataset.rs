@@ -5,9 +5,37 @@
 
 use super::background::BackgroundMode;
 use super::camera::{Camera, SceneBox};
+use super::foreground::ForegroundBox;
 use super::image::RgbaImage;
 use super::layout::Layout;
 use std::path::PathBuf;
+
+/// How a dataset's views were split.
+#[derive(Clone, Debug, PartialEq)]
+pub enum SplitRule {
+    /// One file per split (`transforms_{train,val,test}.json`).
+    Files,
+    /// The names listed in a split file (`split.json`).
+    SplitFile(PathBuf),
+    /// Every n-th view by name (the first, the (n+1)-th, …) held out for testing, no validation
+    /// split (LLFF's convention).
+    EveryNth(usize),
+}
+
+impl std::fmt::Display for SplitRule {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            SplitRule::Files => f.write_str("one transforms_<split>.json per split"),
+            SplitRule::SplitFile(p) => write!(f, "as listed in {}", p.display()),
+            SplitRule::EveryNth(n) => write!(
+                f,
+                "no split file: every {n}th image by name (the first, the {}th, …) held out for \
+                 testing (LLFF's convention)",
+                n + 1
+            ),
+        }
+    }
+}
 
 /// Loader settings.
 #[derive(Clone, Copy, Debug)]
@@ -15,7 +43,8 @@ pub struct LoadOptions {
     /// Box-downscale factor (1 = full resolution).
     pub downscale: u32,
     /// Scene normalisation; `None` takes the layout's own (NeRF-synthetic: `SceneBox::default()`,
-    /// COLMAP: from the sparse points in view, IDR: from `scale_mat`).
+    /// COLMAP: the foreground box without masks, else from the sparse points in view,
+    /// instant-ngp: the foreground box, IDR: from `scale_mat`).
     pub scene: Option<SceneBox>,
     /// The colour images with alpha or masks are composited on; `Learned` refuses them
     /// (`DataError::AlphaWithLearnedBackground`).
@@ -129,6 +158,11 @@ pub struct Dataset {
     pub test: Split,
     /// Scene normalisation.
     pub scene: SceneBox,
+    /// The foreground box the layout found from the cameras (captures without masks), whether
+    /// or not `scene` was overridden.
+    pub foreground: Option<ForegroundBox>,
+    /// How the views were split into train, val and test.
+    pub split_rule: SplitRule,
     /// The background its images with alpha were composited on (`LoadOptions::background`), and
     /// that training composites on.
     pub background: BackgroundMode,

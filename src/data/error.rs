@@ -128,8 +128,9 @@ pub enum DataError {
     },
     /// A directory that is none of the supported dataset layouts.
     #[error(
-        "{}: not a dataset: expected transforms_train.json (NeRF-synthetic), sparse/0/ or sparse/ \
-         with cameras.bin or cameras.txt (COLMAP), or cameras_sphere.npz (IDR/DTU)",
+        "{}: not a dataset: expected transforms_train.json (NeRF-synthetic), transforms.json \
+         (instant-ngp / nerfstudio), sparse/0/ or sparse/ with cameras.bin or cameras.txt \
+         (COLMAP), or cameras_sphere.npz (IDR/DTU)",
         path.display()
     )]
     UnknownLayout {

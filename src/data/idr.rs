@@ -12,6 +12,7 @@
 use super::camera::{Camera, SceneBox};
 use super::distortion::Distortion;
 use super::error::DataError;
+use super::image::image_size;
 use super::views::{self, Posed, View};
 use crate::grid::npz::NpzReader;
 use glam::{DMat3, DMat4, DVec3, DVec4, Mat4};
@@ -128,6 +129,7 @@ pub fn posed(root: &Path, k: u32) -> Result<Posed, DataError> {
         folders,
         source: npz_path,
         scene,
+        foreground: None,
     })
 }
 
@@ -155,20 +157,6 @@ fn list_images(dir: &Path) -> Result<Vec<PathBuf>, DataError> {
         .collect();
     v.sort();
     Ok(v)
-}
-
-/// An image's size from its header.
-fn image_size(path: &Path) -> Result<(u32, u32), DataError> {
-    let unreadable = |msg: String| DataError::UnreadableImage {
-        path: path.to_path_buf(),
-        msg,
-    };
-    image::ImageReader::open(path)
-        .map_err(|e| unreadable(e.to_string()))?
-        .with_guessed_format()
-        .map_err(|e| unreadable(e.to_string()))?
-        .into_dimensions()
-        .map_err(|e| unreadable(e.to_string()))
 }
 
 /// (s, c) of a `scale_mat` that is s·I with translation c, or an error.

@@ -1,8 +1,11 @@
-//! Compact 8-bit RGBA images: decoding (PNG/JPEG via the image crate), compositing on the run's
-//! background colour and box downscaling. Colour channels are stored already composited
+//! Compact 8-bit RGBA images: decoding (PNG/JPEG via the image crate, turned upright by the
+//! file's EXIF orientation as photo viewers show it), compositing on the run's background colour
+//! and box downscaling. Colour channels are stored already composited
 //! (rgb·a + (1 − a)·bg); the alpha channel keeps the coverage for masks.
 
 use super::error::DataError;
+use image::metadata::Orientation;
+use image::ImageDecoder;
 use std::path::Path;
 
 /// An 8-bit RGBA image, row-major, top row first; RGB composited on the background.
@@ -64,7 +67,8 @@ pub fn decode_file(path: &Path) -> Result<(u32, u32, Vec<u8>, bool), DataError> 
     })
 }
 
-/// Decodes image bytes (PNG or JPEG) into straight-alpha RGBA8: (width, height, data, had_alpha).
+/// Decodes image bytes (PNG or JPEG) into straight-alpha RGBA8, upright by its EXIF orientation:
+/// (width, height, data, had_alpha).
 pub fn decode_bytes(bytes: &[u8]) -> Result<(u32, u32, Vec<u8>, bool), String> {
     let reader = image::ImageReader::new(std::io::Cursor::new(bytes))
         .with_guessed_format()
@@ -72,7 +76,10 @@ pub fn decode_bytes(bytes: &[u8]) -> Result<(u32, u32, Vec<u8>, bool), String> {
     if reader.format().is_none() {
         return Err("not a PNG or JPEG file".into());
     }
-    let img = reader.decode().map_err(|e| e.to_string())?;
+    let mut decoder = reader.into_decoder().map_err(|e| e.to_string())?;
+    let orientation = decoder.orientation().map_err(|e| e.to_string())?;
+    let mut img = image::DynamicImage::from_decoder(decoder).map_err(|e| e.to_string())?;
+    img.apply_orientation(orientation);
     let had_alpha = img.color().has_alpha();
     let rgba = img.to_rgba8();
     let (w, h) = rgba.dimensions();
@@ -80,6 +87,31 @@ pub fn decode_bytes(bytes: &[u8]) -> Result<(u32, u32, Vec<u8>, bool), String> {
         return Err("image has no pixels".into());
     }
     Ok((w, h, rgba.into_raw(), had_alpha))
+}
+
+/// An image file's size as [`decode_file`] gives it (EXIF orientation applied), from its header.
+pub fn image_size(path: &Path) -> Result<(u32, u32), DataError> {
+    let unreadable = |msg: String| DataError::UnreadableImage {
+        path: path.to_path_buf(),
+        msg,
+    };
+    let mut decoder = image::ImageReader::open(path)
+        .map_err(|e| unreadable(e.to_string()))?
+        .with_guessed_format()
+        .map_err(|e| unreadable(e.to_string()))?
+        .into_decoder()
+        .map_err(|e| unreadable(e.to_string()))?;
+    let (w, h) = decoder.dimensions();
+    let turned = matches!(
+        decoder
+            .orientation()
+            .map_err(|e| unreadable(e.to_string()))?,
+        Orientation::Rotate90
+            | Orientation::Rotate270
+            | Orientation::Rotate90FlipH
+            | Orientation::Rotate270FlipH
+    );
+    Ok(if turned { (h, w) } else { (w, h) })
 }
 
 /// Composites straight-alpha RGBA8 on `bg`, then box-averages k×k blocks (the ragged right and

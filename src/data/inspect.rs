@@ -1,10 +1,12 @@
-//! `alphasurf inspect`: a summary of a loaded dataset — views per split, resolution, focal length,
-//! bounds of the camera centres, object bounds estimated by carving a visual hull from the
+//! `alphasurf inspect`: a summary of a loaded dataset — views per split and how they were split,
+//! resolution, focal length, bounds of the camera centres, the foreground box found from the
+//! cameras (captures without masks), object bounds estimated by carving a visual hull from the
 //! training alpha masks, and warnings (no alpha channel, cameras not looking at the box, objects
 //! reaching outside the box).
 
 use super::camera::ray_box;
-use super::dataset::{Dataset, Split};
+use super::dataset::{Dataset, Split, SplitRule};
+use super::foreground::ForegroundBox;
 use glam::{Mat4, Vec3, Vec4};
 use rayon::prelude::*;
 use std::fmt::Write as _;
@@ -38,6 +40,10 @@ pub struct SplitSummary {
 pub struct Inspection {
     /// Per split.
     pub splits: Vec<SplitSummary>,
+    /// How the views were split.
+    pub split_rule: SplitRule,
+    /// The foreground box found from the cameras, and how (captures without masks).
+    pub foreground: Option<ForegroundBox>,
     /// The scene box in Blender units.
     pub box_min: Vec3,
     /// See `box_min`.
@@ -116,6 +122,8 @@ pub fn inspect(ds: &Dataset) -> Inspection {
     }
     Inspection {
         splits,
+        split_rule: ds.split_rule.clone(),
+        foreground: ds.foreground.clone(),
         box_min,
         box_max,
         object_bounds,
@@ -254,12 +262,22 @@ impl std::fmt::Display for Inspection {
                 sp.distance.1
             );
         }
+        let _ = writeln!(s, "split: {}", self.split_rule);
         let _ = writeln!(
             s,
             "scene box (Blender units): {} .. {}",
             v(self.box_min),
             v(self.box_max)
         );
+        if let Some(fg) = &self.foreground {
+            let _ = writeln!(
+                s,
+                "foreground box (dataset units): {} .. {}\n  found from the cameras: {}",
+                v(fg.min),
+                v(fg.max),
+                fg.how
+            );
+        }
         match self.object_bounds {
             Some((lo, hi)) => {
                 let _ = writeln!(

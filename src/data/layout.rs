@@ -1,6 +1,7 @@
 //! Which dataset layout a directory holds, decided from the files present, in a fixed order:
-//! NeRF-synthetic (any `transforms_{train,val,test}.json`), IDR/DTU (`cameras_sphere.npz`), COLMAP (`sparse/0/`
-//! or `sparse/` with `cameras.bin` or `cameras.txt`; binary wins when both exist).
+//! NeRF-synthetic (any `transforms_{train,val,test}.json`), instant-ngp / nerfstudio (one
+//! `transforms.json`), IDR/DTU (`cameras_sphere.npz`), COLMAP (`sparse/0/` or `sparse/` with
+//! `cameras.bin` or `cameras.txt`; binary wins when both exist).
 
 use super::error::DataError;
 use std::path::{Path, PathBuf};
@@ -8,8 +9,10 @@ use std::path::{Path, PathBuf};
 /// A dataset layout on disk.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub enum Layout {
-    /// `transforms_{train,val,test}.json` with images (Blender / nerfstudio).
+    /// `transforms_{train,val,test}.json` with images (Blender).
     NerfSynthetic,
+    /// One `transforms.json` with images (instant-ngp / nerfstudio).
+    InstantNgp,
     /// A COLMAP reconstruction: `images/` and a sparse model.
     Colmap {
         /// The model folder (`sparse/0` or `sparse`).
@@ -25,6 +28,7 @@ impl std::fmt::Display for Layout {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
             Layout::NerfSynthetic => f.write_str("NeRF-synthetic (transforms_*.json)"),
+            Layout::InstantNgp => f.write_str("instant-ngp / nerfstudio (transforms.json)"),
             Layout::Colmap { sparse, binary } => write!(
                 f,
                 "COLMAP ({}, {})",
@@ -41,6 +45,9 @@ pub fn detect(root: &Path) -> Result<Layout, DataError> {
     let transforms = |s: &str| root.join(format!("transforms_{s}.json")).exists();
     if ["train", "val", "test"].into_iter().any(transforms) {
         return Ok(Layout::NerfSynthetic);
+    }
+    if root.join(super::instant_ngp::FILE).is_file() {
+        return Ok(Layout::InstantNgp);
     }
     if root.join("cameras_sphere.npz").exists() {
         return Ok(Layout::Idr);

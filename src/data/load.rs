@@ -2,7 +2,7 @@
 //! split has one image size, and measure the load.
 
 use super::camera::SceneBox;
-use super::dataset::{peak_rss_bytes, Dataset, LoadOptions, LoadReport};
+use super::dataset::{peak_rss_bytes, Dataset, LoadOptions, LoadReport, SplitRule};
 use super::error::DataError;
 use super::layout::{self, Layout};
 use anyhow::Context;
@@ -38,6 +38,7 @@ fn train_poses(root: &Path) -> Result<Vec<Mat4>, DataError> {
             super::colmap::posed(root, &sparse, 1)?.train_views(root)?
         }
         Layout::Idr => super::idr::posed(root, 1)?.train_views(root)?,
+        Layout::InstantNgp => super::instant_ngp::posed(root, 1)?.train_views(root)?,
     };
     Ok(views.iter().map(|v| v.camera.c2w).collect())
 }
@@ -59,15 +60,21 @@ fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset, DataError> {
     }
     let layout = layout::detect(root)?;
     let bg = opts.background.initial_rgb();
-    let ((train, val_split, test), scene) = match &layout {
+    let ((train, val_split, test), scene, foreground) = match &layout {
         Layout::NerfSynthetic => (
             super::nerf_synthetic::load_splits(root, k, bg)?,
             SceneBox::default(),
+            None,
         ),
         Layout::Colmap { sparse, .. } => {
             super::colmap::posed(root, sparse, k)?.load(root, k, bg)?
         }
         Layout::Idr => super::idr::posed(root, k)?.load(root, k, bg)?,
+        Layout::InstantNgp => super::instant_ngp::posed(root, k)?.load(root, k, bg)?,
+    };
+    let split_rule = match layout {
+        Layout::NerfSynthetic => SplitRule::Files,
+        _ => super::views::split_rule(root),
     };
     // A learned background is for images without alpha: where alpha (or a mask) says which
     // pixels are background, its colour is known and white or black composites them exactly,
@@ -117,6 +124,8 @@ fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset, DataError> {
         val_split,
         test,
         scene: opts.scene.unwrap_or(scene),
+        foreground,
+        split_rule,
         background: opts.background,
         report: LoadReport {
             seconds: t0.elapsed().as_secs_f64(),

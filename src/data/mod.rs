@@ -1,5 +1,5 @@
-//! Datasets of posed images in three layouts ([`Layout`], detected from the files): NeRF-synthetic,
-//! COLMAP and IDR/DTU. Loading ([`Dataset::load`]), cameras and rays in the OpenGL convention
+//! Datasets of posed images in four layouts ([`Layout`], detected from the files): NeRF-synthetic,
+//! instant-ngp / nerfstudio, COLMAP and IDR/DTU. Loading ([`Dataset::load`]), cameras and rays in the OpenGL convention
 //! ([`Camera`]), the scene box ([`SceneBox`]), training views for ray sampling ([`TrainViews`])
 //! and dataset inspection ([`inspect`]).
 
@@ -9,19 +9,23 @@ pub mod colmap;
 pub mod dataset;
 pub mod distortion;
 pub mod error;
+pub mod foreground;
 pub mod idr;
 pub mod image;
 pub mod inspect;
+pub mod instant_ngp;
 pub mod layout;
 mod load;
 mod nerf_synthetic;
 pub mod sampler;
+mod transforms;
 pub mod views;
 
 pub use background::BackgroundMode;
 pub use camera::{look_at, Camera, SceneBox};
-pub use dataset::{Dataset, Frame, LoadOptions, LoadReport, Split};
+pub use dataset::{Dataset, Frame, LoadOptions, LoadReport, Split, SplitRule};
 pub use error::DataError;
+pub use foreground::ForegroundBox;
 pub use image::RgbaImage;
 pub use layout::Layout;
 pub use sampler::{view_rays, RayBatch, TrainViews};

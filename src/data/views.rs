@@ -1,12 +1,13 @@
-//! Posed photographs as the COLMAP and IDR readers hand them over, turned into splits: the image
+//! Posed photographs as the COLMAP, IDR, instant-ngp and LLFF readers hand them over, turned into splits: the image
 //! folder (`images_2/4/8` when the downscale asks for it and they exist), masks as alpha,
 //! undistortion, the held-out split (`split.json`, else every 8th view by name, as in LLFF and
 //! mip-NeRF practice) and parallel decoding.
 
 use super::camera::{Camera, SceneBox};
-use super::dataset::{Frame, Split, Splits};
+use super::dataset::{Frame, Split, SplitRule, Splits};
 use super::distortion::{undistort, Distortion, Pinhole};
 use super::error::DataError;
+use super::foreground::ForegroundBox;
 use super::image::{composite_and_downscale, decode_file, RgbaImage};
 use rayon::prelude::*;
 use serde::Deserialize;
@@ -46,13 +47,19 @@ pub struct Posed {
     pub source: PathBuf,
     /// The layout's own scene normalisation.
     pub scene: SceneBox,
+    /// The foreground box found from the cameras, when the layout looked for one (captures
+    /// without masks).
+    pub foreground: Option<ForegroundBox>,
 }
+
+/// A layout's splits, its scene normalisation and the foreground box it found (if any).
+pub type Loaded = (Splits, SceneBox, Option<ForegroundBox>);
 
 impl Posed {
     /// Decodes the views into splits (`k`: the requested downscale; `bg`: the background).
-    pub fn load(self, root: &Path, k: u32, bg: [f32; 3]) -> Result<(Splits, SceneBox), DataError> {
+    pub fn load(self, root: &Path, k: u32, bg: [f32; 3]) -> Result<Loaded, DataError> {
         let splits = load_splits(root, &self.source, self.views, &self.folders, k, bg)?;
-        Ok((splits, self.scene))
+        Ok((splits, self.scene, self.foreground))
     }
 
     /// The training split's views, without reading any image.
@@ -93,6 +100,16 @@ pub fn folders(root: &Path, images: &str, masks: &str, k: u32) -> Folders {
         images: small,
         masks: full.masks.map(|_| small_masks),
         prescaled: k,
+    }
+}
+
+/// How [`Posed::load`] splits the views of the dataset `root`.
+pub fn split_rule(root: &Path) -> SplitRule {
+    let file = root.join(SPLIT_FILE);
+    if file.exists() {
+        SplitRule::SplitFile(file)
+    } else {
+        SplitRule::EveryNth(HOLDOUT_EVERY)
     }
 }
 
@@ -312,13 +329,7 @@ fn load_view(
         had_alpha = true;
     }
     if !v.distortion.is_identity() {
-        let pinhole = Pinhole {
-            fx: cam.fx as f64,
-            fy: cam.fy as f64,
-            cx: cam.cx as f64,
-            cy: cam.cy as f64,
-        };
-        raw = undistort(w, h, &raw, &pinhole, &v.distortion);
+        raw = undistort(w, h, &raw, &Pinhole::of(&cam), &v.distortion);
     }
     let k_rest = k / p;
     if w / k_rest == 0 || h / k_rest == 0 {

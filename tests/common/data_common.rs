@@ -8,13 +8,16 @@ use std::path::{Path, PathBuf};
 
 /// The Blender-rendered fixture; a missing fixture fails the test.
 pub fn fixture() -> PathBuf {
-    let p = PathBuf::from(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../shared/fixtures/thin_lyre"
-    ));
+    shared_fixture("thin_lyre")
+}
+
+/// The fixture `name` in the repository's sibling `shared/fixtures/`; a missing one fails the
+/// test.
+pub fn shared_fixture(name: &str) -> PathBuf {
+    let p = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../shared/fixtures")).join(name);
     assert!(
-        p.join("transforms_train.json").is_file(),
-        "fixture missing: {} (the repository's sibling shared/fixtures/thin_lyre must exist)",
+        p.join("scene.json").is_file(),
+        "fixture missing: {} (the repository's sibling shared/fixtures/{name} must exist)",
         p.display()
     );
     p

@@ -208,6 +208,7 @@ fn colmap_opencv_images_are_undistorted_on_load() {
     let d = Distortion::OpenCv {
         k1: -0.3,
         k2: 0.08,
+        k3: 0.0,
         p1: 0.002,
         p2: -0.003,
     };

@@ -6,6 +6,7 @@
 mod data_common;
 
 mod checkpoint;
+mod data_capture;
 mod data_errors;
 mod data_fixture;
 mod data_loader;

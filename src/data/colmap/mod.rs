@@ -6,8 +6,9 @@
 //! on load onto the pinhole with the same intrinsics; other models are refused by name. Poses:
 //! COLMAP stores world-to-camera (R, t) in the OpenCV convention (+Y down, +Z forward); we keep
 //! camera-to-world in the OpenGL one, c2w = [Rᵀ | −Rᵀt]·diag(1, −1, −1, 1). COLMAP's pixel
-//! centres are at +0.5, as ours. The scene box comes from the sparse points in view (see
-//! [`scene_box`]).
+//! centres are at +0.5, as ours. The scene box: without masks, the foreground box found from the
+//! cameras and sparse points ([`super::foreground`]); with masks, or when the optical axes do not
+//! converge, the sparse points in view (see [`scene_box`]).
 
 pub mod binary;
 pub mod text;
@@ -162,20 +163,31 @@ pub fn posed(root: &Path, sparse: &Path, k: u32) -> Result<Posed, DataError> {
             distortion,
         });
     }
-    let scene =
-        scene_box(&points, posed.iter().map(|v| &v.camera)).ok_or_else(|| DataError::Format {
+    // A capture without masks frames its object in a room: the box is the foreground found
+    // from the cameras; with masks (or when the axes do not converge), the points in view.
+    let cameras: Vec<Camera> = posed.iter().map(|v| v.camera).collect();
+    let foreground = folders
+        .masks
+        .is_none()
+        .then(|| super::foreground::find(&cameras, &points))
+        .flatten();
+    let scene = match &foreground {
+        Some(fg) => fg.scene_box(),
+        None => scene_box(&points, cameras.iter()).ok_or_else(|| DataError::Format {
             path: pts_file.clone(),
             msg: format!(
                 "none of its {} points is in view of a registered camera: cannot place the \
                  scene box",
                 points.len()
             ),
-        })?;
+        })?,
+    };
     Ok(Posed {
         views: posed,
         folders,
         source: img_file,
         scene,
+        foreground,
     })
 }
 
@@ -232,6 +244,7 @@ fn intrinsics(path: &Path, c: &CameraEntry) -> Result<Intrinsics, DataError> {
             Distortion::OpenCv {
                 k1: p[4],
                 k2: p[5],
+                k3: 0.0,
                 p1: p[6],
                 p2: p[7],
             },
