@@ -146,8 +146,9 @@ fn convergence(cameras: &[Camera]) -> Option<(DVec3, f64)> {
             b += m * *c * *w;
         }
         let scale = a.x_axis.x + a.y_axis.y + a.z_axis.z;
-        // Nearly parallel axes leave the system (close to) singular.
-        if !(a.determinant() > 1e-6 * (scale / 3.0).powi(3)) {
+        // Nearly parallel axes leave the system (close to) singular (a NaN fails too).
+        let det = a.determinant();
+        if det.is_nan() || det <= 1e-6 * (scale / 3.0).powi(3) {
             return None;
         }
         p = a.inverse() * b;

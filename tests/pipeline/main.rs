@@ -9,6 +9,7 @@ mod checkpoint;
 mod data_capture;
 mod data_errors;
 mod data_fixture;
+mod data_instant_ngp;
 mod data_loader;
 mod data_ply;
 mod eval;

@@ -1,21 +1,38 @@
-//! Converts a NeRF-synthetic dataset into the COLMAP (text or binary) and IDR layouts with exact
-//! poses, so the loaders can be checked without downloading anything: same images (RGB in
-//! `images/` or `image/`, the alpha channel as a grey mask in `masks/` or `mask/`), same cameras,
+//! Converts a NeRF-synthetic dataset into the COLMAP (text or binary), IDR and instant-ngp /
+//! nerfstudio layouts with exact poses, so the loaders can be checked without downloading
+//! anything: same images (RGB in `images/` or `image/`, the alpha channel as a grey mask in
+//! `masks/` or `mask/`; for `transforms.json` optionally as a phone's OPENCV lens would have
+//! imaged them, [`PHONE_LENS`]), same cameras,
 //! the original train/val/test split in `split.json`, and a scene box that the loaders reproduce
 //! (COLMAP: the box's corners shrunk by the loader's margin as the sparse points; IDR: the box as
 //! `scale_mat`). Used by `cargo run --release --example convert_scene` and by the data tests.
 
 use alphasurf::data::colmap::BOX_MARGIN;
-use alphasurf::data::{Dataset, LoadOptions, Split};
+use alphasurf::data::distortion::{distort, Distortion, Pinhole};
+use alphasurf::data::{Camera, Dataset, LoadOptions, Split};
 use alphasurf::grid::npz;
 use anyhow::{ensure, Context, Result};
 use glam::{DMat3, DMat4, DQuat, DVec3, DVec4};
 use std::fmt::Write as _;
 use std::path::Path;
 
+/// The lens of the phone capture in issue 41 (1080×1920, OPENCV): what `transforms.json` with
+/// distortion images through.
+pub const PHONE_LENS: Distortion = Distortion::OpenCv {
+    k1: 0.058,
+    k2: -0.081,
+    k3: 0.0,
+    p1: -0.00098,
+    p2: 0.00016,
+};
+
 /// A target layout.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Target {
+    /// One `transforms.json` (instant-ngp / nerfstudio) with `fl_x/fl_y/cx/cy/w/h`, per-frame
+    /// `mask_path`, images and masks as this lens images them (OPENCV) and its coefficients in
+    /// the file.
+    InstantNgp(Distortion),
     /// `sparse/0/*.txt`.
     ColmapText,
     /// `sparse/0/*.bin`.
@@ -40,11 +57,13 @@ pub fn convert(src: &Path, dst: &Path, target: Target) -> Result<()> {
     ensure!(!dst.exists(), "{} exists already", dst.display());
     let splits: Vec<&Split> = ds.splits();
     let mut views = Vec::new();
+    let mut cameras = Vec::new();
     for s in &splits {
         for f in &s.frames {
             let i = views.len();
             let stem = f.file.file_stem().unwrap().to_string_lossy();
             let c = &f.camera;
+            cameras.push(*c);
             views.push(Source {
                 name: match target {
                     Target::Idr => format!("{i:06}.png"),
@@ -65,11 +84,19 @@ pub fn convert(src: &Path, dst: &Path, target: Target) -> Result<()> {
     };
     std::fs::create_dir_all(dst.join(img_dir))?;
     std::fs::create_dir_all(dst.join(mask_dir))?;
-    for (i, v) in views.iter().enumerate() {
-        let rgba = image::open(&v.frame_file)
+    let lens = match target {
+        Target::InstantNgp(lens) => lens,
+        _ => Distortion::None,
+    };
+    for (i, (v, camera)) in views.iter().zip(&cameras).enumerate() {
+        let mut rgba = image::open(&v.frame_file)
             .with_context(|| v.frame_file.display().to_string())?
             .to_rgba8();
         let (w, h) = rgba.dimensions();
+        if !lens.is_identity() {
+            let raw = distort(w, h, rgba.as_raw(), &Pinhole::of(camera), &lens);
+            rgba = image::RgbaImage::from_raw(w, h, raw).context("distorted image")?;
+        }
         let rgb = image::RgbImage::from_fn(w, h, |x, y| {
             let p = rgba.get_pixel(x, y).0;
             image::Rgb([p[0], p[1], p[2]])
@@ -83,11 +110,15 @@ pub fn convert(src: &Path, dst: &Path, target: Target) -> Result<()> {
         };
         alpha.save(dst.join(mask_dir).join(mask_name))?;
     }
-    let names = |split: &str| -> Vec<&str> {
+    // Split files name views as the layout does: instant-ngp by their path in the dataset.
+    let names = |split: &str| -> Vec<String> {
         views
             .iter()
             .filter(|v| v.split == split)
-            .map(|v| v.name.as_str())
+            .map(|v| match target {
+                Target::InstantNgp(_) => format!("{img_dir}/{}", v.name),
+                _ => v.name.clone(),
+            })
             .collect()
     };
     let mut split = serde_json::json!({ "train": names("train"), "test": names("test") });
@@ -102,6 +133,7 @@ pub fn convert(src: &Path, dst: &Path, target: Target) -> Result<()> {
     let (centre, half) = ((lo + hi).as_dvec3() * 0.5, (hi - lo).x as f64 * 0.5);
     match target {
         Target::Idr => write_idr(dst, &views, centre, half),
+        Target::InstantNgp(_) => write_transforms(dst, &views, &cameras, &lens),
         _ => {
             let corners: Vec<DVec3> = (0..8)
                 .map(|c| {
@@ -122,6 +154,44 @@ pub fn convert(src: &Path, dst: &Path, target: Target) -> Result<()> {
             }
         }
     }
+}
+
+/// `transforms.json`: the first camera's intrinsics and the lens at the top level, each frame's
+/// pose (OpenGL camera-to-world), image and mask.
+fn write_transforms(
+    dst: &Path,
+    views: &[Source],
+    cameras: &[Camera],
+    lens: &Distortion,
+) -> Result<()> {
+    let c = &cameras[0];
+    let mut doc = serde_json::json!({
+        "fl_x": c.fx, "fl_y": c.fy, "cx": c.cx, "cy": c.cy, "w": c.width, "h": c.height,
+        "camera_model": "OPENCV",
+    });
+    if let Distortion::OpenCv { k1, k2, k3, p1, p2 } = *lens {
+        for (k, v) in [("k1", k1), ("k2", k2), ("k3", k3), ("p1", p1), ("p2", p2)] {
+            doc[k] = v.into();
+        }
+    }
+    let frames: Vec<serde_json::Value> = views
+        .iter()
+        .zip(cameras)
+        .map(|(v, c)| {
+            let rows: Vec<[f32; 4]> = (0..4).map(|r| c.c2w.row(r).to_array()).collect();
+            serde_json::json!({
+                "file_path": format!("images/{}", v.name),
+                "mask_path": format!("masks/{}", v.name),
+                "transform_matrix": rows,
+            })
+        })
+        .collect();
+    doc["frames"] = frames.into();
+    std::fs::write(
+        dst.join("transforms.json"),
+        serde_json::to_string_pretty(&doc)?,
+    )?;
+    Ok(())
 }
 
 /// World-to-camera (R as a unit quaternion w, x, y, z; t) of an OpenCV camera-to-world.
