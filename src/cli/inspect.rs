@@ -1,22 +1,33 @@
-//! `alphasurf inspect DATASET`: loads a dataset (NeRF-synthetic, COLMAP or IDR) and prints its
-//! layout, splits, cameras, scene box, estimated object bounds, warnings, and the load time and
+//! `alphasurf inspect DATASET`: loads a dataset (NeRF-synthetic, instant-ngp / nerfstudio, COLMAP
+//! or IDR) and prints its layout, splits and how they were made, cameras, scene box, the
+//! foreground box found from the cameras, estimated object bounds, warnings, and the load time and
 //! memory.
 
-use crate::data::{inspect::inspect, Dataset, LoadOptions, SceneBox};
+use crate::data::{inspect::inspect, Aabb, Dataset, LoadOptions, SceneBox};
 use std::path::PathBuf;
 
 /// Arguments of `inspect`.
 #[derive(clap::Args, Debug)]
 pub struct InspectArgs {
-    /// Dataset directory (NeRF-synthetic, COLMAP or IDR layout; see the README).
+    /// Dataset directory (NeRF-synthetic, instant-ngp / nerfstudio, COLMAP or IDR layout; see
+    /// docs/datasets.md).
     pub dataset: PathBuf,
     /// Box-downscale the images by this factor.
     #[arg(long, default_value_t = 1)]
     pub downscale: u32,
     /// World → scaled-world factor; the grid box [-1, 1]^3 then covers [-1/scale, 1/scale]^3
     /// (default: the layout's box; NeRF-synthetic: 2/3).
-    #[arg(long)]
+    #[arg(long, conflicts_with = "scene_box")]
     pub scale: Option<f32>,
+    /// The scene box in dataset units, `xmin,ymin,zmin,xmax,ymax,zmax`, as `train --box` takes
+    /// it: the grid is the cube around it.
+    #[arg(
+        long = "box",
+        value_name = "XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX",
+        value_delimiter = ',',
+        allow_hyphen_values = true
+    )]
+    pub scene_box: Option<Vec<f32>>,
 }
 
 /// Runs `inspect`.
@@ -24,12 +35,19 @@ pub fn run(args: &InspectArgs) -> anyhow::Result<()> {
     if let Some(scale) = args.scale.filter(|s| !(*s > 0.0 && s.is_finite())) {
         anyhow::bail!("--scale must be positive, got {scale}");
     }
+    let given = args
+        .scene_box
+        .as_deref()
+        .map(|v| Aabb::from_values("--box", v))
+        .transpose()?;
     let opts = LoadOptions {
         downscale: args.downscale,
-        scene: args.scale.map(|scale| SceneBox {
-            scale,
-            ..SceneBox::default()
-        }),
+        scene: given
+            .map(|b| b.scene_box())
+            .or(args.scale.map(|scale| SceneBox {
+                scale,
+                ..SceneBox::default()
+            })),
         ..Default::default()
     };
     let ds = Dataset::load(&args.dataset, &opts)?;

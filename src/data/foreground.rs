@@ -14,7 +14,8 @@
 //! 3. Without sparse points (or too few left): the cube around the convergence point as wide as
 //!    the median camera's view there (an upper bound of what the photos frame).
 
-use super::camera::{Camera, SceneBox};
+use super::aabb::Aabb;
+use super::camera::Camera;
 use crate::eval::knn::PointIndex;
 use glam::{DMat3, DVec3, Vec3};
 use rand::{Rng, SeedableRng};
@@ -39,35 +40,13 @@ const MIN_POINTS: usize = 20;
 const RANSAC_DRAWS: usize = 400;
 const MAX_PLANES: usize = 8;
 
-/// An axis-aligned box in dataset units and how it was found.
+/// The foreground box (dataset units) and how it was found.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ForegroundBox {
-    /// Lower corner.
-    pub min: Vec3,
-    /// Upper corner.
-    pub max: Vec3,
+    /// The box.
+    pub bounds: Aabb,
     /// How it was found, for `inspect`.
     pub how: String,
-}
-
-impl ForegroundBox {
-    /// The scene normalisation whose grid cube encloses the box: centred on it, as wide as its
-    /// widest side.
-    pub fn scene_box(&self) -> SceneBox {
-        scene_box_around(self.min, self.max)
-    }
-}
-
-/// The grid cube around the box `min`..`max` (dataset units): centred on it, as wide as its
-/// widest side.
-pub fn scene_box_around(min: Vec3, max: Vec3) -> SceneBox {
-    let half = (0.5 * (max - min).max_element()).max(f32::MIN_POSITIVE);
-    let scale = 1.0 / half;
-    SceneBox {
-        scale,
-        centre: 0.5 * (min + max) * scale,
-        radius: 1.0,
-    }
 }
 
 /// The foreground box of a capture from its cameras and (when it has them) sparse points;
@@ -90,8 +69,7 @@ pub fn find(cameras: &[Camera], points: &[[f64; 3]]) -> Option<ForegroundBox> {
     );
     if let Some((lo, hi, how)) = from_points(p, d, points) {
         return Some(ForegroundBox {
-            min: lo.as_vec3(),
-            max: hi.as_vec3(),
+            bounds: Aabb::new(lo.as_vec3(), hi.as_vec3()),
             how: format!("{at}; {how}"),
         });
     }
@@ -108,8 +86,10 @@ pub fn find(cameras: &[Camera], points: &[[f64; 3]]) -> Option<ForegroundBox> {
             .collect(),
     );
     Some(ForegroundBox {
-        min: (p - DVec3::splat(half)).as_vec3(),
-        max: (p + DVec3::splat(half)).as_vec3(),
+        bounds: Aabb::new(
+            (p - DVec3::splat(half)).as_vec3(),
+            (p + DVec3::splat(half)).as_vec3(),
+        ),
         how: format!(
             "{at}; {} sparse points to bound the object: the cube the median camera's view \
              spans there",

@@ -272,10 +272,8 @@ impl std::fmt::Display for Inspection {
         if let Some(fg) = &self.foreground {
             let _ = writeln!(
                 s,
-                "foreground box (dataset units): {} .. {}\n  found from the cameras: {}",
-                v(fg.min),
-                v(fg.max),
-                fg.how
+                "foreground box (dataset units): {}\n  found from the cameras: {}",
+                fg.bounds, fg.how
             );
         }
         match self.object_bounds {

@@ -14,6 +14,7 @@
 //! `--downscale k` reads `images_k/` (and `masks_k/`) when every frame's file lies in `images/`
 //! (and mask in `masks/`) and those folders exist, as nerfstudio writes them.
 
+use super::aabb::Aabb;
 use super::camera::SceneBox;
 use super::error::DataError;
 use super::foreground::{self, ForegroundBox};
@@ -22,7 +23,7 @@ use super::transforms::{
     parse_matrix, parse_transform, read_json, relative_path, resolve_image, FrameJson, Intrinsics,
 };
 use super::views::{self, Folders, Posed, View};
-use glam::{DVec3, Vec3};
+use glam::DVec3;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 
@@ -109,16 +110,18 @@ pub fn posed(root: &Path, k: u32) -> Result<Posed, DataError> {
     };
     let cameras: Vec<_> = views.iter().map(|v| v.camera).collect();
     let foreground = foreground::find(&cameras, &points).map(|fg| match bounds {
-        Some((lo, hi)) => ForegroundBox {
-            min: fg.min.clamp(lo, hi),
-            max: fg.max.clamp(lo, hi),
+        Some(b) => ForegroundBox {
+            bounds: Aabb::new(
+                fg.bounds.lo().clamp(b.lo(), b.hi()),
+                fg.bounds.hi().clamp(b.lo(), b.hi()),
+            ),
             how: format!("{}; inside aabb_scale's box", fg.how),
         },
         None => fg,
     });
     let scene = match (&foreground, bounds) {
-        (Some(fg), _) => fg.scene_box(),
-        (None, Some((lo, hi))) => foreground::scene_box_around(lo, hi),
+        (Some(fg), _) => fg.bounds.scene_box(),
+        (None, Some(b)) => b.scene_box(),
         (None, None) => SceneBox::default(),
     };
     Ok(Posed {
@@ -167,7 +170,7 @@ fn sparse_points(root: &Path, json: &Path, ply: &str) -> Result<Vec<[f64; 3]>, D
 }
 
 /// instant-ngp's `aabb_scale` box in the file's world units, if the file has one.
-fn aabb(file: &TransformsFile) -> Result<Option<(Vec3, Vec3)>, String> {
+fn aabb(file: &TransformsFile) -> Result<Option<Aabb>, String> {
     let Some(a) = file.aabb_scale else {
         return Ok(None);
     };
@@ -181,5 +184,8 @@ fn aabb(file: &TransformsFile) -> Result<Option<(Vec3, Vec3)>, String> {
     // instant-ngp's unit-cube axes (x, y, z) are the world's (y, z, x).
     let centre = DVec3::new(0.5 - o[2], 0.5 - o[0], 0.5 - o[1]) / s;
     let half = DVec3::splat(0.5 * a / s);
-    Ok(Some(((centre - half).as_vec3(), (centre + half).as_vec3())))
+    Ok(Some(Aabb::new(
+        (centre - half).as_vec3(),
+        (centre + half).as_vec3(),
+    )))
 }

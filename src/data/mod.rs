@@ -3,6 +3,7 @@
 //! ([`Camera`]), the scene box ([`SceneBox`]), training views for ray sampling ([`TrainViews`])
 //! and dataset inspection ([`inspect`]).
 
+pub mod aabb;
 pub mod background;
 pub mod camera;
 pub mod colmap;
@@ -21,6 +22,7 @@ pub mod sampler;
 mod transforms;
 pub mod views;
 
+pub use aabb::Aabb;
 pub use background::BackgroundMode;
 pub use camera::{look_at, Camera, SceneBox};
 pub use dataset::{Dataset, Frame, LoadOptions, LoadReport, Split, SplitRule};

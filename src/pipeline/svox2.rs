@@ -82,6 +82,7 @@ pub fn import(opts: &ImportOptions) -> Result<Grid> {
         downscale: 1,
         background: crate::data::BackgroundMode::White,
         scene_scale: None,
+        scene_box: None,
         init: None,
         imported_from: Some(opts.ckpt.clone()),
     })?;

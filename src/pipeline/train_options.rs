@@ -82,6 +82,18 @@ pub struct TrainOptions {
     /// Box-downscale the images by this factor.
     #[arg(long, default_value_t = 1)]
     pub downscale: u32,
+    /// The scene box in dataset (world) units, `xmin,ymin,zmin,xmax,ymax,zmax`: the grid is the
+    /// cube around it (centred, as wide as its widest side). Default: the dataset's (for a
+    /// capture without masks, the foreground box found from the cameras; `inspect` prints it).
+    /// Recorded in run.json; `--resume` and stage 2 from a stage-1 run directory take the
+    /// recorded one.
+    #[arg(
+        long = "box",
+        value_name = "XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX",
+        value_delimiter = ',',
+        allow_hyphen_values = true
+    )]
+    pub scene_box: Option<Vec<f32>>,
     /// The colour behind the scene: images with alpha or masks are composited on it at load,
     /// and every render and training pass composites on it. `learned`: a constant colour
     /// trained with the scene, for images without alpha (it refuses images with alpha).
@@ -134,6 +146,7 @@ impl TrainOptions {
             batch: None,
             seed: 0,
             downscale: 1,
+            scene_box: None,
             background: BackgroundMode::White,
             checkpoint_every: None,
             resume: false,

@@ -2,7 +2,7 @@
 //! training call ended, and resuming from a checkpoint.
 
 use super::train_options::TrainOptions;
-use crate::data::{Dataset, LoadOptions};
+use crate::data::{Aabb, Dataset, LoadOptions, SceneBox};
 use crate::run::RunInfo;
 use anyhow::{ensure, Context, Result};
 use std::path::{Path, PathBuf};
@@ -14,8 +14,8 @@ pub struct Loaded {
     pub seconds: f64,
 }
 
-/// The dataset `--data` names, at `--downscale`, composited on `--background`; `inspect`'s
-/// warnings are repeated on stderr.
+/// The dataset `--data` names, at `--downscale`, composited on `--background`, in the scene box
+/// [`scene_box`] picks; `inspect`'s warnings are repeated on stderr.
 pub fn load_data(opts: &TrainOptions) -> Result<Loaded> {
     let t = Instant::now();
     let data = Dataset::load(
@@ -23,7 +23,7 @@ pub fn load_data(opts: &TrainOptions) -> Result<Loaded> {
         &LoadOptions {
             downscale: opts.downscale,
             background: opts.background,
-            ..Default::default()
+            scene: scene_box(opts)?,
         },
     )?;
     for w in crate::data::inspect::inspect(&data).warnings {
@@ -35,8 +35,52 @@ pub fn load_data(opts: &TrainOptions) -> Result<Loaded> {
     })
 }
 
+/// The scene box to train in, when not the dataset's own: `--box`; else, resuming, the one the
+/// run recorded; else, for stage 2 from a stage-1 run directory, the one that run recorded (a
+/// grid is only valid in the box it was trained in). `--box` on a run that recorded another box
+/// is refused.
+fn scene_box(opts: &TrainOptions) -> Result<Option<SceneBox>> {
+    let given = opts
+        .scene_box
+        .as_deref()
+        .map(|v| Aabb::from_values("--box", v))
+        .transpose()?;
+    let recorded_in = |dir: &Path| {
+        dir.join(crate::run::dir::MARKER)
+            .is_file()
+            .then(|| crate::run::read_info(dir).ok())
+            .flatten()
+            .and_then(|i| i.scene_box)
+    };
+    let recorded = match (opts.resume, opts.init.as_deref()) {
+        (true, _) => recorded_in(&opts.out),
+        (false, Some(init)) if init.is_dir() => recorded_in(init),
+        _ => None,
+    };
+    if let (Some(g), Some(r)) = (given, recorded) {
+        // The recorded box is the grid's cube: --box must give that cube.
+        let cube = Aabb::of_scene(&g.scene_box());
+        let close = (cube.lo() - r.lo())
+            .abs()
+            .max(cube.hi() - r.hi())
+            .max_element()
+            <= 1e-4 * (r.hi() - r.lo()).max_element();
+        ensure!(
+            close,
+            "--box {g}: the grid it needs ({cube}) is not the one {} was trained in ({r}); leave \
+             --box out to use that one",
+            if opts.resume {
+                opts.out.display()
+            } else {
+                opts.init.as_deref().unwrap_or(&opts.out).display()
+            }
+        );
+    }
+    Ok(given.or(recorded).map(|b| b.scene_box()))
+}
+
 /// The `run.json` of a training run: the dataset's absolute path, the downscale factor, the
-/// background, the scene box's scale and (stage 2) the grid it started from.
+/// background, the scene box's scale and cube and (stage 2) the grid it started from.
 pub fn run_info(opts: &TrainOptions, data: &Dataset, init: Option<PathBuf>) -> Result<RunInfo> {
     Ok(RunInfo {
         stage: None,
@@ -45,6 +89,7 @@ pub fn run_info(opts: &TrainOptions, data: &Dataset, init: Option<PathBuf>) -> R
         downscale: opts.downscale,
         background: opts.background,
         scene_scale: Some(data.scene.scale),
+        scene_box: Some(Aabb::of_scene(&data.scene)),
         init,
         imported_from: None,
     })

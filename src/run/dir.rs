@@ -19,7 +19,7 @@
 pub use super::files::*;
 use super::lock::Lock;
 use super::outputs::{check_not_inside_inputs, dataset_containing};
-use crate::data::BackgroundMode;
+use crate::data::{Aabb, BackgroundMode};
 use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
 use std::fs;
@@ -69,6 +69,10 @@ pub struct RunInfo {
     /// recorded and in imports: the NeRF-synthetic 2/3.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub scene_scale: Option<f32>,
+    /// The grid's cube in dataset units (absent in runs written before it was recorded and in
+    /// imports).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scene_box: Option<Aabb>,
     /// Stage 2: the stage-1 run or checkpoint it was initialised from.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub init: Option<PathBuf>,
@@ -317,6 +321,7 @@ mod tests {
             downscale: 1,
             background: BackgroundMode::White,
             scene_scale: None,
+            scene_box: None,
             init: None,
             imported_from: None,
         }

@@ -406,22 +406,29 @@ fn non_finite_training_state_stops_the_run_and_keeps_the_last_checkpoint() {
 }
 
 /// `train --stage all` on the built-in scene converted to COLMAP (text, binary) and IDR gives the
-/// original's figures: stage-1 and stage-2 test PSNR within 0.05 dB and the stage-2 point
+/// same stage-1 and stage-2 test PSNR (within 0.05 dB) and the same extracted
 /// cloud's Chamfer within 1 %. The CPU backend is deterministic run to run (see above), so the
 /// only difference is f32 rounding in the converted poses (≤ 5e-7); measured: 3e-5 dB, 2e-6 dB
 /// and 0.01 %. A wrong axis convention, principal point or scene box costs whole dB.
+/// Converted to instant-ngp's `transforms.json` with its images distorted by a phone's OPENCV
+/// lens (undistorted on load) and trained in the original's box (`--box`, recorded in run.json),
+/// the test PSNR of both stages stays within 1 dB of the original's.
 #[test]
 fn converted_layouts_train_to_the_same_figures() {
     let dir = tempfile::tempdir().unwrap();
     let data = scene(dir.path());
     let gt = data.join("gt_points.ply");
-    let figures = |ds: &Path, name: &str| -> [f64; 3] {
+    let figures = |ds: &Path, name: &str, extra: &[&str]| -> [f64; 3] {
         let out = dir.path().join(format!("run-{name}"));
         train(
             ds,
             &out,
             "cpu",
-            &["--stage", "all", "--iters", "60", "--surface-iters", "60"],
+            &[
+                &["--stage", "all", "--iters", "60", "--surface-iters", "60"],
+                extra,
+            ]
+            .concat(),
         );
         let pts = dir.path().join(format!("{name}.ply"));
         run_ok(
@@ -447,11 +454,11 @@ fn converted_layouts_train_to_the_same_figures() {
             e["chamfer_e2"].as_f64().unwrap(),
         ]
     };
-    let want = figures(&data, "original");
+    let want = figures(&data, "original", &[]);
     for target in [Target::ColmapText, Target::ColmapBinary, Target::Idr] {
         let copy = dir.path().join(format!("{target:?}"));
         convert::convert(&data, &copy, target).unwrap();
-        let got = figures(&copy, &format!("{target:?}"));
+        let got = figures(&copy, &format!("{target:?}"), &[]);
         assert!(
             (got[0] - want[0]).abs() <= 0.05 && (got[1] - want[1]).abs() <= 0.05,
             "{target:?}: test PSNR {got:?} vs the original's {want:?}"
@@ -463,6 +470,24 @@ fn converted_layouts_train_to_the_same_figures() {
             want[2]
         );
     }
+    let copy = dir.path().join("instant-ngp");
+    convert::convert(&data, &copy, Target::InstantNgp(convert::PHONE_LENS)).unwrap();
+    let cube = "-1.5,-1.5,-1.5,1.5,1.5,1.5";
+    let got = figures(&copy, "instant-ngp", &["--box", cube]);
+    eprintln!("instant-ngp (distorted): {got:?}, original {want:?}");
+    assert!(
+        (got[0] - want[0]).abs() <= 1.0 && (got[1] - want[1]).abs() <= 1.0,
+        "instant-ngp, distorted: test PSNR {got:?} vs the original's {want:?}"
+    );
+    let info: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.path().join("run-instant-ngp/surface/run.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(
+        info["scene_box"],
+        serde_json::json!({"min": [-1.5, -1.5, -1.5], "max": [1.5, 1.5, 1.5]}),
+        "{info}"
+    );
 }
 
 /// A stage-1 run of `scene` in `dir/run` with `extra` flags: the dataset and the run.

@@ -27,25 +27,26 @@ fn capture_foreground_box_bounds_the_object() {
         let dir = shared_fixture(name);
         let ds = Dataset::load(&dir, &LoadOptions::default()).unwrap();
         let fg = ds.foreground.as_ref().expect("a foreground box");
+        let (fmin, fmax) = (fg.bounds.lo(), fg.bounds.hi());
         let (lo, hi) = object_box(&dir);
         assert!(
-            fg.min.cmple(lo).all() && fg.max.cmpge(hi).all(),
+            fmin.cmple(lo).all() && fmax.cmpge(hi).all(),
             "{name}: foreground box {:?}..{:?} does not contain the object {lo:?}..{hi:?}",
-            fg.min,
-            fg.max
+            fmin,
+            fmax
         );
-        let ratio = (fg.max - fg.min) / (hi - lo);
+        let ratio = (fmax - fmin) / (hi - lo);
         assert!(
             ratio.max_element() <= 2.0,
             "{name}: foreground box {:?}..{:?} is {ratio:?} × the object's size",
-            fg.min,
-            fg.max
+            fmin,
+            fmax
         );
         assert!(fg.how.contains("converge"), "{}", fg.how);
         // The grid cube is the box's, widened to its widest side.
         let (bmin, bmax) = ds.scene.blender_bounds();
-        assert!(bmin.cmple(fg.min + 1e-4).all() && bmax.cmpge(fg.max - 1e-4).all());
-        assert!(((bmax - bmin).max_element() - (fg.max - fg.min).max_element()).abs() < 1e-3);
+        assert!(bmin.cmple(fmin + 1e-4).all() && bmax.cmpge(fmax - 1e-4).all());
+        assert!(((bmax - bmin).max_element() - (fmax - fmin).max_element()).abs() < 1e-3);
         assert_eq!(ds.split_rule, SplitRule::EveryNth(8));
         let n = ds.train.frames.len() + ds.test.frames.len();
         assert_eq!(ds.test.frames.len(), n.div_ceil(8), "{name}");

@@ -172,7 +172,7 @@ pub fn posed(root: &Path, sparse: &Path, k: u32) -> Result<Posed, DataError> {
         .then(|| super::foreground::find(&cameras, &points))
         .flatten();
     let scene = match &foreground {
-        Some(fg) => fg.scene_box(),
+        Some(fg) => fg.bounds.scene_box(),
         None => scene_box(&points, cameras.iter()).ok_or_else(|| DataError::Format {
             path: pts_file.clone(),
             msg: format!(
