@@ -4,6 +4,7 @@
 //! and of the outermost level's halo around thick parts ([`outer_level`]), the Chamfer / F-score metrics of method.md §4 ([`metrics`]) and their split over
 //! a scene's objects ([`objects`]).
 
+pub mod colour;
 pub mod extract;
 pub mod hidden;
 pub mod knn;

@@ -24,6 +24,9 @@ pub struct Mesh {
     pub level: Vec<f32>,
     /// 1 − exp(−max(σα, 0)) at the vertex; 1 for a field without opacity.
     pub alpha: Vec<f32>,
+    /// 8-bit RGB surface colour per vertex ([`crate::eval::colour`]); empty for an uncoloured
+    /// mesh.
+    pub colour: Vec<[u8; 3]>,
     /// Counter-clockwise seen from the side the normals point to.
     pub faces: Vec<[u32; 3]>,
 }
@@ -70,6 +73,9 @@ impl Mesh {
         self.normals = order.iter().map(|&(_, o)| self.normals[o]).collect();
         self.level = pick(&self.level);
         self.alpha = pick(&self.alpha);
+        if !self.colour.is_empty() {
+            self.colour = order.iter().map(|&(_, o)| self.colour[o]).collect();
+        }
     }
 
     /// Area of each face.
@@ -176,6 +182,7 @@ mod tests {
             normals: (0..5).map(|i| [0.0, i as f32, 0.0]).collect(),
             level: vec![0.0, 1.0, 2.0, 3.0, 4.0],
             alpha: vec![0.5, 0.6, 0.7, 0.8, 0.9],
+            colour: (0..5).map(|i| [i as u8; 3]).collect(),
             faces: vec![[0, 1, 2], [2, 3, 4], [4, 1, 3]],
         };
         m.retain_faces(|i| i != 0);
@@ -192,6 +199,7 @@ mod tests {
         assert_eq!(m.normals[3], [0.0, 1.0, 0.0]);
         assert_eq!(m.level, vec![2.0, 3.0, 4.0, 1.0]);
         assert_eq!(m.alpha, vec![0.7, 0.8, 0.9, 0.6]);
+        assert_eq!(m.colour, vec![[2; 3], [3; 3], [4; 3], [1; 3]]);
         m.retain_faces(|_| false);
         assert!(m.faces.is_empty() && m.positions.is_empty() && m.alpha.is_empty());
     }

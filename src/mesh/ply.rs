@@ -1,4 +1,5 @@
-//! Meshes as binary little-endian PLY: `vertex` (float x, y, z, nx, ny, nz, level, alpha) and
+//! Meshes as binary little-endian PLY: `vertex` (float x, y, z, nx, ny, nz, level, alpha, and
+//! uchar red, green, blue for a coloured mesh) and
 //! `face` (`list uchar int vertex_indices`, the form Blender and MeshLab read), written atomically.
 //! Reading takes the positions and faces of any PLY mesh (ascii or binary, through `ply-rs-bw`;
 //! polygons are split into triangle fans) and rejects indices out of range or non-finite
@@ -15,8 +16,12 @@ use std::path::Path;
 pub fn write_mesh_ply(path: &Path, mesh: &Mesh) -> Result<()> {
     let name = path.display();
     let n = mesh.positions.len();
+    let coloured = !mesh.colour.is_empty();
     ensure!(
-        mesh.normals.len() == n && mesh.level.len() == n && mesh.alpha.len() == n,
+        mesh.normals.len() == n
+            && mesh.level.len() == n
+            && mesh.alpha.len() == n
+            && (!coloured || mesh.colour.len() == n),
         "{name}: per-vertex attributes do not match the {n} vertices"
     );
     ensure!(
@@ -41,8 +46,13 @@ pub fn write_mesh_ply(path: &Path, mesh: &Mesh) -> Result<()> {
         "ply\nformat binary_little_endian 1.0\ncomment written by alphasurf\n\
          element vertex {n}\nproperty float x\nproperty float y\nproperty float z\n\
          property float nx\nproperty float ny\nproperty float nz\n\
-         property float level\nproperty float alpha\n\
+         property float level\nproperty float alpha\n{}\
          element face {}\nproperty list uchar int vertex_indices\nend_header\n",
+        if coloured {
+            "property uchar red\nproperty uchar green\nproperty uchar blue\n"
+        } else {
+            ""
+        },
         mesh.faces.len()
     );
     crate::io::atomic::write_atomic(path, |w| {
@@ -52,6 +62,9 @@ pub fn write_mesh_ply(path: &Path, mesh: &Mesh) -> Result<()> {
             let nn = mesh.normals[i];
             for v in p.iter().chain(&nn).chain([&mesh.level[i], &mesh.alpha[i]]) {
                 w.write_all(&v.to_le_bytes())?;
+            }
+            if coloured {
+                w.write_all(&mesh.colour[i])?;
             }
         }
         for f in &mesh.faces {
@@ -202,6 +215,7 @@ mod tests {
             normals: vec![[0.0, 0.0, 1.0]; 4],
             level: vec![50.0; 4],
             alpha: vec![0.5; 4],
+            colour: Vec::new(),
             faces: vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]],
         }
     }

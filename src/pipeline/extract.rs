@@ -9,6 +9,7 @@
 use crate::backend::Backend;
 use crate::cpu::extract_points::ExtractInput;
 use crate::data::{Dataset, SceneBox};
+use crate::eval::colour::Band0;
 use crate::eval::extract::{
     allocated_cells, extract_sorted, to_cloud, ExtractBackend, GridFrame, KernelStats, ThinStats,
 };
@@ -17,10 +18,12 @@ use crate::eval::outer_level::{drop_outer_halo, Field as OuterField, REACH};
 use crate::gpu::Gpu;
 use crate::grid::surface::SurfaceGrid;
 use crate::grid::{checkpoint, npz, Grid};
+use crate::io::{Extra, ExtraValues};
 use crate::mesh::ply::write_mesh_ply;
 use crate::mesh::{level_set_mesh, MeshInput, MeshStats};
 use crate::train::{stage1, stage2, Category};
 use anyhow::{bail, ensure, Context, Result};
+use rayon::prelude::*;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -42,12 +45,13 @@ pub struct ExtractOptions {
     /// An svox2 `ckpt.npz` (or any npz with the svox2 grid arrays) instead of `--run`.
     #[arg(long)]
     pub ckpt: Option<PathBuf>,
-    /// Output point cloud PLY (binary little-endian: x, y, z, level, alpha, nx, ny, nz; Blender
-    /// units).
+    /// Output point cloud PLY (binary little-endian: x, y, z, level, alpha, nx, ny, nz, and the
+    /// surface colour red, green, blue as 8-bit SH band 0; Blender units).
     #[arg(long, required_unless_present = "mesh")]
     pub out: Option<PathBuf>,
     /// Output mesh PLY of the same surfaces (marching tetrahedra on the trilinear field, welded;
-    /// vertices x, y, z, nx, ny, nz, level, alpha; triangles; Blender units). Stage-2 faces are
+    /// vertices x, y, z, nx, ny, nz, level, alpha, red, green, blue (8-bit SH band 0, as MeshLab
+    /// and Blender show vertex colours); triangles; Blender units). Stage-2 faces are
     /// kept where σα ≥ --min-alpha at their centroid. With or instead of --out.
     #[arg(long)]
     pub mesh: Option<PathBuf>,
@@ -278,6 +282,7 @@ pub fn extract(opts: &ExtractOptions, gpu: Option<&Gpu>) -> Result<ExtractReport
         links,
         values,
         opacity,
+        sh: field.sh(),
         levels: &levels,
         res,
         frame,
@@ -357,6 +362,14 @@ impl Field {
         }
     }
 
+    /// The SH coefficients, 27 per allocated vertex.
+    fn sh(&self) -> &[f32] {
+        match self {
+            Field::Density(g) => &g.sh,
+            Field::Surface(g, _) => &g.sh,
+        }
+    }
+
     fn frame(&self, scene_scale: f32) -> GridFrame {
         let (res, center, radius) = match self {
             Field::Density(g) => (g.res, g.center, g.radius),
@@ -423,6 +436,7 @@ pub fn extract_levels(
                 links: &grid.links,
                 values: &grid.density,
                 opacity: None,
+                sh: &grid.sh,
                 levels: &[job.level],
                 res: grid.res,
                 frame,
@@ -441,6 +455,8 @@ struct Surfaces<'a> {
     links: &'a [i32],
     values: &'a [f32],
     opacity: Option<&'a [f32]>,
+    /// SH coefficients (27 per allocated vertex): the points' and vertices' colour.
+    sh: &'a [f32],
     levels: &'a [f32],
     res: [u32; 3],
     frame: GridFrame,
@@ -457,6 +473,19 @@ impl Surfaces<'_> {
             links: self.links,
             values: self.values,
         }
+    }
+
+    /// The 8-bit surface colour at each point (Blender units).
+    fn colours(&self, points: &[[f32; 3]]) -> Vec<[u8; 3]> {
+        let band0 = Band0 {
+            res: self.res,
+            links: self.links,
+            sh: self.sh,
+        };
+        points
+            .par_iter()
+            .map(|p| band0.rgb_at(self.frame.blender_to_grid(*p)))
+            .collect()
     }
 }
 
@@ -513,7 +542,14 @@ fn write_points(
     let outer_dropped = s
         .trim_outer
         .then(|| drop_outer_halo(&mut points, &s.field(), s.levels, REACH));
-    let (cloud, thin) = to_cloud(&points, s.levels, &s.frame, opts.thin_radius)?;
+    let (mut cloud, thin) = to_cloud(&points, s.levels, &s.frame, opts.thin_radius)?;
+    let colours = s.colours(&cloud.points);
+    for (c, name) in ["red", "green", "blue"].into_iter().enumerate() {
+        cloud.extras.push(Extra {
+            name: name.into(),
+            values: ExtraValues::UChar(colours.iter().map(|rgb| rgb[c]).collect()),
+        });
+    }
     ensure!(
         !cloud.points.is_empty(),
         "no surface points at levels {:?} (field range {:?}); nothing written",
@@ -606,6 +642,7 @@ fn write_mesh(opts: &ExtractOptions, s: &Surfaces, out: &Path) -> Result<MeshRep
         s.levels,
         value_range(s.values)
     );
+    mesh.colour = s.colours(&mesh.positions);
     let t_w = Instant::now();
     write_mesh_ply(out, &mesh)?;
     Ok(MeshReport {

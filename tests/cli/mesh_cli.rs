@@ -66,8 +66,9 @@ impl PlyMesh {
     }
 }
 
-/// A minimal reader for binary little-endian PLY with float vertex properties and a face element
-/// of `list uchar int|uint vertex_indices` (what `extract --mesh` promises to write).
+/// A minimal reader for binary little-endian PLY with float and uchar vertex properties (uchar
+/// read as its value) and a face element of `list uchar int|uint vertex_indices` (what
+/// `extract --mesh` promises to write).
 fn read_ply_mesh(path: &Path) -> PlyMesh {
     let bytes = std::fs::read(path).unwrap();
     let end = bytes
@@ -86,7 +87,8 @@ fn read_ply_mesh(path: &Path) -> PlyMesh {
             ["format", f, "1.0"] => assert_eq!(*f, "binary_little_endian"),
             ["element", "vertex", n] => (element, nv) = ("vertex", n.parse().unwrap()),
             ["element", "face", n] => (element, nf) = ("face", n.parse().unwrap()),
-            ["property", "float", name] if element == "vertex" => names.push(name.to_string()),
+            ["property", "float", name] if element == "vertex" => names.push((name.to_string(), 4)),
+            ["property", "uchar", name] if element == "vertex" => names.push((name.to_string(), 1)),
             ["property", "list", "uchar", "int" | "uint", "vertex_indices"] => {
                 assert_eq!(element, "face")
             }
@@ -94,12 +96,17 @@ fn read_ply_mesh(path: &Path) -> PlyMesh {
             other => panic!("unexpected header line {other:?}"),
         }
     }
-    let f32_at = |o: usize| f32::from_le_bytes(bytes[o..o + 4].try_into().unwrap());
-    let mut props: Vec<(String, Vec<f32>)> = names.iter().map(|n| (n.clone(), vec![])).collect();
-    let stride = 4 * names.len();
+    let value_at = |o: usize, size: usize| match size {
+        4 => f32::from_le_bytes(bytes[o..o + 4].try_into().unwrap()),
+        _ => bytes[o] as f32,
+    };
+    let mut props: Vec<(String, Vec<f32>)> = names.iter().map(|n| (n.0.clone(), vec![])).collect();
+    let stride: usize = names.iter().map(|n| n.1).sum();
     for i in 0..nv {
-        for (k, p) in props.iter_mut().enumerate() {
-            p.1.push(f32_at(end + i * stride + 4 * k));
+        let mut o = end + i * stride;
+        for (p, (_, size)) in props.iter_mut().zip(&names) {
+            p.1.push(value_at(o, *size));
+            o += size;
         }
     }
     let mut o = end + nv * stride;
@@ -288,6 +295,9 @@ fn check_stage(dir: &Path, gt: &Path, run: &Path, levels: Option<&str>, name: &s
         );
         assert!((0.0..=1.0).contains(&m.prop("alpha")[i]));
     }
+    // Coloured: the surface colour varies over the object.
+    let reds: std::collections::BTreeSet<u32> = m.prop("red").iter().map(|&r| r as u32).collect();
+    assert!(reds.len() > 10, "{name}: red takes {} values", reds.len());
     let want: Vec<f32> = j["levels"]
         .as_array()
         .unwrap()

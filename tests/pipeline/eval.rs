@@ -486,6 +486,79 @@ fn eval_splits_the_chamfer_distance_over_the_scene_objects() {
     );
 }
 
+/// Points and meshes carry the surface colour, SH band 0 as 8-bit `red green blue` vertex
+/// properties: on a sphere whose band-0 red grows with x (0 at the grid's low face, 255 at its
+/// high one), green is 0.5 and blue 0.9, each point and mesh vertex read back has red within 2 of
+/// 255·(grid x)/(res − 1) at its position, green 128 and blue 230.
+#[test]
+fn extracted_points_and_meshes_carry_the_surface_colour() {
+    use alphasurf::math::sh::SH_C0;
+    let dir = tempfile::tempdir().unwrap();
+    let mut g = analytic_grid(|v| {
+        100.0
+            - 10.0 * ((v[0] - 10.0).powi(2) + (v[1] - 10.0).powi(2) + (v[2] - 10.0).powi(2)).sqrt()
+    });
+    let top = (g.res[0] - 1) as f32;
+    for slot in 0..g.slots() {
+        let l = g.links[slot];
+        if l >= 0 {
+            let x = g.vertex(slot)[0] as f32;
+            let row = &mut g.sh[27 * l as usize..][..27];
+            row[0] = (x / top - 0.5) / SH_C0;
+            row[9] = 0.0;
+            row[18] = 0.4 / SH_C0;
+        }
+    }
+    let ckpt = dir.path().join("ckpt.npz");
+    npz::save_svox2(&g, &ckpt).unwrap();
+    let (pts, mesh) = (dir.path().join("p.ply"), dir.path().join("m.ply"));
+    let out = bin()
+        .args(["extract", "--levels", "50", "--backend", "cpu", "--ckpt"])
+        .arg(&ckpt)
+        .arg("--out")
+        .arg(&pts)
+        .arg("--mesh")
+        .arg(&mesh)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let header = std::fs::read(&mesh).unwrap();
+    let header = String::from_utf8_lossy(&header[..600]);
+    assert!(
+        header.contains("property uchar red\nproperty uchar green\nproperty uchar blue\n"),
+        "{header}"
+    );
+    for file in [&pts, &mesh] {
+        let cloud = read_ply(file).unwrap();
+        let channel =
+            |name: &str| match &cloud.extras.iter().find(|e| e.name == name).unwrap().values {
+                ExtraValues::UChar(v) => v.clone(),
+                other => panic!("{name}: {other:?}"),
+            };
+        let (r, gr, b) = (channel("red"), channel("green"), channel("blue"));
+        assert!(cloud.points.len() > 100);
+        let mut reds = std::collections::BTreeSet::new();
+        for (i, p) in cloud.points.iter().enumerate() {
+            // Blender units → the grid's world (× 2/3) → grid coordinates.
+            let gx = g.world_to_grid(p.map(|c| c * 2.0 / 3.0))[0];
+            let want = 255.0 * gx / top;
+            assert!(
+                (r[i] as f32 - want).abs() <= 2.0,
+                "{}: point {p:?}: red {} vs {want}",
+                file.display(),
+                r[i]
+            );
+            assert_eq!((gr[i], b[i]), (128, 230), "{}", file.display());
+            reds.insert(r[i]);
+        }
+        assert!(reds.len() > 20, "red varies over the sphere: {reds:?}");
+    }
+}
+
 #[test]
 fn extract_then_eval_end_to_end() {
     let dir = tempfile::tempdir().unwrap();
@@ -537,7 +610,10 @@ fn extract_then_eval_end_to_end() {
         assert!(j["points"].as_u64().unwrap() > 1000, "{j}");
         let cloud = read_ply(&out_ply).unwrap();
         let names: Vec<&str> = cloud.extras.iter().map(|e| e.name.as_str()).collect();
-        assert_eq!(names, ["level", "alpha", "nx", "ny", "nz"]);
+        assert_eq!(
+            names,
+            ["level", "alpha", "nx", "ny", "nz", "red", "green", "blue"]
+        );
         let out = eval_cmd(&out_ply, &gt_path);
         assert!(
             out.status.success(),
