@@ -45,11 +45,18 @@ pub fn run(opts: &EvaluateOptions) -> Result<()> {
     }
     let m = &e.metrics;
     println!(
-        "pred {}: {} points ({} after downsampling at {})",
+        "pred {}: {} points ({} after downsampling at {}{})",
         opts.pred.display(),
         e.n_pred_raw,
         m.n_pred,
-        opts.downsample
+        opts.downsample,
+        match &e.scored_box {
+            Some((b, outside)) => format!(
+                "; {outside} more outside the evaluation box {} from {}, not scored",
+                b.bounds, b.from
+            ),
+            None => String::new(),
+        }
     );
     println!(
         "gt   {}: {} points ({} after downsampling)",
@@ -96,6 +103,9 @@ pub fn run(opts: &EvaluateOptions) -> Result<()> {
             "n_gt_raw": e.n_gt_raw,
             "downsample": opts.downsample,
             "chamfer_e2": m.chamfer * 100.0,
+            "eval_box": e.scored_box.as_ref().map(|(b, outside)| json!({
+                "bounds": b.bounds, "from": b.from, "pred_outside": outside,
+            })),
             "metrics": m,
             "load_s": e.load_s,
             "nn_s": e.nn_s,

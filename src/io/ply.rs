@@ -52,6 +52,28 @@ pub struct PointCloud {
     pub extras: Vec<Extra>,
 }
 
+impl PointCloud {
+    /// Keep the points (and their extras) for which `keep` holds.
+    pub fn retain(&mut self, keep: impl Fn(&[f32; 3]) -> bool) {
+        let mask: Vec<bool> = self.points.iter().map(keep).collect();
+        let pick = |i: &usize| mask[*i];
+        self.points = (0..mask.len())
+            .filter(pick)
+            .map(|i| self.points[i])
+            .collect();
+        for e in &mut self.extras {
+            e.values = match &e.values {
+                ExtraValues::Float(v) => {
+                    ExtraValues::Float((0..mask.len()).filter(pick).map(|i| v[i]).collect())
+                }
+                ExtraValues::UChar(v) => {
+                    ExtraValues::UChar((0..mask.len()).filter(pick).map(|i| v[i]).collect())
+                }
+            };
+        }
+    }
+}
+
 /// One vertex as read: xyz and the extras in header order.
 struct Row {
     xyz: [f32; 3],

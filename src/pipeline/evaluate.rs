@@ -4,13 +4,17 @@
 //! already thinned at that radius, so this only changes an unthinned cloud. With the scene's
 //! `scene.json` (found next to the GT cloud, or `--scene`) the figures are also split over its
 //! objects ([`crate::eval::objects`]). A mesh (a PLY with faces, e.g. from `extract --mesh`) is
-//! compared through points drawn on it uniformly by area.
+//! compared through points drawn on it uniformly by area. Only predicted points inside the
+//! evaluation box are scored (`--box`, else the scene.json's `eval_box` when it has one: the
+//! object's box in a capture whose GT is the object alone, so a floor and walls are not scored as
+//! the object).
 
+use crate::data::Aabb;
 use crate::eval::objects::{load_groups, GtGroups};
 use crate::eval::{evaluate_indexed, thin, EvalOptions, Metrics, PointIndex};
 use crate::io::read_points;
 use crate::mesh::ply::{has_faces, read_mesh_ply};
-use anyhow::{ensure, Result};
+use anyhow::{ensure, Context, Result};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -49,9 +53,63 @@ pub struct EvaluateOptions {
     /// the figures over its objects. Default: the scene.json next to --gt, when there is one.
     #[arg(long)]
     pub scene: Option<PathBuf>,
+    /// Score only the predicted points inside this box, dataset units
+    /// `xmin,ymin,zmin,xmax,ymax,zmax`. Default: the scene.json's `eval_box` (--scene, or next
+    /// to --gt) when it has one, else every point.
+    #[arg(
+        long = "box",
+        value_name = "XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX",
+        value_delimiter = ',',
+        allow_hyphen_values = true
+    )]
+    pub eval_box: Option<Vec<f32>>,
     /// Print one JSON object with every figure as the last stdout line.
     #[arg(long)]
     pub json: bool,
+}
+
+/// The box predicted points are scored in, and where it came from.
+#[derive(Clone, Debug)]
+pub struct ScoredBox {
+    pub bounds: Aabb,
+    /// `--box` or the scene.json's path.
+    pub from: String,
+}
+
+/// `--box`, else the `eval_box` of the scene.json (`--scene`, or next to the GT cloud) when it
+/// has one; a malformed `eval_box` is an error naming the file.
+fn scored_box(opts: &EvaluateOptions) -> Result<Option<ScoredBox>> {
+    if let Some(v) = &opts.eval_box {
+        return Ok(Some(ScoredBox {
+            bounds: Aabb::from_values("--box", v)?,
+            from: "--box".into(),
+        }));
+    }
+    let path = match &opts.scene {
+        Some(p) => p.clone(),
+        None => opts.gt.with_file_name("scene.json"),
+    };
+    if !path.is_file() {
+        return Ok(None);
+    }
+    let text =
+        std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
+    let meta: serde_json::Value = serde_json::from_str(&text)
+        .with_context(|| format!("{}: not valid JSON", path.display()))?;
+    let Some(b) = meta.get("eval_box") else {
+        return Ok(None);
+    };
+    let corner = |k: &str| -> Result<Vec<f32>> {
+        serde_json::from_value::<[f32; 3]>(b[k].clone())
+            .map(|c| c.to_vec())
+            .with_context(|| format!("{}: eval_box.{k} is not three numbers", path.display()))
+    };
+    let v = [corner("min")?, corner("max")?].concat();
+    let flag = format!("{}: eval_box", path.display());
+    Ok(Some(ScoredBox {
+        bounds: Aabb::from_values(&flag, &v)?,
+        from: path.display().to_string(),
+    }))
 }
 
 /// A cloud read and thinned.
@@ -140,6 +198,7 @@ impl EvaluateOptions {
             threshold: DEFAULT_THRESHOLD,
             downsample: DEFAULT_DOWNSAMPLE,
             scene: None,
+            eval_box: None,
             json: false,
         }
     }
@@ -158,6 +217,9 @@ pub struct Evaluation {
     pub objects_from: Option<PathBuf>,
     /// Why a scene.json next to the GT cloud could not split the figures.
     pub note: Option<String>,
+    /// The box the predicted points were scored in, and how many (after downsampling) lay
+    /// outside it.
+    pub scored_box: Option<(ScoredBox, usize)>,
     /// Seconds reading and thinning, and finding the nearest points.
     pub load_s: f64,
     pub nn_s: f64,
@@ -222,9 +284,25 @@ impl GroundTruth {
     fn score_loaded(
         &self,
         opts: &EvaluateOptions,
-        pred: Loaded,
+        mut pred: Loaded,
         load_s: f64,
     ) -> Result<Evaluation> {
+        let scored_box = match scored_box(opts)? {
+            Some(b) => {
+                let before = pred.points.len();
+                pred.points.retain(|p| b.bounds.contains(*p));
+                ensure!(
+                    !pred.points.is_empty(),
+                    "{}: none of its {before} points lies inside the evaluation box {} (from {})",
+                    opts.pred.display(),
+                    b.bounds,
+                    b.from
+                );
+                let outside = before - pred.points.len();
+                Some((b, outside))
+            }
+            None => None,
+        };
         let t = Instant::now();
         let m = evaluate_indexed(
             &pred.points,
@@ -258,6 +336,7 @@ impl GroundTruth {
             gt_mesh_faces: self.cloud.mesh_faces,
             objects_from: self.groups.as_ref().map(|g| g.path.clone()),
             note: self.note.clone(),
+            scored_box,
             load_s,
             nn_s,
         })

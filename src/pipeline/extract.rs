@@ -8,7 +8,7 @@
 
 use crate::backend::Backend;
 use crate::cpu::extract_points::ExtractInput;
-use crate::data::{Dataset, SceneBox};
+use crate::data::{Aabb, Dataset, SceneBox};
 use crate::eval::colour::Band0;
 use crate::eval::extract::{
     allocated_cells, extract_sorted, to_cloud, ExtractBackend, GridFrame, KernelStats, ThinStats,
@@ -95,6 +95,16 @@ pub struct ExtractOptions {
     /// good one).
     #[arg(long, value_enum, default_value_t = Switch::Auto)]
     pub trim_outer: Switch,
+    /// Keep only the points, and the mesh faces whose centroid is, inside this box: dataset units
+    /// `xmin,ymin,zmin,xmax,ymax,zmax` (e.g. the object's box in a capture, leaving out the floor
+    /// and walls).
+    #[arg(
+        long = "box",
+        value_name = "XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX",
+        value_delimiter = ',',
+        allow_hyphen_values = true
+    )]
+    pub keep_box: Option<Vec<f32>>,
     /// The dataset whose training cameras `--trim-hidden` uses (default: the run's).
     #[arg(long)]
     pub data: Option<PathBuf>,
@@ -159,6 +169,7 @@ impl ExtractOptions {
             capacity: None,
             trim_hidden: Switch::Auto,
             trim_outer: Switch::Auto,
+            keep_box: None,
             data: None,
             json: false,
         }
@@ -237,6 +248,7 @@ pub fn extract(opts: &ExtractOptions, gpu: Option<&Gpu>) -> Result<ExtractReport
         opts.out.is_none() || opts.out != opts.mesh,
         "--out and --mesh name the same file"
     );
+    let keep_box = keep_box(opts)?;
     let (field, path) = load_grid(opts)?;
     for out in opts.out.iter().chain(&opts.mesh) {
         crate::run::outputs::check_output_file(out, &[&path])?;
@@ -288,6 +300,7 @@ pub fn extract(opts: &ExtractOptions, gpu: Option<&Gpu>) -> Result<ExtractReport
         frame,
         cameras: trim.as_deref(),
         trim_outer: trim_outer(opts, &field),
+        keep_box,
     };
     let points = match &opts.out {
         Some(out) => Some(write_points(opts, &surfaces, out, gpu)?),
@@ -343,6 +356,14 @@ fn scene_scale(opts: &ExtractOptions) -> Result<f32> {
         "--scene-scale must be positive"
     );
     Ok(scale)
+}
+
+/// `--box`, checked.
+fn keep_box(opts: &ExtractOptions) -> Result<Option<Aabb>> {
+    opts.keep_box
+        .as_deref()
+        .map(|v| Aabb::from_values("--box", v))
+        .transpose()
 }
 
 /// Whether the outermost level's halo is dropped (`--trim-outer`; `auto`: thin stage-2 runs).
@@ -405,6 +426,7 @@ pub fn extract_levels(
     let t0 = Instant::now();
     check_sampling(opts)?;
     let frame_scale = scene_scale(opts)?;
+    let keep_box = keep_box(opts)?;
     let (field, path) = load_grid(opts)?;
     let Field::Density(grid) = &field else {
         bail!(
@@ -442,6 +464,7 @@ pub fn extract_levels(
                 frame,
                 cameras: trim,
                 trim_outer: outer,
+                keep_box,
             };
             let report = write_points(opts, &surfaces, &job.out, gpu)?;
             Ok((report, load_s + t.elapsed().as_secs_f64()))
@@ -464,6 +487,8 @@ struct Surfaces<'a> {
     cameras: Option<&'a [[f32; 3]]>,
     /// Drop the outermost level's halo around thick parts ([`crate::eval::outer_level`]).
     trim_outer: bool,
+    /// `--box`: keep only what lies inside it (dataset units).
+    keep_box: Option<Aabb>,
 }
 
 impl Surfaces<'_> {
@@ -543,6 +568,9 @@ fn write_points(
         .trim_outer
         .then(|| drop_outer_halo(&mut points, &s.field(), s.levels, REACH));
     let (mut cloud, thin) = to_cloud(&points, s.levels, &s.frame, opts.thin_radius)?;
+    if let Some(b) = &s.keep_box {
+        cloud.retain(|p| b.contains(*p));
+    }
     let colours = s.colours(&cloud.points);
     for (c, name) in ["red", "green", "blue"].into_iter().enumerate() {
         cloud.extras.push(Extra {
@@ -552,9 +580,11 @@ fn write_points(
     }
     ensure!(
         !cloud.points.is_empty(),
-        "no surface points at levels {:?} (field range {:?}); nothing written",
+        "no surface points at levels {:?} (field range {:?}){}; nothing written",
         s.levels,
-        value_range(s.values)
+        value_range(s.values),
+        s.keep_box
+            .map_or(String::new(), |b| format!(" inside --box {b}"))
     );
     let t_w = Instant::now();
     crate::io::write_ply(out, &cloud)?;
@@ -636,11 +666,29 @@ fn write_mesh(opts: &ExtractOptions, s: &Surfaces, out: &Path) -> Result<MeshRep
         );
         before - mesh.faces.len()
     });
+    if let Some(b) = &s.keep_box {
+        let inside: Vec<bool> = mesh
+            .faces
+            .iter()
+            .map(|f| {
+                b.contains(std::array::from_fn(|i| {
+                    f.iter()
+                        .map(|&v| mesh.positions[v as usize][i])
+                        .sum::<f32>()
+                        / 3.0
+                }))
+            })
+            .collect();
+        mesh.retain_faces(|i| inside[i]);
+        stats = MeshStats::of(&mesh, s.levels, stats.wall_ms);
+    }
     ensure!(
         !mesh.faces.is_empty(),
-        "no surface faces at levels {:?} (field range {:?}); nothing written",
+        "no surface faces at levels {:?} (field range {:?}){}; nothing written",
         s.levels,
-        value_range(s.values)
+        value_range(s.values),
+        s.keep_box
+            .map_or(String::new(), |b| format!(" inside --box {b}"))
     );
     mesh.colour = s.colours(&mesh.positions);
     let t_w = Instant::now();

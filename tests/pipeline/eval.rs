@@ -638,3 +638,134 @@ fn extract_then_eval_end_to_end() {
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("plenoxels.npz"));
 }
+
+/// A capture's prediction holds the floor too; its GT is the object alone. `eval` scores only
+/// the predicted points inside the scene.json's `eval_box` (next to the GT) or `--box`: the
+/// floor is not scored as the object, and is counted as left out; without a box it costs the
+/// Chamfer distance. `extract --box` keeps only the points and faces inside its box.
+#[test]
+fn eval_and_extract_score_within_a_box() {
+    let dir = tempfile::tempdir().unwrap();
+    let object: Vec<[f32; 3]> = (0..2000)
+        .map(|i| {
+            let a = i as f32 * 0.01;
+            [0.3 * a.cos(), 0.3 * a.sin(), -0.5 + i as f32 / 2000.0]
+        })
+        .collect();
+    let floor: Vec<[f32; 3]> = (0..2000)
+        .map(|i| {
+            [
+                (i % 50) as f32 * 0.05 - 1.25,
+                (i / 50) as f32 * 0.05 - 1.0,
+                -0.6,
+            ]
+        })
+        .collect();
+    let (gt, pred) = (dir.path().join("gt.ply"), dir.path().join("pred.ply"));
+    write_points(&gt, &object).unwrap();
+    write_points(&pred, &[object.clone(), floor].concat()).unwrap();
+    let chamfer = |extra: &[&str]| -> (f64, serde_json::Value) {
+        let out = bin()
+            .args(["eval", "--json", "--downsample", "0", "--pred"])
+            .arg(&pred)
+            .arg("--gt")
+            .arg(&gt)
+            .args(extra)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let text = String::from_utf8_lossy(&out.stdout);
+        let j: serde_json::Value = serde_json::from_str(text.lines().last().unwrap()).unwrap();
+        (
+            j["metrics"]["chamfer"].as_f64().unwrap(),
+            j["eval_box"].clone(),
+        )
+    };
+    let (all, no_box) = chamfer(&[]);
+    assert!(no_box.is_null());
+    std::fs::write(
+        dir.path().join("scene.json"),
+        r#"{"eval_box": {"min": [-0.4, -0.4, -0.55], "max": [0.4, 0.4, 0.55]}}"#,
+    )
+    .unwrap();
+    let (boxed, b) = chamfer(&[]);
+    assert!(
+        all > 0.05 && boxed < 1e-6,
+        "Chamfer {all} with the floor, {boxed} without"
+    );
+    assert_eq!(b["pred_outside"].as_u64(), Some(2000), "{b}");
+    assert!(b["from"].as_str().unwrap().ends_with("scene.json"), "{b}");
+    // --box wins over the scene's; a box holding no predicted point is an error naming it.
+    let (_, b) = chamfer(&["--box", "-0.41,-0.41,-0.7,0.41,0.41,0.55"]);
+    assert_eq!(
+        (b["from"].as_str(), b["pred_outside"].as_u64()),
+        (Some("--box"), Some(2000 - 17 * 17))
+    );
+    let out = bin()
+        .args(["eval", "--pred"])
+        .arg(&pred)
+        .arg("--gt")
+        .arg(&gt)
+        .args(["--box", "5,5,5,6,6,6"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("evaluation box"),
+        "{err}"
+    );
+    let out = bin()
+        .args(["eval", "--pred"])
+        .arg(&pred)
+        .arg("--gt")
+        .arg(&gt)
+        .args(["--box", "1,0,0,0,1,1"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("--box") && err.contains("below"),
+        "{err}"
+    );
+
+    // extract --box on the analytic sphere (centre 10 voxels = Blender (0.15, -0.075, 0)): only
+    // the upper half, z ≥ 0, is kept, in the points and the mesh.
+    let g = analytic_grid(|v| {
+        100.0
+            - 10.0 * ((v[0] - 10.0).powi(2) + (v[1] - 10.0).powi(2) + (v[2] - 10.0).powi(2)).sqrt()
+    });
+    let ckpt = dir.path().join("ckpt.npz");
+    npz::save_svox2(&g, &ckpt).unwrap();
+    let (pts, mesh) = (dir.path().join("p.ply"), dir.path().join("m.ply"));
+    let out = bin()
+        .args(["extract", "--levels", "50", "--backend", "cpu", "--ckpt"])
+        .arg(&ckpt)
+        .arg("--out")
+        .arg(&pts)
+        .arg("--mesh")
+        .arg(&mesh)
+        .args(["--box", "-2,-2,0,2,2,2"])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    for file in [&pts, &mesh] {
+        let p = read_ply(file).unwrap().points;
+        assert!(p.len() > 100, "{}", file.display());
+        let low = p.iter().filter(|q| q[2] < 0.0).count();
+        let high = p.iter().filter(|q| q[2] > 0.2).count();
+        // Mesh faces are kept by centroid: a vertex may lie up to a cell (0.15) below z = 0.
+        assert!(
+            p.iter().all(|q| q[2] >= -0.16) && high > 10 * low,
+            "{}: {low} points below z = 0",
+            file.display()
+        );
+    }
+}
