@@ -130,7 +130,7 @@ pub enum DataError {
     #[error(
         "{}: not a dataset: expected transforms_train.json (NeRF-synthetic), transforms.json \
          (instant-ngp / nerfstudio), sparse/0/ or sparse/ with cameras.bin or cameras.txt \
-         (COLMAP), or cameras_sphere.npz (IDR/DTU)",
+         (COLMAP), cameras_sphere.npz (IDR/DTU), or poses_bounds.npy (LLFF)",
         path.display()
     )]
     UnknownLayout {

@@ -143,7 +143,7 @@ fn file_name(p: &Path) -> String {
 }
 
 /// The PNG/JPEG files of `dir`, sorted by name.
-fn list_images(dir: &Path) -> Result<Vec<PathBuf>, DataError> {
+pub(super) fn list_images(dir: &Path) -> Result<Vec<PathBuf>, DataError> {
     let entries = std::fs::read_dir(dir).map_err(|e| DataError::Format {
         path: dir.to_path_buf(),
         msg: format!("cannot list the image folder: {e}"),

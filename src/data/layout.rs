@@ -1,7 +1,8 @@
 //! Which dataset layout a directory holds, decided from the files present, in a fixed order:
 //! NeRF-synthetic (any `transforms_{train,val,test}.json`), instant-ngp / nerfstudio (one
 //! `transforms.json`), IDR/DTU (`cameras_sphere.npz`), COLMAP (`sparse/0/` or `sparse/` with
-//! `cameras.bin` or `cameras.txt`; binary wins when both exist).
+//! `cameras.bin` or `cameras.txt`; binary wins when both exist), LLFF (`poses_bounds.npy`; a
+//! COLMAP model beside it wins: it has the sparse points).
 
 use super::error::DataError;
 use std::path::{Path, PathBuf};
@@ -22,6 +23,8 @@ pub enum Layout {
     },
     /// The IDR layout used for DTU: `cameras_sphere.npz`, `image/`, optional `mask/`.
     Idr,
+    /// LLFF: `poses_bounds.npy` and `images/` (`images_4/8`).
+    Llff,
 }
 
 impl std::fmt::Display for Layout {
@@ -36,6 +39,7 @@ impl std::fmt::Display for Layout {
                 if *binary { "binary" } else { "text" }
             ),
             Layout::Idr => f.write_str("IDR/DTU (cameras_sphere.npz)"),
+            Layout::Llff => f.write_str("LLFF (poses_bounds.npy)"),
         }
     }
 }
@@ -59,6 +63,9 @@ pub fn detect(root: &Path) -> Result<Layout, DataError> {
                 return Ok(Layout::Colmap { sparse, binary });
             }
         }
+    }
+    if root.join(super::llff::FILE).is_file() {
+        return Ok(Layout::Llff);
     }
     Err(DataError::UnknownLayout {
         path: root.to_path_buf(),

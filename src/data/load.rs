@@ -39,6 +39,7 @@ fn train_poses(root: &Path) -> Result<Vec<Mat4>, DataError> {
         }
         Layout::Idr => super::idr::posed(root, 1)?.train_views(root)?,
         Layout::InstantNgp => super::instant_ngp::posed(root, 1)?.train_views(root)?,
+        Layout::Llff => super::llff::posed(root, 1)?.train_views(root)?,
     };
     Ok(views.iter().map(|v| v.camera.c2w).collect())
 }
@@ -71,6 +72,7 @@ fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset, DataError> {
         }
         Layout::Idr => super::idr::posed(root, k)?.load(root, k, bg)?,
         Layout::InstantNgp => super::instant_ngp::posed(root, k)?.load(root, k, bg)?,
+        Layout::Llff => super::llff::posed(root, k)?.load(root, k, bg)?,
     };
     let split_rule = match layout {
         Layout::NerfSynthetic => SplitRule::Files,

@@ -1,5 +1,5 @@
-//! Datasets of posed images in four layouts ([`Layout`], detected from the files): NeRF-synthetic,
-//! instant-ngp / nerfstudio, COLMAP and IDR/DTU. Loading ([`Dataset::load`]), cameras and rays in the OpenGL convention
+//! Datasets of posed images in five layouts ([`Layout`], detected from the files): NeRF-synthetic,
+//! instant-ngp / nerfstudio, COLMAP, IDR/DTU and LLFF. Loading ([`Dataset::load`]), cameras and rays in the OpenGL convention
 //! ([`Camera`]), the scene box ([`SceneBox`]), training views for ray sampling ([`TrainViews`])
 //! and dataset inspection ([`inspect`]).
 
@@ -16,6 +16,7 @@ pub mod image;
 pub mod inspect;
 pub mod instant_ngp;
 pub mod layout;
+pub mod llff;
 mod load;
 mod nerf_synthetic;
 pub mod sampler;

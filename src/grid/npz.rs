@@ -103,26 +103,7 @@ impl NpzReader {
             );
         }
         let read = |zip: &mut ZipArchive<BufReader<File>>| -> Result<(Vec<u64>, Vec<f64>)> {
-            let entry = zip.by_name(&format!("{name}.npy"))?;
-            let npy = NpyFile::new(BufReader::new(entry)).context("bad npy header")?;
-            let shape = npy.shape().to_vec();
-            ensure!(
-                shape.len() < 2 || npy.order() == Order::C,
-                "Fortran-ordered arrays are not supported (shape {shape:?})"
-            );
-            ensure!(
-                shape.iter().product::<u64>() <= 1 << 20,
-                "shape {shape:?} is too large for a camera matrix"
-            );
-            let descr = npy.dtype().descr();
-            let values: io::Result<Vec<f64>> = match npy.try_data::<f64>() {
-                Ok(r) => r.collect(),
-                Err(npy) => match npy.try_data::<f32>() {
-                    Ok(r) => r.map(|v| v.map(f64::from)).collect(),
-                    Err(_) => bail!("dtype {descr}: expected float32 or float64"),
-                },
-            };
-            Ok((shape, values.map_err(read_error)?))
+            read_npy_f64(BufReader::new(zip.by_name(&format!("{name}.npy"))?))
         };
         read(&mut self.zip).with_context(|| format!("array '{name}'"))
     }
@@ -205,6 +186,30 @@ fn decode<R: Read>(npy: NpyFile<R>, count: usize) -> Result<Data> {
         Ok(r) => all(r).map(Data::U8),
         Err(_) => bail!("unsupported dtype {descr} (expected float16/32/64, int32 or uint8)"),
     }
+}
+
+/// A small float `.npy` stream (float32 or float64, C order, at most 2²⁰ values: camera
+/// matrices) at double precision: its shape and values.
+pub fn read_npy_f64(reader: impl Read) -> Result<(Vec<u64>, Vec<f64>)> {
+    let npy = NpyFile::new(reader).context("bad npy header")?;
+    let shape = npy.shape().to_vec();
+    ensure!(
+        shape.len() < 2 || npy.order() == Order::C,
+        "Fortran-ordered arrays are not supported (shape {shape:?})"
+    );
+    ensure!(
+        shape.iter().product::<u64>() <= 1 << 20,
+        "shape {shape:?} is too large for a camera matrix"
+    );
+    let descr = npy.dtype().descr();
+    let values: io::Result<Vec<f64>> = match npy.try_data::<f64>() {
+        Ok(r) => r.collect(),
+        Err(npy) => match npy.try_data::<f32>() {
+            Ok(r) => r.map(|v| v.map(f64::from)).collect(),
+            Err(_) => bail!("dtype {descr}: expected float32 or float64"),
+        },
+    };
+    Ok((shape, values.map_err(read_error)?))
 }
 
 impl Array {

@@ -52,3 +52,54 @@ fn capture_foreground_box_bounds_the_object() {
         assert_eq!(ds.test.frames.len(), n.div_ceil(8), "{name}");
     }
 }
+
+/// The LLFF layout of the same capture (`poses_bounds.npy` beside `images/`, no COLMAP model)
+/// loads the same views as the COLMAP model: same poses (to f32 rounding), intrinsics, pixels and
+/// split; its box is found from the cameras alone (no sparse points) and still holds the object.
+#[test]
+fn llff_poses_bounds_load_as_the_colmap_model_does() {
+    let src = shared_fixture("capture_fan_ff");
+    let d = tempfile::tempdir().unwrap();
+    std::fs::copy(
+        src.join("poses_bounds.npy"),
+        d.path().join("poses_bounds.npy"),
+    )
+    .unwrap();
+    std::os::unix::fs::symlink(src.join("images"), d.path().join("images")).unwrap();
+    let colmap = Dataset::load(&src, &LoadOptions::default()).unwrap();
+    let llff = Dataset::load(d.path(), &LoadOptions::default()).unwrap();
+    assert_eq!(llff.layout, alphasurf::data::Layout::Llff);
+    assert_eq!(llff.split_rule, SplitRule::EveryNth(8));
+    let pose = crate::data_common::max_pose_difference(&colmap, &llff);
+    assert!(pose < 1e-5, "max pose difference {pose:e}");
+    for (sa, sb) in colmap.splits().iter().zip(llff.splits()) {
+        for (fa, fb) in sa.frames.iter().zip(&sb.frames) {
+            let (a, b) = (fa.camera, fb.camera);
+            assert_eq!(
+                (a.fx, a.fy, a.cx, a.cy, a.width, a.height),
+                (b.fx, b.fy, b.cx, b.cy, b.width, b.height)
+            );
+            assert!(fa.image == fb.image);
+        }
+    }
+    let fg = llff.foreground.as_ref().expect("a foreground box");
+    let (lo, hi) = object_box(&src);
+    assert!(fg.bounds.lo().cmple(lo).all() && fg.bounds.hi().cmpge(hi).all());
+    assert!(fg.how.contains("no sparse points"), "{}", fg.how);
+    // A pose count that disagrees with the images is an error naming both.
+    std::fs::remove_file(d.path().join("images")).unwrap();
+    std::fs::create_dir(d.path().join("images")).unwrap();
+    std::fs::copy(
+        src.join("images/0000.png"),
+        d.path().join("images/0000.png"),
+    )
+    .unwrap();
+    let err = format!(
+        "{:#}",
+        Dataset::load(d.path(), &LoadOptions::default()).unwrap_err()
+    );
+    assert!(
+        err.contains("1 images") && err.contains("poses_bounds.npy"),
+        "{err}"
+    );
+}
