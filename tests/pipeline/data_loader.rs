@@ -129,13 +129,19 @@ fn cameras_not_looking_at_the_box_are_warned_about() {
 
 /// The fixture converted to each layout loads back with the same cameras (pose difference
 /// ≤ 1e-5, intrinsics to f32 rounding), byte-identical images, the same splits and scene box
-/// (instant-ngp: its box is the one found from the cameras).
+/// (instant-ngp and LLFF: theirs is the one found from the cameras).
 #[test]
 fn converted_fixture_loads_with_the_same_cameras_images_and_box() {
     let src = fixture();
     let orig = Dataset::load(&src, &LoadOptions::default()).unwrap();
     let ngp = Target::InstantNgp(Distortion::None);
-    for target in [Target::ColmapText, Target::ColmapBinary, Target::Idr, ngp] {
+    for target in [
+        Target::ColmapText,
+        Target::ColmapBinary,
+        Target::Idr,
+        ngp,
+        Target::Llff,
+    ] {
         let (_keep, dir) = converted(&src, target);
         let ds = Dataset::load(&dir, &LoadOptions::default()).unwrap();
         let want_layout = match target {
@@ -143,6 +149,7 @@ fn converted_fixture_loads_with_the_same_cameras_images_and_box() {
             Target::ColmapText => matches!(ds.layout, Layout::Colmap { binary: false, .. }),
             Target::ColmapBinary => matches!(ds.layout, Layout::Colmap { binary: true, .. }),
             Target::InstantNgp(_) => matches!(ds.layout, Layout::InstantNgp),
+            Target::Llff => matches!(ds.layout, Layout::Llff),
         };
         assert!(want_layout, "{target:?}: detected {}", ds.layout);
         let pose = max_pose_difference(&orig, &ds);
@@ -164,7 +171,7 @@ fn converted_fixture_loads_with_the_same_cameras_images_and_box() {
                 );
             }
         }
-        if target == ngp {
+        if target == ngp || target == Target::Llff {
             continue;
         }
         let (s, t) = (orig.scene, ds.scene);

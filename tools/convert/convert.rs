@@ -33,6 +33,8 @@ pub enum Target {
     /// `mask_path`, images and masks as this lens images them (OPENCV) and its coefficients in
     /// the file.
     InstantNgp(Distortion),
+    /// LLFF: `poses_bounds.npy` (rows in the images' name order), `images/`, `masks/`.
+    Llff,
     /// `sparse/0/*.txt`.
     ColmapText,
     /// `sparse/0/*.bin`.
@@ -134,6 +136,7 @@ pub fn convert(src: &Path, dst: &Path, target: Target) -> Result<()> {
     match target {
         Target::Idr => write_idr(dst, &views, centre, half),
         Target::InstantNgp(_) => write_transforms(dst, &views, &cameras, &lens),
+        Target::Llff => write_poses_bounds(dst, &views, &cameras, centre, half),
         _ => {
             let corners: Vec<DVec3> = (0..8)
                 .map(|c| {
@@ -191,6 +194,44 @@ fn write_transforms(
         dst.join("transforms.json"),
         serde_json::to_string_pretty(&doc)?,
     )?;
+    Ok(())
+}
+
+/// `poses_bounds.npy`: per image in name order, [down, right, back, centre | H, W, focal] row-major
+/// and the near and far depths of the box's bounding sphere.
+fn write_poses_bounds(
+    dst: &Path,
+    views: &[Source],
+    cameras: &[Camera],
+    centre: DVec3,
+    half: f64,
+) -> Result<()> {
+    let mut order: Vec<usize> = (0..views.len()).collect();
+    order.sort_by(|&a, &b| views[a].name.cmp(&views[b].name));
+    let mut rows = Vec::with_capacity(17 * views.len());
+    for i in order {
+        let c = &cameras[i];
+        let m = c.c2w.as_dmat4();
+        let cols = [-m.y_axis, m.x_axis, m.z_axis, m.w_axis];
+        let hwf = [c.height as f64, c.width as f64, c.fx as f64];
+        for r in 0..3 {
+            rows.extend(cols.iter().map(|col| col[r]));
+            rows.push(hwf[r]);
+        }
+        let d = (m.w_axis.truncate() - centre).length();
+        let reach = half * 3f64.sqrt();
+        rows.extend([(d - reach).max(0.01 * d), d + reach]);
+    }
+    use npyz::WriterBuilder;
+    let mut bytes = Vec::new();
+    let mut w = npyz::WriteOptions::<f64>::new()
+        .default_dtype()
+        .shape(&[views.len() as u64, 17])
+        .writer(&mut bytes)
+        .begin_nd()?;
+    w.extend(rows)?;
+    w.finish()?;
+    std::fs::write(dst.join("poses_bounds.npy"), bytes)?;
     Ok(())
 }
 
