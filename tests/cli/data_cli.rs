@@ -168,3 +168,35 @@ fn inspect_describes_colmap_and_idr_copies() {
         );
     }
 }
+
+/// `inspect` on a capture (COLMAP, no masks, no split file) states the split rule and prints the
+/// foreground box and how it was found; `--box` sets the scene box; a malformed `--box` is an
+/// error naming the flag.
+#[test]
+fn inspect_states_the_split_and_the_foreground_box_of_a_capture() {
+    let f = data_common::shared_fixture("capture_birdcage");
+    let dir = f.to_str().unwrap();
+    let (ok, stdout, stderr) = alphasurf(&["inspect", dir]);
+    assert!(ok, "{stderr}");
+    for want in [
+        "split: no split file: every 8th image by name",
+        "foreground box (dataset units): [-0.6",
+        "found from the cameras: optical axes of 96 cameras converge",
+        "planes such as a floor or wall set aside",
+    ] {
+        assert!(stdout.contains(want), "missing {want:?} in:\n{stdout}");
+    }
+    let (ok, stdout, stderr) = alphasurf(&["inspect", dir, "--box", "-1,-1,-1,1,1,0"]);
+    assert!(ok, "{stderr}");
+    assert!(
+        stdout.contains(
+            "scene box (Blender units): [-1.000, -1.000, -1.500] .. [1.000, 1.000, 0.500]"
+        ),
+        "{stdout}"
+    );
+    let (ok, _, stderr) = alphasurf(&["inspect", dir, "--box", "-1,-1,-1,1,1"]);
+    assert!(
+        !ok && stderr.contains("--box") && stderr.contains("six numbers"),
+        "{stderr}"
+    );
+}
