@@ -923,3 +923,43 @@ fn unknown_background_is_a_usage_error() {
         "{err}"
     );
 }
+
+/// `train --box` sets the grid's cube, which run.json records; stage 2 from that run takes it
+/// without the flag, and `--resume` with another box is refused (a grid is only valid in the box
+/// it was trained in).
+#[test]
+fn the_scene_box_travels_with_the_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let (data, run) = stage1_run(dir.path(), &["--iters", "20", "--box", "-1,-1,-1,1,1,1"]);
+    let recorded = |run: &Path| -> serde_json::Value {
+        let text = std::fs::read_to_string(run.join("run.json")).unwrap();
+        serde_json::from_str::<serde_json::Value>(&text).unwrap()["scene_box"].clone()
+    };
+    let unit = serde_json::json!({"min": [-1.0, -1.0, -1.0], "max": [1.0, 1.0, 1.0]});
+    assert_eq!(recorded(&run), unit);
+    let s2 = dir.path().join("s2");
+    run_ok(
+        bin()
+            .args(["train", "--stage", "surface", "--backend", "cpu", "--quiet"])
+            .args(["--iters", "10", "--batch", "2048", "--data"])
+            .arg(&data)
+            .arg("--init")
+            .arg(&run)
+            .arg("--out")
+            .arg(&s2),
+    );
+    assert_eq!(recorded(&s2), unit, "stage 2 trains in stage 1's box");
+    let out = bin()
+        .args(["train", "--resume", "--backend", "cpu", "--data"])
+        .arg(&data)
+        .arg("--out")
+        .arg(&run)
+        .args(["--iters", "30", "--box", "-2,-2,-2,2,2,2"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("--box") && err.contains("trained in"),
+        "{err}"
+    );
+}
