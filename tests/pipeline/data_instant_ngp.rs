@@ -235,3 +235,38 @@ fn exif_orientation_turns_photos_upright() {
         px(4, 13)
     );
 }
+
+/// instant-ngp's `aabb_scale` bounds the box found from the cameras (±0.5·a/0.33 around the
+/// origin by default); nerfstudio's `applied_transform` is checked and a malformed one is an
+/// error naming it.
+#[test]
+fn aabb_scale_bounds_the_box_and_applied_transform_is_checked() {
+    let src = tempfile::tempdir().unwrap();
+    write_dataset(src.path(), 2, 8, 6);
+    let (_keep, dir) = converted(src.path(), Target::InstantNgp(Distortion::None));
+    let before = Dataset::load(&dir, &LoadOptions::default()).unwrap();
+    let b = before.foreground.unwrap().bounds;
+    assert!(b.hi().max_element() > 1.0, "{b}");
+    edit(&dir, |v| {
+        v["aabb_scale"] = json!(0.5);
+        v["applied_transform"] = json!([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0]]);
+    });
+    let ds = Dataset::load(&dir, &LoadOptions::default()).unwrap();
+    let fg = ds.foreground.unwrap();
+    let half = 0.5 * 0.5 / 0.33;
+    assert!(
+        fg.bounds.lo().cmpge(glam::Vec3::splat(-half - 1e-5)).all()
+            && fg.bounds.hi().cmple(glam::Vec3::splat(half + 1e-5)).all(),
+        "{}",
+        fg.bounds
+    );
+    assert!(fg.how.contains("aabb_scale"), "{}", fg.how);
+    edit(&dir, |v| {
+        v["applied_transform"] = json!([[1, 0, 0], [0, 1, 0]])
+    });
+    let err = load_err(&dir);
+    assert!(
+        err.contains("applied_transform") && err.contains("row lengths"),
+        "{err}"
+    );
+}
