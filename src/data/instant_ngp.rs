@@ -161,11 +161,14 @@ fn prescaled_folders(root: &Path, k: u32, views: &[View], masks: &[Option<PathBu
 
 /// The sparse points of nerfstudio's `ply_file_path`, in the file's frame.
 fn sparse_points(root: &Path, json: &Path, ply: &str) -> Result<Vec<[f64; 3]>, DataError> {
-    let path = root.join(relative_path(root, json, 0, ply)?);
-    let points = crate::io::read_points(&path).map_err(|e| DataError::Format {
+    let format = |msg: String| DataError::Format {
         path: json.to_path_buf(),
-        msg: format!("ply_file_path '{ply}': {e:#}"),
-    })?;
+        msg: format!("ply_file_path '{ply}': {msg}"),
+    };
+    // The frame-independent check of `relative_path`: inside the dataset directory.
+    let rel = relative_path(root, json, 0, ply)
+        .map_err(|_| format("does not name a file inside the dataset directory".into()))?;
+    let points = crate::io::read_points(&root.join(rel)).map_err(|e| format(format!("{e:#}")))?;
     Ok(points.iter().map(|p| p.map(f64::from)).collect())
 }
 

@@ -270,3 +270,51 @@ fn aabb_scale_bounds_the_box_and_applied_transform_is_checked() {
         "{err}"
     );
 }
+
+/// nerfstudio's `ply_file_path` gives the sparse points the box is found from: a dense cluster
+/// at the origin on a wide floor is boxed tightly (the floor's plane set aside); a path outside
+/// the dataset is refused naming the key.
+#[test]
+fn ply_file_path_points_bound_the_foreground_box() {
+    let src = tempfile::tempdir().unwrap();
+    write_dataset(src.path(), 3, 8, 6);
+    let (_keep, dir) = converted(src.path(), Target::InstantNgp(Distortion::None));
+    let mut pts: Vec<[f32; 3]> = (0..1500)
+        .map(|i| {
+            let (a, b) = (i as f32 * 0.37, i as f32 * 0.011);
+            [
+                0.3 * a.cos() * b.sin(),
+                0.3 * a.sin() * b.sin(),
+                0.3 * b.cos(),
+            ]
+        })
+        .collect();
+    pts.extend((0..3600).map(|i| {
+        [
+            (i % 60) as f32 * 0.1 - 3.0,
+            (i / 60) as f32 * 0.1 - 3.0,
+            -0.5,
+        ]
+    }));
+    alphasurf::io::write_points(&dir.join("sparse_pc.ply"), &pts).unwrap();
+    edit(&dir, |v| v["ply_file_path"] = json!("sparse_pc.ply"));
+    let ds = Dataset::load(&dir, &LoadOptions::default()).unwrap();
+    let fg = ds.foreground.unwrap();
+    let (lo, hi) = (fg.bounds.lo(), fg.bounds.hi());
+    assert!(
+        lo.cmple(glam::Vec3::splat(-0.29)).all()
+            && hi.cmpge(glam::Vec3::splat(0.29)).all()
+            && lo.cmpge(glam::Vec3::splat(-0.45)).all()
+            && hi.cmple(glam::Vec3::splat(0.45)).all(),
+        "{} ({})",
+        fg.bounds,
+        fg.how
+    );
+    assert!(fg.how.contains("1 planes"), "{}", fg.how);
+    edit(&dir, |v| v["ply_file_path"] = json!("../outside.ply"));
+    let err = load_err(&dir);
+    assert!(
+        err.contains("ply_file_path") && err.contains("inside the dataset"),
+        "{err}"
+    );
+}
