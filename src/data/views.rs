@@ -1,5 +1,6 @@
-//! Posed photographs as the COLMAP, IDR, instant-ngp and LLFF readers hand them over, turned into splits: the image
-//! folder (`images_2/4/8` when the downscale asks for it and they exist), masks as alpha,
+//! Posed photographs as the COLMAP, IDR, instant-ngp and LLFF readers hand them over, turned into
+//! splits: the image folder (`images_2/4/8` when the downscale asks for it and they exist), masks
+//! as alpha,
 //! undistortion, the held-out split (`split.json`, else every 8th view by name, as in LLFF and
 //! mip-NeRF practice) and parallel decoding.
 
