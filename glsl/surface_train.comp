@@ -80,6 +80,7 @@ struct HitRec {
     float depth; // t0 + s (voxels)
     float sa;    // σα
     float at;    // α̃
+    float gam;   // γ_a(k), k the hit's truncation count
     vec3 raw;    // raw colour
     vec3 draw;   // ∂raw/∂s
     float dsa;   // ∂σα/∂s
@@ -200,6 +201,10 @@ void main() {
     HitRec rec[SURF_MAX_HITS];
     float T = 1.0;
     uint j = 0u;
+    // The truncation count: j itself, or with counting per structure the hits since the ray last
+    // entered level 0 (surf_restart).
+    uint k = 0u;
+    bool per_structure = prm.count_per_structure != 0u;
     SkipRef blocks = SkipRef(true, pc.block_shift);
     CellWalk walk = cell_walk_new(og, dn, lv, nl, blocks);
     WalkCell cell;
@@ -218,8 +223,10 @@ void main() {
         // Signs before the entry point: the last solved cell's, when it ended here.
         bool joined = t0 == face_t;
         uint epos, eneg;
+        vec2 outer;
         uint nh = surf_cell_hits(cell.c, cell.cc, cell.q0, cell.q1, L, lv, cell.mask,
-                                 joined ? face_pos : 0u, joined ? face_neg : 0u, hs, epos, eneg);
+                                 joined ? face_pos : 0u, joined ? face_neg : 0u, hs, epos, eneg,
+                                 outer);
         face_t = t1;
         face_pos = epos;
         face_neg = eneg;
@@ -227,13 +234,20 @@ void main() {
                          min(min(cell.c[4], cell.c[5]), min(cell.c[6], cell.c[7])));
         float cmax = max(max(max(cell.c[0], cell.c[1]), max(cell.c[2], cell.c[3])),
                          max(max(cell.c[4], cell.c[5]), max(cell.c[6], cell.c[7])));
-        for (uint h = 0u; h < nh; h++) {
-            if (float(j) >= a || j >= SURF_MAX_HITS) {
+        // A cell's list holds its SURF_CELL_KEEP first hits (more are reached only when counting
+        // per structure skips truncated hits; they are dropped).
+        uint nk = min(nh, SURF_CELL_KEEP);
+        for (uint h = 0u; h < nk; h++) {
+            precise float s_hit = surf_pop(hs);
+            surf_restart(per_structure, s_hit, outer, k);
+            // A truncated hit (γ = 0) ends the ray, or with counting per structure is passed
+            // over (a later structure restarts the count); a full record ends it.
+            if (float(k) >= a || j >= SURF_MAX_HITS) {
                 cnt.cut++;
+                if (per_structure && j < SURF_MAX_HITS) continue;
                 done = true;
                 break;
             }
-            precise float s_hit = surf_pop(hs);
             precise vec3 p = clamp(cell.q0 + s_hit * dn, 0.0, 1.0);
             float wt[8];
             trilerp_weights(p, wt);
@@ -241,7 +255,8 @@ void main() {
             trilerp_dwds(p, dn, dw);
             precise float sa = 0.0;
             [[unroll]] for (int i = 0; i < 8; i++) sa += wt[i] * pc.opacity.v[cell.lk[i]];
-            precise float at = surf_alpha(sa) * surf_gamma(a, j);
+            float gam = surf_gamma(a, k);
+            precise float at = surf_alpha(sa) * gam;
             // Shading and the derivatives along the ray the backward pass needs.
             precise vec3 raw = vec3(0.5);
             precise vec3 draw = vec3(0.0);
@@ -267,6 +282,7 @@ void main() {
             hr.depth = depth;
             hr.sa = sa;
             hr.at = at;
+            hr.gam = gam;
             hr.raw = raw;
             hr.draw = draw;
             hr.dsa = dsa;
@@ -274,6 +290,7 @@ void main() {
             hr.guard = abs(f1) <= FPRIME_GUARD * (cmax - cmin);
             set_hit(rec, j, hr);
             j++;
+            k++;
             cnt.hits++;
             precise float tn = T * (1.0 - at);
             T = tn;
@@ -396,11 +413,11 @@ void main() {
     }
     uint nz_d = 0u, nz_a = 0u, nz_c = 0u;
     for (int jj = int(nh) - 1; jj >= 0; jj--) {
-        uint k = uint(jj);
-        HitRec hk = get_hit(rec, k);
+        uint ji = uint(jj);
+        HitRec hk = get_hit(rec, ji);
         float trk = 1.0, wk = 0.0, ek = 0.0, dtk = 0.0;
         [[unroll]] for (uint q = 0u; q < SURF_MAX_HITS; q++) {
-            if (q == k) {
+            if (q == ji) {
                 trk = tr[q];
                 wk = wj[q];
                 ek = e[q];
@@ -421,7 +438,7 @@ void main() {
         // ∂L/∂σα, and ∂L/∂s: opacity and colour move with the hit point, and the depth (Lc).
         float sa = hk.sa;
         float ex = exp(-max(sa, 0.0));
-        precise float d_sa = sa > 0.0 ? d_at * surf_gamma(a, k) * ex : 0.0;
+        precise float d_sa = sa > 0.0 ? d_at * hk.gam * ex : 0.0;
         precise float dl_ds = d_sa * hk.dsa + dtk * inv_len;
         [[unroll]] for (uint ch = 0u; ch < 3u; ch++) dl_ds += d_raw[ch] * hk.draw[ch];
         bool guarded = hk.guard;

@@ -28,7 +28,8 @@ use crate::abi::surface_grid::SurfaceGridRef;
 use crate::math::dda::ray_unit;
 use crate::math::sh::sh_basis;
 use crate::math::surface::{
-    surf_alpha, surf_cell_hits, surf_gamma, surf_ray, FaceSigns, SURF_MAX_LEVELS,
+    surf_alpha, surf_cell_hits, surf_gamma, surf_ray, surf_restart, FaceSigns, Truncation,
+    TruncationCount, SURF_MAX_LEVELS,
 };
 use crate::math::surface_blocks::SkipRef;
 use crate::math::surface_walk::CellWalk;
@@ -77,6 +78,8 @@ pub struct Hit {
     pub len: f32,
     /// Which level.
     pub level: u32,
+    /// Its truncation count k (γ_a(k)).
+    pub count: u32,
 }
 
 /// A ray's forward result: recorded hits, colour before the background, final transmittance.
@@ -117,6 +120,10 @@ pub fn trace_ray(
         inv_len: if len > 0.0 { 1.0 / len } else { 0.0 },
     };
     let mut t_acc = 1.0f32;
+    // The truncation count: the record index, or per structure the hits since the ray entered
+    // level 0.
+    let mut k = 0u32;
+    let Truncation { a, count } = p.truncation;
     let mut walk = CellWalk::new(g, og, dn, levels, blocks);
     let mut face = FaceSigns::default();
     'walk: for cell in walk.by_ref() {
@@ -128,10 +135,22 @@ pub fn trace_ray(
             t: piece.t1,
             ..hits.exit
         };
-        for (&s, &lv) in hits.as_slice().iter().zip(hits.levels()) {
+        let mut outer = hits.outer;
+        // The kernel's cell list holds its SURF_MAX_HITS first hits (more are reached only when
+        // counting per structure passes truncated hits over; they are dropped).
+        for (&s, &lv) in hits
+            .as_slice()
+            .iter()
+            .zip(hits.levels())
+            .take(SURF_MAX_HITS)
+        {
             let j = tr.n;
-            if j as f32 >= p.a {
+            surf_restart(count, s, &mut outer, &mut k);
+            if k as f32 >= a || j >= SURF_MAX_HITS {
                 cnt.cut += 1;
+                if count == TruncationCount::Structure && j < SURF_MAX_HITS {
+                    continue;
+                }
                 break 'walk;
             }
             let h = Hit {
@@ -143,15 +162,17 @@ pub fn trace_ray(
                 s,
                 len: piece.t1 - piece.t0,
                 level: lv,
+                count: k,
             };
             let wt = trilerp_weights(hit_point(&h, dn));
             let mut sa = 0.0f32;
             for i in 0..8 {
                 sa += wt[i] * g.opacity[lk[i] as usize];
             }
-            let at = surf_alpha(sa) * surf_gamma(p.a, j as u32);
+            let at = surf_alpha(sa) * surf_gamma(a, k);
             tr.hits[j] = h;
             tr.n += 1;
+            k += 1;
             cnt.hits += 1;
             t_acc *= 1.0 - at;
             if t_acc < p.stop_thresh {
@@ -178,7 +199,7 @@ struct Shade {
     raw: [f32; 3],
 }
 
-fn shade(g: &SurfaceGridRef, h: &Hit, dn: [f32; 3], y: &[f32; 9], a: f32, j: usize) -> Shade {
+fn shade(g: &SurfaceGridRef, h: &Hit, dn: [f32; 3], y: &[f32; 9], a: f32) -> Shade {
     let p = hit_point(h, dn);
     let wt = trilerp_weights(p);
     let q = [1.0 - p[0], 1.0 - p[1], 1.0 - p[2]];
@@ -197,7 +218,7 @@ fn shade(g: &SurfaceGridRef, h: &Hit, dn: [f32; 3], y: &[f32; 9], a: f32, j: usi
         sa += wt[i] * g.opacity[h.lk[i] as usize];
     }
     let e = (-sa.max(0.0)).exp();
-    let gamma = surf_gamma(a, j as u32);
+    let gamma = surf_gamma(a, h.count);
     let at = surf_alpha(sa) * gamma;
     let mut raw = [0.5f32; 3];
     for i in 0..8 {
@@ -242,9 +263,9 @@ pub fn train(
     validate_inputs(g, rays, p)?;
     validate_blocks(g, blocks)?;
     ensure!(
-        p.a <= SURF_MAX_HITS as f32,
+        p.truncation.a <= SURF_MAX_HITS as f32,
         "truncation parameter a = {} exceeds the {SURF_MAX_HITS} hits a ray records",
-        p.a
+        p.truncation.a
     );
     ensure!(
         targets.len() * 2 == rays.len(),
@@ -464,7 +485,7 @@ fn train_ray(
     let tr = trace_ray(g, ro, rd, p, blocks, &mut cnt);
     let y = sh_basis(ray_unit(rd));
     let shades: Vec<Shade> = (0..tr.n)
-        .map(|j| shade(g, &tr.hits[j], tr.dn, &y, p.a, j))
+        .map(|j| shade(g, &tr.hits[j], tr.dn, &y, p.truncation.a))
         .collect();
     let (rl, hg, d_bg) = ray_backward(&tr, &shades, target, loss, p.background);
     // Per-corner sums over consecutive hits in one cell, in reverse hit order (the kernel scatters
