@@ -109,7 +109,7 @@ void main() {
             // over (a later structure restarts the count).
             if (float(k) >= a) {
                 cnt.cut++;
-                if (per_structure) continue;
+                if (per_structure && T >= SURF_PASS_MIN_T) continue;
                 done = true;
                 break;
             }

@@ -244,7 +244,7 @@ void main() {
             // over (a later structure restarts the count); a full record ends it.
             if (float(k) >= a || j >= SURF_MAX_HITS) {
                 cnt.cut++;
-                if (per_structure && j < SURF_MAX_HITS) continue;
+                if (per_structure && j < SURF_MAX_HITS && T >= SURF_PASS_MIN_T) continue;
                 done = true;
                 break;
             }

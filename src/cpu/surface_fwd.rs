@@ -2,6 +2,7 @@
 //! the same cell walk (`math::surface_walk`, with the block skipping of `math::surface_blocks`),
 //! per-cell hits (`math::surface`) and compositing arithmetic.
 
+use crate::abi::consts::SURF_PASS_MIN_T;
 use crate::abi::surface_grid::SurfaceGridRef;
 use crate::math::dda::ray_unit;
 use crate::math::sh::sh_basis;
@@ -69,7 +70,7 @@ pub fn render_ray(
             surf_restart(count, s, &mut outer, &mut k);
             if k as f32 >= a {
                 cnt.cut += 1;
-                if count == TruncationCount::Structure {
+                if count == TruncationCount::Structure && t_acc >= SURF_PASS_MIN_T {
                     continue;
                 }
                 break 'walk;

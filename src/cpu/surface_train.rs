@@ -39,7 +39,7 @@ use rayon::prelude::*;
 use std::sync::atomic::AtomicU32;
 
 pub use crate::abi::buffers::{RayLoss, TrainCounts};
-pub use crate::abi::consts::{FPRIME_GUARD, SURF_MAX_HITS};
+pub use crate::abi::consts::{FPRIME_GUARD, SURF_MAX_HITS, SURF_PASS_MIN_T};
 
 /// Loss weights of the fused per-ray terms (per-ray coefficients: the batch mean is the caller's).
 #[derive(Clone, Copy, Debug)]
@@ -148,7 +148,10 @@ pub fn trace_ray(
             surf_restart(count, s, &mut outer, &mut k);
             if k as f32 >= a || j >= SURF_MAX_HITS {
                 cnt.cut += 1;
-                if count == TruncationCount::Structure && j < SURF_MAX_HITS {
+                if count == TruncationCount::Structure
+                    && j < SURF_MAX_HITS
+                    && t_acc >= SURF_PASS_MIN_T
+                {
                     continue;
                 }
                 break 'walk;

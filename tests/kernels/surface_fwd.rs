@@ -8,6 +8,7 @@
 //! (plus its extrema, located by bisection on the analytic derivative) and bisection in f64.
 
 use alphasurf::abi::buffers::{SurfCounts, SurfOut};
+use alphasurf::abi::consts::SURF_PASS_MIN_T;
 use alphasurf::check::surface_blocks::check as blocks_check;
 use alphasurf::check::surface_fwd::{check, render_gpu, test_rays, test_scene, SurfaceScene};
 use alphasurf::check::TEST_BACKGROUND;
@@ -337,7 +338,7 @@ fn ref_ray(
             k = 0;
         }
         if k as f64 >= a {
-            if per_structure {
+            if per_structure && trans >= SURF_PASS_MIN_T as f64 {
                 continue;
             }
             break;
@@ -950,7 +951,8 @@ fn truncated_compositing() {
 /// falls below level 0 between them): counted per ray, a = 2 composites the first structure's
 /// outer two levels and ends the ray; counted per structure, each structure gets its own first
 /// a hits (the count restarts at the second structure's level-0 crossing), its inner level is
-/// passed over, and a fractional a blends each structure's last hit by γ.
+/// passed over, and a fractional a blends each structure's last hit by γ; nearly opaque, the
+/// first truncated hit ends the ray (transmittance below SURF_PASS_MIN_T).
 #[test]
 fn truncation_counted_per_structure() {
     let n = 17u32;
@@ -968,7 +970,6 @@ fn truncation_counted_per_structure() {
         (11.5, false),
         (12.5, false),
     ];
-    let sigma = 0.7f32;
     let y0 = 0.282_094_79f64;
     let mut sc = test_scene(1, n);
     sc.links = (0..(nu * nu * nu) as i32).collect();
@@ -979,7 +980,7 @@ fn truncation_counted_per_structure() {
     for slot in 0..nu * nu * nu {
         let x = slot / (nu * nu);
         sc.delta.push(profile[x]);
-        sc.opacity.push(sigma);
+        sc.opacity.push(0.0);
         let mut sh = [0f32; 27];
         sh[0] = x as f32 / (n as f32 * y0 as f32);
         sh[9] = -0.3 / y0 as f32;
@@ -991,15 +992,19 @@ fn truncation_counted_per_structure() {
     let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
     let mut rays = sc.grid_to_scene(g).to_vec();
     rays.extend(d.map(|x| x / l));
-    let alpha = 1.0 - (-(sigma as f64)).exp();
     let cases = [
-        (Truncation::from(2.0), 2u32, 1u32),
-        (per_structure(2.0), 4, 2),
-        (per_structure(1.5), 4, 2),
-        (per_structure(5.0), 6, 0),
-        (per_structure(1.0), 2, 4),
+        (0.7f32, Truncation::from(2.0), 2u32, 1u32),
+        (0.7, per_structure(2.0), 4, 2),
+        (0.7, per_structure(1.5), 4, 2),
+        (0.7, per_structure(5.0), 6, 0),
+        (0.7, per_structure(1.0), 2, 4),
+        // Nearly opaque: T = e^−6 < SURF_PASS_MIN_T after two hits, so the first truncated hit
+        // ends the ray as when counting per ray.
+        (3.0, per_structure(2.0), 2, 1),
     ];
-    for (t, hits, cut) in cases {
+    for (sigma, t, hits, cut) in cases {
+        sc.opacity.iter_mut().for_each(|o| *o = sigma);
+        let alpha = 1.0 - (-(sigma as f64)).exp();
         let p = sc.params(t, 0.0);
         let blocks = build_blocks(&sc.grid(), &sc.levels, 0.0, SHIFT).unwrap();
         let (cpu, counts) = render(&sc.grid(), &rays, &p, Some(sk(&blocks))).unwrap();
@@ -1014,7 +1019,7 @@ fn truncation_counted_per_structure() {
                 k = 0;
             }
             if k as f64 >= a {
-                if t.count == TruncationCount::Structure {
+                if t.count == TruncationCount::Structure && tr >= SURF_PASS_MIN_T as f64 {
                     continue;
                 }
                 break;
