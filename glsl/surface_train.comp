@@ -81,6 +81,7 @@ struct HitRec {
     float sa;    // σα
     float at;    // α̃
     float gam;   // γ_a(k), k the hit's truncation count
+    uint sid;    // its structure along the ray (0 unless the count restarts)
     vec3 raw;    // raw colour
     vec3 draw;   // ∂raw/∂s
     float dsa;   // ∂σα/∂s
@@ -204,6 +205,7 @@ void main() {
     // The truncation count: j itself, or with counting per structure the hits since the ray last
     // entered level 0 (surf_restart).
     uint k = 0u;
+    uint sid = 0u;
     bool per_structure = prm.count_per_structure != 0u;
     SkipRef blocks = SkipRef(true, pc.block_shift);
     CellWalk walk = cell_walk_new(og, dn, lv, nl, blocks);
@@ -283,6 +285,9 @@ void main() {
             hr.sa = sa;
             hr.at = at;
             hr.gam = gam;
+            // A restarted count (k = 0 after the first record) starts the next structure.
+            if (k == 0u && j > 0u) sid++;
+            hr.sid = sid;
             hr.raw = raw;
             hr.draw = draw;
             hr.dsa = dsa;
@@ -360,37 +365,48 @@ void main() {
             }
         }
     }
-    // Lc: depths in scene units, mode m = first largest weight; ∂/∂t_m is summed apart (the same
-    // additions in the same order) and stored after the loop.
+    // Lc per structure (one, unless the truncation count restarts): depths in scene units, the
+    // structure's mode m = its first largest weight; ∂/∂t_m is summed apart per mode (the same
+    // additions in the same order) and added after the loop.
     float lambda_c = prm.lambda_c * omega;
     float d_t[SURF_MAX_HITS];
-    [[unroll]] for (uint k = 0u; k < SURF_MAX_HITS; k++) d_t[k] = 0.0;
+    float dtm[SURF_MAX_HITS];
+    [[unroll]] for (uint k = 0u; k < SURF_MAX_HITS; k++) {
+        d_t[k] = 0.0;
+        dtm[k] = 0.0;
+    }
     if (lambda_c != 0.0 && nh > 1u) {
-        uint m = 0u;
-        float wm = wj[0];
-        float dm_depth = rec[0].depth;
-        [[unroll]] for (uint k = 1u; k < SURF_MAX_HITS; k++) {
-            if (k < nh && wj[k] > wm) {
-                m = k;
-                wm = wj[k];
-                dm_depth = rec[k].depth;
-            }
-        }
-        precise float tm = dm_depth * inv_len;
         precise float lc = 0.0;
-        precise float dtm = 0.0;
         [[unroll]] for (uint k = 0u; k < SURF_MAX_HITS; k++) {
-            if (k >= nh || k == m) continue;
+            if (k >= nh) continue;
+            uint m = k;
+            float wm = -1.0;
+            float dm_depth = 0.0;
+            [[unroll]] for (uint q = 0u; q < SURF_MAX_HITS; q++) {
+                if (q < nh && rec[q].sid == rec[k].sid && wj[q] > wm) {
+                    m = q;
+                    wm = wj[q];
+                    dm_depth = rec[q].depth;
+                }
+            }
+            if (k == m) continue;
+            precise float tm = dm_depth * inv_len;
             precise float dk = rec[k].depth * inv_len - tm;
             lc += abs(dk);
             float sg = dk > 0.0 ? 1.0 : (dk < 0.0 ? -1.0 : 0.0);
             precise float a1 = lambda_c * sg;
             d_t[k] = a1;
-            precise float a2 = dtm - lambda_c * sg;
-            dtm = a2;
+            [[unroll]] for (uint q = 0u; q < SURF_MAX_HITS; q++) {
+                if (q == m) {
+                    precise float a2 = dtm[q] - lambda_c * sg;
+                    dtm[q] = a2;
+                }
+            }
         }
+        // A mode's own term is 0 and a non-mode's dtm is 0: adding is exact either way.
         [[unroll]] for (uint k = 0u; k < SURF_MAX_HITS; k++) {
-            if (k == m) d_t[k] = dtm;
+            precise float v = d_t[k] + dtm[k];
+            d_t[k] = v;
         }
         o.consistency = omega * lc;
     }

@@ -8,7 +8,8 @@
 //! - entropy LH = −Σ p_j ln p_j, p = w/W: ∂LH/∂w_j = −(ln p_j + LH)/W (0 where w_j = 0), carried
 //!   to the α̃ by the same recurrence as a colour channel without background ("gradient to α̃ only").
 //! - Lc = Σ_j |t_j − t_mode| over the composited hits, t in scene units, t_mode the depth of the
-//!   largest weight: ∂/∂t_j = ±λc, to the hit depth.
+//!   largest weight of the hit's structure (the whole ray unless the truncation count restarts):
+//!   ∂/∂t_j = ±λc, to the hit depth.
 //! - α̃ = γ_j·(1 − e^{−max(σα, 0)}) ⇒ ∂α̃/∂σα = γ_j e^{−σα} (σα > 0); colour c = max(0, raw).
 //! - δ through the hit position: ∂s/∂δ_i = −w_i(p)/f′(s), f′(s) = ∇δ(p)·d; ∂L/∂s collects the
 //!   spatial derivatives along d of σα and raw colour at p, and Lc. Hits with
@@ -410,22 +411,31 @@ fn ray_backward(
             }
         }
     }
-    // Lc: depths in scene units, mode = first largest weight.
+    // Lc per structure (the records from one whose truncation count is 0 to the next such: one
+    // structure unless the count restarts): depths in scene units, the structure's mode = its
+    // first largest weight.
     let mut d_t = [0.0f32; SURF_MAX_HITS];
     if loss.lambda_c != 0.0 && n > 1 {
-        let mut m = 0;
+        let mut first = [0usize; SURF_MAX_HITS];
         for j in 1..n {
-            if w[j] > w[m] {
-                m = j;
-            }
+            first[j] = if tr.hits[j].count == 0 {
+                j
+            } else {
+                first[j - 1]
+            };
         }
+        let mode = |j: usize| {
+            (first[j]..n)
+                .filter(|&i| first[i] == first[j])
+                .fold(first[j], |m, i| if w[i] > w[m] { i } else { m })
+        };
         let depth = |j: usize| (tr.hits[j].t0 + tr.hits[j].s) * tr.inv_len;
-        let tm = depth(m);
         for j in 0..n {
+            let m = mode(j);
             if j == m {
                 continue;
             }
-            let dj = depth(j) - tm;
+            let dj = depth(j) - depth(m);
             out.consistency += dj.abs();
             let sg = if dj > 0.0 {
                 1.0

@@ -201,16 +201,27 @@ fn ray_loss64(
             .sum();
         l += lp.lambda_h as f64 * h;
     }
-    if w.len() > 1 {
-        let m = (0..w.len()).fold(0, |m, j| if w[j] > w[m] { j } else { m });
+    // Lc per structure: a hit whose truncation count is 0 starts one; each structure's hits are
+    // pulled to the depth of its largest weight.
+    let mut start = 0;
+    while start < w.len() {
+        let end = (start + 1..w.len())
+            .find(|&j| tr.hits[j].count == 0)
+            .unwrap_or(w.len());
+        let m = (start..end).fold(start, |m, j| if w[j] > w[m] { j } else { m });
         if strict {
-            for j in 0..w.len() {
+            for j in start..end {
                 if j != m && (w[m] - w[j] < 1e-3 || (depth[j] - depth[m]).abs() < 1e-3) {
                     return None;
                 }
             }
         }
-        l += lp.lambda_c as f64 * depth.iter().map(|d| (d - depth[m]).abs()).sum::<f64>();
+        l += lp.lambda_c as f64
+            * depth[start..end]
+                .iter()
+                .map(|d| (d - depth[m]).abs())
+                .sum::<f64>();
+        start = end;
     }
     Some(l)
 }
