@@ -439,6 +439,7 @@ fn svox2_ckpt(path: &Path, shape: [u64; 3]) {
         .unwrap();
     w.array("sh_data", &[n, 27], &vec![0.1f32; n as usize * 27])
         .unwrap();
+    w.array("radius", &[3], &[1.5f32; 3]).unwrap();
     w.finish().unwrap();
 }
 
