@@ -28,7 +28,7 @@ pub struct MakeSceneArgs {
     /// Seed of scene details, cameras and ground-truth samples.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Samples per pixel along each axis (spp = N²).
+    /// Samples per pixel along each axis (spp = N²; at most 32).
     #[arg(long, default_value_t = 4)]
     pub spp: u32,
     /// Ground-truth point spacing (sqrt of area per point), Blender units.

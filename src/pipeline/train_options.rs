@@ -274,6 +274,12 @@ impl TrainOptions {
         if self.stage == Stage::All && self.init.is_some() {
             ignored.push("--init");
         }
+        if self.stage == Stage::Surface && self.iters.is_some() && self.surface_iters.is_some() {
+            bail!(
+                "--iters and --surface-iters both give stage 2's steps with --stage surface (one \
+                 would be ignored); give one of them"
+            );
+        }
         // Only a run trained before (the one resumed, or stage 2's --init) has a dataset to
         // compare with.
         let compared = self.resume || (self.stage == Stage::Surface && self.init.is_some());

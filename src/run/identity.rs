@@ -1,5 +1,6 @@
 //! A dataset's identity as a run records it: a content fingerprint (every split's image names,
-//! sizes and camera poses) and the scene normalisation the run trained with. `--resume` and
+//! sizes, camera poses and a sample of their pixels) and the scene normalisation the run trained
+//! with. `--resume` and
 //! `--init` compare it with the dataset they are given and refuse another one unless the user
 //! says so (`--allow-other-data`): a grid trained on one scene and normalisation is meaningless
 //! on another.
@@ -14,7 +15,8 @@ use std::path::Path;
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct DataIdentity {
     /// FNV-1a (64-bit, hex) over every split's name and, per view, its image file name, image
-    /// size and camera-to-world matrix (f32 bits).
+    /// size, camera-to-world matrix (f32 bits) and [`PIXEL_SAMPLES`] of its pixels (two scenes
+    /// rendered from the same cameras differ only there).
     pub fingerprint: String,
     /// The scene box's centre (scaled units).
     pub scene_centre: [f32; 3],
@@ -38,6 +40,11 @@ impl DataIdentity {
                 for v in f.camera.c2w.to_cols_array() {
                     h.write(&v.to_bits().to_le_bytes());
                 }
+                let pixels = f.image.data.chunks_exact(4);
+                let stride = (pixels.len() / PIXEL_SAMPLES).max(1);
+                for p in pixels.step_by(stride) {
+                    h.write(p);
+                }
             }
         }
         DataIdentity {
@@ -47,6 +54,9 @@ impl DataIdentity {
         }
     }
 }
+
+/// Pixels per view that enter the fingerprint, evenly spaced (cheap next to loading).
+pub const PIXEL_SAMPLES: usize = 4096;
 
 /// FNV-1a, 64-bit: a stable hash (the standard library's may change between releases).
 struct Fnv1a(u64);
@@ -72,7 +82,7 @@ pub fn differences(recorded: &RunInfo, now: &RunInfo) -> Vec<String> {
         (Some(a), Some(b)) => {
             if a.fingerprint != b.fingerprint {
                 diffs.push(format!(
-                    "its images, sizes or camera poses differ (fingerprint {} there, {} here)",
+                    "its images, sizes, camera poses or pixels differ (fingerprint {} there, {} here)",
                     a.fingerprint, b.fingerprint
                 ));
             }

@@ -111,6 +111,9 @@ pub fn split_cameras(split: &str, n: u32, seed: u64) -> Vec<Mat4> {
         .collect()
 }
 
+/// The most samples per pixel along each axis `--spp` may ask for.
+pub const MAX_SPP_SIDE: u32 = 32;
+
 /// `scene.json`'s "generator": marks a folder as a built-in scene that may be regenerated.
 const GENERATOR: &str = "alphasurf make-scene";
 
@@ -120,6 +123,14 @@ pub fn generate(target: &Path, opts: &GenerateOptions) -> anyhow::Result<Generat
     let t0 = Instant::now();
     if opts.res == 0 || opts.views == 0 || opts.spp_side == 0 {
         bail!("--res, --views and --spp must be positive");
+    }
+    if opts.spp_side > MAX_SPP_SIDE {
+        bail!(
+            "--spp {}: at most {MAX_SPP_SIDE} samples per pixel along each axis ({} per pixel); \
+             more changes no pixel's 8-bit value and multiplies the render time",
+            opts.spp_side,
+            MAX_SPP_SIDE * MAX_SPP_SIDE
+        );
     }
     if !(opts.gt_spacing > 0.0 && opts.gt_spacing.is_finite()) {
         bail!("--gt-spacing must be positive");
