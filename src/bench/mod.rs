@@ -17,3 +17,14 @@ pub fn ensure_any_succeeded(what: &str, failed: usize, total: usize) -> anyhow::
     );
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn a_bench_fails_only_when_every_unit_failed() {
+        super::ensure_any_succeeded("point", 2, 3).unwrap();
+        super::ensure_any_succeeded("point", 0, 0).unwrap();
+        let e = super::ensure_any_succeeded("point", 3, 3).unwrap_err();
+        assert!(e.to_string().contains("every point failed (3 of 3)"), "{e}");
+    }
+}

@@ -19,6 +19,7 @@ use crate::grid::surface::SurfaceGrid;
 use crate::grid::{checkpoint, npz, Grid};
 use crate::mesh::ply::write_mesh_ply;
 use crate::mesh::{level_set_mesh, MeshInput, MeshStats};
+use crate::run::dir::{ALL_STAGE1, ALL_STAGE2};
 use crate::train::{stage2, Category};
 use anyhow::{bail, ensure, Context, Result};
 use serde::Serialize;
@@ -55,7 +56,7 @@ pub struct ExtractOptions {
     /// Level values τ, comma-separated, for a stage-1 grid (density units; the paper sweeps
     /// 10,30,50,70,90,100 and reports the best single level). Default 50. A stage-2 run uses its
     /// own levels; giving --levels there is an error.
-    #[arg(long, value_delimiter = ',')]
+    #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
     pub levels: Option<Vec<f32>>,
     /// Keep a crossing only where the trilerped raw opacity σα ≥ this (stage-2 grids; a stage-1
     /// density grid has no opacity field, so it is not used there).
@@ -129,6 +130,14 @@ fn load_grid(opts: &ExtractOptions) -> Result<(Field, PathBuf)> {
         let category = serde_json::from_value(ck.meta["config"]["category"].clone()).ok();
         return Ok((Field::Surface(ck.grid, category), surface));
     }
+    let all_stage2 = run.join(ALL_STAGE2);
+    ensure!(
+        !stage2::checkpoint_path(&all_stage2).exists(),
+        "{} is a `--stage all` run: give its stage-2 run {} (or its stage-1 run {})",
+        run.display(),
+        all_stage2.display(),
+        run.join(ALL_STAGE1).display()
+    );
     let path = crate::run::dir::stage1_checkpoint(run, "extract --run")?;
     Ok((Field::Density(checkpoint::load(&path)?.grid), path))
 }

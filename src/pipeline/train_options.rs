@@ -198,6 +198,12 @@ impl TrainOptions {
         cfg.validate()
             .and_then(|()| cfg.validate_schedule())
             .with_context(|| settings_named("stage-1", "--plenoxels-set", &self.plenoxels_set))?;
+        Ok(cfg)
+    }
+
+    /// Refuse a new stage-1 run whose grids or batch cannot fit in the memory this process may
+    /// use, naming the flag that sized them.
+    pub fn check_stage1_memory(&self, cfg: &Stage1Config) -> Result<()> {
         let (grid_bytes, grid_res) = cfg.peak_grid_bytes();
         let res_flag = self.res.map(|r| format!("--res {r}"));
         crate::run::memory::ensure_fits(
@@ -219,8 +225,7 @@ impl TrainOptions {
                 &["batch"],
                 batch_flag,
             ),
-        )?;
-        Ok(cfg)
+        )
     }
 
     /// Where a configuration value came from, for messages: the last `FLAG KEY=VALUE` of `sets`
@@ -351,12 +356,16 @@ impl TrainOptions {
         }
         cfg.validate()
             .with_context(|| settings_named("stage-2", "--set", &self.set))?;
+        Ok(cfg)
+    }
+
+    /// Refuse a new stage-2 run whose batch cannot fit in the memory this process may use.
+    pub fn check_stage2_memory(&self, cfg: &SurfaceConfig) -> Result<()> {
         let batch_flag = self.batch.map(|b| format!("--batch {b}"));
         check_batch_memory(
             cfg.batch,
             &self.source(("--set", &self.set), &["batch"], batch_flag),
-        )?;
-        Ok(cfg)
+        )
     }
 }
 
@@ -479,11 +488,60 @@ mod tests {
         );
         assert!(err(&["tv_until_upsample=1"]).contains("is false, not 1"));
         assert!(err(&["tv_fraction=2"]).contains("tv_fraction must be in [0, 1]"));
+        // Issue 44: the checks the flags have, whichever flag set the value.
+        for (set, want) in [
+            ("iters=0", "iters must be at least 1"),
+            ("res=5000", "8 ..= 1024"),
+            ("upsample=[[3,4000]]", "8 ..= 1024"),
+            ("upsample=[[3,2]]", "8 ..= 1024"),
+            ("upsample=[[5000,64]]", "past the last step"),
+            ("upsample=[[10,128],[5,256]]", "later step"),
+            ("lr_sigma.init=-30", "lr_sigma.init must be finite and ≥ 0"),
+        ] {
+            let e = err(&[set]);
+            assert!(
+                e.contains(&format!("--plenoxels-set {set}")) && e.contains(want),
+                "{set}: {e}"
+            );
+        }
+        let huge = opts(&["batch=4000000000"]);
+        let cfg = huge.stage1_config().unwrap();
+        let e = format!("{:#}", huge.check_stage1_memory(&cfg).unwrap_err());
+        assert!(
+            e.contains("--plenoxels-set batch=4000000000") && e.contains("memory"),
+            "{e}"
+        );
+        let stage2 = TrainOptions {
+            set: vec!["iters=0".into()],
+            ..TrainOptions::new(Stage::Surface, "d".into(), "o".into())
+        };
+        let e = format!("{:#}", stage2.stage2_config(64).unwrap_err());
+        assert!(
+            e.contains("--set iters=0") && e.contains("at least 1"),
+            "{e}"
+        );
         let surface = TrainOptions {
             plenoxels_set: vec!["tv_sigma=0".into()],
             ..TrainOptions::new(Stage::Surface, "d".into(), "o".into())
         };
         let refused = format!("{:#}", surface.check_stage_flags().unwrap_err());
         assert!(refused.contains("--plenoxels-set is not used by --stage surface"));
+        // Two flags for stage 2's steps: one would be ignored.
+        let both = TrainOptions {
+            iters: Some(50),
+            surface_iters: Some(10),
+            ..TrainOptions::new(Stage::Surface, "d".into(), "o".into())
+        };
+        let refused = format!("{:#}", both.check_stage_flags().unwrap_err());
+        assert!(refused.contains("--iters and --surface-iters"), "{refused}");
+        let allow = TrainOptions {
+            allow_other_data: true,
+            ..TrainOptions::new(Stage::Plenoxels, "d".into(), "o".into())
+        };
+        let refused = format!("{:#}", allow.check_stage_flags().unwrap_err());
+        assert!(
+            refused.contains("--allow-other-data applies with --resume"),
+            "{refused}"
+        );
     }
 }

@@ -32,7 +32,9 @@ pub fn train_stage1(
     let fresh_cfg = if opts.resume {
         None
     } else {
-        Some(opts.stage1_config()?)
+        let cfg = opts.stage1_config()?;
+        opts.check_stage1_memory(&cfg)?;
+        Some(cfg)
     };
     let mut run = RunDir::claim(
         &opts.out,

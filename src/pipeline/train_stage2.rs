@@ -85,6 +85,7 @@ fn fresh_start(
     let (density, bg) = load_init(opts, init, data)?;
     bg.ensure_mode(opts.background, &format!("--init {}", init.display()))?;
     let cfg = opts.stage2_config(density.res.into_iter().max().unwrap_or(0))?;
+    opts.check_stage2_memory(&cfg)?;
     let grid = SurfaceGrid::from_density(&density, &cfg.init)
         .with_context(|| format!("initialising the surfaces from {}", init.display()))?;
     eprintln!(

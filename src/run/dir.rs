@@ -385,13 +385,13 @@ mod tests {
         // New folder: a run, locked.
         let mut r = RunDir::claim(&run, RunStage::Plenoxels, Open::Fresh, &[&data]).unwrap();
         r.write_info(&info(&data)).unwrap();
+        fs::write(r.file(STAGE1_CHECKPOINT), "x").unwrap();
         let err = RunDir::claim(&run, RunStage::Plenoxels, Open::Resume, &[&data]).unwrap_err();
         assert!(
             format!("{err:#}").contains("already locked by this process"),
             "{err:#}"
         );
         fs::write(r.file(METRICS), "{}").unwrap();
-        fs::write(r.file(STAGE1_CHECKPOINT), "x").unwrap();
         fs::write(run.join("notes.txt"), "mine").unwrap();
         drop(r);
         // Existing run: Fresh refused, Resume of another stage refused, Overwrite keeps user files.

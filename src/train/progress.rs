@@ -204,10 +204,10 @@ mod tests {
         for s in 5..20 {
             t.add(s, 100, 0.1);
         }
-        assert_eq!(
-            t.run_rays_per_s(),
-            1000.0,
-            "after the warm-up, its steps only"
+        let rate = t.run_rays_per_s();
+        assert!(
+            (rate - 1000.0).abs() < 1e-6,
+            "after the warm-up, its steps only: {rate}"
         );
     }
 }
