@@ -16,7 +16,8 @@ use std::path::Path;
 pub struct DataIdentity {
     /// FNV-1a (64-bit, hex) over every split's name and, per view, its image file name, image
     /// size, camera-to-world matrix (f32 bits) and [`PIXEL_SAMPLES`] of its pixels (two scenes
-    /// rendered from the same cameras differ only there).
+    /// rendered from the same cameras differ only there; their alpha, and their colour where
+    /// opaque, so the background they are composited on does not enter).
     pub fingerprint: String,
     /// The scene box's centre (scaled units).
     pub scene_centre: [f32; 3],
@@ -42,8 +43,10 @@ impl DataIdentity {
                 }
                 let pixels = f.image.data.chunks_exact(4);
                 let stride = (pixels.len() / PIXEL_SAMPLES).max(1);
+                // Alpha, and the colour where it is opaque: what the background (a run's own
+                // choice, checked on its own) does not change.
                 for p in pixels.step_by(stride) {
-                    h.write(p);
+                    h.write(if p[3] == 255 { p } else { &p[3..] });
                 }
             }
         }

@@ -55,6 +55,15 @@ impl Replacement {
     /// `owned` names the entries the writer writes; a leftover staging folder holding anything
     /// else is refused, naming it.
     pub fn begin(target: &Path, owned: fn(&str) -> bool) -> Result<Replacement> {
+        // A link to a folder: the folder is what is replaced (the swap would move the link).
+        let resolved;
+        let target = if target.is_symlink() {
+            resolved = fs::canonicalize(target)
+                .with_context(|| format!("resolving the link {}", target.display()))?;
+            resolved.as_path()
+        } else {
+            target
+        };
         let staging = staging_path(target)?;
         if staging.exists() {
             let lock = Lock::acquire(&staging.join(LOCK)).with_context(|| {
