@@ -102,7 +102,10 @@ fn rlimit(resource: libc::c_int) -> Option<u64> {
     };
     // SAFETY: getrlimit writes the struct it is given; the resource ids come from libc.
     let ok = unsafe { libc::getrlimit(resource as _, &mut lim) } == 0;
-    (ok && lim.rlim_cur != libc::RLIM_INFINITY).then_some(lim.rlim_cur as u64)
+    // `rlim_t` is 64-bit here but not on every Unix.
+    #[allow(clippy::unnecessary_cast)]
+    let limit = lim.rlim_cur as u64;
+    (ok && lim.rlim_cur != libc::RLIM_INFINITY).then_some(limit)
 }
 
 #[cfg(not(unix))]
