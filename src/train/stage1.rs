@@ -112,7 +112,8 @@ fn upsample_step(
     if next.allocated() == 0 {
         bail!(
             "upsampling to {new_res}³ kept no vertex (no training-ray weight reached {}); \
-             the scene may be empty or training diverged",
+             the scene may be empty, its cameras may not see the scene box (see the warnings \
+             of `alphasurf inspect` on the dataset) or training diverged",
             cfg.prune_weight
         );
     }

@@ -381,6 +381,25 @@ fn errors_say_what_is_wrong_and_what_to_do() {
             .arg(dir.path().join("s2")),
         &["--stage all", "all/plenoxels"],
     );
+    // Stage 2 from a stage 1 that stopped before its last step says so.
+    let s1 = all.join("plenoxels");
+    let ck = alphasurf::grid::checkpoint::load(&s1.join("plenoxels.npz")).unwrap();
+    let mut meta = ck.meta.clone();
+    meta["step"] = 10.into();
+    let optim = alphasurf::grid::checkpoint::optim_refs(&ck.optim);
+    alphasurf::grid::checkpoint::save(&s1.join("plenoxels.npz"), &ck.grid, &optim, &meta).unwrap();
+    let (code, _, err) = run(bin()
+        .args(["train", "--stage", "surface", "--backend", "cpu", "--quiet"])
+        .args(["--batch", "1024", "--surface-iters", "3", "--init"])
+        .arg(&s1)
+        .arg("--data")
+        .arg(&data)
+        .arg("--out")
+        .arg(dir.path().join("from_stopped")));
+    assert!(
+        code == Some(0) && err.contains("stopped at step 10 of 20"),
+        "{err}"
+    );
     // Values a flag cannot mean.
     for (flag, value, needle) in [
         ("--levels", "-5", "must be positive"),
