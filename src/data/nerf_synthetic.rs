@@ -347,23 +347,11 @@ fn resolve_image(
     // Present but not a readable file (a folder without permission, a symbolic link loop):
     // the reason, not "not found".
     for p in [&direct, &with_png] {
-        match std::fs::metadata(p) {
-            Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
-                return Err(DataError::UnreadableImage {
-                    path: p.clone(),
-                    msg: format!("{e} (frame {frame} of {})", json.display()),
-                })
-            }
-            Ok(m) if m.is_dir() => {
-                return Err(DataError::UnreadableImage {
-                    path: p.clone(),
-                    msg: format!(
-                        "a folder, not an image (frame {frame} of {})",
-                        json.display()
-                    ),
-                })
-            }
-            _ => {}
+        if let Some(why) = super::image::unreadable_reason(p) {
+            return Err(DataError::UnreadableImage {
+                path: p.clone(),
+                msg: format!("{why} (frame {frame} of {})", json.display()),
+            });
         }
     }
     Err(DataError::MissingImage {

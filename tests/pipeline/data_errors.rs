@@ -502,6 +502,16 @@ fn colmap_missing_image_mask_and_camera() {
         e.downcast_ref(),
         Some(DataError::MissingViewFile { .. })
     ));
+    // Issue 44: a posed image that is there but unreadable (a symbolic link loop, a folder) is
+    // said to be unreadable, not missing.
+    let (_k, dir) = small(Target::ColmapText);
+    let img = dir.join("images/test_r_1.png");
+    std::fs::remove_file(&img).unwrap();
+    std::os::unix::fs::symlink("test_r_1.png", &img).unwrap();
+    fails_naming(&dir, "images/test_r_1.png", "cannot read image");
+    std::fs::remove_file(&img).unwrap();
+    std::fs::create_dir(&img).unwrap();
+    fails_naming(&dir, "images/test_r_1.png", "a folder, not an image");
     let (_k, dir) = small(Target::ColmapText);
     std::fs::remove_file(dir.join("masks/val_r_0.png")).unwrap();
     fails_naming(&dir, "masks/val_r_0.png", "not found");
