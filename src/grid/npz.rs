@@ -416,10 +416,12 @@ fn check_basis(npz: &mut NpzReader) -> Result<()> {
         Data::F32(v) => v.into_iter().map(f64::from).collect(),
         Data::U8(v) => v.into_iter().map(f64::from).collect(),
     };
+    let shown: Vec<String> = v.iter().map(|x| x.to_string()).collect();
     ensure!(
         v == [BASIS_TYPE_SH as f64],
-        "array 'basis_type' is {v:?}: only spherical harmonics ({BASIS_TYPE_SH}, svox2's \
-         BASIS_TYPE_SH) are supported, not a 3D texture (4) or an MLP (255) basis"
+        "array 'basis_type' is [{}]: only spherical harmonics ({BASIS_TYPE_SH}, svox2's \
+         BASIS_TYPE_SH) are supported, not a 3D texture (4) or an MLP (255) basis",
+        shown.join(", ")
     );
     Ok(())
 }
