@@ -111,6 +111,12 @@ fn replacing_a_folder_loses_nothing_and_leaves_nothing_half_written() {
             .arg("--out")
             .arg(&r);
     };
+    // On a full disk the lock cannot be written: it is removed, not left empty to block the
+    // next run.
+    let mut c = bin_with_limit("-f 0");
+    import(&mut c);
+    refused(&mut c, &["run.lock"]);
+    assert!(!r.join("run.lock").exists());
     // On a disk that fills part way: the previous run whole, no lock, no raw zip message.
     let mut c = bin_with_limit("-f 1");
     import(&mut c);
