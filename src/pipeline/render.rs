@@ -16,7 +16,7 @@ use crate::train::{
     render_split, render_split_with, stage2, BackgroundRecord, RenderedSplit, Stage1Config,
     SurfaceConfig, MAX_PIXEL_SAMPLES,
 };
-use anyhow::{bail, Result};
+use anyhow::{bail, Context, Result};
 use std::path::{Path, PathBuf};
 
 /// Options of `render` (its command-line flags).
@@ -124,7 +124,12 @@ pub fn render(opts: &RenderOptions, gpu: Option<&Gpu>) -> Result<RenderedSplit> 
     )?;
     let split = match opts.split.as_str() {
         "train" => &data.train,
-        "val" => data.val(),
+        "val" => data.val_split.as_ref().with_context(|| {
+            format!(
+                "--split val: {} has no validation split (no val views); use --split test",
+                data.root.display()
+            )
+        })?,
         "test" => &data.test,
         s => bail!("--split {s}: expected train, val or test"),
     };

@@ -3,6 +3,7 @@
 
 use super::train_options::TrainOptions;
 use crate::data::{Dataset, LoadOptions};
+use crate::run::identity::{check_same_data, DataIdentity};
 use crate::run::RunInfo;
 use anyhow::{ensure, Context, Result};
 use std::path::{Path, PathBuf};
@@ -35,8 +36,8 @@ pub fn load_data(opts: &TrainOptions) -> Result<Loaded> {
     })
 }
 
-/// The `run.json` of a training run: the dataset's absolute path, the downscale factor, the
-/// background, the scene box's scale and (stage 2) the grid it started from.
+/// The `run.json` of a training run: the dataset's absolute path and identity, the downscale
+/// factor, the background, the scene box's scale and (stage 2) the grid it started from.
 pub fn run_info(opts: &TrainOptions, data: &Dataset, init: Option<PathBuf>) -> Result<RunInfo> {
     Ok(RunInfo {
         stage: None,
@@ -45,9 +46,24 @@ pub fn run_info(opts: &TrainOptions, data: &Dataset, init: Option<PathBuf>) -> R
         downscale: opts.downscale,
         background: opts.background,
         scene_scale: Some(data.scene.scale),
+        identity: Some(DataIdentity::of(data)),
         init,
         imported_from: None,
     })
+}
+
+/// `--resume`: refuse to continue the run in `opts.out` on another dataset than its own (see
+/// [`crate::run::identity`]); call before its `run.json` is rewritten.
+pub fn check_resumed_data(opts: &TrainOptions, data: &Dataset) -> Result<()> {
+    let recorded = crate::run::read_info(&opts.out)?;
+    let now = run_info(opts, data, None)?;
+    check_same_data(
+        "--resume",
+        &opts.out,
+        &recorded,
+        &now,
+        opts.allow_other_data,
+    )
 }
 
 /// How a training call ended.

@@ -327,7 +327,7 @@ pub fn train(
     writer.finish()?;
     report.checkpoint_seconds += t.elapsed().as_secs_f64();
     report.steps = cfg.iters;
-    report.train_rays_per_s = throughput.rays_per_s().unwrap_or(0.0);
+    report.train_rays_per_s = throughput.run_rays_per_s();
     report.final_mse = mse;
     report.test_psnr = rendered.mean_psnr;
     report.per_ray = totals.scaled(1.0 / throughput.rays().max(1) as f64);

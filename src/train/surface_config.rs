@@ -221,16 +221,7 @@ impl SurfaceConfig {
             ("lr_opacity", &self.lr_opacity),
             ("lr_sh", &self.lr_sh),
         ] {
-            for (field, v) in [
-                ("init", lr.init),
-                ("last", lr.last),
-                ("delay_mult", lr.delay_mult),
-            ] {
-                ensure!(
-                    v.is_finite() && v >= 0.0,
-                    "{name}.{field} must be finite and ≥ 0, got {v}"
-                );
-            }
+            lr.check(name)?;
         }
         let weights = [
             ("lambda_h", self.lambda_h),
