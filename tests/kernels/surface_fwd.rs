@@ -876,38 +876,50 @@ fn planar_field_one_hit_at_the_right_depth() {
     );
 }
 
-/// Seven parallel level planes crossed front-facing along a ray: with a = 1 only the first hit
-/// contributes, with a = 5 exactly five, and a fractional a blends the last one by γ.
-#[test]
-fn truncated_compositing() {
-    let n = 17u32;
+/// An `n`³ grid, every vertex allocated, whose δ depends on x alone (`delta(x)` at the x-th plane
+/// of vertices), σα = `sigma`, and colour (0.5 + x/n, 0.2, 0.7) at x from SH band 0.
+fn x_scene(n: u32, delta: impl Fn(usize) -> f32, sigma: f32) -> SurfaceScene {
     let nu = n as usize;
-    let h = 1.0 / 16.0;
-    let planes = [2.3f64, 4.6, 6.2, 8.5, 10.4, 12.1, 14.7];
-    let sigma = 0.9f32;
-    let y0 = 0.282_094_79f64;
+    let y0 = 0.282_094_79f32;
     let mut sc = test_scene(1, n);
     sc.links = (0..(nu * nu * nu) as i32).collect();
     sc.delta.clear();
     sc.opacity.clear();
     sc.sh.clear();
-    sc.levels = planes.iter().map(|&x| (x * h) as f32).collect();
     for slot in 0..nu * nu * nu {
-        let x = (slot / (nu * nu)) as f32;
-        sc.delta.push(x * h as f32);
+        let x = slot / (nu * nu);
+        sc.delta.push(delta(x));
         sc.opacity.push(sigma);
         let mut sh = [0f32; 27];
-        sh[0] = x / (n as f32 * y0 as f32);
-        sh[9] = -0.3 / y0 as f32;
-        sh[18] = 0.2 / y0 as f32;
+        sh[0] = x as f32 / (n as f32 * y0);
+        sh[9] = -0.3 / y0;
+        sh[18] = 0.2 / y0;
         sc.sh.extend_from_slice(&sh);
     }
-    // Along +x, slightly tilted, through the middle.
+    sc
+}
+
+/// One ray of `sc` along +x, slightly tilted, through the middle of a 17³ grid.
+fn x_ray(sc: &SurfaceScene) -> Vec<f32> {
     let g = [-1.0f32, 8.3, 7.9];
     let d = [1.0f32, 0.02, -0.01];
     let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
     let mut rays = sc.grid_to_scene(g).to_vec();
     rays.extend(d.map(|x| x / l));
+    rays
+}
+
+/// Seven parallel level planes crossed front-facing along a ray: with a = 1 only the first hit
+/// contributes, with a = 5 exactly five, and a fractional a blends the last one by γ.
+#[test]
+fn truncated_compositing() {
+    let n = 17u32;
+    let h = 1.0 / 16.0;
+    let planes = [2.3f64, 4.6, 6.2, 8.5, 10.4, 12.1, 14.7];
+    let sigma = 0.9f32;
+    let mut sc = x_scene(n, |x| x as f32 * h as f32, sigma);
+    sc.levels = planes.iter().map(|&x| (x * h) as f32).collect();
+    let rays = x_ray(&sc);
     let alpha = 1.0 - (-(sigma as f64)).exp();
     for a in [1.0f32, 5.0, 2.5, 3.25, 0.5, 8.0] {
         let p = sc.params(a, 0.0);
@@ -956,7 +968,6 @@ fn truncated_compositing() {
 #[test]
 fn truncation_counted_per_structure() {
     let n = 17u32;
-    let nu = n as usize;
     // δ per x-plane of vertices; levels 0.5, 1.5, 2.5: rising crossings at x = 1.5, 2.5, 3.5
     // (structure 1) and 10.5, 11.5, 12.5 (structure 2).
     let profile = [
@@ -970,28 +981,9 @@ fn truncation_counted_per_structure() {
         (11.5, false),
         (12.5, false),
     ];
-    let y0 = 0.282_094_79f64;
-    let mut sc = test_scene(1, n);
-    sc.links = (0..(nu * nu * nu) as i32).collect();
-    sc.delta.clear();
-    sc.opacity.clear();
-    sc.sh.clear();
+    let mut sc = x_scene(n, |x| profile[x], 0.0);
     sc.levels = vec![0.5, 1.5, 2.5];
-    for slot in 0..nu * nu * nu {
-        let x = slot / (nu * nu);
-        sc.delta.push(profile[x]);
-        sc.opacity.push(0.0);
-        let mut sh = [0f32; 27];
-        sh[0] = x as f32 / (n as f32 * y0 as f32);
-        sh[9] = -0.3 / y0 as f32;
-        sh[18] = 0.2 / y0 as f32;
-        sc.sh.extend_from_slice(&sh);
-    }
-    let g = [-1.0f32, 8.3, 7.9];
-    let d = [1.0f32, 0.02, -0.01];
-    let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-    let mut rays = sc.grid_to_scene(g).to_vec();
-    rays.extend(d.map(|x| x / l));
+    let rays = x_ray(&sc);
     let cases = [
         (0.7f32, Truncation::from(2.0), 2u32, 1u32),
         (0.7, per_structure(2.0), 4, 2),
