@@ -7,8 +7,10 @@
 // coefficients once per cell; per level τ_i that passes min/max, then segment
 // culling (surf_segment_mask) the crossings of δ − τ_i on [0, L); only rising (front-face) crossings are hits, sorted by s within the cell; at
 // hit j: α = 1 − exp(−max(σα, 0)), colour max(0, SH + 0.5) (trilerped at the hit, basis on the unit
-// scene direction), α̃ = α·γ_a(j); C = Σ w_j c_j + T·bg. The ray stops at the first hit with j ≥ a
-// (γ = 0, not shaded, counted as cut) or once T < stop_thresh.
+// scene direction), α̃ = α·γ_a(k); C = Σ w_j c_j + T·bg, k the truncation count: j, or with
+// count_per_structure the hits since the ray last entered level 0 (surf_restart). A hit with
+// k ≥ a (γ = 0, not shaded, counted as cut) ends the ray, or is passed over when counting per
+// structure; the ray also stops once T < stop_thresh.
 // Skipping (block_skip ≠ 0) with the skip structure `blocks` (glsl/lib/surface_blocks.glsl): the
 // walk covers only the ray's span inside the allocated box (surf_box_span); a cell whose
 // 2^block_shift-cell block has level mask 0 (kernel surface_blocks) is not read and the walk
@@ -71,6 +73,10 @@ void main() {
     vec3 color = vec3(0.0);
     float T = 1.0;
     uint j = 0u;
+    // The truncation count: j itself, or with counting per structure the hits since the ray last
+    // entered level 0 (surf_restart).
+    uint k = 0u;
+    bool per_structure = prm.count_per_structure != 0u;
     SurfCounts cnt = SURF_COUNTS_ZERO;
     SkipRef blocks = SkipRef(pc.block_skip != 0u, pc.block_shift);
     CellWalk walk = cell_walk_new(og, dn, lv, nl, blocks);
@@ -89,24 +95,31 @@ void main() {
         // Signs before the entry point: the last solved cell's, when it ended here.
         bool joined = t0 == face_t;
         uint epos, eneg;
+        vec2 outer;
         uint nh = surf_cell_hits(cell.c, cell.cc, cell.q0, cell.q1, L, lv, cell.mask,
-                                 joined ? face_pos : 0u, joined ? face_neg : 0u, hs, epos, eneg);
+                                 joined ? face_pos : 0u, joined ? face_neg : 0u, hs, epos, eneg,
+                                 outer);
         face_t = t1;
         face_pos = epos;
         face_neg = eneg;
         for (uint h = 0u; h < nh; h++) {
-            if (float(j) >= a) {
+            float s_hit = surf_pop(hs);
+            surf_restart(per_structure, s_hit, outer, k);
+            // A truncated hit (γ = 0) ends the ray, or with counting per structure is passed
+            // over (a later structure restarts the count).
+            if (float(k) >= a) {
                 cnt.cut++;
+                if (per_structure && T >= SURF_PASS_MIN_T) continue;
                 done = true;
                 break;
             }
-            precise vec3 p = clamp(cell.q0 + surf_pop(hs) * dn, 0.0, 1.0);
+            precise vec3 p = clamp(cell.q0 + s_hit * dn, 0.0, 1.0);
             float wt[8];
             trilerp_weights(p, wt);
             precise float sa = 0.0;
             for (int i = 0; i < 8; i++) sa += wt[i] * pc.opacity.v[cell.lk[i]];
             float alpha = surf_alpha(sa);
-            precise float at = alpha * surf_gamma(a, j);
+            precise float at = alpha * surf_gamma(a, k);
             float sh[27];
             for (int k = 0; k < 27; k++) sh[k] = 0.0;
             [[unroll]] for (int i = 0; i < 8; i++) {
@@ -132,6 +145,7 @@ void main() {
             precise float tn = T * (1.0 - at);
             T = tn;
             j++;
+            k++;
             cnt.hits++;
             if (T < stop_thresh) {
                 done = true;

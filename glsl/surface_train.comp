@@ -80,6 +80,8 @@ struct HitRec {
     float depth; // t0 + s (voxels)
     float sa;    // σα
     float at;    // α̃
+    float gam;   // γ_a(k), k the hit's truncation count
+    uint sid;    // its structure along the ray (0 unless the count restarts)
     vec3 raw;    // raw colour
     vec3 draw;   // ∂raw/∂s
     float dsa;   // ∂σα/∂s
@@ -200,6 +202,11 @@ void main() {
     HitRec rec[SURF_MAX_HITS];
     float T = 1.0;
     uint j = 0u;
+    // The truncation count: j itself, or with counting per structure the hits since the ray last
+    // entered level 0 (surf_restart).
+    uint k = 0u;
+    uint sid = 0u;
+    bool per_structure = prm.count_per_structure != 0u;
     SkipRef blocks = SkipRef(true, pc.block_shift);
     CellWalk walk = cell_walk_new(og, dn, lv, nl, blocks);
     WalkCell cell;
@@ -218,8 +225,10 @@ void main() {
         // Signs before the entry point: the last solved cell's, when it ended here.
         bool joined = t0 == face_t;
         uint epos, eneg;
+        vec2 outer;
         uint nh = surf_cell_hits(cell.c, cell.cc, cell.q0, cell.q1, L, lv, cell.mask,
-                                 joined ? face_pos : 0u, joined ? face_neg : 0u, hs, epos, eneg);
+                                 joined ? face_pos : 0u, joined ? face_neg : 0u, hs, epos, eneg,
+                                 outer);
         face_t = t1;
         face_pos = epos;
         face_neg = eneg;
@@ -227,13 +236,20 @@ void main() {
                          min(min(cell.c[4], cell.c[5]), min(cell.c[6], cell.c[7])));
         float cmax = max(max(max(cell.c[0], cell.c[1]), max(cell.c[2], cell.c[3])),
                          max(max(cell.c[4], cell.c[5]), max(cell.c[6], cell.c[7])));
-        for (uint h = 0u; h < nh; h++) {
-            if (float(j) >= a || j >= SURF_MAX_HITS) {
+        // A cell's list holds its SURF_CELL_KEEP first hits (more are reached only when counting
+        // per structure skips truncated hits; they are dropped).
+        uint nk = min(nh, SURF_CELL_KEEP);
+        for (uint h = 0u; h < nk; h++) {
+            precise float s_hit = surf_pop(hs);
+            surf_restart(per_structure, s_hit, outer, k);
+            // A truncated hit (γ = 0) ends the ray, or with counting per structure is passed
+            // over (a later structure restarts the count); a full record ends it.
+            if (float(k) >= a || j >= SURF_MAX_HITS) {
                 cnt.cut++;
+                if (per_structure && j < SURF_MAX_HITS && T >= SURF_PASS_MIN_T) continue;
                 done = true;
                 break;
             }
-            precise float s_hit = surf_pop(hs);
             precise vec3 p = clamp(cell.q0 + s_hit * dn, 0.0, 1.0);
             float wt[8];
             trilerp_weights(p, wt);
@@ -241,7 +257,8 @@ void main() {
             trilerp_dwds(p, dn, dw);
             precise float sa = 0.0;
             [[unroll]] for (int i = 0; i < 8; i++) sa += wt[i] * pc.opacity.v[cell.lk[i]];
-            precise float at = surf_alpha(sa) * surf_gamma(a, j);
+            float gam = surf_gamma(a, k);
+            precise float at = surf_alpha(sa) * gam;
             // Shading and the derivatives along the ray the backward pass needs.
             precise vec3 raw = vec3(0.5);
             precise vec3 draw = vec3(0.0);
@@ -267,6 +284,10 @@ void main() {
             hr.depth = depth;
             hr.sa = sa;
             hr.at = at;
+            hr.gam = gam;
+            // A restarted count (k = 0 after the first record) starts the next structure.
+            if (k == 0u && j > 0u) sid++;
+            hr.sid = sid;
             hr.raw = raw;
             hr.draw = draw;
             hr.dsa = dsa;
@@ -274,6 +295,7 @@ void main() {
             hr.guard = abs(f1) <= FPRIME_GUARD * (cmax - cmin);
             set_hit(rec, j, hr);
             j++;
+            k++;
             cnt.hits++;
             precise float tn = T * (1.0 - at);
             T = tn;
@@ -343,37 +365,48 @@ void main() {
             }
         }
     }
-    // Lc: depths in scene units, mode m = first largest weight; ∂/∂t_m is summed apart (the same
-    // additions in the same order) and stored after the loop.
+    // Lc per structure (one, unless the truncation count restarts): depths in scene units, the
+    // structure's mode m = its first largest weight; ∂/∂t_m is summed apart per mode (the same
+    // additions in the same order) and added after the loop.
     float lambda_c = prm.lambda_c * omega;
     float d_t[SURF_MAX_HITS];
-    [[unroll]] for (uint k = 0u; k < SURF_MAX_HITS; k++) d_t[k] = 0.0;
+    float dtm[SURF_MAX_HITS];
+    [[unroll]] for (uint k = 0u; k < SURF_MAX_HITS; k++) {
+        d_t[k] = 0.0;
+        dtm[k] = 0.0;
+    }
     if (lambda_c != 0.0 && nh > 1u) {
-        uint m = 0u;
-        float wm = wj[0];
-        float dm_depth = rec[0].depth;
-        [[unroll]] for (uint k = 1u; k < SURF_MAX_HITS; k++) {
-            if (k < nh && wj[k] > wm) {
-                m = k;
-                wm = wj[k];
-                dm_depth = rec[k].depth;
-            }
-        }
-        precise float tm = dm_depth * inv_len;
         precise float lc = 0.0;
-        precise float dtm = 0.0;
         [[unroll]] for (uint k = 0u; k < SURF_MAX_HITS; k++) {
-            if (k >= nh || k == m) continue;
+            if (k >= nh) continue;
+            uint m = k;
+            float wm = -1.0;
+            float dm_depth = 0.0;
+            [[unroll]] for (uint q = 0u; q < SURF_MAX_HITS; q++) {
+                if (q < nh && rec[q].sid == rec[k].sid && wj[q] > wm) {
+                    m = q;
+                    wm = wj[q];
+                    dm_depth = rec[q].depth;
+                }
+            }
+            if (k == m) continue;
+            precise float tm = dm_depth * inv_len;
             precise float dk = rec[k].depth * inv_len - tm;
             lc += abs(dk);
             float sg = dk > 0.0 ? 1.0 : (dk < 0.0 ? -1.0 : 0.0);
             precise float a1 = lambda_c * sg;
             d_t[k] = a1;
-            precise float a2 = dtm - lambda_c * sg;
-            dtm = a2;
+            [[unroll]] for (uint q = 0u; q < SURF_MAX_HITS; q++) {
+                if (q == m) {
+                    precise float a2 = dtm[q] - lambda_c * sg;
+                    dtm[q] = a2;
+                }
+            }
         }
+        // A mode's own term is 0 and a non-mode's dtm is 0: adding is exact either way.
         [[unroll]] for (uint k = 0u; k < SURF_MAX_HITS; k++) {
-            if (k == m) d_t[k] = dtm;
+            precise float v = d_t[k] + dtm[k];
+            d_t[k] = v;
         }
         o.consistency = omega * lc;
     }
@@ -396,11 +429,11 @@ void main() {
     }
     uint nz_d = 0u, nz_a = 0u, nz_c = 0u;
     for (int jj = int(nh) - 1; jj >= 0; jj--) {
-        uint k = uint(jj);
-        HitRec hk = get_hit(rec, k);
+        uint ji = uint(jj);
+        HitRec hk = get_hit(rec, ji);
         float trk = 1.0, wk = 0.0, ek = 0.0, dtk = 0.0;
         [[unroll]] for (uint q = 0u; q < SURF_MAX_HITS; q++) {
-            if (q == k) {
+            if (q == ji) {
                 trk = tr[q];
                 wk = wj[q];
                 ek = e[q];
@@ -421,7 +454,7 @@ void main() {
         // ∂L/∂σα, and ∂L/∂s: opacity and colour move with the hit point, and the depth (Lc).
         float sa = hk.sa;
         float ex = exp(-max(sa, 0.0));
-        precise float d_sa = sa > 0.0 ? d_at * surf_gamma(a, k) * ex : 0.0;
+        precise float d_sa = sa > 0.0 ? d_at * hk.gam * ex : 0.0;
         precise float dl_ds = d_sa * hk.dsa + dtk * inv_len;
         [[unroll]] for (uint ch = 0u; ch < 3u; ch++) dl_ds += d_raw[ch] * hk.draw[ch];
         bool guarded = hk.guard;

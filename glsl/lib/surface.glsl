@@ -1,6 +1,6 @@
 // surface.glsl — stage-2 (αSurf) surface rendering pieces (method.md §3.2, §5): the ray in grid
 // units, a cell's entry/exit points, the sorted front-face hits of every level in one cell, and
-// the truncation weight γ_a(j). Pure functions (no buffer access): the kernels read the grid.
+// the truncation count and weight γ_a(j). Pure functions (no buffer access): the kernels read the grid.
 // Rust twin: src/math/surface.rs (same operations in the same order; `precise` everywhere the
 // twin rounds each operation).
 //
@@ -134,18 +134,28 @@ uint surf_segment_mask(float c[8], vec3 cc, vec3 q0, vec3 q1, float L, float lv[
     return keep;
 }
 
+// Appends a front crossing of level 0 to `outer` (its ≤ 2 in a cell: rising and falling
+// crossings alternate, and a cubic has ≤ 3 roots).
+void surf_outer_add(inout vec2 outer, float s) {
+    if (outer.x == SURF_NO_HIT) outer.x = s;
+    else if (outer.y == SURF_NO_HIT) outer.y = s;
+}
+
 // Front-face (rising) crossings in one cell of the levels in `mask` (from surf_segment_mask):
 // their count, and the SURF_CELL_KEEP smallest s ∈ [0, L) in ascending order in hs (read them with
 // surf_pop); corners c (paper order), cc = cubic_cell(c, q0, d) (C1..C3, formed once per cell),
 // entry/exit points q0/q1. Each level solves with its own exact end values and the sign before
 // the entry point (bit i of bpos/bneg; neither: unknown), and leaves the sign before the exit in
-// epos/eneg (for the next cell when it starts at this cell's t1).
+// epos/eneg (for the next cell when it starts at this cell's t1). `outer`: level 0's front
+// crossings among them, ascending (SURF_NO_HIT where there are fewer than two), for
+// surf_restart.
 uint surf_cell_hits(float c[8], vec3 cc, vec3 q0, vec3 q1, float L, float lv[SURF_MAX_LEVELS],
                     uint mask, uint bpos, uint bneg, out float hs[SURF_CELL_KEEP], out uint epos,
-                    out uint eneg) {
+                    out uint eneg, out vec2 outer) {
     uint n = 0u;
     epos = 0u;
     eneg = 0u;
+    outer = vec2(SURF_NO_HIT);
     [[unroll]] for (uint i = 0u; i < SURF_CELL_KEEP; i++) hs[i] = SURF_NO_HIT;
     while (mask != 0u) {
         uint i = uint(findLSB(mask));
@@ -154,14 +164,40 @@ uint surf_cell_hits(float c[8], vec3 cc, vec3 q0, vec3 q1, float L, float lv[SUR
         vec2 ends = vec2(cubic_trilerp_level(c, q0, tau), cubic_trilerp_level(c, q1, tau));
         float before = ((bpos >> i) & 1u) != 0u ? 1.0 : (((bneg >> i) & 1u) != 0u ? -1.0 : 0.0);
         CubicCrossings x = cubic_solve(cc, ends, L, before);
-        if (x.n > 0u && (x.rising & 1u) != 0u) surf_insert(hs, n, x.s.x);
-        if (x.n > 1u && (x.rising & 2u) != 0u) surf_insert(hs, n, x.s.y);
-        if (x.n > 2u && (x.rising & 4u) != 0u) surf_insert(hs, n, x.s.z);
+        if (x.n > 0u && (x.rising & 1u) != 0u) {
+            surf_insert(hs, n, x.s.x);
+            if (i == 0u) surf_outer_add(outer, x.s.x);
+        }
+        if (x.n > 1u && (x.rising & 2u) != 0u) {
+            surf_insert(hs, n, x.s.y);
+            if (i == 0u) surf_outer_add(outer, x.s.y);
+        }
+        if (x.n > 2u && (x.rising & 4u) != 0u) {
+            surf_insert(hs, n, x.s.z);
+            if (i == 0u) surf_outer_add(outer, x.s.z);
+        }
         float e = cubic_exit_sign(x, ends.x, before);
         if (e > 0.0) epos |= 1u << i;
         else if (e < 0.0) eneg |= 1u << i;
     }
     return n;
+}
+
+// Counting per structure (`per_structure`, SurfParams::count_per_structure): a popped hit s that
+// is one of the cell's front crossings of level 0 (`outer`; the outermost level, as levels
+// increase) is where the ray enters a structure from outside every level set, so the truncation
+// count k restarts at 0 there; each structure along the ray then gets γ_a for its own first hits,
+// and a surface seen through another is composited, while the inner levels of one structure are
+// still truncated. A matched value is consumed: of two equal hits one restarts the count.
+void surf_restart(bool per_structure, float s, inout vec2 outer, inout uint k) {
+    if (!per_structure) return;
+    if (s == outer.x) {
+        outer.x = SURF_NO_HIT;
+        k = 0u;
+    } else if (s == outer.y) {
+        outer.y = SURF_NO_HIT;
+        k = 0u;
+    }
 }
 
 // Truncation weight γ_a(j) = ½(1 − cos(π·clamp(a − j, 0, 1))): exactly 1 for j ≤ a − 1 and

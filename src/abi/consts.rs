@@ -89,6 +89,10 @@ abi_consts! {
     /// Composited hits surface_train records per ray: the truncation parameter a may not exceed
     /// this.
     SURF_MAX_HITS: usize = 8;
+    /// Counting the truncation per structure, a truncated hit is passed over only while the
+    /// transmittance is at least this (1/256): below it, what lies behind could change the
+    /// colour by less than one step of the 8-bit images, so the ray ends there.
+    SURF_PASS_MIN_T: f32 = 0.00390625;
     /// Relative guard on the implicit derivative's denominator f′(s) (surface_train).
     FPRIME_GUARD: f32 = 1e-3;
 

@@ -764,6 +764,11 @@ pub fn run(args: &AccuracyArgs, devices: &mut Devices) -> Result<()> {
         }
         results.push(r);
     }
+    let failed = results
+        .iter()
+        .filter(|r| r.alphasurf_chamfer_e2.is_none() && r.best_chamfer_e2.is_none())
+        .count();
+    let scenes = results.len();
     let summary = summarise(results);
     write_json(&out.join("accuracy.json"), &summary)?;
     println!("\n{}", table(&summary));
@@ -771,7 +776,7 @@ pub fn run(args: &AccuracyArgs, devices: &mut Devices) -> Result<()> {
     if args.json {
         println!("{}", serde_json::to_string(&summary)?);
     }
-    Ok(())
+    super::ensure_any_succeeded("scene's evaluation", failed, scenes)
 }
 
 #[cfg(test)]

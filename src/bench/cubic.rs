@@ -192,12 +192,22 @@ pub struct ClassRow {
     pub pass: bool,
 }
 
+/// Bytes each case's results take beside the case and its oracle: the crossings of the Vulkan
+/// kernel, both CPU twins and the baseline, and the device's copies of the case and its output.
+const BYTES_PER_CASE_RESULTS: f64 = 512.0;
+
 /// Run the suite; prints the table (and the JSON line); returns `pass`.
 pub fn run(gpu: &Gpu, args: &CubicBenchArgs) -> Result<bool> {
     anyhow::ensure!(args.cases > 0, "--cases must be positive");
     let n = args.cases;
     let t0 = Instant::now();
     let classes = CaseClass::ALL;
+    let per_case = (std::mem::size_of::<CubicCase>() + std::mem::size_of::<OracleCase>()) as f64
+        + BYTES_PER_CASE_RESULTS;
+    crate::run::memory::ensure_fits(
+        &format!("--cases {n} ({} classes)", classes.len()),
+        n as f64 * classes.len() as f64 * per_case,
+    )?;
     let all: Vec<CubicCase> = classes
         .par_iter()
         .flat_map(|&c| gen_cases(c, n, args.seed))

@@ -18,6 +18,7 @@ use std::time::Instant;
 pub fn thin_scene(dir: &Path) -> Result<Dataset> {
     let mut opts = GenerateOptions::new(SceneKind::Thin);
     (opts.res, opts.views, opts.spp_side, opts.gt_spacing) = (128, 40, 2, 0.05);
+    opts.overwrite = true; // the bench's own temporary folder
     generate(dir, &opts)?;
     Dataset::load(dir, &LoadOptions::default())
 }

@@ -22,6 +22,7 @@ use crate::abi::buffers::{TrainCounts, TrainPerRay};
 use crate::data::TrainViews;
 use crate::gpu::Gpu;
 use crate::grid::surface::SurfaceGrid;
+use crate::math::surface::Truncation;
 use crate::plenoxel::{CpuPlenoxels, Plenoxels, VulkanPlenoxels};
 use crate::surface::{CpuSurface, SurfaceBackend, SurfaceRegs, SurfaceStepParams, VulkanSurface};
 use crate::train::progress::READ_EVERY;
@@ -85,7 +86,11 @@ fn step_params(
     step: u32,
 ) -> SurfaceStepParams {
     let draw = (step as u64 + 1).wrapping_mul(0x9e37_79b9_7f4a_7c15);
-    stage2::step_params(cfg, res, rows, 0, a, [draw, draw >> 17, draw >> 7])
+    let truncation = Truncation {
+        a,
+        count: cfg.truncation_count,
+    };
+    stage2::step_params(cfg, res, rows, 0, truncation, [draw, draw >> 17, draw >> 7])
 }
 
 /// `steps + 1` stage-2 steps (the first untimed) on the batches of `n` rays drawn from `views`

@@ -425,7 +425,8 @@ pub fn run(args: &TimeVsErrorArgs, devices: &mut Devices) -> Result<()> {
         });
         println!("{j}");
     }
-    Ok(())
+    let failed = rows.iter().filter(|r| r.error.is_some()).count();
+    super::ensure_any_succeeded("sweep point's method", failed, rows.len())
 }
 
 #[cfg(test)]

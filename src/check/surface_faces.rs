@@ -180,7 +180,7 @@ fn run_field(
             scale: [1.0; 3],
             offset: [0.0; 3],
             levels: lv.clone(),
-            a: 1e6,
+            truncation: 1e6.into(),
             stop_thresh: 1e-4,
             background: [1.0; 3],
         };

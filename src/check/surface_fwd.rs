@@ -23,7 +23,7 @@ use crate::cpu::surface_fwd::{
 use crate::cpu::surface_train::SurfaceLoss;
 use crate::gpu::Gpu;
 use crate::kernels::surface_fwd::{Push, INFO};
-use crate::math::surface::SurfOut;
+use crate::math::surface::{SurfOut, Truncation, TruncationCount};
 use crate::math::surface_blocks::{
     surf_live_words, SkipRef, SURF_BLOCK_SHIFT_CPU, SURF_BLOCK_SHIFT_VULKAN, SURF_BOX_WORDS,
 };
@@ -62,13 +62,14 @@ impl SurfaceScene {
         }
     }
 
-    /// Parameters with truncation `a` and stop threshold `stop`, on [`TEST_BACKGROUND`].
-    pub fn params(&self, a: f32, stop: f32) -> SurfaceParams {
+    /// Parameters with `truncation` (a plain a: counted per ray) and stop threshold `stop`, on
+    /// [`TEST_BACKGROUND`].
+    pub fn params(&self, truncation: impl Into<Truncation>, stop: f32) -> SurfaceParams {
         SurfaceParams {
             scale: self.scale,
             offset: self.offset,
             levels: self.levels.clone(),
-            a,
+            truncation: truncation.into(),
             stop_thresh: stop,
             background: TEST_BACKGROUND,
         }
@@ -299,12 +300,26 @@ pub fn check(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
             }
         })
         .collect();
+    let per_structure = |a| Truncation {
+        a,
+        count: TruncationCount::Structure,
+    };
     let skips = [
-        (3.5f32, 1e-4f32, &real, SURF_BLOCK_SHIFT_VULKAN),
-        (100.0, 1e-3, &random, SURF_BLOCK_SHIFT_CPU),
+        (3.5f32.into(), 1e-4f32, &real, SURF_BLOCK_SHIFT_VULKAN),
+        (100.0.into(), 1e-3, &random, SURF_BLOCK_SHIFT_CPU),
+        (per_structure(1.5), 1e-4, &real, SURF_BLOCK_SHIFT_VULKAN),
     ];
-    for (a, stop, words, shift) in skips {
-        let p = scene.params(a, stop);
+    for (t, stop, words, shift) in skips {
+        let a = format!(
+            "{}{}",
+            t.a,
+            if t.count == TruncationCount::Structure {
+                " per structure"
+            } else {
+                ""
+            }
+        );
+        let p = scene.params(t, stop);
         let blocks = Some(SkipRef { words, shift });
         let (want, wc) = render(&scene.grid(), &rays, &p, blocks)?;
         let (got, gc, _) = render_gpu(gpu, &scene.grid(), &rays, &p, blocks)?;
@@ -331,7 +346,7 @@ pub fn check(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
         }
         notes.push(format!("a {a}: {wc:?}"));
     }
-    let cap = (EXCUSED_CAP_FRAC * 2.0 * n_rays as f64).floor() as usize;
+    let cap = (EXCUSED_CAP_FRAC * skips.len() as f64 * n_rays as f64).floor() as usize;
     if excused > cap {
         cmp.failures += 1;
         cmp.first_failure
@@ -339,9 +354,9 @@ pub fn check(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
     }
     Ok(cmp.row(
         "surface_fwd",
-        2 * n_rays,
+        skips.len() * n_rays,
         format!(
-            "hits exact, {excused} rays excused (cap {cap}, 0.5 %); scene blocks, then random blocks; cells/solves/culled/hits/cut/skips {}",
+            "hits exact, {excused} rays excused (cap {cap}, 0.5 %); scene blocks, then random blocks, then scene blocks counting per structure; cells/solves/culled/hits/cut/skips {}",
             notes.join("; ")
         ),
     ))

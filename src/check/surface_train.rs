@@ -41,6 +41,7 @@ use crate::cpu::surface_train::{
 use crate::gpu::Gpu;
 use crate::grid::surface::SurfaceGrid;
 use crate::grid::SH_DIM;
+use crate::math::surface::{Truncation, TruncationCount};
 use crate::math::surface_blocks::{SkipRef, SURF_BLOCK_SHIFT_VULKAN};
 use crate::math::trilerp::trilerp_grad;
 use crate::surface::{
@@ -69,15 +70,21 @@ pub fn scene_grid(s: &SurfaceScene) -> SurfaceGrid {
     }
 }
 
-/// Step parameters of a pass: truncation, stop threshold and the loss weights (no regulariser).
-pub fn pass_params(a: f32, stop_thresh: f32, lambda_h: f32, lambda_c: f32) -> SurfaceStepParams {
+/// Step parameters of a pass: truncation (a plain a: counted per ray), stop threshold and the
+/// loss weights (no regulariser).
+pub fn pass_params(
+    truncation: impl Into<Truncation>,
+    stop_thresh: f32,
+    lambda_h: f32,
+    lambda_c: f32,
+) -> SurfaceStepParams {
     SurfaceStepParams {
         lr_delta: 0.0,
         lr_opacity: 0.0,
         lr_sh: 0.0,
         beta: 0.95,
         eps: 1e-8,
-        a,
+        truncation: truncation.into(),
         stop_thresh,
         lambda_h,
         lambda_c,
@@ -125,7 +132,7 @@ pub fn cpu_train(
             targets,
             weights,
         },
-        &surface_params(grid, p.a, p.stop_thresh, TEST_BACKGROUND),
+        &surface_params(grid, p.truncation, p.stop_thresh, TEST_BACKGROUND),
         &batch_loss(rays.len() / 6, p),
         Some(SkipRef {
             words: &blocks,
@@ -360,7 +367,7 @@ fn run_pass(
         ));
     }
     // 3: the well-conditioned rays: gradients within 1e-4.
-    let sp = surface_params(grid, p.a, p.stop_thresh, TEST_BACKGROUND);
+    let sp = surface_params(grid, p.truncation, p.stop_thresh, TEST_BACKGROUND);
     let good: Vec<usize> = (0..keep.len())
         .filter(|&i| {
             let r = &rays_k[6 * i..6 * i + 6];
@@ -464,12 +471,26 @@ pub fn check(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
             targets,
             weights,
         };
-        for (a, stop) in [(3.5f32, 1e-4f32), (8.0, 1e-3)] {
-            let p = pass_params(a, stop, 0.5, 0.2);
+        let per_structure = Truncation {
+            a: 1.5,
+            count: TruncationCount::Structure,
+        };
+        for (t, stop) in [
+            (3.5f32.into(), 1e-4f32),
+            (8.0.into(), 1e-3),
+            (per_structure, 1e-4),
+        ] {
+            let p = pass_params(t, stop, 0.5, 0.2);
             let what = format!(
-                "{variant}{} a {a}",
+                "{variant}{} a {}{}",
                 if batch.weights.is_some() {
                     " weighted"
+                } else {
+                    ""
+                },
+                t.a,
+                if t.count == TruncationCount::Structure {
+                    " per structure"
                 } else {
                     ""
                 }

@@ -20,6 +20,14 @@ pub struct CheckKernelsArgs {
 
 /// Run the checks, print the table; returns whether all passed.
 pub fn run(gpu: &Gpu, args: &CheckKernelsArgs) -> Result<bool> {
+    if let Some(only) = &args.only {
+        let names: Vec<&str> = CHECKS.iter().map(|c| c.0).collect();
+        anyhow::ensure!(
+            names.iter().any(|n| n.contains(only.as_str())),
+            "--only {only:?} matches no kernel; the kernels are {}",
+            names.join(", ")
+        );
+    }
     println!("device: {} ({})", gpu.info().name, gpu.info().driver);
     println!(
         "{:<16} {:>8} {:>11} {:>11} {:<28} {:<5} note",

@@ -11,9 +11,14 @@ pub struct MakeSceneArgs {
     /// Which scene.
     #[arg(long, value_enum)]
     pub kind: SceneKind,
-    /// Output directory (created if needed).
+    /// Output directory (created if needed). It is written beside itself (`.NAME.partial`) and
+    /// swapped in when complete, so an interrupted run leaves no half dataset.
     #[arg(long)]
     pub out: PathBuf,
+    /// Replace the scene `make-scene` wrote before in `--out` (only such a scene: a folder
+    /// holding anything else is never replaced; files of yours beside the scene are kept).
+    #[arg(long)]
+    pub overwrite: bool,
     /// Image width and height in pixels.
     #[arg(long, default_value_t = 256)]
     pub res: u32,
@@ -23,7 +28,7 @@ pub struct MakeSceneArgs {
     /// Seed of scene details, cameras and ground-truth samples.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Samples per pixel along each axis (spp = N²).
+    /// Samples per pixel along each axis (spp = N²; at most 32).
     #[arg(long, default_value_t = 4)]
     pub spp: u32,
     /// Ground-truth point spacing (sqrt of area per point), Blender units.
@@ -41,6 +46,7 @@ pub fn run(args: &MakeSceneArgs) -> anyhow::Result<()> {
         spp_side: args.spp,
         gt_spacing: args.gt_spacing,
         progress: std::io::stderr().is_terminal(),
+        overwrite: args.overwrite,
     };
     let r = generate(&args.out, &opts)?;
     println!(

@@ -2,11 +2,13 @@
 //! the same cell walk (`math::surface_walk`, with the block skipping of `math::surface_blocks`),
 //! per-cell hits (`math::surface`) and compositing arithmetic.
 
+use crate::abi::consts::SURF_PASS_MIN_T;
 use crate::abi::surface_grid::SurfaceGridRef;
 use crate::math::dda::ray_unit;
 use crate::math::sh::sh_basis;
 use crate::math::surface::{
-    surf_alpha, surf_cell_hits, surf_gamma, surf_ray, FaceSigns, SurfOut, SURF_MAX_LEVELS,
+    surf_alpha, surf_cell_hits, surf_gamma, surf_ray, surf_restart, FaceSigns, SurfOut, Truncation,
+    TruncationCount, SURF_MAX_LEVELS,
 };
 use crate::math::surface_blocks::{surf_blocks_per_axis, surf_live_words, SkipRef, SURF_BOX_WORDS};
 use crate::math::surface_walk::CellWalk;
@@ -24,8 +26,9 @@ pub struct SurfaceParams {
     pub offset: [f32; 3],
     /// Level values τ_i (at most [`SURF_MAX_LEVELS`]).
     pub levels: Vec<f32>,
-    /// Truncation parameter a: hits j ≥ a get γ = 0 (the ray stops there).
-    pub a: f32,
+    /// Truncated compositing: hits with count k ≥ a get γ = 0 (the ray stops there, or with
+    /// counting per structure passes them over).
+    pub truncation: Truncation,
     /// Stop once transmittance falls below this.
     pub stop_thresh: f32,
     /// The colour composited behind the last hit: C = Σ w_j c_j + T·background.
@@ -47,6 +50,9 @@ pub fn render_ray(
     let mut color = [0f32; 3];
     let mut t_acc = 1.0f32;
     let mut j = 0u32;
+    // The truncation count: j itself, or per structure the hits since the ray entered level 0.
+    let mut k = 0u32;
+    let Truncation { a, count } = p.truncation;
     let mut cnt = SurfCounts::default();
     let mut walk = CellWalk::new(g, og, dn, levels, blocks);
     let mut face = FaceSigns::default();
@@ -59,9 +65,14 @@ pub fn render_ray(
             t: piece.t1,
             ..hits.exit
         };
+        let mut outer = hits.outer;
         for &s in hits.as_slice() {
-            if j as f32 >= p.a {
+            surf_restart(count, s, &mut outer, &mut k);
+            if k as f32 >= a {
                 cnt.cut += 1;
+                if count == TruncationCount::Structure && t_acc >= SURF_PASS_MIN_T {
+                    continue;
+                }
                 break 'walk;
             }
             let pos = std::array::from_fn(|k| (q0[k] + s * dn[k]).clamp(0.0, 1.0));
@@ -70,7 +81,7 @@ pub fn render_ray(
             for i in 0..8 {
                 sa += wt[i] * g.opacity[lk[i] as usize];
             }
-            let at = surf_alpha(sa) * surf_gamma(p.a, j);
+            let at = surf_alpha(sa) * surf_gamma(a, k);
             let mut sh = [0f32; 27];
             for i in 0..8 {
                 let row = &g.sh[lk[i] as usize * 27..lk[i] as usize * 27 + 27];
@@ -88,6 +99,7 @@ pub fn render_ray(
             }
             t_acc *= 1.0 - at;
             j += 1;
+            k += 1;
             cnt.hits += 1;
             if t_acc < p.stop_thresh {
                 break 'walk;

@@ -8,7 +8,8 @@
 //! - entropy LH = −Σ p_j ln p_j, p = w/W: ∂LH/∂w_j = −(ln p_j + LH)/W (0 where w_j = 0), carried
 //!   to the α̃ by the same recurrence as a colour channel without background ("gradient to α̃ only").
 //! - Lc = Σ_j |t_j − t_mode| over the composited hits, t in scene units, t_mode the depth of the
-//!   largest weight: ∂/∂t_j = ±λc, to the hit depth.
+//!   largest weight of the hit's structure (the whole ray unless the truncation count restarts):
+//!   ∂/∂t_j = ±λc, to the hit depth.
 //! - α̃ = γ_j·(1 − e^{−max(σα, 0)}) ⇒ ∂α̃/∂σα = γ_j e^{−σα} (σα > 0); colour c = max(0, raw).
 //! - δ through the hit position: ∂s/∂δ_i = −w_i(p)/f′(s), f′(s) = ∇δ(p)·d; ∂L/∂s collects the
 //!   spatial derivatives along d of σα and raw colour at p, and Lc. Hits with
@@ -28,7 +29,8 @@ use crate::abi::surface_grid::SurfaceGridRef;
 use crate::math::dda::ray_unit;
 use crate::math::sh::sh_basis;
 use crate::math::surface::{
-    surf_alpha, surf_cell_hits, surf_gamma, surf_ray, FaceSigns, SURF_MAX_LEVELS,
+    surf_alpha, surf_cell_hits, surf_gamma, surf_ray, surf_restart, FaceSigns, Truncation,
+    TruncationCount, SURF_MAX_LEVELS,
 };
 use crate::math::surface_blocks::SkipRef;
 use crate::math::surface_walk::CellWalk;
@@ -38,7 +40,7 @@ use rayon::prelude::*;
 use std::sync::atomic::AtomicU32;
 
 pub use crate::abi::buffers::{RayLoss, TrainCounts};
-pub use crate::abi::consts::{FPRIME_GUARD, SURF_MAX_HITS};
+pub use crate::abi::consts::{FPRIME_GUARD, SURF_MAX_HITS, SURF_PASS_MIN_T};
 
 /// Loss weights of the fused per-ray terms (per-ray coefficients: the batch mean is the caller's).
 #[derive(Clone, Copy, Debug)]
@@ -77,6 +79,8 @@ pub struct Hit {
     pub len: f32,
     /// Which level.
     pub level: u32,
+    /// Its truncation count k (γ_a(k)).
+    pub count: u32,
 }
 
 /// A ray's forward result: recorded hits, colour before the background, final transmittance.
@@ -117,6 +121,10 @@ pub fn trace_ray(
         inv_len: if len > 0.0 { 1.0 / len } else { 0.0 },
     };
     let mut t_acc = 1.0f32;
+    // The truncation count: the record index, or per structure the hits since the ray entered
+    // level 0.
+    let mut k = 0u32;
+    let Truncation { a, count } = p.truncation;
     let mut walk = CellWalk::new(g, og, dn, levels, blocks);
     let mut face = FaceSigns::default();
     'walk: for cell in walk.by_ref() {
@@ -128,10 +136,25 @@ pub fn trace_ray(
             t: piece.t1,
             ..hits.exit
         };
-        for (&s, &lv) in hits.as_slice().iter().zip(hits.levels()) {
+        let mut outer = hits.outer;
+        // The kernel's cell list holds its SURF_MAX_HITS first hits (more are reached only when
+        // counting per structure passes truncated hits over; they are dropped).
+        for (&s, &lv) in hits
+            .as_slice()
+            .iter()
+            .zip(hits.levels())
+            .take(SURF_MAX_HITS)
+        {
             let j = tr.n;
-            if j as f32 >= p.a {
+            surf_restart(count, s, &mut outer, &mut k);
+            if k as f32 >= a || j >= SURF_MAX_HITS {
                 cnt.cut += 1;
+                if count == TruncationCount::Structure
+                    && j < SURF_MAX_HITS
+                    && t_acc >= SURF_PASS_MIN_T
+                {
+                    continue;
+                }
                 break 'walk;
             }
             let h = Hit {
@@ -143,15 +166,17 @@ pub fn trace_ray(
                 s,
                 len: piece.t1 - piece.t0,
                 level: lv,
+                count: k,
             };
             let wt = trilerp_weights(hit_point(&h, dn));
             let mut sa = 0.0f32;
             for i in 0..8 {
                 sa += wt[i] * g.opacity[lk[i] as usize];
             }
-            let at = surf_alpha(sa) * surf_gamma(p.a, j as u32);
+            let at = surf_alpha(sa) * surf_gamma(a, k);
             tr.hits[j] = h;
             tr.n += 1;
+            k += 1;
             cnt.hits += 1;
             t_acc *= 1.0 - at;
             if t_acc < p.stop_thresh {
@@ -178,7 +203,7 @@ struct Shade {
     raw: [f32; 3],
 }
 
-fn shade(g: &SurfaceGridRef, h: &Hit, dn: [f32; 3], y: &[f32; 9], a: f32, j: usize) -> Shade {
+fn shade(g: &SurfaceGridRef, h: &Hit, dn: [f32; 3], y: &[f32; 9], a: f32) -> Shade {
     let p = hit_point(h, dn);
     let wt = trilerp_weights(p);
     let q = [1.0 - p[0], 1.0 - p[1], 1.0 - p[2]];
@@ -197,7 +222,7 @@ fn shade(g: &SurfaceGridRef, h: &Hit, dn: [f32; 3], y: &[f32; 9], a: f32, j: usi
         sa += wt[i] * g.opacity[h.lk[i] as usize];
     }
     let e = (-sa.max(0.0)).exp();
-    let gamma = surf_gamma(a, j as u32);
+    let gamma = surf_gamma(a, h.count);
     let at = surf_alpha(sa) * gamma;
     let mut raw = [0.5f32; 3];
     for i in 0..8 {
@@ -242,9 +267,9 @@ pub fn train(
     validate_inputs(g, rays, p)?;
     validate_blocks(g, blocks)?;
     ensure!(
-        p.a <= SURF_MAX_HITS as f32,
+        p.truncation.a <= SURF_MAX_HITS as f32,
         "truncation parameter a = {} exceeds the {SURF_MAX_HITS} hits a ray records",
-        p.a
+        p.truncation.a
     );
     ensure!(
         targets.len() * 2 == rays.len(),
@@ -386,22 +411,31 @@ fn ray_backward(
             }
         }
     }
-    // Lc: depths in scene units, mode = first largest weight.
+    // Lc per structure (the records from one whose truncation count is 0 to the next such: one
+    // structure unless the count restarts): depths in scene units, the structure's mode = its
+    // first largest weight.
     let mut d_t = [0.0f32; SURF_MAX_HITS];
     if loss.lambda_c != 0.0 && n > 1 {
-        let mut m = 0;
+        let mut first = [0usize; SURF_MAX_HITS];
         for j in 1..n {
-            if w[j] > w[m] {
-                m = j;
-            }
+            first[j] = if tr.hits[j].count == 0 {
+                j
+            } else {
+                first[j - 1]
+            };
         }
+        let mode = |j: usize| {
+            (first[j]..n)
+                .filter(|&i| first[i] == first[j])
+                .fold(first[j], |m, i| if w[i] > w[m] { i } else { m })
+        };
         let depth = |j: usize| (tr.hits[j].t0 + tr.hits[j].s) * tr.inv_len;
-        let tm = depth(m);
         for j in 0..n {
+            let m = mode(j);
             if j == m {
                 continue;
             }
-            let dj = depth(j) - tm;
+            let dj = depth(j) - depth(m);
             out.consistency += dj.abs();
             let sg = if dj > 0.0 {
                 1.0
@@ -464,7 +498,7 @@ fn train_ray(
     let tr = trace_ray(g, ro, rd, p, blocks, &mut cnt);
     let y = sh_basis(ray_unit(rd));
     let shades: Vec<Shade> = (0..tr.n)
-        .map(|j| shade(g, &tr.hits[j], tr.dn, &y, p.a, j))
+        .map(|j| shade(g, &tr.hits[j], tr.dn, &y, p.truncation.a))
         .collect();
     let (rl, hg, d_bg) = ray_backward(&tr, &shades, target, loss, p.background);
     // Per-corner sums over consecutive hits in one cell, in reverse hit order (the kernel scatters

@@ -114,6 +114,17 @@ pub fn image_size(path: &Path) -> Result<(u32, u32), DataError> {
     Ok(if turned { (h, w) } else { (w, h) })
 }
 
+/// Why `path`, which is not a readable file, cannot be read (a folder, a symbolic link loop, no
+/// permission); `None` when it does not exist (the caller's "not found") or is a file.
+pub fn unreadable_reason(path: &std::path::Path) -> Option<String> {
+    match std::fs::metadata(path) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => None,
+        Err(e) => Some(e.to_string()),
+        Ok(m) if m.is_dir() => Some("a folder, not an image".into()),
+        Ok(_) => None,
+    }
+}
+
 /// Composites straight-alpha RGBA8 on `bg`, then box-averages k×k blocks (the ragged right and
 /// bottom remainders are dropped). Alpha is box-averaged too. Results are rounded to 8 bits.
 pub fn composite_and_downscale(

@@ -55,6 +55,22 @@ pub struct Inspection {
 }
 
 /// Summarises a dataset.
+/// A warning when a split's images load smaller than their files by a factor that does not
+/// divide the files' size: the box downscale dropped their ragged right and bottom edges.
+fn cropped_by_downscale(s: &Split) -> Option<String> {
+    let f = s.frames.first()?;
+    let (fw, fh) = image::image_dimensions(&f.file).ok()?;
+    let (w, h) = (f.image.width, f.image.height);
+    (w > 0 && h > 0 && (fw % w != 0 || fh % h != 0)).then(|| {
+        format!(
+            "{}: the images ({fw}x{fh} in {}) load as {w}x{h}: the downscale factor does not \
+             divide their size, so their right and bottom edges are dropped",
+            s.name,
+            f.file.display()
+        )
+    })
+}
+
 pub fn inspect(ds: &Dataset) -> Inspection {
     let (box_min, box_max) = ds.scene.blender_bounds();
     let mut warnings = Vec::new();
@@ -67,6 +83,30 @@ pub fn inspect(ds: &Dataset) -> Inspection {
                 "{}: {no_alpha} of {} images have no alpha channel (no masks; treated as opaque)",
                 s.name,
                 s.frames.len()
+            ));
+        }
+        warnings.extend(cropped_by_downscale(s));
+        let outside: Vec<usize> = s
+            .frames
+            .iter()
+            .enumerate()
+            .filter(|(_, f)| {
+                let c = &f.camera;
+                !(0.0..=c.width as f32).contains(&c.cx) || !(0.0..=c.height as f32).contains(&c.cy)
+            })
+            .map(|(i, _)| i)
+            .collect();
+        if let Some(&i) = outside.first() {
+            let c = &s.frames[i].camera;
+            warnings.push(format!(
+                "{}: {} views have their principal point outside the image (first: view {i}, \
+                 cx {} cy {} in a {}x{} image): check the intrinsics",
+                s.name,
+                outside.len(),
+                c.cx,
+                c.cy,
+                c.width,
+                c.height
             ));
         }
         let off: Vec<usize> = s
@@ -114,7 +154,7 @@ pub fn inspect(ds: &Dataset) -> Inspection {
             let cell = (box_max - box_min) / HULL_RES as f32;
             if lo.cmple(box_min + cell).any() || hi.cmpge(box_max - cell).any() {
                 warnings.push(
-                    "the estimated object reaches the scene box boundary: it may not fit in the grid (adjust the scale)"
+                    "the estimated object reaches the scene box boundary: it may not fit in the grid (the layout's box is too small for it: check the scene's units; inspect --scale S shows the bounds at another scale)"
                         .into(),
                 );
             }

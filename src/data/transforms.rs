@@ -363,6 +363,16 @@ pub(super) fn resolve_image(
     if with_png.is_file() {
         return Ok(with_png);
     }
+    // Present but not a readable file (a folder without permission, a symbolic link loop):
+    // the reason, not "not found".
+    for p in [&direct, &with_png] {
+        if let Some(why) = super::image::unreadable_reason(p) {
+            return Err(DataError::UnreadableImage {
+                path: p.clone(),
+                msg: format!("{why} (frame {frame} of {})", json.display()),
+            });
+        }
+    }
     Err(DataError::MissingImage {
         path: if direct.extension().is_some() {
             direct

@@ -266,10 +266,17 @@ fn load_view(
     k: u32,
     bg: [f32; 3],
 ) -> Result<Frame, DataError> {
-    let missing = |path: &Path| DataError::MissingViewFile {
-        path: path.to_path_buf(),
-        image: v.name.clone(),
-        listed_in: source.to_path_buf(),
+    // Not there, or there but unreadable (a folder, a link loop): said as such.
+    let missing = |path: &Path| match super::image::unreadable_reason(path) {
+        Some(why) => DataError::UnreadableImage {
+            path: path.to_path_buf(),
+            msg: format!("{why} (image '{}' posed in {})", v.name, source.display()),
+        },
+        None => DataError::MissingViewFile {
+            path: path.to_path_buf(),
+            image: v.name.clone(),
+            listed_in: source.to_path_buf(),
+        },
     };
     if !v.file.is_file() {
         return Err(missing(&v.file));

@@ -1,9 +1,11 @@
 //! svox2 checkpoint import/export (`ckpt.npz`) and the small npz reader/writer under it.
 //!
 //! svox2 layout: `links` int32 (X, Y, Z), `density_data` (n, 1) and `sh_data` (n, 27) in float16
-//! or float32, `radius` and `center` float (3,). Other arrays (`basis_type`, `background_data`, …)
-//! are ignored. As in svox2's loader, a missing `radius` / `center` means [1, 1, 1] / [0, 0, 0],
-//! and every float width (f2/f4/f8) is read as f32. Negative links (svox2 stores skip distances
+//! or float32, `radius` and `center` float (3,). `basis_type`, when present, must be svox2's
+//! spherical harmonics (1); other arrays (`background_data`, …) are ignored. A missing `radius`
+//! is refused (svox2's loader would assume [1, 1, 1], which places the grid wrongly in any other
+//! scene box); as in svox2, a missing `center` means [0, 0, 0]. Every float width (f2/f4/f8) is
+//! read as f32. Negative links (svox2 stores skip distances
 //! there after `accelerate()`) all mean empty and are normalised to −1 on import.
 //! We export float32, entries stored uncompressed (np.load reads both stored and deflated ones).
 //!
@@ -182,6 +184,17 @@ fn decode<R: Read>(npy: NpyFile<R>, count: usize) -> Result<Data> {
         Ok(r) => return all(r).map(Data::I32),
         Err(npy) => npy,
     };
+    // numpy's default integer (svox2's `basis_type`), kept when it fits int32.
+    let npy = match npy.try_data::<i64>() {
+        Ok(r) => {
+            let wide = all(r)?;
+            let narrow: Option<Vec<i32>> = wide.iter().map(|&v| i32::try_from(v).ok()).collect();
+            return narrow
+                .map(Data::I32)
+                .with_context(|| format!("int64 values beyond int32 ({descr})"));
+        }
+        Err(npy) => npy,
+    };
     match npy.try_data::<u8>() {
         Ok(r) => all(r).map(Data::U8),
         Err(_) => bail!("unsupported dtype {descr} (expected float16/32/64, int32 or uint8)"),
@@ -285,7 +298,12 @@ pub fn write_atomic(
 ) -> Result<()> {
     crate::io::atomic::write_atomic(path, |w| {
         let mut npz = NpzWriter::new(w);
-        fill(&mut npz)?;
+        if let Err(e) = fill(&mut npz) {
+            // Abandoned (its temporary is removed): a dropped zip writer would try to finalise
+            // it and print its own raw error (a full disk) before the command's message.
+            std::mem::forget(npz);
+            return Err(e);
+        }
         npz.finish()?.flush()?;
         Ok(())
     })
@@ -343,6 +361,11 @@ pub fn read_grid(npz: &mut NpzReader) -> Result<Grid> {
         sh.shape
     );
     let sh = sh.into_f32("sh_data")?;
+    ensure!(
+        npz.contains("radius"),
+        "no array 'radius': the grid's extent in the scene is unknown (svox2 writes 'radius' and \
+         'center' with every grid; add them, e.g. np.savez(..., radius=..., center=...))"
+    );
     let mut vec3 = |name: &str, default: f32| -> Result<[f32; 3]> {
         if !npz.contains(name) {
             return Ok([default; 3]);
@@ -384,10 +407,36 @@ pub fn write_grid<W: Write + Seek>(npz: &mut NpzWriter<W>, grid: &Grid) -> Resul
     npz.array("center", &[3], &grid.center)
 }
 
+/// svox2's `BASIS_TYPE_SH`: the only basis this crate renders.
+const BASIS_TYPE_SH: i32 = 1;
+
+/// Refuse an svox2 grid of another basis (3D texture 4, MLP 255): its `sh_data` is no SH.
+fn check_basis(npz: &mut NpzReader) -> Result<()> {
+    if !npz.contains("basis_type") {
+        return Ok(());
+    }
+    let a = npz.read("basis_type")?;
+    let v: Vec<f64> = match a.data {
+        Data::I32(v) => v.into_iter().map(f64::from).collect(),
+        Data::F32(v) => v.into_iter().map(f64::from).collect(),
+        Data::U8(v) => v.into_iter().map(f64::from).collect(),
+    };
+    let shown: Vec<String> = v.iter().map(|x| x.to_string()).collect();
+    ensure!(
+        v == [BASIS_TYPE_SH as f64],
+        "array 'basis_type' is [{}]: only spherical harmonics ({BASIS_TYPE_SH}, svox2's \
+         BASIS_TYPE_SH) are supported, not a 3D texture (4) or an MLP (255) basis",
+        shown.join(", ")
+    );
+    Ok(())
+}
+
 /// Import an svox2 `ckpt.npz`.
 pub fn load_svox2(path: &Path) -> Result<Grid> {
     let mut npz = NpzReader::open(path)?;
-    read_grid(&mut npz).with_context(|| format!("importing svox2 checkpoint {}", path.display()))
+    check_basis(&mut npz)
+        .and_then(|()| read_grid(&mut npz))
+        .with_context(|| format!("importing svox2 checkpoint {}", path.display()))
 }
 
 /// Export `grid` as an svox2 `ckpt.npz` (float32), written atomically.

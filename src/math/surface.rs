@@ -92,6 +92,78 @@ pub struct CellHits {
     pub level: [u32; SURF_MAX_CELL_HITS],
     /// The solved levels' signs before the exit (`t` left 0 for the caller to set).
     pub exit: FaceSigns,
+    /// Level 0's front crossings among the hits, ascending ([`SURF_NO_HIT`] where there are
+    /// fewer than two), for [`surf_restart`].
+    pub outer: [f32; 2],
+}
+
+/// An empty slot of a hit list (the GLSL's `SURF_NO_HIT`).
+pub const SURF_NO_HIT: f32 = f32::MAX;
+
+/// How the truncation count j of γ_a(j) runs along a ray (`SurfParams::count_per_structure`).
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    Default,
+    PartialEq,
+    Eq,
+    serde::Serialize,
+    serde::Deserialize,
+    clap::ValueEnum,
+)]
+#[serde(rename_all = "lowercase")]
+pub enum TruncationCount {
+    /// Over every front hit of the ray (the paper's rule): the ray ends at its first hit j ≥ a.
+    #[default]
+    Ray,
+    /// Per structure: the count restarts where the ray enters level 0 (the outermost level) from
+    /// outside ([`surf_restart`]); a truncated hit is passed over, not the end of the ray.
+    Structure,
+}
+
+/// Truncated compositing: γ_a(k) with k counted as `count` says.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Truncation {
+    pub a: f32,
+    pub count: TruncationCount,
+}
+
+/// The paper's rule with parameter `a`.
+impl From<f32> for Truncation {
+    fn from(a: f32) -> Self {
+        Truncation {
+            a,
+            count: TruncationCount::Ray,
+        }
+    }
+}
+
+impl Truncation {
+    /// `SurfParams::count_per_structure`.
+    pub fn per_structure_flag(&self) -> u32 {
+        (self.count == TruncationCount::Structure) as u32
+    }
+}
+
+/// Counting per structure: a popped hit `s` that is one of the cell's front crossings of level 0
+/// (`outer`; the outermost level, as levels increase) is where the ray enters a structure from
+/// outside every level set, so the truncation count `k` restarts at 0 there: each structure along
+/// the ray gets γ_a for its own first hits, a surface seen through another is composited, and
+/// the inner levels of one structure are still truncated. A matched value is consumed: of two
+/// equal hits one restarts the count. (The GLSL's `surf_restart`: the kernels' hit lists hold s
+/// values only.)
+pub fn surf_restart(count: TruncationCount, s: f32, outer: &mut [f32; 2], k: &mut u32) {
+    if count == TruncationCount::Ray {
+        return;
+    }
+    if s == outer[0] {
+        outer[0] = SURF_NO_HIT;
+        *k = 0;
+    } else if s == outer[1] {
+        outer[1] = SURF_NO_HIT;
+        *k = 0;
+    }
 }
 
 impl CellHits {
@@ -189,7 +261,7 @@ pub fn surf_segment_mask(
 /// [`surf_segment_mask`]), sorted by s ∈ [0, L): corners `c` (paper order), `cc` =
 /// `cell_cubic(c, q0, d)` (C1..C3, formed once per cell), entry/exit points; each level solves
 /// with its own exact end values and the sign before the entry point from `before`
-/// (`FaceSigns::before`).
+/// (`FaceSigns::before`); `outer` holds level 0's front crossings.
 #[allow(clippy::too_many_arguments)]
 pub fn surf_cell_hits(
     c: &[f32; 8],
@@ -206,6 +278,7 @@ pub fn surf_cell_hits(
         s: [0.0; SURF_MAX_CELL_HITS],
         level: [0; SURF_MAX_CELL_HITS],
         exit: FaceSigns::default(),
+        outer: [SURF_NO_HIT; 2],
     };
     while mask != 0 {
         let i = mask.trailing_zeros() as usize;
@@ -217,6 +290,14 @@ pub fn surf_cell_hits(
         for (s, rising) in x.iter() {
             if rising {
                 out.insert(s, i as u32);
+                if i == 0 {
+                    // ≤ 2 per cell: rising and falling crossings alternate, ≤ 3 roots.
+                    if out.outer[0] == SURF_NO_HIT {
+                        out.outer[0] = s;
+                    } else if out.outer[1] == SURF_NO_HIT {
+                        out.outer[1] = s;
+                    }
+                }
             }
         }
         let e = exit_sign(&x, ends[0], b);

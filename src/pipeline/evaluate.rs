@@ -123,10 +123,18 @@ struct Loaded {
     mesh_faces: Option<usize>,
 }
 
+/// Bytes each point drawn on a mesh takes until the distances are computed: the point, its copy
+/// in the thinned cloud and its k-d tree entry.
+const BYTES_PER_MESH_SAMPLE: f64 = 64.0;
+
 /// Read a cloud (for a mesh: `mesh_samples` points drawn on it) and thin it.
 fn load(path: &Path, radius: f64, mesh_samples: usize) -> Result<Loaded> {
     let (pts, mesh_faces) = if has_faces(path)? {
         let mesh = read_mesh_ply(path)?;
+        crate::run::memory::ensure_fits(
+            &format!("--mesh-samples {mesh_samples}"),
+            mesh_samples as f64 * BYTES_PER_MESH_SAMPLE,
+        )?;
         let pts = mesh.sample(mesh_samples, 0);
         ensure!(
             !pts.is_empty(),

@@ -21,7 +21,8 @@ use crate::grid::{checkpoint, npz, Grid};
 use crate::io::{Extra, ExtraValues};
 use crate::mesh::ply::write_mesh_ply;
 use crate::mesh::{level_set_mesh, MeshInput, MeshStats};
-use crate::train::{stage1, stage2, Category};
+use crate::run::dir::{ALL_STAGE1, ALL_STAGE2};
+use crate::train::{stage2, Category};
 use anyhow::{bail, ensure, Context, Result};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -37,10 +38,11 @@ pub const DEFAULT_THIN_RADIUS: f64 = 0.001;
 
 /// Options of `extract` (its command-line flags).
 #[derive(clap::Args, Debug)]
+#[command(group(clap::ArgGroup::new("grid").required(true).args(["run", "ckpt"])))]
 pub struct ExtractOptions {
     /// A run directory written by `train`: its `surface.npz` (stage 2) if there is one, else its
     /// `plenoxels.npz` (stage 1).
-    #[arg(long, required_unless_present = "ckpt", conflicts_with = "ckpt")]
+    #[arg(long)]
     pub run: Option<PathBuf>,
     /// An svox2 `ckpt.npz` (or any npz with the svox2 grid arrays) instead of `--run`.
     #[arg(long)]
@@ -58,7 +60,7 @@ pub struct ExtractOptions {
     /// Level values τ, comma-separated, for a stage-1 grid (density units; the paper sweeps
     /// 10,30,50,70,90,100 and reports the best single level). Default 50. A stage-2 run uses its
     /// own levels; giving --levels there is an error.
-    #[arg(long, value_delimiter = ',')]
+    #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
     pub levels: Option<Vec<f32>>,
     /// Keep a crossing only where the trilerped raw opacity σα ≥ this (stage-2 grids; a stage-1
     /// density grid has no opacity field, so it is not used there).
@@ -142,13 +144,15 @@ fn load_grid(opts: &ExtractOptions) -> Result<(Field, PathBuf)> {
         let category = serde_json::from_value(ck.meta["config"]["category"].clone()).ok();
         return Ok((Field::Surface(ck.grid, category), surface));
     }
-    let path = stage1::checkpoint_path(run);
+    let all_stage2 = run.join(ALL_STAGE2);
     ensure!(
-        path.exists(),
-        "{}: no {} (is this a run directory written by `alphasurf train`?)",
+        !stage2::checkpoint_path(&all_stage2).exists(),
+        "{} is a `--stage all` run: give its stage-2 run {} (or its stage-1 run {})",
         run.display(),
-        stage1::CHECKPOINT
+        all_stage2.display(),
+        run.join(ALL_STAGE1).display()
     );
+    let path = crate::run::dir::stage1_checkpoint(run, "extract --run")?;
     Ok((Field::Density(checkpoint::load(&path)?.grid), path))
 }
 
@@ -273,6 +277,12 @@ pub fn extract(opts: &ExtractOptions, gpu: Option<&Gpu>) -> Result<ExtractReport
         levels.iter().all(|l| l.is_finite()),
         "--levels: every level must be finite, got {levels:?}"
     );
+    // A stage-1 grid renders max(σ, 0): a level at or below 0 is no surface of it.
+    ensure!(
+        matches!(field, Field::Surface(..)) || levels.iter().all(|&l| l > 0.0),
+        "--levels: density levels must be positive (the rendered density is max(σ, 0)), got \
+         {levels:?}"
+    );
     let frame = field.frame(scene_scale);
     // `on` needs the cameras; `auto` goes on without them (a run moved away from its dataset
     // still extracts), and says so.
@@ -339,6 +349,10 @@ fn check_sampling(opts: &ExtractOptions) -> Result<()> {
     Ok(())
 }
 
+/// The scene scales `extract` accepts: far past any dataset's units either way, short of the
+/// floats' range (points written back would overflow or vanish).
+const SCENE_SCALES: std::ops::RangeInclusive<f32> = 1e-6..=1e6;
+
 /// Dataset units → grid-scene scale: `--scene-scale`, else the run's recorded one, else the
 /// NeRF-synthetic box's.
 fn scene_scale(opts: &ExtractOptions) -> Result<f32> {
@@ -352,8 +366,11 @@ fn scene_scale(opts: &ExtractOptions) -> Result<f32> {
         .or(recorded)
         .unwrap_or(SceneBox::default().scale);
     ensure!(
-        scale > 0.0 && scale.is_finite(),
-        "--scene-scale must be positive"
+        SCENE_SCALES.contains(&scale),
+        "--scene-scale {scale}: expected {:e} ..= {:e} (dataset units → the grid's world; \
+         NeRF-synthetic 2/3)",
+        SCENE_SCALES.start(),
+        SCENE_SCALES.end()
     );
     Ok(scale)
 }
@@ -580,9 +597,9 @@ fn write_points(
     }
     ensure!(
         !cloud.points.is_empty(),
-        "no surface points at levels {:?} (field range {:?}){}; nothing written",
+        "no surface points at levels {:?} ({}){}; nothing written",
         s.levels,
-        value_range(s.values),
+        field_range(s.values),
         s.keep_box
             .map_or(String::new(), |b| format!(" inside --box {b}"))
     );
@@ -684,9 +701,9 @@ fn write_mesh(opts: &ExtractOptions, s: &Surfaces, out: &Path) -> Result<MeshRep
     }
     ensure!(
         !mesh.faces.is_empty(),
-        "no surface faces at levels {:?} (field range {:?}){}; nothing written",
+        "no surface faces at levels {:?} ({}){}; nothing written",
         s.levels,
-        value_range(s.values),
+        field_range(s.values),
         s.keep_box
             .map_or(String::new(), |b| format!(" inside --box {b}"))
     );
@@ -702,8 +719,15 @@ fn write_mesh(opts: &ExtractOptions, s: &Surfaces, out: &Path) -> Result<MeshRep
     })
 }
 
-/// (min, max) of the field over the allocated vertices.
-fn value_range(v: &[f32]) -> (f32, f32) {
-    v.iter()
-        .fold((f32::MAX, f32::MIN), |(a, b), &x| (a.min(x), b.max(x)))
+/// The field's range over the allocated vertices, for messages (an empty grid says so).
+fn field_range(v: &[f32]) -> String {
+    match v.first() {
+        None => "the grid holds no vertex".into(),
+        Some(&first) => {
+            let (lo, hi) = v
+                .iter()
+                .fold((first, first), |(a, b), &x| (a.min(x), b.max(x)));
+            format!("field range {lo} ..= {hi}")
+        }
+    }
 }

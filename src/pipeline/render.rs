@@ -9,13 +9,14 @@ use crate::data::{Dataset, LoadOptions};
 use crate::gpu::Gpu;
 use crate::grid::checkpoint;
 use crate::grid::surface::SurfaceGrid;
+use crate::math::surface::Truncation;
 use crate::run::dir::{ALL_STAGE1, ALL_STAGE2, STAGE2_CHECKPOINT};
 use crate::run::{self, read_info};
 use crate::train::{
     render_split, render_split_with, stage2, BackgroundRecord, RenderedSplit, Stage1Config,
     SurfaceConfig, MAX_PIXEL_SAMPLES,
 };
-use anyhow::{bail, Result};
+use anyhow::{bail, Context, Result};
 use std::path::{Path, PathBuf};
 
 /// Options of `render` (its command-line flags).
@@ -58,7 +59,7 @@ enum Trained {
     Surface {
         grid: SurfaceGrid,
         /// Truncation at the checkpoint's step.
-        a: f32,
+        truncation: Truncation,
         stop_thresh: f32,
     },
 }
@@ -74,7 +75,7 @@ fn load_run(run: &Path) -> Result<(Trained, BackgroundRecord, PathBuf)> {
         let bg = BackgroundRecord::from_meta(&ck.meta, &surface)?;
         let trained = Trained::Surface {
             grid: ck.grid,
-            a: cfg.a.at(step),
+            truncation: cfg.truncation(step),
             stop_thresh: cfg.stop_thresh,
         };
         return Ok((trained, bg, surface));
@@ -123,7 +124,12 @@ pub fn render(opts: &RenderOptions, gpu: Option<&Gpu>) -> Result<RenderedSplit> 
     )?;
     let split = match opts.split.as_str() {
         "train" => &data.train,
-        "val" => data.val(),
+        "val" => data.val_split.as_ref().with_context(|| {
+            format!(
+                "--split val: {} has no validation split (no val views); use --split test",
+                data.root.display()
+            )
+        })?,
         "test" => &data.test,
         s => bail!("--split {s}: expected train, val or test"),
     };
@@ -142,13 +148,13 @@ pub fn render(opts: &RenderOptions, gpu: Option<&Gpu>) -> Result<RenderedSplit> 
         }
         Trained::Surface {
             grid,
-            a,
+            truncation,
             stop_thresh,
         } => {
             let mut backend = train_stage2::make_backend(gpu, grid)?;
             backend.set_background(bg.kernel())?;
             render_split_with(
-                &mut |rays| Ok(backend.render(rays, a, stop_thresh)?.0),
+                &mut |rays| Ok(backend.render(rays, truncation, stop_thresh)?.0),
                 &data,
                 split,
                 &opts.out,

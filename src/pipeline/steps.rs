@@ -140,6 +140,8 @@ impl<'g> Steps<'g> {
                 spp_side: size.spp,
                 gt_spacing: size.gt_spacing,
                 progress: std::io::stderr().is_terminal(),
+                // The scene folder belongs to the command's own output (demo, bench).
+                overwrite: true,
             },
         )?;
         eprintln!(

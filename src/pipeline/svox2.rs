@@ -58,7 +58,7 @@ pub fn import(opts: &ImportOptions) -> Result<Grid> {
     } else {
         Open::Fresh
     };
-    let mut run = RunDir::claim(&opts.out, RunStage::Plenoxels, open, &[&opts.ckpt, &data])?;
+    let run = RunDir::claim(&opts.out, RunStage::Plenoxels, open, &[&opts.ckpt, &data])?;
     let mut cfg = Stage1Config::paper();
     cfg.preset = Preset::Imported;
     cfg.res = grid.res[0];
@@ -67,24 +67,28 @@ pub fn import(opts: &ImportOptions) -> Result<Grid> {
     let meta =
         json!({ "stage": "plenoxels", "step": 0, "config": cfg, "imported_from": opts.ckpt });
     let n = grid.allocated();
-    crate::grid::checkpoint::save(
-        &run.file(run::dir::STAGE1_CHECKPOINT),
-        &grid,
-        &[
-            ("rms_density", &vec![0.0; n]),
-            ("rms_sh", &vec![0.0; n * crate::grid::SH_DIM]),
-        ],
-        &meta,
-    )?;
-    run.write_info(&RunInfo {
+    let info = RunInfo {
         stage: None,
         data,
         downscale: 1,
         background: crate::data::BackgroundMode::White,
         scene_scale: None,
         scene_box: None,
+        identity: None,
         init: None,
         imported_from: Some(opts.ckpt.clone()),
+    };
+    // Built beside the run and swapped in whole: a failure leaves a previous run as it was.
+    run.write_whole(&info, |dir| {
+        crate::grid::checkpoint::save(
+            &dir.join(run::dir::STAGE1_CHECKPOINT),
+            &grid,
+            &[
+                ("rms_density", &vec![0.0; n]),
+                ("rms_sh", &vec![0.0; n * crate::grid::SH_DIM]),
+            ],
+            &meta,
+        )
     })?;
     Ok(grid)
 }

@@ -3,7 +3,7 @@
 
 use super::metrics::{Stage1Metrics, Stage2Metrics};
 use super::train_options::{Stage, TrainOptions};
-use super::train_run::{load_data, run_info, Trained};
+use super::train_run::{check_resumed_data, load_data, run_info, Trained};
 use super::{train_stage1, train_stage2};
 use crate::gpu::Gpu;
 use crate::run::dir::{ALL_STAGE1, ALL_STAGE2};
@@ -41,6 +41,9 @@ pub fn train(opts: &TrainOptions, gpu: Option<&Gpu>) -> Result<TrainOutcome> {
 pub fn train_all(opts: &TrainOptions, gpu: Option<&Gpu>) -> Result<TrainOutcome> {
     let mut parent = RunDir::claim(&opts.out, RunStage::All, opts.open_mode(), &[&opts.data])?;
     let data = load_data(opts)?;
+    if opts.resume {
+        check_resumed_data(opts, &data.data)?;
+    }
     parent.write_info(&run_info(opts, &data.data, None)?)?;
     let s1_dir = parent.file(ALL_STAGE1);
     let s2_dir = parent.file(ALL_STAGE2);

@@ -5,6 +5,7 @@
 use crate::backend::Backend;
 use crate::data::BackgroundMode;
 use crate::run::Open;
+use crate::train::config::GRID_RES;
 use crate::train::{Category, Preset, Stage1Config, SurfaceConfig};
 use anyhow::{bail, ensure, Context, Result};
 use serde::{de::DeserializeOwned, Serialize};
@@ -110,6 +111,11 @@ pub struct TrainOptions {
     /// overwritten).
     #[arg(long)]
     pub overwrite: bool,
+    /// With `--resume` or `--init RUN`: use `--data` even though it is not the dataset that run
+    /// was trained on (another content fingerprint or scene normalisation, or, for runs from
+    /// before fingerprints were recorded, another folder), which is refused without it.
+    #[arg(long)]
+    pub allow_other_data: bool,
     /// Hide the progress bar.
     #[arg(long)]
     pub quiet: bool,
@@ -151,6 +157,7 @@ impl TrainOptions {
             checkpoint_every: None,
             resume: false,
             overwrite: false,
+            allow_other_data: false,
             quiet: false,
         }
     }
@@ -170,8 +177,12 @@ impl TrainOptions {
             cfg.iters = n;
         }
         if let Some(r) = self.res {
-            if !(8..=1024).contains(&r) {
-                bail!("--res {r}: expected 8 ..= 1024");
+            if !GRID_RES.contains(&r) {
+                bail!(
+                    "--res {r}: expected {} ..= {}",
+                    GRID_RES.start(),
+                    GRID_RES.end()
+                );
             }
             let last = cfg.upsample.last().map_or(cfg.res, |u| u.1);
             cfg.res = (cfg.res as u64 * r as u64 / last as u64).max(8) as u32;
@@ -196,8 +207,57 @@ impl TrainOptions {
         for kv in &self.plenoxels_set {
             cfg = set_field(&cfg, kv, "--plenoxels-set")?;
         }
-        cfg.validate()?;
+        // The same checks whichever flag set a value.
+        cfg.validate()
+            .and_then(|()| cfg.validate_schedule())
+            .with_context(|| settings_named("stage-1", "--plenoxels-set", &self.plenoxels_set))?;
         Ok(cfg)
+    }
+
+    /// Refuse a new stage-1 run whose grids or batch cannot fit in the memory this process may
+    /// use, naming the flag that sized them.
+    pub fn check_stage1_memory(&self, cfg: &Stage1Config) -> Result<()> {
+        let (grid_bytes, grid_res) = cfg.peak_grid_bytes();
+        let res_flag = self.res.map(|r| format!("--res {r}"));
+        crate::run::memory::ensure_fits(
+            &format!(
+                "a {grid_res}³ training grid ({})",
+                self.source(
+                    ("--plenoxels-set", &self.plenoxels_set),
+                    &["res", "upsample"],
+                    res_flag
+                )
+            ),
+            grid_bytes,
+        )?;
+        let batch_flag = self.batch.map(|b| format!("--batch {b}"));
+        check_batch_memory(
+            cfg.batch,
+            &self.source(
+                ("--plenoxels-set", &self.plenoxels_set),
+                &["batch"],
+                batch_flag,
+            ),
+        )
+    }
+
+    /// Where a configuration value came from, for messages: the last `FLAG KEY=VALUE` of `sets`
+    /// whose key is one of `keys` (or a field inside one), else the flag, else the preset.
+    fn source(
+        &self,
+        (set_flag, sets): (&str, &[String]),
+        keys: &[&str],
+        flag: Option<String>,
+    ) -> String {
+        sets.iter()
+            .rfind(|kv| {
+                let key = kv.split_once('=').map_or(kv.as_str(), |(k, _)| k);
+                let head = key.split('.').next().unwrap_or(key);
+                keys.contains(&head)
+            })
+            .map(|kv| format!("{set_flag} {kv}"))
+            .or(flag)
+            .unwrap_or_else(|| format!("preset {}", self.preset()))
     }
 
     /// How these options open their run directory.
@@ -232,6 +292,21 @@ impl TrainOptions {
         if self.stage == Stage::All && self.init.is_some() {
             ignored.push("--init");
         }
+        if self.stage == Stage::Surface && self.iters.is_some() && self.surface_iters.is_some() {
+            bail!(
+                "--iters and --surface-iters both give stage 2's steps with --stage surface (one \
+                 would be ignored); give one of them"
+            );
+        }
+        // Only a run trained before (the one resumed, or stage 2's --init) has a dataset to
+        // compare with.
+        let compared = self.resume || (self.stage == Stage::Surface && self.init.is_some());
+        if self.allow_other_data && !compared {
+            bail!(
+                "--allow-other-data applies with --resume or --stage surface --init RUN (a run \
+                 trained before); leave it out"
+            );
+        }
         if !ignored.is_empty() {
             bail!(
                 "{} {} not used by --stage {} ({}); leave {} out",
@@ -257,9 +332,6 @@ impl TrainOptions {
             if v == Some(0) {
                 bail!("{name} must be at least 1");
             }
-        }
-        if let Some(b) = self.batch {
-            check_batch_memory(b)?;
         }
         Ok(())
     }
@@ -295,8 +367,18 @@ impl TrainOptions {
             );
             cfg.init.alpha_init_scale = s;
         }
-        cfg.validate()?;
+        cfg.validate()
+            .with_context(|| settings_named("stage-2", "--set", &self.set))?;
         Ok(cfg)
+    }
+
+    /// Refuse a new stage-2 run whose batch cannot fit in the memory this process may use.
+    pub fn check_stage2_memory(&self, cfg: &SurfaceConfig) -> Result<()> {
+        let batch_flag = self.batch.map(|b| format!("--batch {b}"));
+        check_batch_memory(
+            cfg.batch,
+            &self.source(("--set", &self.set), &["batch"], batch_flag),
+        )
     }
 }
 
@@ -306,12 +388,24 @@ impl TrainOptions {
 /// copies, hence the margin.
 const BYTES_PER_BATCH_RAY: f64 = 256.0;
 
-/// Refuse a `--batch` whose per-step buffers cannot fit in the memory available.
-fn check_batch_memory(batch: u32) -> Result<()> {
+/// Refuse a batch whose per-step buffers cannot fit in the memory available; `source` names
+/// the flag that set it.
+fn check_batch_memory(batch: u32, source: &str) -> Result<()> {
     crate::run::memory::ensure_fits(
-        &format!("--batch {batch}"),
+        &format!("a batch of {batch} rays ({source})"),
         batch as f64 * BYTES_PER_BATCH_RAY,
     )
+}
+
+/// The context of a configuration check: which stage, and the `FLAG KEY=VALUE` settings applied
+/// (a value they set is refused as the flag's own would be).
+fn settings_named(stage: &str, flag: &str, sets: &[String]) -> String {
+    if sets.is_empty() {
+        format!("the {stage} configuration")
+    } else {
+        let named: Vec<String> = sets.iter().map(|kv| format!("{flag} {kv}")).collect();
+        format!("the {stage} configuration with {}", named.join(" "))
+    }
 }
 
 /// `FLAG key.path=json` (`--set`, `--plenoxels-set`): patch one field of a configuration.
@@ -407,11 +501,60 @@ mod tests {
         );
         assert!(err(&["tv_until_upsample=1"]).contains("is false, not 1"));
         assert!(err(&["tv_fraction=2"]).contains("tv_fraction must be in [0, 1]"));
+        // Issue 44: the checks the flags have, whichever flag set the value.
+        for (set, want) in [
+            ("iters=0", "iters must be at least 1"),
+            ("res=5000", "8 ..= 1024"),
+            ("upsample=[[3,4000]]", "8 ..= 1024"),
+            ("upsample=[[3,2]]", "8 ..= 1024"),
+            ("upsample=[[5000,64]]", "past the last step"),
+            ("upsample=[[10,128],[5,256]]", "later step"),
+            ("lr_sigma.init=-30", "lr_sigma.init must be finite and ≥ 0"),
+        ] {
+            let e = err(&[set]);
+            assert!(
+                e.contains(&format!("--plenoxels-set {set}")) && e.contains(want),
+                "{set}: {e}"
+            );
+        }
+        let huge = opts(&["batch=4000000000"]);
+        let cfg = huge.stage1_config().unwrap();
+        let e = format!("{:#}", huge.check_stage1_memory(&cfg).unwrap_err());
+        assert!(
+            e.contains("--plenoxels-set batch=4000000000") && e.contains("memory"),
+            "{e}"
+        );
+        let stage2 = TrainOptions {
+            set: vec!["iters=0".into()],
+            ..TrainOptions::new(Stage::Surface, "d".into(), "o".into())
+        };
+        let e = format!("{:#}", stage2.stage2_config(64).unwrap_err());
+        assert!(
+            e.contains("--set iters=0") && e.contains("at least 1"),
+            "{e}"
+        );
         let surface = TrainOptions {
             plenoxels_set: vec!["tv_sigma=0".into()],
             ..TrainOptions::new(Stage::Surface, "d".into(), "o".into())
         };
         let refused = format!("{:#}", surface.check_stage_flags().unwrap_err());
         assert!(refused.contains("--plenoxels-set is not used by --stage surface"));
+        // Two flags for stage 2's steps: one would be ignored.
+        let both = TrainOptions {
+            iters: Some(50),
+            surface_iters: Some(10),
+            ..TrainOptions::new(Stage::Surface, "d".into(), "o".into())
+        };
+        let refused = format!("{:#}", both.check_stage_flags().unwrap_err());
+        assert!(refused.contains("--iters and --surface-iters"), "{refused}");
+        let allow = TrainOptions {
+            allow_other_data: true,
+            ..TrainOptions::new(Stage::Plenoxels, "d".into(), "o".into())
+        };
+        let refused = format!("{:#}", allow.check_stage_flags().unwrap_err());
+        assert!(
+            refused.contains("--allow-other-data applies with --resume"),
+            "{refused}"
+        );
     }
 }

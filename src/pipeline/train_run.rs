@@ -3,6 +3,7 @@
 
 use super::train_options::TrainOptions;
 use crate::data::{Aabb, Dataset, LoadOptions, SceneBox};
+use crate::run::identity::{check_same_data, DataIdentity};
 use crate::run::RunInfo;
 use anyhow::{ensure, Context, Result};
 use std::path::{Path, PathBuf};
@@ -45,19 +46,31 @@ fn scene_box(opts: &TrainOptions) -> Result<Option<SceneBox>> {
         .as_deref()
         .map(|v| Aabb::from_values("--box", v))
         .transpose()?;
-    let recorded_in = |dir: &Path| {
-        dir.join(crate::run::dir::MARKER)
+    // The recorded cube, and the normalisation exactly as the run had it (its scale and
+    // identity), so that the identity check compares equal values.
+    let recorded_in = |dir: &Path| -> Option<(Aabb, SceneBox)> {
+        let info = dir
+            .join(crate::run::dir::MARKER)
             .is_file()
             .then(|| crate::run::read_info(dir).ok())
-            .flatten()
-            .and_then(|i| i.scene_box)
+            .flatten()?;
+        let cube = info.scene_box?;
+        let exact = match (info.scene_scale, &info.identity) {
+            (Some(scale), Some(id)) => SceneBox {
+                scale,
+                centre: id.scene_centre.into(),
+                radius: id.scene_radius,
+            },
+            _ => cube.scene_box(),
+        };
+        Some((cube, exact))
     };
     let recorded = match (opts.resume, opts.init.as_deref()) {
         (true, _) => recorded_in(&opts.out),
         (false, Some(init)) if init.is_dir() => recorded_in(init),
         _ => None,
     };
-    if let (Some(g), Some(r)) = (given, recorded) {
+    if let (Some(g), Some((r, _))) = (given, recorded) {
         // The recorded box is the grid's cube: --box must give that cube.
         let cube = Aabb::of_scene(&g.scene_box());
         let close = (cube.lo() - r.lo())
@@ -76,11 +89,11 @@ fn scene_box(opts: &TrainOptions) -> Result<Option<SceneBox>> {
             }
         );
     }
-    Ok(given.or(recorded).map(|b| b.scene_box()))
+    Ok(recorded.map(|r| r.1).or(given.map(|g| g.scene_box())))
 }
 
-/// The `run.json` of a training run: the dataset's absolute path, the downscale factor, the
-/// background, the scene box's scale and cube and (stage 2) the grid it started from.
+/// The `run.json` of a training run: the dataset's absolute path and identity, the downscale
+/// factor, the background, the scene box's scale and cube and (stage 2) the grid it started from.
 pub fn run_info(opts: &TrainOptions, data: &Dataset, init: Option<PathBuf>) -> Result<RunInfo> {
     Ok(RunInfo {
         stage: None,
@@ -90,9 +103,24 @@ pub fn run_info(opts: &TrainOptions, data: &Dataset, init: Option<PathBuf>) -> R
         background: opts.background,
         scene_scale: Some(data.scene.scale),
         scene_box: Some(Aabb::of_scene(&data.scene)),
+        identity: Some(DataIdentity::of(data)),
         init,
         imported_from: None,
     })
+}
+
+/// `--resume`: refuse to continue the run in `opts.out` on another dataset than its own (see
+/// [`crate::run::identity`]); call before its `run.json` is rewritten.
+pub fn check_resumed_data(opts: &TrainOptions, data: &Dataset) -> Result<()> {
+    let recorded = crate::run::read_info(&opts.out)?;
+    let now = run_info(opts, data, None)?;
+    check_same_data(
+        "--resume",
+        &opts.out,
+        &recorded,
+        &now,
+        opts.allow_other_data,
+    )
 }
 
 /// How a training call ended.

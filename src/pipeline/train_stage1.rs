@@ -3,7 +3,7 @@
 
 use super::metrics::{SamplesPerRay, Stage1Metrics, Stage1Seconds};
 use super::train_options::TrainOptions;
-use super::train_run::{resume, run_info, Loaded, Trained};
+use super::train_run::{check_resumed_data, resume, run_info, Loaded, Trained};
 use crate::data::dataset::peak_rss_bytes;
 use crate::gpu::Gpu;
 use crate::grid::Grid;
@@ -32,7 +32,9 @@ pub fn train_stage1(
     let fresh_cfg = if opts.resume {
         None
     } else {
-        Some(opts.stage1_config()?)
+        let cfg = opts.stage1_config()?;
+        opts.check_stage1_memory(&cfg)?;
+        Some(cfg)
     };
     let mut run = RunDir::claim(
         &opts.out,
@@ -41,6 +43,9 @@ pub fn train_stage1(
         &[&opts.data],
     )?;
     let (load_s, data) = (data.seconds, &data.data);
+    if opts.resume {
+        check_resumed_data(opts, data)?;
+    }
     let ckpt = stage1::checkpoint_path(&opts.out);
     let (mut backend, cfg, start) = if let Some(cfg) = fresh_cfg {
         let grid = Grid::sphere(

@@ -4,15 +4,17 @@
 
 use super::metrics::{Stage2Metrics, Stage2PerRay, Stage2Seconds};
 use super::train_options::TrainOptions;
-use super::train_run::{resume, run_info, Loaded, Trained};
+use super::train_run::{check_resumed_data, resume, run_info, Loaded, Trained};
 use crate::data::dataset::peak_rss_bytes;
 use crate::data::BackgroundMode;
+use crate::data::Dataset;
 use crate::gpu::Gpu;
 use crate::grid::surface::SurfaceGrid;
 use crate::grid::{checkpoint, npz, Grid};
-use crate::run::{RunDir, RunStage};
+use crate::run::identity::check_same_data;
+use crate::run::{self, RunDir, RunStage};
 use crate::surface::{CpuSurface, SurfaceBackend, VulkanSurface};
-use crate::train::{stage1, stage2, BackgroundRecord, SurfaceConfig};
+use crate::train::{stage2, BackgroundRecord, SurfaceConfig};
 use anyhow::{ensure, Context, Result};
 use std::path::Path;
 use std::time::Instant;
@@ -32,23 +34,39 @@ pub(super) fn make_backend(
 }
 
 /// The stage-1 grid `--init` names (a run directory: its plenoxels.npz, or an npz file) and the
-/// background it trained with (an svox2 `ckpt.npz`: white).
-fn load_init(path: &Path) -> Result<(Grid, BackgroundRecord)> {
+/// background it trained with (an svox2 `ckpt.npz`: white). A stage-1 run must have been trained
+/// on `data` (unless `--allow-other-data`); one that stopped before its last step is named.
+fn load_init(opts: &TrainOptions, path: &Path, data: &Dataset) -> Result<(Grid, BackgroundRecord)> {
     let file = if path.is_dir() {
-        let ck = stage1::checkpoint_path(path);
-        ensure!(
-            ck.exists(),
-            "--init {}: no {} in that directory (is it a stage-1 run?)",
-            path.display(),
-            stage1::CHECKPOINT
-        );
+        let ck = run::dir::stage1_checkpoint(path, "--init")?;
+        if run::files::is_run(path) {
+            let recorded = run::read_info(path)?;
+            let now = run_info(opts, data, None)?;
+            check_same_data("--init", path, &recorded, &now, opts.allow_other_data)?;
+        }
         ck
     } else {
         path.to_path_buf()
     };
     let grid = npz::load_svox2(&file).with_context(|| format!("--init {}", path.display()))?;
-    let bg = match checkpoint::read_meta(&file)? {
-        Some(meta) => BackgroundRecord::from_meta(&meta, &file)?,
+    let meta = checkpoint::read_meta(&file)?;
+    if let Some(meta) = &meta {
+        let step = meta["step"].as_u64();
+        let iters = meta["config"]["iters"].as_u64();
+        if let (Some(step), Some(iters)) = (step, iters) {
+            if step < iters {
+                eprintln!(
+                    "warning: --init {}: stage 1 stopped at step {step} of {iters} (interrupted); \
+                     stage 2 starts from that grid (to finish stage 1 first: train --stage \
+                     plenoxels --resume --out {})",
+                    path.display(),
+                    path.display()
+                );
+            }
+        }
+    }
+    let bg = match &meta {
+        Some(meta) => BackgroundRecord::from_meta(meta, &file)?,
         None => BackgroundRecord::start(BackgroundMode::White),
     };
     Ok((grid, bg))
@@ -56,14 +74,18 @@ fn load_init(path: &Path) -> Result<(Grid, BackgroundRecord)> {
 
 /// A new stage-2 grid, its configuration and its background (stage 1's, carried on) from
 /// `--init` and the flags.
-fn fresh_start(opts: &TrainOptions) -> Result<(SurfaceGrid, SurfaceConfig, BackgroundRecord)> {
+fn fresh_start(
+    opts: &TrainOptions,
+    data: &Dataset,
+) -> Result<(SurfaceGrid, SurfaceConfig, BackgroundRecord)> {
     let init = opts
         .init
         .as_ref()
         .context("stage 2 needs --init STAGE1_RUN_DIR or --init ckpt.npz")?;
-    let (density, bg) = load_init(init)?;
+    let (density, bg) = load_init(opts, init, data)?;
     bg.ensure_mode(opts.background, &format!("--init {}", init.display()))?;
     let cfg = opts.stage2_config(density.res.into_iter().max().unwrap_or(0))?;
+    opts.check_stage2_memory(&cfg)?;
     let grid = SurfaceGrid::from_density(&density, &cfg.init)
         .with_context(|| format!("initialising the surfaces from {}", init.display()))?;
     eprintln!(
@@ -92,12 +114,15 @@ pub fn train_stage2(
     let fresh = if opts.resume {
         None
     } else {
-        Some(fresh_start(opts)?)
+        Some(fresh_start(opts, &data.data)?)
     };
     let mut inputs = vec![opts.data.as_path()];
     inputs.extend(opts.init.as_deref());
     let mut run = RunDir::claim(&opts.out, RunStage::Surface, opts.open_mode(), &inputs)?;
     let (load_s, data) = (data.seconds, &data.data);
+    if opts.resume {
+        check_resumed_data(opts, data)?;
+    }
     let ckpt = stage2::checkpoint_path(&opts.out);
     let (mut backend, cfg, start) = match fresh {
         Some((grid, cfg, bg)) => {

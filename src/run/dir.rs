@@ -17,8 +17,10 @@
 //! [`super::outputs`].
 
 pub use super::files::*;
+use super::identity::DataIdentity;
 use super::lock::Lock;
 use super::outputs::{check_not_inside_inputs, dataset_containing};
+use super::replace::Replacement;
 use crate::data::{Aabb, BackgroundMode};
 use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
@@ -73,6 +75,10 @@ pub struct RunInfo {
     /// imports).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub scene_box: Option<Aabb>,
+    /// The dataset's content fingerprint and scene box ([`super::identity`]), which `--resume`
+    /// and `--init` compare; absent in runs written before it was recorded and in imports.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub identity: Option<DataIdentity>,
     /// Stage 2: the stage-1 run or checkpoint it was initialised from.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub init: Option<PathBuf>,
@@ -136,10 +142,29 @@ impl RunDir {
         }
         check_not_inside_inputs(path, inputs)?;
         let existing = path.is_dir();
+        let mut open = open;
         if existing {
             if is_run(path) {
                 let info = read_info(path)?;
                 let had = info.stage.unwrap_or(stage);
+                // A run stopped before its first checkpoint holds nothing trained: a new run
+                // replaces it, and there is nothing to resume.
+                if !holds_checkpoint(path) {
+                    if open == Open::Resume {
+                        bail!(
+                            "--resume: {shown} holds no checkpoint (the run stopped before its \
+                             first one); start it again without --resume"
+                        );
+                    }
+                    if open == Open::Fresh {
+                        eprintln!(
+                            "{shown} holds a {} run stopped before its first checkpoint \
+                             (nothing trained): replacing it",
+                            had.name()
+                        );
+                        open = Open::Overwrite;
+                    }
+                }
                 match open {
                     Open::Fresh => bail!(
                         "--out {shown} already holds a {} run; pass --resume to continue it or \
@@ -204,17 +229,44 @@ impl RunDir {
             remove_run_files(&self.path)?;
             self.replace_pending = false;
         }
-        let info = RunInfo {
-            stage: Some(self.stage),
-            ..info.clone()
-        };
-        crate::io::atomic::write_json(&self.file(MARKER), &serde_json::to_value(&info)?)
+        write_marker(&self.path, self.stage, info)
+    }
+
+    /// Write the whole run at once (`import`): `fill` writes its files into a folder beside the
+    /// run, the marker is added, and that folder replaces the run only when complete
+    /// ([`super::replace`]); the entries of a previous run that are not a run's stay.
+    pub fn write_whole(self, info: &RunInfo, fill: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
+        let staged = Replacement::begin(&self.path, is_run_entry)?;
+        fill(staged.path())?;
+        write_marker(staged.path(), self.stage, info)?;
+        staged.commit()
     }
 
     /// Write `metrics.json` (atomically).
     pub fn write_metrics(&self, metrics: &impl Serialize) -> Result<()> {
         crate::io::atomic::write_json(&self.file(METRICS), &serde_json::to_value(metrics)?)
     }
+}
+
+/// Whether a run directory holds a checkpoint of either stage (of a `--stage all` run: its
+/// stage-1 run's).
+fn holds_checkpoint(path: &Path) -> bool {
+    [
+        path.join(STAGE1_CHECKPOINT),
+        path.join(STAGE2_CHECKPOINT),
+        path.join(ALL_STAGE1).join(STAGE1_CHECKPOINT),
+    ]
+    .iter()
+    .any(|p| p.is_file())
+}
+
+/// Write `dir`'s marker for a run of `stage` (atomically).
+fn write_marker(dir: &Path, stage: RunStage, info: &RunInfo) -> Result<()> {
+    let info = RunInfo {
+        stage: Some(stage),
+        ..info.clone()
+    };
+    crate::io::atomic::write_json(&dir.join(MARKER), &serde_json::to_value(&info)?)
 }
 
 /// Remove the files a run owns (and its test renders, and the stage runs of a `--stage all`
@@ -322,6 +374,7 @@ mod tests {
             background: BackgroundMode::White,
             scene_scale: None,
             scene_box: None,
+            identity: None,
             init: None,
             imported_from: None,
         }
@@ -337,6 +390,7 @@ mod tests {
         // New folder: a run, locked.
         let mut r = RunDir::claim(&run, RunStage::Plenoxels, Open::Fresh, &[&data]).unwrap();
         r.write_info(&info(&data)).unwrap();
+        fs::write(r.file(STAGE1_CHECKPOINT), "x").unwrap();
         let err = RunDir::claim(&run, RunStage::Plenoxels, Open::Resume, &[&data]).unwrap_err();
         assert!(
             format!("{err:#}").contains("already locked by this process"),
@@ -394,6 +448,14 @@ mod tests {
         )
         .unwrap_err();
         assert!(format!("{err:#}").contains("no run"), "{err:#}");
+        // A run stopped before its first checkpoint: nothing to resume, a new run replaces it.
+        let stopped = dir.path().join("stopped");
+        let mut r = RunDir::claim(&stopped, RunStage::Plenoxels, Open::Fresh, &[]).unwrap();
+        r.write_info(&info(&data)).unwrap();
+        drop(r);
+        let err = RunDir::claim(&stopped, RunStage::Plenoxels, Open::Resume, &[]).unwrap_err();
+        assert!(format!("{err:#}").contains("without --resume"), "{err:#}");
+        RunDir::claim(&stopped, RunStage::Plenoxels, Open::Fresh, &[]).unwrap();
     }
 
     #[test]

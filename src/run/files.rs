@@ -33,6 +33,12 @@ pub const OWNED_FILES: [&str; 6] = [
     STAGE2_CHECKPOINT,
 ];
 
+/// Whether an entry (directly in a run directory) is the run's: one of [`OWNED_FILES`], the test
+/// renders or the stage runs of a `--stage all` run.
+pub fn is_run_entry(name: &str) -> bool {
+    OWNED_FILES.contains(&name) || [TEST_RENDERS, ALL_STAGE1, ALL_STAGE2].contains(&name)
+}
+
 /// Whether `path` is a run directory (holds the marker).
 pub fn is_run(path: &Path) -> bool {
     path.join(MARKER).is_file()

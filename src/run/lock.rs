@@ -2,11 +2,17 @@
 //! (`create_new`) holding the writer's process id and host name, removed when the writer ends.
 //! A lock left by a process that was killed is taken over when its process is gone from this
 //! host; a lock from another host is never taken over (its process cannot be checked from here).
+//! A lock that could not be written (a full disk) is removed at once; an empty one older than
+//! [`EMPTY_LOCK_GRACE`] (left by a process killed between creating and writing it) is taken over.
 
 use anyhow::{bail, Context, Result};
 use std::fs;
 use std::io::{ErrorKind, Write};
 use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+/// How long an empty lock file may be another process's lock in the making.
+pub const EMPTY_LOCK_GRACE: Duration = Duration::from_secs(5);
 
 /// Who holds a lock: `pid host`.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -54,6 +60,15 @@ pub fn host_name() -> String {
         .unwrap_or_else(|| "localhost".into())
 }
 
+/// Whether `path` was last modified more than `age` ago (unknown: no).
+fn is_older_than(path: &Path, age: Duration) -> bool {
+    fs::metadata(path)
+        .and_then(|m| m.modified())
+        .ok()
+        .and_then(|t| t.elapsed().ok())
+        .is_some_and(|e| e > age)
+}
+
 /// A held lock; dropping it removes the lock file (if it still names this process).
 #[derive(Debug)]
 pub struct Lock {
@@ -73,9 +88,11 @@ impl Lock {
                 .open(path)
             {
                 Ok(mut f) => {
-                    f.write_all(me.line().as_bytes())
-                        .and_then(|_| f.sync_all())
-                        .with_context(|| format!("writing lock {}", path.display()))?;
+                    if let Err(e) = f.write_all(me.line().as_bytes()).and_then(|_| f.sync_all()) {
+                        // An empty lock would keep every later writer out.
+                        let _ = fs::remove_file(path);
+                        return Err(e).with_context(|| format!("writing lock {}", path.display()));
+                    }
                     return Ok(Lock {
                         path: path.to_path_buf(),
                         me,
@@ -106,11 +123,22 @@ impl Lock {
                             h.host,
                             path.display()
                         ),
+                        None if text.is_empty() && is_older_than(path, EMPTY_LOCK_GRACE) => {
+                            eprintln!(
+                                "taking over the empty lock {} (left by a process stopped while \
+                                 taking it)",
+                                path.display()
+                            );
+                            fs::remove_file(path).with_context(|| {
+                                format!("removing stale lock {}", path.display())
+                            })?;
+                        }
                         None => bail!(
-                            "{}: unreadable lock file {:?}; remove it if no other alphasurf \
-                             process writes there",
+                            "{}: unreadable lock file {:?}; if no other alphasurf process writes \
+                             there, remove it (rm {}) and run the command again",
                             path.display(),
-                            text
+                            text,
+                            path.display()
                         ),
                     }
                 }
@@ -125,6 +153,12 @@ impl Lock {
     /// The lock file.
     pub fn path(&self) -> &Path {
         &self.path
+    }
+
+    /// The same lock after its file was moved to `path` (with the folder holding it).
+    pub fn moved_to(mut self, path: PathBuf) -> Lock {
+        self.path = path;
+        self
     }
 }
 
@@ -167,5 +201,21 @@ mod tests {
             Some(Holder::me())
         );
         drop(lock);
+        // An empty lock: another process's in the making while fresh, a leftover once old.
+        fs::write(&path, "").unwrap();
+        let err = format!("{:#}", Lock::acquire(&path).unwrap_err());
+        assert!(
+            err.contains("unreadable lock") && err.contains("rm "),
+            "{err}"
+        );
+        let old = std::time::SystemTime::now() - 2 * EMPTY_LOCK_GRACE;
+        fs::File::options()
+            .write(true)
+            .open(&path)
+            .unwrap()
+            .set_modified(old)
+            .unwrap();
+        drop(Lock::acquire(&path).unwrap());
+        assert!(!path.exists());
     }
 }

@@ -6,6 +6,7 @@
 
 use super::{build, render_view, Scene, SceneKind, SCENE_HALF_EXTENT};
 use crate::data::{look_at, Camera};
+use crate::run::replace::Replacement;
 use anyhow::{bail, Context};
 use glam::{DVec3, Mat4, Vec3};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -40,6 +41,8 @@ pub struct GenerateOptions {
     pub gt_spacing: f64,
     /// Show a progress bar.
     pub progress: bool,
+    /// Replace a scene that `make-scene` wrote before in the output folder (`--overwrite`).
+    pub overwrite: bool,
 }
 
 impl GenerateOptions {
@@ -53,6 +56,7 @@ impl GenerateOptions {
             spp_side: 4,
             gt_spacing: 0.0019,
             progress: false,
+            overwrite: false,
         }
     }
 
@@ -107,14 +111,26 @@ pub fn split_cameras(split: &str, n: u32, seed: u64) -> Vec<Mat4> {
         .collect()
 }
 
+/// The most samples per pixel along each axis `--spp` may ask for.
+pub const MAX_SPP_SIDE: u32 = 32;
+
 /// `scene.json`'s "generator": marks a folder as a built-in scene that may be regenerated.
 const GENERATOR: &str = "alphasurf make-scene";
 
-/// Generates the dataset into `out` (created if needed).
-pub fn generate(out: &Path, opts: &GenerateOptions) -> anyhow::Result<GenerateReport> {
+/// Generates the dataset into `out` (created if needed). It is built beside `out` and swapped in
+/// when complete ([`crate::run::replace`]): a failure or a kill leaves `out` as it was.
+pub fn generate(target: &Path, opts: &GenerateOptions) -> anyhow::Result<GenerateReport> {
     let t0 = Instant::now();
     if opts.res == 0 || opts.views == 0 || opts.spp_side == 0 {
         bail!("--res, --views and --spp must be positive");
+    }
+    if opts.spp_side > MAX_SPP_SIDE {
+        bail!(
+            "--spp {}: at most {MAX_SPP_SIDE} samples per pixel along each axis ({} per pixel); \
+             more changes no pixel's 8-bit value and multiplies the render time",
+            opts.spp_side,
+            MAX_SPP_SIDE * MAX_SPP_SIDE
+        );
     }
     if !(opts.gt_spacing > 0.0 && opts.gt_spacing.is_finite()) {
         bail!("--gt-spacing must be positive");
@@ -128,9 +144,9 @@ pub fn generate(out: &Path, opts: &GenerateOptions) -> anyhow::Result<GenerateRe
         );
     }
     check_memory(&scene, opts)?;
-    check_scene_folder(out)?;
-    std::fs::create_dir_all(out)
-        .with_context(|| format!("{}: cannot create directory", out.display()))?;
+    check_scene_folder(target, opts.overwrite)?;
+    let staged = Replacement::begin(target, is_scene_entry)?;
+    let out = staged.path();
     let splits = opts.split_views();
     let total_views: u64 = splits.iter().map(|s| s.1 as u64).sum();
     let bar = if opts.progress {
@@ -186,6 +202,7 @@ pub fn generate(out: &Path, opts: &GenerateOptions) -> anyhow::Result<GenerateRe
         total_s: t0.elapsed().as_secs_f64(),
     };
     write_scene_json(out, &scene, opts, &ranges, points.len(), &report)?;
+    staged.commit()?;
     Ok(report)
 }
 
@@ -263,9 +280,26 @@ pub fn sample_gt(scene: &Scene, spacing: f64, seed: u64) -> (Vec<[f32; 3]>, Vec<
     (all, ranges)
 }
 
-/// `out` must be new, empty, or a scene this command wrote before (its `scene.json` names the
-/// generator): files of anything else (a real dataset, a run) are never replaced.
-fn check_scene_folder(out: &Path) -> anyhow::Result<()> {
+/// The entries (directly in the scene folder) that a generated scene consists of; anything else a
+/// user put beside them is kept when the scene is replaced.
+fn is_scene_entry(name: &str) -> bool {
+    [
+        "train",
+        "val",
+        "test",
+        "transforms_train.json",
+        "transforms_val.json",
+        "transforms_test.json",
+        "gt_points.ply",
+        "scene.json",
+    ]
+    .contains(&name)
+}
+
+/// `out` must be new, empty, or (with `overwrite`) a scene this command wrote before (its
+/// `scene.json` names the generator): files of anything else (a real dataset, a run) are never
+/// replaced.
+fn check_scene_folder(out: &Path, overwrite: bool) -> anyhow::Result<()> {
     if !out.exists() {
         return Ok(());
     }
@@ -284,7 +318,15 @@ fn check_scene_folder(out: &Path) -> anyhow::Result<()> {
     if generator.as_deref() != Some(GENERATOR) {
         bail!(
             "{}: not empty and not a scene written by make-scene (no scene.json of ours); \
-             its files would be replaced — give a new or empty --out",
+             its files would be replaced — give a new or empty --out (what an interrupted \
+             make-scene of an earlier version left is removed with rm -r {})",
+            out.display(),
+            out.display()
+        );
+    }
+    if !overwrite {
+        bail!(
+            "--out {} already holds a scene written by make-scene; pass --overwrite to replace it",
             out.display()
         );
     }

@@ -21,6 +21,7 @@ use crate::grid::checkpoint::state_bytes;
 use crate::grid::row_slots;
 use crate::grid::surface::SurfaceGrid;
 use crate::grid::SH_DIM;
+use crate::math::surface::Truncation;
 use crate::math::surface_blocks::{SkipRef, SURF_BLOCK_SHIFT_CPU};
 use anyhow::{ensure, Result};
 
@@ -123,11 +124,11 @@ impl CpuSurface {
             match pass {
                 SurfacePass::Blocks { margin } => self.build_blocks(*margin)?,
                 SurfacePass::Train {
-                    a,
+                    truncation,
                     stop_thresh,
                     loss,
                 } => {
-                    let sp = surface_params(&self.grid, *a, *stop_thresh, self.bg.rgb);
+                    let sp = surface_params(&self.grid, *truncation, *stop_thresh, self.bg.rgb);
                     let learned = self.bg.learned();
                     let [gd, go, gs] = &mut self.grad;
                     (out.losses, out.counts) = train(
@@ -284,8 +285,13 @@ impl SurfaceBackend for CpuSurface {
         Ok(std::mem::take(&mut self.done))
     }
 
-    fn render(&mut self, rays: &[f32], a: f32, stop_thresh: f32) -> Result<(Vec<f32>, SurfCounts)> {
-        let sp = surface_params(&self.grid, a, stop_thresh, self.bg.rgb);
+    fn render(
+        &mut self,
+        rays: &[f32],
+        truncation: Truncation,
+        stop_thresh: f32,
+    ) -> Result<(Vec<f32>, SurfCounts)> {
+        let sp = surface_params(&self.grid, truncation, stop_thresh, self.bg.rgb);
         self.refresh_blocks(0.0, 0.0)?;
         let skip = SkipRef {
             words: &self.blocks,

@@ -20,6 +20,7 @@ use crate::cpu::surface_train::{SurfaceLoss, TrainCounts};
 use crate::cpu::TvChunk;
 use crate::data::TrainViews;
 use crate::grid::surface::SurfaceGrid;
+use crate::math::surface::Truncation;
 use anyhow::Result;
 
 /// The per-vertex regularisers of one step (method.md §3.4); `None` switches a term off.
@@ -44,8 +45,8 @@ pub struct SurfaceStepParams {
     pub lr_sh: f32,
     pub beta: f32,
     pub eps: f32,
-    /// Truncation parameter a (≤ 8).
-    pub a: f32,
+    /// Truncated compositing (a ≤ 8).
+    pub truncation: Truncation,
     pub stop_thresh: f32,
     /// Per-ray entropy and depth-consistency weights (the batch mean is applied by the backend).
     pub lambda_h: f32,
@@ -114,7 +115,12 @@ pub trait SurfaceBackend {
     fn take_stats(&mut self) -> Result<Vec<SurfaceStepStats>>;
     /// Render rays (composited on the background): 3 floats per ray, and the counters of
     /// `surface_fwd`.
-    fn render(&mut self, rays: &[f32], a: f32, stop_thresh: f32) -> Result<(Vec<f32>, SurfCounts)>;
+    fn render(
+        &mut self,
+        rays: &[f32],
+        truncation: Truncation,
+        stop_thresh: f32,
+    ) -> Result<(Vec<f32>, SurfCounts)>;
     /// The current grid.
     fn grid(&self) -> Result<SurfaceGrid>;
     /// RMSProp running averages.
@@ -179,7 +185,7 @@ impl BlockRefresh {
 /// Ray → grid mapping and rendering parameters of a surface grid, composited on `background`.
 pub fn surface_params(
     g: &SurfaceGrid,
-    a: f32,
+    truncation: Truncation,
     stop_thresh: f32,
     background: [f32; 3],
 ) -> SurfaceParams {
@@ -189,7 +195,7 @@ pub fn surface_params(
             (0.5 - g.center[i] / (2.0 * g.radius[i])) * g.res[i] as f32 - 0.5
         }),
         levels: g.levels.clone(),
-        a,
+        truncation,
         stop_thresh,
         background,
     }

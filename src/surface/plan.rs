@@ -10,6 +10,7 @@ use crate::cpu::surface_delta_tv::DeltaTvChunk;
 use crate::cpu::surface_reg::{NormalChunk, NormalPrefix, OpacityChunk};
 use crate::cpu::surface_train::{SurfaceLoss, SURF_MAX_HITS};
 use crate::cpu::{SurfaceRmsProp, TvChunk};
+use crate::math::surface::Truncation;
 use anyhow::{ensure, Result};
 
 /// One pass of a stage-2 step, with everything it needs besides the backend's buffers.
@@ -19,7 +20,7 @@ pub enum SurfacePass {
     Blocks { margin: f32 },
     /// The fused forward/backward pass over the batch (`surface_train`): gradients += data term.
     Train {
-        a: f32,
+        truncation: Truncation,
         stop_thresh: f32,
         loss: SurfaceLoss,
     },
@@ -66,7 +67,7 @@ impl SurfacePlan {
         learned_bg: bool,
         refresh: &mut BlockRefresh,
     ) -> Result<Self> {
-        check_truncation(p.a)?;
+        check_truncation(p.truncation.a)?;
         let regs = &p.regs;
         let slots: u64 = g.res.iter().map(|&r| r as u64).product();
         if let Some(c) = &regs.delta_tv {
@@ -114,7 +115,7 @@ impl SurfacePlan {
             passes.push(SurfacePass::Blocks { margin });
         }
         passes.push(SurfacePass::Train {
-            a: p.a,
+            truncation: p.truncation,
             stop_thresh: p.stop_thresh,
             loss: batch_loss(n_rays, p),
         });
@@ -151,13 +152,13 @@ impl SurfacePlan {
         n_rays: usize,
         refresh: &mut BlockRefresh,
     ) -> Result<Self> {
-        check_truncation(p.a)?;
+        check_truncation(p.truncation.a)?;
         let mut passes = Vec::new();
         if let Some(margin) = refresh.before_pass(p.lr_delta, p.beta) {
             passes.push(SurfacePass::Blocks { margin });
         }
         passes.push(SurfacePass::Train {
-            a: p.a,
+            truncation: p.truncation,
             stop_thresh: p.stop_thresh,
             loss: batch_loss(n_rays, p),
         });
@@ -241,7 +242,7 @@ mod tests {
             lr_sh: 1e-2,
             beta: 0.95,
             eps: 1e-8,
-            a: 3.0,
+            truncation: 3.0.into(),
             stop_thresh: 1e-4,
             lambda_h: 0.0,
             lambda_c: 0.0,
@@ -371,7 +372,10 @@ mod tests {
         let g = grid(&normals);
         let mut refresh = BlockRefresh::default();
         let refused = |regs: SurfaceRegs, a: f32, refresh: &mut BlockRefresh| {
-            let p = SurfaceStepParams { a, ..params(regs) };
+            let p = SurfaceStepParams {
+                truncation: a.into(),
+                ..params(regs)
+            };
             SurfacePlan::step(&p, &g, 10, false, refresh)
                 .unwrap_err()
                 .to_string()
@@ -392,7 +396,7 @@ mod tests {
         assert!(refused(regs, 3.0, &mut refresh).contains("Lα chunk over 65 rows"));
         assert!(refused(all_regs(), 9.0, &mut refresh).contains("truncation parameter a = 9"));
         let p = SurfaceStepParams {
-            a: 9.0,
+            truncation: 9.0.into(),
             ..params(all_regs())
         };
         assert!(SurfacePlan::gradients(&p, 10, &mut refresh).is_err());

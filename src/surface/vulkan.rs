@@ -36,6 +36,7 @@ use crate::grid::row_slots;
 use crate::grid::surface::SurfaceGrid;
 use crate::grid::SH_DIM;
 use crate::kernels;
+use crate::math::surface::Truncation;
 use crate::math::surface::SURF_MAX_LEVELS;
 use crate::math::surface_blocks::{
     surf_blocks_per_axis, surf_live_words, SURF_BLOCK_SHIFT_VULKAN, SURF_BOX_WORDS,
@@ -56,7 +57,7 @@ pub fn surf_params(sp: &SurfaceParams, loss: &SurfaceLoss, n_rays: usize) -> Sur
     SurfParams {
         scale: sp.scale,
         offset: sp.offset,
-        a: sp.a,
+        a: sp.truncation.a,
         stop_thresh: sp.stop_thresh,
         grad_scale: loss.grad_scale,
         lambda_h: loss.lambda_h,
@@ -65,6 +66,7 @@ pub fn surf_params(sp: &SurfaceParams, loss: &SurfaceLoss, n_rays: usize) -> Sur
         n_levels: sp.levels.len() as u32,
         levels,
         weights: [0, 0],
+        count_per_structure: sp.truncation.per_structure_flag(),
     }
 }
 
@@ -345,10 +347,10 @@ impl VulkanSurface {
             match pass {
                 SurfacePass::Blocks { margin } => self.record_blocks(b, *margin)?,
                 SurfacePass::Train {
-                    a,
+                    truncation,
                     stop_thresh,
                     loss,
-                } => self.record_train(b, *a, *stop_thresh, loss, rays, n)?,
+                } => self.record_train(b, *truncation, *stop_thresh, loss, rays, n)?,
                 SurfacePass::DeltaTv(c) => {
                     record_delta_tv(b, &self.delta_tv_io(), c, self.axis_reach)?
                 }
@@ -401,14 +403,14 @@ impl VulkanSurface {
     fn record_train(
         &self,
         b: &mut Batch,
-        a: f32,
+        truncation: Truncation,
         stop_thresh: f32,
         loss: &SurfaceLoss,
         io: RayIo,
         n: usize,
     ) -> Result<()> {
         // The colour is the device's (`bg`); surface_fwd and surface_train read it there.
-        let sp = surface_params(&self.meta, a, stop_thresh, [1.0; 3]);
+        let sp = surface_params(&self.meta, truncation, stop_thresh, [1.0; 3]);
         let prm = SurfParams {
             weights: [io.weights as u32, (io.weights >> 32) as u32],
             ..surf_params(&sp, loss, n)
@@ -706,10 +708,15 @@ impl SurfaceBackend for VulkanSurface {
         Ok(self.take_timed()?.into_iter().map(|(s, _)| s).collect())
     }
 
-    fn render(&mut self, rays: &[f32], a: f32, stop_thresh: f32) -> Result<(Vec<f32>, SurfCounts)> {
+    fn render(
+        &mut self,
+        rays: &[f32],
+        truncation: Truncation,
+        stop_thresh: f32,
+    ) -> Result<(Vec<f32>, SurfCounts)> {
         self.settle()?;
         let n = rays.len() / 6;
-        let sp = surface_params(&self.meta, a, stop_thresh, [1.0; 3]);
+        let sp = surface_params(&self.meta, truncation, stop_thresh, [1.0; 3]);
         let no_loss = SurfaceLoss {
             grad_scale: 0.0,
             lambda_h: 0.0,

@@ -8,6 +8,10 @@ use serde::{Deserialize, Serialize};
 /// The presets' least time between periodic checkpoints (both stages), in seconds.
 pub const CHECKPOINT_MIN_SECONDS: f32 = 60.0;
 
+/// The grid resolutions a new run may ask for (`--res`, and `res` / `upsample` in
+/// `--plenoxels-set`).
+pub const GRID_RES: std::ops::RangeInclusive<u32> = 8..=1024;
+
 /// The largest final grid at which `fast`'s stage 1 keeps its batch of rays per step.
 const FAST_BATCH_RES: u64 = 128;
 
@@ -176,7 +180,60 @@ impl Stage1Config {
             "checkpoint_min_seconds must not be negative, got {}",
             self.checkpoint_min_seconds
         );
+        self.lr_sigma.check("lr_sigma")?;
+        self.lr_sh.check("lr_sh")?;
         Ok(())
+    }
+
+    /// The checks of a new run's schedule beyond [`Stage1Config::validate`] (which a checkpoint's
+    /// configuration also passes, an import's among them: no steps, any grid): at least one
+    /// step; every grid resolution in [`GRID_RES`]; upsampling at increasing steps before the
+    /// last one, each to a finer grid.
+    pub fn validate_schedule(&self) -> anyhow::Result<()> {
+        anyhow::ensure!(self.iters >= 1, "iters must be at least 1");
+        let (lo, hi) = (GRID_RES.start(), GRID_RES.end());
+        anyhow::ensure!(
+            GRID_RES.contains(&self.res),
+            "res {}: grid resolutions must be in {lo} ..= {hi}",
+            self.res
+        );
+        let mut prev = (None, self.res);
+        for &(step, res) in &self.upsample {
+            anyhow::ensure!(
+                GRID_RES.contains(&res),
+                "upsample [{step}, {res}]: grid resolutions must be in {lo} ..= {hi}"
+            );
+            anyhow::ensure!(
+                step < self.iters,
+                "upsample [{step}, {res}]: step {step} is past the last step ({} steps)",
+                self.iters
+            );
+            anyhow::ensure!(
+                prev.0.is_none_or(|p| step > p) && res > prev.1,
+                "upsample [{step}, {res}]: each upsampling must come at a later step than the one \
+                 before and to a finer grid (from {}³)",
+                prev.1
+            );
+            prev = (Some(step), res);
+        }
+        Ok(())
+    }
+
+    /// The most memory the schedule's grids take while training: the starting sphere-bounded
+    /// grid's rows and state, or an upsampled grid's dense links (its kept rows are checked when
+    /// it is made); and the resolution that needs it.
+    pub fn peak_grid_bytes(&self) -> (f64, u32) {
+        let start = self.res as f64;
+        // The vertices inside the inscribed sphere: π/6 of the grid.
+        let rows = std::f64::consts::FRAC_PI_6 * start * start * start;
+        let first = (
+            crate::grid::Grid::training_bytes([self.res; 3], rows as usize),
+            self.res,
+        );
+        self.upsample
+            .iter()
+            .map(|&(_, r)| (crate::grid::Grid::training_bytes([r; 3], 0), r))
+            .fold(first, |a, b| if b.0 > a.0 { b } else { a })
     }
 
     /// Rays per step for this schedule's final grid: `fast` sends its batch up to 128³ and,

@@ -76,6 +76,7 @@ impl Progress {
 pub struct Throughput {
     start_step: u32,
     rays: u64,
+    secs: f64,
     timed_rays: u64,
     timed_secs: f64,
 }
@@ -86,6 +87,7 @@ impl Throughput {
         Throughput {
             start_step,
             rays: 0,
+            secs: 0.0,
             timed_rays: 0,
             timed_secs: 0.0,
         }
@@ -98,11 +100,22 @@ impl Throughput {
             self.timed_secs += secs;
         }
         self.rays += rays as u64;
+        self.secs += secs;
     }
 
     /// Rays per second over the steps after the warm-up, once there are any.
     pub fn rays_per_s(&self) -> Option<f64> {
         (self.timed_secs > 0.0).then(|| self.timed_rays as f64 / self.timed_secs)
+    }
+
+    /// The run's figure: rays per second after the warm-up, or, for a run no longer than the
+    /// warm-up, over all its steps (compiles included; a short run still has a figure).
+    pub fn run_rays_per_s(&self) -> f64 {
+        self.rays_per_s().unwrap_or(if self.secs > 0.0 {
+            self.rays as f64 / self.secs
+        } else {
+            0.0
+        })
     }
 
     /// Rays of every step so far.
@@ -173,4 +186,28 @@ pub fn pair<S>(steps: Vec<u32>, stats: Vec<S>) -> anyhow::Result<Vec<(u32, S)>> 
         steps.len()
     );
     Ok(steps.into_iter().zip(stats).collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_run_within_the_warm_up_still_has_a_rate() {
+        let mut t = Throughput::new(0);
+        assert_eq!(t.run_rays_per_s(), 0.0);
+        for s in 0..5 {
+            t.add(s, 100, 0.5);
+        }
+        assert_eq!(t.rays_per_s(), None, "still warming up");
+        assert_eq!(t.run_rays_per_s(), 200.0);
+        for s in 5..20 {
+            t.add(s, 100, 0.1);
+        }
+        let rate = t.run_rays_per_s();
+        assert!(
+            (rate - 1000.0).abs() < 1e-6,
+            "after the warm-up, its steps only: {rate}"
+        );
+    }
 }

@@ -26,6 +26,22 @@ impl DelayedExp {
         }
     }
 
+    /// Refuse a rate no run can use: `init`, `last` and `delay_mult` must be finite and ≥ 0
+    /// (`name` is the field, e.g. `lr_sigma`).
+    pub fn check(&self, name: &str) -> anyhow::Result<()> {
+        for (field, v) in [
+            ("init", self.init),
+            ("last", self.last),
+            ("delay_mult", self.delay_mult),
+        ] {
+            anyhow::ensure!(
+                v.is_finite() && v >= 0.0,
+                "{name}.{field} must be finite and ≥ 0, got {v}"
+            );
+        }
+        Ok(())
+    }
+
     /// The rate at step `t`.
     pub fn at(&self, t: u32) -> f32 {
         let u = (t as f64 / self.max_steps.max(1) as f64).clamp(0.0, 1.0);

@@ -112,7 +112,8 @@ fn upsample_step(
     if next.allocated() == 0 {
         bail!(
             "upsampling to {new_res}³ kept no vertex (no training-ray weight reached {}); \
-             the scene may be empty or training diverged",
+             the scene may be empty, its cameras may not see the scene box (see the warnings \
+             of `alphasurf inspect` on the dataset) or training diverged",
             cfg.prune_weight
         );
     }
@@ -353,7 +354,7 @@ pub fn train(
     report.checkpoint_seconds += t.elapsed().as_secs_f64();
     let (res, rows) = backend.shape();
     report.steps = cfg.iters;
-    report.train_rays_per_s = throughput.rays_per_s().unwrap_or(0.0);
+    report.train_rays_per_s = throughput.run_rays_per_s();
     report.final_mse = mse;
     report.test_psnr = rendered.mean_psnr;
     report.samples_per_ray = sample_totals.scaled(1.0 / throughput.rays().max(1) as f64);

@@ -13,6 +13,7 @@ use crate::cpu::surface_reg::{delta_tv_chunk, opacity_tv_chunk, OpacityChunk};
 use crate::data::{BackgroundMode, Dataset, TrainViews};
 use crate::grid::checkpoint;
 use crate::grid::surface::SurfaceGrid;
+use crate::math::surface::Truncation;
 use crate::run::checkpoint_writer::{BackgroundSave, Cadence};
 use crate::run::interrupt::{self, Interrupted};
 use crate::run::train_log;
@@ -129,7 +130,7 @@ pub fn resume(
     Ok((step, cfg, bg))
 }
 
-/// The scheduled parameters of step `step`, with truncation `a`, for a grid of resolution `res`
+/// The scheduled parameters of step `step`, with `truncation`, for a grid of resolution `res`
 /// with `rows` allocated vertices; `draws` place the random regulariser chunks (Lα's start, Ln's
 /// and Lδ's start — one row for both, so that the δ rows RMSProp updates densely cover both —
 /// and TVα's draw).
@@ -138,7 +139,7 @@ pub fn step_params(
     res: [u32; 3],
     rows: u32,
     step: u32,
-    a: f32,
+    truncation: Truncation,
     draws: [u64; 3],
 ) -> SurfaceStepParams {
     let row_chunk = |fraction: f32, draw: u64| {
@@ -157,7 +158,7 @@ pub fn step_params(
         lr_bg: cfg.lr_sh.at(step),
         beta: cfg.beta,
         eps: cfg.eps,
-        a,
+        truncation,
         stop_thresh: cfg.stop_thresh,
         lambda_h: cfg.lambda_h,
         lambda_c: if step < cfg.lambda_c_until {
@@ -218,7 +219,7 @@ pub fn train(
             rng.random::<u32>().into(),
             rng.random(),
         ];
-        let p = step_params(cfg, res, rows, step, cfg.a.at(step), draws);
+        let p = step_params(cfg, res, rows, step, cfg.truncation(step), draws);
         backend.step_sampled(&views, batch_seed, cfg.batch as usize, &p)?;
         group.push(step);
         // A signal asked for a stop: this step's checkpoint, then out (after the last step the
@@ -313,9 +314,9 @@ pub fn train(
     report.checkpoint_seconds += t.elapsed().as_secs_f64();
 
     let t = Instant::now();
-    let a = cfg.a.at(cfg.iters);
+    let truncation = cfg.truncation(cfg.iters);
     let rendered = render_split_with(
-        &mut |rays| Ok(backend.render(rays, a, cfg.stop_thresh)?.0),
+        &mut |rays| Ok(backend.render(rays, truncation, cfg.stop_thresh)?.0),
         data,
         &data.test,
         &out.join("test"),
@@ -326,7 +327,7 @@ pub fn train(
     writer.finish()?;
     report.checkpoint_seconds += t.elapsed().as_secs_f64();
     report.steps = cfg.iters;
-    report.train_rays_per_s = throughput.rays_per_s().unwrap_or(0.0);
+    report.train_rays_per_s = throughput.run_rays_per_s();
     report.final_mse = mse;
     report.test_psnr = rendered.mean_psnr;
     report.per_ray = totals.scaled(1.0 / throughput.rays().max(1) as f64);

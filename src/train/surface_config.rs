@@ -6,6 +6,7 @@ use super::config::CHECKPOINT_MIN_SECONDS;
 use super::preset::{Category, Preset};
 use super::schedule::DelayedExp;
 use crate::grid::surface::SurfaceInit;
+use crate::math::surface::{Truncation, TruncationCount};
 use anyhow::{bail, ensure, Result};
 use serde::{Deserialize, Serialize};
 
@@ -57,6 +58,12 @@ pub struct SurfaceConfig {
     pub lr_sh: DelayedExp,
     /// Truncation parameter a.
     pub a: Linear,
+    /// How the truncation count runs along a ray: over every front hit (`ray`, the paper's
+    /// rule) or per structure (`structure`: it restarts where the ray enters the outermost level,
+    /// so a surface seen through another keeps its hits). Absent from checkpoints written before
+    /// it: those counted per ray.
+    #[serde(default)]
+    pub truncation_count: TruncationCount,
     /// Entropy weight LH (per-ray term, mean over the batch).
     pub lambda_h: f32,
     /// Depth-consistency weight Lc, switched off from step `lambda_c_until` on.
@@ -109,6 +116,14 @@ pub fn fast_alpha_init_scale(category: Category) -> f32 {
 }
 
 impl SurfaceConfig {
+    /// Truncated compositing at step `step`.
+    pub fn truncation(&self, step: u32) -> Truncation {
+        Truncation {
+            a: self.a.at(step),
+            count: self.truncation_count,
+        }
+    }
+
     /// The paper's set-up for `category` (50k steps × 5000 rays).
     pub fn paper(category: Category) -> Self {
         // Synthetic / thin values (supplement B.2), then the per-category changes.
@@ -139,6 +154,7 @@ impl SurfaceConfig {
                 end: 2.0,
                 steps: 10_000,
             },
+            truncation_count: TruncationCount::Ray,
             lambda_h: 1e-4,
             lambda_c: 1e-6,
             lambda_c_until: 10_000,
@@ -205,16 +221,7 @@ impl SurfaceConfig {
             ("lr_opacity", &self.lr_opacity),
             ("lr_sh", &self.lr_sh),
         ] {
-            for (field, v) in [
-                ("init", lr.init),
-                ("last", lr.last),
-                ("delay_mult", lr.delay_mult),
-            ] {
-                ensure!(
-                    v.is_finite() && v >= 0.0,
-                    "{name}.{field} must be finite and ≥ 0, got {v}"
-                );
-            }
+            lr.check(name)?;
         }
         let weights = [
             ("lambda_h", self.lambda_h),

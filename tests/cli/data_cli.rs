@@ -64,8 +64,8 @@ fn make_scene_then_inspect() {
     }
     assert!(!stdout.contains("warning"), "{stdout}");
 
-    // Writing the same scene again replaces it; a folder holding anything else is refused and
-    // left as it was.
+    // Writing the same scene again is refused without --overwrite and replaces it with it; a
+    // folder holding anything else is refused and left as it was.
     let small = [
         "--kind",
         "thin",
@@ -78,6 +78,8 @@ fn make_scene_then_inspect() {
     ];
     let again = [&["make-scene", "--out", o][..], &small[..]].concat();
     let (ok, _, stderr) = alphasurf(&again);
+    assert!(!ok && stderr.contains("pass --overwrite"), "{stderr}");
+    let (ok, _, stderr) = alphasurf(&[&again[..], &["--overwrite"]].concat());
     assert!(ok, "{stderr}");
     let other = d.path().join("other");
     std::fs::create_dir(&other).unwrap();

@@ -10,20 +10,29 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-fn bin() -> Command {
+pub(super) fn bin() -> Command {
     Command::new(env!("CARGO_BIN_EXE_alphasurf"))
 }
 
 /// The binary under a file-size limit of 0 blocks: every write to a file fails (EFBIG).
-fn bin_on_full_disk() -> Command {
+pub(super) fn bin_on_full_disk() -> Command {
+    bin_with_limit("-f 0")
+}
+
+/// The binary under `ulimit LIMIT` (e.g. `-f 1`: a write past one 512-byte block fails with
+/// EFBIG, as on a disk that fills up part way; `-v KIB`: an address-space limit).
+pub(super) fn bin_with_limit(limit: &str) -> Command {
     let mut c = Command::new("bash");
-    c.args(["-c", "trap '' XFSZ; ulimit -f 0; exec \"$0\" \"$@\""])
-        .arg(env!("CARGO_BIN_EXE_alphasurf"));
+    c.args([
+        "-c",
+        &format!("trap '' XFSZ; ulimit {limit}; exec \"$0\" \"$@\""),
+    ])
+    .arg(env!("CARGO_BIN_EXE_alphasurf"));
     c
 }
 
 /// Exit code, stdout, stderr.
-fn run(cmd: &mut Command) -> (Option<i32>, String, String) {
+pub(super) fn run(cmd: &mut Command) -> (Option<i32>, String, String) {
     let out = cmd.output().expect("spawn alphasurf");
     (
         out.status.code(),
@@ -32,7 +41,7 @@ fn run(cmd: &mut Command) -> (Option<i32>, String, String) {
     )
 }
 
-fn run_ok(cmd: &mut Command) -> String {
+pub(super) fn run_ok(cmd: &mut Command) -> String {
     let (code, out, err) = run(cmd);
     assert_eq!(code, Some(0), "{cmd:?} failed:\n{out}\n{err}");
     out
@@ -40,7 +49,7 @@ fn run_ok(cmd: &mut Command) -> String {
 
 /// The command fails cleanly (exit code 1, not a panic's 101 or a signal) with a message that
 /// contains every one of `needles`; returns the message.
-fn refused(cmd: &mut Command, needles: &[&str]) -> String {
+pub(super) fn refused(cmd: &mut Command, needles: &[&str]) -> String {
     let (code, out, err) = run(cmd);
     assert_eq!(
         code,
@@ -60,7 +69,7 @@ fn scene(dir: &Path) -> PathBuf {
 }
 
 /// The built-in solid scene at `res`² pixels and `views` views, in `dir/scene`.
-fn small_scene(dir: &Path, res: &str, views: &str) -> PathBuf {
+pub(super) fn small_scene(dir: &Path, res: &str, views: &str) -> PathBuf {
     let data = dir.join("scene");
     run_ok(
         bin()
@@ -79,7 +88,7 @@ fn small_scene(dir: &Path, res: &str, views: &str) -> PathBuf {
     data
 }
 
-fn train_args<'a>(data: &'a Path, out: &'a Path) -> Vec<&'a std::ffi::OsStr> {
+pub(super) fn train_args<'a>(data: &'a Path, out: &'a Path) -> Vec<&'a std::ffi::OsStr> {
     let mut v: Vec<&std::ffi::OsStr> = vec!["train".as_ref(), "--data".as_ref(), data.as_ref()];
     v.extend(["--out".as_ref(), out.as_os_str()]);
     for a in [
@@ -97,7 +106,7 @@ fn train_args<'a>(data: &'a Path, out: &'a Path) -> Vec<&'a std::ffi::OsStr> {
 }
 
 /// A small finished stage-1 run.
-fn stage1(data: &Path, out: &Path, iters: &str) {
+pub(super) fn stage1(data: &Path, out: &Path, iters: &str) {
     run_ok(
         bin()
             .args(train_args(data, out))
@@ -105,7 +114,7 @@ fn stage1(data: &Path, out: &Path, iters: &str) {
     );
 }
 
-fn read(p: &Path) -> Vec<u8> {
+pub(super) fn read(p: &Path) -> Vec<u8> {
     std::fs::read(p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
 }
 
@@ -430,7 +439,7 @@ fn stage_all_resumes_across_the_boundary_and_locks_its_run() {
 }
 
 /// An svox2 checkpoint with a links array of `shape` (every vertex allocated).
-fn svox2_ckpt(path: &Path, shape: [u64; 3]) {
+pub(super) fn svox2_ckpt(path: &Path, shape: [u64; 3]) {
     let n = shape.iter().product::<u64>();
     let mut w = alphasurf::grid::npz::NpzWriter::new(std::fs::File::create(path).unwrap());
     let links: Vec<i32> = (0..n as i32).collect();
@@ -439,6 +448,7 @@ fn svox2_ckpt(path: &Path, shape: [u64; 3]) {
         .unwrap();
     w.array("sh_data", &[n, 27], &vec![0.1f32; n as usize * 27])
         .unwrap();
+    w.array("radius", &[3], &[1.5f32; 3]).unwrap();
     w.finish().unwrap();
 }
 

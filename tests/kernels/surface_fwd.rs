@@ -8,12 +8,14 @@
 //! (plus its extrema, located by bisection on the analytic derivative) and bisection in f64.
 
 use alphasurf::abi::buffers::{SurfCounts, SurfOut};
+use alphasurf::abi::consts::SURF_PASS_MIN_T;
 use alphasurf::check::surface_blocks::check as blocks_check;
 use alphasurf::check::surface_fwd::{check, render_gpu, test_rays, test_scene, SurfaceScene};
 use alphasurf::check::TEST_BACKGROUND;
 use alphasurf::cpu::surface_blocks::build_blocks;
 use alphasurf::cpu::surface_fwd::render;
 use alphasurf::gpu::test_gpu;
+use alphasurf::math::surface::{Truncation, TruncationCount};
 use alphasurf::math::surface_blocks::{
     surf_blocks_per_axis, surf_live_words, SkipRef, SURF_BLOCK_SHIFT_CPU, SURF_BLOCK_SHIFT_VULKAN,
     SURF_BOX_WORDS, SURF_MASK_BITS,
@@ -175,8 +177,18 @@ fn crossings64(
     out
 }
 
-/// Renders one ray in f64 by method.md §3.2 and §5, on [`TEST_BACKGROUND`] (`SurfaceScene::params`).
-fn ref_ray(sc: &SurfaceScene, ro: [f32; 3], rd: [f32; 3], a: f64, stop: f64) -> RefRay {
+/// Renders one ray in f64 by method.md §3.2 and §5, on [`TEST_BACKGROUND`] (`SurfaceScene::params`),
+/// with `truncation`'s a and count (per structure: the count restarts at each front crossing of
+/// level 0, `sc.levels[0]`).
+fn ref_ray(
+    sc: &SurfaceScene,
+    ro: [f32; 3],
+    rd: [f32; 3],
+    truncation: Truncation,
+    stop: f64,
+) -> RefRay {
+    let a = truncation.a as f64;
+    let per_structure = truncation.count == TruncationCount::Structure;
     let n = sc.n as usize;
     let hi = (n - 1) as f64;
     let og: [f64; 3] =
@@ -284,8 +296,8 @@ fn ref_ray(sc: &SurfaceScene, ro: [f32; 3], rd: [f32; 3], a: f64, stop: f64) -> 
             res.degenerate = true;
         }
     }
-    // Hits in t order.
-    let mut hits: Vec<(f64, [usize; 8], [f64; 3])> = Vec::new();
+    // Hits in t order, and whether each crosses level 0.
+    let mut hits: Vec<(f64, [usize; 8], [f64; 3], bool)> = Vec::new();
     for &(t0, t1, l) in &pieces {
         let Some(rows) = allocated(l) else { continue };
         let c: [f64; 8] = rows.map(|r| sc.delta[r] as f64);
@@ -295,7 +307,7 @@ fn ref_ray(sc: &SurfaceScene, ro: [f32; 3], rd: [f32; 3], a: f64, stop: f64) -> 
         };
         let len = t1 - t0;
         let mut cell_hits = Vec::new();
-        for &tau in &sc.levels {
+        for (level, &tau) in sc.levels.iter().enumerate() {
             let tau = tau as f64;
             let f = |s: f64| trilerp64(&c, local(t0 + s)) - tau;
             let fp = |s: f64| {
@@ -307,21 +319,28 @@ fn ref_ray(sc: &SurfaceScene, ro: [f32; 3], rd: [f32; 3], a: f64, stop: f64) -> 
                     res.degenerate = true;
                 }
                 if rising && s.is_finite() {
-                    cell_hits.push(t0 + s);
+                    cell_hits.push((t0 + s, level == 0));
                 }
             }
         }
-        cell_hits.sort_by(|a, b| a.partial_cmp(b).unwrap());
-        for t in cell_hits {
-            hits.push((t, rows, local(t)));
+        cell_hits.sort_by(|a, b| a.0.partial_cmp(&b.0).unwrap());
+        for (t, outer) in cell_hits {
+            hits.push((t, rows, local(t), outer));
         }
     }
     // Truncated alpha compositing.
     let mut color = [0.0f64; 3];
     let mut trans = 1.0f64;
     let mut j = 0u32;
-    for (_, rows, p) in hits {
-        if j as f64 >= a {
+    let mut k = 0u32;
+    for (_, rows, p, outer) in hits {
+        if per_structure && outer {
+            k = 0;
+        }
+        if k as f64 >= a {
+            if per_structure && trans >= SURF_PASS_MIN_T as f64 {
+                continue;
+            }
             break;
         }
         let w: [f64; 8] = std::array::from_fn(|i| {
@@ -331,7 +350,7 @@ fn ref_ray(sc: &SurfaceScene, ro: [f32; 3], rd: [f32; 3], a: f64, stop: f64) -> 
         });
         let sa: f64 = (0..8).map(|i| w[i] * sc.opacity[rows[i]] as f64).sum();
         let alpha = 1.0 - (-sa.max(0.0)).exp();
-        let gamma = 0.5 * (1.0 - (std::f64::consts::PI * (a - j as f64).clamp(0.0, 1.0)).cos());
+        let gamma = 0.5 * (1.0 - (std::f64::consts::PI * (a - k as f64).clamp(0.0, 1.0)).cos());
         let at = alpha * gamma;
         for (ch, col) in color.iter_mut().enumerate() {
             let mut v = 0.5;
@@ -345,6 +364,7 @@ fn ref_ray(sc: &SurfaceScene, ro: [f32; 3], rd: [f32; 3], a: f64, stop: f64) -> 
         }
         trans *= 1.0 - at;
         j += 1;
+        k += 1;
         // Early termination within rounding of the threshold.
         if (trans - stop).abs() <= 1e-4 * stop {
             res.degenerate = true;
@@ -359,36 +379,48 @@ fn ref_ray(sc: &SurfaceScene, ro: [f32; 3], rd: [f32; 3], a: f64, stop: f64) -> 
     res
 }
 
-fn ref_render(sc: &SurfaceScene, rays: &[f32], a: f32, stop: f32) -> Vec<RefRay> {
+fn ref_render(sc: &SurfaceScene, rays: &[f32], truncation: Truncation, stop: f32) -> Vec<RefRay> {
     rays.chunks_exact(6)
         .map(|r| {
             ref_ray(
                 sc,
                 [r[0], r[1], r[2]],
                 [r[3], r[4], r[5]],
-                a as f64,
+                truncation,
                 stop as f64,
             )
         })
         .collect()
 }
 
+/// A per-structure truncation with parameter `a`.
+fn per_structure(a: f32) -> Truncation {
+    Truncation {
+        a,
+        count: TruncationCount::Structure,
+    }
+}
+
 // ---------------------------------------------------------------------------------------------
 
 /// Both f32 backends (CPU twin, Vulkan) against the f64 reference on the random test scene with
 /// random and adversarial rays: rgb and transmittance within 1e-3 and hit counts exact, except
-/// rays the reference flags as near-degenerate (counted, capped at 2 %). The last pass puts three
-/// levels on vertex values of δ (crossings through vertices, culling ties) and 8 levels in all.
+/// rays the reference flags as near-degenerate (counted, capped at 2 %). The fourth pass puts
+/// three levels on vertex values of δ (crossings through vertices, culling ties) and 8 levels in
+/// all; the last two count the truncation per structure.
 #[test]
 fn backends_match_f64_reference() {
     let mut total = [0usize; 4];
     for (seed, a, stop, on_vertices, n) in [
-        (11u64, 3.5f32, 1e-4f32, false, 16u32),
-        (12, 100.0, 1e-3, false, 16),
-        (13, 1.5, 0.0, false, 16),
-        (14, 100.0, 1e-4, true, 16),
-        (15, 100.0, 1e-4, false, 40),
+        (11u64, 3.5f32.into(), 1e-4f32, false, 16u32),
+        (12, 100.0.into(), 1e-3, false, 16),
+        (13, 1.5.into(), 0.0, false, 16),
+        (14, 100.0.into(), 1e-4, true, 16),
+        (15, 100.0.into(), 1e-4, false, 40),
+        (16, per_structure(1.5), 1e-4, false, 16),
+        (17, per_structure(2.0), 0.0, false, 40),
     ] {
+        let a: Truncation = a;
         let mut sc = test_scene(seed, n);
         if on_vertices {
             let k = sc.delta.len();
@@ -422,7 +454,7 @@ fn backends_match_f64_reference() {
                 assert!(dt <= 1e-3, "{}", what());
             }
             eprintln!(
-                "{backend} seed {seed} a {a} levels {}: {n} rays, {hits} reference hits ({multi} rays with ≥ 2), {flagged} flagged, max |Δrgb| {worst:.2e}, twin counters {counts:?}",
+                "{backend} seed {seed} {a:?} levels {}: {n} rays, {hits} reference hits ({multi} rays with ≥ 2), {flagged} flagged, max |Δrgb| {worst:.2e}, twin counters {counts:?}",
                 sc.levels.len()
             );
         }
@@ -844,38 +876,50 @@ fn planar_field_one_hit_at_the_right_depth() {
     );
 }
 
-/// Seven parallel level planes crossed front-facing along a ray: with a = 1 only the first hit
-/// contributes, with a = 5 exactly five, and a fractional a blends the last one by γ.
-#[test]
-fn truncated_compositing() {
-    let n = 17u32;
+/// An `n`³ grid, every vertex allocated, whose δ depends on x alone (`delta(x)` at the x-th plane
+/// of vertices), σα = `sigma`, and colour (0.5 + x/n, 0.2, 0.7) at x from SH band 0.
+fn x_scene(n: u32, delta: impl Fn(usize) -> f32, sigma: f32) -> SurfaceScene {
     let nu = n as usize;
-    let h = 1.0 / 16.0;
-    let planes = [2.3f64, 4.6, 6.2, 8.5, 10.4, 12.1, 14.7];
-    let sigma = 0.9f32;
-    let y0 = 0.282_094_79f64;
+    let y0 = 0.282_094_79f32;
     let mut sc = test_scene(1, n);
     sc.links = (0..(nu * nu * nu) as i32).collect();
     sc.delta.clear();
     sc.opacity.clear();
     sc.sh.clear();
-    sc.levels = planes.iter().map(|&x| (x * h) as f32).collect();
     for slot in 0..nu * nu * nu {
-        let x = (slot / (nu * nu)) as f32;
-        sc.delta.push(x * h as f32);
+        let x = slot / (nu * nu);
+        sc.delta.push(delta(x));
         sc.opacity.push(sigma);
         let mut sh = [0f32; 27];
-        sh[0] = x / (n as f32 * y0 as f32);
-        sh[9] = -0.3 / y0 as f32;
-        sh[18] = 0.2 / y0 as f32;
+        sh[0] = x as f32 / (n as f32 * y0);
+        sh[9] = -0.3 / y0;
+        sh[18] = 0.2 / y0;
         sc.sh.extend_from_slice(&sh);
     }
-    // Along +x, slightly tilted, through the middle.
+    sc
+}
+
+/// One ray of `sc` along +x, slightly tilted, through the middle of a 17³ grid.
+fn x_ray(sc: &SurfaceScene) -> Vec<f32> {
     let g = [-1.0f32, 8.3, 7.9];
     let d = [1.0f32, 0.02, -0.01];
     let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
     let mut rays = sc.grid_to_scene(g).to_vec();
     rays.extend(d.map(|x| x / l));
+    rays
+}
+
+/// Seven parallel level planes crossed front-facing along a ray: with a = 1 only the first hit
+/// contributes, with a = 5 exactly five, and a fractional a blends the last one by γ.
+#[test]
+fn truncated_compositing() {
+    let n = 17u32;
+    let h = 1.0 / 16.0;
+    let planes = [2.3f64, 4.6, 6.2, 8.5, 10.4, 12.1, 14.7];
+    let sigma = 0.9f32;
+    let mut sc = x_scene(n, |x| x as f32 * h as f32, sigma);
+    sc.levels = planes.iter().map(|&x| (x * h) as f32).collect();
+    let rays = x_ray(&sc);
     let alpha = 1.0 - (-(sigma as f64)).exp();
     for a in [1.0f32, 5.0, 2.5, 3.25, 0.5, 8.0] {
         let p = sc.params(a, 0.0);
@@ -911,6 +955,97 @@ fn truncated_compositing() {
                 );
             }
             assert!((o.transmittance as f64 - t).abs() < 2e-6);
+        }
+    }
+}
+
+/// Two structures along a ray, each crossing three nested levels front-facing (δ a tent in x that
+/// falls below level 0 between them): counted per ray, a = 2 composites the first structure's
+/// outer two levels and ends the ray; counted per structure, each structure gets its own first
+/// a hits (the count restarts at the second structure's level-0 crossing), its inner level is
+/// passed over, and a fractional a blends each structure's last hit by γ; nearly opaque, the
+/// first truncated hit ends the ray (transmittance below SURF_PASS_MIN_T).
+#[test]
+fn truncation_counted_per_structure() {
+    let n = 17u32;
+    // δ per x-plane of vertices; levels 0.5, 1.5, 2.5: rising crossings at x = 1.5, 2.5, 3.5
+    // (structure 1) and 10.5, 11.5, 12.5 (structure 2).
+    let profile = [
+        -1.0f32, 0., 1., 2., 3., 2., 1., 0., -1., -1., 0., 1., 2., 3., 2., 1., 0.,
+    ];
+    let crossings = [
+        (1.5f64, true),
+        (2.5, false),
+        (3.5, false),
+        (10.5, true),
+        (11.5, false),
+        (12.5, false),
+    ];
+    let mut sc = x_scene(n, |x| profile[x], 0.0);
+    sc.levels = vec![0.5, 1.5, 2.5];
+    let rays = x_ray(&sc);
+    let cases = [
+        (0.7f32, Truncation::from(2.0), 2u32, 1u32),
+        (0.7, per_structure(2.0), 4, 2),
+        (0.7, per_structure(1.5), 4, 2),
+        (0.7, per_structure(5.0), 6, 0),
+        (0.7, per_structure(1.0), 2, 4),
+        // Nearly opaque: T = e^−6 < SURF_PASS_MIN_T after two hits, so the first truncated hit
+        // ends the ray as when counting per ray.
+        (3.0, per_structure(2.0), 2, 1),
+    ];
+    for (sigma, t, hits, cut) in cases {
+        sc.opacity.iter_mut().for_each(|o| *o = sigma);
+        let alpha = 1.0 - (-(sigma as f64)).exp();
+        let p = sc.params(t, 0.0);
+        let blocks = build_blocks(&sc.grid(), &sc.levels, 0.0, SHIFT).unwrap();
+        let (cpu, counts) = render(&sc.grid(), &rays, &p, Some(sk(&blocks))).unwrap();
+        let (gpu, gc, _) =
+            render_gpu(test_gpu(), &sc.grid(), &rays, &p, Some(sk(&blocks))).unwrap();
+        let want = ref_render(&sc, &rays, t, 0.0)[0];
+        // Expected, in f64, from the crossings listed above.
+        let a = t.a as f64;
+        let (mut col, mut tr, mut k) = ([0.0f64; 3], 1.0f64, 0u32);
+        for &(x, outer) in &crossings {
+            if t.count == TruncationCount::Structure && outer {
+                k = 0;
+            }
+            if k as f64 >= a {
+                if t.count == TruncationCount::Structure && tr >= SURF_PASS_MIN_T as f64 {
+                    continue;
+                }
+                break;
+            }
+            let u = (a - k as f64).clamp(0.0, 1.0);
+            let at = alpha * 0.5 * (1.0 - (std::f64::consts::PI * u).cos());
+            let c = [0.5 + x / n as f64, 0.2, 0.7];
+            for ch in 0..3 {
+                col[ch] += tr * at * c[ch];
+            }
+            tr *= 1.0 - at;
+            k += 1;
+        }
+        let rgb: [f64; 3] = std::array::from_fn(|ch| col[ch] + tr * TEST_BACKGROUND[ch] as f64);
+        assert_eq!(want.hits, hits, "reference {t:?}: {want:?}");
+        for (backend, o, cn) in [("cpu", cpu[0], counts), ("gpu", gpu[0], gc)] {
+            assert_eq!(o.hits, hits, "{backend} {t:?}: {o:?}");
+            assert_eq!(cn.cut, cut, "{backend} {t:?}: counters {cn:?}");
+            for ch in 0..3 {
+                assert!(
+                    (o.rgb[ch] as f64 - rgb[ch]).abs() < 2e-5,
+                    "{backend} {t:?}: {o:?} want {rgb:?}"
+                );
+                // The reference's own crossings (bisection in f64 on the f32 field) agree with
+                // the listed ones to rounding.
+                assert!(
+                    (want.rgb[ch] - rgb[ch]).abs() < 1e-7,
+                    "reference {t:?}: {want:?} want {rgb:?}"
+                );
+            }
+            assert!(
+                (o.transmittance as f64 - tr).abs() < 2e-6,
+                "{backend} {t:?}: {o:?}"
+            );
         }
     }
 }

@@ -21,6 +21,7 @@ use alphasurf::cpu::surface_train::{
 };
 use alphasurf::math::dda::ray_unit;
 use alphasurf::math::sh::sh_basis;
+use alphasurf::math::surface::{Truncation, TruncationCount};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
 
@@ -46,9 +47,10 @@ impl Scene {
     }
 }
 
-/// δ rising along +x with gentle bends (levels cross the grid as wavy sheets), σα in [0.3, 2],
-/// SH small around a mid grey.
-fn scene(rng: &mut Pcg64) -> Scene {
+/// δ rising along +x with gentle bends (levels cross the grid as wavy sheets), or with `layered`
+/// rising and falling along x (a ray crosses the levels front-facing in several separate layers),
+/// σα in [0.3, 2], SH small around a mid grey.
+fn scene(rng: &mut Pcg64, layered: bool) -> Scene {
     let n = N as usize;
     let mut s = Scene {
         links: (0..(n * n * n) as i32).collect(),
@@ -60,8 +62,13 @@ fn scene(rng: &mut Pcg64) -> Scene {
         for y in 0..n {
             for z in 0..n {
                 let (xf, yf, zf) = (x as f32, y as f32, z as f32);
+                let along = if layered {
+                    0.7 * (1.6 * xf).sin()
+                } else {
+                    0.35 * (xf - 2.5)
+                };
                 s.delta
-                    .push(0.35 * (xf - 2.5) + 0.12 * (0.9 * yf).sin() + 0.08 * (1.3 * zf).cos());
+                    .push(along + 0.12 * (0.9 * yf).sin() + 0.08 * (1.3 * zf).cos());
                 s.opacity.push(rng.random_range(0.3..2.0));
                 for k in 0..27 {
                     let scale = if k % 9 == 0 { 0.3 } else { 0.08 };
@@ -157,7 +164,7 @@ fn ray_loss64(
         }
         let wt = weights64(p);
         let sa: f64 = (0..8).map(|i| wt[i] * q.opacity[h.lk[i] as usize]).sum();
-        let u = (a - j as f64).clamp(0.0, 1.0);
+        let u = (a - h.count as f64).clamp(0.0, 1.0);
         let gamma = 0.5 * (1.0 - (std::f64::consts::PI * u).cos());
         let at = (1.0 - (-sa.max(0.0)).exp()) * gamma;
         let mut raw = [0.5f64; 3];
@@ -194,31 +201,56 @@ fn ray_loss64(
             .sum();
         l += lp.lambda_h as f64 * h;
     }
-    if w.len() > 1 {
-        let m = (0..w.len()).fold(0, |m, j| if w[j] > w[m] { j } else { m });
+    // Lc per structure: a hit whose truncation count is 0 starts one; each structure's hits are
+    // pulled to the depth of its largest weight.
+    let mut start = 0;
+    while start < w.len() {
+        let end = (start + 1..w.len())
+            .find(|&j| tr.hits[j].count == 0)
+            .unwrap_or(w.len());
+        let m = (start..end).fold(start, |m, j| if w[j] > w[m] { j } else { m });
         if strict {
-            for j in 0..w.len() {
+            for j in start..end {
                 if j != m && (w[m] - w[j] < 1e-3 || (depth[j] - depth[m]).abs() < 1e-3) {
                     return None;
                 }
             }
         }
-        l += lp.lambda_c as f64 * depth.iter().map(|d| (d - depth[m]).abs()).sum::<f64>();
+        l += lp.lambda_c as f64
+            * depth[start..end]
+                .iter()
+                .map(|d| (d - depth[m]).abs())
+                .sum::<f64>();
+        start = end;
     }
     Some(l)
 }
 
 #[test]
 fn cpu_backward_matches_f64_central_differences() {
+    backward_matches_central_differences(2.6.into());
+}
+
+/// The same with the truncation counted per structure: γ follows each hit's own count, which
+/// restarts at level-0 crossings (some rays of the scene restart it).
+#[test]
+fn cpu_backward_matches_f64_central_differences_per_structure() {
+    backward_matches_central_differences(Truncation {
+        a: 1.6,
+        count: TruncationCount::Structure,
+    });
+}
+
+fn backward_matches_central_differences(truncation: Truncation) {
     let mut rng = Pcg64::seed_from_u64(7);
-    let sc = scene(&mut rng);
+    let sc = scene(&mut rng, truncation.count == TruncationCount::Structure);
     let g = sc.grid();
     let levels = vec![-0.45f32, 0.0, 0.5];
     let p = SurfaceParams {
         scale: [1.0; 3],
         offset: [0.0; 3],
         levels: levels.clone(),
-        a: 2.6,
+        truncation,
         stop_thresh: 0.0,
         background: TEST_BACKGROUND,
     };
@@ -254,7 +286,19 @@ fn cpu_backward_matches_f64_central_differences() {
         ];
         let mut cnt = TrainCounts::default();
         let tr = trace_ray(&g, ro, rd, &p, None, &mut cnt);
-        if tr.n == 0 || ray_loss64(&tr, rd, target, &levels, p.a as f64, &lp, &q, true).is_none() {
+        if tr.n == 0
+            || ray_loss64(
+                &tr,
+                rd,
+                target,
+                &levels,
+                p.truncation.a as f64,
+                &lp,
+                &q,
+                true,
+            )
+            .is_none()
+        {
             continue;
         }
         multi += (tr.n > 1) as usize;
@@ -264,6 +308,15 @@ fn cpu_backward_matches_f64_central_differences() {
         traces.push((tr, rd, target));
     }
     assert!(multi > 60, "only {multi} rays with several hits");
+    let restarts = traces
+        .iter()
+        .filter(|(tr, _, _)| tr.hits[1..tr.n].iter().any(|h| h.count == 0))
+        .count();
+    if truncation.count == TruncationCount::Structure {
+        assert!(restarts > 5, "only {restarts} rays restart the count");
+    } else {
+        assert_eq!(restarts, 0);
+    }
     // Hit points are inside their cells.
     for (tr, _, _) in &traces {
         for h in &tr.hits[..tr.n] {
@@ -306,7 +359,9 @@ fn cpu_backward_matches_f64_central_differences() {
             .iter()
             .zip(&weights)
             .map(|((tr, rd, t), &w)| {
-                w as f64 * ray_loss64(tr, *rd, *t, &levels, p.a as f64, &lp, q, false).unwrap()
+                w as f64
+                    * ray_loss64(tr, *rd, *t, &levels, p.truncation.a as f64, &lp, q, false)
+                        .unwrap()
             })
             .sum()
     };

@@ -178,14 +178,35 @@ fn float16_svox2_with_extra_arrays_and_skip_links() {
     }
     fs::write(&p, z.finish().unwrap().into_inner()).unwrap();
     assert_eq!(npz::load_svox2(&p).unwrap(), g);
-    // svox2's loader defaults a missing radius/center.
-    let mut w = NpzWriter::new(Cursor::new(Vec::new()));
-    w.array("links", &[2, 2, 3], &g.links).unwrap();
-    w.array("density_data", &[n, 1], &g.density).unwrap();
-    w.array("sh_data", &[n, 27], &g.sh).unwrap();
-    fs::write(&p, w.finish().unwrap().into_inner()).unwrap();
-    let g2 = npz::load_svox2(&p).unwrap();
-    assert_eq!((g2.radius, g2.center), ([1.0; 3], [0.0; 3]));
+    // A missing center is svox2's [0, 0, 0]; a missing radius (the grid's extent) is refused.
+    for radius in [false, true] {
+        write_npz(&p, |w| {
+            w.array("links", &[2, 2, 3], &g.links).unwrap();
+            w.array("density_data", &[n, 1], &g.density).unwrap();
+            w.array("sh_data", &[n, 27], &g.sh).unwrap();
+            if radius {
+                w.array("radius", &[3], &[1.5f32; 3]).unwrap();
+            }
+        });
+        if radius {
+            assert_eq!(npz::load_svox2(&p).unwrap().center, [0.0; 3]);
+        } else {
+            assert_mentions(&import_err(&p), &["ckpt.npz", "'radius'", "extent"]);
+        }
+    }
+    // Another basis than spherical harmonics (numpy's int64 scalar, as svox2 saves it).
+    for (basis, ok) in [(1i64, true), (4, false), (255, false)] {
+        svox2_with(&p, &g, "", |w| {
+            w.array("basis_type", &[], &[basis]).unwrap()
+        });
+        match npz::load_svox2(&p) {
+            Ok(_) => assert!(ok, "basis {basis} accepted"),
+            Err(e) => {
+                assert!(!ok, "basis {basis}: {e:#}");
+                assert_mentions(&format!("{e:#}"), &["basis_type", "spherical harmonics"]);
+            }
+        }
+    }
 }
 
 #[test]
@@ -228,14 +249,13 @@ fn damaged_files_get_clear_errors() {
         w.array("links", &res, &links_f).unwrap();
     });
     assert_mentions(&import_err(&p), &["ckpt.npz", "'links'", "int32"]);
+    // numpy's default int64 is read where its values fit int32 (svox2's `basis_type`).
     write_npz(&p, |w| {
-        let links_64: Vec<i64> = g.links.iter().map(|&l| l as i64).collect();
+        let mut links_64: Vec<i64> = g.links.iter().map(|&l| l as i64).collect();
+        links_64[0] = 1 << 40;
         w.array("links", &res, &links_64).unwrap();
     });
-    assert_mentions(
-        &import_err(&p),
-        &["ckpt.npz", "'links'", "unsupported dtype '<i8'"],
-    );
+    assert_mentions(&import_err(&p), &["ckpt.npz", "'links'", "beyond int32"]);
     svox2_with(&p, &g, "density_data", |w| {
         w.array("density_data", &[n, 1], &vec![1i32; n as usize])
             .unwrap();

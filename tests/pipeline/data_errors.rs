@@ -502,6 +502,16 @@ fn colmap_missing_image_mask_and_camera() {
         e.downcast_ref(),
         Some(DataError::MissingViewFile { .. })
     ));
+    // Issue 44: a posed image that is there but unreadable (a symbolic link loop, a folder) is
+    // said to be unreadable, not missing.
+    let (_k, dir) = small(Target::ColmapText);
+    let img = dir.join("images/test_r_1.png");
+    std::fs::remove_file(&img).unwrap();
+    std::os::unix::fs::symlink("test_r_1.png", &img).unwrap();
+    fails_naming(&dir, "images/test_r_1.png", "cannot read image");
+    std::fs::remove_file(&img).unwrap();
+    std::fs::create_dir(&img).unwrap();
+    fails_naming(&dir, "images/test_r_1.png", "a folder, not an image");
     let (_k, dir) = small(Target::ColmapText);
     std::fs::remove_file(dir.join("masks/val_r_0.png")).unwrap();
     fails_naming(&dir, "masks/val_r_0.png", "not found");
@@ -510,6 +520,44 @@ fn colmap_missing_image_mask_and_camera() {
         s.replacen("\n3 PINHOLE", "\n33 PINHOLE", 1)
     });
     fails_naming(&dir, "images.txt", "uses camera 3, which");
+}
+
+/// Issue 44: a camera line with too few parameters says so (not "model not supported"), and a
+/// distortion no lens has is refused at load instead of failing training later.
+#[test]
+fn colmap_parameter_count_and_impossible_distortion() {
+    let (_k, dir) = small(Target::ColmapText);
+    let cams = dir.join("sparse/0/cameras.txt");
+    let orig = std::fs::read_to_string(&cams).unwrap();
+    let line = orig.lines().find(|l| l.contains(" PINHOLE ")).unwrap();
+    let f: Vec<&str> = line.split_whitespace().collect();
+    let short = format!("{} PINHOLE {} {} 44", f[0], f[2], f[3]);
+    std::fs::write(&cams, orig.replacen(line, &short, 1)).unwrap();
+    let (msg, _) = load_err(&dir);
+    assert!(
+        msg.contains("cameras.txt")
+            && msg.contains("takes 4 parameters")
+            && msg.contains("has 1")
+            && !msg.contains("not supported"),
+        "{msg}"
+    );
+    // SIMPLE_RADIAL f cx cy k1 with k1 = 1e6.
+    let radial = format!(
+        "{} SIMPLE_RADIAL {} {} {} {} {} 1e6",
+        f[0], f[2], f[3], f[4], f[6], f[7]
+    );
+    std::fs::write(&cams, orig.replacen(line, &radial, 1)).unwrap();
+    let (msg, _) = load_err(&dir);
+    assert!(
+        msg.contains("distortion k1 1000000") && msg.contains("not a lens"),
+        "{msg}"
+    );
+    let mild = format!(
+        "{} SIMPLE_RADIAL {} {} {} {} {} 0.01",
+        f[0], f[2], f[3], f[4], f[6], f[7]
+    );
+    std::fs::write(&cams, orig.replacen(line, &mild, 1)).unwrap();
+    Dataset::load(&dir, &LoadOptions::default()).unwrap();
 }
 
 #[test]

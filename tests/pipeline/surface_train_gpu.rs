@@ -25,7 +25,7 @@ fn params(g: &SurfaceGrid, step: u32) -> SurfaceStepParams {
         lr_sh: 1e-2,
         beta: 0.95,
         eps: 1e-8,
-        a: 3.5,
+        truncation: 3.5.into(),
         stop_thresh: 1e-4,
         lambda_h: 1e-2,
         lambda_c: 1e-2,
@@ -189,8 +189,8 @@ fn vulkan_render_and_load_round_trip() {
     let rays = test_rays(&scene, 9, 1500);
     let mut vk = VulkanSurface::new(gpu, g0.clone()).unwrap();
     let mut cpu = CpuSurface::new(g0.clone()).unwrap();
-    let (rv, cv) = vk.render(&rays, 3.5, 1e-4).unwrap();
-    let (rc, cc) = cpu.render(&rays, 3.5, 1e-4).unwrap();
+    let (rv, cv) = vk.render(&rays, 3.5.into(), 1e-4).unwrap();
+    let (rc, cc) = cpu.render(&rays, 3.5.into(), 1e-4).unwrap();
     assert_eq!(rv.len(), rc.len());
     let close = rv
         .iter()
@@ -221,7 +221,7 @@ fn vulkan_render_and_load_round_trip() {
     assert!(vk.load(g1, Some([vec![], vec![], vec![]])).is_err());
     // Inputs that must be refused, not crash the device.
     let p = SurfaceStepParams {
-        a: 9.0,
+        truncation: 9.0.into(),
         ..params(&g0, 0)
     };
     assert!(vk.step(&rays[..60], &[0.5; 30], &p).is_err());
@@ -243,8 +243,8 @@ fn cpu_backend_checks_links_when_made() {
     let err = CpuSurface::new(bad).err().expect("a bad link is an error");
     assert!(format!("{err:#}").contains("link"), "{err:#}");
     let mut cpu = CpuSurface::new(g0).unwrap();
-    let first = cpu.render(&rays, 5.0, 1e-4).unwrap();
-    let again = cpu.render(&rays, 5.0, 1e-4).unwrap();
+    let first = cpu.render(&rays, 5.0.into(), 1e-4).unwrap();
+    let again = cpu.render(&rays, 5.0.into(), 1e-4).unwrap();
     assert!(
         first.1.cut + first.1.cells > 0,
         "the rays walk cells: {:?}",

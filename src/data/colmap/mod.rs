@@ -221,9 +221,15 @@ fn intrinsics(path: &Path, c: &CameraEntry) -> Result<Intrinsics, DataError> {
     if !READ.contains(&c.model.as_str()) {
         return Err(unsupported());
     }
+    let bad = |msg: String| DataError::Format {
+        path: path.to_path_buf(),
+        msg: format!("camera {}: {msg}", c.id),
+    };
     if c.params.len() != n {
-        return Err(refuse(format!(
-            "it takes {n} parameters, the camera has {}",
+        return Err(bad(format!(
+            "model {} takes {n} parameters after the width and height, this camera has {} \
+             (a line reads CAMERA_ID MODEL WIDTH HEIGHT PARAMS[])",
+            c.model,
             c.params.len()
         )));
     }
@@ -251,10 +257,6 @@ fn intrinsics(path: &Path, c: &CameraEntry) -> Result<Intrinsics, DataError> {
         ),
         _ => return Err(unsupported()),
     };
-    let bad = |msg: String| DataError::Format {
-        path: path.to_path_buf(),
-        msg: format!("camera {}: {msg}", c.id),
-    };
     if let Some(x) = p.iter().find(|x| !x.is_finite()) {
         return Err(bad(format!("parameter {x} is not finite")));
     }
@@ -269,6 +271,22 @@ fn intrinsics(path: &Path, c: &CameraEntry) -> Result<Intrinsics, DataError> {
         return Err(bad(format!(
             "image size {}x{} is not in 1..=65536",
             c.width, c.height
+        )));
+    }
+    // The radial factor at the image's farthest corner: a lens model COLMAP fits keeps it
+    // well inside (0.1, 10); past that, undistorting folds or blows up the image.
+    let (k1, k2) = match d {
+        Distortion::None => (0.0, 0.0),
+        Distortion::Radial { k1, k2 } | Distortion::OpenCv { k1, k2, .. } => (k1, k2),
+    };
+    let dx = f[2].max(c.width as f64 - f[2]) / f[0];
+    let dy = f[3].max(c.height as f64 - f[3]) / f[1];
+    let r2 = dx * dx + dy * dy;
+    let factor = 1.0 + k1 * r2 + k2 * r2 * r2;
+    if !(0.1..10.0).contains(&factor) {
+        return Err(bad(format!(
+            "distortion k1 {k1}, k2 {k2} scales the image corner's radius by {factor:.3e}: not \
+             a lens (check the intrinsics, or undistort with colmap image_undistorter)"
         )));
     }
     Ok((f[0] as f32, f[1] as f32, f[2] as f32, f[3] as f32, d))
