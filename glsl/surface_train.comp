@@ -366,47 +366,62 @@ void main() {
         }
     }
     // Lc per structure (one, unless the truncation count restarts): depths in scene units, the
-    // structure's mode m = its first largest weight; ∂/∂t_m is summed apart per mode (the same
-    // additions in the same order) and added after the loop.
+    // structure's mode = its first largest weight; ∂/∂t_mode is summed apart per structure (the
+    // same additions in the same order). Structures are runs of records with one sid, so each
+    // pass below is one sweep over the slots.
     float lambda_c = prm.lambda_c * omega;
     float d_t[SURF_MAX_HITS];
-    float dtm[SURF_MAX_HITS];
-    [[unroll]] for (uint k = 0u; k < SURF_MAX_HITS; k++) {
-        d_t[k] = 0.0;
-        dtm[k] = 0.0;
-    }
+    [[unroll]] for (uint k = 0u; k < SURF_MAX_HITS; k++) d_t[k] = 0.0;
     if (lambda_c != 0.0 && nh > 1u) {
-        precise float lc = 0.0;
+        // Each slot's mode and the mode's depth: running forward over its run, then handed back
+        // from the run's last slot.
+        uint mk[SURF_MAX_HITS];
+        float tmk[SURF_MAX_HITS];
+        uint m = 0u;
+        float wm = -1.0;
+        float tm = 0.0;
         [[unroll]] for (uint k = 0u; k < SURF_MAX_HITS; k++) {
-            if (k >= nh) continue;
-            uint m = k;
-            float wm = -1.0;
-            float dm_depth = 0.0;
-            [[unroll]] for (uint q = 0u; q < SURF_MAX_HITS; q++) {
-                if (q < nh && rec[q].sid == rec[k].sid && wj[q] > wm) {
-                    m = q;
-                    wm = wj[q];
-                    dm_depth = rec[q].depth;
-                }
+            bool starts = k == 0u || rec[k].sid != rec[k == 0u ? 0u : k - 1u].sid;
+            if (k < nh && (starts || wj[k] > wm)) {
+                m = k;
+                wm = wj[k];
+                tm = rec[k].depth;
             }
-            if (k == m) continue;
-            precise float tm = dm_depth * inv_len;
-            precise float dk = rec[k].depth * inv_len - tm;
-            lc += abs(dk);
-            float sg = dk > 0.0 ? 1.0 : (dk < 0.0 ? -1.0 : 0.0);
-            precise float a1 = lambda_c * sg;
-            d_t[k] = a1;
-            [[unroll]] for (uint q = 0u; q < SURF_MAX_HITS; q++) {
-                if (q == m) {
-                    precise float a2 = dtm[q] - lambda_c * sg;
-                    dtm[q] = a2;
-                }
+            mk[k] = m;
+            tmk[k] = tm;
+        }
+        [[unroll]] for (uint k = SURF_MAX_HITS - 1u; k > 0u; k--) {
+            if (k < nh && rec[k].sid == rec[k - 1u].sid) {
+                mk[k - 1u] = mk[k];
+                tmk[k - 1u] = tmk[k];
             }
         }
-        // A mode's own term is 0 and a non-mode's dtm is 0: adding is exact either way.
+        // The terms, and per run −Σ λ·sign over its other slots (left at each slot as the run's
+        // sum so far, then handed back from the run's last slot to its mode).
+        precise float lc = 0.0;
+        precise float acc = 0.0;
+        float tot[SURF_MAX_HITS];
         [[unroll]] for (uint k = 0u; k < SURF_MAX_HITS; k++) {
-            precise float v = d_t[k] + dtm[k];
-            d_t[k] = v;
+            tot[k] = 0.0;
+            if (k >= nh) continue;
+            if (k == 0u || rec[k].sid != rec[k == 0u ? 0u : k - 1u].sid) acc = 0.0;
+            if (k != mk[k]) {
+                precise float tmode = tmk[k] * inv_len;
+                precise float dk = rec[k].depth * inv_len - tmode;
+                lc += abs(dk);
+                float sg = dk > 0.0 ? 1.0 : (dk < 0.0 ? -1.0 : 0.0);
+                precise float a1 = lambda_c * sg;
+                d_t[k] = a1;
+                precise float a2 = acc - lambda_c * sg;
+                acc = a2;
+            }
+            tot[k] = acc;
+        }
+        [[unroll]] for (uint k = SURF_MAX_HITS - 1u; k > 0u; k--) {
+            if (k < nh && rec[k].sid == rec[k - 1u].sid) tot[k - 1u] = tot[k];
+        }
+        [[unroll]] for (uint k = 0u; k < SURF_MAX_HITS; k++) {
+            if (k < nh && mk[k] == k) d_t[k] = tot[k];
         }
         o.consistency = omega * lc;
     }
