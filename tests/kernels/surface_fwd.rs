@@ -909,6 +909,42 @@ fn x_ray(sc: &SurfaceScene) -> Vec<f32> {
     rays
 }
 
+/// The colour (on [`TEST_BACKGROUND`]), transmittance and hit count, in f64, of [`x_ray`] through
+/// an [`x_scene`] of σα giving `alpha`, whose front crossings lie at the given x (each flagged
+/// when it crosses level 0), composited with `t`.
+fn x_expected(
+    crossings: &[(f64, bool)],
+    t: Truncation,
+    alpha: f64,
+    n: u32,
+) -> ([f64; 3], f64, u32) {
+    let per_structure = t.count == TruncationCount::Structure;
+    let a = t.a as f64;
+    let (mut col, mut tr, mut k, mut hits) = ([0.0f64; 3], 1.0f64, 0u32, 0u32);
+    for &(x, outer) in crossings {
+        if per_structure && outer {
+            k = 0;
+        }
+        if k as f64 >= a {
+            if per_structure && tr >= SURF_PASS_MIN_T as f64 {
+                continue;
+            }
+            break;
+        }
+        let u = (a - k as f64).clamp(0.0, 1.0);
+        let at = alpha * 0.5 * (1.0 - (std::f64::consts::PI * u).cos());
+        let c = [0.5 + x / n as f64, 0.2, 0.7];
+        for ch in 0..3 {
+            col[ch] += tr * at * c[ch];
+        }
+        tr *= 1.0 - at;
+        k += 1;
+        hits += 1;
+    }
+    let rgb = std::array::from_fn(|ch| col[ch] + tr * TEST_BACKGROUND[ch] as f64);
+    (rgb, tr, hits)
+}
+
 /// Seven parallel level planes crossed front-facing along a ray: with a = 1 only the first hit
 /// contributes, with a = 5 exactly five, and a fractional a blends the last one by γ.
 #[test]
@@ -927,22 +963,8 @@ fn truncated_compositing() {
         let (cpu, counts) = render(&sc.grid(), &rays, &p, Some(sk(&blocks))).unwrap();
         let (gpu, gc, _) =
             render_gpu(test_gpu(), &sc.grid(), &rays, &p, Some(sk(&blocks))).unwrap();
-        // Expected, in f64.
-        let (mut col, mut t, mut used) = ([0.0f64; 3], 1.0f64, 0u32);
-        for (j, &x) in planes.iter().enumerate() {
-            if j as f64 >= a as f64 {
-                break;
-            }
-            let u = (a as f64 - j as f64).clamp(0.0, 1.0);
-            let at = alpha * 0.5 * (1.0 - (std::f64::consts::PI * u).cos());
-            let c = [0.5 + x / n as f64, 0.2, 0.7];
-            for k in 0..3 {
-                col[k] += t * at * c[k];
-            }
-            t *= 1.0 - at;
-            used += 1;
-        }
-        let want: [f64; 3] = std::array::from_fn(|k| col[k] + t * TEST_BACKGROUND[k] as f64);
+        let crossings: Vec<(f64, bool)> = planes.iter().map(|&x| (x, false)).collect();
+        let (want, t, used) = x_expected(&crossings, a.into(), alpha, n);
         let cut = u32::from((used as usize) < planes.len());
         for (backend, o, cn) in [("cpu", cpu[0], counts), ("gpu", gpu[0], gc)] {
             assert_eq!(o.hits, used, "{backend} a {a}: {o:?}");
@@ -1003,29 +1025,8 @@ fn truncation_counted_per_structure() {
         let (gpu, gc, _) =
             render_gpu(test_gpu(), &sc.grid(), &rays, &p, Some(sk(&blocks))).unwrap();
         let want = ref_render(&sc, &rays, t, 0.0)[0];
-        // Expected, in f64, from the crossings listed above.
-        let a = t.a as f64;
-        let (mut col, mut tr, mut k) = ([0.0f64; 3], 1.0f64, 0u32);
-        for &(x, outer) in &crossings {
-            if t.count == TruncationCount::Structure && outer {
-                k = 0;
-            }
-            if k as f64 >= a {
-                if t.count == TruncationCount::Structure && tr >= SURF_PASS_MIN_T as f64 {
-                    continue;
-                }
-                break;
-            }
-            let u = (a - k as f64).clamp(0.0, 1.0);
-            let at = alpha * 0.5 * (1.0 - (std::f64::consts::PI * u).cos());
-            let c = [0.5 + x / n as f64, 0.2, 0.7];
-            for ch in 0..3 {
-                col[ch] += tr * at * c[ch];
-            }
-            tr *= 1.0 - at;
-            k += 1;
-        }
-        let rgb: [f64; 3] = std::array::from_fn(|ch| col[ch] + tr * TEST_BACKGROUND[ch] as f64);
+        let (rgb, tr, composited) = x_expected(&crossings, t, alpha, n);
+        assert_eq!(composited, hits, "{t:?}");
         assert_eq!(want.hits, hits, "reference {t:?}: {want:?}");
         for (backend, o, cn) in [("cpu", cpu[0], counts), ("gpu", gpu[0], gc)] {
             assert_eq!(o.hits, hits, "{backend} {t:?}: {o:?}");
