@@ -11,7 +11,7 @@ use alphasurf::grid::{npz, Grid};
 use alphasurf::io::{read_ply, write_points, ExtraValues};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::Command;
 
 fn random_cloud(rng: &mut Pcg64, n: usize, spread: f32) -> Vec<[f32; 3]> {
@@ -490,14 +490,44 @@ fn eval_splits_the_chamfer_distance_over_the_scene_objects() {
 /// properties: on a sphere whose band-0 red grows with x (0 at the grid's low face, 255 at its
 /// high one), green is 0.5 and blue 0.9, each point and mesh vertex read back has red within 2 of
 /// 255·(grid x)/(res − 1) at its position, green 128 and blue 230.
+/// Density 100 at voxel (10, 10, 10) falling off by 10 a voxel: σ = 50 on a sphere of radius 5
+/// voxels.
+fn sphere_grid() -> Grid {
+    analytic_grid(|v| {
+        100.0
+            - 10.0 * ((v[0] - 10.0).powi(2) + (v[1] - 10.0).powi(2) + (v[2] - 10.0).powi(2)).sqrt()
+    })
+}
+
+/// `extract --levels 50 --backend cpu` of `g` (saved in `dir` as an svox2 checkpoint) into points
+/// and a mesh, with the `extra` arguments; the two files' paths (the command must succeed).
+fn extract_points_and_mesh(dir: &Path, g: &Grid, extra: &[&str]) -> (PathBuf, PathBuf) {
+    let ckpt = dir.join("ckpt.npz");
+    npz::save_svox2(g, &ckpt).unwrap();
+    let (pts, mesh) = (dir.join("p.ply"), dir.join("m.ply"));
+    let out = bin()
+        .args(["extract", "--levels", "50", "--backend", "cpu", "--ckpt"])
+        .arg(&ckpt)
+        .arg("--out")
+        .arg(&pts)
+        .arg("--mesh")
+        .arg(&mesh)
+        .args(extra)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    (pts, mesh)
+}
+
 #[test]
 fn extracted_points_and_meshes_carry_the_surface_colour() {
     use alphasurf::math::sh::SH_C0;
     let dir = tempfile::tempdir().unwrap();
-    let mut g = analytic_grid(|v| {
-        100.0
-            - 10.0 * ((v[0] - 10.0).powi(2) + (v[1] - 10.0).powi(2) + (v[2] - 10.0).powi(2)).sqrt()
-    });
+    let mut g = sphere_grid();
     let top = (g.res[0] - 1) as f32;
     for slot in 0..g.slots() {
         let l = g.links[slot];
@@ -509,23 +539,7 @@ fn extracted_points_and_meshes_carry_the_surface_colour() {
             row[18] = 0.4 / SH_C0;
         }
     }
-    let ckpt = dir.path().join("ckpt.npz");
-    npz::save_svox2(&g, &ckpt).unwrap();
-    let (pts, mesh) = (dir.path().join("p.ply"), dir.path().join("m.ply"));
-    let out = bin()
-        .args(["extract", "--levels", "50", "--backend", "cpu", "--ckpt"])
-        .arg(&ckpt)
-        .arg("--out")
-        .arg(&pts)
-        .arg("--mesh")
-        .arg(&mesh)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let (pts, mesh) = extract_points_and_mesh(dir.path(), &g, &[]);
     let header = std::fs::read(&mesh).unwrap();
     let header = String::from_utf8_lossy(&header[..600]);
     assert!(
@@ -563,10 +577,7 @@ fn extracted_points_and_meshes_carry_the_surface_colour() {
 fn extract_then_eval_end_to_end() {
     let dir = tempfile::tempdir().unwrap();
     // Density 100 at the centre falling off with distance: σ = 50 on a sphere of radius 5 voxel.
-    let g = analytic_grid(|v| {
-        100.0
-            - 10.0 * ((v[0] - 10.0).powi(2) + (v[1] - 10.0).powi(2) + (v[2] - 10.0).powi(2)).sqrt()
-    });
+    let g = sphere_grid();
     let ckpt = dir.path().join("ckpt.npz");
     npz::save_svox2(&g, &ckpt).unwrap();
     // GT: the sphere σ = 50 in Blender units (radius 5 voxel = 5 · 2/20 scene = 0.5 scene).
@@ -734,28 +745,8 @@ fn eval_and_extract_score_within_a_box() {
 
     // extract --box on the analytic sphere (centre 10 voxels = Blender (0.15, -0.075, 0)): only
     // the upper half, z ≥ 0, is kept, in the points and the mesh.
-    let g = analytic_grid(|v| {
-        100.0
-            - 10.0 * ((v[0] - 10.0).powi(2) + (v[1] - 10.0).powi(2) + (v[2] - 10.0).powi(2)).sqrt()
-    });
-    let ckpt = dir.path().join("ckpt.npz");
-    npz::save_svox2(&g, &ckpt).unwrap();
-    let (pts, mesh) = (dir.path().join("p.ply"), dir.path().join("m.ply"));
-    let out = bin()
-        .args(["extract", "--levels", "50", "--backend", "cpu", "--ckpt"])
-        .arg(&ckpt)
-        .arg("--out")
-        .arg(&pts)
-        .arg("--mesh")
-        .arg(&mesh)
-        .args(["--box", "-2,-2,0,2,2,2"])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let g = sphere_grid();
+    let (pts, mesh) = extract_points_and_mesh(dir.path(), &g, &["--box", "-2,-2,0,2,2,2"]);
     for file in [&pts, &mesh] {
         let p = read_ply(file).unwrap().points;
         assert!(p.len() > 100, "{}", file.display());
