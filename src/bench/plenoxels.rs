@@ -9,7 +9,8 @@
 
 use super::stage1::{thin_scene, time_steps, warm_config, StepFigures};
 use crate::gpu::Gpu;
-use crate::plenoxel::{CpuPlenoxels, Plenoxels, VulkanPlenoxels};
+use crate::plenoxel::{CpuPlenoxels, VulkanPlenoxels};
+use crate::stage::StageBackend;
 use crate::train::stage1;
 use anyhow::{ensure, Result};
 use serde_json::json;

@@ -14,6 +14,7 @@ use crate::grid::{Grid, SH_DIM};
 use crate::kernels;
 use crate::math::plenoxel::PlenoxelCounts;
 use crate::plenoxel::{CpuPlenoxels, Plenoxels, VulkanPlenoxels};
+use crate::stage::StageBackend;
 use anyhow::Result;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;

@@ -44,9 +44,9 @@ use crate::grid::SH_DIM;
 use crate::math::surface::{Truncation, TruncationCount};
 use crate::math::surface_blocks::{SkipRef, SURF_BLOCK_SHIFT_VULKAN};
 use crate::math::trilerp::trilerp_grad;
+use crate::stage::StageBackend;
 use crate::surface::{
-    batch_loss, surface_params, SurfaceBackend as _, SurfaceGradients, SurfaceStepParams,
-    VulkanSurface,
+    batch_loss, surface_params, SurfaceGradients, SurfaceStepParams, VulkanSurface,
 };
 use anyhow::Result;
 use rand::{Rng, SeedableRng};

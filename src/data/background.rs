@@ -20,7 +20,7 @@ pub enum BackgroundMode {
 impl BackgroundMode {
     /// The colour images are composited on at load, and a fixed background's colour: white,
     /// black, or, learned, mid grey (images with alpha are refused then, so it composites
-    /// nothing; a learned run starts from its images' border colour, `train::BackgroundRecord`).
+    /// nothing; a learned run starts from its images' border colour, `checkpoint::BackgroundRecord`).
     pub fn initial_rgb(self) -> [f32; 3] {
         match self {
             BackgroundMode::White => [1.0; 3],

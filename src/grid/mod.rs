@@ -3,7 +3,6 @@
 //! coefficients per vertex ([R0..R8, G0..G8, B0..B8]). Vertex (x, y, z) of an X×Y×Z grid sits at
 //! `links[(x·Y + y)·Z + z]`. World→grid: g = ((p − c)/(2r) + 0.5)·N − 0.5 per axis.
 
-pub mod checkpoint;
 mod mask;
 pub mod npz;
 mod resample;
@@ -52,6 +51,12 @@ pub fn row_slots(links: &[i32], rows: usize) -> Vec<u32> {
         }
     }
     out
+}
+
+/// Bytes a copy of a training state holds (what a checkpoint writes): `slots` links, and `rows`
+/// vertices of `channels` floats each, twice (the values and their RMSProp averages).
+pub fn state_bytes(slots: u64, rows: u64, channels: u64) -> u64 {
+    4 * (slots + 2 * rows * channels)
 }
 
 impl Grid {
@@ -150,7 +155,7 @@ impl Grid {
     pub fn training_bytes(res: [u32; 3], rows: usize) -> f64 {
         let slots = res.iter().map(|&r| r as u64).product();
         let channels = 1 + SH_DIM as u64;
-        (checkpoint::state_bytes(slots, rows as u64, channels) + 4 * rows as u64 * channels) as f64
+        (state_bytes(slots, rows as u64, channels) + 4 * rows as u64 * channels) as f64
     }
 
     /// Check the invariants a loaded grid must satisfy; the error says which one fails.

@@ -3,22 +3,10 @@
 //! dilated twice over the 26-neighbourhood; rescale δ and τ by the mean forward-difference
 //! gradient norm so δ is SDF-like; raw opacity σα = s·σ; SH copied.
 
-use super::checkpoint::{check_optim, read_extras, write_extras, OptimRefs, META};
-use super::npz::{self, Data, NpzReader};
 use super::{cells_then_corners, dilate, Grid, SH_DIM};
 use crate::abi::surface_grid::SurfaceGridRef;
-use anyhow::{bail, ensure, Context, Result};
+use anyhow::{bail, ensure, Result};
 use rayon::prelude::*;
-use std::path::Path;
-
-/// A loaded stage-2 checkpoint.
-#[derive(Debug, Clone, PartialEq)]
-pub struct SurfaceCheckpoint {
-    pub grid: SurfaceGrid,
-    /// Optimiser state by name, in file order.
-    pub optim: Vec<(String, Vec<f32>)>,
-    pub meta: serde_json::Value,
-}
 
 /// How to turn a density grid into a surface grid.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -149,36 +137,6 @@ impl SurfaceGrid {
         before - self.delta.len()
     }
 
-    /// Write a checkpoint atomically (temp file, fsync, rename): the grid, named optimiser arrays
-    /// and JSON metadata. Refuses invalid or non-finite data, leaving the previous file intact.
-    pub fn save(&self, path: &Path, optim: &OptimRefs, meta: &serde_json::Value) -> Result<()> {
-        (|| -> Result<()> {
-            self.validate()?;
-            check_optim(optim)?;
-            let meta = serde_json::to_vec(meta)?;
-            let n = self.delta.len() as u64;
-            npz::write_atomic(path, |w| {
-                w.array("links", &self.res.map(u64::from), &self.links)?;
-                w.array("delta_data", &[n], &self.delta)?;
-                w.array("opacity_data", &[n], &self.opacity)?;
-                w.array("sh_data", &[n, SH_DIM as u64], &self.sh)?;
-                w.array("levels", &[self.levels.len() as u64], &self.levels)?;
-                w.array("radius", &[3], &self.radius)?;
-                w.array("center", &[3], &self.center)?;
-                w.array("gradient_scale", &[1], &[self.gradient_scale])?;
-                write_extras(w, optim, &meta)
-            })
-        })()
-        .with_context(|| format!("saving surface checkpoint {}", path.display()))
-    }
-
-    /// Load and validate a checkpoint written by [`SurfaceGrid::save`].
-    pub fn load(path: &Path) -> Result<SurfaceCheckpoint> {
-        let mut r = NpzReader::open(path)?;
-        read_checkpoint(&mut r)
-            .with_context(|| format!("loading surface checkpoint {}", path.display()))
-    }
-
     /// Initialise from a stage-1 density grid (method.md §3.1).
     pub fn from_density(g: &Grid, init: &SurfaceInit) -> Result<SurfaceGrid> {
         let levels = &init.density_levels;
@@ -275,53 +233,10 @@ impl SurfaceGrid {
     }
 }
 
-fn read_checkpoint(r: &mut NpzReader) -> Result<SurfaceCheckpoint> {
-    ensure!(
-        r.contains("delta_data") && r.contains(META),
-        "no 'delta_data' or '{META}' array: not a stage-2 (surface) checkpoint"
-    );
-    let links = r.read("links")?;
-    let Data::I32(links_v) = links.data else {
-        bail!(
-            "array 'links' has dtype {}, expected int32",
-            links.data.kind()
-        );
-    };
-    ensure!(
-        links.shape.len() == 3 && links.shape.iter().all(|&d| d <= 4096),
-        "array 'links' has shape {:?}, expected (N, N, N)",
-        links.shape
-    );
-    let mut f32s = |name: &str| -> Result<Vec<f32>> { r.read(name)?.into_f32(name) };
-    let vec3 = |v: Vec<f32>, name: &str| -> Result<[f32; 3]> {
-        ensure!(
-            v.len() == 3,
-            "array '{name}' has {} values, expected 3",
-            v.len()
-        );
-        Ok([v[0], v[1], v[2]])
-    };
-    let grid = SurfaceGrid {
-        res: [0, 1, 2].map(|i| links.shape[i] as u32),
-        links: links_v.into_iter().map(|l| l.max(-1)).collect(),
-        delta: f32s("delta_data")?,
-        opacity: f32s("opacity_data")?,
-        sh: f32s("sh_data")?,
-        levels: f32s("levels")?,
-        radius: vec3(f32s("radius")?, "radius")?,
-        center: vec3(f32s("center")?, "center")?,
-        gradient_scale: *f32s("gradient_scale")?
-            .first()
-            .context("empty gradient_scale")?,
-    };
-    grid.validate()?;
-    let (optim, meta) = read_extras(r)?;
-    Ok(SurfaceCheckpoint { grid, optim, meta })
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::checkpoint::surface::{load, save};
 
     /// σ = 100·(0.6 − |p|) inside the unit sphere: a ball whose density falls linearly outward.
     fn ball(res: u32) -> Grid {
@@ -391,23 +306,24 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("surface.npz");
         let optim = vec![("rms_delta".to_string(), vec![0.5; s.delta.len()])];
-        s.save(
+        save(
             &path,
+            &s,
             &[("rms_delta", &optim[0].1)],
             &serde_json::json!({"step": 3}),
         )
         .unwrap();
-        let ck = SurfaceGrid::load(&path).unwrap();
+        let ck = load(&path).unwrap();
         assert_eq!(ck.grid, s);
         assert_eq!(ck.optim, optim);
         assert_eq!(ck.meta["step"], 3);
         // NaN is refused and the previous file survives.
         let mut bad = s.clone();
         bad.opacity[0] = f32::NAN;
-        assert!(bad.save(&path, &[], &serde_json::json!({})).is_err());
-        assert_eq!(SurfaceGrid::load(&path).unwrap().grid, s);
+        assert!(save(&path, &bad, &[], &serde_json::json!({})).is_err());
+        assert_eq!(load(&path).unwrap().grid, s);
         // A stage-1 checkpoint is not a surface checkpoint.
-        let e = SurfaceGrid::load(&dir.path().join("missing.npz")).unwrap_err();
+        let e = load(&dir.path().join("missing.npz")).unwrap_err();
         assert!(format!("{e:#}").contains("missing.npz"), "{e:#}");
         // Prune: make one vertex opaque, the rest transparent; exactly the vertices of the
         // cells around it survive (a 3×3×3 block when it is interior).

@@ -7,6 +7,7 @@
 //! training camera sees inside other surfaces are dropped from both ([`crate::eval::hidden`]).
 
 use crate::backend::Backend;
+use crate::checkpoint::format as checkpoint;
 use crate::cpu::extract_points::ExtractInput;
 use crate::data::{Aabb, Dataset, SceneBox};
 use crate::eval::colour::Band0;
@@ -17,12 +18,12 @@ use crate::eval::hidden::{kept_cells, HiddenStats, HiddenTrim};
 use crate::eval::outer_level::{drop_outer_halo, Field as OuterField, REACH};
 use crate::gpu::Gpu;
 use crate::grid::surface::SurfaceGrid;
-use crate::grid::{checkpoint, npz, Grid};
+use crate::grid::{npz, Grid};
 use crate::io::{Extra, ExtraValues};
 use crate::mesh::ply::write_mesh_ply;
 use crate::mesh::{level_set_mesh, MeshInput, MeshStats};
 use crate::run::dir::{ALL_STAGE1, ALL_STAGE2};
-use crate::train::{stage2, Category};
+use crate::train::Category;
 use anyhow::{bail, ensure, Context, Result};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -138,15 +139,15 @@ fn load_grid(opts: &ExtractOptions) -> Result<(Field, PathBuf)> {
         return Ok((Field::Density(npz::load_svox2(ckpt)?), ckpt.clone()));
     }
     let run = opts.run.as_ref().context("give --run or --ckpt")?;
-    let surface = stage2::checkpoint_path(run);
+    let surface = crate::checkpoint::path::<crate::surface::SurfaceStage>(run);
     if surface.exists() {
-        let ck = SurfaceGrid::load(&surface)?;
+        let ck = crate::checkpoint::surface::load(&surface)?;
         let category = serde_json::from_value(ck.meta["config"]["category"].clone()).ok();
         return Ok((Field::Surface(ck.grid, category), surface));
     }
     let all_stage2 = run.join(ALL_STAGE2);
     ensure!(
-        !stage2::checkpoint_path(&all_stage2).exists(),
+        !crate::checkpoint::path::<crate::surface::SurfaceStage>(&all_stage2).exists(),
         "{} is a `--stage all` run: give its stage-2 run {} (or its stage-1 run {})",
         run.display(),
         all_stage2.display(),

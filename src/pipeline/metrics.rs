@@ -2,8 +2,9 @@
 //! [`Stage2Metrics`] for a stage-2 (αSurf) run. The JSON layout is the one runs have always
 //! written; counters added over time are `Option`s, absent in runs written before them.
 
+use crate::checkpoint::BackgroundRecord;
 use crate::run::dir::METRICS;
-use crate::train::{BackgroundRecord, Stage1Config, SurfaceConfig};
+use crate::train::{Stage1Config, SurfaceConfig};
 use anyhow::{Context, Result};
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};

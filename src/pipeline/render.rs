@@ -5,16 +5,16 @@
 
 use super::{train_stage1, train_stage2};
 use crate::backend::Backend;
+use crate::checkpoint::format as checkpoint;
+use crate::checkpoint::BackgroundRecord;
 use crate::data::{Dataset, LoadOptions};
 use crate::gpu::Gpu;
-use crate::grid::checkpoint;
 use crate::grid::surface::SurfaceGrid;
 use crate::math::surface::Truncation;
 use crate::run::dir::{ALL_STAGE1, ALL_STAGE2, STAGE2_CHECKPOINT};
 use crate::run::{self, read_info};
 use crate::train::{
-    render_split, render_split_with, stage2, BackgroundRecord, RenderedSplit, Stage1Config,
-    SurfaceConfig, MAX_PIXEL_SAMPLES,
+    render_split, render_split_with, RenderedSplit, Stage1Config, SurfaceConfig, MAX_PIXEL_SAMPLES,
 };
 use anyhow::{bail, Context, Result};
 use std::path::{Path, PathBuf};
@@ -67,9 +67,9 @@ enum Trained {
 /// Load the checkpoint of the run `run`: its surface.npz (stage 2) if there is one, else its
 /// plenoxels.npz (stage 1).
 fn load_run(run: &Path) -> Result<(Trained, BackgroundRecord, PathBuf)> {
-    let surface = stage2::checkpoint_path(run);
+    let surface = crate::checkpoint::path::<crate::surface::SurfaceStage>(run);
     if surface.is_file() {
-        let ck = SurfaceGrid::load(&surface)?;
+        let ck = crate::checkpoint::surface::load(&surface)?;
         let (step, cfg) =
             checkpoint::meta_step_config::<SurfaceConfig>(&ck.meta, "surface", &surface)?;
         let bg = BackgroundRecord::from_meta(&ck.meta, &surface)?;

@@ -42,7 +42,7 @@ pub struct ImportOptions {
 pub fn export(opts: &ExportOptions) -> Result<Grid> {
     let ckpt_path = run::dir::stage1_checkpoint(&opts.run, "export")?;
     run::outputs::check_output_file(&opts.out, &[&ckpt_path])?;
-    let ck = crate::grid::checkpoint::load(&ckpt_path)?;
+    let ck = crate::checkpoint::format::load(&ckpt_path)?;
     crate::grid::npz::save_svox2(&ck.grid, &opts.out)?;
     Ok(ck.grid)
 }
@@ -80,7 +80,7 @@ pub fn import(opts: &ImportOptions) -> Result<Grid> {
     };
     // Built beside the run and swapped in whole: a failure leaves a previous run as it was.
     run.write_whole(&info, |dir| {
-        crate::grid::checkpoint::save(
+        crate::checkpoint::format::save(
             &dir.join(run::dir::STAGE1_CHECKPOINT),
             &grid,
             &[

@@ -47,8 +47,8 @@ pub fn train_all(opts: &TrainOptions, gpu: Option<&Gpu>) -> Result<TrainOutcome>
     parent.write_info(&run_info(opts, &data.data, None)?)?;
     let s1_dir = parent.file(ALL_STAGE1);
     let s2_dir = parent.file(ALL_STAGE2);
-    let s1_ckpt = crate::train::stage1::checkpoint_path(&s1_dir);
-    let s2_ckpt = crate::train::stage2::checkpoint_path(&s2_dir);
+    let s1_ckpt = crate::checkpoint::path::<crate::plenoxel::PlenoxelsStage>(&s1_dir);
+    let s2_ckpt = crate::checkpoint::path::<crate::surface::SurfaceStage>(&s2_dir);
     let stage1_opts = TrainOptions {
         stage: Stage::Plenoxels,
         out: s1_dir.clone(),
@@ -72,7 +72,7 @@ pub fn train_all(opts: &TrainOptions, gpu: Option<&Gpu>) -> Result<TrainOutcome>
         ..opts.clone()
     };
     let stage1 = if opts.resume && s2_ckpt.exists() {
-        let s1 = crate::grid::checkpoint::load(&s1_ckpt)?;
+        let s1 = crate::checkpoint::format::load(&s1_ckpt)?;
         let step = s1.meta["step"].as_u64().unwrap_or(0);
         if opts.iters.is_some_and(|n| n as u64 > step) {
             bail!(

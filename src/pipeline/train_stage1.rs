@@ -4,12 +4,13 @@
 use super::metrics::{SamplesPerRay, Stage1Metrics, Stage1Seconds};
 use super::train_options::TrainOptions;
 use super::train_run::{check_resumed_data, resume, run_info, Loaded, Trained};
+use crate::checkpoint::{self, BackgroundRecord};
 use crate::data::dataset::peak_rss_bytes;
 use crate::gpu::Gpu;
 use crate::grid::Grid;
-use crate::plenoxel::{CpuPlenoxels, Plenoxels, VulkanPlenoxels};
+use crate::plenoxel::{CpuPlenoxels, Plenoxels, PlenoxelsStage, VulkanPlenoxels};
 use crate::run::{RunDir, RunStage};
-use crate::train::{stage1, BackgroundRecord, Stage1Config};
+use crate::train::{stage1, Stage1Config};
 use anyhow::{bail, Result};
 use std::time::Instant;
 
@@ -46,7 +47,7 @@ pub fn train_stage1(
     if opts.resume {
         check_resumed_data(opts, data)?;
     }
-    let ckpt = stage1::checkpoint_path(&opts.out);
+    let ckpt = checkpoint::path::<PlenoxelsStage>(&opts.out);
     let (mut backend, cfg, start) = if let Some(cfg) = fresh_cfg {
         let grid = Grid::sphere(
             cfg.res,
@@ -58,7 +59,7 @@ pub fn train_stage1(
         (make_backend(gpu, grid)?, cfg, 0)
     } else {
         let restore = || {
-            let probe = crate::grid::checkpoint::load(&ckpt)?;
+            let probe = crate::checkpoint::format::load(&ckpt)?;
             let mut b = make_backend(gpu, probe.grid)?;
             let (step, cfg, bg) = stage1::resume(b.as_mut(), &ckpt)?;
             check_resume_flags(opts, &cfg)?;
@@ -91,22 +92,22 @@ pub fn train_stage1(
     );
     let (report, rendered) =
         stage1::train(backend.as_mut(), data, &cfg, &opts.out, start, !opts.quiet)?;
-    let spr = report.samples_per_ray;
+    let spr = &report.run.per_ray;
     let metrics = Stage1Metrics {
         stage: RunStage::Plenoxels.name().into(),
         backend: backend.name().into(),
         device: gpu.map(|g| g.info().name.clone()),
         wall_seconds: Stage1Seconds {
             load: load_s,
-            train: report.train_seconds,
+            train: report.run.train_seconds,
             upsample: report.upsample_seconds,
-            checkpoint: report.checkpoint_seconds,
-            render_test: report.render_seconds,
+            checkpoint: report.run.checkpoint_seconds,
+            render_test: report.run.render_seconds,
             total: load_s + t_all.elapsed().as_secs_f64(),
         },
-        train_rays_per_s: report.train_rays_per_s,
-        final_train_mse: report.final_mse,
-        test_psnr: report.test_psnr,
+        train_rays_per_s: report.run.train_rays_per_s,
+        final_train_mse: report.run.final_mse,
+        test_psnr: report.run.test_psnr,
         test_psnr_per_view: rendered.psnr,
         samples_per_ray: Some(SamplesPerRay {
             shaded: spr.shaded,

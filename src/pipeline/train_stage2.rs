@@ -5,16 +5,18 @@
 use super::metrics::{Stage2Metrics, Stage2PerRay, Stage2Seconds};
 use super::train_options::TrainOptions;
 use super::train_run::{check_resumed_data, resume, run_info, Loaded, Trained};
+use crate::checkpoint::format as checkpoint;
+use crate::checkpoint::BackgroundRecord;
 use crate::data::dataset::peak_rss_bytes;
 use crate::data::BackgroundMode;
 use crate::data::Dataset;
 use crate::gpu::Gpu;
 use crate::grid::surface::SurfaceGrid;
-use crate::grid::{checkpoint, npz, Grid};
+use crate::grid::{npz, Grid};
 use crate::run::identity::check_same_data;
 use crate::run::{self, RunDir, RunStage};
-use crate::surface::{CpuSurface, SurfaceBackend, VulkanSurface};
-use crate::train::{stage2, BackgroundRecord, SurfaceConfig};
+use crate::surface::{CpuSurface, SurfaceBackend, SurfaceStage, VulkanSurface};
+use crate::train::{stage2, SurfaceConfig};
 use anyhow::{ensure, Context, Result};
 use std::path::Path;
 use std::time::Instant;
@@ -123,7 +125,7 @@ pub fn train_stage2(
     if opts.resume {
         check_resumed_data(opts, data)?;
     }
-    let ckpt = stage2::checkpoint_path(&opts.out);
+    let ckpt = crate::checkpoint::path::<SurfaceStage>(&opts.out);
     let (mut backend, cfg, start) = match fresh {
         Some((grid, cfg, bg)) => {
             let mut b = make_backend(gpu, grid)?;
@@ -132,7 +134,7 @@ pub fn train_stage2(
         }
         None => {
             let restore = || {
-                let probe = SurfaceGrid::load(&ckpt)?;
+                let probe = crate::checkpoint::surface::load(&ckpt)?;
                 let mut b = make_backend(gpu, probe.grid)?;
                 let (step, cfg, bg) = stage2::resume(b.as_mut(), &ckpt)?;
                 check_resume_flags(opts, &cfg)?;
@@ -161,21 +163,21 @@ pub fn train_stage2(
     );
     let (report, rendered) =
         stage2::train(backend.as_mut(), data, &cfg, &opts.out, start, !opts.quiet)?;
-    let r = report.per_ray;
+    let r = &report.run.per_ray;
     let metrics = Stage2Metrics {
         stage: RunStage::Surface.name().into(),
         backend: backend.name().into(),
         device: gpu.map(|g| g.info().name.clone()),
         wall_seconds: Stage2Seconds {
             load: load_s,
-            train: report.train_seconds,
-            checkpoint: report.checkpoint_seconds,
-            render_test: report.render_seconds,
+            train: report.run.train_seconds,
+            checkpoint: report.run.checkpoint_seconds,
+            render_test: report.run.render_seconds,
             total: load_s + t_all.elapsed().as_secs_f64(),
         },
-        train_rays_per_s: report.train_rays_per_s,
-        final_train_mse: report.final_mse,
-        test_psnr: report.test_psnr,
+        train_rays_per_s: report.run.train_rays_per_s,
+        final_train_mse: report.run.final_mse,
+        test_psnr: report.run.test_psnr,
         test_psnr_per_view: rendered.psnr,
         per_ray: Some(Stage2PerRay {
             cells: r.cells,

@@ -1,7 +1,9 @@
 //! The CPU stage-1 backend: the kernels' rayon twins over host arrays.
 
 use super::plan::{batch_grad_scale, PlenoxelPass, PlenoxelPlan, TvField};
-use super::{march_params, Gradients, Plenoxels, StateFn, StepParams, StepStats};
+use super::{
+    march_params, state_bytes_of, Gradients, Plenoxels, PlenoxelsStage, StepParams, StepStats,
+};
 use crate::cpu::background::{self, Background};
 use crate::cpu::plenoxel::{self as twin, MarchParams, TrainGrads};
 use crate::cpu::{rmsprop_sparse, tv, Stage1Params};
@@ -9,6 +11,7 @@ use crate::data::TrainViews;
 use crate::gpu::{timed, Phase, PhaseClock};
 use crate::grid::{Grid, SH_DIM};
 use crate::math::plenoxel::{GridRef, PlenoxelCounts};
+use crate::stage::{StageBackend, StateFn};
 use anyhow::{ensure, Result};
 
 /// Grid, occupancy, gradient accumulators and RMSProp state on the host.
@@ -150,7 +153,7 @@ fn data_term(
     Ok(twin::train(g, rays, targets, mp, grad_scale, bg, grads))
 }
 
-impl Plenoxels for CpuPlenoxels {
+impl StageBackend<PlenoxelsStage> for CpuPlenoxels {
     fn name(&self) -> &'static str {
         "cpu"
     }
@@ -189,6 +192,51 @@ impl Plenoxels for CpuPlenoxels {
         Ok(std::mem::take(&mut self.done))
     }
 
+    fn grid(&self) -> Result<Grid> {
+        Ok(self.grid.clone())
+    }
+
+    fn optimizer_state(&self) -> Result<[Vec<f32>; 2]> {
+        Ok([self.state_density.clone(), self.state_sh.clone()])
+    }
+
+    fn state_bytes(&self) -> u64 {
+        state_bytes_of(self.shape())
+    }
+
+    fn with_state(&self, f: &mut StateFn<PlenoxelsStage>) -> Result<()> {
+        f(&self.grid, &[&self.state_density, &self.state_sh])
+    }
+
+    fn load(&mut self, grid: Grid, state: Option<[Vec<f32>; 2]>) -> Result<()> {
+        let n = grid.allocated();
+        let [sd, ss] = state.unwrap_or_else(|| [vec![0.0; n], vec![0.0; n * SH_DIM]]);
+        ensure!(
+            sd.len() == n && ss.len() == n * SH_DIM,
+            "optimizer state does not match the grid"
+        );
+        self.grad_density = vec![0.0; n];
+        self.grad_sh = vec![0.0; n * SH_DIM];
+        self.state_density = sd;
+        self.state_sh = ss;
+        self.touched = vec![0; n];
+        self.slots = twin::occupancy_slots(&grid.links, n);
+        self.grid = grid;
+        self.refresh_occupancy();
+        Ok(())
+    }
+
+    fn background(&self) -> Result<Background> {
+        Ok(self.bg)
+    }
+
+    fn set_background(&mut self, bg: Background) -> Result<()> {
+        self.bg = bg;
+        Ok(())
+    }
+}
+
+impl Plenoxels for CpuPlenoxels {
     fn gradients(&mut self, rays: &[f32], targets: &[f32], stop_thresh: f32) -> Result<Gradients> {
         self.refresh_occupancy();
         let n = self.grid.allocated();
@@ -230,46 +278,7 @@ impl Plenoxels for CpuPlenoxels {
         Ok(twin::max_weights(&self.view(), rays, &mp))
     }
 
-    fn grid(&self) -> Result<Grid> {
-        Ok(self.grid.clone())
-    }
-
-    fn optimizer_state(&self) -> Result<(Vec<f32>, Vec<f32>)> {
-        Ok((self.state_density.clone(), self.state_sh.clone()))
-    }
-
     fn shape(&self) -> ([u32; 3], usize) {
         (self.grid.res, self.grid.allocated())
-    }
-
-    fn with_state(&self, f: &mut StateFn) -> Result<()> {
-        f(&self.grid, [&self.state_density, &self.state_sh])
-    }
-
-    fn load(&mut self, grid: Grid, state: Option<(Vec<f32>, Vec<f32>)>) -> Result<()> {
-        let n = grid.allocated();
-        let (sd, ss) = state.unwrap_or_else(|| (vec![0.0; n], vec![0.0; n * SH_DIM]));
-        ensure!(
-            sd.len() == n && ss.len() == n * SH_DIM,
-            "optimizer state does not match the grid"
-        );
-        self.grad_density = vec![0.0; n];
-        self.grad_sh = vec![0.0; n * SH_DIM];
-        self.state_density = sd;
-        self.state_sh = ss;
-        self.touched = vec![0; n];
-        self.slots = twin::occupancy_slots(&grid.links, n);
-        self.grid = grid;
-        self.refresh_occupancy();
-        Ok(())
-    }
-
-    fn background(&self) -> Result<Background> {
-        Ok(self.bg)
-    }
-
-    fn set_background(&mut self, bg: Background) -> Result<()> {
-        self.bg = bg;
-        Ok(())
     }
 }

@@ -8,13 +8,16 @@ mod vulkan;
 pub use cpu::CpuPlenoxels;
 pub use vulkan::VulkanPlenoxels;
 
-use crate::cpu::background::Background;
+use crate::abi::buffers::PlenoxelPerRay;
+use crate::checkpoint::{self, format};
 use crate::cpu::plenoxel::MarchParams;
 use crate::data::TrainViews;
-use crate::grid::checkpoint::state_bytes;
+use crate::grid::state_bytes;
 use crate::grid::{Grid, SH_DIM};
 use crate::math::plenoxel::PlenoxelCounts;
-use anyhow::Result;
+use crate::stage::{psnr, Saved, Stage, StageBackend};
+use anyhow::{bail, Result};
+use std::path::Path;
 
 /// TV regularisation of one step: a contiguous chunk of vertex slots and the two weights.
 #[derive(Clone, Copy, Debug)]
@@ -62,31 +65,83 @@ pub struct Gradients {
     pub counts: PlenoxelCounts,
 }
 
-/// What [`Plenoxels::with_state`] calls: the grid and the running averages (σ, SH).
-pub type StateFn<'a> = dyn FnMut(&Grid, [&[f32]; 2]) -> Result<()> + 'a;
+/// Stage 1: the Plenoxels density and SH grid.
+pub struct PlenoxelsStage;
 
-/// A stage-1 compute backend holding the grid and its optimiser state.
-pub trait Plenoxels {
-    /// Backend name for logs ("vulkan" or "cpu").
-    fn name(&self) -> &'static str;
-    /// One optimisation step on a batch: `rays` 6 floats per ray, `targets` 3 per ray.
-    fn step(&mut self, rays: &[f32], targets: &[f32], p: &StepParams) -> Result<StepStats>;
-    /// One optimisation step on the batch of `n` rays drawn from `views` with `seed`
-    /// (`cpu::sample_rays`): the CPU backend draws it with the twin on the host; the Vulkan
-    /// backend draws it on the device, from views it uploads once, and returns once the step is
-    /// submitted (the device may still run it). Its figures come with [`Self::take_stats`].
-    /// Stage 1 trains on uniform batches: views with a focus are refused ([`uniform_views`]).
-    fn step_sampled(
-        &mut self,
-        views: &TrainViews,
-        seed: u64,
-        n: usize,
-        p: &StepParams,
-    ) -> Result<()>;
-    /// The figures of every `step_sampled` step since the last call, in order (waits for the
-    /// steps still running). A backend keeps at most [`crate::gpu::STEP_SLOTS`] steps' figures
-    /// on the device and reads them into host memory when that many have not been taken.
-    fn take_stats(&mut self) -> Result<Vec<StepStats>>;
+impl Stage for PlenoxelsStage {
+    const NAME: &'static str = "plenoxels";
+    const CHECKPOINT: &'static str = crate::run::dir::STAGE1_CHECKPOINT;
+    const STATE_NAMES: &'static [&'static str] = &["rms_density", "rms_sh"];
+    /// `step` = steps done, `psnr_batch` = PSNR of that step's batch MSE, `elapsed_s` = seconds
+    /// since training started.
+    const LOG_HEADER: &'static str = "step,mse,psnr_batch,elapsed_s";
+    type Grid = Grid;
+    type Params = StepParams;
+    type Stats = StepStats;
+    type PerRay = PlenoxelPerRay;
+    type State = [Vec<f32>; 2];
+
+    fn mse(stats: &StepStats) -> f64 {
+        stats.mse
+    }
+
+    fn non_finite(stats: &StepStats) -> Option<String> {
+        (!stats.mse.is_finite()).then(|| stats.mse.to_string())
+    }
+
+    fn log_row(stats: &StepStats, step: u32, elapsed: f64) -> String {
+        let mse = stats.mse;
+        format!("{step},{mse:e},{:.4},{elapsed:.3}", psnr(mse))
+    }
+
+    fn tally(totals: &mut PlenoxelPerRay, stats: &StepStats) {
+        totals.add(&stats.counts);
+    }
+
+    fn scaled(totals: &PlenoxelPerRay, f: f64) -> PlenoxelPerRay {
+        totals.scaled(f)
+    }
+
+    fn save(
+        path: &Path,
+        grid: &Grid,
+        optim: &[(&str, &[f32])],
+        meta: &serde_json::Value,
+    ) -> Result<()> {
+        check_finite(grid)?;
+        format::save(path, grid, optim, meta)
+    }
+
+    fn load(path: &Path) -> Result<Saved<Self>> {
+        let ck = format::load(path)?;
+        Ok(Saved {
+            state: checkpoint::state_of::<Self>(&ck.optim, path)?,
+            grid: ck.grid,
+            meta: ck.meta,
+        })
+    }
+}
+
+/// Refuse a grid with a NaN or infinite value; the error names the first offender.
+fn check_finite(grid: &Grid) -> Result<()> {
+    for (name, v) in [("density", &grid.density), ("sh", &grid.sh)] {
+        if let Some(i) = v.iter().position(|x| !x.is_finite()) {
+            bail!("non-finite {name} value {} at vertex row {i}", v[i]);
+        }
+    }
+    Ok(())
+}
+
+/// Bytes of a copy of a grid of `res` vertices with `rows` allocated and its running averages
+/// (what a checkpoint holds).
+pub fn state_bytes_of((res, rows): ([u32; 3], usize)) -> u64 {
+    let slots = res.iter().map(|&r| r as u64).product();
+    state_bytes(slots, rows as u64, 1 + SH_DIM as u64)
+}
+
+/// The stage-1 backend: [`StageBackend`] and what only stage 1 does (its data-term gradients,
+/// renders and pruning weights).
+pub trait Plenoxels: StageBackend<PlenoxelsStage> {
     /// The data-term gradients of a batch without updating anything: per-ray squared error,
     /// dL/dσ, dL/dSH and, when it is learned, dL/dbg (L = mean squared error over rays and
     /// channels), and the sample counts.
@@ -95,34 +150,10 @@ pub trait Plenoxels {
     fn render(&mut self, rays: &[f32], stop_thresh: f32) -> Result<(Vec<f32>, PlenoxelCounts)>;
     /// Max over rays and samples of w·w_trilinear per allocated vertex (pruning weights).
     fn max_weights(&mut self, rays: &[f32], stop_thresh: f32) -> Result<Vec<f32>>;
-    /// The current grid.
-    fn grid(&self) -> Result<Grid>;
-    /// RMSProp running averages (σ, SH).
-    fn optimizer_state(&self) -> Result<(Vec<f32>, Vec<f32>)>;
     /// Vertices per axis and allocated vertices of the current grid (nothing copied).
     fn shape(&self) -> ([u32; 3], usize);
-    /// Bytes of a copy of the grid and the running averages (what a checkpoint holds).
-    fn state_bytes(&self) -> u64 {
-        let (res, rows) = self.shape();
-        let slots = res.iter().map(|&r| r as u64).product();
-        state_bytes(slots, rows as u64, 1 + SH_DIM as u64)
-    }
-    /// Call `f` with the grid and the running averages (σ, SH): borrowed where the backend holds
-    /// them in host memory (checkpoints of large grids copy nothing), else downloaded.
-    fn with_state(&self, f: &mut StateFn) -> Result<()> {
-        let (sd, ss) = self.optimizer_state()?;
-        f(&self.grid()?, [&sd, &ss])
-    }
-    /// Replace grid and optimiser state (after resampling, or when resuming); the background
-    /// stays.
-    fn load(&mut self, grid: Grid, state: Option<(Vec<f32>, Vec<f32>)>) -> Result<()>;
-    /// The background with its optimiser state (white and fixed unless set).
-    fn background(&self) -> Result<Background>;
-    /// Replace the background (colour, whether it is learned, its optimiser state).
-    fn set_background(&mut self, bg: Background) -> Result<()>;
 }
 
-/// Ray → grid mapping of a grid: grid = p·scale + offset.
 /// Stage 1's kernel and twin take no importance weights, so its batches must be drawn
 /// uniformly: an error for views with a focus (`data::TrainViews::focused`).
 pub fn uniform_views(views: &TrainViews) -> Result<()> {
@@ -133,6 +164,7 @@ pub fn uniform_views(views: &TrainViews) -> Result<()> {
     Ok(())
 }
 
+/// Ray → grid mapping of a grid: grid = p·scale + offset.
 pub fn march_params(g: &Grid, stop_thresh: f32) -> MarchParams {
     MarchParams {
         scale: std::array::from_fn(|i| g.res[i] as f32 / (2.0 * g.radius[i])),

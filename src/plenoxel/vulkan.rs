@@ -3,7 +3,9 @@
 //! on the device → the kernels of the step's [`PlenoxelPlan`], in its order) and one submission.
 
 use super::plan::{PlenoxelPass, PlenoxelPlan, TvField};
-use super::{march_params, Gradients, Plenoxels, StepParams, StepStats};
+use super::{
+    march_params, state_bytes_of, Gradients, Plenoxels, PlenoxelsStage, StepParams, StepStats,
+};
 use crate::abi::buffers::PlenoxelParams;
 use crate::cpu::background::Background;
 use crate::cpu::sample_rays::SampledRays;
@@ -18,6 +20,7 @@ use crate::gpu::{
 use crate::grid::{Grid, SH_DIM};
 use crate::kernels;
 use crate::math::plenoxel::{occ_dims, PlenoxelCounts};
+use crate::stage::StageBackend;
 use anyhow::{ensure, Result};
 use std::cell::RefCell;
 
@@ -379,7 +382,7 @@ impl VulkanPlenoxels {
     }
 }
 
-impl Plenoxels for VulkanPlenoxels {
+impl StageBackend<PlenoxelsStage> for VulkanPlenoxels {
     fn name(&self) -> &'static str {
         "vulkan"
     }
@@ -409,6 +412,62 @@ impl Plenoxels for VulkanPlenoxels {
         Ok(self.take_timed()?.into_iter().map(|(s, _)| s).collect())
     }
 
+    fn grid(&self) -> Result<Grid> {
+        self.settle()?;
+        Ok(Grid {
+            links: self.links.download()?,
+            density: self.density.download()?,
+            sh: self.sh.download()?,
+            ..self.meta.clone()
+        })
+    }
+
+    fn optimizer_state(&self) -> Result<[Vec<f32>; 2]> {
+        self.settle()?;
+        Ok([self.state_density.download()?, self.state_sh.download()?])
+    }
+
+    fn state_bytes(&self) -> u64 {
+        state_bytes_of(self.shape())
+    }
+
+    fn load(&mut self, grid: Grid, state: Option<[Vec<f32>; 2]>) -> Result<()> {
+        let n = grid.allocated();
+        if let Some([sd, ss]) = &state {
+            ensure!(
+                sd.len() == n && ss.len() == n * SH_DIM,
+                "optimizer state does not match the grid"
+            );
+        }
+        // The figures of the steps so far stay (read now: the buffers they sit in go).
+        self.collect()?;
+        let bg = self.background()?;
+        let mut fresh = VulkanPlenoxels::new(&self.gpu, grid)?;
+        if let Some([sd, ss]) = state {
+            fresh.state_density.write(&sd)?;
+            fresh.state_sh.write(&ss)?;
+        }
+        fresh.set_background(bg)?;
+        fresh.views = self.views.take();
+        fresh.done = std::mem::take(&mut self.done);
+        *self = fresh;
+        Ok(())
+    }
+
+    fn background(&self) -> Result<Background> {
+        self.settle()?;
+        Ok(self.bg.download()?[0])
+    }
+
+    fn set_background(&mut self, bg: Background) -> Result<()> {
+        self.settle()?;
+        self.bg.write(&[bg])?;
+        self.bg_learned = bg.learned();
+        Ok(())
+    }
+}
+
+impl Plenoxels for VulkanPlenoxels {
     fn gradients(&mut self, rays: &[f32], targets: &[f32], stop_thresh: f32) -> Result<Gradients> {
         self.settle()?;
         let n = rays.len() / 6;
@@ -504,57 +563,7 @@ impl Plenoxels for VulkanPlenoxels {
             .collect())
     }
 
-    fn grid(&self) -> Result<Grid> {
-        self.settle()?;
-        Ok(Grid {
-            links: self.links.download()?,
-            density: self.density.download()?,
-            sh: self.sh.download()?,
-            ..self.meta.clone()
-        })
-    }
-
     fn shape(&self) -> ([u32; 3], usize) {
         (self.meta.res, self.allocated())
-    }
-
-    fn optimizer_state(&self) -> Result<(Vec<f32>, Vec<f32>)> {
-        self.settle()?;
-        Ok((self.state_density.download()?, self.state_sh.download()?))
-    }
-
-    fn load(&mut self, grid: Grid, state: Option<(Vec<f32>, Vec<f32>)>) -> Result<()> {
-        let n = grid.allocated();
-        if let Some((sd, ss)) = &state {
-            ensure!(
-                sd.len() == n && ss.len() == n * SH_DIM,
-                "optimizer state does not match the grid"
-            );
-        }
-        // The figures of the steps so far stay (read now: the buffers they sit in go).
-        self.collect()?;
-        let bg = self.background()?;
-        let mut fresh = VulkanPlenoxels::new(&self.gpu, grid)?;
-        if let Some((sd, ss)) = state {
-            fresh.state_density.write(&sd)?;
-            fresh.state_sh.write(&ss)?;
-        }
-        fresh.set_background(bg)?;
-        fresh.views = self.views.take();
-        fresh.done = std::mem::take(&mut self.done);
-        *self = fresh;
-        Ok(())
-    }
-
-    fn background(&self) -> Result<Background> {
-        self.settle()?;
-        Ok(self.bg.download()?[0])
-    }
-
-    fn set_background(&mut self, bg: Background) -> Result<()> {
-        self.settle()?;
-        self.bg.write(&[bg])?;
-        self.bg_learned = bg.learned();
-        Ok(())
     }
 }

@@ -4,8 +4,7 @@
 //! handler. Outside a training loop (no [`Catch`] alive) both signals keep their usual effect, so
 //! a command that is extracting or evaluating stops at once.
 
-use super::checkpoint_writer::BackgroundSave;
-use anyhow::Error;
+use anyhow::{Error, Result};
 use std::fmt;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicI32, Ordering};
@@ -110,15 +109,16 @@ impl std::error::Error for Interrupted {}
 
 impl Interrupted {
     /// The error that ends a run `signal` stopped after `done` of `iters` steps, once the
-    /// checkpoint `writer` is writing to `checkpoint` is on disk (or that write's own error).
+    /// checkpoint written to `checkpoint` is on disk (`written`: that write's outcome; its own
+    /// error if it failed).
     pub fn after_checkpoint(
         signal: i32,
         done: u32,
         iters: u32,
         checkpoint: PathBuf,
-        writer: &mut BackgroundSave,
+        written: Result<()>,
     ) -> Error {
-        match writer.finish() {
+        match written {
             Err(e) => e,
             Ok(()) => Error::new(Interrupted {
                 signal,

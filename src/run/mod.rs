@@ -4,7 +4,6 @@
 //! identity a run records, memory estimates for flags that size allocations, the thread that
 //! writes checkpoints while training goes on, and the stop a signal asks of a training loop.
 
-pub mod checkpoint_writer;
 pub mod dir;
 pub mod files;
 pub mod identity;

@@ -2,8 +2,7 @@
 
 use super::plan::{PlanGrid, SurfacePass, SurfacePlan};
 use super::{
-    surface_params, BlockRefresh, SurfaceBackend, SurfaceState, SurfaceStateFn, SurfaceStepParams,
-    SurfaceStepStats,
+    surface_params, BlockRefresh, SurfaceBackend, SurfaceStage, SurfaceStepParams, SurfaceStepStats,
 };
 use crate::abi::surface_grid::SurfaceGridRef;
 use crate::cpu::background::{self, Background};
@@ -17,12 +16,13 @@ use crate::cpu::surface_train::{train, RayLoss, SurfaceGrads, TrainCounts, Train
 use crate::cpu::{surface_rmsprop_sparse, tv, Stage2Params};
 use crate::data::TrainViews;
 use crate::gpu::{timed, Phase, PhaseClock};
-use crate::grid::checkpoint::state_bytes;
 use crate::grid::row_slots;
+use crate::grid::state_bytes;
 use crate::grid::surface::SurfaceGrid;
 use crate::grid::SH_DIM;
 use crate::math::surface::Truncation;
 use crate::math::surface_blocks::{SkipRef, SURF_BLOCK_SHIFT_CPU};
+use crate::stage::{StageBackend, StateFn};
 use anyhow::{ensure, Result};
 
 /// The grid for the kernels' twins, whose links [`CpuSurface::new`] checked (they never change
@@ -38,7 +38,7 @@ fn grid_ref(grid: &SurfaceGrid) -> SurfaceGridRef<'_> {
 pub struct CpuSurface {
     grid: SurfaceGrid,
     grad: [Vec<f32>; 3],
-    state: SurfaceState,
+    state: [Vec<f32>; 3],
     touched: Vec<u32>,
     /// Per-grid neighbour tables: Lδ's axis neighbours (and their forward reach in rows), and
     /// the normal regulariser's data (neighbour table, cell counts of the chunks).
@@ -252,7 +252,7 @@ struct PassOutput {
     reg_loss: f64,
 }
 
-impl SurfaceBackend for CpuSurface {
+impl StageBackend<SurfaceStage> for CpuSurface {
     fn name(&self) -> &'static str {
         "cpu"
     }
@@ -285,27 +285,11 @@ impl SurfaceBackend for CpuSurface {
         Ok(std::mem::take(&mut self.done))
     }
 
-    fn render(
-        &mut self,
-        rays: &[f32],
-        truncation: Truncation,
-        stop_thresh: f32,
-    ) -> Result<(Vec<f32>, SurfCounts)> {
-        let sp = surface_params(&self.grid, truncation, stop_thresh, self.bg.rgb);
-        self.refresh_blocks(0.0, 0.0)?;
-        let skip = SkipRef {
-            words: &self.blocks,
-            shift: SURF_BLOCK_SHIFT_CPU,
-        };
-        let (out, counts) = render(&grid_ref(&self.grid), rays, &sp, Some(skip))?;
-        Ok((out.iter().flat_map(|o| o.rgb).collect(), counts))
-    }
-
     fn grid(&self) -> Result<SurfaceGrid> {
         Ok(self.grid.clone())
     }
 
-    fn optimizer_state(&self) -> Result<SurfaceState> {
+    fn optimizer_state(&self) -> Result<[Vec<f32>; 3]> {
         Ok(self.state.clone())
     }
 
@@ -318,12 +302,12 @@ impl SurfaceBackend for CpuSurface {
         )
     }
 
-    fn with_state(&self, f: &mut SurfaceStateFn) -> Result<()> {
+    fn with_state(&self, f: &mut StateFn<SurfaceStage>) -> Result<()> {
         let [sd, so, ss] = &self.state;
-        f(&self.grid, [sd, so, ss])
+        f(&self.grid, &[sd, so, ss])
     }
 
-    fn load(&mut self, grid: SurfaceGrid, state: Option<SurfaceState>) -> Result<()> {
+    fn load(&mut self, grid: SurfaceGrid, state: Option<[Vec<f32>; 3]>) -> Result<()> {
         let n = grid.delta.len();
         let state = state.unwrap_or_else(|| [vec![0.0; n], vec![0.0; n], vec![0.0; n * SH_DIM]]);
         ensure!(
@@ -345,5 +329,23 @@ impl SurfaceBackend for CpuSurface {
     fn set_background(&mut self, bg: Background) -> Result<()> {
         self.bg = bg;
         Ok(())
+    }
+}
+
+impl SurfaceBackend for CpuSurface {
+    fn render(
+        &mut self,
+        rays: &[f32],
+        truncation: Truncation,
+        stop_thresh: f32,
+    ) -> Result<(Vec<f32>, SurfCounts)> {
+        let sp = surface_params(&self.grid, truncation, stop_thresh, self.bg.rgb);
+        self.refresh_blocks(0.0, 0.0)?;
+        let skip = SkipRef {
+            words: &self.blocks,
+            shift: SURF_BLOCK_SHIFT_CPU,
+        };
+        let (out, counts) = render(&grid_ref(&self.grid), rays, &sp, Some(skip))?;
+        Ok((out.iter().flat_map(|o| o.rgb).collect(), counts))
     }
 }

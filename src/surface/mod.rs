@@ -12,16 +12,18 @@ mod vulkan;
 pub use cpu::CpuSurface;
 pub use vulkan::{surf_params, SurfaceGradients, VulkanSurface};
 
-use crate::cpu::background::Background;
+use crate::abi::buffers::TrainPerRay;
+use crate::checkpoint;
 use crate::cpu::surface_delta_tv::DeltaTvChunk;
 use crate::cpu::surface_fwd::{SurfCounts, SurfaceParams};
 use crate::cpu::surface_reg::OpacityChunk;
 use crate::cpu::surface_train::{SurfaceLoss, TrainCounts};
 use crate::cpu::TvChunk;
-use crate::data::TrainViews;
 use crate::grid::surface::SurfaceGrid;
 use crate::math::surface::Truncation;
+use crate::stage::{psnr, Saved, Stage, StageBackend};
 use anyhow::Result;
+use std::path::Path;
 
 /// The per-vertex regularisers of one step (method.md §3.4); `None` switches a term off.
 #[derive(Clone, Copy, Debug, Default)]
@@ -81,38 +83,78 @@ pub struct SurfaceStepStats {
     pub host: crate::gpu::StepTimes,
 }
 
-/// The optimiser's running averages: δ, σα, SH.
-pub type SurfaceState = [Vec<f32>; 3];
+/// Stage 2: the αSurf surface grid.
+pub struct SurfaceStage;
 
-/// What [`SurfaceBackend::with_state`] calls: the grid and the running averages (δ, σα, SH).
-pub type SurfaceStateFn<'a> = dyn FnMut(&SurfaceGrid, [&[f32]; 3]) -> Result<()> + 'a;
+impl Stage for SurfaceStage {
+    const NAME: &'static str = "surface";
+    const CHECKPOINT: &'static str = crate::run::dir::STAGE2_CHECKPOINT;
+    const STATE_NAMES: &'static [&'static str] = &["rms_delta", "rms_opacity", "rms_sh"];
+    /// Step, mse, batch PSNR, the unweighted entropy and consistency means, the regulariser
+    /// loss (Lα + Ln), seconds since training started.
+    const LOG_HEADER: &'static str = "step,mse,psnr_batch,entropy,consistency,reg_loss,elapsed_s";
+    type Grid = SurfaceGrid;
+    type Params = SurfaceStepParams;
+    type Stats = SurfaceStepStats;
+    type PerRay = TrainPerRay;
+    /// δ, σα, SH.
+    type State = [Vec<f32>; 3];
 
-/// A stage-2 compute backend holding the surface grid and its optimiser state.
-pub trait SurfaceBackend {
-    /// Backend name for logs ("vulkan" or "cpu").
-    fn name(&self) -> &'static str;
-    /// One optimisation step on a batch: `rays` 6 floats per ray, `targets` 3 per ray.
-    fn step(
-        &mut self,
-        rays: &[f32],
-        targets: &[f32],
-        p: &SurfaceStepParams,
-    ) -> Result<SurfaceStepStats>;
-    /// One optimisation step on the batch of `n` rays drawn from `views` with `seed`
-    /// (`cpu::sample_rays`): the CPU backend draws it with the twin on the host; the Vulkan
-    /// backend draws it on the device, from views it uploads once, and returns once the step is
-    /// submitted (the device may still run it). Its figures come with [`Self::take_stats`].
-    fn step_sampled(
-        &mut self,
-        views: &TrainViews,
-        seed: u64,
-        n: usize,
-        p: &SurfaceStepParams,
-    ) -> Result<()>;
-    /// The figures of every `step_sampled` step since the last call, in order (waits for the
-    /// steps still running). A backend keeps at most [`crate::gpu::STEP_SLOTS`] steps' figures
-    /// on the device and reads them into host memory when that many have not been taken.
-    fn take_stats(&mut self) -> Result<Vec<SurfaceStepStats>>;
+    fn mse(stats: &SurfaceStepStats) -> f64 {
+        stats.mse
+    }
+
+    fn non_finite(s: &SurfaceStepStats) -> Option<String> {
+        (!(s.mse.is_finite() && s.entropy.is_finite() && s.consistency.is_finite())).then(|| {
+            format!(
+                "mse {}, entropy {}, consistency {}",
+                s.mse, s.entropy, s.consistency
+            )
+        })
+    }
+
+    fn log_row(s: &SurfaceStepStats, step: u32, elapsed: f64) -> String {
+        format!(
+            "{},{:.6e},{:.3},{:.5},{:.5},{:.4e},{:.3}",
+            step,
+            s.mse,
+            psnr(s.mse),
+            s.entropy,
+            s.consistency,
+            s.reg_loss,
+            elapsed
+        )
+    }
+
+    fn tally(totals: &mut TrainPerRay, stats: &SurfaceStepStats) {
+        totals.add(&stats.counts);
+    }
+
+    fn scaled(totals: &TrainPerRay, f: f64) -> TrainPerRay {
+        totals.scaled(f)
+    }
+
+    fn save(
+        path: &Path,
+        grid: &SurfaceGrid,
+        optim: &[(&str, &[f32])],
+        meta: &serde_json::Value,
+    ) -> Result<()> {
+        checkpoint::surface::save(path, grid, optim, meta)
+    }
+
+    fn load(path: &Path) -> Result<Saved<Self>> {
+        let ck = checkpoint::surface::load(path)?;
+        Ok(Saved {
+            state: checkpoint::state_of::<Self>(&ck.optim, path)?,
+            grid: ck.grid,
+            meta: ck.meta,
+        })
+    }
+}
+
+/// The stage-2 backend: [`StageBackend`] and its renders.
+pub trait SurfaceBackend: StageBackend<SurfaceStage> {
     /// Render rays (composited on the background): 3 floats per ray, and the counters of
     /// `surface_fwd`.
     fn render(
@@ -121,24 +163,6 @@ pub trait SurfaceBackend {
         truncation: Truncation,
         stop_thresh: f32,
     ) -> Result<(Vec<f32>, SurfCounts)>;
-    /// The current grid.
-    fn grid(&self) -> Result<SurfaceGrid>;
-    /// RMSProp running averages.
-    fn optimizer_state(&self) -> Result<SurfaceState>;
-    /// Bytes of a copy of the grid and the running averages (what a checkpoint holds).
-    fn state_bytes(&self) -> u64;
-    /// Call `f` with the grid and the running averages (δ, σα, SH): borrowed where the backend
-    /// holds them in host memory (checkpoints of large grids copy nothing), else downloaded.
-    fn with_state(&self, f: &mut SurfaceStateFn) -> Result<()> {
-        let [sd, so, ss] = self.optimizer_state()?;
-        f(&self.grid()?, [&sd, &so, &ss])
-    }
-    /// Replace grid and optimiser state (after pruning, or when resuming); the background stays.
-    fn load(&mut self, grid: SurfaceGrid, state: Option<SurfaceState>) -> Result<()>;
-    /// The background with its optimiser state (white and fixed unless set).
-    fn background(&self) -> Result<Background>;
-    /// Replace the background (colour, whether it is learned, its optimiser state).
-    fn set_background(&mut self, bg: Background) -> Result<()>;
 }
 
 /// Passes between rebuilds of the block masks the walks skip with (see [`BlockRefresh`]).

@@ -13,7 +13,7 @@ use super::plan::{PlanGrid, SurfacePass, SurfacePlan};
 use super::rmsprop::{record_surface_rmsprop, SurfaceOptimIo};
 use super::skip::{record_skip_structure, SkipIo};
 use super::{
-    opacity_reg_invocations, surface_params, BlockRefresh, SurfaceBackend, SurfaceState,
+    opacity_reg_invocations, surface_params, BlockRefresh, SurfaceBackend, SurfaceStage,
     SurfaceStepParams, SurfaceStepStats,
 };
 use crate::abi::buffers::{RayLoss, SurfCounts, SurfOut, SurfParams, TrainCounts};
@@ -31,8 +31,8 @@ use crate::gpu::{
     record_background_step, record_loss_sum, Batch, BatchTimes, Gpu, GpuBuffer, Phase, PhaseClock,
     RayBuffers, Readback, StepMeta, StepsInFlight, TrainRays, TrainViewBuffers, STEP_SLOTS,
 };
-use crate::grid::checkpoint::state_bytes;
 use crate::grid::row_slots;
+use crate::grid::state_bytes;
 use crate::grid::surface::SurfaceGrid;
 use crate::grid::SH_DIM;
 use crate::kernels;
@@ -41,6 +41,7 @@ use crate::math::surface::SURF_MAX_LEVELS;
 use crate::math::surface_blocks::{
     surf_blocks_per_axis, surf_live_words, SURF_BLOCK_SHIFT_VULKAN, SURF_BOX_WORDS,
 };
+use crate::stage::StageBackend;
 use anyhow::{ensure, Result};
 use std::cell::RefCell;
 
@@ -674,7 +675,7 @@ impl VulkanSurface {
     }
 }
 
-impl SurfaceBackend for VulkanSurface {
+impl StageBackend<SurfaceStage> for VulkanSurface {
     fn name(&self) -> &'static str {
         "vulkan"
     }
@@ -708,6 +709,71 @@ impl SurfaceBackend for VulkanSurface {
         Ok(self.take_timed()?.into_iter().map(|(s, _)| s).collect())
     }
 
+    fn grid(&self) -> Result<SurfaceGrid> {
+        self.settle()?;
+        let rows = self.rows;
+        Ok(SurfaceGrid {
+            links: self.links.download()?,
+            delta: self.delta.download_range(0, rows)?,
+            opacity: self.opacity.download_range(0, rows)?,
+            sh: self.sh.download_range(0, rows * SH_DIM)?,
+            ..self.meta.clone()
+        })
+    }
+
+    fn state_bytes(&self) -> u64 {
+        let slots = self.meta.res.iter().map(|&r| r as u64).product();
+        state_bytes(slots, self.rows as u64, 2 + SH_DIM as u64)
+    }
+
+    fn optimizer_state(&self) -> Result<[Vec<f32>; 3]> {
+        self.settle()?;
+        let rows = self.rows;
+        Ok([
+            self.state[0].download_range(0, rows)?,
+            self.state[1].download_range(0, rows)?,
+            self.state[2].download_range(0, rows * SH_DIM)?,
+        ])
+    }
+
+    fn load(&mut self, grid: SurfaceGrid, state: Option<[Vec<f32>; 3]>) -> Result<()> {
+        let n = grid.delta.len();
+        if let Some(s) = &state {
+            ensure!(
+                s[0].len() == n && s[1].len() == n && s[2].len() == n * SH_DIM,
+                "optimizer state does not match the surface grid"
+            );
+        }
+        // The figures of the steps so far stay (read now: the buffers they sit in go).
+        self.collect()?;
+        let bg = self.background()?;
+        let mut fresh = VulkanSurface::new(&self.gpu, grid)?;
+        if let Some(s) = state {
+            for (buf, v) in fresh.state.iter().zip(&s) {
+                buf.write(v)?;
+            }
+        }
+        fresh.set_background(bg)?;
+        fresh.views = self.views.take();
+        fresh.done = std::mem::take(&mut self.done);
+        *self = fresh;
+        Ok(())
+    }
+
+    fn background(&self) -> Result<Background> {
+        self.settle()?;
+        Ok(self.bg.download()?[0])
+    }
+
+    fn set_background(&mut self, bg: Background) -> Result<()> {
+        self.settle()?;
+        self.bg.write(&[bg])?;
+        self.bg_learned = bg.learned();
+        Ok(())
+    }
+}
+
+impl SurfaceBackend for VulkanSurface {
     fn render(
         &mut self,
         rays: &[f32],
@@ -751,68 +817,5 @@ impl SurfaceBackend for VulkanSurface {
         let out: Vec<SurfOut> = self.rays.out().download_range(0, n)?;
         let counts = self.stats.download_range::<SurfCounts>(0, 1)?[0];
         Ok((out.iter().flat_map(|o| o.rgb).collect(), counts))
-    }
-
-    fn grid(&self) -> Result<SurfaceGrid> {
-        self.settle()?;
-        let rows = self.rows;
-        Ok(SurfaceGrid {
-            links: self.links.download()?,
-            delta: self.delta.download_range(0, rows)?,
-            opacity: self.opacity.download_range(0, rows)?,
-            sh: self.sh.download_range(0, rows * SH_DIM)?,
-            ..self.meta.clone()
-        })
-    }
-
-    fn state_bytes(&self) -> u64 {
-        let slots = self.meta.res.iter().map(|&r| r as u64).product();
-        state_bytes(slots, self.rows as u64, 2 + SH_DIM as u64)
-    }
-
-    fn optimizer_state(&self) -> Result<SurfaceState> {
-        self.settle()?;
-        let rows = self.rows;
-        Ok([
-            self.state[0].download_range(0, rows)?,
-            self.state[1].download_range(0, rows)?,
-            self.state[2].download_range(0, rows * SH_DIM)?,
-        ])
-    }
-
-    fn load(&mut self, grid: SurfaceGrid, state: Option<SurfaceState>) -> Result<()> {
-        let n = grid.delta.len();
-        if let Some(s) = &state {
-            ensure!(
-                s[0].len() == n && s[1].len() == n && s[2].len() == n * SH_DIM,
-                "optimizer state does not match the surface grid"
-            );
-        }
-        // The figures of the steps so far stay (read now: the buffers they sit in go).
-        self.collect()?;
-        let bg = self.background()?;
-        let mut fresh = VulkanSurface::new(&self.gpu, grid)?;
-        if let Some(s) = state {
-            for (buf, v) in fresh.state.iter().zip(&s) {
-                buf.write(v)?;
-            }
-        }
-        fresh.set_background(bg)?;
-        fresh.views = self.views.take();
-        fresh.done = std::mem::take(&mut self.done);
-        *self = fresh;
-        Ok(())
-    }
-
-    fn background(&self) -> Result<Background> {
-        self.settle()?;
-        Ok(self.bg.download()?[0])
-    }
-
-    fn set_background(&mut self, bg: Background) -> Result<()> {
-        self.settle()?;
-        self.bg.write(&[bg])?;
-        self.bg_learned = bg.learned();
-        Ok(())
     }
 }

@@ -260,3 +260,9 @@ impl Stage1Config {
             .map_or(self.res, |(_, r)| *r)
     }
 }
+
+impl crate::checkpoint::Recorded for Stage1Config {
+    fn validate(&self) -> anyhow::Result<()> {
+        Stage1Config::validate(self)
+    }
+}

@@ -1,7 +1,7 @@
-//! Backend-agnostic training: configurations and presets, learning-rate schedules, the stage-1
-//! loop with checkpoints, progress, rendering and metrics.
+//! Backend-agnostic training: configurations and presets, learning-rate schedules, the training
+//! loop of both stages ([`steps`]) and what each stage adds to it ([`stage1`], [`stage2`]),
+//! progress and the test renders.
 
-pub mod background;
 pub mod config;
 pub mod preset;
 pub mod progress;
@@ -9,11 +9,11 @@ pub mod render;
 pub mod schedule;
 pub mod stage1;
 pub mod stage2;
+pub mod steps;
 pub mod surface_config;
 
-pub use background::BackgroundRecord;
 pub use config::Stage1Config;
 pub use preset::{Category, Preset};
-pub use render::{psnr, render_split, render_split_with, RenderedSplit, MAX_PIXEL_SAMPLES};
+pub use render::{render_split, render_split_with, RenderedSplit, MAX_PIXEL_SAMPLES};
 pub use schedule::DelayedExp;
 pub use surface_config::SurfaceConfig;

@@ -3,6 +3,7 @@
 
 use crate::data::{view_rays, Dataset, Split};
 use crate::plenoxel::Plenoxels;
+use crate::stage::psnr;
 use anyhow::{Context, Result};
 use std::path::Path;
 
@@ -55,11 +56,6 @@ fn render_averaged(
         }
     }
     Ok(rgb)
-}
-
-/// PSNR in dB of a mean squared error on [0, 1] colours.
-pub fn psnr(mse: f64) -> f64 {
-    -10.0 * mse.max(1e-20).log10()
 }
 
 /// Render every view of `split` through a stage-1 backend into `out/r_<i>.png` and measure PSNR

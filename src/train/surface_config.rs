@@ -368,6 +368,12 @@ impl SurfaceConfig {
     }
 }
 
+impl crate::checkpoint::Recorded for SurfaceConfig {
+    fn validate(&self) -> Result<()> {
+        SurfaceConfig::validate(self)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

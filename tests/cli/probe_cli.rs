@@ -137,7 +137,7 @@ fn replacing_a_folder_loses_nothing_and_leaves_nothing_half_written() {
     let mut c = bin();
     import(&mut c);
     run_ok(&mut c);
-    let loaded = alphasurf::grid::checkpoint::load(&r.join("plenoxels.npz")).unwrap();
+    let loaded = alphasurf::checkpoint::format::load(&r.join("plenoxels.npz")).unwrap();
     assert_eq!(loaded.grid.res, [4, 4, 4]);
     assert_eq!(names(&r), ["notes.txt", "plenoxels.npz", "run.json"]);
     run_ok(
@@ -389,11 +389,12 @@ fn errors_say_what_is_wrong_and_what_to_do() {
     );
     // Stage 2 from a stage 1 that stopped before its last step says so.
     let s1 = all.join("plenoxels");
-    let ck = alphasurf::grid::checkpoint::load(&s1.join("plenoxels.npz")).unwrap();
+    let ck = alphasurf::checkpoint::format::load(&s1.join("plenoxels.npz")).unwrap();
     let mut meta = ck.meta.clone();
     meta["step"] = 10.into();
-    let optim = alphasurf::grid::checkpoint::optim_refs(&ck.optim);
-    alphasurf::grid::checkpoint::save(&s1.join("plenoxels.npz"), &ck.grid, &optim, &meta).unwrap();
+    let optim = alphasurf::checkpoint::format::optim_refs(&ck.optim);
+    alphasurf::checkpoint::format::save(&s1.join("plenoxels.npz"), &ck.grid, &optim, &meta)
+        .unwrap();
     let (code, _, err) = run(bin()
         .args(["train", "--stage", "surface", "--backend", "cpu", "--quiet"])
         .args(["--batch", "1024", "--surface-iters", "3", "--init"])

@@ -5,7 +5,7 @@
 //! resumes across the stage boundary; a run is locked against a second writer; bad inputs and
 //! oversized flags are clear errors (exit code 1, never a panic or an abort).
 
-use alphasurf::grid::checkpoint::{self, optim_refs};
+use alphasurf::checkpoint::format::{self as checkpoint, optim_refs};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};

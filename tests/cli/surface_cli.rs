@@ -324,7 +324,7 @@ fn diverging_surface_training_stops_and_keeps_the_checkpoint() {
     assert!(text.contains("non-finite"), "{text}");
     // The checkpoint left behind loads and is finite (a stage-2 checkpoint is never written
     // with NaN/Inf).
-    let ck = alphasurf::grid::surface::SurfaceGrid::load(&s2.join("surface.npz"));
+    let ck = alphasurf::checkpoint::surface::load(&s2.join("surface.npz"));
     if let Ok(ck) = ck {
         assert!(ck.grid.delta.iter().all(|v| v.is_finite()));
     }

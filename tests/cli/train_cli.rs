@@ -7,7 +7,7 @@
 use crate::bench_common;
 use crate::data_common::convert::{self, Target};
 
-use alphasurf::grid::checkpoint::optim_refs;
+use alphasurf::checkpoint::format::optim_refs;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
@@ -210,7 +210,7 @@ fn sigkill_loses_at_most_the_steps_since_the_last_checkpoint() {
     std::thread::sleep(Duration::from_millis(1500));
     child.kill().unwrap();
     child.wait().unwrap();
-    let ck = alphasurf::grid::checkpoint::load(&ckpt).expect("checkpoint intact after SIGKILL");
+    let ck = alphasurf::checkpoint::format::load(&ckpt).expect("checkpoint intact after SIGKILL");
     let step = ck.meta["step"].as_u64().unwrap();
     assert!(
         step >= 5 && step.is_multiple_of(5),
@@ -220,7 +220,7 @@ fn sigkill_loses_at_most_the_steps_since_the_last_checkpoint() {
     let mut cfg = ck.meta["config"].clone();
     cfg["iters"] = serde_json::json!(step + 10);
     let meta = serde_json::json!({ "stage": "plenoxels", "step": step, "config": cfg });
-    alphasurf::grid::checkpoint::save(&ckpt, &ck.grid, &optim_refs(&ck.optim), &meta).unwrap();
+    alphasurf::checkpoint::format::save(&ckpt, &ck.grid, &optim_refs(&ck.optim), &meta).unwrap();
     let out = run_ok(
         bin()
             .args(["train", "--data"])
@@ -232,7 +232,7 @@ fn sigkill_loses_at_most_the_steps_since_the_last_checkpoint() {
     assert!(out.contains("stage 1 done"), "{out}");
     let m = metrics(&run);
     assert_eq!(m["config"]["iters"].as_u64().unwrap(), step + 10);
-    let done = alphasurf::grid::checkpoint::load(&ckpt).unwrap();
+    let done = alphasurf::checkpoint::format::load(&ckpt).unwrap();
     assert_eq!(done.meta["step"].as_u64().unwrap(), step + 10);
     // The log was cut back to the checkpoint: every step once, no torn row (issue 24).
     let log = std::fs::read_to_string(run.join("train_log.csv")).unwrap();
@@ -332,7 +332,7 @@ fn sigint_checkpoints_the_step_it_stops_at_and_resume_goes_on() {
         err.contains("plenoxels.npz") && err.contains("--resume"),
         "{err}"
     );
-    let ck = alphasurf::grid::checkpoint::load(&run.join("plenoxels.npz")).unwrap();
+    let ck = alphasurf::checkpoint::format::load(&run.join("plenoxels.npz")).unwrap();
     assert_eq!(ck.meta["step"].as_u64(), Some(step));
     assert!(step > 0 && step < 1_000_000, "{err}");
     assert_eq!(log_steps(&run, 4), (1..=step).collect::<Vec<_>>());
@@ -372,7 +372,8 @@ fn sigint_checkpoints_the_step_it_stops_at_and_resume_goes_on() {
 #[test]
 fn non_finite_training_state_stops_the_run_and_keeps_the_last_checkpoint() {
     use alphasurf::data::{Dataset, LoadOptions};
-    use alphasurf::plenoxel::{CpuPlenoxels, Plenoxels};
+    use alphasurf::plenoxel::CpuPlenoxels;
+    use alphasurf::stage::StageBackend;
     use alphasurf::train::{stage1, Stage1Config};
     let dir = tempfile::tempdir().unwrap();
     let data = Dataset::load(&scene(dir.path()), &LoadOptions::default()).unwrap();
@@ -389,7 +390,10 @@ fn non_finite_training_state_stops_the_run_and_keeps_the_last_checkpoint() {
     let grid = alphasurf::grid::Grid::sphere(16, [0.0; 3], [1.0; 3], 1.0, cfg.init_sigma);
     let mut b = CpuPlenoxels::new(grid);
     stage1::train(&mut b, &data, &cfg, &run, 0, false).unwrap();
-    let good = std::fs::read(stage1::checkpoint_path(&run)).unwrap();
+    let good = std::fs::read(alphasurf::checkpoint::path::<
+        alphasurf::plenoxel::PlenoxelsStage,
+    >(&run))
+    .unwrap();
     // Poison the grid: every σ becomes NaN, so the next step's loss is NaN.
     let mut poisoned = b.grid().unwrap();
     poisoned.density.iter_mut().for_each(|v| *v = f32::NAN);
@@ -399,7 +403,10 @@ fn non_finite_training_state_stops_the_run_and_keeps_the_last_checkpoint() {
     let msg = format!("{err:#}");
     assert!(msg.contains("non-finite"), "{msg}");
     assert_eq!(
-        std::fs::read(stage1::checkpoint_path(&run)).unwrap(),
+        std::fs::read(alphasurf::checkpoint::path::<
+            alphasurf::plenoxel::PlenoxelsStage,
+        >(&run))
+        .unwrap(),
         good,
         "checkpoint overwritten"
     );
@@ -688,7 +695,7 @@ fn black_background_trains_and_renders_on_black() {
     let info: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(run.join("run.json")).unwrap()).unwrap();
     assert_eq!(info["background"], "black");
-    let ck = alphasurf::grid::checkpoint::load(&run.join("plenoxels.npz")).unwrap();
+    let ck = alphasurf::checkpoint::format::load(&run.join("plenoxels.npz")).unwrap();
     assert_eq!(ck.meta["background"]["mode"], "black");
     // The test renders: background corners near black (0.05: the empty space of a 60-step grid
     // still holds a little density).
@@ -782,17 +789,17 @@ fn learned_background_converges_to_the_backdrop_of_images_without_alpha() {
         }
     }
     let s1_path = run.join("plenoxels/plenoxels.npz");
-    let s1_ck = alphasurf::grid::checkpoint::load(&s1_path).unwrap();
+    let s1_ck = alphasurf::checkpoint::format::load(&s1_path).unwrap();
     assert_eq!(s1_ck.meta["background"]["rgb"], s1["background"]["rgb"]);
     // Resume and stage 2 start from the checkpoint's colour: set it to grey, far from the
     // backdrop and from the images' border median.
     let mut meta = s1_ck.meta.clone();
     meta["background"]["rgb"] = serde_json::json!([0.5, 0.5, 0.5]);
-    alphasurf::grid::checkpoint::save(&s1_path, &s1_ck.grid, &optim_refs(&s1_ck.optim), &meta)
+    alphasurf::checkpoint::format::save(&s1_path, &s1_ck.grid, &optim_refs(&s1_ck.optim), &meta)
         .unwrap();
     let mut b = alphasurf::plenoxel::CpuPlenoxels::new(s1_ck.grid.clone());
     let (_, _, rec) = alphasurf::train::stage1::resume(&mut b, &s1_path).unwrap();
-    use alphasurf::plenoxel::Plenoxels as _;
+    use alphasurf::stage::StageBackend;
     let restored = b.background().unwrap();
     assert!(restored.learned() && restored.rgb == [0.5; 3] && restored == rec.kernel());
     let s2b = dir.path().join("s2b");
@@ -849,7 +856,8 @@ fn learned_background_converges_from_grey_on_the_device() {
     use alphasurf::cpu::background::Background;
     use alphasurf::data::{BackgroundMode, Dataset, LoadOptions, TrainViews};
     use alphasurf::grid::Grid;
-    use alphasurf::plenoxel::{Plenoxels, StepParams, VulkanPlenoxels};
+    use alphasurf::plenoxel::{StepParams, VulkanPlenoxels};
+    use alphasurf::stage::StageBackend;
     use alphasurf::train::Stage1Config;
     let dir = tempfile::tempdir().unwrap();
     let data = scene(dir.path());

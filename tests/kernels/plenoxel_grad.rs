@@ -7,6 +7,7 @@ use alphasurf::check::TEST_BACKGROUND;
 use alphasurf::cpu::background::Background;
 use alphasurf::grid::{Grid, SH_DIM};
 use alphasurf::plenoxel::{CpuPlenoxels, Plenoxels};
+use alphasurf::stage::StageBackend;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
 

@@ -5,7 +5,7 @@ use std::fs;
 use std::io::{Cursor, Write};
 use std::path::{Path, PathBuf};
 
-use alphasurf::grid::checkpoint;
+use alphasurf::checkpoint::format as checkpoint;
 use alphasurf::grid::npz::{self, NpzWriter};
 use alphasurf::grid::{Grid, SH_DIM};
 use half::f16;

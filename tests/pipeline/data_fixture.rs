@@ -306,7 +306,8 @@ fn stage1_start() -> (alphasurf::grid::Grid, alphasurf::plenoxel::StepParams) {
 #[test]
 fn device_batches_are_the_twins_and_a_restart_draws_them_again() {
     use alphasurf::check::sample_rays::{DIR_ABS, TARGET_ABS};
-    use alphasurf::plenoxel::{CpuPlenoxels, Plenoxels, VulkanPlenoxels};
+    use alphasurf::plenoxel::{CpuPlenoxels, VulkanPlenoxels};
+    use alphasurf::stage::StageBackend;
     let ds = dataset();
     let gpu = alphasurf::gpu::test_gpu();
     let (grid, p) = stage1_start();
@@ -371,7 +372,8 @@ const DENSITY_REL: f32 = 1e-3;
 #[test]
 fn steps_in_flight_match_steps_waited_for() {
     use alphasurf::gpu::STEP_SLOTS;
-    use alphasurf::plenoxel::{Plenoxels, VulkanPlenoxels};
+    use alphasurf::plenoxel::VulkanPlenoxels;
+    use alphasurf::stage::StageBackend;
     let ds = dataset();
     let gpu = alphasurf::gpu::test_gpu();
     let (grid, p) = stage1_start();

@@ -10,6 +10,7 @@ use alphasurf::check::surface_train::{scene_grid, test_background};
 use alphasurf::cpu::surface_reg::{delta_tv_chunk, opacity_tv_chunk, OpacityChunk};
 use alphasurf::gpu::test_gpu;
 use alphasurf::grid::surface::SurfaceGrid;
+use alphasurf::stage::StageBackend;
 use alphasurf::surface::{
     CpuSurface, SurfaceBackend, SurfaceRegs, SurfaceStepParams, VulkanSurface,
 };
@@ -257,7 +258,8 @@ fn cpu_backend_checks_links_when_made() {
 /// it is written in the background) as the bytes of the arrays a checkpoint holds.
 #[test]
 fn state_bytes_are_the_checkpoint_arrays() {
-    use alphasurf::plenoxel::{CpuPlenoxels, Plenoxels, VulkanPlenoxels};
+    use alphasurf::plenoxel::{CpuPlenoxels, VulkanPlenoxels};
+    use alphasurf::stage::StageBackend;
     let gpu = test_gpu();
     let g0 = scene_grid(&test_scene(11, 24));
     let (vk, cpu) = (
@@ -275,7 +277,7 @@ fn state_bytes_are_the_checkpoint_arrays() {
         VulkanPlenoxels::new(gpu, g.clone()).unwrap(),
         CpuPlenoxels::new(g.clone()),
     );
-    let (sd, ss) = cpu.optimizer_state().unwrap();
+    let [sd, ss] = cpu.optimizer_state().unwrap();
     let arrays = [&g.density, &g.sh, &sd, &ss];
     let want = 4 * (g.links.len() + arrays.iter().map(|a| a.len()).sum::<usize>()) as u64;
     assert_eq!(cpu.state_bytes(), want);

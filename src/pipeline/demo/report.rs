@@ -323,7 +323,7 @@ fn meshes(r: &Inputs, path: &Path) -> Result<String> {
 
 /// Batch MSE and PSNR against the step, stage 2 continuing after stage 1; moving averages.
 fn curves(r: &Inputs, path: &Path) -> Result<String> {
-    let log_name = crate::train::stage1::TRAIN_LOG;
+    let log_name = crate::run::dir::TRAIN_LOG;
     let mut stages = vec![("STAGE 1 (PLENOXELS)", log::read(&r.s1.dir.join(log_name))?)];
     let mut s2_note = String::new();
     if let Ok(s2) = &r.s2 {

@@ -2,7 +2,7 @@
 //! goes on training while it is written. One write at a time; a failed write's error comes back
 //! from the next call.
 
-use super::memory;
+use crate::run::memory;
 use anyhow::{anyhow, Context, Result};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};

@@ -9,8 +9,8 @@ use std::path::Path;
 
 use anyhow::{bail, ensure, Context, Result};
 
-use super::npz::{self, Data, NpzReader};
-use super::Grid;
+use crate::grid::npz::{self, Data, NpzReader};
+use crate::grid::Grid;
 
 /// Name of the metadata array.
 pub const META: &str = "alphasurf_meta";
@@ -37,12 +37,6 @@ fn check_name(name: &str) -> Result<()> {
 /// Named optimiser-state arrays to write, borrowed (a checkpoint of a 512³ grid would otherwise
 /// copy gigabytes).
 pub type OptimRefs<'a> = [(&'a str, &'a [f32])];
-
-/// Bytes a copy of a training state holds: `slots` links, and `rows` vertices of `channels`
-/// floats each, twice (the values and their RMSProp averages).
-pub fn state_bytes(slots: u64, rows: u64, channels: u64) -> u64 {
-    4 * (slots + 2 * rows * channels)
-}
 
 /// Write a checkpoint atomically to `path`. Refuses (leaving any previous checkpoint intact) an
 /// invalid or non-finite grid, non-finite optimiser state, or bad/duplicate names.

@@ -1,0 +1,128 @@
+//! Checkpoints, in one place: the npz layout of each stage ([`format`]: the stage-1 grid and
+//! what every checkpoint adds; [`surface`]: the stage-2 grid), the metadata a checkpoint records
+//! (stage, step, configuration, [`BackgroundRecord`]), the writes of a training run (now, or on
+//! the checkpoint thread of [`writer`]) and the resume, written once for both stages over
+//! [`Stage`].
+
+pub mod background;
+pub mod format;
+pub mod surface;
+pub mod writer;
+
+pub use background::BackgroundRecord;
+
+use crate::data::BackgroundMode;
+use crate::stage::{Stage, StageBackend, StateArrays};
+use anyhow::{Context, Result};
+use serde::de::DeserializeOwned;
+use serde_json::json;
+use std::path::{Path, PathBuf};
+use writer::BackgroundSave;
+
+/// The checkpoint file of stage `S` in the run directory `run`.
+pub fn path<S: Stage>(run: &Path) -> PathBuf {
+    run.join(S::CHECKPOINT)
+}
+
+/// A training run's checkpoints of stage `S`: where they go, and the configuration and
+/// background mode each records.
+pub struct RunCheckpoints {
+    pub path: PathBuf,
+    /// The run's configuration, as recorded.
+    pub config: serde_json::Value,
+    pub mode: BackgroundMode,
+}
+
+impl RunCheckpoints {
+    /// The metadata of the checkpoint of `step`, with the backend's background.
+    fn meta<S: Stage, B: StageBackend<S> + ?Sized>(
+        &self,
+        backend: &B,
+        step: u32,
+    ) -> Result<serde_json::Value> {
+        let bg = BackgroundRecord::of(self.mode, &backend.background()?);
+        Ok(json!({
+            "stage": S::NAME, "step": step, "config": self.config, background::META_KEY: bg
+        }))
+    }
+
+    /// Write the checkpoint of `step` atomically, now (refuses non-finite values).
+    fn save<S: Stage, B: StageBackend<S> + ?Sized>(&self, backend: &B, step: u32) -> Result<()> {
+        let meta = self.meta(backend, step)?;
+        backend
+            .with_state(&mut |grid, state| S::save(&self.path, grid, &named::<S>(state), &meta))
+            .with_context(|| format!("after step {step}"))
+    }
+
+    /// The checkpoint of `step` as a write for the checkpoint thread: the grid and the running
+    /// averages are copied (downloaded from a GPU) now, checked and written atomically there.
+    fn snapshot<S: Stage, B: StageBackend<S> + ?Sized>(
+        &self,
+        backend: &B,
+        step: u32,
+    ) -> Result<impl FnOnce() -> Result<()> + Send + 'static> {
+        let meta = self.meta(backend, step)?;
+        let grid = backend.grid()?;
+        let state = backend.optimizer_state()?;
+        let path = self.path.clone();
+        Ok(move || {
+            S::save(&path, &grid, &named::<S>(&state.arrays()), &meta)
+                .with_context(|| format!("after step {step}"))
+        })
+    }
+
+    /// Checkpoint `step` with `writer`: on its thread from a copy, or now in place when a copy
+    /// does not fit in memory (`BackgroundSave::checkpoint`).
+    pub fn write<S: Stage, B: StageBackend<S> + ?Sized>(
+        &self,
+        writer: &mut BackgroundSave,
+        backend: &B,
+        step: u32,
+    ) -> Result<()> {
+        writer.checkpoint(
+            backend.state_bytes(),
+            || self.snapshot(backend, step),
+            || self.save(backend, step),
+        )
+    }
+}
+
+/// The optimiser arrays with their names.
+fn named<'a, S: Stage>(state: &[&'a [f32]]) -> Vec<(&'static str, &'a [f32])> {
+    S::STATE_NAMES
+        .iter()
+        .copied()
+        .zip(state.iter().copied())
+        .collect()
+}
+
+/// A configuration a checkpoint records.
+pub trait Recorded: serde::Serialize + DeserializeOwned {
+    /// Refuse values the stage cannot train with.
+    fn validate(&self) -> Result<()>;
+}
+
+/// Restore grid, optimiser state, background and step from the checkpoint of stage `S` at
+/// `path` into `backend`; returns the next step, the configuration and the background.
+pub fn resume<S: Stage, C: Recorded, B: StageBackend<S> + ?Sized>(
+    backend: &mut B,
+    path: &Path,
+) -> Result<(u32, C, BackgroundRecord)> {
+    let saved = S::load(path)?;
+    let (step, cfg) = format::meta_step_config::<C>(&saved.meta, S::NAME, path)?;
+    cfg.validate()
+        .with_context(|| format!("{}: invalid configuration", path.display()))?;
+    let bg = BackgroundRecord::from_meta(&saved.meta, path)?;
+    backend.load(saved.grid, Some(saved.state))?;
+    backend.set_background(bg.kernel())?;
+    Ok((step, cfg, bg))
+}
+
+/// The optimiser arrays named by `S::STATE_NAMES`, from a loaded checkpoint's arrays.
+pub fn state_of<S: Stage>(optim: &format::OptimArrays, path: &Path) -> Result<S::State> {
+    let arrays = S::STATE_NAMES
+        .iter()
+        .map(|name| format::optim_array(optim, name, path))
+        .collect::<Result<Vec<_>>>()?;
+    S::State::from_arrays(arrays)
+}
