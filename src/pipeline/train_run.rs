@@ -2,9 +2,11 @@
 //! training call ended, and resuming from a checkpoint.
 
 use super::train_options::TrainOptions;
+use crate::checkpoint::{self, Recorded};
 use crate::data::{Aabb, Dataset, LoadOptions, SceneBox};
 use crate::run::identity::{check_same_data, DataIdentity};
 use crate::run::RunInfo;
+use crate::stage::{Stage, StageBackend};
 use anyhow::{ensure, Context, Result};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -136,29 +138,41 @@ pub enum Trained<M> {
     },
 }
 
-/// Resumes the run whose checkpoint is `ckpt`: `restore` builds the backend from it and returns
-/// `(backend, step reached, configuration)`; `iters` (when given) replaces the step count that
-/// `total` points at in the configuration. Returns `Ok((backend, configuration, step))`, or
-/// `Err(Trained::AlreadyDone)` when the run is already at its last step.
-pub(super) fn resume<B, C, M>(
-    ckpt: &Path,
+/// Resumes the stage-`S` run in `opts.out` from its checkpoint: `make` builds the backend for
+/// the checkpoint's grid, which is then restored (optimiser state, background, step); the
+/// configuration must pass `check_flags` and the background match `--background`. `iters` (when
+/// given) replaces the step count that `total` points at in the configuration. Returns
+/// `Ok((backend, configuration, step))`, or `Err(Trained::AlreadyDone)` when the run is already
+/// at its last step.
+pub(super) fn resume<S, C, B, M>(
+    opts: &TrainOptions,
     iters: Option<u32>,
     total: impl FnOnce(&mut C) -> &mut u32,
-    restore: impl FnOnce() -> Result<(B, u32, C)>,
-) -> Result<Result<(B, C, u32), Trained<M>>> {
+    make: impl FnOnce(S::Grid) -> Result<Box<B>>,
+    check_flags: impl FnOnce(&C) -> Result<()>,
+) -> Result<Result<(Box<B>, C, u32), Trained<M>>>
+where
+    S: Stage,
+    C: Recorded,
+    B: StageBackend<S> + ?Sized,
+{
+    let ckpt = checkpoint::path::<S>(&opts.out);
     ensure!(
         ckpt.exists(),
         "--resume: no checkpoint at {}",
         ckpt.display()
     );
-    let (backend, step, mut cfg) = restore()?;
+    let mut backend = make(S::load(&ckpt)?.grid)?;
+    let (step, mut cfg, bg) = checkpoint::resume::<S, C, B>(backend.as_mut(), &ckpt)?;
+    check_flags(&cfg)?;
+    bg.ensure_mode(opts.background, "the checkpoint")?;
     let total = total(&mut cfg);
     if let Some(n) = iters {
         *total = n; // extend (or shorten) the run; the schedules keep their lengths
     }
     if step >= *total {
         return Ok(Err(Trained::AlreadyDone {
-            checkpoint: ckpt.to_path_buf(),
+            checkpoint: ckpt,
             step,
             total: *total,
         }));

@@ -4,7 +4,7 @@
 use super::metrics::{SamplesPerRay, Stage1Metrics, Stage1Seconds};
 use super::train_options::TrainOptions;
 use super::train_run::{check_resumed_data, resume, run_info, Loaded, Trained};
-use crate::checkpoint::{self, BackgroundRecord};
+use crate::checkpoint::BackgroundRecord;
 use crate::data::dataset::peak_rss_bytes;
 use crate::gpu::Gpu;
 use crate::grid::Grid;
@@ -47,7 +47,6 @@ pub fn train_stage1(
     if opts.resume {
         check_resumed_data(opts, data)?;
     }
-    let ckpt = checkpoint::path::<PlenoxelsStage>(&opts.out);
     let (mut backend, cfg, start) = if let Some(cfg) = fresh_cfg {
         let grid = Grid::sphere(
             cfg.res,
@@ -58,20 +57,9 @@ pub fn train_stage1(
         );
         (make_backend(gpu, grid)?, cfg, 0)
     } else {
-        let restore = || {
-            let probe = crate::checkpoint::format::load(&ckpt)?;
-            let mut b = make_backend(gpu, probe.grid)?;
-            let (step, cfg, bg) = stage1::resume(b.as_mut(), &ckpt)?;
-            check_resume_flags(opts, &cfg)?;
-            bg.ensure_mode(opts.background, "the checkpoint")?;
-            Ok((b, step, cfg))
-        };
-        match resume(
-            &ckpt,
-            opts.iters,
-            |c: &mut Stage1Config| &mut c.iters,
-            restore,
-        )? {
+        let make = |grid| make_backend(gpu, grid);
+        let flags = |cfg: &Stage1Config| check_resume_flags(opts, cfg);
+        match resume::<PlenoxelsStage, _, _, _>(opts, opts.iters, iters_of, make, flags)? {
             Ok(resumed) => resumed,
             Err(done) => return Ok(done),
         }
@@ -146,4 +134,9 @@ fn check_resume_flags(opts: &TrainOptions, cfg: &Stage1Config) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// The step count of a configuration (what `--resume --iters` replaces).
+fn iters_of(cfg: &mut Stage1Config) -> &mut u32 {
+    &mut cfg.iters
 }

@@ -125,7 +125,6 @@ pub fn train_stage2(
     if opts.resume {
         check_resumed_data(opts, data)?;
     }
-    let ckpt = crate::checkpoint::path::<SurfaceStage>(&opts.out);
     let (mut backend, cfg, start) = match fresh {
         Some((grid, cfg, bg)) => {
             let mut b = make_backend(gpu, grid)?;
@@ -133,16 +132,10 @@ pub fn train_stage2(
             (b, cfg, 0)
         }
         None => {
-            let restore = || {
-                let probe = crate::checkpoint::surface::load(&ckpt)?;
-                let mut b = make_backend(gpu, probe.grid)?;
-                let (step, cfg, bg) = stage2::resume(b.as_mut(), &ckpt)?;
-                check_resume_flags(opts, &cfg)?;
-                bg.ensure_mode(opts.background, "the checkpoint")?;
-                Ok((b, step, cfg))
-            };
+            let make = |grid| make_backend(gpu, grid);
+            let flags = |cfg: &SurfaceConfig| check_resume_flags(opts, cfg);
             let iters = opts.surface_iters.or(opts.iters);
-            match resume(&ckpt, iters, |c: &mut SurfaceConfig| &mut c.iters, restore)? {
+            match resume::<SurfaceStage, _, _, _>(opts, iters, iters_of, make, flags)? {
                 Ok(resumed) => resumed,
                 Err(done) => return Ok(done),
             }
@@ -223,4 +216,9 @@ fn check_resume_flags(opts: &TrainOptions, cfg: &SurfaceConfig) -> Result<()> {
         named.join(", ")
     );
     Ok(())
+}
+
+/// The step count of a configuration (what `--resume --iters` replaces).
+fn iters_of(cfg: &mut SurfaceConfig) -> &mut u32 {
+    &mut cfg.iters
 }

@@ -7,7 +7,7 @@ use super::progress::Progress;
 use super::render::{render_split, RenderedSplit};
 use super::steps::{self, LoopReport, LoopSchedule, StageSteps};
 use crate::abi::buffers::PlenoxelPerRay;
-use crate::checkpoint::{self, BackgroundRecord};
+use crate::checkpoint::BackgroundRecord;
 use crate::data::{Dataset, Split, TrainViews};
 use crate::grid::{dilate, upsample, Grid};
 use crate::plenoxel::{Plenoxels, PlenoxelsStage, StepParams, TvParams};
@@ -189,15 +189,6 @@ impl<'b> StageSteps<PlenoxelsStage, dyn Plenoxels + 'b> for PlenoxelsSteps<'_> {
     ) -> Result<RenderedSplit> {
         render_split(backend, data, &data.test, self.cfg.stop_thresh, out, 1)
     }
-}
-
-/// Restore grid, optimiser state, background and step from a run's checkpoint; returns the next
-/// step, the configuration and the background.
-pub fn resume(
-    backend: &mut dyn Plenoxels,
-    path: &Path,
-) -> Result<(u32, Stage1Config, BackgroundRecord)> {
-    checkpoint::resume::<PlenoxelsStage, _, _>(backend, path)
 }
 
 /// Train stage 1 from `start_step` (0, or the step after a resumed checkpoint) to `cfg.iters`,

@@ -7,7 +7,6 @@ use super::render::{render_split_with, RenderedSplit};
 use super::steps::{self, LoopReport, LoopSchedule, StageSteps};
 use super::surface_config::SurfaceConfig;
 use crate::abi::buffers::TrainPerRay;
-use crate::checkpoint::{self, BackgroundRecord};
 use crate::cpu::surface_reg::{delta_tv_chunk, opacity_tv_chunk, OpacityChunk};
 use crate::data::{Dataset, TrainViews};
 use crate::math::surface::Truncation;
@@ -24,15 +23,6 @@ pub struct Stage2Report {
     pub run: LoopReport<TrainPerRay>,
     pub vertices_before_prune: usize,
     pub allocated_vertices: usize,
-}
-
-/// Restore grid, optimiser state, background and step from a stage-2 checkpoint; returns the
-/// next step, the configuration and the background.
-pub fn resume(
-    backend: &mut dyn SurfaceBackend,
-    path: &Path,
-) -> Result<(u32, SurfaceConfig, BackgroundRecord)> {
-    checkpoint::resume::<SurfaceStage, _, _>(backend, path)
 }
 
 /// The scheduled parameters of step `step`, with `truncation`, for a grid of resolution `res`

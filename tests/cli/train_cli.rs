@@ -798,7 +798,12 @@ fn learned_background_converges_to_the_backdrop_of_images_without_alpha() {
     alphasurf::checkpoint::format::save(&s1_path, &s1_ck.grid, &optim_refs(&s1_ck.optim), &meta)
         .unwrap();
     let mut b = alphasurf::plenoxel::CpuPlenoxels::new(s1_ck.grid.clone());
-    let (_, _, rec) = alphasurf::train::stage1::resume(&mut b, &s1_path).unwrap();
+    let (_, _, rec) = alphasurf::checkpoint::resume::<
+        alphasurf::plenoxel::PlenoxelsStage,
+        alphasurf::train::Stage1Config,
+        _,
+    >(&mut b, &s1_path)
+    .unwrap();
     use alphasurf::stage::StageBackend;
     let restored = b.background().unwrap();
     assert!(restored.learned() && restored.rgb == [0.5; 3] && restored == rec.kernel());
