@@ -8,6 +8,8 @@
 #ifndef SURFACE_TRAIN_GLSL
 #define SURFACE_TRAIN_GLSL
 
+#include "surface.glsl"
+
 // What the backward pass needs of a composited hit (surface_train records ≤ SURF_MAX_HITS).
 struct HitRec {
     ivec3 cell;
@@ -62,9 +64,8 @@ void surf_shade_corner(inout HitRec h, float w, float dw, float op, float c, flo
 
 // The f′ guard: |f′(s)| ≤ FPRIME_GUARD·(max − min of the cell's δ c) gives δ no gradient.
 bool surf_guard(float f1, float c[8]) {
-    float cmin = min(min(min(c[0], c[1]), min(c[2], c[3])), min(min(c[4], c[5]), min(c[6], c[7])));
-    float cmax = max(max(max(c[0], c[1]), max(c[2], c[3])), max(max(c[4], c[5]), max(c[6], c[7])));
-    return abs(f1) <= FPRIME_GUARD * (cmax - cmin);
+    vec2 range = surf_cell_range(c);
+    return abs(f1) <= FPRIME_GUARD * (range.y - range.x);
 }
 
 // Compositing from the nh records: the transmittance before each slot tr (the slots past nh copy

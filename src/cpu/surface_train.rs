@@ -387,7 +387,6 @@ fn ray_terms(
             entropy,
             consistency,
             hits: rec.len() as u32,
-            ..Default::default()
         },
         tr,
         wj,

@@ -4,6 +4,8 @@
 //! LH and depth consistency Lc with their gradients, one step of the reverse recurrence, the
 //! gradients of a hit's σα and δ, and the per-corner gradient sums of a cell.
 
+use super::surface::surf_cell_range;
+
 pub use crate::abi::consts::{FPRIME_GUARD, SURF_MAX_HITS};
 
 /// What the backward pass needs of a composited hit.
@@ -60,14 +62,7 @@ pub fn surf_shade_corner(
 
 /// The f′ guard: |f′(s)| ≤ FPRIME_GUARD·(max − min of the cell's δ `c`) gives δ no gradient.
 pub fn surf_guard(f1: f32, c: &[f32; 8]) -> bool {
-    let cmin = c[0]
-        .min(c[1])
-        .min(c[2].min(c[3]))
-        .min(c[4].min(c[5]).min(c[6].min(c[7])));
-    let cmax = c[0]
-        .max(c[1])
-        .max(c[2].max(c[3]))
-        .max(c[4].max(c[5]).max(c[6].max(c[7])));
+    let (cmin, cmax) = surf_cell_range(c);
     f1.abs() <= FPRIME_GUARD * (cmax - cmin)
 }
 
