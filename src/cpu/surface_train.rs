@@ -19,6 +19,9 @@
 //! order, as the kernel's reverse recurrence visits them) and added with one atomic per corner,
 //! parameter and non-zero sum when the cell changes (SH: 3 colour sums per corner, times Y_k).
 //!
+//! The pieces that read no buffer are `math::surface_train` (the twin of
+//! `glsl/lib/surface_train.glsl`); this file holds the walk, the shading reads and the scatter.
+//!
 //! Each loss term is a per-ray sum; the caller's weights (`grad_scale` for the squared error,
 //! `lambda_h`, `lambda_c`) carry the batch normalisation.
 
