@@ -36,7 +36,8 @@
 // (TrainCounts) += cells read (live cells: links and δ loaded), cubic solves, solves culled
 // (min/max or segment), hits composited, hits cut by truncation, guarded hits, gradient atomic
 // adds, blocks skipped (subgroup-reduced).
-// CPU twin: cpu::surface_train::train (src/cpu/surface_train.rs).
+// CPU twin: cpu::surface_train::train (src/cpu/surface_train.rs). The pieces that read no buffer
+// are in glsl/lib/surface_train.glsl (twin: src/math/surface_train.rs).
 #extension GL_EXT_shader_atomic_float : require
 #include "common.glsl"
 // A cell's hit list keeps SURF_MAX_HITS (surface.glsl; the hits a ray records, a ≤ this), all a
@@ -72,79 +73,26 @@ layout(push_constant, scalar) uniform Push {
 #include "surface_walk.glsl"
 
 #include "step.glsl"
-
-// What the backward pass needs of a composited hit (surface_train records ≤ SURF_MAX_HITS).
-struct HitRec {
-    ivec3 cell;
-    vec3 p;      // local hit point
-    float depth; // t0 + s (voxels)
-    float sa;    // σα
-    float at;    // α̃
-    float gam;   // γ_a(k), k the hit's truncation count
-    uint sid;    // its structure along the ray (0 unless the count restarts)
-    vec3 raw;    // raw colour
-    vec3 draw;   // ∂raw/∂s
-    float dsa;   // ∂σα/∂s
-    float f1;    // f′(s)
-    bool guard;  // the f′ guard drops the δ gradient
-};
-
-// rec[j] = v and rec[k] with a data-dependent slot, through constant indices: the records stay in
-// registers (an indexed local array is kept in memory and gathered lane by lane on SIMD-per-lane
-// drivers such as lavapipe).
-void set_hit(inout HitRec rec[SURF_MAX_HITS], uint j, HitRec v) {
-    [[unroll]] for (uint q = 0u; q < SURF_MAX_HITS; q++) {
-        if (q == j) rec[q] = v;
-    }
-}
-
-HitRec get_hit(HitRec rec[SURF_MAX_HITS], uint k) {
-    HitRec v = rec[0];
-    [[unroll]] for (uint q = 1u; q < SURF_MAX_HITS; q++) {
-        if (q == k) v = rec[q];
-    }
-    return v;
-}
-
-// ∂w_i/∂s at local point p moving along unit direction d.
-void trilerp_dwds(vec3 p, vec3 d, out float dw[8]) {
-    vec3 q = vec3(1.0) - p;
-    for (uint i = 0u; i < 8u; i++) {
-        bool bx = ((i >> 2u) & 1u) == 1u;
-        bool by = ((i >> 1u) & 1u) == 1u;
-        bool bz = (i & 1u) == 1u;
-        float fx = bx ? p.x : q.x;
-        float fy = by ? p.y : q.y;
-        float fz = bz ? p.z : q.z;
-        float sx = bx ? 1.0 : -1.0;
-        float sy = by ? 1.0 : -1.0;
-        float sz = bz ? 1.0 : -1.0;
-        precise float v = sx * fy * fz * d.x + fx * sy * fz * d.y + fx * fy * sz * d.z;
-        dw[i] = v;
-    }
-}
+#include "surface_train.glsl"
 
 // Adds a cell's per-corner gradient sums (one atomic per corner and parameter that received a
-// non-zero term), touches the corners that get one, clears the sums and masks; returns the atomic
-// adds. Which corners and parameters get an add is read from the masks of non-zero terms (bit i
-// of nz_d / nz_a, bit 3i + ch of nz_c), set from single products: a sum's exact zero could
-// depend on whether the compiler fused its additions, a product's cannot.
-uint flush(ivec3 cell, float y[9], inout float acc_d[8], inout float acc_a[8], inout vec3 acc_c[8],
-           inout uint nz_d, inout uint nz_a, inout uint nz_c) {
+// non-zero term, read from the masks of CornerSums), touches the corners that get one, clears the
+// sums and masks; returns the atomic adds.
+uint flush(ivec3 cell, float y[9], inout CornerSums s) {
     if (cell.x < 0) return 0u;
     int lk[8];
     cell_links(pc.links, uvec3(pc.n), cell, lk);
     uint adds = 0u;
     for (uint i = 0u; i < 8u; i++) {
-        float gd = acc_d[i];
-        float ga = acc_a[i];
-        vec3 gc = acc_c[i];
-        acc_d[i] = 0.0;
-        acc_a[i] = 0.0;
-        acc_c[i] = vec3(0.0);
-        bool bd = ((nz_d >> i) & 1u) != 0u;
-        bool ba = ((nz_a >> i) & 1u) != 0u;
-        uint bc = (nz_c >> (3u * i)) & 7u;
+        float gd = s.d[i];
+        float ga = s.a[i];
+        vec3 gc = s.c[i];
+        s.d[i] = 0.0;
+        s.a[i] = 0.0;
+        s.c[i] = vec3(0.0);
+        bool bd = ((s.nz_d >> i) & 1u) != 0u;
+        bool ba = ((s.nz_a >> i) & 1u) != 0u;
+        uint bc = (s.nz_c >> (3u * i)) & 7u;
         if (!bd && !ba && bc == 0u) continue;
         uint row = uint(lk[i]);
         touch_mask(row, TOUCH_SURFACE);
@@ -166,40 +114,53 @@ uint flush(ivec3 cell, float y[9], inout float acc_d[8], inout float acc_a[8], i
             adds += 9u;
         }
     }
-    nz_d = 0u;
-    nz_a = 0u;
-    nz_c = 0u;
+    s.nz_d = 0u;
+    s.nz_a = 0u;
+    s.nz_c = 0u;
     return adds;
 }
 
-void main() {
-    uint r = flat_id();
-    if (r >= pc.params.v[0].n_rays) return;
-    vec3 ro = vec3(pc.rays.v[6u * r], pc.rays.v[6u * r + 1u], pc.rays.v[6u * r + 2u]);
-    vec3 rd = vec3(pc.rays.v[6u * r + 3u], pc.rays.v[6u * r + 4u], pc.rays.v[6u * r + 5u]);
-    vec3 target = vec3(pc.targets.v[3u * r], pc.targets.v[3u * r + 1u], pc.targets.v[3u * r + 2u]);
-    SurfParams prm = pc.params.v[0];
-    const uint64_t weights = packUint2x32(prm.weights);
-    float omega = weights != 0ul ? F32Buf(weights).v[r] : 1.0;
-    vec3 scale = prm.scale;
-    vec3 offset = prm.offset;
-    float a = prm.a;
-    float stop_thresh = prm.stop_thresh;
-    uint nl = min(prm.n_levels, SURF_MAX_LEVELS);
-    float lv[SURF_MAX_LEVELS];
-    for (uint i = 0u; i < SURF_MAX_LEVELS; i++) lv[i] = i < nl ? prm.levels[i] : 0.0;
-    vec3 og, dn;
-    surf_ray(ro, rd, scale, offset, og, dn);
-    precise vec3 dg = rd * scale;
-    precise float len2 = dg.x * dg.x + dg.y * dg.y + dg.z * dg.z;
-    float len = sqrt(len2);
-    float inv_len = len > 0.0 ? 1.0 / len : 0.0;
-    float y[9];
-    sh_basis(ray_unit(rd), y);
-    TrainCounts cnt = TRAIN_COUNTS_ZERO;
+// The record of the hit at s_hit along the piece of `cell` (truncation parameter a, count k; sid
+// left 0 for the caller): σα, α̃, the shading and the derivatives along the ray dn the backward
+// pass needs (SH basis y), and the f′ guard verdict.
+HitRec hit_record(WalkCell cell, float s_hit, vec3 dn, float y[9], float a, uint k) {
+    HitRec hr;
+    precise vec3 p = clamp(cell.q0 + s_hit * dn, 0.0, 1.0);
+    float wt[8];
+    trilerp_weights(p, wt);
+    float dw[8];
+    trilerp_dwds(p, dn, dw);
+    precise float sa = 0.0;
+    [[unroll]] for (int i = 0; i < 8; i++) sa += wt[i] * pc.opacity.v[cell.lk[i]];
+    float gam = surf_gamma(a, k);
+    precise float at = surf_alpha(sa) * gam;
+    hr.cell = cell.piece.cell;
+    hr.p = p;
+    precise float depth = cell.piece.t0 + s_hit;
+    hr.depth = depth;
+    hr.sa = sa;
+    hr.at = at;
+    hr.gam = gam;
+    hr.sid = 0u;
+    hr.raw = vec3(0.5);
+    hr.draw = vec3(0.0);
+    hr.dsa = 0.0;
+    hr.f1 = 0.0;
+    [[unroll]] for (int i = 0; i < 8; i++) {
+        uint row = uint(cell.lk[i]);
+        float shv[27];
+        SH27_LOAD(pc.sh, row, shv);
+        surf_shade_corner(hr, wt[i], dw[i], pc.opacity.v[row], cell.c[i], y, shv);
+    }
+    hr.guard = surf_guard(hr.f1, cell.c);
+    return hr;
+}
 
-    // Forward walk, recording the composited hits (registers: HitRec, set_hit).
-    HitRec rec[SURF_MAX_HITS];
+// The forward walk of the ray (og, dn) through levels lv (nl used), recording the composited hits
+// in rec (registers: set_hit); returns their number. The same stopping rules as surface_fwd.
+uint walk_hits(vec3 og, vec3 dn, float lv[SURF_MAX_LEVELS], uint nl, SurfParams prm, float y[9],
+               inout HitRec rec[SURF_MAX_HITS], inout TrainCounts cnt) {
+    float a = prm.a;
     float T = 1.0;
     uint j = 0u;
     // The truncation count: j itself, or with counting per structure the hits since the ray last
@@ -217,7 +178,6 @@ void main() {
     uint face_neg = 0u;
     bool done = false;
     while (!done && cell_walk_next(walk, cell)) {
-        ivec3 l = cell.piece.cell;
         float t0 = cell.piece.t0;
         float t1 = cell.piece.t1;
         precise float L = t1 - t0;
@@ -232,10 +192,6 @@ void main() {
         face_t = t1;
         face_pos = epos;
         face_neg = eneg;
-        float cmin = min(min(min(cell.c[0], cell.c[1]), min(cell.c[2], cell.c[3])),
-                         min(min(cell.c[4], cell.c[5]), min(cell.c[6], cell.c[7])));
-        float cmax = max(max(max(cell.c[0], cell.c[1]), max(cell.c[2], cell.c[3])),
-                         max(max(cell.c[4], cell.c[5]), max(cell.c[6], cell.c[7])));
         // A cell's list holds its SURF_CELL_KEEP first hits (more are reached only when counting
         // per structure skips truncated hits; they are dropped).
         uint nk = min(nh, SURF_CELL_KEEP);
@@ -250,199 +206,81 @@ void main() {
                 done = true;
                 break;
             }
-            precise vec3 p = clamp(cell.q0 + s_hit * dn, 0.0, 1.0);
-            float wt[8];
-            trilerp_weights(p, wt);
-            float dw[8];
-            trilerp_dwds(p, dn, dw);
-            precise float sa = 0.0;
-            [[unroll]] for (int i = 0; i < 8; i++) sa += wt[i] * pc.opacity.v[cell.lk[i]];
-            float gam = surf_gamma(a, k);
-            precise float at = surf_alpha(sa) * gam;
-            // Shading and the derivatives along the ray the backward pass needs.
-            precise vec3 raw = vec3(0.5);
-            precise vec3 draw = vec3(0.0);
-            precise float dsa = 0.0;
-            precise float f1 = 0.0;
-            [[unroll]] for (int i = 0; i < 8; i++) {
-                uint row = uint(cell.lk[i]);
-                dsa += dw[i] * pc.opacity.v[row];
-                f1 += dw[i] * cell.c[i];
-                float shv[27];
-                SH27_LOAD(pc.sh, row, shv);
-                [[unroll]] for (uint ch = 0u; ch < 3u; ch++) {
-                    precise float v = 0.0;
-                    [[unroll]] for (uint k = 0u; k < 9u; k++) v += y[k] * shv[ch * 9u + k];
-                    raw[ch] += wt[i] * v;
-                    draw[ch] += dw[i] * v;
-                }
-            }
-            HitRec hr;
-            hr.cell = l;
-            hr.p = p;
-            precise float depth = t0 + s_hit;
-            hr.depth = depth;
-            hr.sa = sa;
-            hr.at = at;
-            hr.gam = gam;
+            HitRec hr = hit_record(cell, s_hit, dn, y, a, k);
             // A restarted count (k = 0 after the first record) starts the next structure.
             if (k == 0u && j > 0u) sid++;
             hr.sid = sid;
-            hr.raw = raw;
-            hr.draw = draw;
-            hr.dsa = dsa;
-            hr.f1 = f1;
-            hr.guard = abs(f1) <= FPRIME_GUARD * (cmax - cmin);
             set_hit(rec, j, hr);
             j++;
             k++;
             cnt.hits++;
-            precise float tn = T * (1.0 - at);
+            precise float tn = T * (1.0 - hr.at);
             T = tn;
-            if (T < stop_thresh) {
+            if (T < prm.stop_thresh) {
                 done = true;
                 break;
             }
         }
     }
-    uint nh = j;
     cnt.cells = walk.counts.cells;
     cnt.solves = walk.counts.solves;
     cnt.culled = walk.counts.culled;
     cnt.blocks_skipped = walk.counts.blocks_skipped;
+    return j;
+}
 
-    // Compositing from the records, and the squared error. Loops over the records run over all
-    // SURF_MAX_HITS slots with a guard, unrolled, so that every index is a constant.
+void main() {
+    uint r = flat_id();
+    if (r >= pc.params.v[0].n_rays) return;
+    vec3 ro = vec3(pc.rays.v[6u * r], pc.rays.v[6u * r + 1u], pc.rays.v[6u * r + 2u]);
+    vec3 rd = vec3(pc.rays.v[6u * r + 3u], pc.rays.v[6u * r + 4u], pc.rays.v[6u * r + 5u]);
+    vec3 target = vec3(pc.targets.v[3u * r], pc.targets.v[3u * r + 1u], pc.targets.v[3u * r + 2u]);
+    SurfParams prm = pc.params.v[0];
+    const uint64_t weights = packUint2x32(prm.weights);
+    float omega = weights != 0ul ? F32Buf(weights).v[r] : 1.0;
+    uint nl = min(prm.n_levels, SURF_MAX_LEVELS);
+    float lv[SURF_MAX_LEVELS];
+    for (uint i = 0u; i < SURF_MAX_LEVELS; i++) lv[i] = i < nl ? prm.levels[i] : 0.0;
+    vec3 og, dn;
+    surf_ray(ro, rd, prm.scale, prm.offset, og, dn);
+    precise vec3 dg = rd * prm.scale;
+    precise float len2 = dg.x * dg.x + dg.y * dg.y + dg.z * dg.z;
+    float len = sqrt(len2);
+    float inv_len = len > 0.0 ? 1.0 / len : 0.0;
+    float y[9];
+    sh_basis(ray_unit(rd), y);
+    TrainCounts cnt = TRAIN_COUNTS_ZERO;
+
+    HitRec rec[SURF_MAX_HITS];
+    uint nh = walk_hits(og, dn, lv, nl, prm, y, rec, cnt);
+
+    // Compositing from the records, the squared error and the regularisers' terms.
     float tr[SURF_MAX_HITS + 1u];
     float wj[SURF_MAX_HITS];
-    tr[0] = 1.0;
-    precise vec3 color = vec3(0.0);
-    [[unroll]] for (uint k = 0u; k < SURF_MAX_HITS; k++) {
-        wj[k] = 0.0;
-        tr[k + 1u] = tr[k];
-        if (k >= nh) continue;
-        precise float wk = tr[k] * rec[k].at;
-        wj[k] = wk;
-        color += wk * max(rec[k].raw, vec3(0.0));
-        precise float tn = tr[k] * (1.0 - rec[k].at);
-        tr[k + 1u] = tn;
-    }
-    float t_last = tr[SURF_MAX_HITS]; // = tr[nh]: the slots past nh copy it
+    vec3 color = surf_composite(rec, nh, tr, wj);
+    float t_last = tr[SURF_MAX_HITS];
     vec3 bg = pc.bg.v[0].rgb;
     precise vec3 total = color + t_last * bg;
     precise vec3 diff = total - target;
     RayLoss o;
     precise float sq = diff.x * diff.x + diff.y * diff.y + diff.z * diff.z;
     o.sq_err = omega * sq;
-    o.entropy = 0.0;
-    o.consistency = 0.0;
     o.hits = nh;
     float grad_scale = prm.grad_scale * omega;
     precise vec3 d_c = grad_scale * diff;
-    bool learn_bg = pc.bg.v[0].learn != 0u;
-
-    // Entropy of the normalised weights and ∂(λH·LH)/∂w_j.
-    float lambda_h = prm.lambda_h * omega;
     float e[SURF_MAX_HITS];
-    [[unroll]] for (uint k = 0u; k < SURF_MAX_HITS; k++) e[k] = 0.0;
-    precise float wsum = 0.0;
-    [[unroll]] for (uint k = 0u; k < SURF_MAX_HITS; k++) {
-        if (k < nh) wsum += wj[k];
-    }
-    if (lambda_h != 0.0 && wsum > 1e-8) {
-        precise float H = 0.0;
-        [[unroll]] for (uint k = 0u; k < SURF_MAX_HITS; k++) {
-            if (k < nh && wj[k] > 0.0) {
-                precise float pk = wj[k] / wsum;
-                H -= pk * log(pk);
-            }
-        }
-        o.entropy = omega * H;
-        [[unroll]] for (uint k = 0u; k < SURF_MAX_HITS; k++) {
-            if (k < nh && wj[k] > 0.0) {
-                precise float ek = -lambda_h * (log(wj[k] / wsum) + H) / wsum;
-                e[k] = ek;
-            }
-        }
-    }
-    // Lc per structure (one, unless the truncation count restarts): depths in scene units, the
-    // structure's mode = its first largest weight; ∂/∂t_mode is summed apart per structure (the
-    // same additions in the same order). Structures are runs of records with one sid, so each
-    // pass below is one sweep over the slots.
-    float lambda_c = prm.lambda_c * omega;
+    o.entropy = omega * surf_entropy(wj, nh, prm.lambda_h * omega, e);
     float d_t[SURF_MAX_HITS];
-    [[unroll]] for (uint k = 0u; k < SURF_MAX_HITS; k++) d_t[k] = 0.0;
-    if (lambda_c != 0.0 && nh > 1u) {
-        // Each slot's mode and the mode's depth: running forward over its run, then handed back
-        // from the run's last slot.
-        uint mk[SURF_MAX_HITS];
-        float tmk[SURF_MAX_HITS];
-        uint m = 0u;
-        float wm = -1.0;
-        float tm = 0.0;
-        [[unroll]] for (uint k = 0u; k < SURF_MAX_HITS; k++) {
-            bool starts = k == 0u || rec[k].sid != rec[k == 0u ? 0u : k - 1u].sid;
-            if (k < nh && (starts || wj[k] > wm)) {
-                m = k;
-                wm = wj[k];
-                tm = rec[k].depth;
-            }
-            mk[k] = m;
-            tmk[k] = tm;
-        }
-        [[unroll]] for (uint k = SURF_MAX_HITS - 1u; k > 0u; k--) {
-            if (k < nh && rec[k].sid == rec[k - 1u].sid) {
-                mk[k - 1u] = mk[k];
-                tmk[k - 1u] = tmk[k];
-            }
-        }
-        // The terms, and per run −Σ λ·sign over its other slots (left at each slot as the run's
-        // sum so far, then handed back from the run's last slot to its mode).
-        precise float lc = 0.0;
-        precise float acc = 0.0;
-        float tot[SURF_MAX_HITS];
-        [[unroll]] for (uint k = 0u; k < SURF_MAX_HITS; k++) {
-            tot[k] = 0.0;
-            if (k >= nh) continue;
-            if (k == 0u || rec[k].sid != rec[k == 0u ? 0u : k - 1u].sid) acc = 0.0;
-            if (k != mk[k]) {
-                precise float tmode = tmk[k] * inv_len;
-                precise float dk = rec[k].depth * inv_len - tmode;
-                lc += abs(dk);
-                float sg = dk > 0.0 ? 1.0 : (dk < 0.0 ? -1.0 : 0.0);
-                precise float a1 = lambda_c * sg;
-                d_t[k] = a1;
-                precise float a2 = acc - lambda_c * sg;
-                acc = a2;
-            }
-            tot[k] = acc;
-        }
-        [[unroll]] for (uint k = SURF_MAX_HITS - 1u; k > 0u; k--) {
-            if (k < nh && rec[k].sid == rec[k - 1u].sid) tot[k - 1u] = tot[k];
-        }
-        [[unroll]] for (uint k = 0u; k < SURF_MAX_HITS; k++) {
-            if (k < nh && mk[k] == k) d_t[k] = tot[k];
-        }
-        o.consistency = omega * lc;
-    }
+    o.consistency = omega * surf_consistency(rec, wj, nh, prm.lambda_c * omega, inv_len, d_t);
     pc.out_rays.v[r] = o;
 
     // Reverse pass: colour and entropy seen from behind each hit (behind the last: the
     // background); the gradients of consecutive hits in one cell are summed per corner and
-    // flushed when the cell changes. Unrolled over the slots (constant indices) with the flush
-    // outside: a slot whose cell differs from the running one hands the running sums over first.
+    // flushed when the cell changes.
     precise vec3 s_c = bg;
     precise float s_e = 0.0;
     ivec3 cur = ivec3(-1);
-    float acc_d[8];
-    float acc_a[8];
-    vec3 acc_c[8];
-    [[unroll]] for (uint i = 0u; i < 8u; i++) {
-        acc_d[i] = 0.0;
-        acc_a[i] = 0.0;
-        acc_c[i] = vec3(0.0);
-    }
-    uint nz_d = 0u, nz_a = 0u, nz_c = 0u;
+    CornerSums sums = corner_sums_zero();
     for (int jj = int(nh) - 1; jj >= 0; jj--) {
         uint ji = uint(jj);
         HitRec hk = get_hit(rec, ji);
@@ -455,48 +293,20 @@ void main() {
                 dtk = d_t[q];
             }
         }
-        float at = hk.at;
-        vec3 raw = hk.raw;
-        vec3 col = max(raw, vec3(0.0));
-        precise float d_at = trk * (ek - s_e);
-        [[unroll]] for (uint ch = 0u; ch < 3u; ch++) {
-            precise float term = d_c[ch] * trk * (col[ch] - s_c[ch]);
-            d_at += term;
-        }
-        precise vec3 d_raw = mix(vec3(0.0), d_c * wk, greaterThan(raw, vec3(0.0)));
-        s_c = at * col + (1.0 - at) * s_c;
-        s_e = at * ek + (1.0 - at) * s_e;
-        // ∂L/∂σα, and ∂L/∂s: opacity and colour move with the hit point, and the depth (Lc).
-        float sa = hk.sa;
-        float ex = exp(-max(sa, 0.0));
-        precise float d_sa = sa > 0.0 ? d_at * hk.gam * ex : 0.0;
-        precise float dl_ds = d_sa * hk.dsa + dtk * inv_len;
-        [[unroll]] for (uint ch = 0u; ch < 3u; ch++) dl_ds += d_raw[ch] * hk.draw[ch];
-        bool guarded = hk.guard;
-        if (guarded) cnt.guarded++;
-        precise float dds = (guarded || dl_ds == 0.0) ? 0.0 : -dl_ds / hk.f1;
+        vec3 d_raw;
+        float d_at = surf_reverse_step(hk, trk, wk, ek, d_c, s_c, s_e, d_raw);
+        float d_sa;
+        float dds = surf_hit_grads(hk, d_at, d_raw, dtk, inv_len, d_sa);
+        if (hk.guard) cnt.guarded++;
         if (hk.cell != cur) {
-            cnt.atomic_adds += flush(cur, y, acc_d, acc_a, acc_c, nz_d, nz_a, nz_c);
+            cnt.atomic_adds += flush(cur, y, sums);
             cur = hk.cell;
         }
         float wt[8];
         trilerp_weights(hk.p, wt);
-        [[unroll]] for (uint i = 0u; i < 8u; i++) {
-            precise float td = wt[i] * dds;
-            precise float ta = wt[i] * d_sa;
-            precise vec3 tc = wt[i] * d_raw;
-            precise float gd = acc_d[i] + td;
-            acc_d[i] = gd;
-            precise float ga = acc_a[i] + ta;
-            acc_a[i] = ga;
-            precise vec3 gc = acc_c[i] + tc;
-            acc_c[i] = gc;
-            nz_d |= uint(td != 0.0) << i;
-            nz_a |= uint(ta != 0.0) << i;
-            nz_c |= (uint(tc.x != 0.0) | (uint(tc.y != 0.0) << 1u) | (uint(tc.z != 0.0) << 2u)) << (3u * i);
-        }
+        surf_sums_add(sums, wt, dds, d_sa, d_raw);
     }
-    cnt.atomic_adds += flush(cur, y, acc_d, acc_a, acc_c, nz_d, nz_a, nz_c);
-    if (learn_bg) BACKGROUND_GRAD_ADD(pc.bg, d_c * t_last);
+    cnt.atomic_adds += flush(cur, y, sums);
+    if (pc.bg.v[0].learn != 0u) BACKGROUND_GRAD_ADD(pc.bg, d_c * t_last);
     TRAIN_COUNTS_SUBGROUP_ADD(pc.stats.v[0], cnt);
 }

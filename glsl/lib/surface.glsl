@@ -82,14 +82,20 @@ float surf_pop(inout float hs[SURF_CELL_KEEP]) {
     return s;
 }
 
+// The smallest and largest of a cell's 8 corner values (x, y).
+vec2 surf_cell_range(float c[8]) {
+    float cmin = min(min(min(c[0], c[1]), min(c[2], c[3])), min(min(c[4], c[5]), min(c[6], c[7])));
+    float cmax = max(max(max(c[0], c[1]), max(c[2], c[3])), max(max(c[4], c[5]), max(c[6], c[7])));
+    return vec2(cmin, cmax);
+}
+
 // Min/max culling: bit i set when level lv[i] (i < nl) lies within [min c, max c]; only those
 // levels can cross the cell.
 uint surf_level_mask(float c[8], float lv[SURF_MAX_LEVELS], uint nl) {
-    float cmin = min(min(min(c[0], c[1]), min(c[2], c[3])), min(min(c[4], c[5]), min(c[6], c[7])));
-    float cmax = max(max(max(c[0], c[1]), max(c[2], c[3])), max(max(c[4], c[5]), max(c[6], c[7])));
+    vec2 range = surf_cell_range(c);
     uint m = 0u;
     [[unroll]] for (uint i = 0u; i < SURF_MAX_LEVELS; i++) {
-        if (i < nl && cmin <= lv[i] && lv[i] <= cmax) m |= 1u << i;
+        if (i < nl && range.x <= lv[i] && lv[i] <= range.y) m |= 1u << i;
     }
     return m;
 }

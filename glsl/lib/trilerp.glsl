@@ -59,6 +59,24 @@ void trilerp_weights(vec3 p, out float w[8]) {
     w[4] = w4; w[5] = w5; w[6] = w6; w[7] = w7;
 }
 
+// ∂w_i/∂s of the weights above at p moving along the unit direction d.
+void trilerp_dwds(vec3 p, vec3 d, out float dw[8]) {
+    vec3 q = vec3(1.0) - p;
+    for (uint i = 0u; i < 8u; i++) {
+        bool bx = ((i >> 2u) & 1u) == 1u;
+        bool by = ((i >> 1u) & 1u) == 1u;
+        bool bz = (i & 1u) == 1u;
+        float fx = bx ? p.x : q.x;
+        float fy = by ? p.y : q.y;
+        float fz = bz ? p.z : q.z;
+        float sx = bx ? 1.0 : -1.0;
+        float sy = by ? 1.0 : -1.0;
+        float sz = bz ? 1.0 : -1.0;
+        precise float v = sx * fy * fz * d.x + fx * sy * fz * d.y + fx * fy * sz * d.z;
+        dw[i] = v;
+    }
+}
+
 // Links of the 8 corners of cell l in a grid of res vertices (x-major: slot (x·ny + y)·nz + z),
 // in the corner order above; < 0: unallocated. Reads `links` (I32Buf, common.glsl).
 void cell_links(I32Buf links, uvec3 res, ivec3 l, out int lk[8]) {

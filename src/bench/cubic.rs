@@ -196,115 +196,124 @@ pub struct ClassRow {
 /// kernel, both CPU twins and the baseline, and the device's copies of the case and its output.
 const BYTES_PER_CASE_RESULTS: f64 = 512.0;
 
-/// Run the suite; prints the table (and the JSON line); returns `pass`.
-pub fn run(gpu: &Gpu, args: &CubicBenchArgs) -> Result<bool> {
-    anyhow::ensure!(args.cases > 0, "--cases must be positive");
-    let n = args.cases;
-    let t0 = Instant::now();
-    let classes = CaseClass::ALL;
-    let per_case = (std::mem::size_of::<CubicCase>() + std::mem::size_of::<OracleCase>()) as f64
-        + BYTES_PER_CASE_RESULTS;
-    crate::run::memory::ensure_fits(
-        &format!("--cases {n} ({} classes)", classes.len()),
-        n as f64 * classes.len() as f64 * per_case,
-    )?;
-    let all: Vec<CubicCase> = classes
-        .par_iter()
-        .flat_map(|&c| gen_cases(c, n, args.seed))
-        .collect();
-    let ranges: Vec<std::ops::Range<usize>> =
-        (0..classes.len()).map(|k| k * n..(k + 1) * n).collect();
-    let oracle: Vec<OracleCase> = all.par_iter().map(OracleCase::new).collect();
+/// Overall figures: the scores summed over the classes and the solve rates over all cases.
+#[derive(Clone, Debug, serde::Serialize)]
+struct Overall {
+    gpu: Score,
+    cpu: Score,
+    baseline: Score,
+    gpu_solves_per_s: f64,
+    cpu_solves_per_s: f64,
+    cpu1_solves_per_s: f64,
+    baseline1_solves_per_s: f64,
+}
 
-    // Vulkan: a warm-up pass (lavapipe compiles at the first dispatch), then the timed pass with
-    // one dispatch per class.
-    let warm = n.min(1024);
+impl Overall {
+    /// From the class rows and the Vulkan kernel's device ns per class.
+    fn new(rows: &[ClassRow], gns: &[f64]) -> Overall {
+        let total = |f: &dyn Fn(&ClassRow) -> &Score| {
+            let mut s = Score::default();
+            for r in rows {
+                s.add(f(r));
+            }
+            s
+        };
+        let all_n = rows.iter().map(|r| r.cases).sum::<usize>() as f64;
+        // Cases over the summed time of a solver (rows' rates are per class).
+        let rate = |f: fn(&ClassRow) -> f64| {
+            all_n / rows.iter().map(|r| r.cases as f64 / f(r)).sum::<f64>()
+        };
+        Overall {
+            gpu: total(&|r| &r.gpu),
+            cpu: total(&|r| &r.cpu),
+            baseline: total(&|r| &r.baseline),
+            gpu_solves_per_s: all_n / (gns.iter().sum::<f64>() * 1e-9),
+            cpu_solves_per_s: rate(|r| r.cpu_solves_per_s),
+            cpu1_solves_per_s: rate(|r| r.cpu1_solves_per_s),
+            baseline1_solves_per_s: rate(|r| r.baseline1_solves_per_s),
+        }
+    }
+}
+
+/// The Vulkan kernel's crossings of all cases and its fastest device ns per class (`ranges`):
+/// a warm-up pass (lavapipe compiles at the first dispatch), then REPEATS timed passes with one
+/// dispatch per class, which must agree.
+fn time_gpu(
+    gpu: &Gpu,
+    all: &[CubicCase],
+    ranges: &[std::ops::Range<usize>],
+) -> Result<(CubicSolveOut, Vec<f64>)> {
+    let warm = all.len().min(1024);
     crate::check::cubic_solve::run_gpu(gpu, &all[..warm], std::slice::from_ref(&(0..warm)))?;
-    let (gout, mut gns) = crate::check::cubic_solve::run_gpu(gpu, &all, &ranges)?;
+    let (gout, mut gns) = crate::check::cubic_solve::run_gpu(gpu, all, ranges)?;
     for _ in 1..REPEATS {
-        let (again, ns) = crate::check::cubic_solve::run_gpu(gpu, &all, &ranges)?;
+        let (again, ns) = crate::check::cubic_solve::run_gpu(gpu, all, ranges)?;
         anyhow::ensure!(again == gout, "the Vulkan kernel is not deterministic");
         for (a, b) in gns.iter_mut().zip(ns) {
             *a = a.min(b);
         }
     }
+    Ok((gout, gns))
+}
 
-    let mut rows = Vec::new();
-    for (k, class) in classes.iter().enumerate() {
-        let r = ranges[k].clone();
-        let cases = &all[r.clone()];
-        let orc = &oracle[r.clone()];
-        // CPU twin, rayon and one thread.
-        let (cout, cpu_s) = best_of(|| cubic_solve(cases));
-        let (cout1, cpu1_s) = best_of(|| cubic_solve_serial(cases));
-        anyhow::ensure!(cout1 == cout, "serial and rayon CPU twins differ");
-        // Baseline, one thread.
-        let (base, base_s) = best_of(|| {
-            cases
-                .iter()
-                .map(|c| vieta_crossings(&c.corners, c.o, c.d, c.l, c.tau))
-                .collect::<Vec<_>>()
-        });
+/// One class's row: the CPU twins (rayon and one thread) and the baseline timed on `cases`, and
+/// every solver scored against the oracle `orc`; the Vulkan kernel's crossings are `gout` from
+/// case `start` on, its device time `gpu_ns`.
+fn class_row(
+    class: CaseClass,
+    cases: &[CubicCase],
+    orc: &[OracleCase],
+    gout: &CubicSolveOut,
+    start: usize,
+    gpu_ns: f64,
+) -> Result<ClassRow> {
+    let n = cases.len();
+    // CPU twin, rayon and one thread.
+    let (cout, cpu_s) = best_of(|| cubic_solve(cases));
+    let (cout1, cpu1_s) = best_of(|| cubic_solve_serial(cases));
+    anyhow::ensure!(cout1 == cout, "serial and rayon CPU twins differ");
+    // Baseline, one thread.
+    let (base, base_s) = best_of(|| {
+        cases
+            .iter()
+            .map(|c| vieta_crossings(&c.corners, c.o, c.d, c.l, c.tau))
+            .collect::<Vec<_>>()
+    });
 
-        let (mut sg, mut scpu, mut sb) = (Score::default(), Score::default(), Score::default());
-        let mut identical = 0;
-        for (i, oc) in orc.iter().enumerate() {
-            let gi = r.start + i;
-            let (g, gbad) = ours(&gout, gi);
-            let (c, cbad) = ours(&cout, i);
-            identical += (gout.get(gi) == cout.get(i)) as usize;
-            sg.add(&score_case(oc, &g, gbad));
-            scpu.add(&score_case(oc, &c, cbad));
-            let b: Vec<(f64, bool)> = base[i].crossings.iter().map(|x| (x.s, x.rising)).collect();
-            sb.add(&score_case(oc, &b, base[i].non_finite > 0));
-        }
-        let pass = sg.meets_targets()
-            && scpu.meets_targets()
-            && sg.not_worse_than(&sb)
-            && scpu.not_worse_than(&sb);
-        rows.push(ClassRow {
-            class: class.name(),
-            cases: n,
-            oracle_crossings: orc.iter().map(|o| o.crossings.len()).sum(),
-            gpu: sg,
-            cpu: scpu,
-            baseline: sb,
-            gpu_solves_per_s: n as f64 / (gns[k] * 1e-9),
-            cpu_solves_per_s: n as f64 / cpu_s,
-            cpu1_solves_per_s: n as f64 / cpu1_s,
-            baseline1_solves_per_s: n as f64 / base_s,
-            gpu_cpu_identical: identical,
-            pass,
-        });
+    let (mut sg, mut scpu, mut sb) = (Score::default(), Score::default(), Score::default());
+    let mut identical = 0;
+    for (i, oc) in orc.iter().enumerate() {
+        let gi = start + i;
+        let (g, gbad) = ours(gout, gi);
+        let (c, cbad) = ours(&cout, i);
+        identical += (gout.get(gi) == cout.get(i)) as usize;
+        sg.add(&score_case(oc, &g, gbad));
+        scpu.add(&score_case(oc, &c, cbad));
+        let b: Vec<(f64, bool)> = base[i].crossings.iter().map(|x| (x.s, x.rising)).collect();
+        sb.add(&score_case(oc, &b, base[i].non_finite > 0));
     }
-    let total = |f: &dyn Fn(&ClassRow) -> &Score| {
-        let mut s = Score::default();
-        for r in &rows {
-            s.add(f(r));
-        }
-        s
-    };
-    let (tg, tc, tb) = (
-        total(&|r| &r.gpu),
-        total(&|r| &r.cpu),
-        total(&|r| &r.baseline),
-    );
-    let all_n = (n * classes.len()) as f64;
-    let gpu_rate = all_n / (gns.iter().sum::<f64>() * 1e-9);
-    let messages = gpu.validation_messages();
-    let pass = rows.iter().all(|r| r.pass) && messages.is_empty();
+    let pass = sg.meets_targets()
+        && scpu.meets_targets()
+        && sg.not_worse_than(&sb)
+        && scpu.not_worse_than(&sb);
+    Ok(ClassRow {
+        class: class.name(),
+        cases: n,
+        oracle_crossings: orc.iter().map(|o| o.crossings.len()).sum(),
+        gpu: sg,
+        cpu: scpu,
+        baseline: sb,
+        gpu_solves_per_s: n as f64 / (gpu_ns * 1e-9),
+        cpu_solves_per_s: n as f64 / cpu_s,
+        cpu1_solves_per_s: n as f64 / cpu1_s,
+        baseline1_solves_per_s: n as f64 / base_s,
+        gpu_cpu_identical: identical,
+        pass,
+    })
+}
 
-    println!(
-        "cubic stress suite: {n} cases per class, seed {}, device {} ({})",
-        args.seed,
-        gpu.info().name,
-        gpu.info().driver
-    );
-    println!(
-        "floor: oracle crossings with |f'(s)|·L < {FLOOR:.0e}·max|δ−τ| are near-tangent (excluded, counted; \
-         'band m/s' = missed/spurious with {FLOOR_BAND:.0e} ≤ |f'|·L/max|δ−τ| < {FLOOR:.0e}); missed rate per \
-         significant oracle crossing, spurious rate per case; 'face' = owner cell decided below f32 resolution"
-    );
+/// Prints the per-class table: one line per solver, then the class's summary line.
+fn print_rows(rows: &[ClassRow]) {
     println!(
         "{:<14} {:<8} {:>8} {:>7} {:>7} {:>9} {:>9} {:>7} {:>9} {:>6} {:>9} {:>6} {:>10}",
         "class",
@@ -321,7 +330,7 @@ pub fn run(gpu: &Gpu, args: &CubicBenchArgs) -> Result<bool> {
         "NaN",
         "solves/s"
     );
-    for r in &rows {
+    for r in rows {
         let line = |name: &str, s: &Score, rate: f64| {
             println!(
                 "{:<14} {:<8} {:>8} {:>7} {:>7} {:>9.1e} {:>9.1e} {:>7} {:>9} {:>6} {:>9.2e} {:>6} {:>10.3e}",
@@ -352,30 +361,79 @@ pub fn run(gpu: &Gpu, args: &CubicBenchArgs) -> Result<bool> {
             if r.pass { "pass" } else { "FAIL" }
         );
     }
-    let cpu_rate = all_n
-        / rows
-            .iter()
-            .map(|r| n as f64 / r.cpu_solves_per_s)
-            .sum::<f64>();
-    let cpu1_rate = all_n
-        / rows
-            .iter()
-            .map(|r| n as f64 / r.cpu1_solves_per_s)
-            .sum::<f64>();
-    let base_rate = all_n
-        / rows
-            .iter()
-            .map(|r| n as f64 / r.baseline1_solves_per_s)
-            .sum::<f64>();
+}
+
+/// Prints the overall rates and tallies.
+fn print_overall(o: &Overall) {
+    let (tg, tc, tb) = (&o.gpu, &o.cpu, &o.baseline);
     println!(
-        "overall: vulkan {gpu_rate:.3e} solves/s (device time), cpu {cpu_rate:.3e}/s ({} threads), cpu 1-thread {cpu1_rate:.3e}/s, vieta64 1-thread {base_rate:.3e}/s",
-        rayon::current_num_threads()
+        "overall: vulkan {:.3e} solves/s (device time), cpu {:.3e}/s ({} threads), cpu 1-thread {:.3e}/s, vieta64 1-thread {:.3e}/s",
+        o.gpu_solves_per_s,
+        o.cpu_solves_per_s,
+        rayon::current_num_threads(),
+        o.cpu1_solves_per_s,
+        o.baseline1_solves_per_s
     );
     println!(
         "overall missed/spurious/max|Δs|/NaN: vulkan {}/{}/{:.2e}/{}, cpu {}/{}/{:.2e}/{}, vieta64 {}/{}/{:.2e}/{}",
         tg.missed, tg.spurious, tg.max_ds, tg.non_finite, tc.missed, tc.spurious, tc.max_ds, tc.non_finite,
         tb.missed, tb.spurious, tb.max_ds, tb.non_finite
     );
+}
+
+/// Run the suite; prints the table (and the JSON line); returns `pass`.
+pub fn run(gpu: &Gpu, args: &CubicBenchArgs) -> Result<bool> {
+    anyhow::ensure!(args.cases > 0, "--cases must be positive");
+    let n = args.cases;
+    let t0 = Instant::now();
+    let classes = CaseClass::ALL;
+    let per_case = (std::mem::size_of::<CubicCase>() + std::mem::size_of::<OracleCase>()) as f64
+        + BYTES_PER_CASE_RESULTS;
+    crate::run::memory::ensure_fits(
+        &format!("--cases {n} ({} classes)", classes.len()),
+        n as f64 * classes.len() as f64 * per_case,
+    )?;
+    let all: Vec<CubicCase> = classes
+        .par_iter()
+        .flat_map(|&c| gen_cases(c, n, args.seed))
+        .collect();
+    let ranges: Vec<std::ops::Range<usize>> =
+        (0..classes.len()).map(|k| k * n..(k + 1) * n).collect();
+    let oracle: Vec<OracleCase> = all.par_iter().map(OracleCase::new).collect();
+
+    let (gout, gns) = time_gpu(gpu, &all, &ranges)?;
+    let rows = classes
+        .iter()
+        .zip(&ranges)
+        .zip(&gns)
+        .map(|((&class, r), &ns)| {
+            class_row(
+                class,
+                &all[r.clone()],
+                &oracle[r.clone()],
+                &gout,
+                r.start,
+                ns,
+            )
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let overall = Overall::new(&rows, &gns);
+    let messages = gpu.validation_messages();
+    let pass = rows.iter().all(|r| r.pass) && messages.is_empty();
+
+    println!(
+        "cubic stress suite: {n} cases per class, seed {}, device {} ({})",
+        args.seed,
+        gpu.info().name,
+        gpu.info().driver
+    );
+    println!(
+        "floor: oracle crossings with |f'(s)|·L < {FLOOR:.0e}·max|δ−τ| are near-tangent (excluded, counted; \
+         'band m/s' = missed/spurious with {FLOOR_BAND:.0e} ≤ |f'|·L/max|δ−τ| < {FLOOR:.0e}); missed rate per \
+         significant oracle crossing, spurious rate per case; 'face' = owner cell decided below f32 resolution"
+    );
+    print_rows(&rows);
+    print_overall(&overall);
     for m in &messages {
         println!("validation: {m}");
     }
@@ -396,11 +454,7 @@ pub fn run(gpu: &Gpu, args: &CubicBenchArgs) -> Result<bool> {
                 "boundary_rel": BOUNDARY_REL,
                 "targets": {"rate": RATE_TARGET, "max_ds": DS_TARGET},
                 "classes": rows,
-                "overall": {
-                    "gpu": tg, "cpu": tc, "baseline": tb,
-                    "gpu_solves_per_s": gpu_rate, "cpu_solves_per_s": cpu_rate,
-                    "cpu1_solves_per_s": cpu1_rate, "baseline1_solves_per_s": base_rate,
-                },
+                "overall": overall,
                 "validation_messages": messages,
                 "pass": pass,
             })

@@ -19,16 +19,17 @@
 
 use super::stage1::{thin_scene, time_steps, warm_config, StepFigures};
 use crate::abi::buffers::{TrainCounts, TrainPerRay};
-use crate::data::TrainViews;
+use crate::data::{Dataset, TrainViews};
 use crate::gpu::Gpu;
 use crate::grid::surface::SurfaceGrid;
+use crate::grid::Grid;
 use crate::math::surface::Truncation;
 use crate::plenoxel::{CpuPlenoxels, VulkanPlenoxels};
 use crate::stage::StageBackend;
 use crate::surface::{CpuSurface, SurfaceBackend, SurfaceRegs, SurfaceStepParams, VulkanSurface};
 use crate::train::progress::READ_EVERY;
 use crate::train::surface_config::SurfaceConfig;
-use crate::train::{stage1, stage2, Category, Preset};
+use crate::train::{stage1, stage2, Category, Preset, Stage1Config};
 use anyhow::{ensure, Result};
 use serde_json::json;
 use std::collections::BTreeMap;
@@ -184,26 +185,32 @@ pub fn run(gpu: &Gpu, args: &SurfaceBenchArgs) -> Result<()> {
     result
 }
 
-fn run_in(gpu: &Gpu, args: &SurfaceBenchArgs, dir: &std::path::Path) -> Result<()> {
-    eprintln!("bench surface: generating the thin scene (128², 40 views)");
-    let data = thin_scene(&dir.join("scene"))?;
+/// What the timings start from: the stage-1 config and density grid, the stage-2 grid and its
+/// optimiser state after the warm-up steps.
+struct Start {
+    cfg: Stage1Config,
+    density: Grid,
+    grid: SurfaceGrid,
+    state: [Vec<f32>; 3],
+}
 
-    // Stage 1, briefly, on the CPU backend (the faster one on a CPU-only machine).
+/// Stage 1, briefly, on the CPU backend (the faster one on a CPU-only machine), then the stage-2
+/// grid initialised from it and `--warm-steps` CPU steps on batches from `views`.
+fn warm_start(
+    data: &Dataset,
+    views: &TrainViews,
+    scfg: &SurfaceConfig,
+    args: &SurfaceBenchArgs,
+    dir: &std::path::Path,
+) -> Result<Start> {
     let (cfg, grid0) = warm_config(args.res, args.stage1_steps);
     let mut s1 = CpuPlenoxels::new(grid0);
     eprintln!(
         "bench surface: {} stage-1 steps (CPU) to reach a {}³ density grid",
         cfg.iters, args.res
     );
-    stage1::train(&mut s1, &data, &cfg, &dir.join("stage1"), 0, false)?;
+    stage1::train(&mut s1, data, &cfg, &dir.join("stage1"), 0, false)?;
     let density = s1.grid()?;
-    // Stage 1 on the Vulkan device from the same grid (a fresh backend each time).
-    let time_stage1 = || -> Result<f64> {
-        let mut vk = VulkanPlenoxels::new(gpu, density.clone())?;
-        Ok(time_steps(&mut vk, &data, &cfg, args.steps, args.batch)?.rays_per_s)
-    };
-
-    let scfg = SurfaceConfig::preset(Preset::Fast, Category::Thin)?;
     let init_grid = SurfaceGrid::from_density(&density, &scfg.init)?;
     let (res, rows) = (init_grid.res, init_grid.delta.len() as u32);
     let mut cpu = CpuSurface::new(init_grid)?;
@@ -211,156 +218,255 @@ fn run_in(gpu: &Gpu, args: &SurfaceBenchArgs, dir: &std::path::Path) -> Result<(
         "bench surface: {} stage-2 warm-up steps (CPU)",
         args.warm_steps
     );
-    // Batches drawn as training draws them (the preset's focus on the object's pixels).
-    let views = TrainViews::new(&data.train, &data.scene)?.focused(scfg.ray_focus)?;
-    let n = args.batch as usize;
     for i in 0..args.warm_steps {
-        let p = step_params(&scfg, res, rows, args.a, i);
-        cpu.step_sampled(&views, 3 + i as u64, n, &p)?;
+        let p = step_params(scfg, res, rows, args.a, i);
+        cpu.step_sampled(views, 3 + i as u64, args.batch as usize, &p)?;
     }
-    let grid = cpu.grid()?;
-    let state = cpu.optimizer_state()?;
+    Ok(Start {
+        cfg,
+        density,
+        grid: cpu.grid()?,
+        state: cpu.optimizer_state()?,
+    })
+}
 
-    // The Vulkan backend from that state, with the regularisers or the data term alone.
-    let time_vulkan = |regs: bool| -> Result<Figures> {
-        let mut vk = VulkanSurface::new(gpu, grid.clone())?;
-        vk.load(grid.clone(), Some(state.clone()))?;
+/// The timings' shared inputs.
+struct Bench<'a> {
+    gpu: &'a Gpu,
+    args: &'a SurfaceBenchArgs,
+    data: &'a Dataset,
+    /// Batches drawn as training draws them (the preset's focus on the object's pixels).
+    views: &'a TrainViews<'a>,
+    scfg: &'a SurfaceConfig,
+    start: &'a Start,
+}
+
+impl Bench<'_> {
+    /// Stage-1 training rays/s on the Vulkan device from the density grid (a fresh backend).
+    fn stage1(&self) -> Result<f64> {
+        let s = self.start;
+        let mut vk = VulkanPlenoxels::new(self.gpu, s.density.clone())?;
+        let (steps, batch) = (self.args.steps, self.args.batch);
+        Ok(time_steps(&mut vk, self.data, &s.cfg, steps, batch)?.rays_per_s)
+    }
+
+    /// The Vulkan backend from the warm state, with the regularisers or the data term alone.
+    fn vulkan(&self, regs: bool) -> Result<Figures> {
+        let (gpu, s) = (self.gpu, self.start);
+        let mut vk = VulkanSurface::new(gpu, s.grid.clone())?;
+        vk.load(s.grid.clone(), Some(s.state.clone()))?;
         // The warm-up step is timed by the profile too: take the snapshot after it.
         let mut before = Vec::new();
-        let mut f = time_surface(
-            &mut vk,
-            &mut || before = gpu.profile().totals(),
-            &views,
-            n,
-            &grid,
-            &scfg,
-            args,
-            regs,
-        )?;
+        let mut f = self.time(&mut vk, &mut || before = gpu.profile().totals(), regs)?;
         let kernel_ns = kernel_ns_since(gpu, &before);
         f.device_ms_per_step = kernel_ns
             .into_iter()
-            .map(|(k, ns)| (k, ns / 1e6 / args.steps as f64))
+            .map(|(k, ns)| (k, ns / 1e6 / self.args.steps as f64))
             .collect();
         Ok(f)
-    };
-    // Rounds of stage 1 then stage 2 back to back: the machine's speed drifts from run to run and
-    // within one (docs/results.md), so each ratio pairs two timings taken seconds apart, and the
-    // round with the median ratio is reported.
-    let mut rounds = Vec::new();
-    for r in 1..=args.rounds {
-        eprintln!(
-            "bench surface: round {r}/{}: stage-1 then stage-2 training on the Vulkan device",
-            args.rounds
-        );
-        let stage1 = time_stage1()?;
-        rounds.push((stage1, time_vulkan(true)?));
     }
-    // Per round: stage-1 rays/s, stage-2 rays/s, their ratio.
-    let paired: Vec<[f64; 3]> = rounds
-        .iter()
-        .map(|(s1, f)| [*s1, f.rays_per_s, f.rays_per_s / s1])
-        .collect();
-    let mut order: Vec<usize> = (0..paired.len()).collect();
-    order.sort_by(|&i, &j| paired[i][2].total_cmp(&paired[j][2]));
-    let median = order[order.len() / 2];
-    eprintln!("bench surface: timing the Vulkan backend (data term only)");
-    let fd = time_vulkan(false)?;
-    let (stage1_vk, fv) = rounds.swap_remove(median);
-    eprintln!("bench surface: timing the CPU backend");
-    let mut cpu = CpuSurface::new(grid.clone())?;
-    cpu.load(grid.clone(), Some(state))?;
-    let fc = time_surface(&mut cpu, &mut || (), &views, n, &grid, &scfg, args, true)?;
 
-    println!(
-        "stage-2 training at {}³ ({} allocated vertices, {} levels), {} steps of {} rays, a = {}, \
-         thin scene",
-        args.res,
-        grid.delta.len(),
-        grid.levels.len(),
-        args.steps,
-        args.batch,
-        args.a
-    );
-    print!("{:<8} {:>10} {:>9}", "backend", "rays/s", "mse");
-    for k in TrainCounts::NAMES {
-        print!(" {k:>8}");
+    /// The CPU backend from the warm state, with the regularisers.
+    fn cpu(&self) -> Result<Figures> {
+        let s = self.start;
+        let mut cpu = CpuSurface::new(s.grid.clone())?;
+        cpu.load(s.grid.clone(), Some(s.state.clone()))?;
+        self.time(&mut cpu, &mut || (), true)
     }
-    println!("   (per ray)");
-    for (name, f) in [("vulkan", &fv), ("cpu", &fc), ("vk-data", &fd)] {
-        print!("{name:<8} {:>10.0} {:>9.5}", f.rays_per_s, f.mean_mse);
-        for (k, v) in f.per_ray.named() {
-            print!(" {v:>w$.2}", w = k.len().max(8));
+
+    fn time(
+        &self,
+        backend: &mut dyn SurfaceBackend,
+        after_warm_up: &mut dyn FnMut(),
+        regs: bool,
+    ) -> Result<Figures> {
+        let n = self.args.batch as usize;
+        let grid = &self.start.grid;
+        time_surface(
+            backend,
+            after_warm_up,
+            self.views,
+            n,
+            grid,
+            self.scfg,
+            self.args,
+            regs,
+        )
+    }
+}
+
+/// The figures reported: the Vulkan backend (the median round's), the CPU backend and the Vulkan
+/// backend on the data term alone; per round stage-1 rays/s, stage-2 rays/s and their ratio; the
+/// median round's stage-1 rays/s.
+struct Report {
+    vulkan: Figures,
+    cpu: Figures,
+    data_term: Figures,
+    paired: Vec<[f64; 3]>,
+    stage1_vk: f64,
+}
+
+impl Report {
+    /// Rounds of stage 1 then stage 2 back to back: the machine's speed drifts from run to run and
+    /// within one (docs/results.md), so each ratio pairs two timings taken seconds apart, and the
+    /// round with the median ratio is reported.
+    fn measure(b: &Bench) -> Result<Report> {
+        let rounds = b.args.rounds;
+        let mut figures = Vec::new();
+        for r in 1..=rounds {
+            eprintln!(
+                "bench surface: round {r}/{rounds}: stage-1 then stage-2 training on the Vulkan \
+                 device"
+            );
+            let stage1 = b.stage1()?;
+            figures.push((stage1, b.vulkan(true)?));
         }
-        println!();
-    }
-    println!(
-        "(vk-data: the Vulkan backend without the regularisers, like `bench plenoxels`' steps)"
-    );
-    let ratio = fv.rays_per_s / fc.rays_per_s;
-    println!("vulkan / cpu: {ratio:.2}×");
-    println!("ms per step: wall, device (kernels' timestamps; the CPU: its compute), host phases:");
-    println!("{}", StepFigures::header("backend", 8));
-    for (name, f) in [("vulkan", &fv), ("cpu", &fc), ("vk-data", &fd)] {
-        println!("{name:<8} {}", f.times.row());
-    }
-    for (what, f) in [("", &fv), (", data term only", &fd)] {
-        println!("device ms per step (Vulkan{what}):");
-        for (k, ms) in &f.device_ms_per_step {
-            println!("  {k:<20} {ms:>9.3}");
-        }
-    }
-    let vs_stage1 = fv.rays_per_s / stage1_vk;
-    let data_vs_stage1 = fd.rays_per_s / stage1_vk;
-    let column = |k: usize, fmt: fn(f64) -> String| {
-        paired
+        let paired: Vec<[f64; 3]> = figures
             .iter()
-            .map(|r| fmt(r[k]))
-            .collect::<Vec<_>>()
-            .join(" / ")
-    };
-    println!(
-        "stage-1 training on the Vulkan device at {}³ (no TV, as `bench plenoxels`), {} rounds of \
-         stage 1 then stage 2: stage 1 {} rays/s, stage 2 {}, ratios {}",
-        args.res,
-        paired.len(),
-        column(0, |v| format!("{v:.0}")),
-        column(1, |v| format!("{v:.0}")),
-        column(2, |v| format!("{v:.2}×")),
-    );
-    println!(
-        "stage 2 / stage 1 (the median round; the table's Vulkan row is that round's): \
-         {vs_stage1:.2}× with the regularisers, {data_vs_stage1:.2}× data term only (target ≥ 3×)"
-    );
-    if args.json {
+            .map(|(s1, f)| [*s1, f.rays_per_s, f.rays_per_s / s1])
+            .collect();
+        let mut order: Vec<usize> = (0..paired.len()).collect();
+        order.sort_by(|&i, &j| paired[i][2].total_cmp(&paired[j][2]));
+        let median = order[order.len() / 2];
+        eprintln!("bench surface: timing the Vulkan backend (data term only)");
+        let data_term = b.vulkan(false)?;
+        let (stage1_vk, vulkan) = figures.swap_remove(median);
+        eprintln!("bench surface: timing the CPU backend");
+        let cpu = b.cpu()?;
+        Ok(Report {
+            vulkan,
+            cpu,
+            data_term,
+            paired,
+            stage1_vk,
+        })
+    }
+
+    fn rows(&self) -> [(&'static str, &Figures); 3] {
+        [
+            ("vulkan", &self.vulkan),
+            ("cpu", &self.cpu),
+            ("vk-data", &self.data_term),
+        ]
+    }
+
+    /// Prints the tables and ratios.
+    fn print(&self, args: &SurfaceBenchArgs, grid: &SurfaceGrid) {
         println!(
-            "{}",
-            json!({
-                "bench": "surface",
-                "device": gpu.info().name,
-                "res": args.res,
-                "allocated_vertices": grid.delta.len(),
-                "levels": grid.levels.len(),
-                "a": args.a,
-                "batch": args.batch,
-                "steps": args.steps,
-                "vulkan": fv,
-                "vulkan_data_term_only": fd,
-                "cpu": fc,
-                "ratio_vulkan_over_cpu": ratio,
-                "stage1_vulkan_rays_per_s": stage1_vk,
-                "rounds": paired
-                    .iter()
-                    .map(|r| json!({
-                        "stage1_rays_per_s": r[0],
-                        "surface_rays_per_s": r[1],
-                        "ratio": r[2],
-                    }))
-                    .collect::<Vec<_>>(),
-                "ratio_surface_over_stage1_vulkan": vs_stage1,
-                "ratio_surface_data_term_over_stage1_vulkan": data_vs_stage1,
-            })
+            "stage-2 training at {}³ ({} allocated vertices, {} levels), {} steps of {} rays, a = \
+             {}, thin scene",
+            args.res,
+            grid.delta.len(),
+            grid.levels.len(),
+            args.steps,
+            args.batch,
+            args.a
         );
+        print!("{:<8} {:>10} {:>9}", "backend", "rays/s", "mse");
+        for k in TrainCounts::NAMES {
+            print!(" {k:>8}");
+        }
+        println!("   (per ray)");
+        for (name, f) in self.rows() {
+            print!("{name:<8} {:>10.0} {:>9.5}", f.rays_per_s, f.mean_mse);
+            for (k, v) in f.per_ray.named() {
+                print!(" {v:>w$.2}", w = k.len().max(8));
+            }
+            println!();
+        }
+        println!(
+            "(vk-data: the Vulkan backend without the regularisers, like `bench plenoxels`' steps)"
+        );
+        println!(
+            "vulkan / cpu: {:.2}×",
+            self.vulkan.rays_per_s / self.cpu.rays_per_s
+        );
+        println!(
+            "ms per step: wall, device (kernels' timestamps; the CPU: its compute), host phases:"
+        );
+        println!("{}", StepFigures::header("backend", 8));
+        for (name, f) in self.rows() {
+            println!("{name:<8} {}", f.times.row());
+        }
+        for (what, f) in [("", &self.vulkan), (", data term only", &self.data_term)] {
+            println!("device ms per step (Vulkan{what}):");
+            for (k, ms) in &f.device_ms_per_step {
+                println!("  {k:<20} {ms:>9.3}");
+            }
+        }
+        let column = |k: usize, fmt: fn(f64) -> String| {
+            self.paired
+                .iter()
+                .map(|r| fmt(r[k]))
+                .collect::<Vec<_>>()
+                .join(" / ")
+        };
+        println!(
+            "stage-1 training on the Vulkan device at {}³ (no TV, as `bench plenoxels`), {} rounds \
+             of stage 1 then stage 2: stage 1 {} rays/s, stage 2 {}, ratios {}",
+            args.res,
+            self.paired.len(),
+            column(0, |v| format!("{v:.0}")),
+            column(1, |v| format!("{v:.0}")),
+            column(2, |v| format!("{v:.2}×")),
+        );
+        println!(
+            "stage 2 / stage 1 (the median round; the table's Vulkan row is that round's): \
+             {:.2}× with the regularisers, {:.2}× data term only (target ≥ 3×)",
+            self.vulkan.rays_per_s / self.stage1_vk,
+            self.data_term.rays_per_s / self.stage1_vk
+        );
+    }
+
+    /// The figures as one JSON object.
+    fn json(&self, gpu: &Gpu, args: &SurfaceBenchArgs, grid: &SurfaceGrid) -> serde_json::Value {
+        json!({
+            "bench": "surface",
+            "device": gpu.info().name,
+            "res": args.res,
+            "allocated_vertices": grid.delta.len(),
+            "levels": grid.levels.len(),
+            "a": args.a,
+            "batch": args.batch,
+            "steps": args.steps,
+            "vulkan": self.vulkan,
+            "vulkan_data_term_only": self.data_term,
+            "cpu": self.cpu,
+            "ratio_vulkan_over_cpu": self.vulkan.rays_per_s / self.cpu.rays_per_s,
+            "stage1_vulkan_rays_per_s": self.stage1_vk,
+            "rounds": self
+                .paired
+                .iter()
+                .map(|r| json!({
+                    "stage1_rays_per_s": r[0],
+                    "surface_rays_per_s": r[1],
+                    "ratio": r[2],
+                }))
+                .collect::<Vec<_>>(),
+            "ratio_surface_over_stage1_vulkan": self.vulkan.rays_per_s / self.stage1_vk,
+            "ratio_surface_data_term_over_stage1_vulkan": self.data_term.rays_per_s / self.stage1_vk,
+        })
+    }
+}
+
+fn run_in(gpu: &Gpu, args: &SurfaceBenchArgs, dir: &std::path::Path) -> Result<()> {
+    eprintln!("bench surface: generating the thin scene (128², 40 views)");
+    let data = thin_scene(&dir.join("scene"))?;
+    let scfg = SurfaceConfig::preset(Preset::Fast, Category::Thin)?;
+    let views = TrainViews::new(&data.train, &data.scene)?.focused(scfg.ray_focus)?;
+    let start = warm_start(&data, &views, &scfg, args, dir)?;
+    let bench = Bench {
+        gpu,
+        args,
+        data: &data,
+        views: &views,
+        scfg: &scfg,
+        start: &start,
+    };
+    let report = Report::measure(&bench)?;
+    report.print(args, &start.grid);
+    if args.json {
+        println!("{}", report.json(gpu, args, &start.grid));
     }
     Ok(())
 }

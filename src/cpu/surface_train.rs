@@ -19,6 +19,9 @@
 //! order, as the kernel's reverse recurrence visits them) and added with one atomic per corner,
 //! parameter and non-zero sum when the cell changes (SH: 3 colour sums per corner, times Y_k).
 //!
+//! The pieces that read no buffer are `math::surface_train` (the twin of
+//! `glsl/lib/surface_train.glsl`); this file holds the walk, the shading reads and the scatter.
+//!
 //! Each loss term is a per-ray sum; the caller's weights (`grad_scale` for the squared error,
 //! `lambda_h`, `lambda_c`) carry the batch normalisation.
 
@@ -33,8 +36,12 @@ use crate::math::surface::{
     TruncationCount, SURF_MAX_LEVELS,
 };
 use crate::math::surface_blocks::SkipRef;
+use crate::math::surface_train::{
+    surf_composite, surf_consistency, surf_entropy, surf_guard, surf_hit_grads, surf_reverse_step,
+    surf_shade_corner, surf_sums_add, CornerSums, HitRec,
+};
 use crate::math::surface_walk::CellWalk;
-use crate::math::trilerp::trilerp_weights;
+use crate::math::trilerp::{trilerp_dwds, trilerp_weights};
 use anyhow::{ensure, Result};
 use rayon::prelude::*;
 use std::sync::atomic::AtomicU32;
@@ -190,60 +197,53 @@ pub fn trace_ray(
     tr
 }
 
-/// Per-hit shading quantities of the backward pass.
-struct Shade {
-    wt: [f32; 8],
-    /// ∂w_i/∂s.
-    dwds: [f32; 8],
-    sa: f32,
-    /// e^{−max(σα, 0)} = 1 − α.
-    e: f32,
-    gamma: f32,
-    at: f32,
-    raw: [f32; 3],
-}
-
-fn shade(g: &SurfaceGridRef, h: &Hit, dn: [f32; 3], y: &[f32; 9], a: f32) -> Shade {
+/// Twin of the kernel's `hit_record`: the record of hit `h` (truncation parameter `a`; `sid` left 0
+/// for the caller): σα, α̃, the shading and the derivatives along the ray `dn` the backward pass
+/// needs (SH basis `y`), and the f′ guard verdict.
+fn hit_record(g: &SurfaceGridRef, h: &Hit, dn: [f32; 3], y: &[f32; 9], a: f32) -> HitRec {
     let p = hit_point(h, dn);
     let wt = trilerp_weights(p);
-    let q = [1.0 - p[0], 1.0 - p[1], 1.0 - p[2]];
-    let dwds = std::array::from_fn(|i| {
-        let (bx, by, bz) = (i >> 2 & 1, i >> 1 & 1, i & 1);
-        let fx = if bx == 1 { p[0] } else { q[0] };
-        let fy = if by == 1 { p[1] } else { q[1] };
-        let fz = if bz == 1 { p[2] } else { q[2] };
-        let sx = if bx == 1 { 1.0 } else { -1.0 };
-        let sy = if by == 1 { 1.0 } else { -1.0 };
-        let sz = if bz == 1 { 1.0 } else { -1.0 };
-        sx * fy * fz * dn[0] + fx * sy * fz * dn[1] + fx * fy * sz * dn[2]
-    });
+    let dw = trilerp_dwds(p, dn);
     let mut sa = 0.0f32;
     for i in 0..8 {
         sa += wt[i] * g.opacity[h.lk[i] as usize];
     }
-    let e = (-sa.max(0.0)).exp();
-    let gamma = surf_gamma(a, h.count);
-    let at = surf_alpha(sa) * gamma;
-    let mut raw = [0.5f32; 3];
-    for i in 0..8 {
-        let row = &g.sh[h.lk[i] as usize * 27..h.lk[i] as usize * 27 + 27];
-        for ch in 0..3 {
-            let mut v = 0.0f32;
-            for k in 0..9 {
-                v += y[k] * row[ch * 9 + k];
-            }
-            raw[ch] += wt[i] * v;
-        }
-    }
-    Shade {
-        wt,
-        dwds,
+    let gam = surf_gamma(a, h.count);
+    let mut hr = HitRec {
+        cell: h.cell,
+        p,
+        depth: h.t0 + h.s,
         sa,
-        e,
-        gamma,
-        at,
-        raw,
+        at: surf_alpha(sa) * gam,
+        gam,
+        raw: [0.5; 3],
+        ..Default::default()
+    };
+    for i in 0..8 {
+        let row = h.lk[i] as usize;
+        let shv = &g.sh[row * 27..row * 27 + 27];
+        surf_shade_corner(&mut hr, wt[i], dw[i], g.opacity[row], h.c[i], y, shv);
     }
+    hr.guard = surf_guard(hr.f1, &h.c);
+    hr
+}
+
+/// The records of a traced ray's hits, each with its structure: a restarted truncation count
+/// (count 0 after the first record) starts the next one.
+fn hit_records(g: &SurfaceGridRef, tr: &Trace, y: &[f32; 9], a: f32) -> Vec<HitRec> {
+    let mut sid = 0;
+    (0..tr.n)
+        .map(|j| {
+            let h = &tr.hits[j];
+            if h.count == 0 && j > 0 {
+                sid += 1;
+            }
+            HitRec {
+                sid,
+                ..hit_record(g, h, tr.dn, y, a)
+            }
+        })
+        .collect()
 }
 
 /// Twin of `surface_train.comp`: per-ray losses and the summed counters; dL/dδ, dL/dσα and
@@ -356,131 +356,47 @@ struct Scatter<'a> {
     touched: &'a [AtomicU32],
 }
 
-/// Per-hit gradients: ∂L/∂α̃ (before the chain to σα), ∂L/∂raw colour, and ∂L/∂t from Lc.
-pub struct HitGrads {
-    pub d_at: f32,
-    pub d_raw: [f32; 3],
-    pub d_t: f32,
+/// A ray's loss terms from its records, and what the reverse pass reads of them.
+struct RayTerms {
+    loss: RayLoss,
+    /// Transmittance before each slot (`[SURF_MAX_HITS]`: the final one) and the weights.
+    tr: [f32; SURF_MAX_HITS + 1],
+    wj: [f32; SURF_MAX_HITS],
+    /// ∂(λH·LH)/∂w_j and ∂(λc·Lc)/∂t_j.
+    e: [f32; SURF_MAX_HITS],
+    d_t: [f32; SURF_MAX_HITS],
+    /// dL/dC.
+    d_c: [f32; 3],
 }
 
-/// The loss of one traced ray and the per-hit gradients with respect to α̃_j, raw colour and
-/// depth (the part of the backward pass that does not touch the grid), and dL/dbg = dL/dC·T.
-fn ray_backward(
-    tr: &Trace,
-    sh: &[Shade],
+/// Compositing from the records, the squared error and the regularisers' terms (the kernel's
+/// `main` between the walk and the reverse pass).
+fn ray_terms(
+    rec: &[HitRec],
+    inv_len: f32,
     target: [f32; 3],
     loss: &SurfaceLoss,
     bg: [f32; 3],
-) -> (RayLoss, [HitGrads; SURF_MAX_HITS], [f32; 3]) {
-    let n = tr.n;
-    let mut t = [1.0f32; SURF_MAX_HITS + 1];
-    let mut w = [0.0f32; SURF_MAX_HITS];
-    let mut color = [0.0f32; 3];
-    for j in 0..n {
-        w[j] = t[j] * sh[j].at;
-        for ch in 0..3 {
-            color[ch] += w[j] * sh[j].raw[ch].max(0.0);
-        }
-        t[j + 1] = t[j] * (1.0 - sh[j].at);
-    }
-    let total: [f32; 3] = std::array::from_fn(|ch| color[ch] + t[n] * bg[ch]);
+) -> RayTerms {
+    let (tr, wj, color) = surf_composite(rec);
+    let t_last = tr[SURF_MAX_HITS];
+    let total: [f32; 3] = std::array::from_fn(|ch| color[ch] + t_last * bg[ch]);
     let diff: [f32; 3] = std::array::from_fn(|ch| total[ch] - target[ch]);
-    let mut out = RayLoss {
-        sq_err: diff[0] * diff[0] + diff[1] * diff[1] + diff[2] * diff[2],
-        hits: n as u32,
-        ..Default::default()
-    };
-    let d_c = diff.map(|d| loss.grad_scale * d);
-    let d_bg = d_c.map(|d| d * t[n]);
-
-    // Entropy of the normalised weights and ∂(λH·LH)/∂w_j.
-    let mut e = [0.0f32; SURF_MAX_HITS];
-    let wsum: f32 = w[..n].iter().sum();
-    if loss.lambda_h != 0.0 && wsum > 1e-8 {
-        let mut h = 0.0f32;
-        for &wj in &w[..n] {
-            if wj > 0.0 {
-                let pj = wj / wsum;
-                h -= pj * pj.ln();
-            }
-        }
-        out.entropy = h;
-        for j in 0..n {
-            if w[j] > 0.0 {
-                e[j] = -loss.lambda_h * ((w[j] / wsum).ln() + h) / wsum;
-            }
-        }
+    let (entropy, e) = surf_entropy(&wj, rec.len(), loss.lambda_h);
+    let (consistency, d_t) = surf_consistency(rec, &wj, loss.lambda_c, inv_len);
+    RayTerms {
+        loss: RayLoss {
+            sq_err: diff[0] * diff[0] + diff[1] * diff[1] + diff[2] * diff[2],
+            entropy,
+            consistency,
+            hits: rec.len() as u32,
+        },
+        tr,
+        wj,
+        e,
+        d_t,
+        d_c: diff.map(|d| loss.grad_scale * d),
     }
-    // Lc per structure (the records from one whose truncation count is 0 to the next such: one
-    // structure unless the count restarts): depths in scene units, the structure's mode = its
-    // first largest weight.
-    let mut d_t = [0.0f32; SURF_MAX_HITS];
-    if loss.lambda_c != 0.0 && n > 1 {
-        let mut first = [0usize; SURF_MAX_HITS];
-        for j in 1..n {
-            first[j] = if tr.hits[j].count == 0 {
-                j
-            } else {
-                first[j - 1]
-            };
-        }
-        let mode = |j: usize| {
-            (first[j]..n)
-                .filter(|&i| first[i] == first[j])
-                .fold(first[j], |m, i| if w[i] > w[m] { i } else { m })
-        };
-        let depth = |j: usize| (tr.hits[j].t0 + tr.hits[j].s) * tr.inv_len;
-        for j in 0..n {
-            let m = mode(j);
-            if j == m {
-                continue;
-            }
-            let dj = depth(j) - depth(m);
-            out.consistency += dj.abs();
-            let sg = if dj > 0.0 {
-                1.0
-            } else if dj < 0.0 {
-                -1.0
-            } else {
-                0.0
-            };
-            d_t[j] += loss.lambda_c * sg;
-            d_t[m] -= loss.lambda_c * sg;
-        }
-    }
-    // Reverse pass: colour and entropy seen from behind each hit (behind the last: the
-    // background).
-    let mut grads: [HitGrads; SURF_MAX_HITS] = std::array::from_fn(|_| HitGrads {
-        d_at: 0.0,
-        d_raw: [0.0; 3],
-        d_t: 0.0,
-    });
-    let mut s_c = bg;
-    let mut s_e = 0.0f32;
-    for j in (0..n).rev() {
-        let at = sh[j].at;
-        let c = sh[j].raw.map(|r| r.max(0.0));
-        let mut d_at = t[j] * (e[j] - s_e);
-        for ch in 0..3 {
-            d_at += d_c[ch] * t[j] * (c[ch] - s_c[ch]);
-        }
-        grads[j] = HitGrads {
-            d_at,
-            d_raw: std::array::from_fn(|ch| {
-                if sh[j].raw[ch] > 0.0 {
-                    d_c[ch] * w[j]
-                } else {
-                    0.0
-                }
-            }),
-            d_t: d_t[j],
-        };
-        for ch in 0..3 {
-            s_c[ch] = at * c[ch] + (1.0 - at) * s_c[ch];
-        }
-        s_e = at * e[j] + (1.0 - at) * s_e;
-    }
-    (out, grads, d_bg)
 }
 
 #[allow(clippy::too_many_arguments)] // the kernel's per-ray inputs, one argument each
@@ -497,88 +413,39 @@ fn train_ray(
     let mut cnt = TrainCounts::default();
     let tr = trace_ray(g, ro, rd, p, blocks, &mut cnt);
     let y = sh_basis(ray_unit(rd));
-    let shades: Vec<Shade> = (0..tr.n)
-        .map(|j| shade(g, &tr.hits[j], tr.dn, &y, p.truncation.a))
-        .collect();
-    let (rl, hg, d_bg) = ray_backward(&tr, &shades, target, loss, p.background);
-    // Per-corner sums over consecutive hits in one cell, in reverse hit order (the kernel scatters
-    // inside its reverse recurrence), flushed when the cell changes.
+    let rec = hit_records(g, &tr, &y, p.truncation.a);
+    let t = ray_terms(&rec, tr.inv_len, target, loss, p.background);
+    // Reverse pass: colour and entropy seen from behind each hit (behind the last: the
+    // background); per-corner sums over consecutive hits in one cell, flushed when the cell
+    // changes.
+    let mut s_c = p.background;
+    let mut s_e = 0.0f32;
     let mut acc = CellAcc::default();
-    for j in (0..tr.n).rev() {
-        let (h, s, gr) = (&tr.hits[j], &shades[j], &hg[j]);
-        let d_sa = if s.sa > 0.0 {
-            gr.d_at * s.gamma * s.e
-        } else {
-            0.0
-        };
-        // ∂L/∂s: opacity and colour move with the hit point, and the depth (Lc).
-        let mut dsa_ds = 0.0f32;
-        let mut f1 = 0.0f32;
-        let mut draw_ds = [0.0f32; 3];
-        for i in 0..8 {
-            let row = h.lk[i] as usize;
-            dsa_ds += s.dwds[i] * g.opacity[row];
-            f1 += s.dwds[i] * h.c[i];
-            for ch in 0..3 {
-                let mut v = 0.0f32;
-                for k in 0..9 {
-                    v += y[k] * g.sh[row * 27 + ch * 9 + k];
-                }
-                draw_ds[ch] += s.dwds[i] * v;
-            }
-        }
-        let mut dl_ds = d_sa * dsa_ds + gr.d_t * tr.inv_len;
-        for ch in 0..3 {
-            dl_ds += gr.d_raw[ch] * draw_ds[ch];
-        }
-        let cmin = h.c.iter().copied().fold(f32::INFINITY, f32::min);
-        let cmax = h.c.iter().copied().fold(f32::NEG_INFINITY, f32::max);
-        let guarded = f1.abs() <= FPRIME_GUARD * (cmax - cmin);
-        if guarded {
+    for (j, hk) in rec.iter().enumerate().rev() {
+        let (d_at, d_raw) =
+            surf_reverse_step(hk, t.tr[j], t.wj[j], t.e[j], t.d_c, &mut s_c, &mut s_e);
+        let (d_sa, dds) = surf_hit_grads(hk, d_at, d_raw, t.d_t[j], tr.inv_len);
+        if hk.guard {
             cnt.guarded += 1;
         }
-        let d_delta_scale = if guarded || dl_ds == 0.0 {
-            0.0
-        } else {
-            -dl_ds / f1
-        };
-        if acc.cell != Some(h.cell) {
+        if acc.cell != Some(hk.cell) {
             cnt.atomic_adds += acc.flush(out, &y);
-            acc.cell = Some(h.cell);
-            acc.lk = h.lk;
+            acc.cell = Some(hk.cell);
+            acc.lk = tr.hits[j].lk;
         }
-        for i in 0..8 {
-            let wi = s.wt[i];
-            let (td, ta) = (wi * d_delta_scale, wi * d_sa);
-            acc.delta[i] += td;
-            acc.opacity[i] += ta;
-            acc.nz_d |= u32::from(td != 0.0) << i;
-            acc.nz_a |= u32::from(ta != 0.0) << i;
-            for ch in 0..3 {
-                let tc = wi * gr.d_raw[ch];
-                acc.color[i][ch] += tc;
-                acc.nz_c |= u32::from(tc != 0.0) << (3 * i + ch);
-            }
-        }
+        surf_sums_add(&mut acc.sums, &trilerp_weights(hk.p), dds, d_sa, d_raw);
     }
     cnt.atomic_adds += acc.flush(out, &y);
-    (rl, d_bg, cnt)
+    let t_last = t.tr[SURF_MAX_HITS];
+    (t.loss, t.d_c.map(|d| d * t_last), cnt)
 }
 
-/// Per-corner gradient sums of the current cell (SH as 3 colour sums: Y is constant along a ray).
+/// The current cell, its corner links and its per-corner gradient sums.
 #[derive(Default)]
 struct CellAcc {
     cell: Option<[i32; 3]>,
     lk: [i32; 8],
-    delta: [f32; 8],
-    opacity: [f32; 8],
-    color: [[f32; 3]; 8],
-    /// Bit i (δ, σα) or 3i + ch (colour): corner i received a non-zero term. The adds follow these
-    /// single products, not the sums being zero: a sum's exact zero could depend on whether a GPU
-    /// compiler fused its additions.
-    nz_d: u32,
-    nz_a: u32,
-    nz_c: u32,
+    sums: CornerSums,
 }
 
 impl CellAcc {
@@ -588,12 +455,13 @@ impl CellAcc {
         if self.cell.is_none() {
             return 0;
         }
+        let s = &mut self.sums;
         let mut adds = 0;
         for i in 0..8 {
-            let (dd, dsa, dcol) = (self.delta[i], self.opacity[i], self.color[i]);
-            (self.delta[i], self.opacity[i], self.color[i]) = (0.0, 0.0, [0.0; 3]);
-            let (bd, ba) = ((self.nz_d >> i) & 1 != 0, (self.nz_a >> i) & 1 != 0);
-            let bc = (self.nz_c >> (3 * i)) & 7;
+            let (dd, dsa, dcol) = (s.d[i], s.a[i], s.c[i]);
+            (s.d[i], s.a[i], s.c[i]) = (0.0, 0.0, [0.0; 3]);
+            let (bd, ba) = ((s.nz_d >> i) & 1 != 0, (s.nz_a >> i) & 1 != 0);
+            let bc = (s.nz_c >> (3 * i)) & 7;
             if !bd && !ba && bc == 0 {
                 continue;
             }
@@ -617,7 +485,7 @@ impl CellAcc {
                 adds += 9;
             }
         }
-        (self.nz_d, self.nz_a, self.nz_c) = (0, 0, 0);
+        (s.nz_d, s.nz_a, s.nz_c) = (0, 0, 0);
         adds
     }
 }

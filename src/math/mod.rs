@@ -12,6 +12,7 @@ pub mod plenoxel;
 pub mod sh;
 pub mod surface;
 pub mod surface_blocks;
+pub mod surface_train;
 pub mod surface_walk;
 pub mod trilerp;
 pub mod vieta;

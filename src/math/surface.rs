@@ -190,9 +190,8 @@ impl CellHits {
     }
 }
 
-/// Min/max culling: bit i set when `levels[i]` (at most [`SURF_MAX_LEVELS`]) lies within
-/// [min c, max c]; only those levels can cross the cell.
-pub fn surf_level_mask(c: &[f32; 8], levels: &[f32]) -> u32 {
+/// The smallest and largest of a cell's 8 corner values (pairwise, as the GLSL's nested min/max).
+pub fn surf_cell_range(c: &[f32; 8]) -> (f32, f32) {
     let cmin = c[0]
         .min(c[1])
         .min(c[2].min(c[3]))
@@ -201,6 +200,13 @@ pub fn surf_level_mask(c: &[f32; 8], levels: &[f32]) -> u32 {
         .max(c[1])
         .max(c[2].max(c[3]))
         .max(c[4].max(c[5]).max(c[6].max(c[7])));
+    (cmin, cmax)
+}
+
+/// Min/max culling: bit i set when `levels[i]` (at most [`SURF_MAX_LEVELS`]) lies within
+/// [min c, max c]; only those levels can cross the cell.
+pub fn surf_level_mask(c: &[f32; 8], levels: &[f32]) -> u32 {
+    let (cmin, cmax) = surf_cell_range(c);
     levels
         .iter()
         .take(SURF_MAX_LEVELS)

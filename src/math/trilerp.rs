@@ -52,6 +52,21 @@ pub fn trilerp_weights(p: [f32; 3]) -> [f32; 8] {
     ]
 }
 
+/// `∂w_i/∂s` of the weights above at `p` moving along the unit direction `d`.
+pub fn trilerp_dwds(p: [f32; 3], d: [f32; 3]) -> [f32; 8] {
+    let q = [1.0 - p[0], 1.0 - p[1], 1.0 - p[2]];
+    std::array::from_fn(|i| {
+        let (bx, by, bz) = (i >> 2 & 1, i >> 1 & 1, i & 1);
+        let fx = if bx == 1 { p[0] } else { q[0] };
+        let fy = if by == 1 { p[1] } else { q[1] };
+        let fz = if bz == 1 { p[2] } else { q[2] };
+        let sx = if bx == 1 { 1.0 } else { -1.0 };
+        let sy = if by == 1 { 1.0 } else { -1.0 };
+        let sz = if bz == 1 { 1.0 } else { -1.0 };
+        sx * fy * fz * d[0] + fx * sy * fz * d[1] + fx * fy * sz * d[2]
+    })
+}
+
 /// Links of the 8 corners of cell `l` in a grid of `res` vertices (x-major: slot
 /// (x·ny + y)·nz + z), in the corner order above; < 0: unallocated.
 #[inline]
