@@ -20,6 +20,7 @@ mod optim_args;
 mod profile;
 mod ray_buffers;
 mod readback;
+mod step_queue;
 mod step_times;
 mod train_views;
 
@@ -34,6 +35,7 @@ pub use optim_args::record_optim_args;
 pub use profile::Profile;
 pub use ray_buffers::RayBuffers;
 pub use readback::{Readback, STEP_SLOTS};
+pub use step_queue::{SlotFigures, StepQueue};
 pub use step_times::{timed, Phase, PhaseClock, StepTimes};
 pub use train_views::{record_sort_runs, KeyDraw, SampledAt, TrainRays, TrainViewBuffers};
 

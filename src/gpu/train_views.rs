@@ -9,6 +9,7 @@ use super::{Batch, Gpu, GpuBuffer};
 use crate::abi::buffers::SampleCamera;
 use crate::abi::consts::{SAMPLE_SORT_RAYS, SAMPLE_SORT_SIDE};
 use crate::cpu::sample_rays::{sorted_keys, SampleSet, SampledRays};
+use crate::data::TrainViews;
 use crate::kernels::{sample_rays, sample_rays_sort};
 use anyhow::{ensure, Result};
 
@@ -273,7 +274,17 @@ pub enum TrainRays<'a> {
     },
 }
 
-impl TrainRays<'_> {
+impl<'a> TrainRays<'a> {
+    /// The batch of `n` rays drawn with `seed` from `views`.
+    pub fn sampled(views: &'a TrainViews, seed: u64, n: usize) -> Self {
+        TrainRays::Sampled {
+            id: views.id(),
+            set: views.set(),
+            seed,
+            n,
+        }
+    }
+
     /// Number of rays.
     pub fn len(&self) -> usize {
         match self {

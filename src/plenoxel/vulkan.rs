@@ -14,24 +14,21 @@ use crate::cpu::{RmsProp, TvChunk};
 use crate::data::TrainViews;
 use crate::gpu::{
     record_background_step, record_loss_sum, record_optim_args, Batch, BatchTimes, Gpu, GpuBuffer,
-    Phase, PhaseClock, RayBuffers, Readback, StepMeta, StepsInFlight, TrainRays, TrainViewBuffers,
-    STEP_SLOTS,
+    Phase, PhaseClock, Readback, SlotFigures, StepQueue, StepTimes, TrainRays,
 };
 use crate::grid::{Grid, SH_DIM};
 use crate::kernels;
 use crate::math::plenoxel::{occ_dims, PlenoxelCounts};
 use crate::stage::StageBackend;
 use anyhow::{ensure, Result};
-use std::cell::RefCell;
 
 /// Device-resident stage-1 state.
 pub struct VulkanPlenoxels {
-    /// Steps submitted and not yet read. First, so that dropping the backend waits for them
-    /// before any buffer they use is freed. In a `RefCell` because reading state (`grid`, …)
-    /// must wait for them too.
-    steps: RefCell<StepsInFlight>,
-    /// Figures of completed steps not yet taken.
-    done: Vec<(StepStats, BatchTimes)>,
+    /// The steps in flight, their figures, the ray buffers, the training views and the
+    /// background: per ray 3 floats of output (rgb) for a render, the squared error (1 float)
+    /// for training; per step a slot with the squared-error sum and the counters. First, so
+    /// that dropping the backend waits for the steps before any buffer they use is freed.
+    queue: StepQueue<StepStats>,
     gpu: Gpu,
     meta: Grid,
     links: GpuBuffer,
@@ -49,21 +46,6 @@ pub struct VulkanPlenoxels {
     args: GpuBuffer,
     /// plenoxel_train's params buffer (written in each training batch's command stream).
     params: GpuBuffer,
-    /// The background (`Background`): read by the render and training kernels, and, when
-    /// learned, its gradient accumulated and stepped on the device (`background_step`) so that a
-    /// step needs no host round trip for it.
-    bg: GpuBuffer,
-    /// Whether `bg` is learned (the host's copy of its flag: `background_step` is recorded then).
-    bg_learned: bool,
-    /// Per-batch rays, targets and per-ray output: rgb (3 floats) for render, the squared error
-    /// (1 float) for training.
-    rays: RayBuffers,
-    /// Per training step since the figures were last read, a slot: the squared-error sum and
-    /// the counters.
-    readback: Readback,
-    /// The training views and sampled batches (uploaded by the first sampled step; kept by
-    /// `load`).
-    views: Option<TrainViewBuffers>,
 }
 
 impl VulkanPlenoxels {
@@ -71,8 +53,12 @@ impl VulkanPlenoxels {
         let n = grid.allocated();
         let nb = occ_dims(grid.res);
         Ok(VulkanPlenoxels {
-            steps: RefCell::default(),
-            done: Vec::new(),
+            queue: StepQueue::new(
+                gpu,
+                3 * std::mem::size_of::<f32>(),
+                // The squared-error sum (one float), the counters.
+                &[4, std::mem::size_of::<PlenoxelCounts>() as u64],
+            )?,
             gpu: gpu.clone(),
             links: gpu.upload(&grid.links)?,
             density: gpu.upload(&grid.density)?,
@@ -85,16 +71,6 @@ impl VulkanPlenoxels {
             step: gpu.upload(&step_record(n, &[]))?,
             args: gpu.zeros::<u32>(3)?,
             params: gpu.host_to_device::<PlenoxelParams>(1)?,
-            bg: gpu.upload(&[Background::new([1.0; 3], false)])?,
-            bg_learned: false,
-            rays: RayBuffers::new(3 * std::mem::size_of::<f32>()),
-            readback: Readback::new(
-                gpu,
-                // The squared-error sum (one float), the counters.
-                &[4, std::mem::size_of::<PlenoxelCounts>() as u64],
-                STEP_SLOTS,
-            )?,
-            views: None,
             meta: Grid {
                 links: Vec::new(),
                 density: Vec::new(),
@@ -163,7 +139,7 @@ impl VulkanPlenoxels {
         targets: Option<&[f32]>,
         clock: &mut PhaseClock,
     ) -> Result<(Batch, [u64; 3])> {
-        let addrs = self.rays.upload(&self.gpu, rays, targets)?;
+        let addrs = self.queue.rays.upload(&self.gpu, rays, targets)?;
         clock.mark(Phase::Upload);
         let mut b = self.gpu.batch()?;
         self.record_step_reset(&mut b);
@@ -184,14 +160,10 @@ impl VulkanPlenoxels {
                 self.begin(rays, Some(targets), clock)
             }
             TrainRays::Sampled { id, set, seed, n } => {
-                TrainViewBuffers::ensure(&mut self.views, &self.gpu, id, set, n)?;
-                let [_, _, out] = self.rays.reserve(&self.gpu, n)?;
-                clock.mark(Phase::Upload);
+                let out = self.queue.reserve_sampled(&self.gpu, id, set, n, clock)?;
                 let mut b = self.gpu.batch()?;
                 self.record_step_reset(&mut b);
-                let views = self.views.as_ref().expect("ensured");
-                let at = views.record_sample(&mut b, set, seed, n)?;
-                clock.mark(Phase::Sampling);
+                let at = self.queue.record_sample(&mut b, set, seed, n, clock)?;
                 Ok((b, [at.rays, at.targets, out]))
             }
         }
@@ -216,7 +188,7 @@ impl VulkanPlenoxels {
                 PlenoxelPass::Tv { field, chunk } => self.record_tv(&mut b, *field, chunk)?,
                 PlenoxelPass::RmsProp(h) => self.record_rmsprop(&mut b, h)?,
                 PlenoxelPass::Background { lr, beta, eps } => {
-                    record_background_step(&mut b, &self.bg, *lr, *beta, *eps)?
+                    record_background_step(&mut b, &self.queue.bg, *lr, *beta, *eps)?
                 }
             }
         }
@@ -258,7 +230,7 @@ impl VulkanPlenoxels {
                 ray_loss: loss_buf,
                 step: self.step.address(),
                 params: self.params.address(),
-                bg: self.bg.address(),
+                bg: self.queue.bg.address(),
                 res: self.meta.res,
                 n_rays: n as u32,
             },
@@ -293,29 +265,7 @@ impl VulkanPlenoxels {
 
     /// Wait for the steps in flight (before the host reads, writes or frees what they use).
     fn settle(&self) -> Result<()> {
-        self.steps.borrow_mut().settle()
-    }
-
-    /// Read the figures of every step submitted since the last read into `done`.
-    fn collect(&mut self) -> Result<()> {
-        let steps = self.steps.get_mut().take()?;
-        for (slot, (meta, times)) in steps.into_iter().enumerate() {
-            let mut clock = PhaseClock::start();
-            let sum: Vec<f32> = self.readback.part(slot, 0)?;
-            let counts = self.readback.part::<PlenoxelCounts>(slot, 1)?[0];
-            clock.mark(Phase::Readback);
-            let mut host = meta.host;
-            host.add(&times.host);
-            host.add(&clock.times);
-            let stats = StepStats {
-                mse: sum[0] as f64 / (3 * meta.n.max(1)) as f64,
-                counts,
-                device_ns: times.total_ns(),
-                host,
-            };
-            self.done.push((stats, times));
-        }
-        Ok(())
+        self.queue.settle()
     }
 
     /// Record the step's plan on one batch and submit it without waiting (up to
@@ -324,59 +274,40 @@ impl VulkanPlenoxels {
     pub fn submit_step(&mut self, src: TrainRays, p: &StepParams) -> Result<()> {
         let n = src.len();
         let mut clock = PhaseClock::start();
-        let plan = PlenoxelPlan::step(p, self.meta.res, n, self.bg_learned)?;
-        self.steps.get_mut().before_step(&src)?;
-        if self.steps.get_mut().pending() == self.readback.slots() {
-            self.collect()?;
-        }
-        let slot = self.steps.get_mut().pending();
+        let plan = PlenoxelPlan::step(p, self.meta.res, n, self.queue.bg_learned)?;
+        let slot = self.queue.slot_for(&src)?;
         let mut b = self.record_plan(src, &plan, &mut clock)?;
         // The step's figures into its slot: the squared error summed on the device, the
         // counters copied.
-        let out = self.rays.out().address();
-        record_loss_sum(&mut b, out, self.readback.address(slot, 0), n, 1, 1)?;
+        let q = &self.queue;
+        let out = q.rays.out().address();
+        record_loss_sum(&mut b, out, q.readback.address(slot, 0), n, 1, 1)?;
         let stats = std::mem::offset_of!(StepHeader, stats) as u64;
-        self.readback.copy(&mut b, slot, 1, &self.step, stats);
-        clock.mark(Phase::Record);
-        let f = b.submit_async()?;
-        self.steps.get_mut().push(
-            f,
-            StepMeta {
-                n,
-                host: clock.times,
-            },
-        )
+        q.readback.copy(&mut b, slot, 1, &self.step, stats);
+        self.queue.submit(b, n, clock)
     }
 
     /// The figures of every step submitted since they were last taken, in order, with the
     /// device times of their dispatches (waits for the steps in flight).
     pub fn take_timed(&mut self) -> Result<Vec<(StepStats, BatchTimes)>> {
-        self.collect()?;
-        Ok(std::mem::take(&mut self.done))
+        self.queue.take_timed()
     }
 
     /// One training step on `src`'s rays, waited for: its figures.
     /// The figures of earlier steps not yet taken stay for `take_stats`.
     fn train_step(&mut self, src: TrainRays, p: &StepParams) -> Result<StepStats> {
         self.submit_step(src, p)?;
-        self.collect()?;
-        let last = self.done.pop();
-        Ok(last
-            .ok_or_else(|| anyhow::anyhow!("a submitted step left no figures"))?
-            .0)
+        Ok(self.queue.last()?.0)
     }
 
     /// The last sampled batch of `n` rays.
     pub fn sampled_batch(&self, n: usize) -> Result<SampledRays> {
-        self.settle()?;
-        let views = self.views.as_ref();
-        let views = views.ok_or_else(|| anyhow::anyhow!("no batch was sampled"))?;
-        views.download_batch(n)
+        self.queue.sampled_batch(n)
     }
 
     /// Per-ray squared error of the last training pass over `n` rays.
     fn ray_loss(&self, n: usize) -> Result<Vec<f32>> {
-        let mut loss: Vec<f32> = self.rays.out().download()?;
+        let mut loss: Vec<f32> = self.queue.rays.out().download()?;
         loss.truncate(n);
         Ok(loss)
     }
@@ -399,17 +330,11 @@ impl StageBackend<PlenoxelsStage> for VulkanPlenoxels {
         p: &StepParams,
     ) -> Result<()> {
         super::uniform_views(views)?;
-        let src = TrainRays::Sampled {
-            id: views.id(),
-            set: views.set(),
-            seed,
-            n,
-        };
-        self.submit_step(src, p)
+        self.submit_step(TrainRays::sampled(views, seed, n), p)
     }
 
     fn take_stats(&mut self) -> Result<Vec<StepStats>> {
-        Ok(self.take_timed()?.into_iter().map(|(s, _)| s).collect())
+        self.queue.take_figures()
     }
 
     fn grid(&self) -> Result<Grid> {
@@ -439,31 +364,23 @@ impl StageBackend<PlenoxelsStage> for VulkanPlenoxels {
                 "optimizer state does not match the grid"
             );
         }
-        // The figures of the steps so far stay (read now: the buffers they sit in go).
-        self.collect()?;
-        let bg = self.background()?;
         let mut fresh = VulkanPlenoxels::new(&self.gpu, grid)?;
         if let Some([sd, ss]) = state {
             fresh.state_density.write(&sd)?;
             fresh.state_sh.write(&ss)?;
         }
-        fresh.set_background(bg)?;
-        fresh.views = self.views.take();
-        fresh.done = std::mem::take(&mut self.done);
+        // The background, the views and the figures of the steps so far stay.
+        self.queue.carry_into(&mut fresh.queue)?;
         *self = fresh;
         Ok(())
     }
 
     fn background(&self) -> Result<Background> {
-        self.settle()?;
-        Ok(self.bg.download()?[0])
+        self.queue.background()
     }
 
     fn set_background(&mut self, bg: Background) -> Result<()> {
-        self.settle()?;
-        self.bg.write(&[bg])?;
-        self.bg_learned = bg.learned();
-        Ok(())
+        self.queue.set_background(bg)
     }
 }
 
@@ -475,7 +392,7 @@ impl Plenoxels for VulkanPlenoxels {
         let src = TrainRays::Host { rays, targets };
         self.record_plan(src, &plan, &mut PhaseClock::start())?
             .submit()?;
-        let mut bg: Background = self.bg.download()?[0];
+        let mut bg: Background = self.queue.bg.download()?[0];
         let g = Gradients {
             ray_loss: self.ray_loss(n)?,
             density: self.grad_density.download()?,
@@ -484,7 +401,7 @@ impl Plenoxels for VulkanPlenoxels {
             counts: self.read_stats()?,
         };
         bg.grad = [0.0; 3];
-        self.bg.write(&[bg])?;
+        self.queue.bg.write(&[bg])?;
         // Leave no gradient or touched flag behind for the next step.
         let mut b = self.gpu.batch()?;
         b.fill_zero(&self.grad_density);
@@ -514,7 +431,7 @@ impl Plenoxels for VulkanPlenoxels {
                 rays: ray_buf,
                 rgb: out_buf,
                 step: self.step.address(),
-                bg: self.bg.address(),
+                bg: self.queue.bg.address(),
                 res: self.meta.res,
                 scale: mp.scale,
                 offset: mp.offset,
@@ -525,7 +442,7 @@ impl Plenoxels for VulkanPlenoxels {
             n as u32,
         )?;
         b.submit()?;
-        let mut rgb: Vec<f32> = self.rays.out().download()?;
+        let mut rgb: Vec<f32> = self.queue.rays.out().download()?;
         rgb.truncate(3 * n);
         Ok((rgb, self.read_stats()?))
     }
@@ -565,5 +482,23 @@ impl Plenoxels for VulkanPlenoxels {
 
     fn shape(&self) -> ([u32; 3], usize) {
         (self.meta.res, self.allocated())
+    }
+}
+
+/// A step's figures from its slot: the squared-error sum, the counters.
+impl SlotFigures for StepStats {
+    fn read(readback: &Readback, slot: usize, n: usize) -> Result<Self> {
+        let sum: Vec<f32> = readback.part(slot, 0)?;
+        Ok(StepStats {
+            mse: sum[0] as f64 / (3 * n.max(1)) as f64,
+            counts: readback.part::<PlenoxelCounts>(slot, 1)?[0],
+            device_ns: 0.0,
+            host: Default::default(),
+        })
+    }
+
+    fn set_times(&mut self, device_ns: f64, host: StepTimes) {
+        self.device_ns = device_ns;
+        self.host = host;
     }
 }

@@ -29,7 +29,7 @@ use crate::cpu::TvChunk;
 use crate::data::TrainViews;
 use crate::gpu::{
     record_background_step, record_loss_sum, Batch, BatchTimes, Gpu, GpuBuffer, Phase, PhaseClock,
-    RayBuffers, Readback, StepMeta, StepsInFlight, TrainRays, TrainViewBuffers, STEP_SLOTS,
+    Readback, SlotFigures, StepQueue, StepTimes, TrainRays,
 };
 use crate::grid::row_slots;
 use crate::grid::state_bytes;
@@ -43,7 +43,6 @@ use crate::math::surface_blocks::{
 };
 use crate::stage::StageBackend;
 use anyhow::{ensure, Result};
-use std::cell::RefCell;
 
 /// Regulariser values a step writes: Lα, Ln.
 const REG_VALUES: usize = 2;
@@ -88,12 +87,12 @@ pub struct SurfaceGradients {
 
 /// Device-resident stage-2 state.
 pub struct VulkanSurface {
-    /// Steps submitted and not yet read. First, so that dropping the backend waits for them
-    /// before any buffer they use is freed. In a `RefCell` because reading state (`grid`, …)
-    /// must wait for them too.
-    steps: RefCell<StepsInFlight>,
-    /// Figures of completed steps not yet taken.
-    done: Vec<(SurfaceStepStats, BatchTimes)>,
+    /// The steps in flight, their figures, the ray buffers, the training views and the
+    /// background: per ray `RayLoss` (16 bytes) of output for training, `SurfOut` (20 bytes) for
+    /// rendering; per step a slot with the loss sums (squared error, entropy, consistency), the
+    /// regulariser values and the counters. First, so that dropping the backend waits for the
+    /// steps before any buffer they use is freed.
+    queue: StepQueue<SurfaceStepStats>,
     gpu: Gpu,
     /// The grid without its arrays (resolution, bounds, levels).
     meta: SurfaceGrid,
@@ -122,12 +121,6 @@ pub struct VulkanSurface {
     /// The params buffer of surface_fwd and surface_train (written in each training batch's
     /// command stream, before a render).
     params: GpuBuffer,
-    /// The background (`Background`): read by surface_fwd and surface_train, and, when learned,
-    /// its gradient accumulated and stepped on the device (`background_step`), so that a step
-    /// needs no host round trip for it.
-    bg: GpuBuffer,
-    /// Whether `bg` is learned (the host's copy of its flag: `background_step` is recorded then).
-    bg_learned: bool,
     /// The levels, zero-padded (the skip-structure kernels).
     levels: GpuBuffer,
     /// Counters: `TrainCounts` of surface_train, or `SurfCounts` of surface_fwd (no larger).
@@ -144,15 +137,6 @@ pub struct VulkanSurface {
     /// Regulariser values: Lα, Ln (floats); pairs skipped by Ln (u32).
     reg_loss: GpuBuffer,
     reg_skipped: GpuBuffer,
-    /// Per-batch rays, targets and per-ray output: `RayLoss` (16 bytes) for training, `SurfOut`
-    /// (20 bytes) for rendering.
-    rays: RayBuffers,
-    /// Per training step since the figures were last read, a slot: the loss sums (squared
-    /// error, entropy, consistency), the regulariser values, the counters.
-    readback: Readback,
-    /// The training views and sampled batches (uploaded by the first sampled step; kept by
-    /// `load`).
-    views: Option<TrainViewBuffers>,
 }
 
 /// Device addresses of a training batch: rays (6 floats each), targets (3 floats each),
@@ -193,8 +177,15 @@ impl VulkanSurface {
         let normal_prefix = NormalPrefix::new(&grid.links, &row_slot, grid.res);
         let axis_nbrs = axis_neighbours(&grid.links, &row_slot, grid.res);
         Ok(VulkanSurface {
-            steps: RefCell::default(),
-            done: Vec::new(),
+            queue: StepQueue::new(
+                gpu,
+                std::mem::size_of::<SurfOut>(),
+                &[
+                    4 * LOSS_SUM_FIELDS as u64,
+                    4 * REG_VALUES as u64,
+                    std::mem::size_of::<TrainCounts>() as u64,
+                ],
+            )?,
             gpu: gpu.clone(),
             rows: n,
             links: gpu.upload(&grid.links)?,
@@ -226,8 +217,6 @@ impl VulkanSurface {
             },
             args: gpu.zeros::<u32>(3)?,
             params: gpu.host_to_device::<SurfParams>(1)?,
-            bg: gpu.upload(&[Background::new([1.0; 3], false)])?,
-            bg_learned: false,
             levels: gpu.upload(&levels)?,
             stats: gpu.zeros::<TrainCounts>(1)?,
             axis_nbrs: upload_nonempty(gpu, &axis_nbrs)?,
@@ -237,17 +226,6 @@ impl VulkanSurface {
             normal_prefix,
             reg_loss: gpu.zeros::<f32>(REG_VALUES)?,
             reg_skipped: gpu.zeros::<u32>(1)?,
-            rays: RayBuffers::new(std::mem::size_of::<SurfOut>()),
-            readback: Readback::new(
-                gpu,
-                &[
-                    4 * LOSS_SUM_FIELDS as u64,
-                    4 * REG_VALUES as u64,
-                    std::mem::size_of::<TrainCounts>() as u64,
-                ],
-                STEP_SLOTS,
-            )?,
-            views: None,
             meta: SurfaceGrid {
                 links: Vec::new(),
                 delta: Vec::new(),
@@ -272,7 +250,7 @@ impl VulkanSurface {
             "rays must be 6 floats each, got {} floats",
             rays.len()
         );
-        let [rays, targets, out] = self.rays.upload(&self.gpu, rays, targets)?;
+        let [rays, targets, out] = self.queue.rays.upload(&self.gpu, rays, targets)?;
         clock.mark(Phase::Upload);
         let b = self.begin_batch()?;
         Ok((
@@ -312,13 +290,9 @@ impl VulkanSurface {
         match src {
             TrainRays::Host { rays, targets } => self.begin(rays, Some(targets), clock),
             TrainRays::Sampled { id, set, seed, n } => {
-                TrainViewBuffers::ensure(&mut self.views, &self.gpu, id, set, n)?;
-                let [_, _, out] = self.rays.reserve(&self.gpu, n)?;
-                clock.mark(Phase::Upload);
+                let out = self.queue.reserve_sampled(&self.gpu, id, set, n, clock)?;
                 let mut b = self.begin_batch()?;
-                let views = self.views.as_ref().expect("ensured");
-                let at = views.record_sample(&mut b, set, seed, n)?;
-                clock.mark(Phase::Sampling);
+                let at = self.queue.record_sample(&mut b, set, seed, n, clock)?;
                 Ok((
                     b,
                     RayIo {
@@ -392,7 +366,7 @@ impl VulkanSurface {
                     record_surface_rmsprop(b, &io, &self.step, &self.args, h)?;
                 }
                 SurfacePass::Background { lr, beta, eps } => {
-                    record_background_step(b, &self.bg, *lr, *beta, *eps)?
+                    record_background_step(b, &self.queue.bg, *lr, *beta, *eps)?
                 }
             }
         }
@@ -434,7 +408,7 @@ impl VulkanSurface {
                 out_rays: io.out,
                 stats: self.stats.address(),
                 step: self.step.address(),
-                bg: self.bg.address(),
+                bg: self.queue.bg.address(),
                 n: self.meta.res[0],
                 block_shift: SURF_BLOCK_SHIFT_VULKAN,
             },
@@ -514,7 +488,7 @@ impl VulkanSurface {
     }
 
     fn ray_loss(&self, n: usize) -> Result<Vec<RayLoss>> {
-        self.rays.out().download_range(0, n)
+        self.queue.rays.out().download_range(0, n)
     }
 
     /// The training pass alone (no regulariser, no update) on rays with optional per-ray
@@ -552,12 +526,12 @@ impl VulkanSurface {
             opacity: self.grad[1].download_range(0, rows)?,
             sh: self.grad[2].download_range(0, rows * SH_DIM)?,
             touched: self.step.download_range(STEP_FLAGS, rows)?,
-            background: self.bg.download::<Background>()?[0].grad,
+            background: self.queue.bg.download::<Background>()?[0].grad,
             counts: self.read_train_counts()?,
         };
         let mut bg = self.background()?;
         bg.grad = [0.0; 3];
-        self.bg.write(&[bg])?;
+        self.queue.bg.write(&[bg])?;
         // Leave no gradient or touched flag behind for the next step.
         let mut b = self.gpu.batch()?;
         for gb in &self.grad {
@@ -584,7 +558,7 @@ impl VulkanSurface {
     ) -> Result<Batch> {
         let n = src.len();
         let mut refresh = self.refresh;
-        let plan = SurfacePlan::step(p, &self.plan_grid(), n, self.bg_learned, &mut refresh)?;
+        let plan = SurfacePlan::step(p, &self.plan_grid(), n, self.queue.bg_learned, &mut refresh)?;
         let (mut b, io) = self.begin_train(src, clock)?;
         self.record_plan(&mut b, &plan, io, n)?;
         self.refresh = refresh;
@@ -593,34 +567,7 @@ impl VulkanSurface {
 
     /// Wait for the steps in flight (before the host reads, writes or frees what they use).
     fn settle(&self) -> Result<()> {
-        self.steps.borrow_mut().settle()
-    }
-
-    /// Read the figures of every step submitted since the last read into `done`.
-    fn collect(&mut self) -> Result<()> {
-        let steps = self.steps.get_mut().take()?;
-        for (slot, (meta, times)) in steps.into_iter().enumerate() {
-            let mut clock = PhaseClock::start();
-            let sums: Vec<f32> = self.readback.part(slot, 0)?;
-            let reg: Vec<f32> = self.readback.part(slot, 1)?;
-            let counts = self.readback.part::<TrainCounts>(slot, 2)?[0];
-            clock.mark(Phase::Readback);
-            let nf = meta.n.max(1) as f64;
-            let mut host = meta.host;
-            host.add(&times.host);
-            host.add(&clock.times);
-            let stats = SurfaceStepStats {
-                mse: sums[0] as f64 / (3.0 * nf),
-                entropy: sums[1] as f64 / nf,
-                consistency: sums[2] as f64 / nf,
-                reg_loss: reg.iter().map(|&x| x as f64).sum(),
-                counts,
-                device_ns: times.total_ns(),
-                host,
-            };
-            self.done.push((stats, times));
-        }
-        Ok(())
+        self.queue.settle()
     }
 
     /// Record one training step on `src`'s rays and submit it without waiting (up to
@@ -629,36 +576,24 @@ impl VulkanSurface {
     pub fn submit_step(&mut self, src: TrainRays, p: &SurfaceStepParams) -> Result<()> {
         let n = src.len();
         let mut clock = PhaseClock::start();
-        self.steps.get_mut().before_step(&src)?;
-        if self.steps.get_mut().pending() == self.readback.slots() {
-            self.collect()?;
-        }
-        let slot = self.steps.get_mut().pending();
+        let slot = self.queue.slot_for(&src)?;
         let mut b = self.record_step(src, p, &mut clock)?;
         // The step's figures into its slot: per-ray losses summed on the device, the
         // regulariser values and counters copied.
         let stride = (std::mem::size_of::<RayLoss>() / 4) as u32;
-        let out = self.rays.out().address();
-        record_loss_sum(&mut b, out, self.readback.address(slot, 0), n, stride, 3)?;
-        self.readback.copy(&mut b, slot, 1, &self.reg_loss, 0);
-        self.readback.copy(&mut b, slot, 2, &self.stats, 0);
-        clock.mark(Phase::Record);
-        let f = b.submit_async()?;
+        let q = &self.queue;
+        let out = q.rays.out().address();
+        record_loss_sum(&mut b, out, q.readback.address(slot, 0), n, stride, 3)?;
+        q.readback.copy(&mut b, slot, 1, &self.reg_loss, 0);
+        q.readback.copy(&mut b, slot, 2, &self.stats, 0);
         self.refresh.after_update(p.lr_delta, p.beta);
-        self.steps.get_mut().push(
-            f,
-            StepMeta {
-                n,
-                host: clock.times,
-            },
-        )
+        self.queue.submit(b, n, clock)
     }
 
     /// The figures of every step submitted since they were last taken, in order, with the
     /// device times of their dispatches (waits for the steps in flight).
     pub fn take_timed(&mut self) -> Result<Vec<(SurfaceStepStats, BatchTimes)>> {
-        self.collect()?;
-        Ok(std::mem::take(&mut self.done))
+        self.queue.take_timed()
     }
 
     /// One training step on `src`'s rays, waited for: its figures and the device times of its
@@ -669,9 +604,7 @@ impl VulkanSurface {
         p: &SurfaceStepParams,
     ) -> Result<(SurfaceStepStats, BatchTimes)> {
         self.submit_step(src, p)?;
-        self.collect()?;
-        let last = self.done.pop();
-        last.ok_or_else(|| anyhow::anyhow!("a submitted step left no figures"))
+        self.queue.last()
     }
 }
 
@@ -696,17 +629,11 @@ impl StageBackend<SurfaceStage> for VulkanSurface {
         n: usize,
         p: &SurfaceStepParams,
     ) -> Result<()> {
-        let src = TrainRays::Sampled {
-            id: views.id(),
-            set: views.set(),
-            seed,
-            n,
-        };
-        self.submit_step(src, p)
+        self.submit_step(TrainRays::sampled(views, seed, n), p)
     }
 
     fn take_stats(&mut self) -> Result<Vec<SurfaceStepStats>> {
-        Ok(self.take_timed()?.into_iter().map(|(s, _)| s).collect())
+        self.queue.take_figures()
     }
 
     fn grid(&self) -> Result<SurfaceGrid> {
@@ -744,32 +671,24 @@ impl StageBackend<SurfaceStage> for VulkanSurface {
                 "optimizer state does not match the surface grid"
             );
         }
-        // The figures of the steps so far stay (read now: the buffers they sit in go).
-        self.collect()?;
-        let bg = self.background()?;
         let mut fresh = VulkanSurface::new(&self.gpu, grid)?;
         if let Some(s) = state {
             for (buf, v) in fresh.state.iter().zip(&s) {
                 buf.write(v)?;
             }
         }
-        fresh.set_background(bg)?;
-        fresh.views = self.views.take();
-        fresh.done = std::mem::take(&mut self.done);
+        // The background, the views and the figures of the steps so far stay.
+        self.queue.carry_into(&mut fresh.queue)?;
         *self = fresh;
         Ok(())
     }
 
     fn background(&self) -> Result<Background> {
-        self.settle()?;
-        Ok(self.bg.download()?[0])
+        self.queue.background()
     }
 
     fn set_background(&mut self, bg: Background) -> Result<()> {
-        self.settle()?;
-        self.bg.write(&[bg])?;
-        self.bg_learned = bg.learned();
-        Ok(())
+        self.queue.set_background(bg)
     }
 }
 
@@ -804,7 +723,7 @@ impl SurfaceBackend for VulkanSurface {
                 rays: io.rays,
                 out_rays: io.out,
                 stats: self.stats.address(),
-                bg: self.bg.address(),
+                bg: self.queue.bg.address(),
                 n: self.meta.res[0],
                 blocks: self.skip_address(),
                 block_skip: 1,
@@ -814,8 +733,31 @@ impl SurfaceBackend for VulkanSurface {
             n as u32,
         )?;
         b.submit()?;
-        let out: Vec<SurfOut> = self.rays.out().download_range(0, n)?;
+        let out: Vec<SurfOut> = self.queue.rays.out().download_range(0, n)?;
         let counts = self.stats.download_range::<SurfCounts>(0, 1)?[0];
         Ok((out.iter().flat_map(|o| o.rgb).collect(), counts))
+    }
+}
+
+/// A step's figures from its slot: the loss sums, the regulariser values, the counters.
+impl SlotFigures for SurfaceStepStats {
+    fn read(readback: &Readback, slot: usize, n: usize) -> Result<Self> {
+        let sums: Vec<f32> = readback.part(slot, 0)?;
+        let reg: Vec<f32> = readback.part(slot, 1)?;
+        let nf = n.max(1) as f64;
+        Ok(SurfaceStepStats {
+            mse: sums[0] as f64 / (3.0 * nf),
+            entropy: sums[1] as f64 / nf,
+            consistency: sums[2] as f64 / nf,
+            reg_loss: reg.iter().map(|&x| x as f64).sum(),
+            counts: readback.part::<TrainCounts>(slot, 2)?[0],
+            device_ns: 0.0,
+            host: Default::default(),
+        })
+    }
+
+    fn set_times(&mut self, device_ns: f64, host: StepTimes) {
+        self.device_ns = device_ns;
+        self.host = host;
     }
 }

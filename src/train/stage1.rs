@@ -5,7 +5,7 @@
 use super::config::Stage1Config;
 use super::progress::Progress;
 use super::render::{render_split, RenderedSplit};
-use super::steps::{self, LoopReport, LoopSchedule, StageSteps};
+use super::steps::{self, loop_schedule, LoopReport, LoopSchedule, StageSteps};
 use crate::abi::buffers::PlenoxelPerRay;
 use crate::checkpoint::BackgroundRecord;
 use crate::data::{Dataset, Split, TrainViews};
@@ -103,14 +103,7 @@ impl<'b> StageSteps<PlenoxelsStage, dyn Plenoxels + 'b> for PlenoxelsSteps<'_> {
     }
 
     fn schedule(&self) -> LoopSchedule {
-        let c = self.cfg;
-        LoopSchedule {
-            iters: c.iters,
-            batch: c.batch,
-            seed: c.seed,
-            checkpoint_every: c.checkpoint_every,
-            checkpoint_min_seconds: c.checkpoint_min_seconds,
-        }
+        loop_schedule!(self.cfg)
     }
 
     fn views<'d>(&self, data: &'d Dataset) -> Result<TrainViews<'d>> {

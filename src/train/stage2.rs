@@ -4,7 +4,7 @@
 
 use super::progress::Progress;
 use super::render::{render_split_with, RenderedSplit};
-use super::steps::{self, LoopReport, LoopSchedule, StageSteps};
+use super::steps::{self, loop_schedule, LoopReport, LoopSchedule, StageSteps};
 use super::surface_config::SurfaceConfig;
 use crate::abi::buffers::TrainPerRay;
 use crate::cpu::surface_reg::{delta_tv_chunk, opacity_tv_chunk, OpacityChunk};
@@ -97,14 +97,7 @@ impl<'b> StageSteps<SurfaceStage, dyn SurfaceBackend + 'b> for SurfaceSteps<'_> 
     }
 
     fn schedule(&self) -> LoopSchedule {
-        let c = self.cfg;
-        LoopSchedule {
-            iters: c.iters,
-            batch: c.batch,
-            seed: c.seed,
-            checkpoint_every: c.checkpoint_every,
-            checkpoint_min_seconds: c.checkpoint_min_seconds,
-        }
+        loop_schedule!(self.cfg)
     }
 
     fn views<'d>(&self, data: &'d Dataset) -> Result<TrainViews<'d>> {

@@ -38,6 +38,20 @@ pub struct LoopSchedule {
     pub checkpoint_min_seconds: f32,
 }
 
+/// The [`LoopSchedule`] of a stage configuration: its fields of the same names.
+macro_rules! loop_schedule {
+    ($c:expr) => {
+        $crate::train::steps::LoopSchedule {
+            iters: $c.iters,
+            batch: $c.batch,
+            seed: $c.seed,
+            checkpoint_every: $c.checkpoint_every,
+            checkpoint_min_seconds: $c.checkpoint_min_seconds,
+        }
+    };
+}
+pub(crate) use loop_schedule;
+
 /// What a stage does around the shared loop, on backends of type `B`.
 pub trait StageSteps<S: Stage, B: StageBackend<S> + ?Sized> {
     /// The configuration each checkpoint records.
