@@ -138,6 +138,9 @@ pub enum Trained<M> {
     },
 }
 
+/// A run restored from its checkpoint: the backend, the configuration and the next step.
+pub(super) type Resumed<B, C> = (Box<B>, C, u32);
+
 /// Resumes the stage-`S` run in `opts.out` from its checkpoint: `make` builds the backend for
 /// the checkpoint's grid, which is then restored (optimiser state, background, step); the
 /// configuration must pass `check_flags` and the background match `--background`. `iters` (when
@@ -150,7 +153,7 @@ pub(super) fn resume<S, C, B, M>(
     total: impl FnOnce(&mut C) -> &mut u32,
     make: impl FnOnce(S::Grid) -> Result<Box<B>>,
     check_flags: impl FnOnce(&C) -> Result<()>,
-) -> Result<Result<(Box<B>, C, u32), Trained<M>>>
+) -> Result<Result<Resumed<B, C>, Trained<M>>>
 where
     S: Stage,
     C: Recorded,
