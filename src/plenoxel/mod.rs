@@ -8,11 +8,11 @@ mod vulkan;
 pub use cpu::CpuPlenoxels;
 pub use vulkan::VulkanPlenoxels;
 
-use crate::cpu::background::Background;
-use crate::cpu::plenoxel::MarchParams;
+use crate::abi::buffers::Background;
 use crate::data::TrainViews;
 use crate::grid::checkpoint::state_bytes;
 use crate::grid::{Grid, SH_DIM};
+use crate::math::plenoxel::MarchParams;
 use crate::math::plenoxel::PlenoxelCounts;
 use anyhow::Result;
 

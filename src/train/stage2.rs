@@ -9,7 +9,7 @@ use super::render::{render_split_with, RenderedSplit};
 use super::stage1::step_rng;
 use super::surface_config::SurfaceConfig;
 use crate::abi::buffers::TrainPerRay;
-use crate::cpu::surface_reg::{delta_tv_chunk, opacity_tv_chunk, OpacityChunk};
+use crate::abi::regularisers::{delta_tv_chunk, opacity_tv_chunk, OpacityChunk};
 use crate::data::{BackgroundMode, Dataset, TrainViews};
 use crate::grid::checkpoint;
 use crate::grid::surface::SurfaceGrid;
