@@ -28,35 +28,18 @@ mod consts;
 
 use std::collections::{HashMap, HashSet};
 use std::fmt::Write as _;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 fn main() {
     let root = PathBuf::from(std::env::var("CARGO_MANIFEST_DIR").unwrap());
     let glsl_dir = root.join("glsl");
     let lib_dir = glsl_dir.join("lib");
-    println!("cargo:rerun-if-changed=glsl");
-    println!("cargo:rerun-if-changed=glsl/lib");
-    for f in ["build/abi.rs", "src/abi/consts.rs", "src/abi/buffers.rs"] {
-        println!("cargo:rerun-if-changed={f}");
-    }
+    let kernels = kernel_sources(&glsl_dir, &lib_dir);
     let layouts = buffers::layouts();
     let abi_header = abi::header(consts::glsl, &layouts);
     let out_dir = PathBuf::from(std::env::var("OUT_DIR").unwrap());
     std::fs::write(out_dir.join("abi.glsl"), &abi_header).unwrap();
     let mut used_layouts = HashSet::new();
-
-    let mut kernels: Vec<PathBuf> = std::fs::read_dir(&glsl_dir)
-        .expect("glsl/ directory")
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.extension().is_some_and(|x| x == "comp"))
-        .collect();
-    kernels.sort();
-    for entry in std::fs::read_dir(&lib_dir)
-        .expect("glsl/lib/ directory")
-        .flatten()
-    {
-        println!("cargo:rerun-if-changed={}", entry.path().display());
-    }
 
     let compiler = shaderc::Compiler::new().expect("shaderc compiler");
     let mut out = String::new();
@@ -66,55 +49,11 @@ fn main() {
     for path in &kernels {
         println!("cargo:rerun-if-changed={}", path.display());
         let name = path.file_stem().unwrap().to_string_lossy().to_string();
-        let source = std::fs::read_to_string(path).expect("read kernel source");
         let rel = format!("glsl/{name}.comp");
-        let compile = |level: shaderc::OptimizationLevel| {
-            let mut opts = shaderc::CompileOptions::new().unwrap();
-            opts.set_target_env(
-                shaderc::TargetEnv::Vulkan,
-                shaderc::EnvVersion::Vulkan1_2 as u32,
-            );
-            opts.set_target_spirv(shaderc::SpirvVersion::V1_5);
-            opts.set_optimization_level(level);
-            opts.set_warnings_as_errors();
-            let lib_dir = lib_dir.clone();
-            let abi_header = abi_header.clone();
-            opts.set_include_callback(move |requested, _ty, _from, _depth| {
-                if requested == "abi.glsl" {
-                    return Ok(shaderc::ResolvedInclude {
-                        resolved_name: "abi.glsl (generated from src/abi/)".into(),
-                        content: abi_header.clone(),
-                    });
-                }
-                let p = lib_dir.join(requested);
-                std::fs::read_to_string(&p)
-                    .map(|content| shaderc::ResolvedInclude {
-                        resolved_name: format!("glsl/lib/{requested}"),
-                        content,
-                    })
-                    .map_err(|e| format!("cannot include {}: {e}", p.display()))
-            });
-            compiler.compile_into_spirv(
-                &source,
-                shaderc::ShaderKind::Compute,
-                &rel,
-                "main",
-                Some(&opts),
-            )
-        };
-        let optimised = match compile(shaderc::OptimizationLevel::Performance) {
-            Ok(a) => a,
+        let (optimised, info) = match compile_kernel(&compiler, &lib_dir, &abi_header, path, &rel) {
+            Ok(k) => k,
             Err(e) => {
-                failures.push(format!("{e}"));
-                continue;
-            }
-        };
-        // Reflection reads names, which the optimiser may strip: reflect an unoptimised build.
-        let plain = compile(shaderc::OptimizationLevel::Zero).expect("unoptimised compile");
-        let info = match reflect(plain.as_binary()) {
-            Ok(i) => i,
-            Err(e) => {
-                failures.push(format!("{rel}: {e}"));
+                failures.push(e);
                 continue;
             }
         };
@@ -127,7 +66,7 @@ fn main() {
                 Err(e) => failures.push(format!("{rel}: struct {}: {e}", layout.name)),
             }
         }
-        emit_kernel(&mut out, &name, optimised.as_binary(), &info);
+        emit_kernel(&mut out, &name, &optimised, &info);
         names.push(name);
     }
     for layout in &layouts {
@@ -147,12 +86,112 @@ fn main() {
             failures.len()
         );
     }
+    emit_lists(&mut out, &names);
+    std::fs::write(out_dir.join("kernels.rs"), out).unwrap();
+}
+
+/// The kernels `glsl/*.comp` in file-name order, after telling cargo to rerun on any change
+/// to them, to `glsl/lib/` or to the ABI sources.
+fn kernel_sources(glsl_dir: &Path, lib_dir: &Path) -> Vec<PathBuf> {
+    println!("cargo:rerun-if-changed=glsl");
+    println!("cargo:rerun-if-changed=glsl/lib");
+    for f in ["build/abi.rs", "src/abi/consts.rs", "src/abi/buffers.rs"] {
+        println!("cargo:rerun-if-changed={f}");
+    }
+    let mut kernels: Vec<PathBuf> = std::fs::read_dir(glsl_dir)
+        .expect("glsl/ directory")
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "comp"))
+        .collect();
+    kernels.sort();
+    for entry in std::fs::read_dir(lib_dir)
+        .expect("glsl/lib/ directory")
+        .flatten()
+    {
+        println!("cargo:rerun-if-changed={}", entry.path().display());
+    }
+    kernels
+}
+
+/// Kernel `path` (named `rel` in messages) compiled to optimised SPIR-V, with the reflection of
+/// an unoptimised build; the compiler's or the reflection's error text otherwise.
+fn compile_kernel(
+    compiler: &shaderc::Compiler,
+    lib_dir: &Path,
+    abi_header: &str,
+    path: &Path,
+    rel: &str,
+) -> Result<(Vec<u32>, Reflection), String> {
+    let source = std::fs::read_to_string(path).expect("read kernel source");
+    let compile = |level: shaderc::OptimizationLevel| {
+        let mut opts = shaderc::CompileOptions::new().unwrap();
+        opts.set_target_env(
+            shaderc::TargetEnv::Vulkan,
+            shaderc::EnvVersion::Vulkan1_2 as u32,
+        );
+        opts.set_target_spirv(shaderc::SpirvVersion::V1_5);
+        opts.set_optimization_level(level);
+        opts.set_warnings_as_errors();
+        let lib_dir = lib_dir.to_path_buf();
+        let abi_header = abi_header.to_string();
+        opts.set_include_callback(move |requested, _ty, _from, _depth| {
+            if requested == "abi.glsl" {
+                return Ok(shaderc::ResolvedInclude {
+                    resolved_name: "abi.glsl (generated from src/abi/)".into(),
+                    content: abi_header.clone(),
+                });
+            }
+            let p = lib_dir.join(requested);
+            std::fs::read_to_string(&p)
+                .map(|content| shaderc::ResolvedInclude {
+                    resolved_name: format!("glsl/lib/{requested}"),
+                    content,
+                })
+                .map_err(|e| format!("cannot include {}: {e}", p.display()))
+        });
+        compiler.compile_into_spirv(
+            &source,
+            shaderc::ShaderKind::Compute,
+            rel,
+            "main",
+            Some(&opts),
+        )
+    };
+    let optimised = compile(shaderc::OptimizationLevel::Performance).map_err(|e| format!("{e}"))?;
+    // Reflection reads names, which the optimiser may strip: reflect an unoptimised build.
+    let plain = compile(shaderc::OptimizationLevel::Zero).expect("unoptimised compile");
+    let info = reflect(plain.as_binary()).map_err(|e| format!("{rel}: {e}"))?;
+    Ok((optimised.as_binary().to_vec(), info))
+}
+
+/// The lists over every kernel: `ALL` (their table entries) and the enum `Kernel` (one variant
+/// per kernel), in file-name order. `check::registry` matches on `Kernel` exhaustively, so a
+/// kernel without a registry entry (CPU twin and parity rows) fails to compile.
+fn emit_lists(out: &mut String, names: &[String]) {
     out.push_str("\n/// Every kernel, in file-name order.\npub const ALL: &[&KernelInfo] = &[\n");
-    for n in &names {
+    for n in names {
         writeln!(out, "    &{n}::INFO,").unwrap();
     }
     out.push_str("];\n");
-    std::fs::write(out_dir.join("kernels.rs"), out).unwrap();
+    out.push_str(
+        "\n/// One variant per kernel `glsl/<name>.comp`, named as the file.\n\
+         #[allow(non_camel_case_types)]\n\
+         #[derive(Clone, Copy, Debug, PartialEq, Eq)]\npub enum Kernel {\n",
+    );
+    for n in names {
+        writeln!(out, "    {n},").unwrap();
+    }
+    out.push_str("}\n\nimpl Kernel {\n    /// Every kernel, in file-name order.\n");
+    writeln!(out, "    pub const ALL: [Kernel; {}] = [", names.len()).unwrap();
+    for n in names {
+        writeln!(out, "        Kernel::{n},").unwrap();
+    }
+    out.push_str("    ];\n\n    /// The kernel's table entry.\n");
+    out.push_str("    pub fn info(self) -> &'static KernelInfo {\n        match self {\n");
+    for n in names {
+        writeln!(out, "            Kernel::{n} => &{n}::INFO,").unwrap();
+    }
+    out.push_str("        }\n    }\n}\n");
 }
 
 struct Member {
@@ -230,9 +269,23 @@ fn check_layout(info: &Reflection, layout: &abi::Layout) -> Result<bool, String>
     Ok(used)
 }
 
-/// Minimal SPIR-V reader: local size, the push-constant block's members, descriptor use, and the
-/// float-atomic capability. Enough for the table; anything unexpected is a build error.
-fn reflect(words: &[u32]) -> Result<Reflection, String> {
+/// What [`reflect`] reads from a SPIR-V module's instructions, by result id.
+struct Module {
+    local_size: Option<[u32; 3]>,
+    names: HashMap<u32, String>,
+    member_names: HashMap<(u32, u32), String>,
+    runtime_arrays: HashMap<u32, u32>,
+    strides: HashMap<u32, u32>,
+    member_offsets: HashMap<(u32, u32), u32>,
+    types: HashMap<u32, RustTy>,
+    structs: HashMap<u32, Vec<u32>>,
+    push_struct: Option<u32>,
+    float_atomics: bool,
+    bindings: u32,
+}
+
+/// One pass over the instructions of `words`, keeping what the table needs.
+fn read_module(words: &[u32]) -> Result<Module, String> {
     const OP_NAME: u32 = 5;
     const OP_MEMBER_NAME: u32 = 6;
     const OP_EXECUTION_MODE: u32 = 16;
@@ -337,40 +390,60 @@ fn reflect(words: &[u32]) -> Result<Reflection, String> {
         }
         i += count;
     }
-    if bindings > 0 {
+    Ok(Module {
+        local_size,
+        names,
+        member_names,
+        runtime_arrays,
+        strides,
+        member_offsets,
+        types,
+        structs,
+        push_struct,
+        float_atomics,
+        bindings,
+    })
+}
+
+/// Minimal SPIR-V reader: local size, the push-constant block's members, descriptor use, and the
+/// float-atomic capability. Enough for the table; anything unexpected is a build error.
+fn reflect(words: &[u32]) -> Result<Reflection, String> {
+    let m = read_module(words)?;
+    if m.bindings > 0 {
         return Err(
             "declares descriptor bindings; pass buffers by device address in the push-constant \
              block instead (see build.rs)"
                 .into(),
         );
     }
-    let local_size = local_size.ok_or("no local_size layout")?;
+    let local_size = m.local_size.ok_or("no local_size layout")?;
     let mut members = Vec::new();
-    if let Some(sid) = push_struct {
-        for (k, tid) in structs[&sid].iter().enumerate() {
+    if let Some(sid) = m.push_struct {
+        for (k, tid) in m.structs[&sid].iter().enumerate() {
             let k = k as u32;
-            let ty = *types.get(tid).ok_or_else(|| {
+            let ty = *m.types.get(tid).ok_or_else(|| {
                 format!("push-constant member {k} has a type the table does not support")
             })?;
             members.push(Member {
-                name: member_names
+                name: m
+                    .member_names
                     .get(&(sid, k))
                     .cloned()
                     .unwrap_or_else(|| format!("m{k}")),
-                offset: member_offsets[&(sid, k)],
+                offset: m.member_offsets[&(sid, k)],
                 ty,
             });
         }
     }
     let mut laid_out = Vec::new();
-    for (&sid, fields) in &structs {
-        let Some(name) = names.get(&sid) else {
+    for (&sid, fields) in &m.structs {
+        let Some(name) = m.names.get(&sid) else {
             continue;
         };
         let offsets: Option<Vec<(String, u32)>> = (0..fields.len() as u32)
             .map(|k| {
-                let offset = *member_offsets.get(&(sid, k))?;
-                let member = member_names.get(&(sid, k)).cloned().unwrap_or_default();
+                let offset = *m.member_offsets.get(&(sid, k))?;
+                let member = m.member_names.get(&(sid, k)).cloned().unwrap_or_default();
                 Some((member, offset))
             })
             .collect();
@@ -378,10 +451,11 @@ fn reflect(words: &[u32]) -> Result<Reflection, String> {
             laid_out.push(StructLayout {
                 name: name.clone(),
                 members,
-                strides: runtime_arrays
+                strides: m
+                    .runtime_arrays
                     .iter()
                     .filter(|&(_, &elem)| elem == sid)
-                    .filter_map(|(arr, _)| strides.get(arr).copied())
+                    .filter_map(|(arr, _)| m.strides.get(arr).copied())
                     .collect(),
             });
         }
@@ -389,7 +463,7 @@ fn reflect(words: &[u32]) -> Result<Reflection, String> {
     Ok(Reflection {
         local_size,
         members,
-        float_atomics,
+        float_atomics: m.float_atomics,
         structs: laid_out,
     })
 }

@@ -6,7 +6,7 @@
 // gradient step): black and white backdrops are reachable exactly, which a sigmoid
 // parametrisation would only approach with a vanishing gradient.
 // Thread mapping: one invocation per channel (3).
-// CPU twin: cpu::background::step.
+// CPU twin: `cpu::background_step::background_step`.
 #include "common.glsl"
 layout(local_size_x = 4) in;
 

@@ -3,7 +3,7 @@
 // Thread mapping: one invocation per case (flat 1-D index over a 2-D grid).
 // Inputs: `cases`, 16 floats per case: corners[8] (paper order, index 4a + 2b + c), o'[3], d[3],
 // L, tau. Outputs: `count[i]` (0..3), `s[3i + k]` and `rising[3i + k]` (0/1) for k < count[i];
-// unused slots are written as 0. CPU twin: `cpu::cubic_solve` (src/cpu/cubic_solve.rs).
+// unused slots are written as 0. CPU twin: `cpu::cubic_solve::cubic_solve`.
 #include "common.glsl"
 #include "cubic.glsl"
 layout(local_size_x = 64) in;

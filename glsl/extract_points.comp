@@ -11,7 +11,7 @@
 // found, so the host can retry with a larger buffer.
 // Inputs: cells (links slot of corner 000), links (X·Y·Z, < 0 empty), field and opacity (per
 // allocated vertex), levels[n_levels]. Output: points, counter.
-// CPU twin: `cpu::extract_points::extract_points` (src/cpu/extract_points.rs).
+// CPU twin: `cpu::extract_points::extract_points`.
 #include "common.glsl"
 #include "cubic.glsl"
 #include "trilerp.glsl"

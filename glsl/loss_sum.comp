@@ -7,7 +7,7 @@
 // t + LOSS_SUM_THREADS, t + 2·LOSS_SUM_THREADS, … in that order, then a tree over shared memory
 // (s[t] += s[t + h] for h = LOSS_SUM_THREADS/2, …, 1) gives the totals: a fixed order, which
 // the twin follows, so the sums agree bit for bit. A NaN or Inf in any record reaches the sum.
-// CPU twin: cpu::loss_sum.
+// CPU twin: `cpu::loss_sum`.
 #include "common.glsl"
 layout(local_size_x = LOSS_SUM_THREADS) in;
 

@@ -3,7 +3,7 @@
 // Thread mapping: one invocation per block of 8³ cells (flat index over occ_dims(res)).
 // Inputs: links, density, res. Output: occ[block] = 1 when any vertex of the block's cells
 // (vertex range [8b, min(8b + 8, N − 1)] per axis) is allocated with σ > SIGMA_EPS/2, else 0.
-// CPU twin: cpu::plenoxel::occupancy.
+// CPU twin: `cpu::occupancy::occupancy`.
 #include "common.glsl"
 layout(local_size_x = 64) in;
 

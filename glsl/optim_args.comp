@@ -2,7 +2,7 @@
 // optim_args — turns the touched-vertex count of a step into the indirect dispatch arguments of
 // rmsprop_sparse (64 invocations per workgroup; rows of DISPATCH_ROW_GROUPS as in dispatch_1d).
 // Thread mapping: a single invocation. Input: the step buffer's touched count (touch.glsl).
-// Output: args[0..3] = (gx, gy, 1). CPU twin: cpu::optim_args.
+// Output: args[0..3] = (gx, gy, 1). CPU twin: `cpu::optim_args::optim_args`.
 #include "common.glsl"
 layout(local_size_x = 1) in;
 

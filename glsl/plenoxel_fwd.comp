@@ -6,7 +6,7 @@
 // colour composited behind: C = Σ w_i c_i + T·bg.rgb).
 // Outputs: rgb (3 floats per ray); step-buffer counters += samples shaded,
 // samples evaluated at σ ≤ 1e-8, samples skipped by the occupancy volume (subgroup-reduced).
-// CPU twin: cpu::plenoxel::render.
+// CPU twin: `cpu::plenoxel_fwd::render`.
 #include "common.glsl"
 layout(local_size_x = 64) in;
 

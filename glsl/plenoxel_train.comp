@@ -10,7 +10,7 @@
 // offset, stop threshold, grad_scale), res, bg (Background: C = Σ w_i c_i + T·bg.rgb).
 // Outputs: grad_density, grad_sh (+= by float atomics; each vertex that gets one is touched), ray_loss[r] = Σ_channels (C − target)²,
 // when bg.learn ≠ 0, bg.grad += Σ_rays dL/dC·T (subgroup-reduced float atomics),
-// sample counters as in plenoxel_fwd, touched vertices listed in the step buffer. CPU twin: cpu::plenoxel::train.
+// sample counters as in plenoxel_fwd, touched vertices listed in the step buffer. CPU twin: `cpu::plenoxel_train::train`.
 #extension GL_EXT_shader_atomic_float : require
 #include "common.glsl"
 #include "background.glsl"

@@ -5,7 +5,7 @@
 // Thread mapping: one invocation per ray. Inputs: grid, occupancy, rays (6 floats), scale/offset.
 // Output: max_weight per allocated vertex, as float bits under uint atomicMax (weights are ≥ 0, so
 // the bit patterns order like the floats; no float-atomic feature needed).
-// CPU twin: cpu::plenoxel::max_weights.
+// CPU twin: `cpu::plenoxel_weights::max_weights`.
 #include "common.glsl"
 layout(local_size_x = 64) in;
 

@@ -7,7 +7,7 @@
 // optim_args). Inputs/outputs: density, sh and their gradients and RMS states; the step buffer
 // (step.glsl) gives the list and has each visited flag cleared. SH through RMSPROP_UPDATE_SH27
 // (64-bit pairs).
-// CPU twin: cpu::rmsprop_sparse.
+// CPU twin: `cpu::rmsprop_sparse`.
 #include "common.glsl"
 layout(local_size_x = 64) in;
 

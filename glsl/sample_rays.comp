@@ -1,11 +1,11 @@
 #version 460
-// sample_rays — draws a batch of training rays on the device (CPU twin: cpu::sample_rays), in
+// sample_rays — draws a batch of training rays on the device (CPU twin: `cpu::sample_rays::sample_rays`), in
 // three dispatches (gpu::TrainViewBuffers::record_sample): pass 0 of this kernel, then
 // sample_rays_sort, then pass 1 of this kernel; the parity row checks the whole draw.
 // Ray i of the batch hashes h = splitmix64(seed + (i + 1)·γ) (a counter-based draw: no state
 // between batches) and picks pixel h mod n_pixels over all pixels of the split (uniform with
 // replacement) or, when the high 32 bits of h are below focus_threshold, the focus pixel
-// focus[h mod n_focus] (cpu::sample_rays::Focus: a share of the batch from the pixels the object
+// focus[h mod n_focus] (abi::rays::Focus: a share of the batch from the pixels the object
 // covers), as the
 // key (view << 2·key_bits) | morton(x, y), which determines the pixel. Each run of
 // SAMPLE_SORT_RAYS rays is sorted by key (the last run may be shorter), so within a run the rays

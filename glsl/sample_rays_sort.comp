@@ -1,7 +1,7 @@
 #version 460
 // sample_rays_sort — sorts a batch of sample_rays' keys ascending in runs of SAMPLE_SORT_RAYS
 // keys (the last run may be shorter), the middle one of the three dispatches that draw a batch
-// (gpu::TrainViewBuffers::record_sample; CPU twin: cpu::sample_rays::sort_runs).
+// (gpu::TrainViewBuffers::record_sample; CPU twin: `cpu::sample_rays_sort`).
 // Thread mapping: one workgroup of SIDE = SAMPLE_SORT_SIDE invocations per run, each holding SIDE
 // of the run's keys in registers (past the batch: all-ones padding, which sorts last), sorted by
 // a bitonic network whose compare-exchanges all run between registers of one invocation: in

@@ -10,7 +10,7 @@
 // Thread mapping: one invocation per block, flat index (bx·nb + by)·nb + bz.
 // Inputs: blocks (the nb³ level masks of surface_blocks), scratch (2·nb³ u32), nb, pass.
 // Output: scratch (passes 0, 1), blocks (pass 2: masks unchanged, radii or-ed in).
-// CPU twin: math::surface_blocks::surf_radius_value, surf_block_radii.
+// CPU twin: `cpu::surface_block_radius`.
 #include "common.glsl"
 #include "surface_blocks.glsl"
 layout(local_size_x = 64) in;

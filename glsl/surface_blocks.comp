@@ -10,7 +10,7 @@
 // bmin/bmax over the allocated vertices of the block's vertex range [Bb, min(Bb+B, n−1)]³ (0 if
 // none); the empty radii are added by surface_block_radius.
 // min/max are exact, so the scan order does not matter (signed zeros aside, which compare alike).
-// CPU twin: cpu::surface_blocks::build_blocks (src/cpu/surface_blocks.rs).
+// CPU twin: `cpu::surface_blocks::build_blocks`.
 #include "common.glsl"
 #include "surface_blocks.glsl"
 layout(local_size_x = 64) in;

@@ -8,18 +8,18 @@
 //   differences of δ from v to its +x, +y, +z neighbours (0 where there is none); the other
 //   rows' q are left as they are and never read;
 // - stage 1, i < window, v = row i from start (the chunk and the rows its vertices' forward
-//   neighbours can be, cpu::surface_delta_tv::forward_reach): grad[v] += scale·(Σ_a q[v − e_a][a]
+//   neighbours can be, abi::regularisers::forward_reach): grad[v] += scale·(Σ_a q[v − e_a][a]
 //   − (q[v].x + q[v].y + q[v].z)), each sum over its terms whose vertex (v − e_a, or v) is in the
 //   chunk (plain read-modify-write of grad: one owner per element).
 // That is ∂(scale·Σ_{v in chunk} √(|d_v|² + 1e-9))/∂δ (scale = λ·κ/count,
-// cpu::surface_reg::delta_tv_chunk). Nothing is flagged touched: surface_rmsprop's range pass
+// abi::regularisers::delta_tv_chunk). Nothing is flagged touched: surface_rmsprop's range pass
 // updates δ on every row of the window.
 // Thread mapping: one invocation per chunk row (stage 0) or window row (stage 1).
 // Inputs: nbr, delta, q (stage 1), rows, stage, start (< rows), count, window (≤ rows), scale.
 // Outputs: q (stage 0, Q_FLOATS = 4 floats per row: x, y, z, 0), grad (stage 1).
 // The table (6 entries per row) and q (4 floats per row) are read and written as aligned 64-bit
 // words where a pair is wanted (lavapipe moves memory one component at a time).
-// CPU twin: cpu::surface_delta_tv.
+// CPU twin: `cpu::surface_delta_tv::delta_tv`.
 #include "common.glsl"
 layout(local_size_x = 64) in;
 

@@ -25,7 +25,7 @@
 // Outputs: out[r] = (rgb, transmittance, hits composited); stats (SurfCounts) += cells read (live
 // cells: links read), cubic solves, solves skipped by min/max or segment culling, hits composited,
 // hits cut by truncation, blocks skipped (subgroup-reduced atomics).
-// CPU twin: cpu::surface_fwd::render (src/cpu/surface_fwd.rs).
+// CPU twin: `cpu::surface_fwd::render`.
 #include "common.glsl"
 // Every hit of a cell: a is not bounded here (surface.glsl).
 #define SURF_CELL_KEEP 16u

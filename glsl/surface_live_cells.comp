@@ -7,7 +7,7 @@
 // Thread mapping: one invocation per bit word w (cells 32w … 32w + 31, x-major slots).
 // Inputs: complete (the static complete-cell bits, same layout: a word without any is skipped
 // unread), links (n³ i32), delta (per allocated vertex), levels[n_levels ≤ 8], n, margin ≥ 0.
-// Output: live[w]. CPU twin: cpu::surface_blocks::build_blocks (its first words).
+// Output: live[w]. CPU twin: `cpu::surface_live_cells::surface_live_cells`.
 #include "common.glsl"
 #include "surface_blocks.glsl"
 layout(local_size_x = 64) in;

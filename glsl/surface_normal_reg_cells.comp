@@ -15,7 +15,7 @@
 // cells_work); one owner per written element.
 // Inputs: cell_rows, n_cells, first, work, nbr (rows of the corners, k), delta.
 // Outputs: normals[r] = (n, status + 4·k) (plain stores).
-// CPU twin: cpu::surface_reg::normal_cells.
+// CPU twin: `cpu::surface_normal_reg_cells::normal_cells`.
 #include "common.glsl"
 #include "normal_reg.glsl"
 #extension GL_EXT_control_flow_attributes : require

@@ -16,7 +16,7 @@
 // start (< rows), window (≤ rows), touch_bits.
 // Outputs: for each touched v: grad[r] += sum (plain read-modify-write) and touch_mask(r,
 // touch_bits) (step.glsl; touch_bits = 0 sets nothing).
-// CPU twin: cpu::surface_reg::normal_gather.
+// CPU twin: `cpu::surface_normal_reg_gather::normal_gather`.
 #include "common.glsl"
 #include "normal_reg.glsl"
 #extension GL_EXT_control_flow_attributes : require

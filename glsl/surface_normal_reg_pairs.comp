@@ -30,7 +30,7 @@
 // Outputs: corners[8·r + b] = corner_grad(b, ∂L/∂n_c) for a cell in a kept pair, else +∞
 // (plain stores, as 4 words); loss[0] += loss and skipped[0] += skipped pairs (atomic adds, one
 // per subgroup; the host zeroes both).
-// CPU twin: cpu::surface_reg::normal_pairs.
+// CPU twin: `cpu::surface_normal_reg_pairs::normal_pairs`.
 #include "common.glsl"
 #include "normal_reg.glsl"
 #extension GL_EXT_shader_atomic_float : require

@@ -10,7 +10,7 @@
 // Inputs: opacity (raw σα per allocated vertex), rows, start, count, lambda.
 // Outputs: grad += (plain read-modify-write) for each row with σα > 0;
 // loss[0] += λ·Σ log σα (float atomic add, one per subgroup; the host zeroes it).
-// CPU twin: cpu::surface_opacity_reg.
+// CPU twin: `cpu::surface_opacity_reg::surface_opacity_reg`.
 #include "common.glsl"
 #extension GL_EXT_shader_atomic_float : require
 #extension GL_KHR_shader_subgroup_arithmetic : require

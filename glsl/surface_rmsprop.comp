@@ -20,8 +20,7 @@
 //   keeps the list (one invocation each) short.
 // SH through RMSPROP_UPDATE_SH27 (64-bit pairs: lavapipe moves memory one component at a time).
 // Inputs/outputs: delta, opacity, sh, their gradients and RMS states; rows, the ranges; the step
-// buffer (list pass: the list; its flags are cleared, the host resets the count). CPU twin:
-// cpu::surface_rmsprop_sparse (both passes at once).
+// buffer (list pass: the list; its flags are cleared, the host resets the count). CPU twin: `cpu::surface_rmsprop` (both passes at once).
 #include "common.glsl"
 layout(local_size_x = 64) in;
 

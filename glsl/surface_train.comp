@@ -36,8 +36,8 @@
 // (TrainCounts) += cells read (live cells: links and δ loaded), cubic solves, solves culled
 // (min/max or segment), hits composited, hits cut by truncation, guarded hits, gradient atomic
 // adds, blocks skipped (subgroup-reduced).
-// CPU twin: cpu::surface_train::train (src/cpu/surface_train.rs). The pieces that read no buffer
-// are in glsl/lib/surface_train.glsl (twin: src/math/surface_train.rs).
+// CPU twin: `cpu::surface_train::train`. The pieces that read no buffer are in
+// glsl/lib/surface_train.glsl (twin: src/math/surface_train.rs).
 #extension GL_EXT_shader_atomic_float : require
 #include "common.glsl"
 // A cell's hit list keeps SURF_MAX_HITS (surface.glsl; the hits a ray records, a ≤ this), all a

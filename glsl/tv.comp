@@ -10,7 +10,7 @@
 // Thread mapping: flat id = slot − start.
 // Inputs: links, data (channels floats per allocated vertex), res, chunk, scale (λ/count).
 // Output: grad += (plain read-modify-write; one owner per element) for vertices with a TV term;
-// each gets the touched bits touch_bits (0: none; step.glsl). CPU twin: cpu::tv.
+// each gets the touched bits touch_bits (0: none; step.glsl). CPU twin: `cpu::tv`.
 #include "common.glsl"
 layout(local_size_x = 256) in;
 

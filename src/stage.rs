@@ -4,7 +4,7 @@
 //! (`train::steps`) and the checkpoints (`checkpoint`) are written once over them; the stages are
 //! `plenoxel::PlenoxelsStage` (stage 1) and `surface::SurfaceStage` (stage 2).
 
-use crate::cpu::background::Background;
+use crate::abi::buffers::Background;
 use crate::data::TrainViews;
 use anyhow::{anyhow, Result};
 use std::path::Path;

@@ -7,7 +7,8 @@
 //! whether every draw's keys equal the twin's. A measurement tool, not a test: figures go to docs/results.md.
 
 use alphasurf::abi::buffers::SampleCamera;
-use alphasurf::cpu::sample_rays::{sample_rays, Focus, SampleSet};
+use alphasurf::abi::rays::{Focus, SampleSet};
+use alphasurf::cpu::sample_rays::sample_rays;
 use alphasurf::gpu::{Gpu, KeyDraw, TrainViewBuffers};
 use anyhow::{ensure, Context, Result};
 use std::time::Instant;

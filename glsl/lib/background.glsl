@@ -1,6 +1,6 @@
 // background.glsl — the learned background's gradient (src/abi/buffers.rs `Background`).
 // Needs GL_EXT_shader_atomic_float and a `Background` buffer reference.
-// Rust twin: the per-ray Σ dL/dC·T of cpu::plenoxel::train and cpu::surface_train::train.
+// Rust twin: the per-ray Σ dL/dC·T of cpu::plenoxel_train::train and cpu::surface_train::train.
 #ifndef BACKGROUND_GLSL
 #define BACKGROUND_GLSL
 #extension GL_KHR_shader_subgroup_arithmetic : require

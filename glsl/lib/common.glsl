@@ -27,7 +27,7 @@ layout(buffer_reference, scalar, buffer_reference_align = 4) buffer StepRecord {
 // before the kernel's `layout(local_size_x = …)`, where it would still read 1.
 #define flat_id() (gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * (DISPATCH_ROW_GROUPS * gl_WorkGroupSize.x))
 
-// Cyclic row ranges (Rust twin: cpu::step::RowRange): the rows (start + i) mod n for i < len,
+// Cyclic row ranges (Rust twin: abi::step::RowRange): the rows (start + i) mod n for i < len,
 // start < n, len ≤ n.
 // Row i (< n) of the range starting at `start`.
 uint range_row(uint start, uint i, uint n) {

@@ -140,7 +140,7 @@ void surf_dda_restart(inout Dda w, vec3 dn, int n, float t) {
 
 // Words after the block masks in a skip structure: the box of the allocated vertices, lo x, y, z
 // then hi x, y, z (vertex coordinates; lo > hi when nothing is allocated; written once per grid,
-// Rust cpu::surface_blocks::alloc_box). A cell the walk can solve has its 8 corners allocated, so
+// Rust math::surface_blocks::alloc_box). A cell the walk can solve has its 8 corners allocated, so
 // it lies inside: a walk runs from dda_init(og, dn, n, t_in) and ends at the first piece entered
 // at t_out or later. Exact: t_in is a plane crossing computed with the DDA's own formula
 // (ray_box), and dda_init at such a t is the continuous walk's state there (as for a block exit).

@@ -117,7 +117,7 @@ abi_structs! {
     }
 
     /// The header of the step record the training kernels of a step share (glsl/lib/step.glsl,
-    /// twin `cpu::step`); the touched flags (`n`) and the touched list (`n`) follow it
+    /// twin `math::step`); the touched flags (`n`) and the touched list (`n`) follow it
     /// (`StepRecord` in glsl/lib/common.glsl). The host zeroes `count` and `stats` each step.
     struct StepHeader {
         /// Vertices touched this step: the length of the touched list.

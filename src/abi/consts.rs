@@ -65,7 +65,7 @@ abi_consts! {
     /// (plenoxel_train).
     REPLAY: usize = 32;
 
-    // Touched flags of the step record (cpu::step, glsl/lib/step.glsl; its header is
+    // Touched flags of the step record (math::step, abi::step, glsl/lib/step.glsl; its header is
     // `buffers::StepHeader`).
     /// Touched-flag bits: stage 1's one group, stage 2's three (the optimiser updates only the
     /// groups of a vertex that received a gradient).

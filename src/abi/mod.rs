@@ -4,6 +4,13 @@
 
 #[macro_use]
 mod macros;
+pub mod background;
 pub mod buffers;
 pub mod consts;
+pub mod extract;
+pub mod normal_reg;
+pub mod rays;
+pub mod regularisers;
+pub mod step;
 pub mod surface_grid;
+pub mod train;

@@ -206,240 +206,258 @@ fn gen_case(class: CaseClass, rng: &mut Pcg64) -> CubicCase {
 
 fn try_case(class: CaseClass, rng: &mut Pcg64) -> Option<CubicCase> {
     match class {
-        CaseClass::Random | CaseClass::Axis1 | CaseClass::Axis2 => {
-            let mut d = rand_dir(rng);
-            if class == CaseClass::Axis1 {
-                d[rng.random_range(0..3)] = 0.0;
-                d = unit(d);
-            } else if class == CaseClass::Axis2 {
-                let k = rng.random_range(0..3);
-                d = [0.0; 3];
-                d[k] = if rng.random() { 1.0 } else { -1.0 };
-            }
-            let d = f32_dir(d);
-            let (o, l) = chord(rng, d);
-            let w = rand_corners(rng, 1.0);
-            let corners = to_f32(&w, 0.0);
-            let tau = tau_between(rng, &corners);
-            Some(CubicCase {
-                corners,
-                o,
-                d,
-                l,
-                tau,
-            })
+        CaseClass::Random | CaseClass::Axis1 | CaseClass::Axis2 => general_case(class, rng),
+        CaseClass::Tangent | CaseClass::Triple => repeated_root_case(class, rng),
+        CaseClass::RootAt0 => root_at_0_case(rng),
+        CaseClass::RootAtL => root_at_l_case(rng),
+        CaseClass::WideRange => wide_range_case(rng),
+        CaseClass::NearConstant => near_constant_case(rng),
+    }
+}
+
+/// A random, one-axis or two-axis ray (`Random`, `Axis1`, `Axis2`) through random corners.
+fn general_case(class: CaseClass, rng: &mut Pcg64) -> Option<CubicCase> {
+    let mut d = rand_dir(rng);
+    if class == CaseClass::Axis1 {
+        d[rng.random_range(0..3)] = 0.0;
+        d = unit(d);
+    } else if class == CaseClass::Axis2 {
+        let k = rng.random_range(0..3);
+        d = [0.0; 3];
+        d[k] = if rng.random() { 1.0 } else { -1.0 };
+    }
+    let d = f32_dir(d);
+    let (o, l) = chord(rng, d);
+    let w = rand_corners(rng, 1.0);
+    let corners = to_f32(&w, 0.0);
+    let tau = tau_between(rng, &corners);
+    Some(CubicCase {
+        corners,
+        o,
+        d,
+        l,
+        tau,
+    })
+}
+
+/// A double (`Tangent`, possibly nudged apart) or triple (`Triple`) root inside the segment.
+fn repeated_root_case(class: CaseClass, rng: &mut Pcg64) -> Option<CubicCase> {
+    let d = f32_dir(rand_dir(rng));
+    let (o, l) = chord(rng, d);
+    if l < 0.2 {
+        return None;
+    }
+    let base = rand_corners(rng, 1.0);
+    let cb = cubic_of(&base, o, d);
+    let mx = cb.iter().fold(0.0f64, |m, c| m.max(c.abs()));
+    let lf = l as f64;
+    let r = rng.random_range(0.1..0.9) * lf;
+    let target = if class == CaseClass::Tangent {
+        // (s − r)²(α s + β) keeping C3 and C2 of the random cell.
+        let alpha = cb[3];
+        let beta = cb[2] + 2.0 * r * alpha;
+        if alpha.abs() + beta.abs() < 0.05 * mx {
+            return None;
         }
-        CaseClass::Tangent | CaseClass::Triple => {
-            let d = f32_dir(rand_dir(rng));
-            let (o, l) = chord(rng, d);
-            if l < 0.2 {
-                return None;
-            }
-            let base = rand_corners(rng, 1.0);
-            let cb = cubic_of(&base, o, d);
-            let mx = cb.iter().fold(0.0f64, |m, c| m.max(c.abs()));
-            let lf = l as f64;
-            let r = rng.random_range(0.1..0.9) * lf;
-            let target = if class == CaseClass::Tangent {
-                // (s − r)²(α s + β) keeping C3 and C2 of the random cell.
-                let alpha = cb[3];
-                let beta = cb[2] + 2.0 * r * alpha;
-                if alpha.abs() + beta.abs() < 0.05 * mx {
-                    return None;
-                }
-                let mut t = [beta * r * r, alpha * r * r - 2.0 * r * beta, cb[2], alpha];
-                if rng.random_range(0..4) != 0 {
-                    let mag = t.iter().fold(0.0f64, |m, c| m.max(c.abs()));
-                    let eps = mag * 10f64.powf(rng.random_range(-9.0..-1.0));
-                    t[0] += if rng.random() { eps } else { -eps };
-                }
-                t
-            } else {
-                let alpha = cb[3];
-                if alpha.abs() < 0.1 * mx || alpha.abs() < 1e-3 {
-                    return None;
-                }
-                [
-                    -alpha * r * r * r,
-                    3.0 * alpha * r * r,
-                    -3.0 * alpha * r,
-                    alpha,
-                ]
-            };
-            let w = fit_corners(&base, o, d, target)?;
-            if w.iter().any(|v| v.abs() > 50.0) {
-                return None;
-            }
-            let tau: f32 = rng.random_range(-1.0..1.0);
-            Some(CubicCase {
-                corners: to_f32(&w, tau),
-                o,
-                d,
-                l,
-                tau,
-            })
+        let mut t = [beta * r * r, alpha * r * r - 2.0 * r * beta, cb[2], alpha];
+        if rng.random_range(0..4) != 0 {
+            let mag = t.iter().fold(0.0f64, |m, c| m.max(c.abs()));
+            let eps = mag * 10f64.powf(rng.random_range(-9.0..-1.0));
+            t[0] += if rng.random() { eps } else { -eps };
         }
-        CaseClass::RootAt0 => {
-            // Entry on a cell edge along axis k; the other two coordinates fixed at 0/1.
-            let k = rng.random_range(0..3);
-            let fixed: [f32; 3] = [0, 1, 2].map(|j| {
-                if j == k {
-                    0.0
-                } else {
-                    rng.random_range(0..2) as f32
-                }
-            });
-            let mut d = rand_dir(rng);
-            for j in 0..3 {
-                if j != k {
-                    // Point into the cell and away from grazing the faces.
-                    let a = d[j].abs().max(0.05);
-                    d[j] = if fixed[j] == 0.0 { a } else { -a };
-                }
-            }
-            let d = f32_dir(unit(d));
-            let mut o = fixed;
-            o[k] = rng.random();
-            // L: exit of the cube from o along d.
-            let mut l = f64::INFINITY;
-            for j in 0..3 {
-                let dj = d[j] as f64;
-                if dj > 0.0 {
-                    l = l.min((1.0 - o[j] as f64) / dj);
-                } else if dj < 0.0 {
-                    l = l.min(-(o[j] as f64) / dj);
-                }
-            }
-            let l = l as f32;
-            if l < 1e-3 {
-                return None;
-            }
-            let tau: f32 = rng.random_range(-1.0..1.0);
-            let mut corners = to_f32(&rand_corners(rng, 1.0), tau);
-            for (i, c) in corners.iter_mut().enumerate() {
-                let bits = [(i >> 2) & 1, (i >> 1) & 1, i & 1];
-                if (0..3).all(|j| j == k || bits[j] as f32 == fixed[j]) {
-                    *c = tau;
-                }
-            }
-            Some(CubicCase {
-                corners,
-                o,
-                d,
-                l,
-                tau,
-            })
+        t
+    } else {
+        let alpha = cb[3];
+        if alpha.abs() < 0.1 * mx || alpha.abs() < 1e-3 {
+            return None;
         }
-        CaseClass::RootAtL => {
-            if rng.random() {
-                // Axis-aligned, τ = 0, leaving through an edge whose corners are 0.
-                let k = rng.random_range(0..3);
-                let plus: bool = rng.random();
-                let mut d = [0.0f32; 3];
-                d[k] = if plus { 1.0 } else { -1.0 };
-                let e = (k + 1 + rng.random_range(0..2)) % 3; // edge coordinate (fixed 0/1)
-                let ev = rng.random_range(0..2) as f32;
-                let mut o = [0.0f32; 3];
-                for (j, oj) in o.iter_mut().enumerate() {
-                    *oj = if j == k {
-                        if plus {
-                            0.0
-                        } else {
-                            1.0
-                        }
-                    } else if j == e {
-                        ev
-                    } else {
-                        rng.random()
-                    };
-                }
-                let exit_k = if plus { 1 } else { 0 };
-                let mut corners = to_f32(&rand_corners(rng, 1.0), 0.0);
-                for (i, c) in corners.iter_mut().enumerate() {
-                    let bits = [(i >> 2) & 1, (i >> 1) & 1, i & 1];
-                    if bits[k] == exit_k && bits[e] as f32 == ev {
-                        *c = 0.0;
-                    }
-                }
-                Some(CubicCase {
-                    corners,
-                    o,
-                    d,
-                    l: 1.0,
-                    tau: 0.0,
-                })
-            } else {
-                let d = f32_dir(rand_dir(rng));
-                let (o, l) = chord(rng, d);
-                if l < 0.05 {
-                    return None;
-                }
-                let base = rand_corners(rng, 1.0);
-                let cb = cubic_of(&base, o, d);
-                let lf = l as f64;
-                let t = [
-                    -(cb[1] * lf + cb[2] * lf * lf + cb[3] * lf * lf * lf),
-                    cb[1],
-                    cb[2],
-                    cb[3],
-                ];
-                let w = fit_corners(&base, o, d, t)?;
-                let tau: f32 = rng.random_range(-1.0..1.0);
-                Some(CubicCase {
-                    corners: to_f32(&w, tau),
-                    o,
-                    d,
-                    l,
-                    tau,
-                })
-            }
+        [
+            -alpha * r * r * r,
+            3.0 * alpha * r * r,
+            -3.0 * alpha * r,
+            alpha,
+        ]
+    };
+    let w = fit_corners(&base, o, d, target)?;
+    if w.iter().any(|v| v.abs() > 50.0) {
+        return None;
+    }
+    let tau: f32 = rng.random_range(-1.0..1.0);
+    Some(CubicCase {
+        corners: to_f32(&w, tau),
+        o,
+        d,
+        l,
+        tau,
+    })
+}
+
+/// `RootAt0`: entry on a cell edge whose two corners equal τ.
+fn root_at_0_case(rng: &mut Pcg64) -> Option<CubicCase> {
+    // Entry on a cell edge along axis k; the other two coordinates fixed at 0/1.
+    let k = rng.random_range(0..3);
+    let fixed: [f32; 3] = [0, 1, 2].map(|j| {
+        if j == k {
+            0.0
+        } else {
+            rng.random_range(0..2) as f32
         }
-        CaseClass::WideRange => {
-            let d = f32_dir(rand_dir(rng));
-            let (o, l) = chord(rng, d);
-            let corners: [f32; 8] = match rng.random_range(0..3) {
-                0 => {
-                    let s = 10f64.powf(rng.random_range(-6.0..6.0));
-                    to_f32(&rand_corners(rng, s), 0.0)
-                }
-                _ => std::array::from_fn(|_| {
-                    let m = 10f64.powf(rng.random_range(-6.0..6.0));
-                    (if rng.random() { m } else { -m }) as f32
-                }),
-            };
-            let tau = if rng.random() {
-                tau_between(rng, &corners)
-            } else {
-                // A small level among large corners.
-                let lo = corners.iter().cloned().fold(f32::INFINITY, f32::min);
-                let hi = corners.iter().cloned().fold(f32::NEG_INFINITY, f32::max);
-                let m = 10f64.powf(rng.random_range(-6.0..0.0)) as f32;
-                (if rng.random() { m } else { -m }).clamp(lo, hi)
-            };
-            Some(CubicCase {
-                corners,
-                o,
-                d,
-                l,
-                tau,
-            })
-        }
-        CaseClass::NearConstant => {
-            let d = f32_dir(rand_dir(rng));
-            let (o, l) = chord(rng, d);
-            let t = 10f64.powf(rng.random_range(-3.0..3.0));
-            let tau = (if rng.random() { t } else { -t }) as f32;
-            let eta = t * 10f64.powf(rng.random_range(-7.0..-2.0));
-            let corners = to_f32(&rand_corners(rng, eta), tau);
-            Some(CubicCase {
-                corners,
-                o,
-                d,
-                l,
-                tau,
-            })
+    });
+    let mut d = rand_dir(rng);
+    for j in 0..3 {
+        if j != k {
+            // Point into the cell and away from grazing the faces.
+            let a = d[j].abs().max(0.05);
+            d[j] = if fixed[j] == 0.0 { a } else { -a };
         }
     }
+    let d = f32_dir(unit(d));
+    let mut o = fixed;
+    o[k] = rng.random();
+    // L: exit of the cube from o along d.
+    let mut l = f64::INFINITY;
+    for j in 0..3 {
+        let dj = d[j] as f64;
+        if dj > 0.0 {
+            l = l.min((1.0 - o[j] as f64) / dj);
+        } else if dj < 0.0 {
+            l = l.min(-(o[j] as f64) / dj);
+        }
+    }
+    let l = l as f32;
+    if l < 1e-3 {
+        return None;
+    }
+    let tau: f32 = rng.random_range(-1.0..1.0);
+    let mut corners = to_f32(&rand_corners(rng, 1.0), tau);
+    for (i, c) in corners.iter_mut().enumerate() {
+        let bits = [(i >> 2) & 1, (i >> 1) & 1, i & 1];
+        if (0..3).all(|j| j == k || bits[j] as f32 == fixed[j]) {
+            *c = tau;
+        }
+    }
+    Some(CubicCase {
+        corners,
+        o,
+        d,
+        l,
+        tau,
+    })
+}
+
+/// `RootAtL`: a root exactly or nearly at the exit, L.
+fn root_at_l_case(rng: &mut Pcg64) -> Option<CubicCase> {
+    if rng.random() {
+        // Axis-aligned, τ = 0, leaving through an edge whose corners are 0.
+        let k = rng.random_range(0..3);
+        let plus: bool = rng.random();
+        let mut d = [0.0f32; 3];
+        d[k] = if plus { 1.0 } else { -1.0 };
+        let e = (k + 1 + rng.random_range(0..2)) % 3; // edge coordinate (fixed 0/1)
+        let ev = rng.random_range(0..2) as f32;
+        let mut o = [0.0f32; 3];
+        for (j, oj) in o.iter_mut().enumerate() {
+            *oj = if j == k {
+                if plus {
+                    0.0
+                } else {
+                    1.0
+                }
+            } else if j == e {
+                ev
+            } else {
+                rng.random()
+            };
+        }
+        let exit_k = if plus { 1 } else { 0 };
+        let mut corners = to_f32(&rand_corners(rng, 1.0), 0.0);
+        for (i, c) in corners.iter_mut().enumerate() {
+            let bits = [(i >> 2) & 1, (i >> 1) & 1, i & 1];
+            if bits[k] == exit_k && bits[e] as f32 == ev {
+                *c = 0.0;
+            }
+        }
+        Some(CubicCase {
+            corners,
+            o,
+            d,
+            l: 1.0,
+            tau: 0.0,
+        })
+    } else {
+        let d = f32_dir(rand_dir(rng));
+        let (o, l) = chord(rng, d);
+        if l < 0.05 {
+            return None;
+        }
+        let base = rand_corners(rng, 1.0);
+        let cb = cubic_of(&base, o, d);
+        let lf = l as f64;
+        let t = [
+            -(cb[1] * lf + cb[2] * lf * lf + cb[3] * lf * lf * lf),
+            cb[1],
+            cb[2],
+            cb[3],
+        ];
+        let w = fit_corners(&base, o, d, t)?;
+        let tau: f32 = rng.random_range(-1.0..1.0);
+        Some(CubicCase {
+            corners: to_f32(&w, tau),
+            o,
+            d,
+            l,
+            tau,
+        })
+    }
+}
+
+/// `WideRange`: corner magnitudes spanning 1e-6 … 1e6.
+fn wide_range_case(rng: &mut Pcg64) -> Option<CubicCase> {
+    let d = f32_dir(rand_dir(rng));
+    let (o, l) = chord(rng, d);
+    let corners: [f32; 8] = match rng.random_range(0..3) {
+        0 => {
+            let s = 10f64.powf(rng.random_range(-6.0..6.0));
+            to_f32(&rand_corners(rng, s), 0.0)
+        }
+        _ => std::array::from_fn(|_| {
+            let m = 10f64.powf(rng.random_range(-6.0..6.0));
+            (if rng.random() { m } else { -m }) as f32
+        }),
+    };
+    let tau = if rng.random() {
+        tau_between(rng, &corners)
+    } else {
+        // A small level among large corners.
+        let lo = corners.iter().cloned().fold(f32::INFINITY, f32::min);
+        let hi = corners.iter().cloned().fold(f32::NEG_INFINITY, f32::max);
+        let m = 10f64.powf(rng.random_range(-6.0..0.0)) as f32;
+        (if rng.random() { m } else { -m }).clamp(lo, hi)
+    };
+    Some(CubicCase {
+        corners,
+        o,
+        d,
+        l,
+        tau,
+    })
+}
+
+/// `NearConstant`: corners τ plus tiny noise.
+fn near_constant_case(rng: &mut Pcg64) -> Option<CubicCase> {
+    let d = f32_dir(rand_dir(rng));
+    let (o, l) = chord(rng, d);
+    let t = 10f64.powf(rng.random_range(-3.0..3.0));
+    let tau = (if rng.random() { t } else { -t }) as f32;
+    let eta = t * 10f64.powf(rng.random_range(-7.0..-2.0));
+    let corners = to_f32(&rand_corners(rng, eta), tau);
+    Some(CubicCase {
+        corners,
+        o,
+        d,
+        l,
+        tau,
+    })
 }
 
 /// `n` cases of `class`, deterministic in `seed`.

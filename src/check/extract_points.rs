@@ -12,7 +12,8 @@
 //! Excused slots are counted and capped at 0.1 % of the points.
 
 use super::{CheckRow, Compare};
-use crate::cpu::extract_points::{extract_points, ExtractInput, ExtractPoint};
+use crate::abi::extract::{ExtractInput, ExtractPoint};
+use crate::cpu::extract_points::extract_points;
 use crate::eval::extract::{allocated_cells, run_gpu, KernelStats};
 use crate::gpu::Gpu;
 use crate::kernels::extract_points::INFO;

@@ -10,6 +10,7 @@ pub mod extract_points;
 pub mod fill_pattern;
 pub mod loss_sum;
 pub mod plenoxel;
+pub mod registry;
 pub mod sample_rays;
 pub mod sh_eval;
 pub mod surface_blocks;
@@ -18,6 +19,8 @@ pub mod surface_fwd;
 pub mod surface_reg;
 pub mod surface_train;
 pub mod trilerp_eval;
+
+pub use registry::rows;
 
 /// The background the parity rows of the render and training kernels composite on: neither
 /// white nor grey, so a kernel that ignores its background (or mixes up its channels) fails.
@@ -44,42 +47,6 @@ pub struct CheckRow {
 
 /// One kernel's parity check.
 pub type CheckFn = fn(&Gpu, u64) -> anyhow::Result<CheckRow>;
-
-/// Every registered parity check, in table order. Later kernels add themselves here.
-pub const CHECKS: &[(&str, CheckFn)] = &[
-    ("fill_pattern", fill_pattern::check),
-    ("dda_walk", dda_walk::check),
-    ("trilerp_eval", trilerp_eval::check),
-    ("sh_eval", sh_eval::check),
-    ("occupancy", plenoxel::check_occupancy),
-    ("plenoxel_fwd", plenoxel::check_fwd),
-    ("plenoxel_train", plenoxel::check_train),
-    ("plenoxel_weights", plenoxel::check_weights),
-    ("optim_args", plenoxel::check_optim_args),
-    ("rmsprop_sparse", plenoxel::check_rmsprop),
-    ("tv", plenoxel::check_tv),
-    ("background_step", plenoxel::check_background_step),
-    ("loss_sum", loss_sum::check),
-    ("cubic_solve", cubic_solve::check),
-    ("extract_points", extract_points::check),
-    ("surface_blocks", surface_blocks::check),
-    ("surface_block_radius", surface_blocks::check_radius),
-    ("surface_live_cells", surface_blocks::check_live),
-    ("surface_fwd", surface_fwd::check),
-    ("surface_faces", surface_faces::check),
-    ("surface_train", surface_train::check),
-    ("surface_delta_tv", surface_reg::check_delta_tv),
-    ("surface_opacity_reg", surface_reg::check_opacity_reg),
-    ("surface_normal_reg_cells", surface_reg::check_normal_cells),
-    ("surface_normal_reg_pairs", surface_reg::check_normal_pairs),
-    (
-        "surface_normal_reg_gather",
-        surface_reg::check_normal_gather,
-    ),
-    ("surface_rmsprop", surface_reg::check_rmsprop),
-    ("sample_rays", sample_rays::check),
-    ("sample_rays_sort", sample_rays::check_sort),
-];
 
 /// Relative L2 distance ‖a − b‖/‖b‖ (0 when both vanish, ∞ when only `b` does).
 pub fn rel_l2(a: &[f32], b: &[f32]) -> f64 {

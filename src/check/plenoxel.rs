@@ -5,10 +5,16 @@
 //! (learned in training, so its gradient is compared too). Also `background_step`.
 
 use super::{grad_outliers, rel_l2, CheckRow, Compare, TEST_BACKGROUND};
-use crate::cpu::background::{self, Background};
-use crate::cpu::plenoxel as twin;
-use crate::cpu::step::{optim_args, step_record, StepHeader, STEP_FLAGS, TOUCH_ALL};
-use crate::cpu::{rmsprop_sparse, tv, RmsProp, Stage1Params, TvChunk};
+use crate::abi::buffers::Background;
+use crate::abi::buffers::StepHeader;
+use crate::abi::consts::TOUCH_ALL;
+use crate::abi::regularisers::TvChunk;
+use crate::abi::step::{step_record, STEP_FLAGS};
+use crate::abi::train::RmsProp;
+use crate::cpu::background_step::background_step;
+use crate::cpu::occupancy;
+use crate::cpu::optim_args::optim_args;
+use crate::cpu::{rmsprop_sparse, tv, Stage1Params};
 use crate::gpu::{record_optim_args, Gpu, GpuBuffer};
 use crate::grid::{Grid, SH_DIM};
 use crate::kernels;
@@ -123,7 +129,7 @@ fn counts_close(g: PlenoxelCounts, c: PlenoxelCounts) -> bool {
 
 pub fn check_occupancy(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
     let (g, _, _) = test_scene(seed, 40, 0);
-    let want = twin::occupancy(&g.links, &g.density, g.res);
+    let want = occupancy::occupancy(&g.links, &g.density, g.res);
     let links = gpu.upload(&g.links)?;
     let density = gpu.upload(&g.density)?;
     let occ = gpu.zeros::<u32>(want.len())?;
@@ -468,7 +474,7 @@ pub fn check_tv(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
     ))
 }
 
-/// `background_step` against `cpu::background::step` on 64 random states, one dispatch each:
+/// `background_step` against `cpu::background_step::background_step` on 64 random states, one dispatch each:
 /// fresh (r = 0) and running averages, zero gradients, 1e-6..1e2 magnitudes, steps that leave
 /// [0, 1] (the clamp). Same tolerance as rmsprop_sparse (the same update).
 pub fn check_background_step(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
@@ -520,7 +526,7 @@ pub fn check_background_step(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
     let mut clamped = 0;
     for (i, (g, mut w)) in got.iter().zip(cases).enumerate() {
         let before = w.rgb;
-        background::step(&mut w, lr, beta, eps);
+        background_step(&mut w, lr, beta, eps);
         clamped += (0..3)
             .filter(|&ch| (w.rgb[ch] == 0.0 || w.rgb[ch] == 1.0) && w.rgb[ch] != before[ch])
             .count();

@@ -10,7 +10,9 @@
 use super::{CheckRow, Compare};
 use crate::abi::buffers::SampleCamera;
 use crate::abi::consts::SAMPLE_SORT_RAYS;
-use crate::cpu::sample_rays::{sample_rays, sort_runs, Focus, SampleSet};
+use crate::abi::rays::{Focus, SampleSet};
+use crate::cpu::sample_rays::sample_rays;
+use crate::cpu::sample_rays_sort;
 use crate::data::camera::look_at;
 use crate::gpu::{record_sort_runs, Gpu, KeyDraw, TrainViewBuffers};
 use anyhow::Result;
@@ -172,7 +174,7 @@ pub fn check_sort(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
             })
             .collect();
         let mut want = keys.clone();
-        sort_runs(&mut want);
+        sample_rays_sort(&mut want);
         let src = gpu.upload(&keys)?;
         let dst = gpu.zeros::<u64>(n)?;
         let mut b = gpu.batch()?;

@@ -8,8 +8,9 @@
 
 use super::surface_fwd::test_scene;
 use super::{CheckRow, Compare};
-use crate::cpu::surface_blocks::{alloc_box, build_blocks, complete_cells};
+use crate::cpu::surface_blocks::build_blocks;
 use crate::gpu::Gpu;
+use crate::math::surface_blocks::{alloc_box, complete_cells};
 use crate::math::surface_blocks::{
     surf_blocks_per_axis, surf_live_words, SURF_BLOCK_SHIFT_CPU, SURF_BLOCK_SHIFT_VULKAN,
     SURF_MASK_BITS, SURF_RADIUS_SHIFT,

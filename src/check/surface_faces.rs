@@ -22,8 +22,9 @@
 use super::CheckRow;
 use crate::abi::surface_grid::SurfaceGridRef;
 use crate::check::surface_fwd::render_gpu;
-use crate::cpu::surface_fwd::{render, SurfaceParams};
+use crate::cpu::surface_fwd::render;
 use crate::gpu::Gpu;
+use crate::math::surface::SurfaceParams;
 use crate::math::surface::SURF_MAX_LEVELS;
 use anyhow::Result;
 use rand::{Rng, SeedableRng};

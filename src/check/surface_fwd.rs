@@ -14,15 +14,14 @@
 //! capped at [`EXCUSED_CAP_FRAC`] of the rays. The summed counters must agree within 0.5 % + 4.
 
 use super::{CheckRow, Compare, TEST_BACKGROUND};
+use crate::abi::buffers::Background;
 use crate::abi::surface_grid::SurfaceGridRef;
-use crate::cpu::background::Background;
+use crate::abi::train::SurfaceLoss;
 use crate::cpu::surface_blocks::build_blocks;
-use crate::cpu::surface_fwd::{
-    render, validate_blocks, validate_inputs, SurfCounts, SurfaceParams,
-};
-use crate::cpu::surface_train::SurfaceLoss;
+use crate::cpu::surface_fwd::{render, validate_blocks, validate_inputs, SurfCounts};
 use crate::gpu::Gpu;
 use crate::kernels::surface_fwd::{Push, INFO};
+use crate::math::surface::SurfaceParams;
 use crate::math::surface::{SurfOut, Truncation, TruncationCount};
 use crate::math::surface_blocks::{
     surf_live_words, SkipRef, SURF_BLOCK_SHIFT_CPU, SURF_BLOCK_SHIFT_VULKAN, SURF_BOX_WORDS,

@@ -5,15 +5,18 @@
 //! σα, and chunks inside, whole and wrapping past the end.
 
 use super::{rel_l2, CheckRow, Compare};
-use crate::cpu::step::RowRange;
-use crate::cpu::step::{optim_args, step_record, STEP_FLAGS};
-use crate::cpu::surface_delta_tv::{axis_neighbours, delta_tv, forward_reach, DeltaTvChunk};
-use crate::cpu::surface_reg::delta_tv_chunk;
-use crate::cpu::surface_reg::{
-    normal_reg_passes, surface_opacity_reg, NormalChunk, NormalPrefix, NormalScratch, OpacityChunk,
-    CORNERS_STRIDE, NORMALS_STRIDE,
+use crate::abi::normal_reg::{NormalChunk, NormalPrefix, CORNERS_STRIDE, NORMALS_STRIDE};
+use crate::abi::regularisers::{
+    axis_neighbours, delta_tv_chunk, forward_reach, DeltaTvChunk, OpacityChunk, TvChunk,
 };
-use crate::cpu::{surface_rmsprop_sparse, tv, Stage2Params, SurfaceRmsProp, TvChunk};
+use crate::abi::step::RowRange;
+use crate::abi::step::{step_record, STEP_FLAGS};
+use crate::abi::train::SurfaceRmsProp;
+use crate::cpu::optim_args::optim_args;
+use crate::cpu::surface_delta_tv::delta_tv;
+use crate::cpu::surface_opacity_reg::surface_opacity_reg;
+use crate::cpu::surface_reg::{normal_reg_passes, NormalScratch};
+use crate::cpu::{surface_rmsprop, tv, Stage2Params};
 use crate::gpu::{Gpu, GpuBuffer};
 use crate::grid::row_slots;
 use crate::grid::SH_DIM;
@@ -599,7 +602,7 @@ fn rmsprop_case(
     record_surface_rmsprop(&mut b, &io, &sb, &args, &h)?;
     b.submit()?;
     let got_args: Vec<u32> = args.download()?;
-    surface_rmsprop_sparse(Stage2Params::from_arrays(&mut p), &mut flags, &h);
+    surface_rmsprop(Stage2Params::from_arrays(&mut p), &mut flags, &h);
     let names = [
         "delta",
         "opacity",

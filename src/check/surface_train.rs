@@ -32,15 +32,15 @@
 
 use super::surface_fwd::{test_rays, test_scene, SurfaceScene, RES};
 use super::{grad_outliers, rel_l2, CheckRow, Compare, TEST_BACKGROUND};
-use crate::cpu::background::Background;
+use crate::abi::buffers::Background;
 use crate::cpu::surface_blocks::build_blocks;
-use crate::cpu::surface_fwd::SurfaceParams;
 use crate::cpu::surface_train::{
     hit_point, trace_ray, train, RayLoss, SurfaceGrads, TrainCounts, TrainInput,
 };
 use crate::gpu::Gpu;
 use crate::grid::surface::SurfaceGrid;
 use crate::grid::SH_DIM;
+use crate::math::surface::SurfaceParams;
 use crate::math::surface::{Truncation, TruncationCount};
 use crate::math::surface_blocks::{SkipRef, SURF_BLOCK_SHIFT_VULKAN};
 use crate::math::trilerp::trilerp_grad;

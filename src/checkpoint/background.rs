@@ -1,7 +1,7 @@
 //! A run's background as its checkpoints and metrics record it: the mode, the colour and, when
 //! it is learned, the optimiser's running average; carried from stage 1 into stage 2.
 
-use crate::cpu::background::Background;
+use crate::abi::buffers::Background;
 use crate::data::{BackgroundMode, Dataset};
 use anyhow::{ensure, Context, Result};
 use serde::{Deserialize, Serialize};

@@ -1,6 +1,6 @@
 //! `alphasurf check-kernels`: every kernel on the Vulkan device against its CPU twin.
 
-use crate::check::{CheckRow, CHECKS};
+use crate::check::{rows, CheckRow};
 use crate::gpu::Gpu;
 use anyhow::Result;
 
@@ -20,8 +20,9 @@ pub struct CheckKernelsArgs {
 
 /// Run the checks, print the table; returns whether all passed.
 pub fn run(gpu: &Gpu, args: &CheckKernelsArgs) -> Result<bool> {
+    let checks = rows();
     if let Some(only) = &args.only {
-        let names: Vec<&str> = CHECKS.iter().map(|c| c.0).collect();
+        let names: Vec<&str> = checks.iter().map(|c| c.0).collect();
         anyhow::ensure!(
             names.iter().any(|n| n.contains(only.as_str())),
             "--only {only:?} matches no kernel; the kernels are {}",
@@ -34,7 +35,7 @@ pub fn run(gpu: &Gpu, args: &CheckKernelsArgs) -> Result<bool> {
         "kernel", "cases", "max abs", "max rel", "tolerance", "pass"
     );
     let mut rows: Vec<CheckRow> = Vec::new();
-    for (name, f) in CHECKS {
+    for (name, f) in checks {
         if args.only.as_deref().is_some_and(|o| !name.contains(o)) {
             continue;
         }

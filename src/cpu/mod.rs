@@ -5,22 +5,30 @@
 // `!(a < b)` is deliberate where NaN must take the same branch as on the GPU.
 #![allow(clippy::needless_range_loop, clippy::neg_cmp_op_on_partial_ord)]
 
-pub mod atomic;
-pub mod background;
+pub mod background_step;
 pub mod cubic_solve;
 mod dda_walk;
 pub mod extract_points;
 mod fill_pattern;
 mod loss_sum;
-pub mod plenoxel;
-mod rmsprop;
+pub mod occupancy;
+pub mod optim_args;
+pub mod plenoxel_fwd;
+pub mod plenoxel_train;
+pub mod plenoxel_weights;
+mod rmsprop_sparse;
 pub mod sample_rays;
 mod sh_eval;
-pub mod step;
 pub mod surface_blocks;
 pub mod surface_delta_tv;
 pub mod surface_fwd;
+pub mod surface_live_cells;
+pub mod surface_normal_reg_cells;
+pub mod surface_normal_reg_gather;
+pub mod surface_normal_reg_pairs;
+pub mod surface_opacity_reg;
 pub mod surface_reg;
+mod surface_rmsprop;
 pub mod surface_train;
 mod trilerp_eval;
 mod tv;
@@ -28,10 +36,16 @@ mod tv;
 pub use dda_walk::dda_walk;
 pub use fill_pattern::fill_pattern;
 pub use loss_sum::loss_sum;
-pub use rmsprop::{
-    rmsprop_one, rmsprop_sparse, surface_rmsprop_sparse, RmsProp, Stage1Params, Stage2Params,
-    SurfaceRmsProp,
-};
+pub use rmsprop_sparse::{rmsprop_sparse, Stage1Params};
 pub use sh_eval::sh_eval;
+pub use surface_rmsprop::{surface_rmsprop, Stage2Params};
 pub use trilerp_eval::trilerp_eval;
-pub use tv::{tv, TvChunk};
+pub use tv::tv;
+
+/// Twin of `glsl/sample_rays_sort.comp`: the host's sort of a batch's keys in runs, which the
+/// host draw of the keys (`abi::rays::sorted_keys`) shares (any sort of a run gives the kernel's
+/// bitonic order).
+pub use crate::abi::rays::sample_rays_sort;
+/// Twin of `glsl/surface_block_radius.comp`: its three passes, `surf_block_radii` in
+/// `math::surface_blocks` with the skip structure's other conventions (and its tests).
+pub use crate::math::surface_blocks::surf_block_radii as surface_block_radius;

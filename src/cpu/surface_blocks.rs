@@ -1,15 +1,15 @@
-//! Twins of `glsl/surface_live_cells.comp`, `glsl/surface_blocks.comp` and
-//! `glsl/surface_block_radius.comp`: the skip structure of the stage-2 walks (`math::surface_blocks`
-//! has the conventions) — a live bit per cell (all 8 corners allocated and some level within its
-//! corners' δ range ± margin), then the level mask of every 2^shift-cell block (one rayon task per
-//! bit word and per block) with the empty radius of the blocks without levels
-//! (`math::surface_blocks::surf_block_radii`, the kernel's three passes).
+//! Twin of `glsl/surface_blocks.comp`, and the whole skip structure of the stage-2 walks
+//! (`math::surface_blocks` has the conventions) — a live bit per cell (all 8 corners allocated
+//! and some level within its corners' δ range ± margin; twin `cpu::surface_live_cells`), then the
+//! level mask of every 2^shift-cell block (one rayon task per block) with the empty radius of the
+//! blocks without levels (twin `cpu::surf_block_radii`, the kernel's three passes).
 
+use super::surface_live_cells::{delta_range, surface_live_cells};
 use crate::abi::surface_grid::SurfaceGridRef;
 use crate::math::surface::SURF_MAX_LEVELS;
 use crate::math::surface_blocks::{
-    surf_block_box, surf_block_mask, surf_block_radii, surf_blocks_per_axis, surf_live_words,
-    SURF_BLOCK_BIG, SURF_BOX_WORDS,
+    alloc_box, complete_cells, surf_block_box, surf_block_mask, surf_block_radii,
+    surf_blocks_per_axis, SURF_BOX_WORDS,
 };
 use anyhow::{ensure, Result};
 use rayon::prelude::*;
@@ -131,40 +131,10 @@ impl SkipAllocation {
             delta.len(),
             self.n
         );
-        let nn = self.n as usize;
-        let range = |rows: &[u32]| {
-            rows.iter()
-                .fold((SURF_BLOCK_BIG, -SURF_BLOCK_BIG), |(lo, hi), &r| {
-                    let d = delta[r as usize];
-                    (lo.min(d), hi.max(d))
-                })
-        };
-        // Live cells: only the complete ones can be live.
-        let mut out: Vec<u32> = self
-            .complete
-            .par_iter()
-            .enumerate()
-            .map(|(w, &bits)| {
-                if bits == 0 {
-                    return 0;
-                }
-                let mut live = 0u32;
-                for b in (0..32).filter(|b| bits >> b & 1 != 0) {
-                    let ci = 32 * w + b;
-                    let corners: [u32; 8] = std::array::from_fn(|k| {
-                        links[ci + (k >> 2) * nn * nn + ((k >> 1) & 1) * nn + (k & 1)] as u32
-                    });
-                    let (cmin, cmax) = range(&corners);
-                    if surf_block_mask(cmin, cmax, margin, levels) != 0 {
-                        live |= 1 << b;
-                    }
-                }
-                live
-            })
-            .collect();
+        let mut out = surface_live_cells(&self.complete, links, delta, self.n, levels, margin);
         let words = out.len();
         out.par_extend(self.starts.par_windows(2).map(|s| {
-            let (bmin, bmax) = range(&self.rows[s[0] as usize..s[1] as usize]);
+            let (bmin, bmax) = delta_range(delta, &self.rows[s[0] as usize..s[1] as usize]);
             surf_block_mask(bmin, bmax, margin, levels)
         }));
         surf_block_radii(&mut out[words..], surf_blocks_per_axis(self.n, self.shift));
@@ -173,85 +143,10 @@ impl SkipAllocation {
     }
 }
 
-/// The box of the allocated vertices (`math::surface_blocks::SURF_BOX_WORDS`): lo x, y, z, hi x,
-/// y, z in vertex coordinates of the `n`³ grid; [1, 1, 1, 0, 0, 0] when nothing is allocated.
-/// Depends on the allocation only.
-pub fn alloc_box(links: &[i32], n: u32) -> [u32; SURF_BOX_WORDS] {
-    let n = n as usize;
-    let (lo, hi) = links
-        .par_iter()
-        .enumerate()
-        .filter(|(_, &l)| l >= 0)
-        .map(|(s, _)| {
-            let v = [s / (n * n), (s / n) % n, s % n].map(|x| x as u32);
-            (v, v)
-        })
-        .reduce(
-            || ([u32::MAX; 3], [0; 3]),
-            |(a0, a1), (b0, b1)| {
-                (
-                    std::array::from_fn(|i| a0[i].min(b0[i])),
-                    std::array::from_fn(|i| a1[i].max(b1[i])),
-                )
-            },
-        );
-    if lo[0] == u32::MAX {
-        return [1, 1, 1, 0, 0, 0];
-    }
-    [lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]]
-}
-
-/// Bit i of word i/32 set when the cell whose lower corner is slot i (x-major, `n`³ slots) has
-/// its 8 corners allocated: `surface_live_cells` reads these instead of the links.
-pub fn complete_cells(links: &[i32], n: u32) -> Vec<u32> {
-    if n < 2 {
-        return vec![0; surf_live_words(n) as usize];
-    }
-    let n = n as usize;
-    let (nz, nyz) = (n, n * n);
-    (0..surf_live_words(n as u32) as usize)
-        .into_par_iter()
-        .map(|w| {
-            let mut bits = 0u32;
-            // The word's first slot's coordinates, then stepped along z (no division per slot).
-            let s0 = 32 * w;
-            let (mut x, mut y, mut z) = (s0 / nyz, (s0 / nz) % n, s0 % n);
-            for b in 0..32 {
-                let s = s0 + b;
-                if x + 1 < n && y + 1 < n && z + 1 < n {
-                    let corners = [
-                        s,
-                        s + 1,
-                        s + nz,
-                        s + nz + 1,
-                        s + nyz,
-                        s + nyz + 1,
-                        s + nyz + nz,
-                        s + nyz + nz + 1,
-                    ];
-                    if corners.iter().all(|&c| links[c] >= 0) {
-                        bits |= 1 << b;
-                    }
-                }
-                z += 1;
-                if z == n {
-                    z = 0;
-                    y += 1;
-                    if y == n {
-                        y = 0;
-                        x += 1;
-                    }
-                }
-            }
-            bits
-        })
-        .collect()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::math::surface_blocks::SURF_BLOCK_SHIFT_CPU;
+    use crate::math::surface_blocks::{surf_live_words, SURF_BLOCK_SHIFT_CPU};
 
     /// A 3³-vertex grid (8 cells), every vertex allocated with δ = its slot index.
     fn ramp() -> (Vec<i32>, Vec<f32>) {

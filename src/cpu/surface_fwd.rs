@@ -6,6 +6,7 @@ use crate::abi::consts::SURF_PASS_MIN_T;
 use crate::abi::surface_grid::SurfaceGridRef;
 use crate::math::dda::ray_unit;
 use crate::math::sh::sh_basis;
+use crate::math::surface::SurfaceParams;
 use crate::math::surface::{
     surf_alpha, surf_cell_hits, surf_gamma, surf_ray, surf_restart, FaceSigns, SurfOut, Truncation,
     TruncationCount, SURF_MAX_LEVELS,
@@ -17,23 +18,6 @@ use anyhow::{ensure, Result};
 use rayon::prelude::*;
 
 pub use crate::abi::buffers::SurfCounts;
-
-/// How rays map into the grid, the levels, truncation and early termination.
-#[derive(Clone, Debug)]
-pub struct SurfaceParams {
-    /// grid = p·scale + offset (per axis).
-    pub scale: [f32; 3],
-    pub offset: [f32; 3],
-    /// Level values τ_i (at most [`SURF_MAX_LEVELS`]).
-    pub levels: Vec<f32>,
-    /// Truncated compositing: hits with count k ≥ a get γ = 0 (the ray stops there, or with
-    /// counting per structure passes them over).
-    pub truncation: Truncation,
-    /// Stop once transmittance falls below this.
-    pub stop_thresh: f32,
-    /// The colour composited behind the last hit: C = Σ w_j c_j + T·background.
-    pub background: [f32; 3],
-}
 
 /// One ray: its output and counters. `blocks`: the skip structure of `g` for `p.levels`
 /// (`cpu::surface_blocks::build_blocks`: live-cell bits and block masks); `None` walks every cell.

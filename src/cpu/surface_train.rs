@@ -25,12 +25,15 @@
 //! Each loss term is a per-ray sum; the caller's weights (`grad_scale` for the squared error,
 //! `lambda_h`, `lambda_c`) carry the batch normalisation.
 
-use super::atomic;
-use super::step::{touch_mask, TOUCH_SURFACE};
-use super::surface_fwd::{validate_blocks, validate_inputs, SurfaceParams};
+use super::surface_fwd::{validate_blocks, validate_inputs};
+use crate::abi::consts::TOUCH_SURFACE;
 use crate::abi::surface_grid::SurfaceGridRef;
+use crate::abi::train::SurfaceLoss;
+use crate::math::atomic;
 use crate::math::dda::ray_unit;
 use crate::math::sh::sh_basis;
+use crate::math::step::touch_mask;
+use crate::math::surface::SurfaceParams;
 use crate::math::surface::{
     surf_alpha, surf_cell_hits, surf_gamma, surf_ray, surf_restart, FaceSigns, Truncation,
     TruncationCount, SURF_MAX_LEVELS,
@@ -48,17 +51,6 @@ use std::sync::atomic::AtomicU32;
 
 pub use crate::abi::buffers::{RayLoss, TrainCounts};
 pub use crate::abi::consts::{FPRIME_GUARD, SURF_MAX_HITS, SURF_PASS_MIN_T};
-
-/// Loss weights of the fused per-ray terms (per-ray coefficients: the batch mean is the caller's).
-#[derive(Clone, Copy, Debug)]
-pub struct SurfaceLoss {
-    /// dL/dC = grad_scale·(C − target) (2/(3B) for the mean squared error).
-    pub grad_scale: f32,
-    /// Weight of the entropy of the ray's normalised hit weights.
-    pub lambda_h: f32,
-    /// Weight of Σ |t_j − t_mode|.
-    pub lambda_c: f32,
-}
 
 /// Gradient outputs of one training pass, and the per-vertex touched flags.
 pub struct SurfaceGrads<'a> {
@@ -340,7 +332,7 @@ pub fn train(
 }
 
 /// A training batch: rays (6 floats each), their targets (3 floats each) and, for a focused
-/// batch, each ray's importance weight ω (`cpu::sample_rays::Focus`; `None`: ω = 1).
+/// batch, each ray's importance weight ω (`abi::rays::Focus`; `None`: ω = 1).
 #[derive(Clone, Copy, Debug)]
 pub struct TrainInput<'a> {
     pub rays: &'a [f32],

@@ -1,19 +1,8 @@
 //! Twin of `glsl/tv.comp`: gradient of TV on a contiguous chunk of vertex slots, gathered per
 //! owned element (see the kernel for the formulation).
 
+use crate::abi::regularisers::TvChunk;
 use rayon::prelude::*;
-
-/// Which slots and how much: TV over slots [start, start + count), loss = scale·Σ TV.
-#[derive(Clone, Copy, Debug)]
-pub struct TvChunk {
-    pub res: [u32; 3],
-    pub start: u32,
-    pub count: u32,
-    pub channels: u32,
-    pub scale: f32,
-    /// Touched-flag bits set on every vertex given a gradient (0: none; step.glsl).
-    pub touch: u32,
-}
 
 /// The links every channel of a slot's gradient needs, read once (as the kernel does): its
 /// vertex's row, its forward neighbours when it lies in the chunk, and for each backward

@@ -7,7 +7,8 @@
 use super::camera::SceneBox;
 use super::dataset::Split;
 use crate::abi::buffers::SampleCamera;
-use crate::cpu::sample_rays::{sample_rays, Focus, SampleSet, SampledRays};
+use crate::abi::rays::{Focus, SampleSet};
+use crate::gpu::TrainRays;
 use anyhow::{Context, Result};
 use std::sync::atomic::{AtomicU64, Ordering};
 
@@ -112,7 +113,7 @@ impl<'a> TrainViews<'a> {
     }
 
     /// The same views with a share `share` ∈ [0, 1) of each batch drawn from the pixels the
-    /// object covers (alpha above 0, grown by [`FOCUS_GROW`] pixels; `cpu::sample_rays::Focus`),
+    /// object covers (alpha above 0, grown by [`FOCUS_GROW`] pixels; `abi::rays::Focus`),
     /// the rest uniform over all pixels. Views without alpha, or a share of 0, draw uniformly.
     /// The result is a set of its own (a new [`id`](Self::id)).
     pub fn focused(mut self, share: f32) -> Result<TrainViews<'a>> {
@@ -132,12 +133,15 @@ impl<'a> TrainViews<'a> {
         &self.set
     }
 
-    /// The batch of `n` rays drawn with `seed` (`cpu::sample_rays`: uniform pixels with
-    /// replacement, ordered by view and Z-order — neighbouring invocations of a kernel then trace
-    /// nearby rays, and the walks diverge less; docs/tuning.md). The order changes no loss: a
-    /// batch's gradient is a sum over its rays.
-    pub fn sample(&self, seed: u64, n: usize) -> Result<SampledRays> {
-        sample_rays(&self.set, seed, n)
+    /// The batch of `n` rays drawn with `seed` from these views, as a Vulkan backend's training
+    /// step takes it (drawn on the device).
+    pub fn train_rays(&self, seed: u64, n: usize) -> TrainRays<'_> {
+        TrainRays::Sampled {
+            id: self.id,
+            set: &self.set,
+            seed,
+            n,
+        }
     }
 }
 

@@ -6,7 +6,8 @@
 //! opacity; stage 2 passes δ, its levels, and σα with the `--min-alpha` threshold.
 
 use super::thin::thin_levels;
-use crate::cpu::extract_points::{extract_points, ExtractInput, ExtractPoint};
+use crate::abi::extract::{ExtractInput, ExtractPoint};
+use crate::cpu::extract_points::extract_points;
 use crate::gpu::Gpu;
 use crate::io::{Extra, ExtraValues, PointCloud};
 use crate::kernels::extract_points::{Push, INFO};

@@ -6,7 +6,7 @@
 //! the part is too thin for that (the field's peak stays between the two), the outermost level is
 //! the only surface there and stays.
 
-use crate::cpu::extract_points::ExtractPoint;
+use crate::abi::extract::ExtractPoint;
 use crate::grid::slot_vertex;
 use crate::math::trilerp::trilerp;
 use rayon::prelude::*;

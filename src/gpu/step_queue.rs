@@ -7,8 +7,8 @@ use super::{
     Batch, BatchTimes, Gpu, GpuBuffer, Phase, PhaseClock, RayBuffers, Readback, SampledAt,
     StepMeta, StepTimes, StepsInFlight, TrainRays, TrainViewBuffers, STEP_SLOTS,
 };
-use crate::cpu::background::Background;
-use crate::cpu::sample_rays::{SampleSet, SampledRays};
+use crate::abi::buffers::Background;
+use crate::abi::rays::{SampleSet, SampledRays};
 use anyhow::{anyhow, Result};
 use std::cell::RefCell;
 

@@ -8,8 +8,7 @@ use super::DeviceKind;
 use super::{Batch, Gpu, GpuBuffer};
 use crate::abi::buffers::SampleCamera;
 use crate::abi::consts::{SAMPLE_SORT_RAYS, SAMPLE_SORT_SIDE};
-use crate::cpu::sample_rays::{sorted_keys, SampleSet, SampledRays};
-use crate::data::TrainViews;
+use crate::abi::rays::{sorted_keys, SampleSet, SampledRays};
 use crate::kernels::{sample_rays, sample_rays_sort};
 use anyhow::{ensure, Result};
 
@@ -23,7 +22,7 @@ const _: () = assert!(SAMPLE_SORT_SIDE == 64 && std::mem::size_of::<SampleCamera
 pub enum KeyDraw {
     /// `sample_rays` pass 0 and `sample_rays_sort` on the device.
     Device,
-    /// The twin (`cpu::sample_rays::sorted_keys`, the same keys bit for bit) on the host, written
+    /// The host draw (`abi::rays::sorted_keys`, the same keys bit for bit), written
     /// into the batch in its command stream. The default on a CPU device: there a workgroup runs
     /// on one thread, so the sort's single workgroup per run costs several times the host's sort
     /// (docs/results.md, "Training batches drawn on the device"), and the host is the device's
@@ -274,17 +273,7 @@ pub enum TrainRays<'a> {
     },
 }
 
-impl<'a> TrainRays<'a> {
-    /// The batch of `n` rays drawn with `seed` from `views`.
-    pub fn sampled(views: &'a TrainViews, seed: u64, n: usize) -> Self {
-        TrainRays::Sampled {
-            id: views.id(),
-            set: views.set(),
-            seed,
-            n,
-        }
-    }
-
+impl TrainRays<'_> {
     /// Number of rays.
     pub fn len(&self) -> usize {
         match self {

@@ -4,12 +4,15 @@
 // `!(a < b)` is deliberate where NaN must take the same branch as on the GPU.
 #![allow(clippy::needless_range_loop, clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod atomic;
 pub mod cubic;
 pub mod cubic_oracle;
 pub mod dda;
 pub mod madd;
 pub mod plenoxel;
+pub mod rmsprop;
 pub mod sh;
+pub mod step;
 pub mod surface;
 pub mod surface_blocks;
 pub mod surface_train;

@@ -1,8 +1,10 @@
 //! The stage-1 ray march: the twin of `glsl/lib/plenoxel.glsl`, operation for operation (no FMA
-//! contraction on either side), so the CPU kernels in `cpu::plenoxel` visit the same samples.
+//! contraction on either side), so the CPU twins `cpu::plenoxel_fwd`, `cpu::plenoxel_train` and
+//! `cpu::plenoxel_weights` visit the same samples.
 
 use super::dda::ray_box;
 use super::trilerp::{cell_links, trilerp_weights};
+use crate::abi::consts::REPLAY;
 
 pub use crate::abi::consts::{OCC_SHIFT, SIGMA_EPS, SKIP_MARGIN, STEP};
 
@@ -189,4 +191,53 @@ pub fn march_next(
         }
         counts.empty += 1;
     }
+}
+
+/// Origin and direction of ray `r` of `rays` (6 floats each).
+pub fn ray(rays: &[f32], r: usize) -> ([f32; 3], [f32; 3]) {
+    let v = &rays[6 * r..6 * r + 6];
+    ([v[0], v[1], v[2]], [v[3], v[4], v[5]])
+}
+
+/// The forward march of one ray (the first loop of `plenoxel_fwd` and `plenoxel_train`): accumulated colour (background not
+/// yet added) and final transmittance; the indices of the first REPLAY shaded samples go to
+/// `replay`, and the number of shaded samples to `counts.shaded`.
+pub fn forward(
+    g: &GridRef,
+    m: &March,
+    y: &[f32; 9],
+    stop_thresh: f32,
+    counts: &mut PlenoxelCounts,
+    replay: &mut [u32; REPLAY],
+) -> ([f32; 3], f32) {
+    let mut color = [0f32; 3];
+    let mut t_acc = 1.0f32;
+    let mut k = 0;
+    while let Some(s) = march_next(g, m, &mut k, counts) {
+        if (counts.shaded as usize) < REPLAY {
+            replay[counts.shaded as usize] = k - 1;
+        }
+        counts.shaded += 1;
+        let alpha = sample_alpha(s.sigma, m.delta);
+        let c = sample_color_raw(g, &s.lk, &s.w, y).map(|x| x.max(0.0));
+        let wt = t_acc * alpha;
+        for ch in 0..3 {
+            color[ch] += wt * c[ch];
+        }
+        t_acc *= 1.0 - alpha;
+        if t_acc < stop_thresh {
+            break;
+        }
+    }
+    (color, t_acc)
+}
+
+/// How rays map into the grid and when they stop.
+#[derive(Clone, Copy, Debug)]
+pub struct MarchParams {
+    /// grid = p·scale + offset (per axis).
+    pub scale: [f32; 3],
+    pub offset: [f32; 3],
+    /// Stop once transmittance falls below this.
+    pub stop_thresh: f32,
 }

@@ -490,3 +490,20 @@ mod tests {
         assert!(dropped_near > 1000, "only {dropped_near} close calls");
     }
 }
+
+/// How rays map into the grid, the levels, truncation and early termination.
+#[derive(Clone, Debug)]
+pub struct SurfaceParams {
+    /// grid = p·scale + offset (per axis).
+    pub scale: [f32; 3],
+    pub offset: [f32; 3],
+    /// Level values τ_i (at most [`SURF_MAX_LEVELS`]).
+    pub levels: Vec<f32>,
+    /// Truncated compositing: hits with count k ≥ a get γ = 0 (the ray stops there, or with
+    /// counting per structure passes them over).
+    pub truncation: Truncation,
+    /// Stop once transmittance falls below this.
+    pub stop_thresh: f32,
+    /// The colour composited behind the last hit: C = Σ w_j c_j + T·background.
+    pub background: [f32; 3],
+}

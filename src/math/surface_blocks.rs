@@ -28,6 +28,7 @@
 //! ```
 
 use super::dda::{dda_flush, ray_box, Dda, DDA_BIG};
+use rayon::prelude::*;
 
 /// log2 of the block edge each backend skips with, the faster in `bench surface`
 /// (docs/tuning.md): 8³ on the CPU twins (a restart costs a scalar walk more than the cells it
@@ -229,6 +230,81 @@ pub fn surf_block_skip(
     surf_dda_restart(w, dn, n, t);
     *skipped = bi;
     true
+}
+
+/// The box of the allocated vertices (`math::surface_blocks::SURF_BOX_WORDS`): lo x, y, z, hi x,
+/// y, z in vertex coordinates of the `n`³ grid; [1, 1, 1, 0, 0, 0] when nothing is allocated.
+/// Depends on the allocation only.
+pub fn alloc_box(links: &[i32], n: u32) -> [u32; SURF_BOX_WORDS] {
+    let n = n as usize;
+    let (lo, hi) = links
+        .par_iter()
+        .enumerate()
+        .filter(|(_, &l)| l >= 0)
+        .map(|(s, _)| {
+            let v = [s / (n * n), (s / n) % n, s % n].map(|x| x as u32);
+            (v, v)
+        })
+        .reduce(
+            || ([u32::MAX; 3], [0; 3]),
+            |(a0, a1), (b0, b1)| {
+                (
+                    std::array::from_fn(|i| a0[i].min(b0[i])),
+                    std::array::from_fn(|i| a1[i].max(b1[i])),
+                )
+            },
+        );
+    if lo[0] == u32::MAX {
+        return [1, 1, 1, 0, 0, 0];
+    }
+    [lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]]
+}
+
+/// Bit i of word i/32 set when the cell whose lower corner is slot i (x-major, `n`³ slots) has
+/// its 8 corners allocated: `surface_live_cells` reads these instead of the links.
+pub fn complete_cells(links: &[i32], n: u32) -> Vec<u32> {
+    if n < 2 {
+        return vec![0; surf_live_words(n) as usize];
+    }
+    let n = n as usize;
+    let (nz, nyz) = (n, n * n);
+    (0..surf_live_words(n as u32) as usize)
+        .into_par_iter()
+        .map(|w| {
+            let mut bits = 0u32;
+            // The word's first slot's coordinates, then stepped along z (no division per slot).
+            let s0 = 32 * w;
+            let (mut x, mut y, mut z) = (s0 / nyz, (s0 / nz) % n, s0 % n);
+            for b in 0..32 {
+                let s = s0 + b;
+                if x + 1 < n && y + 1 < n && z + 1 < n {
+                    let corners = [
+                        s,
+                        s + 1,
+                        s + nz,
+                        s + nz + 1,
+                        s + nyz,
+                        s + nyz + 1,
+                        s + nyz + nz,
+                        s + nyz + nz + 1,
+                    ];
+                    if corners.iter().all(|&c| links[c] >= 0) {
+                        bits |= 1 << b;
+                    }
+                }
+                z += 1;
+                if z == n {
+                    z = 0;
+                    y += 1;
+                    if y == n {
+                        y = 0;
+                        x += 1;
+                    }
+                }
+            }
+            bits
+        })
+        .collect()
 }
 
 #[cfg(test)]

@@ -6,9 +6,9 @@
 //! ([`crate::mesh`]). With `--trim-hidden` (by default for thin stage-2 runs) the cells no
 //! training camera sees inside other surfaces are dropped from both ([`crate::eval::hidden`]).
 
+use crate::abi::extract::ExtractInput;
 use crate::backend::Backend;
 use crate::checkpoint::format as checkpoint;
-use crate::cpu::extract_points::ExtractInput;
 use crate::data::{Aabb, Dataset, SceneBox};
 use crate::eval::colour::Band0;
 use crate::eval::extract::{

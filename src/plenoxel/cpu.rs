@@ -4,12 +4,18 @@ use super::plan::{batch_grad_scale, PlenoxelPass, PlenoxelPlan, TvField};
 use super::{
     march_params, state_bytes_of, Gradients, Plenoxels, PlenoxelsStage, StepParams, StepStats,
 };
-use crate::cpu::background::{self, Background};
-use crate::cpu::plenoxel::{self as twin, MarchParams, TrainGrads};
+use crate::abi::buffers::Background;
+use crate::cpu::background_step::background_step;
+use crate::cpu::occupancy::{occupancy_rows, occupancy_slots};
+use crate::cpu::plenoxel_fwd::render;
+use crate::cpu::plenoxel_train::{train, TrainGrads};
+use crate::cpu::plenoxel_weights::max_weights;
+use crate::cpu::sample_rays::sample_rays;
 use crate::cpu::{rmsprop_sparse, tv, Stage1Params};
 use crate::data::TrainViews;
 use crate::gpu::{timed, Phase, PhaseClock};
 use crate::grid::{Grid, SH_DIM};
+use crate::math::plenoxel::MarchParams;
 use crate::math::plenoxel::{GridRef, PlenoxelCounts};
 use crate::stage::{StageBackend, StateFn};
 use anyhow::{ensure, Result};
@@ -18,7 +24,7 @@ use anyhow::{ensure, Result};
 pub struct CpuPlenoxels {
     grid: Grid,
     occ: Vec<u32>,
-    /// Each row's slot in the links (`twin::occupancy_slots`): the occupancy twin scatters
+    /// Each row's slot in the links (`occupancy_slots`): the occupancy twin scatters
     /// from the rows.
     slots: Vec<u32>,
     grad_density: Vec<f32>,
@@ -55,7 +61,7 @@ impl CpuPlenoxels {
     }
 
     fn refresh_occupancy(&mut self) {
-        self.occ = twin::occupancy_rows(&self.slots, &self.grid.density, self.grid.res);
+        self.occ = occupancy_rows(&self.slots, &self.grid.density, self.grid.res);
     }
 
     fn view(&self) -> GridRef<'_> {
@@ -116,7 +122,7 @@ impl CpuPlenoxels {
                     h,
                 ),
                 PlenoxelPass::Background { lr, beta, eps } => {
-                    background::step(&mut self.bg, *lr, *beta, *eps);
+                    background_step(&mut self.bg, *lr, *beta, *eps);
                 }
             }
         }
@@ -150,7 +156,7 @@ fn data_term(
         "batch of {n} rays with {} targets",
         targets.len() / 3
     );
-    Ok(twin::train(g, rays, targets, mp, grad_scale, bg, grads))
+    Ok(train(g, rays, targets, mp, grad_scale, bg, grads))
 }
 
 impl StageBackend<PlenoxelsStage> for CpuPlenoxels {
@@ -181,7 +187,7 @@ impl StageBackend<PlenoxelsStage> for CpuPlenoxels {
         p: &StepParams,
     ) -> Result<()> {
         super::uniform_views(views)?;
-        let (batch, sampling) = timed(Phase::Sampling, || views.sample(seed, n))?;
+        let (batch, sampling) = timed(Phase::Sampling, || sample_rays(views.set(), seed, n))?;
         let mut stats = self.step(&batch.rays, &batch.targets, p)?;
         stats.host.add(&sampling);
         self.done.push(stats);
@@ -220,7 +226,7 @@ impl StageBackend<PlenoxelsStage> for CpuPlenoxels {
         self.state_density = sd;
         self.state_sh = ss;
         self.touched = vec![0; n];
-        self.slots = twin::occupancy_slots(&grid.links, n);
+        self.slots = occupancy_slots(&grid.links, n);
         self.grid = grid;
         self.refresh_occupancy();
         Ok(())
@@ -269,13 +275,13 @@ impl Plenoxels for CpuPlenoxels {
     fn render(&mut self, rays: &[f32], stop_thresh: f32) -> Result<(Vec<f32>, PlenoxelCounts)> {
         self.refresh_occupancy();
         let mp = march_params(&self.grid, stop_thresh);
-        Ok(twin::render(&self.view(), rays, &mp, self.bg.rgb))
+        Ok(render(&self.view(), rays, &mp, self.bg.rgb))
     }
 
     fn max_weights(&mut self, rays: &[f32], stop_thresh: f32) -> Result<Vec<f32>> {
         self.refresh_occupancy();
         let mp = march_params(&self.grid, stop_thresh);
-        Ok(twin::max_weights(&self.view(), rays, &mp))
+        Ok(max_weights(&self.view(), rays, &mp))
     }
 
     fn shape(&self) -> ([u32; 3], usize) {

@@ -10,10 +10,10 @@ pub use vulkan::VulkanPlenoxels;
 
 use crate::abi::buffers::PlenoxelPerRay;
 use crate::checkpoint::{self, format};
-use crate::cpu::plenoxel::MarchParams;
 use crate::data::TrainViews;
 use crate::grid::state_bytes;
 use crate::grid::{Grid, SH_DIM};
+use crate::math::plenoxel::MarchParams;
 use crate::math::plenoxel::PlenoxelCounts;
 use crate::stage::{psnr, Saved, Stage, StageBackend};
 use anyhow::{bail, Result};

@@ -4,8 +4,9 @@
 //! σ and SH → sparse RMSProp → background step (when it is learned).
 
 use super::StepParams;
-use crate::cpu::step::TOUCH_ALL;
-use crate::cpu::{RmsProp, TvChunk};
+use crate::abi::consts::TOUCH_ALL;
+use crate::abi::regularisers::TvChunk;
+use crate::abi::train::RmsProp;
 use crate::grid::SH_DIM;
 use anyhow::{ensure, Result};
 

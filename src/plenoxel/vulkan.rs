@@ -6,11 +6,13 @@ use super::plan::{PlenoxelPass, PlenoxelPlan, TvField};
 use super::{
     march_params, state_bytes_of, Gradients, Plenoxels, PlenoxelsStage, StepParams, StepStats,
 };
+use crate::abi::buffers::Background;
 use crate::abi::buffers::PlenoxelParams;
-use crate::cpu::background::Background;
-use crate::cpu::sample_rays::SampledRays;
-use crate::cpu::step::{step_record, StepHeader, STEP_FLAGS, STEP_RESET_BYTES};
-use crate::cpu::{RmsProp, TvChunk};
+use crate::abi::buffers::StepHeader;
+use crate::abi::rays::SampledRays;
+use crate::abi::regularisers::TvChunk;
+use crate::abi::step::{step_record, STEP_FLAGS, STEP_RESET_BYTES};
+use crate::abi::train::RmsProp;
 use crate::data::TrainViews;
 use crate::gpu::{
     record_background_step, record_loss_sum, record_optim_args, Batch, BatchTimes, Gpu, GpuBuffer,
@@ -330,7 +332,7 @@ impl StageBackend<PlenoxelsStage> for VulkanPlenoxels {
         p: &StepParams,
     ) -> Result<()> {
         super::uniform_views(views)?;
-        self.submit_step(TrainRays::sampled(views, seed, n), p)
+        self.submit_step(views.train_rays(seed, n), p)
     }
 
     fn take_stats(&mut self) -> Result<Vec<StepStats>> {

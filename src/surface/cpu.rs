@@ -4,16 +4,21 @@ use super::plan::{PlanGrid, SurfacePass, SurfacePlan};
 use super::{
     surface_params, BlockRefresh, SurfaceBackend, SurfaceStage, SurfaceStepParams, SurfaceStepStats,
 };
+use crate::abi::buffers::Background;
+use crate::abi::buffers::SurfCounts;
+use crate::abi::buffers::{RayLoss, TrainCounts};
+use crate::abi::normal_reg::NormalPrefix;
+use crate::abi::regularisers::{axis_neighbours, forward_reach};
 use crate::abi::surface_grid::SurfaceGridRef;
-use crate::cpu::background::{self, Background};
+use crate::cpu::background_step::background_step;
+use crate::cpu::sample_rays::sample_rays;
 use crate::cpu::surface_blocks::SkipAllocation;
-use crate::cpu::surface_delta_tv::{axis_neighbours, delta_tv, forward_reach};
-use crate::cpu::surface_fwd::{render, SurfCounts};
-use crate::cpu::surface_reg::{
-    normal_reg_passes, surface_opacity_reg, NormalPrefix, NormalScratch,
-};
-use crate::cpu::surface_train::{train, RayLoss, SurfaceGrads, TrainCounts, TrainInput};
-use crate::cpu::{surface_rmsprop_sparse, tv, Stage2Params};
+use crate::cpu::surface_delta_tv::delta_tv;
+use crate::cpu::surface_fwd::render;
+use crate::cpu::surface_opacity_reg::surface_opacity_reg;
+use crate::cpu::surface_reg::{normal_reg_passes, NormalScratch};
+use crate::cpu::surface_train::{train, SurfaceGrads, TrainInput};
+use crate::cpu::{surface_rmsprop, tv, Stage2Params};
 use crate::data::TrainViews;
 use crate::gpu::{timed, Phase, PhaseClock};
 use crate::grid::row_slots;
@@ -186,7 +191,7 @@ impl CpuSurface {
                     let [gd, go, gs] = &mut self.grad;
                     let [sd, so, ss] = &mut self.state;
                     let g = &mut self.grid;
-                    surface_rmsprop_sparse(
+                    surface_rmsprop(
                         Stage2Params {
                             delta: &mut g.delta,
                             opacity: &mut g.opacity,
@@ -203,7 +208,7 @@ impl CpuSurface {
                     );
                 }
                 SurfacePass::Background { lr, beta, eps } => {
-                    background::step(&mut self.bg, *lr, *beta, *eps);
+                    background_step(&mut self.bg, *lr, *beta, *eps);
                 }
             }
         }
@@ -273,7 +278,7 @@ impl StageBackend<SurfaceStage> for CpuSurface {
         n: usize,
         p: &SurfaceStepParams,
     ) -> Result<()> {
-        let (batch, sampling) = timed(Phase::Sampling, || views.sample(seed, n))?;
+        let (batch, sampling) = timed(Phase::Sampling, || sample_rays(views.set(), seed, n))?;
         let weights = (!batch.weights.is_empty()).then_some(batch.weights.as_slice());
         let mut stats = self.step_weighted(&batch.rays, &batch.targets, weights, p)?;
         stats.host.add(&sampling);

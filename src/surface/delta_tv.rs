@@ -2,7 +2,7 @@
 //! `surface_delta_tv` over a [`DeltaTvChunk`] (twin `cpu::surface_delta_tv`), shared by
 //! `VulkanSurface` and the parity checks.
 
-use crate::cpu::surface_delta_tv::DeltaTvChunk;
+use crate::abi::regularisers::DeltaTvChunk;
 use crate::gpu::Batch;
 use crate::kernels;
 use anyhow::{ensure, Result};

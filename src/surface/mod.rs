@@ -12,14 +12,16 @@ mod vulkan;
 pub use cpu::CpuSurface;
 pub use vulkan::{surf_params, SurfaceGradients, VulkanSurface};
 
+use crate::abi::buffers::SurfCounts;
+use crate::abi::buffers::TrainCounts;
 use crate::abi::buffers::TrainPerRay;
+use crate::abi::regularisers::DeltaTvChunk;
+use crate::abi::regularisers::OpacityChunk;
+use crate::abi::regularisers::TvChunk;
+use crate::abi::train::SurfaceLoss;
 use crate::checkpoint;
-use crate::cpu::surface_delta_tv::DeltaTvChunk;
-use crate::cpu::surface_fwd::{SurfCounts, SurfaceParams};
-use crate::cpu::surface_reg::OpacityChunk;
-use crate::cpu::surface_train::{SurfaceLoss, TrainCounts};
-use crate::cpu::TvChunk;
 use crate::grid::surface::SurfaceGrid;
+use crate::math::surface::SurfaceParams;
 use crate::math::surface::Truncation;
 use crate::stage::{psnr, Saved, Stage, StageBackend};
 use anyhow::Result;
@@ -75,7 +77,7 @@ pub struct SurfaceStepStats {
     pub consistency: f64,
     /// Weighted losses of the regularisers Lα and Ln (the TV terms are not evaluated).
     pub reg_loss: f64,
-    /// Counters of the training pass (see `cpu::surface_train::TrainCounts`).
+    /// Counters of the training pass (see `abi::buffers::TrainCounts`).
     pub counts: TrainCounts,
     /// Device time of the step's kernels in ns (0 on the CPU backend).
     pub device_ns: f64,

@@ -3,7 +3,7 @@
 //! `glsl/surface_normal_reg_pairs.comp`, layouts in `glsl/lib/normal_reg.glsl`, twin
 //! `cpu::surface_reg::normal_reg_passes`), shared by `VulkanSurface` and the parity checks.
 
-use crate::cpu::surface_reg::{NormalChunk, NormalPrefix, CORNERS_STRIDE, NORMALS_STRIDE};
+use crate::abi::normal_reg::{NormalChunk, NormalPrefix, CORNERS_STRIDE, NORMALS_STRIDE};
 use crate::gpu::{Batch, Gpu, GpuBuffer};
 use crate::kernels;
 use anyhow::{ensure, Result};

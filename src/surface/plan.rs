@@ -5,11 +5,14 @@
 //! background step (when it is learned).
 
 use super::{batch_loss, BlockRefresh, SurfaceStepParams};
-use crate::cpu::step::RowRange;
-use crate::cpu::surface_delta_tv::DeltaTvChunk;
-use crate::cpu::surface_reg::{NormalChunk, NormalPrefix, OpacityChunk};
-use crate::cpu::surface_train::{SurfaceLoss, SURF_MAX_HITS};
-use crate::cpu::{SurfaceRmsProp, TvChunk};
+use crate::abi::consts::SURF_MAX_HITS;
+use crate::abi::normal_reg::{NormalChunk, NormalPrefix};
+use crate::abi::regularisers::DeltaTvChunk;
+use crate::abi::regularisers::OpacityChunk;
+use crate::abi::regularisers::TvChunk;
+use crate::abi::step::RowRange;
+use crate::abi::train::SurfaceLoss;
+use crate::abi::train::SurfaceRmsProp;
 use crate::math::surface::Truncation;
 use anyhow::{ensure, Result};
 
@@ -212,8 +215,8 @@ fn delta_rows(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::cpu::step::TOUCH_DELTA;
-    use crate::cpu::surface_reg::{delta_tv_chunk, opacity_tv_chunk};
+    use crate::abi::consts::TOUCH_DELTA;
+    use crate::abi::regularisers::{delta_tv_chunk, opacity_tv_chunk};
     use crate::grid::row_slots;
     use crate::surface::SurfaceRegs;
 

@@ -1,8 +1,8 @@
-//! Recording of `surface_rmsprop` on the Vulkan device (twin `cpu::surface_rmsprop_sparse`): the
+//! Recording of `surface_rmsprop` on the Vulkan device (twin `cpu::surface_rmsprop`): the
 //! range passes over the rows whose δ or σα is updated flagged or not, then the list pass over
 //! the touched vertices; shared by `VulkanSurface` and the parity checks.
 
-use crate::cpu::SurfaceRmsProp;
+use crate::abi::train::SurfaceRmsProp;
 use crate::gpu::{record_optim_args, Batch, GpuBuffer};
 use crate::kernels;
 use anyhow::Result;

@@ -10,7 +10,7 @@ use anyhow::Result;
 
 /// Device addresses and sizes the two kernels read and write.
 pub struct SkipIo {
-    /// Static complete-cell bits (`cpu::surface_blocks::complete_cells`).
+    /// Static complete-cell bits (`math::surface_blocks::complete_cells`).
     pub complete: u64,
     pub links: u64,
     pub delta: u64,

@@ -16,16 +16,15 @@ use super::{
     opacity_reg_invocations, surface_params, BlockRefresh, SurfaceBackend, SurfaceStage,
     SurfaceStepParams, SurfaceStepStats,
 };
+use crate::abi::buffers::Background;
+use crate::abi::buffers::StepHeader;
 use crate::abi::buffers::{RayLoss, SurfCounts, SurfOut, SurfParams, TrainCounts};
 use crate::abi::consts::LOSS_SUM_FIELDS;
-use crate::cpu::background::Background;
-use crate::cpu::step::{step_record, StepHeader, STEP_FLAGS, STEP_RESET_BYTES};
-use crate::cpu::surface_blocks::{alloc_box, complete_cells};
-use crate::cpu::surface_delta_tv::{axis_neighbours, forward_reach};
-use crate::cpu::surface_fwd::SurfaceParams;
-use crate::cpu::surface_reg::NormalPrefix;
-use crate::cpu::surface_train::SurfaceLoss;
-use crate::cpu::TvChunk;
+use crate::abi::normal_reg::NormalPrefix;
+use crate::abi::regularisers::TvChunk;
+use crate::abi::regularisers::{axis_neighbours, forward_reach};
+use crate::abi::step::{step_record, STEP_FLAGS, STEP_RESET_BYTES};
+use crate::abi::train::SurfaceLoss;
 use crate::data::TrainViews;
 use crate::gpu::{
     record_background_step, record_loss_sum, Batch, BatchTimes, Gpu, GpuBuffer, Phase, PhaseClock,
@@ -36,8 +35,10 @@ use crate::grid::state_bytes;
 use crate::grid::surface::SurfaceGrid;
 use crate::grid::SH_DIM;
 use crate::kernels;
+use crate::math::surface::SurfaceParams;
 use crate::math::surface::Truncation;
 use crate::math::surface::SURF_MAX_LEVELS;
+use crate::math::surface_blocks::{alloc_box, complete_cells};
 use crate::math::surface_blocks::{
     surf_blocks_per_axis, surf_live_words, SURF_BLOCK_SHIFT_VULKAN, SURF_BOX_WORDS,
 };
@@ -629,7 +630,7 @@ impl StageBackend<SurfaceStage> for VulkanSurface {
         n: usize,
         p: &SurfaceStepParams,
     ) -> Result<()> {
-        self.submit_step(TrainRays::sampled(views, seed, n), p)
+        self.submit_step(views.train_rays(seed, n), p)
     }
 
     fn take_stats(&mut self) -> Result<Vec<SurfaceStepStats>> {

@@ -7,7 +7,7 @@ use super::render::{render_split_with, RenderedSplit};
 use super::steps::{self, loop_schedule, LoopReport, LoopSchedule, StageSteps};
 use super::surface_config::SurfaceConfig;
 use crate::abi::buffers::TrainPerRay;
-use crate::cpu::surface_reg::{delta_tv_chunk, opacity_tv_chunk, OpacityChunk};
+use crate::abi::regularisers::{delta_tv_chunk, opacity_tv_chunk, OpacityChunk};
 use crate::data::{Dataset, TrainViews};
 use crate::math::surface::Truncation;
 use crate::surface::{SurfaceBackend, SurfaceRegs, SurfaceStage, SurfaceStepParams};

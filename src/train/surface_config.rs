@@ -49,7 +49,7 @@ pub struct SurfaceConfig {
     /// The share of each batch drawn from the pixels the object covers (alpha above 0 in the
     /// training images, grown by `data::sampler::FOCUS_GROW` pixels), in [0, 1); the rest is
     /// uniform over every pixel, and each ray's loss is importance-weighted so that a batch's
-    /// loss is the uniform batch's in expectation (`cpu::sample_rays::Focus`). 0: uniform, as the
+    /// loss is the uniform batch's in expectation (`abi::rays::Focus`). 0: uniform, as the
     /// paper (views without alpha always are).
     #[serde(default)]
     pub ray_focus: f32,

@@ -858,7 +858,7 @@ fn drop_alpha(data: &Path, backdrop: [f32; 3]) {
 
 #[test]
 fn learned_background_converges_from_grey_on_the_device() {
-    use alphasurf::cpu::background::Background;
+    use alphasurf::abi::buffers::Background;
     use alphasurf::data::{BackgroundMode, Dataset, LoadOptions, TrainViews};
     use alphasurf::grid::Grid;
     use alphasurf::plenoxel::{StepParams, VulkanPlenoxels};

@@ -110,7 +110,7 @@ fn kernel_table_matches_sources() {
         assert_eq!(k.spirv[0], 0x0723_0203, "{}: not SPIR-V", k.name);
         assert!(k.local_size.iter().all(|&s| s >= 1));
         assert!(
-            alphasurf::check::CHECKS.iter().any(|(n, _)| *n == k.name),
+            alphasurf::check::rows().iter().any(|(n, _)| *n == k.name),
             "{} has no parity check",
             k.name
         );

@@ -3,8 +3,8 @@
 //! inside the ReLU, no early termination), composited on a learned background (dL/dbg checked
 //! too).
 
+use alphasurf::abi::buffers::Background;
 use alphasurf::check::TEST_BACKGROUND;
-use alphasurf::cpu::background::Background;
 use alphasurf::grid::{Grid, SH_DIM};
 use alphasurf::plenoxel::{CpuPlenoxels, Plenoxels};
 use alphasurf::stage::StageBackend;
@@ -213,7 +213,8 @@ fn cpu_backward_matches_finite_differences_on_long_rays() {
 
 #[test]
 fn tv_gradient_matches_finite_differences() {
-    use alphasurf::cpu::{tv, TvChunk};
+    use alphasurf::abi::regularisers::TvChunk;
+    use alphasurf::cpu::tv;
     let mut rng = Pcg64::seed_from_u64(5);
     let mut g = Grid::sphere(7, [0.0; 3], [1.0; 3], 1.2, 0.0);
     for v in g.sh.iter_mut() {
@@ -225,7 +226,7 @@ fn tv_gradient_matches_finite_differences() {
         count: 150,
         channels: SH_DIM as u32,
         scale: 0.01,
-        touch: alphasurf::cpu::step::TOUCH_ALL,
+        touch: alphasurf::abi::consts::TOUCH_ALL,
     };
     let mut grad = vec![0.0f32; g.sh.len()];
     let mut touched = vec![0u32; g.allocated()];

@@ -14,13 +14,12 @@
 
 use alphasurf::abi::buffers::TrainCounts;
 use alphasurf::abi::surface_grid::SurfaceGridRef;
+use alphasurf::abi::train::SurfaceLoss;
 use alphasurf::check::TEST_BACKGROUND;
-use alphasurf::cpu::surface_fwd::SurfaceParams;
-use alphasurf::cpu::surface_train::{
-    hit_point, trace_ray, train, SurfaceGrads, SurfaceLoss, Trace, TrainInput,
-};
+use alphasurf::cpu::surface_train::{hit_point, trace_ray, train, SurfaceGrads, Trace, TrainInput};
 use alphasurf::math::dda::ray_unit;
 use alphasurf::math::sh::sh_basis;
+use alphasurf::math::surface::SurfaceParams;
 use alphasurf::math::surface::{Truncation, TruncationCount};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
@@ -410,7 +409,7 @@ fn backward_matches_central_differences(truncation: Truncation) {
         if gd[i] != 0.0 || go[i] != 0.0 || gs[27 * i..27 * i + 27].iter().any(|&v| v != 0.0) {
             assert_eq!(
                 touched[i],
-                alphasurf::cpu::step::TOUCH_SURFACE,
+                alphasurf::abi::consts::TOUCH_SURFACE,
                 "vertex {i} has a gradient but not every group flag"
             );
         }

@@ -5,14 +5,19 @@
 //! that wrap); the normal regularisers' neighbour table and work lists; the parity rows of the
 //! stage-2 kernels under validation.
 
-use alphasurf::check::surface_reg::{gpu_delta_tv, gpu_normal_reg, RegGrid};
-use alphasurf::cpu::step::{RowRange, TOUCH_DELTA, TOUCH_OPACITY, TOUCH_SURFACE};
-use alphasurf::cpu::surface_delta_tv::{axis_neighbours, delta_tv, forward_reach};
-use alphasurf::cpu::surface_reg::{
-    delta_tv_chunk, opacity_tv_chunk, surface_normal_reg, surface_opacity_reg, tv_loss,
-    NormalChunk, NormalPrefix, NormalRegStats, OpacityChunk, NBR_B, NBR_STRIDE,
+use alphasurf::abi::consts::{NBR_B, NBR_STRIDE, TOUCH_DELTA, TOUCH_OPACITY, TOUCH_SURFACE};
+use alphasurf::abi::normal_reg::{NormalChunk, NormalPrefix};
+use alphasurf::abi::regularisers::{
+    axis_neighbours, delta_tv_chunk, forward_reach, opacity_tv_chunk, OpacityChunk, TvChunk,
 };
-use alphasurf::cpu::{surface_rmsprop_sparse, tv, Stage2Params, SurfaceRmsProp, TvChunk};
+use alphasurf::abi::step::RowRange;
+use alphasurf::abi::train::SurfaceRmsProp;
+use alphasurf::check::surface_reg::{gpu_delta_tv, gpu_normal_reg, RegGrid};
+use alphasurf::cpu::surface_delta_tv::delta_tv;
+use alphasurf::cpu::surface_normal_reg_pairs::NormalRegStats;
+use alphasurf::cpu::surface_opacity_reg::surface_opacity_reg;
+use alphasurf::cpu::surface_reg::{surface_normal_reg, tv_loss};
+use alphasurf::cpu::{surface_rmsprop, tv, Stage2Params};
 use alphasurf::grid::row_slots;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
@@ -669,7 +674,7 @@ fn surface_rmsprop_twin_updates_touched_groups_only() {
             delta_rows,
             opacity_rows,
         };
-        surface_rmsprop_sparse(Stage2Params::from_arrays(p), touched, &h);
+        surface_rmsprop(Stage2Params::from_arrays(p), touched, &h);
     };
     // Vertices 0, 1 touched in every group, 2 not at all, 3 in σα only.
     let mut p = fresh();
@@ -740,8 +745,8 @@ fn parity_rows_pass() {
         "surface_normal_reg_gather",
         "surface_rmsprop",
     ] {
-        let (_, f) = alphasurf::check::CHECKS
-            .iter()
+        let (_, f) = alphasurf::check::rows()
+            .into_iter()
             .find(|(n, _)| *n == name)
             .unwrap_or_else(|| panic!("{name} not registered"));
         let row = f(gpu, 11).unwrap();

@@ -2,7 +2,8 @@
 //! `../shared/fixtures/thin_lyre` (a missing fixture fails these tests).
 
 use crate::data_common::fixture;
-use alphasurf::cpu::sample_rays::key_pixel;
+use alphasurf::abi::rays::key_pixel;
+use alphasurf::cpu::sample_rays::sample_rays;
 use alphasurf::data::image::decode_file;
 use alphasurf::data::inspect::inspect;
 use alphasurf::data::{Camera, Dataset, LoadOptions, Split, TrainViews};
@@ -247,20 +248,22 @@ fn inspect_estimates_object_bounds() {
 fn sampler_is_seeded_uniform_and_matches_pixels() {
     let ds = dataset();
     let views = TrainViews::new(&ds.train, &ds.scene).unwrap();
-    let batch = |seed| views.sample(seed, 4096).unwrap();
+    let batch = |seed| sample_rays(views.set(), seed, 4096).unwrap();
     let (a, b, c) = (batch(1), batch(1), batch(2));
     assert_eq!(a, b);
     assert_ne!(a, c);
     // A second set over the same split draws the same batch (a function of the seed alone).
     assert_eq!(
-        TrainViews::new(&ds.train, &ds.scene)
-            .unwrap()
-            .sample(1, 4096)
-            .unwrap(),
+        sample_rays(
+            TrainViews::new(&ds.train, &ds.scene).unwrap().set(),
+            1,
+            4096,
+        )
+        .unwrap(),
         a
     );
     let bits = views.set().key_bits();
-    let big = views.sample(3, 200_000).unwrap();
+    let big = sample_rays(views.set(), 3, 200_000).unwrap();
     let mut per_view = vec![0usize; 100];
     for &k in &big.keys {
         let (v, x, y) = key_pixel(k, bits);
@@ -337,7 +340,7 @@ fn device_batches_are_the_twins_and_a_restart_draws_them_again() {
     }
     vk.step_sampled(&views, 6, n, &p).unwrap();
     let batch = vk.sampled_batch(n).unwrap();
-    let twin = views.sample(6, n).unwrap();
+    let twin = sample_rays(views.set(), 6, n).unwrap();
     assert_eq!(batch.keys, twin.keys);
     let close = |a: &[f32], b: &[f32], tol: f64| {
         a.iter()
@@ -419,7 +422,7 @@ fn steps_in_flight_match_steps_waited_for() {
     for s in 0..3 {
         queued.step_sampled(&views, steps + s, n, &p).unwrap();
     }
-    let host = views.sample(steps + 3, n).unwrap();
+    let host = sample_rays(views.set(), steps + 3, n).unwrap();
     queued.step(&host.rays, &host.targets, &p).unwrap();
     assert_eq!(queued.take_stats().unwrap().len(), 3);
     let msgs = gpu.validation_messages();

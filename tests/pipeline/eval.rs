@@ -1,7 +1,8 @@
 //! Extraction and evaluation: Chamfer/F-score against brute force, PLY errors, thinning
 //! invariants, extraction on analytic fields (CPU twin and Vulkan), and extract → eval end to end.
 
-use alphasurf::cpu::extract_points::{extract_points, ExtractInput};
+use alphasurf::abi::extract::ExtractInput;
+use alphasurf::cpu::extract_points::extract_points;
 use alphasurf::eval::extract::{
     allocated_cells, extract_sorted, to_cloud, ExtractBackend, GridFrame,
 };

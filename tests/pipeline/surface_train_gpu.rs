@@ -4,10 +4,10 @@
 //! The kernel-level parity (per-ray losses, gradients, touched flags, counters) is the
 //! `surface_train` row of `check-kernels`, asserted in tests/kernels/parity.rs.
 
+use alphasurf::abi::regularisers::{delta_tv_chunk, opacity_tv_chunk, OpacityChunk};
 use alphasurf::check::rel_l2;
 use alphasurf::check::surface_fwd::{test_rays, test_scene};
 use alphasurf::check::surface_train::{scene_grid, test_background};
-use alphasurf::cpu::surface_reg::{delta_tv_chunk, opacity_tv_chunk, OpacityChunk};
 use alphasurf::gpu::test_gpu;
 use alphasurf::grid::surface::SurfaceGrid;
 use alphasurf::stage::StageBackend;

@@ -1,13 +1,10 @@
-//! Twin of `glsl/lib/step.glsl`: the per-step touched-vertex flags (the CPU keeps only the flags;
-//! the list order of the GPU is irrelevant to the result) and the kernel `optim_args`.
+//! The step record (`glsl/lib/step.glsl`) as the host lays it out and reads it, and the ranges
+//! of vertex rows ([`RowRange`]) that the stage-2 regularisers and RMSProp work on.
 
 use rayon::prelude::*;
 use std::ops::Range;
-use std::sync::atomic::{AtomicU32, Ordering};
 
-pub use crate::abi::buffers::StepHeader;
-use crate::abi::consts::DISPATCH_ROW_GROUPS;
-pub use crate::abi::consts::{TOUCH_ALL, TOUCH_DELTA, TOUCH_OPACITY, TOUCH_SH, TOUCH_SURFACE};
+use crate::abi::buffers::StepHeader;
 
 /// Index in u32 words of the touched flags in the step record: after its header.
 pub const STEP_FLAGS: usize = std::mem::size_of::<StepHeader>() / 4;
@@ -96,25 +93,6 @@ impl RowRange {
                 .for_each(|(i, item)| f(span.start + i, item));
         }
     }
-}
-
-/// Set the bits `m` of vertex v's flag.
-pub fn touch_mask(flags: &[AtomicU32], v: usize, m: u32) {
-    if m != 0 {
-        flags[v].fetch_or(m, Ordering::Relaxed);
-    }
-}
-
-/// Mark vertex v touched (every group).
-pub fn touch(flags: &[AtomicU32], v: usize) {
-    touch_mask(flags, v, TOUCH_ALL);
-}
-
-/// Twin of `optim_args.comp`: indirect dispatch arguments for `count` touched vertices.
-pub fn optim_args(count: u32) -> [u32; 3] {
-    let groups = count.div_ceil(64);
-    let gx = groups.min(DISPATCH_ROW_GROUPS);
-    [gx, if gx == 0 { 0 } else { groups.div_ceil(gx) }, 1]
 }
 
 #[cfg(test)]
