@@ -650,68 +650,12 @@ pub fn run(args: &AccuracyArgs, devices: &mut Devices) -> Result<()> {
             args.seed
         ))
     });
-    // Every scene's category is known before the first one trains.
-    let mut todo = Vec::new();
-    for d in &args.data {
-        ensure!(d.is_dir(), "{}: not a directory", d.display());
-        let name = scene_name(d);
-        ensure!(
-            todo.iter().all(|(_, n, _)| n != &name),
-            "two scenes are named {name:?}: their folders would collide under --out"
-        );
-        todo.push((d.clone(), name, scene_category(d, args.category)?));
-    }
+    let todo = scenes_to_run(args)?;
     let mut results = Vec::new();
     for (i, (data, name, category)) in todo.into_iter().enumerate() {
         let dir = out.join(&name);
         std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
-        let mut stage1 = Stage1Settings {
-            data: data.clone(),
-            res: args.res,
-            iters: args.iters,
-            batch: args.batch,
-            preset: args.preset,
-            seed: args.seed,
-            backend: steps.backend(),
-            set: args.plenoxels_set.clone(),
-        };
-        if args.stage1_from.is_some() {
-            // Another output's stage 1, whatever its seed, as long as the rest matches.
-            let from = stage1_dir(args, &dir);
-            let rec = read_stage1(&from)?.with_context(|| {
-                format!(
-                    "--stage1-from: {} holds no finished stage-1 run",
-                    from.display()
-                )
-            })?;
-            stage1.seed = rec.settings.seed;
-            ensure!(
-                rec.settings == stage1,
-                "--stage1-from: {} was trained with other settings ({:?}, here {:?})",
-                from.display(),
-                rec.settings,
-                stage1
-            );
-        }
-        let settings = Settings {
-            stage1,
-            category,
-            seed: args.seed,
-            surface_iters: args.surface_iters,
-            surface_set: args.surface_set.clone(),
-        };
-        let expected = Expected::new(&steps, args, &settings)?;
-        if args.stage1_from.is_some() {
-            let from = stage1_dir(args, &dir);
-            if let Some(d) = config_difference(&from, &expected.stage1) {
-                bail!(
-                    "--stage1-from: {} was trained with another stage-1 configuration than this \
-                     build's ({d}), e.g. by a build with other presets; train stage 1 again \
-                     (leave out --stage1-from)",
-                    from.display()
-                );
-            }
-        }
+        let (settings, expected) = scene_settings(&steps, args, &dir, data, category)?;
         let path = dir.join("result.json");
         eprintln!(
             "\n=== bench accuracy [{}/{}] {name} ({}) → {}",
@@ -720,27 +664,7 @@ pub fn run(args: &AccuracyArgs, devices: &mut Devices) -> Result<()> {
             settings.category,
             dir.display()
         );
-        let r = match stored(&path, &settings)?.filter(|_| {
-            let differs = [
-                (
-                    "stage-1",
-                    config_difference(&stage1_dir(args, &dir), &expected.stage1),
-                ),
-                (
-                    "stage-2",
-                    config_difference(&dir.join("alphasurf"), &expected.stage2),
-                ),
-            ];
-            let differs = differs.into_iter().find_map(|(s, d)| Some((s, d?)));
-            if let Some((stage, d)) = &differs {
-                eprintln!(
-                    "  {} holds a result whose {stage} run had another configuration than this \
-                     build's ({d}): computing it again",
-                    path.display()
-                );
-            }
-            differs.is_none()
-        }) {
+        let r = match stored_for_this_build(args, &dir, &path, &settings, &expected)? {
             Some(r) => {
                 eprintln!("  finished before: {}", path.display());
                 r
@@ -751,17 +675,7 @@ pub fn run(args: &AccuracyArgs, devices: &mut Devices) -> Result<()> {
                 r
             }
         };
-        eprintln!(
-            "  αSurf {} vs best Plen {} (σ = {}), PSNR {:.2} → {} dB",
-            num(r.alphasurf_chamfer_e2, 4),
-            num(r.best_chamfer_e2, 4),
-            r.best_level.map_or("—".into(), |l| l.to_string()),
-            r.stage1_psnr,
-            num(r.stage2_psnr, 2)
-        );
-        if let Some(t) = &r.time {
-            eprintln!("  time: {}", t.line());
-        }
+        print_scene_summary(&r);
         results.push(r);
     }
     let failed = results
@@ -777,6 +691,129 @@ pub fn run(args: &AccuracyArgs, devices: &mut Devices) -> Result<()> {
         println!("{}", serde_json::to_string(&summary)?);
     }
     super::ensure_any_succeeded("scene's evaluation", failed, scenes)
+}
+
+/// Each `--data` folder with its name and category, checked before the first scene trains so
+/// that a bad folder or a name clash fails at once.
+fn scenes_to_run(args: &AccuracyArgs) -> Result<Vec<(PathBuf, String, Category)>> {
+    let mut todo = Vec::new();
+    for d in &args.data {
+        ensure!(d.is_dir(), "{}: not a directory", d.display());
+        let name = scene_name(d);
+        ensure!(
+            todo.iter().all(|(_, n, _)| n != &name),
+            "two scenes are named {name:?}: their folders would collide under --out"
+        );
+        todo.push((d.clone(), name, scene_category(d, args.category)?));
+    }
+    Ok(todo)
+}
+
+/// A scene's settings and this build's configurations for them. With `--stage1-from`, the
+/// other output's stage-1 run is checked to match (its seed is taken over) and refused when
+/// this build would configure it otherwise.
+fn scene_settings(
+    steps: &Steps,
+    args: &AccuracyArgs,
+    dir: &Path,
+    data: PathBuf,
+    category: Category,
+) -> Result<(Settings, Expected)> {
+    let mut stage1 = Stage1Settings {
+        data,
+        res: args.res,
+        iters: args.iters,
+        batch: args.batch,
+        preset: args.preset,
+        seed: args.seed,
+        backend: steps.backend(),
+        set: args.plenoxels_set.clone(),
+    };
+    if args.stage1_from.is_some() {
+        // Another output's stage 1, whatever its seed, as long as the rest matches.
+        let from = stage1_dir(args, dir);
+        let rec = read_stage1(&from)?.with_context(|| {
+            format!(
+                "--stage1-from: {} holds no finished stage-1 run",
+                from.display()
+            )
+        })?;
+        stage1.seed = rec.settings.seed;
+        ensure!(
+            rec.settings == stage1,
+            "--stage1-from: {} was trained with other settings ({:?}, here {:?})",
+            from.display(),
+            rec.settings,
+            stage1
+        );
+    }
+    let settings = Settings {
+        stage1,
+        category,
+        seed: args.seed,
+        surface_iters: args.surface_iters,
+        surface_set: args.surface_set.clone(),
+    };
+    let expected = Expected::new(steps, args, &settings)?;
+    if args.stage1_from.is_some() {
+        let from = stage1_dir(args, dir);
+        if let Some(d) = config_difference(&from, &expected.stage1) {
+            bail!(
+                "--stage1-from: {} was trained with another stage-1 configuration than this \
+                 build's ({d}), e.g. by a build with other presets; train stage 1 again \
+                 (leave out --stage1-from)",
+                from.display()
+            );
+        }
+    }
+    Ok((settings, expected))
+}
+
+/// The stored result at `path` when it is for these settings and both of its runs had the
+/// configuration this build gives them (an older build's result is computed again).
+fn stored_for_this_build(
+    args: &AccuracyArgs,
+    dir: &Path,
+    path: &Path,
+    settings: &Settings,
+    expected: &Expected,
+) -> Result<Option<SceneResult>> {
+    Ok(stored(path, settings)?.filter(|_| {
+        let differs = [
+            (
+                "stage-1",
+                config_difference(&stage1_dir(args, dir), &expected.stage1),
+            ),
+            (
+                "stage-2",
+                config_difference(&dir.join("alphasurf"), &expected.stage2),
+            ),
+        ];
+        let differs = differs.into_iter().find_map(|(s, d)| Some((s, d?)));
+        if let Some((stage, d)) = &differs {
+            eprintln!(
+                "  {} holds a result whose {stage} run had another configuration than this \
+                 build's ({d}): computing it again",
+                path.display()
+            );
+        }
+        differs.is_none()
+    }))
+}
+
+/// A scene's headline figures and time breakdown on stderr.
+fn print_scene_summary(r: &SceneResult) {
+    eprintln!(
+        "  αSurf {} vs best Plen {} (σ = {}), PSNR {:.2} → {} dB",
+        num(r.alphasurf_chamfer_e2, 4),
+        num(r.best_chamfer_e2, 4),
+        r.best_level.map_or("—".into(), |l| l.to_string()),
+        r.stage1_psnr,
+        num(r.stage2_psnr, 2)
+    );
+    if let Some(t) = &r.time {
+        eprintln!("  time: {}", t.line());
+    }
 }
 
 #[cfg(test)]

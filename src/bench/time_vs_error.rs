@@ -318,7 +318,6 @@ pub fn run(args: &TimeVsErrorArgs, devices: &mut Devices) -> Result<()> {
         Err("no Vulkan sweep point".to_string())
     };
     let data = out.join("scene");
-    let gt = data.join("gt_points.ply");
     let size = args.size.scene(false);
     eprintln!(
         "time-vs-error: make-scene --kind {} ({}² images, {} views) → {}",
@@ -339,7 +338,6 @@ pub fn run(args: &TimeVsErrorArgs, devices: &mut Devices) -> Result<()> {
             }
             _ => &cpu,
         };
-        let dir = out.join(p.name());
         eprintln!(
             "\n=== time-vs-error [{}/{}] {}: stage 1 at {}³, {} steps",
             k + 1,
@@ -348,62 +346,91 @@ pub fn run(args: &TimeVsErrorArgs, devices: &mut Devices) -> Result<()> {
             p.res,
             p.iters
         );
-        let tsize = Stage1Overrides {
-            res: Some(p.res),
-            iters: Some(p.iters),
-            batch: args.size.batch,
-            set: Vec::new(),
-        };
-        let s1 = steps.train_plenoxels(&data, &dir.join("plenoxels"), &tsize);
-        let s1 = match interrupt::unless_stopped(s1)? {
-            Ok(s1) => s1,
-            Err(e) => {
-                eprintln!("time-vs-error: stage 1 failed: {e:#}");
-                rows.push(BenchRow::failed(p, "plenoxels_best", format!("{e:#}")));
-                continue;
-            }
-        };
-        let levels = plenoxels_levels(steps, &s1, &gt, &LEVELS);
-        match best_plenoxels(&levels) {
-            Some(b) => rows.push(BenchRow::from_row(p, &b, Some(s1.train_rays_per_s))),
-            None => rows.push(BenchRow::failed(
-                p,
-                "plenoxels_best",
-                "no density level gave an evaluable point cloud".into(),
-            )),
+        measure_point(steps, args, p, &data, &out.join(p.name()), &mut rows)?;
+    }
+    write_and_print(args, &out, &rows, t0)?;
+    let failed = rows.iter().filter(|r| r.error.is_some()).count();
+    super::ensure_any_succeeded("sweep point's method", failed, rows.len())
+}
+
+/// One sweep point in `dir`: stage 1 and its best Plenoxels level, then (unless
+/// `--no-surface`) stage 2 from the same run; pushes a row per method, a failed one when its
+/// training failed. Errs only when a signal asked to stop.
+fn measure_point(
+    steps: &Steps,
+    args: &TimeVsErrorArgs,
+    p: &SweepPoint,
+    data: &Path,
+    dir: &Path,
+    rows: &mut Vec<BenchRow>,
+) -> Result<()> {
+    let gt = data.join("gt_points.ply");
+    let tsize = Stage1Overrides {
+        res: Some(p.res),
+        iters: Some(p.iters),
+        batch: args.size.batch,
+        set: Vec::new(),
+    };
+    let s1 = steps.train_plenoxels(data, &dir.join("plenoxels"), &tsize);
+    let s1 = match interrupt::unless_stopped(s1)? {
+        Ok(s1) => s1,
+        Err(e) => {
+            eprintln!("time-vs-error: stage 1 failed: {e:#}");
+            rows.push(BenchRow::failed(p, "plenoxels_best", format!("{e:#}")));
+            return Ok(());
         }
-        if args.no_surface {
-            eprintln!("time-vs-error: stage 2 skipped (--no-surface)");
-            continue;
+    };
+    let levels = plenoxels_levels(steps, &s1, &gt, &LEVELS);
+    match best_plenoxels(&levels) {
+        Some(b) => rows.push(BenchRow::from_row(p, &b, Some(s1.train_rays_per_s))),
+        None => rows.push(BenchRow::failed(
+            p,
+            "plenoxels_best",
+            "no density level gave an evaluable point cloud".into(),
+        )),
+    }
+    if args.no_surface {
+        eprintln!("time-vs-error: stage 2 skipped (--no-surface)");
+        return Ok(());
+    }
+    eprintln!("time-vs-error: stage 2 (αSurf) from {}", s1.dir.display());
+    let stage2 = Stage2Overrides {
+        category: category(args.scene),
+        iters: Some(args.size.surface_iters.unwrap_or((p.iters / 2).max(1))),
+        set: args.size.surface_set.clone(),
+    };
+    let s2 = steps.train_surface(&s1.dir, data, &dir.join("alphasurf"), &stage2);
+    match interrupt::unless_stopped(s2)? {
+        Ok(s2) => {
+            let r = alphasurf_row(steps, &s1, &s2, &gt);
+            rows.push(BenchRow::from_row(p, &r, Some(s2.train_rays_per_s)));
         }
-        eprintln!("time-vs-error: stage 2 (αSurf) from {}", s1.dir.display());
-        let stage2 = Stage2Overrides {
-            category: category(args.scene),
-            iters: Some(args.size.surface_iters.unwrap_or((p.iters / 2).max(1))),
-            set: args.size.surface_set.clone(),
-        };
-        let s2 = steps.train_surface(&s1.dir, &data, &dir.join("alphasurf"), &stage2);
-        match interrupt::unless_stopped(s2)? {
-            Ok(s2) => {
-                let r = alphasurf_row(steps, &s1, &s2, &gt);
-                rows.push(BenchRow::from_row(p, &r, Some(s2.train_rays_per_s)));
-            }
-            Err(e) => {
-                let msg = format!("{e:#}");
-                eprintln!("time-vs-error: STAGE 2 FAILED: {msg}");
-                rows.push(BenchRow::failed(p, "alphasurf", msg));
-            }
+        Err(e) => {
+            let msg = format!("{e:#}");
+            eprintln!("time-vs-error: STAGE 2 FAILED: {msg}");
+            rows.push(BenchRow::failed(p, "alphasurf", msg));
         }
     }
+    Ok(())
+}
+
+/// Writes the CSV and the plot (a plot that fails is reported, not fatal) into `out`, prints
+/// the table and what was written, and with `--json` the JSON line.
+fn write_and_print(
+    args: &TimeVsErrorArgs,
+    out: &Path,
+    rows: &[BenchRow],
+    t0: Instant,
+) -> Result<()> {
     let csv_path = out.join("time_vs_error.csv");
-    crate::io::atomic::write_bytes(&csv_path, csv(args.scene.name(), &rows).as_bytes())?;
+    crate::io::atomic::write_bytes(&csv_path, csv(args.scene.name(), rows).as_bytes())?;
     let png_path = out.join("time_vs_error.png");
-    let png = plot_png(&rows, &png_path);
+    let png = plot_png(rows, &png_path);
     if let Err(e) = &png {
         eprintln!("time-vs-error: no plot: {e:#}");
     }
     println!();
-    print!("{}", table(&rows));
+    print!("{}", table(rows));
     println!(
         "wrote {}{} in {:.1} s",
         csv_path.display(),
@@ -425,8 +452,7 @@ pub fn run(args: &TimeVsErrorArgs, devices: &mut Devices) -> Result<()> {
         });
         println!("{j}");
     }
-    let failed = rows.iter().filter(|r| r.error.is_some()).count();
-    super::ensure_any_succeeded("sweep point's method", failed, rows.len())
+    Ok(())
 }
 
 #[cfg(test)]

@@ -14,6 +14,7 @@ use crate::abi::step::{step_record, STEP_FLAGS};
 use crate::abi::train::SurfaceRmsProp;
 use crate::cpu::optim_args::optim_args;
 use crate::cpu::surface_delta_tv::delta_tv;
+use crate::cpu::surface_normal_reg_pairs::NormalRegStats;
 use crate::cpu::surface_opacity_reg::surface_opacity_reg;
 use crate::cpu::surface_reg::{normal_reg_passes, NormalScratch};
 use crate::cpu::{surface_rmsprop, tv, Stage2Params};
@@ -355,6 +356,20 @@ pub fn check_opacity_reg(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
     Ok(row)
 }
 
+/// One chunk's run of the three normal-regulariser passes: the twin's results (`st`, `ws`,
+/// `want`, `want_t`) and the device's (`out`, `gs`), after chunk `prior` ran on the device.
+struct NormalRun {
+    start: u32,
+    count: u32,
+    c: NormalChunk,
+    st: NormalRegStats,
+    ws: NormalScratch,
+    want: Vec<f32>,
+    want_t: Vec<u32>,
+    out: GpuRegOut,
+    gs: NormalScratch,
+}
+
 /// The parity rows of the three normal-regulariser passes, from the same runs: each compares
 /// its pass's output (cells: normals; pairs: each cell's corner gradients, loss, skipped pairs —
 /// both within the chunk's window; gather: the gradient and the touched flags) on four chunks,
@@ -385,84 +400,142 @@ fn normal_reg_rows(gpu: &Gpu, seed: u64) -> Result<Vec<CheckRow>> {
         let mut ws = NormalScratch::default();
         let st = normal_reg_passes(&prefix, &g.delta, &mut want, &mut want_t, &c, &mut ws);
         let (out, gs) = gpu_normal_reg_scratch(gpu, &g, &grad0, &c, Some(&prior))?;
-        runs.push((start, count, c, st, ws, want, want_t, out, gs));
+        runs.push(NormalRun {
+            start,
+            count,
+            c,
+            st,
+            ws,
+            want,
+            want_t,
+            out,
+            gs,
+        });
     }
-    // Scales of the elementwise tolerances: the largest finite corner gradient, the largest
-    // added gradient.
+    let mut cmp = normal_reg_compares(&runs, &grad0);
+    let (mut worst_loss, mut worst_l2, mut flags_diff, mut notes) = (0f64, 0f64, 0, Vec::new());
+    for r in &runs {
+        let (l2, flags, loss, note) = compare_normal_run(&mut cmp, r, &grad0);
+        worst_l2 = worst_l2.max(l2);
+        flags_diff += flags;
+        worst_loss = worst_loss.max(loss);
+        notes.push(note);
+    }
+    cmp[2].value(flags_diff as f64, 0.0, || "touched flags differing".into());
+    Ok(normal_reg_check_rows(
+        cmp,
+        cases.len(),
+        worst_loss,
+        worst_l2,
+        &notes.join("; "),
+    ))
+}
+
+/// The comparisons of the cells, pairs and gather passes. Scales of the elementwise
+/// tolerances: the largest finite corner gradient, the largest added gradient.
+fn normal_reg_compares(runs: &[NormalRun], grad0: &[f32]) -> [Compare; 3] {
     let (mut corner_max, mut added_max) = (0f64, 0f64);
-    for (.., ws, want, _, _, _) in &runs {
-        for &v in ws.corners.iter().filter(|v| v.is_finite()) {
+    for r in runs {
+        for &v in r.ws.corners.iter().filter(|v| v.is_finite()) {
             corner_max = corner_max.max(v.abs() as f64);
         }
-        for (&w, &w0) in want.iter().zip(&grad0) {
+        for (&w, &w0) in r.want.iter().zip(grad0) {
             added_max = added_max.max((w - w0).abs() as f64);
         }
     }
-    let mut cmp = [
+    [
         Compare::new(0.0, 0.0),
         Compare::new(1e-6 * corner_max, 1e-5),
         Compare::new(1e-6 * added_max, 1e-5),
-    ];
-    let (mut worst_loss, mut worst_l2, mut flags_diff, mut notes) = (0f64, 0f64, 0, Vec::new());
-    for (start, count, c, st, ws, want, want_t, out, gs) in &runs {
-        for (k, (got, want, name, stride)) in [
-            (&gs.normals, &ws.normals, "normals", NORMALS_STRIDE),
-            (&gs.corners, &ws.corners, "corners", CORNERS_STRIDE),
-            (&out.grad, want, "grad", 1),
-        ]
-        .into_iter()
-        .enumerate()
-        {
-            for (i, (&a, &b)) in got.iter().zip(want.iter()).enumerate() {
-                // The per-row arrays hold what the passes wrote only within the window.
-                if k < 2 && !c.rows_from_start(c.window).contains(i / stride) {
-                    continue;
-                }
-                cmp[k].value(a as f64, b as f64, || {
-                    format!(
-                        "chunk {start}+{count} {name}[{}][{}]",
-                        i / stride,
-                        i % stride
-                    )
-                });
+    ]
+}
+
+/// Compares one chunk's device outputs with the twin's into `cmp`; returns the rel L2 of the
+/// added gradient, the number of touched flags that differ, the loss's relative difference and
+/// the chunk's note.
+fn compare_normal_run(
+    cmp: &mut [Compare; 3],
+    r: &NormalRun,
+    grad0: &[f32],
+) -> (f64, usize, f64, String) {
+    let NormalRun {
+        start,
+        count,
+        c,
+        st,
+        ws,
+        want,
+        want_t,
+        out,
+        gs,
+    } = r;
+    for (k, (got, want, name, stride)) in [
+        (&gs.normals, &ws.normals, "normals", NORMALS_STRIDE),
+        (&gs.corners, &ws.corners, "corners", CORNERS_STRIDE),
+        (&out.grad, want, "grad", 1),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        for (i, (&a, &b)) in got.iter().zip(want.iter()).enumerate() {
+            // The per-row arrays hold what the passes wrote only within the window.
+            if k < 2 && !c.rows_from_start(c.window).contains(i / stride) {
+                continue;
             }
+            cmp[k].value(a as f64, b as f64, || {
+                format!(
+                    "chunk {start}+{count} {name}[{}][{}]",
+                    i / stride,
+                    i % stride
+                )
+            });
         }
-        cmp[1].value(out.skipped as f64, st.skipped as f64, || {
-            format!("chunk {start}+{count} skipped pairs")
-        });
-        let (mut num, mut den) = (0f64, 0f64);
-        for ((&a, &b), &b0) in out.grad.iter().zip(want).zip(&grad0) {
-            num += (a as f64 - b as f64).powi(2);
-            den += (b as f64 - b0 as f64).powi(2);
-        }
-        worst_l2 = worst_l2.max((num / den.max(1e-300)).sqrt());
-        flags_diff += out
-            .touched
-            .iter()
-            .zip(want_t)
-            .filter(|(a, b)| a != b)
-            .count();
-        worst_loss = worst_loss.max((out.loss as f64 - st.loss).abs() / st.loss.abs().max(1e-30));
-        notes.push(format!(
-            "chunk {start}+{count}: {} cells ({} in its window), {} skipped pairs, {} touched",
-            c.cells,
-            c.cells_work.1,
-            st.skipped,
-            want_t.iter().filter(|&&t| t != 0).count()
-        ));
     }
-    cmp[2].value(flags_diff as f64, 0.0, || "touched flags differing".into());
-    let notes = notes.join("; ");
+    cmp[1].value(out.skipped as f64, st.skipped as f64, || {
+        format!("chunk {start}+{count} skipped pairs")
+    });
+    let (mut num, mut den) = (0f64, 0f64);
+    for ((&a, &b), &b0) in out.grad.iter().zip(want).zip(grad0) {
+        num += (a as f64 - b as f64).powi(2);
+        den += (b as f64 - b0 as f64).powi(2);
+    }
+    let l2 = (num / den.max(1e-300)).sqrt();
+    let flags = out
+        .touched
+        .iter()
+        .zip(want_t)
+        .filter(|(a, b)| a != b)
+        .count();
+    let loss = (out.loss as f64 - st.loss).abs() / st.loss.abs().max(1e-30);
+    let note = format!(
+        "chunk {start}+{count}: {} cells ({} in its window), {} skipped pairs, {} touched",
+        c.cells,
+        c.cells_work.1,
+        st.skipped,
+        want_t.iter().filter(|&&t| t != 0).count()
+    );
+    (l2, flags, loss, note)
+}
+
+/// The cells, pairs and gather rows from their comparisons, with the worst loss and gradient
+/// figures folded into their pass/fail.
+fn normal_reg_check_rows(
+    cmp: [Compare; 3],
+    cases: usize,
+    worst_loss: f64,
+    worst_l2: f64,
+    notes: &str,
+) -> Vec<CheckRow> {
     let [c0, c1, c2] = cmp;
     let mut cells = c0.row(
         "surface_normal_reg_cells",
-        cases.len(),
+        cases,
         format!("cell normals, status and k, the window's rows; {notes}"),
     );
     cells.tolerance = "exact (sums and ×¼ only)".into();
     let mut pairs = c1.row(
         "surface_normal_reg_pairs",
-        cases.len(),
+        cases,
         format!(
             "cells' corner gradients (+∞ for cells in no pair) and skipped pairs; loss \
              (float-atomic sum of non-negative terms) rel {worst_loss:.1e} (≤ 1e-5 required); \
@@ -473,7 +546,7 @@ fn normal_reg_rows(gpu: &Gpu, seed: u64) -> Result<Vec<CheckRow>> {
     pairs.pass &= worst_loss <= 1e-5;
     let mut gather = c2.row(
         "surface_normal_reg_gather",
-        cases.len(),
+        cases,
         format!(
             "gradient added to random initial values: rel L2 of the added gradient \
              {worst_l2:.1e} (≤ 1e-6 required); touched flags exact; {notes}"
@@ -481,7 +554,7 @@ fn normal_reg_rows(gpu: &Gpu, seed: u64) -> Result<Vec<CheckRow>> {
     );
     gather.tolerance = "|Δ| ≤ 1e-6·max|Δgrad| + 1e-5·|cpu| elementwise".into();
     gather.pass &= worst_l2 <= 1e-6;
-    Ok(vec![cells, pairs, gather])
+    vec![cells, pairs, gather]
 }
 
 /// The row of normal-regulariser pass `i` (see [`normal_reg_rows`]).

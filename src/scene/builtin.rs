@@ -92,8 +92,21 @@ fn rotated_box(centre: DVec3, half: DVec3, rot: DMat3) -> Shape {
     }
 }
 
+/// Corners of the wire frame in the XZ plane: (x0, x1, z0, z1).
+const THIN_FRAME: (f64, f64, f64, f64) = (-1.0, 0.3, -0.85, 0.85);
+
 fn thin<R: Rng>(rng: &mut R) -> Vec<Object> {
     let mut v = Vec::new();
+    // Order matters: the frame bars and then the leaves draw from `rng`.
+    thin_frame_bars(rng, &mut v);
+    thin_wires(&mut v);
+    let stem_pts = thin_pot_and_stem(&mut v);
+    thin_leaves(rng, &stem_pts, &mut v);
+    v
+}
+
+/// The four wooden bars of the frame; each draws one wood-grain phase from `rng`.
+fn thin_frame_bars<R: Rng>(rng: &mut R, v: &mut Vec<Object>) {
     let wood = |rng: &mut R| {
         opaque(
             [rgb(0.45, 0.25, 0.10), rgb(0.25, 0.12, 0.05)],
@@ -104,7 +117,7 @@ fn thin<R: Rng>(rng: &mut R) -> Vec<Object> {
         )
     };
     // Frame in the XZ plane: x ∈ [−1.04, 0.34], z ∈ [−0.9, 0.9].
-    let (x0, x1, z0, z1) = (-1.0, 0.3, -0.85, 0.85);
+    let (x0, x1, z0, z1) = THIN_FRAME;
     let xm = 0.5 * (x0 + x1);
     let hx = 0.5 * (x1 - x0) + 0.04;
     v.push(obj(
@@ -127,6 +140,11 @@ fn thin<R: Rng>(rng: &mut R) -> Vec<Object> {
         aligned_box(DVec3::new(x1, 0.0, 0.0), DVec3::new(0.04, 0.04, 0.8)),
         wood(rng),
     ));
+}
+
+/// The vertical and diagonal wires strung across the frame (no random draws).
+fn thin_wires(v: &mut Vec<Object>) {
+    let (x0, x1, z0, z1) = THIN_FRAME;
     // Nine vertical wires, radius 0.004–0.008, ends buried in the bars.
     let metal = [rgb(0.75, 0.72, 0.55), rgb(0.35, 0.33, 0.30)];
     for k in 0..9 {
@@ -169,7 +187,22 @@ fn thin<R: Rng>(rng: &mut R) -> Vec<Object> {
         );
         v.push(obj(format!("diagonal_{k}"), shape, mat));
     }
-    // Potted plant at x = 0.85.
+}
+
+/// Material shared by the plant's stem segments and leaf petioles.
+fn thin_stem_material() -> Material {
+    opaque(
+        [rgb(0.25, 0.45, 0.15), rgb(0.40, 0.55, 0.20)],
+        Texture::Stripes {
+            dir: DVec3::Z,
+            freq: 25.0,
+        },
+    )
+}
+
+/// The pot and the three stem segments of the potted plant at x = 0.85;
+/// returns the stem polyline the leaves hang from.
+fn thin_pot_and_stem(v: &mut Vec<Object>) -> [DVec3; 4] {
     let base = DVec3::new(0.85, 0.0, -0.68);
     v.push(obj(
         "pot",
@@ -185,13 +218,7 @@ fn thin<R: Rng>(rng: &mut R) -> Vec<Object> {
         DVec3::new(0.88, -0.02, 0.25),
         DVec3::new(0.84, 0.0, 0.6),
     ];
-    let stem_mat = opaque(
-        [rgb(0.25, 0.45, 0.15), rgb(0.40, 0.55, 0.20)],
-        Texture::Stripes {
-            dir: DVec3::Z,
-            freq: 25.0,
-        },
-    );
+    let stem_mat = thin_stem_material();
     for k in 0..3 {
         let shape = Shape::Capsule {
             a: stem_pts[k],
@@ -200,6 +227,13 @@ fn thin<R: Rng>(rng: &mut R) -> Vec<Object> {
         };
         v.push(obj(format!("stem_{k}"), shape, stem_mat.clone()));
     }
+    stem_pts
+}
+
+/// Twenty-four leaves (a petiole capsule and a zero-thickness elliptical blade
+/// each) placed along `stem_pts`; draws seven values from `rng` per leaf.
+fn thin_leaves<R: Rng>(rng: &mut R, stem_pts: &[DVec3; 4], v: &mut Vec<Object>) {
+    let stem_mat = thin_stem_material();
     let leaf_colors = [rgb(0.10, 0.45, 0.10), rgb(0.45, 0.75, 0.20)];
     for k in 0..24 {
         // A point on the stem polyline above the pot.
@@ -241,7 +275,6 @@ fn thin<R: Rng>(rng: &mut R) -> Vec<Object> {
         );
         v.push(obj(format!("leaf_{k}"), shape, mat));
     }
-    v
 }
 
 fn translucent<R: Rng>(rng: &mut R) -> Vec<Object> {

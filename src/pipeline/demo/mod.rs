@@ -354,6 +354,9 @@ impl DemoSummary {
     }
 }
 
+/// How many phases `demo` announces.
+const DEMO_PHASES: usize = 6;
+
 /// Run the demo on the device `devices` holds for `opts.backend`.
 pub fn demo(opts: &DemoOptions, devices: &mut Devices) -> Result<DemoSummary> {
     let t0 = Instant::now();
@@ -377,37 +380,8 @@ pub fn demo(opts: &DemoOptions, devices: &mut Devices) -> Result<DemoSummary> {
         out.join("alphasurf"),
     );
     let gt = data.join("gt_points.ply");
-    let size = opts.size.scene(opts.fast);
-    let n = 6;
-
-    phase(
-        1,
-        n,
-        &format!(
-            "make-scene --kind {} ({}² images, {} training views) → {}",
-            scene.name(),
-            size.image_res,
-            size.views,
-            data.display()
-        ),
-    );
-    steps.make_scene(scene, &data, &size)?;
-
-    let tsize = opts.size.train(opts.fast);
-    phase(
-        2,
-        n,
-        &format!(
-            "stage 1: train --stage plenoxels --preset fast{}{} on {} → {}",
-            tsize.res.map_or(String::new(), |r| format!(" --res {r}")),
-            tsize
-                .iters
-                .map_or(String::new(), |i| format!(" --iters {i}")),
-            steps.backend(),
-            s1_dir.display()
-        ),
-    );
-    let s1 = steps.train_plenoxels(&data, &s1_dir, &tsize)?;
+    let n = DEMO_PHASES;
+    let s1 = demo_scene_and_stage1(&steps, opts, &data, &s1_dir)?;
 
     phase(
         3,
@@ -420,27 +394,7 @@ pub fn demo(opts: &DemoOptions, devices: &mut Devices) -> Result<DemoSummary> {
     let mut rows = plenoxels_levels(&steps, &s1, &gt, &LEVELS);
     let best = best_plenoxels(&rows);
 
-    phase(
-        4,
-        n,
-        &format!(
-            "stage 2 (αSurf): train --stage surface --init {} --category {} → {}",
-            s1_dir.display(),
-            category(scene),
-            s2_dir.display()
-        ),
-    );
-    let stage2 = Stage2Overrides {
-        category: category(scene),
-        iters: opts.size.surface_iters(opts.fast),
-        set: opts.size.surface_set.clone(),
-    };
-    // A failed stage 2 leaves the table its Plenoxels rows; a stop asked for by a signal ends
-    // the demo.
-    let s2 = interrupt::unless_stopped(steps.train_surface(&s1.dir, &data, &s2_dir, &stage2))?;
-    if let Err(e) = &s2 {
-        eprintln!("demo: STAGE 2 FAILED — the table shows the Plenoxels rows only.\n  {e:#}");
-    }
+    let s2 = demo_stage2(&steps, opts, &s1, &data, &s1_dir, &s2_dir)?;
 
     phase(5, n, "αSurf: extract (α ≥ 0.1) + eval");
     let surf = match &s2 {
@@ -478,6 +432,82 @@ pub fn demo(opts: &DemoOptions, devices: &mut Devices) -> Result<DemoSummary> {
         figures,
         elapsed_s: t0.elapsed().as_secs_f64(),
     })
+}
+
+/// Demo phases 1 and 2: the built-in scene written to `data`, then stage 1 (Plenoxels)
+/// trained on it into `s1_dir`.
+fn demo_scene_and_stage1(
+    steps: &Steps,
+    opts: &DemoOptions,
+    data: &Path,
+    s1_dir: &Path,
+) -> Result<TrainedRun> {
+    let (scene, n) = (opts.scene, DEMO_PHASES);
+    let size = opts.size.scene(opts.fast);
+    phase(
+        1,
+        n,
+        &format!(
+            "make-scene --kind {} ({}² images, {} training views) → {}",
+            scene.name(),
+            size.image_res,
+            size.views,
+            data.display()
+        ),
+    );
+    steps.make_scene(scene, data, &size)?;
+
+    let tsize = opts.size.train(opts.fast);
+    phase(
+        2,
+        n,
+        &format!(
+            "stage 1: train --stage plenoxels --preset fast{}{} on {} → {}",
+            tsize.res.map_or(String::new(), |r| format!(" --res {r}")),
+            tsize
+                .iters
+                .map_or(String::new(), |i| format!(" --iters {i}")),
+            steps.backend(),
+            s1_dir.display()
+        ),
+    );
+    steps.train_plenoxels(data, s1_dir, &tsize)
+}
+
+/// Demo phase 4: stage 2 (αSurf) from `s1` into `s2_dir`. The outer error is a stop asked for
+/// by a signal (it ends the demo); the inner one a failed stage 2, which leaves the table its
+/// Plenoxels rows.
+fn demo_stage2(
+    steps: &Steps,
+    opts: &DemoOptions,
+    s1: &TrainedRun,
+    data: &Path,
+    s1_dir: &Path,
+    s2_dir: &Path,
+) -> Result<Result<TrainedRun>> {
+    let scene = opts.scene;
+    phase(
+        4,
+        DEMO_PHASES,
+        &format!(
+            "stage 2 (αSurf): train --stage surface --init {} --category {} → {}",
+            s1_dir.display(),
+            category(scene),
+            s2_dir.display()
+        ),
+    );
+    let stage2 = Stage2Overrides {
+        category: category(scene),
+        iters: opts.size.surface_iters(opts.fast),
+        set: opts.size.surface_set.clone(),
+    };
+    // A failed stage 2 leaves the table its Plenoxels rows; a stop asked for by a signal ends
+    // the demo.
+    let s2 = interrupt::unless_stopped(steps.train_surface(&s1.dir, data, s2_dir, &stage2))?;
+    if let Err(e) = &s2 {
+        eprintln!("demo: STAGE 2 FAILED — the table shows the Plenoxels rows only.\n  {e:#}");
+    }
+    Ok(s2)
 }
 
 /// First line of a message.
