@@ -458,17 +458,9 @@ fn compare_normal_run(
     r: &NormalRun,
     grad0: &[f32],
 ) -> (f64, usize, f64, String) {
-    let NormalRun {
-        start,
-        count,
-        c,
-        st,
-        ws,
-        want,
-        want_t,
-        out,
-        gs,
-    } = r;
+    let (start, count, c, st) = (r.start, r.count, &r.c, &r.st);
+    let (ws, gs, out) = (&r.ws, &r.gs, &r.out);
+    let (want, want_t) = (&r.want, &r.want_t);
     for (k, (got, want, name, stride)) in [
         (&gs.normals, &ws.normals, "normals", NORMALS_STRIDE),
         (&gs.corners, &ws.corners, "corners", CORNERS_STRIDE),
