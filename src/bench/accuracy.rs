@@ -15,11 +15,13 @@ use crate::backend::Backend;
 use crate::pipeline::demo::{
     alphasurf_row, plenoxels_levels, plenoxels_levels_trimmed, Row, LEVELS,
 };
-use crate::pipeline::metrics::{self, Stage1Metrics, Stage1Seconds, Stage2Metrics, Stage2Seconds};
-use crate::pipeline::steps::{Stage1Overrides, Stage2Overrides, Steps, TrainedRun};
+use crate::pipeline::metrics::{
+    self, PlenoxelsMetrics, PlenoxelsSeconds, SurfaceMetrics, SurfaceSeconds,
+};
+use crate::pipeline::steps::{PlenoxelsOverrides, Steps, SurfaceOverrides, TrainedRun};
 use crate::pipeline::Devices;
 use crate::run::interrupt;
-use crate::train::{Category, Preset, Stage1Config, SurfaceConfig};
+use crate::train::{Category, PlenoxelsConfig, Preset, SurfaceConfig};
 use anyhow::{bail, ensure, Context, Result};
 use clap::ValueEnum;
 use serde::de::DeserializeOwned;
@@ -84,7 +86,7 @@ pub struct AccuracyArgs {
 
 /// What a stage-1 run depends on (`plenoxels/stage1.json`, with its wall time).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Stage1Settings {
+pub struct PlenoxelsSettings {
     pub data: PathBuf,
     pub res: Option<u32>,
     pub iters: Option<u32>,
@@ -97,10 +99,10 @@ pub struct Stage1Settings {
     pub set: Vec<String>,
 }
 
-impl Stage1Settings {
+impl PlenoxelsSettings {
     /// The stage-1 flags these settings hold.
-    fn overrides(&self) -> Stage1Overrides {
-        Stage1Overrides {
+    fn overrides(&self) -> PlenoxelsOverrides {
+        PlenoxelsOverrides {
             res: self.res,
             iters: self.iters,
             batch: self.batch,
@@ -111,8 +113,8 @@ impl Stage1Settings {
 
 /// A finished stage-1 run and its level sweep (`plenoxels/stage1.json`).
 #[derive(Serialize, Deserialize)]
-struct Stage1Record {
-    settings: Stage1Settings,
+struct PlenoxelsRecord {
+    settings: PlenoxelsSettings,
     wall_s: f64,
     levels: Vec<LevelScore>,
     /// The sweep's wall time (0 in records written before it).
@@ -129,7 +131,7 @@ fn best_of(levels: &[LevelScore]) -> Option<&LevelScore> {
         .map(|(l, _)| l)
 }
 
-impl Stage1Record {
+impl PlenoxelsRecord {
     /// The level with the lowest finite Chamfer distance.
     fn best(&self) -> Option<&LevelScore> {
         best_of(&self.levels)
@@ -139,7 +141,7 @@ impl Stage1Record {
 /// What a scene's figures depend on; a stored result is reused only when this matches.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Settings {
-    pub stage1: Stage1Settings,
+    pub stage1: PlenoxelsSettings,
     pub category: Category,
     /// Stage 2's seed.
     pub seed: u64,
@@ -189,12 +191,12 @@ pub struct SceneResult {
 /// the scoring around them.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct SceneTime {
-    pub stage1: Option<Stage1Seconds>,
+    pub stage1: Option<PlenoxelsSeconds>,
     /// Extraction and eval of every level of stage 1 (0 when its record predates the timing).
     pub levels_s: f64,
     /// The same with the levels' hidden cells trimmed (thin scenes).
     pub trimmed_levels_s: f64,
-    pub stage2: Option<Stage2Seconds>,
+    pub stage2: Option<SurfaceSeconds>,
     /// αSurf's extraction and eval.
     pub alphasurf_score_s: f64,
 }
@@ -426,7 +428,7 @@ fn stored(path: &Path, settings: &Settings) -> Result<Option<SceneResult>> {
 
 /// This build's configurations for a scene's two runs, from its settings.
 struct Expected {
-    stage1: Stage1Config,
+    stage1: PlenoxelsConfig,
     stage2: SurfaceConfig,
 }
 
@@ -467,7 +469,7 @@ fn write_json(path: &Path, value: &impl Serialize) -> Result<()> {
 }
 
 /// The stage-1 record in `dir`, if its run finished.
-fn read_stage1(dir: &Path) -> Result<Option<Stage1Record>> {
+fn read_plenoxels(dir: &Path) -> Result<Option<PlenoxelsRecord>> {
     let rec = dir.join("stage1.json");
     if !(dir.join(crate::run::dir::METRICS).is_file() && rec.is_file()) {
         return Ok(None);
@@ -483,15 +485,15 @@ fn read_stage1(dir: &Path) -> Result<Option<Stage1Record>> {
 /// else trained and swept.
 fn stage1(
     steps: &Steps,
-    settings: &Stage1Settings,
-    config: &Stage1Config,
+    settings: &PlenoxelsSettings,
+    config: &PlenoxelsConfig,
     dir: &Path,
-) -> Result<(TrainedRun, Stage1Record)> {
-    if let Some(r) = read_stage1(dir)?.filter(|r| &r.settings == settings) {
+) -> Result<(TrainedRun, PlenoxelsRecord)> {
+    if let Some(r) = read_plenoxels(dir)?.filter(|r| &r.settings == settings) {
         match config_difference(dir, config) {
             None => {
                 eprintln!("  stage 1: reusing {}", dir.display());
-                return Ok((TrainedRun::read_stage1(dir, r.wall_s)?, r));
+                return Ok((TrainedRun::read_plenoxels(dir, r.wall_s)?, r));
             }
             Some(d) => eprintln!(
                 "  stage 1 in {} was trained with another configuration than this build's \
@@ -505,7 +507,7 @@ fn stage1(
     let gt = settings.data.join("gt_points.ply");
     let t = Instant::now();
     let rows = plenoxels_levels(steps, &run, &gt, &LEVELS);
-    let rec = Stage1Record {
+    let rec = PlenoxelsRecord {
         settings: settings.clone(),
         wall_s: run.wall_s,
         levels: LEVELS.iter().map(|&l| score(&rows, l)).collect(),
@@ -545,8 +547,8 @@ fn surface_overrides(args: &AccuracyArgs) -> Vec<String> {
 }
 
 /// What stage 2 of a scene is trained with.
-fn stage2_overrides(args: &AccuracyArgs, settings: &Settings) -> Stage2Overrides {
-    Stage2Overrides {
+fn stage2_overrides(args: &AccuracyArgs, settings: &Settings) -> SurfaceOverrides {
+    SurfaceOverrides {
         category: settings.category,
         iters: settings.surface_iters,
         set: surface_overrides(args),
@@ -604,7 +606,7 @@ fn scene(
         Err(e) => (None, 0.0, Some(format!("{e:#}"))),
     };
     let time = SceneTime {
-        stage1: metrics::read::<Stage1Metrics>(&s1.dir)
+        stage1: metrics::read::<PlenoxelsMetrics>(&s1.dir)
             .ok()
             .map(|m| m.wall_seconds),
         levels_s: rec.levels_s,
@@ -612,7 +614,7 @@ fn scene(
         stage2: s2
             .as_ref()
             .ok()
-            .and_then(|r| metrics::read::<Stage2Metrics>(&r.dir).ok())
+            .and_then(|r| metrics::read::<SurfaceMetrics>(&r.dir).ok())
             .map(|m| m.wall_seconds),
         alphasurf_score_s: t.elapsed().as_secs_f64(),
     };
@@ -719,7 +721,7 @@ fn scene_settings(
     data: PathBuf,
     category: Category,
 ) -> Result<(Settings, Expected)> {
-    let mut stage1 = Stage1Settings {
+    let mut stage1 = PlenoxelsSettings {
         data,
         res: args.res,
         iters: args.iters,
@@ -732,7 +734,7 @@ fn scene_settings(
     if args.stage1_from.is_some() {
         // Another output's stage 1, whatever its seed, as long as the rest matches.
         let from = stage1_dir(args, dir);
-        let rec = read_stage1(&from)?.with_context(|| {
+        let rec = read_plenoxels(&from)?.with_context(|| {
             format!(
                 "--stage1-from: {} holds no finished stage-1 run",
                 from.display()
@@ -829,7 +831,7 @@ mod tests {
         assert!(back.time.is_none());
         let rec = r#"{"settings":{"data":"d","res":256,"iters":null,"batch":null,
             "preset":"fast","seed":0,"backend":"cpu"},"wall_s":130.7,"levels":[]}"#;
-        let rec: Stage1Record = serde_json::from_str(rec).unwrap();
+        let rec: PlenoxelsRecord = serde_json::from_str(rec).unwrap();
         assert_eq!(rec.levels_s, 0.0);
         r.time = Some(SceneTime {
             stage1: None,
@@ -883,7 +885,7 @@ mod tests {
         SceneResult {
             scene: scene.into(),
             settings: Settings {
-                stage1: Stage1Settings {
+                stage1: PlenoxelsSettings {
                     data: scene.into(),
                     res: Some(64),
                     iters: None,

@@ -11,7 +11,7 @@ use super::stage1::{thin_scene, time_steps, warm_config, StepFigures};
 use crate::gpu::Gpu;
 use crate::plenoxel::{CpuPlenoxels, VulkanPlenoxels};
 use crate::stage::StageBackend;
-use crate::train::stage1;
+use crate::train::plenoxels_steps;
 use anyhow::{ensure, Result};
 use serde_json::json;
 
@@ -54,7 +54,7 @@ pub fn run(gpu: &Gpu, args: &PlenoxelsBenchArgs) -> Result<()> {
         "bench plenoxels: {} warm-up steps to reach a {}³ grid",
         cfg.iters, args.res
     );
-    stage1::train(&mut vk, &data, &cfg, &dir.join("warm"), 0, false)?;
+    plenoxels_steps::train(&mut vk, &data, &cfg, &dir.join("warm"), 0, false)?;
     let grid = vk.grid()?;
 
     let before: Vec<(&str, u64, f64)> = gpu.profile().totals();

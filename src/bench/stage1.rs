@@ -5,10 +5,10 @@ use crate::abi::buffers::PlenoxelPerRay;
 use crate::data::{Dataset, LoadOptions, TrainViews};
 use crate::gpu::StepTimes;
 use crate::grid::Grid;
-use crate::plenoxel::{Plenoxels, StepParams};
+use crate::plenoxel::{PlenoxelsBackend, PlenoxelsStepParams};
 use crate::scene::{generate, GenerateOptions, SceneKind};
 use crate::train::progress::READ_EVERY;
-use crate::train::Stage1Config;
+use crate::train::PlenoxelsConfig;
 use anyhow::Result;
 use std::path::Path;
 use std::time::Instant;
@@ -25,8 +25,8 @@ pub fn thin_scene(dir: &Path) -> Result<Dataset> {
 
 /// The fast preset for `iters` steps from a (`res`/2)³ grid upsampled to `res`³ after a third
 /// of them, without checkpoints; and its initial grid.
-pub fn warm_config(res: u32, iters: u32) -> (Stage1Config, Grid) {
-    let mut cfg = Stage1Config::fast();
+pub fn warm_config(res: u32, iters: u32) -> (PlenoxelsConfig, Grid) {
+    let mut cfg = PlenoxelsConfig::fast();
     cfg.res = res / 2;
     cfg.upsample = vec![(iters / 3, res)];
     cfg.iters = iters;
@@ -110,16 +110,16 @@ impl StepFigures {
 /// training runs them (submitted without waiting, figures read every `READ_EVERY` steps); the
 /// first is untimed (first-dispatch compilation on lavapipe). The wall time is the whole loop's.
 pub fn time_steps(
-    backend: &mut dyn Plenoxels,
+    backend: &mut dyn PlenoxelsBackend,
     data: &Dataset,
-    cfg: &Stage1Config,
+    cfg: &PlenoxelsConfig,
     steps: u32,
     batch: u32,
 ) -> Result<Figures> {
     let mut f = Figures::default();
     let mut times = StepFigures::default();
     let views = TrainViews::new(&data.train, &data.scene)?;
-    let p = StepParams {
+    let p = PlenoxelsStepParams {
         lr_sigma: cfg.lr_sigma.at(cfg.iters),
         lr_sh: cfg.lr_sh.at(cfg.iters),
         beta: cfg.beta,

@@ -29,7 +29,7 @@ use crate::stage::StageBackend;
 use crate::surface::{CpuSurface, SurfaceBackend, SurfaceRegs, SurfaceStepParams, VulkanSurface};
 use crate::train::progress::READ_EVERY;
 use crate::train::surface_config::SurfaceConfig;
-use crate::train::{stage1, stage2, Category, Preset, Stage1Config};
+use crate::train::{plenoxels_steps, surface_steps, Category, PlenoxelsConfig, Preset};
 use anyhow::{ensure, Result};
 use serde_json::json;
 use std::collections::BTreeMap;
@@ -92,7 +92,7 @@ fn step_params(
         a,
         count: cfg.truncation_count,
     };
-    stage2::step_params(cfg, res, rows, 0, truncation, [draw, draw >> 17, draw >> 7])
+    surface_steps::step_params(cfg, res, rows, 0, truncation, [draw, draw >> 17, draw >> 7])
 }
 
 /// `steps + 1` stage-2 steps (the first untimed) on the batches of `n` rays drawn from `views`
@@ -188,7 +188,7 @@ pub fn run(gpu: &Gpu, args: &SurfaceBenchArgs) -> Result<()> {
 /// What the timings start from: the stage-1 config and density grid, the stage-2 grid and its
 /// optimiser state after the warm-up steps.
 struct Start {
-    cfg: Stage1Config,
+    cfg: PlenoxelsConfig,
     density: Grid,
     grid: SurfaceGrid,
     state: [Vec<f32>; 3],
@@ -209,7 +209,7 @@ fn warm_start(
         "bench surface: {} stage-1 steps (CPU) to reach a {}³ density grid",
         cfg.iters, args.res
     );
-    stage1::train(&mut s1, data, &cfg, &dir.join("stage1"), 0, false)?;
+    plenoxels_steps::train(&mut s1, data, &cfg, &dir.join("stage1"), 0, false)?;
     let density = s1.grid()?;
     let init_grid = SurfaceGrid::from_density(&density, &scfg.init)?;
     let (res, rows) = (init_grid.res, init_grid.delta.len() as u32);

@@ -10,7 +10,7 @@ use crate::backend::Backend;
 use crate::pipeline::demo::{
     alphasurf_row, best_plenoxels, category, first_line, plenoxels_levels, Row, SizeArgs, LEVELS,
 };
-use crate::pipeline::steps::{Stage1Overrides, Stage2Overrides, Steps};
+use crate::pipeline::steps::{PlenoxelsOverrides, Steps, SurfaceOverrides};
 use crate::pipeline::Devices;
 use crate::report::plot::{self, Axis, Plot, Series, Style, PALETTE};
 use crate::run::interrupt;
@@ -365,7 +365,7 @@ fn measure_point(
     rows: &mut Vec<BenchRow>,
 ) -> Result<()> {
     let gt = data.join("gt_points.ply");
-    let tsize = Stage1Overrides {
+    let tsize = PlenoxelsOverrides {
         res: Some(p.res),
         iters: Some(p.iters),
         batch: args.size.batch,
@@ -394,7 +394,7 @@ fn measure_point(
         return Ok(());
     }
     eprintln!("time-vs-error: stage 2 (αSurf) from {}", s1.dir.display());
-    let stage2 = Stage2Overrides {
+    let stage2 = SurfaceOverrides {
         category: category(args.scene),
         iters: Some(args.size.surface_iters.unwrap_or((p.iters / 2).max(1))),
         set: args.size.surface_set.clone(),

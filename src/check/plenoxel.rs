@@ -14,12 +14,12 @@ use crate::abi::train::RmsProp;
 use crate::cpu::background_step::background_step;
 use crate::cpu::occupancy;
 use crate::cpu::optim_args::optim_args;
-use crate::cpu::{rmsprop_sparse, tv, Stage1Params};
+use crate::cpu::{rmsprop_sparse, tv, PlenoxelsOptimArrays};
 use crate::gpu::{record_optim_args, Gpu, GpuBuffer};
 use crate::grid::{Grid, SH_DIM};
 use crate::kernels;
 use crate::math::plenoxel::PlenoxelCounts;
-use crate::plenoxel::{CpuPlenoxels, Plenoxels, VulkanPlenoxels};
+use crate::plenoxel::{CpuPlenoxels, PlenoxelsBackend, VulkanPlenoxels};
 use crate::stage::StageBackend;
 use anyhow::Result;
 use rand::{Rng, SeedableRng};
@@ -361,7 +361,7 @@ pub fn check_rmsprop(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
     )?;
     b.submit()?;
     rmsprop_sparse(
-        Stage1Params {
+        PlenoxelsOptimArrays {
             density: &mut density,
             sh: &mut sh,
             grad_density: &mut grad_density,

@@ -17,7 +17,7 @@ use crate::cpu::surface_delta_tv::delta_tv;
 use crate::cpu::surface_normal_reg_pairs::NormalRegStats;
 use crate::cpu::surface_opacity_reg::surface_opacity_reg;
 use crate::cpu::surface_reg::{normal_reg_passes, NormalScratch};
-use crate::cpu::{surface_rmsprop, tv, Stage2Params};
+use crate::cpu::{surface_rmsprop, tv, SurfaceOptimArrays};
 use crate::gpu::{Gpu, GpuBuffer};
 use crate::grid::row_slots;
 use crate::grid::SH_DIM;
@@ -667,7 +667,7 @@ fn rmsprop_case(
     record_surface_rmsprop(&mut b, &io, &sb, &args, &h)?;
     b.submit()?;
     let got_args: Vec<u32> = args.download()?;
-    surface_rmsprop(Stage2Params::from_arrays(&mut p), &mut flags, &h);
+    surface_rmsprop(SurfaceOptimArrays::from_arrays(&mut p), &mut flags, &h);
     let names = [
         "delta",
         "opacity",

@@ -36,9 +36,9 @@ mod tv;
 pub use dda_walk::dda_walk;
 pub use fill_pattern::fill_pattern;
 pub use loss_sum::loss_sum;
-pub use rmsprop_sparse::{rmsprop_sparse, Stage1Params};
+pub use rmsprop_sparse::{rmsprop_sparse, PlenoxelsOptimArrays};
 pub use sh_eval::sh_eval;
-pub use surface_rmsprop::{surface_rmsprop, Stage2Params};
+pub use surface_rmsprop::{surface_rmsprop, SurfaceOptimArrays};
 pub use trilerp_eval::trilerp_eval;
 pub use tv::tv;
 

@@ -7,7 +7,7 @@ use crate::math::rmsprop::rmsprop_one;
 use rayon::prelude::*;
 
 /// Parameters, gradients and RMS state of the stage-1 grid.
-pub struct Stage1Params<'a> {
+pub struct PlenoxelsOptimArrays<'a> {
     pub density: &'a mut [f32],
     pub sh: &'a mut [f32],
     pub grad_density: &'a mut [f32],
@@ -17,7 +17,7 @@ pub struct Stage1Params<'a> {
 }
 
 /// Update every vertex whose flag is set, and clear the flags.
-pub fn rmsprop_sparse(p: Stage1Params, touched: &mut [u32], h: &RmsProp) {
+pub fn rmsprop_sparse(p: PlenoxelsOptimArrays, touched: &mut [u32], h: &RmsProp) {
     p.density
         .par_iter_mut()
         .zip(p.grad_density.par_iter_mut())

@@ -9,7 +9,7 @@ use rayon::prelude::*;
 
 /// Parameters, gradients and RMS state of the stage-2 grid (per allocated vertex: δ, raw
 /// opacity σα, 27 SH).
-pub struct Stage2Params<'a> {
+pub struct SurfaceOptimArrays<'a> {
     pub delta: &'a mut [f32],
     pub opacity: &'a mut [f32],
     pub sh: &'a mut [f32],
@@ -21,11 +21,11 @@ pub struct Stage2Params<'a> {
     pub state_sh: &'a mut [f32],
 }
 
-impl<'a> Stage2Params<'a> {
+impl<'a> SurfaceOptimArrays<'a> {
     /// The nine arrays in field order: δ, σα, SH, their gradients, their RMS states.
     pub fn from_arrays(p: &'a mut [Vec<f32>; 9]) -> Self {
         let [d, o, sh, gd, go, gs, sd, so, ss] = p;
-        Stage2Params {
+        SurfaceOptimArrays {
             delta: d,
             opacity: o,
             sh,
@@ -42,7 +42,7 @@ impl<'a> Stage2Params<'a> {
 /// Update, per vertex, each group whose touched bit (step.rs TOUCH_*) is set — δ also on every row
 /// of `delta_rows`, σα on every row of `opacity_rows` — clearing the updated gradients, and clear
 /// the flags (surface_rmsprop.comp's range and list passes in one).
-pub fn surface_rmsprop(p: Stage2Params, touched: &mut [u32], h: &SurfaceRmsProp) {
+pub fn surface_rmsprop(p: SurfaceOptimArrays, touched: &mut [u32], h: &SurfaceRmsProp) {
     let scalars = p
         .delta
         .par_iter_mut()

@@ -153,7 +153,7 @@ fn load_grid(opts: &ExtractOptions) -> Result<(Field, PathBuf)> {
         all_stage2.display(),
         run.join(ALL_STAGE1).display()
     );
-    let path = crate::run::dir::stage1_checkpoint(run, "extract --run")?;
+    let path = crate::run::dir::plenoxels_checkpoint(run, "extract --run")?;
     Ok((Field::Density(checkpoint::load(&path)?.grid), path))
 }
 

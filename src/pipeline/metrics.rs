@@ -1,10 +1,10 @@
-//! A training run's `metrics.json`, typed: [`Stage1Metrics`] for a stage-1 (Plenoxels) run,
-//! [`Stage2Metrics`] for a stage-2 (αSurf) run. The JSON layout is the one runs have always
+//! A training run's `metrics.json`, typed: [`PlenoxelsMetrics`] for a stage-1 (Plenoxels) run,
+//! [`SurfaceMetrics`] for a stage-2 (αSurf) run. The JSON layout is the one runs have always
 //! written; counters added over time are `Option`s, absent in runs written before them.
 
 use crate::checkpoint::BackgroundRecord;
 use crate::run::dir::METRICS;
-use crate::train::{Stage1Config, SurfaceConfig};
+use crate::train::{PlenoxelsConfig, SurfaceConfig};
 use anyhow::{Context, Result};
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
@@ -12,7 +12,7 @@ use std::path::Path;
 
 /// Wall time of a stage-1 run's phases, seconds.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Stage1Seconds {
+pub struct PlenoxelsSeconds {
     /// Reading the dataset.
     pub load: f64,
     pub train: f64,
@@ -36,7 +36,7 @@ pub struct SamplesPerRay {
 
 /// `metrics.json` of a stage-1 run.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Stage1Metrics {
+pub struct PlenoxelsMetrics {
     /// "plenoxels".
     pub stage: String,
     /// The backend's name ("cpu", "vulkan").
@@ -44,7 +44,7 @@ pub struct Stage1Metrics {
     /// The Vulkan device's name (`None` on the CPU backend).
     #[serde(default)]
     pub device: Option<String>,
-    pub wall_seconds: Stage1Seconds,
+    pub wall_seconds: PlenoxelsSeconds,
     pub train_rays_per_s: f64,
     pub final_train_mse: f64,
     /// Mean PSNR over the test views, dB.
@@ -60,12 +60,12 @@ pub struct Stage1Metrics {
     /// The background at the end (a learned colour's value; absent in older runs: white).
     #[serde(default)]
     pub background: BackgroundRecord,
-    pub config: Stage1Config,
+    pub config: PlenoxelsConfig,
 }
 
 /// Wall time of a stage-2 run's phases, seconds.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Stage2Seconds {
+pub struct SurfaceSeconds {
     /// Reading the dataset.
     pub load: f64,
     pub train: f64,
@@ -77,7 +77,7 @@ pub struct Stage2Seconds {
 
 /// Per training ray of stage 2 (the kernel's counters over the run's steps).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Stage2PerRay {
+pub struct SurfacePerRay {
     /// Cells read (live cells).
     pub cells: f64,
     /// Cubic solves.
@@ -97,7 +97,7 @@ pub struct Stage2PerRay {
 
 /// `metrics.json` of a stage-2 run.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Stage2Metrics {
+pub struct SurfaceMetrics {
     /// "surface".
     pub stage: String,
     /// The backend's name ("cpu", "vulkan").
@@ -105,13 +105,13 @@ pub struct Stage2Metrics {
     /// The Vulkan device's name (`None` on the CPU backend).
     #[serde(default)]
     pub device: Option<String>,
-    pub wall_seconds: Stage2Seconds,
+    pub wall_seconds: SurfaceSeconds,
     pub train_rays_per_s: f64,
     pub final_train_mse: f64,
     /// Mean PSNR over the test views, dB.
     pub test_psnr: f64,
     pub test_psnr_per_view: Vec<f64>,
-    pub per_ray: Option<Stage2PerRay>,
+    pub per_ray: Option<SurfacePerRay>,
     /// Vertices before dropping the surfaces with α below the configuration's `prune_alpha`.
     pub vertices_before_prune: Option<usize>,
     pub allocated_vertices: usize,
@@ -131,7 +131,7 @@ pub fn read<M: DeserializeOwned>(dir: &Path) -> Result<M> {
     serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))
 }
 
-impl Stage1Metrics {
+impl PlenoxelsMetrics {
     /// The lines `train` prints when stage 1 ends: per-view PSNR, per-ray counters, the summary.
     pub fn summary(&self) -> String {
         let mut s = views(&self.test_psnr_per_view);
@@ -154,7 +154,7 @@ impl Stage1Metrics {
     }
 }
 
-impl Stage2Metrics {
+impl SurfaceMetrics {
     /// The lines `train` prints when stage 2 ends: per-view PSNR, per-ray counters, the summary.
     pub fn summary(&self) -> String {
         let mut s = views(&self.test_psnr_per_view);
@@ -220,7 +220,7 @@ mod tests {
             "allocated_vertices": 12345,
             "bytes_per_vertex": 224.0,
             "peak_rss_bytes": 1048576,
-            "config": Stage1Config::fast(),
+            "config": PlenoxelsConfig::fast(),
         })
     }
 
@@ -260,11 +260,11 @@ mod tests {
     #[test]
     fn the_typed_metrics_read_and_write_the_untyped_layout() {
         let v = stage1_untyped();
-        let m: Stage1Metrics = serde_json::from_value(v.clone()).unwrap();
+        let m: PlenoxelsMetrics = serde_json::from_value(v.clone()).unwrap();
         assert_eq!(m.samples_per_ray.as_ref().unwrap().empty, 20.25);
         assert_eq!(serde_json::to_value(&m).unwrap(), with_white_background(v));
         let v = stage2_untyped();
-        let m: Stage2Metrics = serde_json::from_value(v.clone()).unwrap();
+        let m: SurfaceMetrics = serde_json::from_value(v.clone()).unwrap();
         assert_eq!(m.per_ray.as_ref().unwrap().blocks_skipped, Some(3.0));
         assert_eq!(serde_json::to_value(&m).unwrap(), with_white_background(v));
     }
@@ -280,7 +280,7 @@ mod tests {
         ] {
             v.as_object_mut().unwrap().remove(k);
         }
-        let m: Stage1Metrics = serde_json::from_value(v).unwrap();
+        let m: PlenoxelsMetrics = serde_json::from_value(v).unwrap();
         assert_eq!((&m.device, m.atomic_adds_per_ray), (&None, None));
         assert!(m.summary().contains("stage 1 done: test PSNR 21.90 dB"));
         assert!(!m.summary().contains("per training ray"));
@@ -293,26 +293,26 @@ mod tests {
         ] {
             v.as_object_mut().unwrap().remove(k);
         }
-        let m: Stage2Metrics = serde_json::from_value(v).unwrap();
+        let m: SurfaceMetrics = serde_json::from_value(v).unwrap();
         assert_eq!((m.per_ray, m.vertices_before_prune), (None, None));
         let mut v = stage2_untyped();
         v["per_ray"]
             .as_object_mut()
             .unwrap()
             .remove("blocks_skipped");
-        let m: Stage2Metrics = serde_json::from_value(v).unwrap();
+        let m: SurfaceMetrics = serde_json::from_value(v).unwrap();
         assert_eq!(m.per_ray.unwrap().blocks_skipped, None);
         // A stage-2 file is not a stage-1 run's metrics.
-        assert!(serde_json::from_value::<Stage1Metrics>(stage2_untyped()).is_err());
+        assert!(serde_json::from_value::<PlenoxelsMetrics>(stage2_untyped()).is_err());
     }
 
     #[test]
     fn read_names_the_file() {
         let dir = tempfile::tempdir().unwrap();
-        let e = format!("{:#}", read::<Stage1Metrics>(dir.path()).unwrap_err());
+        let e = format!("{:#}", read::<PlenoxelsMetrics>(dir.path()).unwrap_err());
         assert!(e.contains(METRICS), "{e}");
         std::fs::write(dir.path().join(METRICS), "{}").unwrap();
-        let e = format!("{:#}", read::<Stage1Metrics>(dir.path()).unwrap_err());
+        let e = format!("{:#}", read::<PlenoxelsMetrics>(dir.path()).unwrap_err());
         assert!(e.contains("parsing") && e.contains(METRICS), "{e}");
     }
 }

@@ -3,7 +3,7 @@
 //! grid; a stage-2 run its surfaces, truncated as at the checkpoint's step (after training: as
 //! the test renders `train` wrote).
 
-use super::{train_stage1, train_stage2};
+use super::{train_plenoxels, train_surface};
 use crate::backend::Backend;
 use crate::checkpoint::format as checkpoint;
 use crate::checkpoint::BackgroundRecord;
@@ -11,10 +11,11 @@ use crate::data::{Dataset, LoadOptions};
 use crate::gpu::Gpu;
 use crate::grid::surface::SurfaceGrid;
 use crate::math::surface::Truncation;
-use crate::run::dir::{ALL_STAGE1, ALL_STAGE2, STAGE2_CHECKPOINT};
+use crate::run::dir::{ALL_STAGE1, ALL_STAGE2, SURFACE_CHECKPOINT};
 use crate::run::{self, read_info};
 use crate::train::{
-    render_split, render_split_with, RenderedSplit, Stage1Config, SurfaceConfig, MAX_PIXEL_SAMPLES,
+    render_split, render_split_with, PlenoxelsConfig, RenderedSplit, SurfaceConfig,
+    MAX_PIXEL_SAMPLES,
 };
 use anyhow::{bail, Context, Result};
 use std::path::{Path, PathBuf};
@@ -80,7 +81,7 @@ fn load_run(run: &Path) -> Result<(Trained, BackgroundRecord, PathBuf)> {
         };
         return Ok((trained, bg, surface));
     }
-    if run.join(ALL_STAGE2).join(STAGE2_CHECKPOINT).is_file() {
+    if run.join(ALL_STAGE2).join(SURFACE_CHECKPOINT).is_file() {
         bail!(
             "{} is a `--stage all` run: give its stage-1 run {} or its stage-2 run {}",
             run.display(),
@@ -88,10 +89,10 @@ fn load_run(run: &Path) -> Result<(Trained, BackgroundRecord, PathBuf)> {
             run.join(ALL_STAGE2).display()
         );
     }
-    let path = run::dir::stage1_checkpoint(run, "render")?;
+    let path = run::dir::plenoxels_checkpoint(run, "render")?;
     let ck = checkpoint::load(&path)?;
     let bg = BackgroundRecord::from_meta(&ck.meta, &path)?;
-    let stop_thresh = serde_json::from_value::<Stage1Config>(ck.meta["config"].clone())
+    let stop_thresh = serde_json::from_value::<PlenoxelsConfig>(ck.meta["config"].clone())
         .map(|c| c.stop_thresh)
         .unwrap_or(1e-7);
     let trained = Trained::Density {
@@ -135,7 +136,7 @@ pub fn render(opts: &RenderOptions, gpu: Option<&Gpu>) -> Result<RenderedSplit> 
     };
     match trained {
         Trained::Density { grid, stop_thresh } => {
-            let mut backend = train_stage1::make_backend(gpu, grid)?;
+            let mut backend = train_plenoxels::make_backend(gpu, grid)?;
             backend.set_background(bg.kernel())?;
             render_split(
                 backend.as_mut(),
@@ -151,7 +152,7 @@ pub fn render(opts: &RenderOptions, gpu: Option<&Gpu>) -> Result<RenderedSplit> 
             truncation,
             stop_thresh,
         } => {
-            let mut backend = train_stage2::make_backend(gpu, grid)?;
+            let mut backend = train_surface::make_backend(gpu, grid)?;
             backend.set_background(bg.kernel())?;
             render_split_with(
                 &mut |rays| Ok(backend.render(rays, truncation, stop_thresh)?.0),

@@ -4,7 +4,7 @@
 
 use super::evaluate::{evaluate, EvaluateOptions, GroundTruth};
 use super::extract::{extract, extract_levels, ExtractOptions, LevelJob, DEFAULT_RAYS_PER_AXIS};
-use super::metrics::{self, Stage1Metrics};
+use super::metrics::{self, PlenoxelsMetrics};
 use super::train::train;
 use super::train_options::{Stage, TrainOptions};
 use super::train_run::Trained;
@@ -12,7 +12,7 @@ use crate::backend::Backend;
 use crate::eval::Metrics;
 use crate::gpu::Gpu;
 use crate::scene::{generate, GenerateOptions, SceneKind};
-use crate::train::{Category, Preset, Stage1Config, SurfaceConfig};
+use crate::train::{Category, PlenoxelsConfig, Preset, SurfaceConfig};
 use anyhow::{bail, Result};
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
@@ -31,7 +31,7 @@ pub struct SceneSize {
 
 /// Stage-1 overrides (`None` or empty keeps the preset's values).
 #[derive(Clone, Debug, Default)]
-pub struct Stage1Overrides {
+pub struct PlenoxelsOverrides {
     /// Final grid resolution.
     pub res: Option<u32>,
     pub iters: Option<u32>,
@@ -43,7 +43,7 @@ pub struct Stage1Overrides {
 
 /// Stage-2 choices (`None` or empty keeps the preset's values).
 #[derive(Clone, Debug)]
-pub struct Stage2Overrides {
+pub struct SurfaceOverrides {
     pub category: Category,
     /// Stage-2 steps.
     pub iters: Option<u32>,
@@ -77,8 +77,8 @@ impl TrainedRun {
     }
 
     /// The finished stage-1 run in `dir`, from its metrics.json; `wall_s` as recorded elsewhere.
-    pub fn read_stage1(dir: &Path, wall_s: f64) -> Result<TrainedRun> {
-        let m: Stage1Metrics = metrics::read(dir)?;
+    pub fn read_plenoxels(dir: &Path, wall_s: f64) -> Result<TrainedRun> {
+        let m: PlenoxelsMetrics = metrics::read(dir)?;
         let psnr = (m.test_psnr, m.test_psnr_per_view);
         Ok(TrainedRun::new(dir, wall_s, psnr, m.train_rays_per_s))
     }
@@ -168,7 +168,12 @@ impl<'g> Steps<'g> {
         }
     }
 
-    fn plenoxels_options(&self, data: &Path, out: &Path, stage1: &Stage1Overrides) -> TrainOptions {
+    fn plenoxels_options(
+        &self,
+        data: &Path,
+        out: &Path,
+        stage1: &PlenoxelsOverrides,
+    ) -> TrainOptions {
         TrainOptions {
             res: stage1.res,
             iters: stage1.iters,
@@ -179,9 +184,13 @@ impl<'g> Steps<'g> {
     }
 
     /// The configuration `train_plenoxels` trains with these overrides (this build's presets).
-    pub fn plenoxels_config(&self, data: &Path, stage1: &Stage1Overrides) -> Result<Stage1Config> {
+    pub fn plenoxels_config(
+        &self,
+        data: &Path,
+        stage1: &PlenoxelsOverrides,
+    ) -> Result<PlenoxelsConfig> {
         self.plenoxels_options(data, Path::new(""), stage1)
-            .stage1_config()
+            .plenoxels_config()
     }
 
     /// Stage 1: `train --stage plenoxels` with the overrides.
@@ -189,7 +198,7 @@ impl<'g> Steps<'g> {
         &self,
         data: &Path,
         out: &Path,
-        stage1: &Stage1Overrides,
+        stage1: &PlenoxelsOverrides,
     ) -> Result<TrainedRun> {
         let opts = self.plenoxels_options(data, out, stage1);
         let t = Instant::now();
@@ -209,7 +218,7 @@ impl<'g> Steps<'g> {
         init: &Path,
         data: &Path,
         out: &Path,
-        stage2: &Stage2Overrides,
+        stage2: &SurfaceOverrides,
     ) -> TrainOptions {
         TrainOptions {
             init: Some(init.to_path_buf()),
@@ -225,12 +234,12 @@ impl<'g> Steps<'g> {
     pub fn surface_config(
         &self,
         data: &Path,
-        stage2: &Stage2Overrides,
+        stage2: &SurfaceOverrides,
         grid_n: u32,
     ) -> Result<SurfaceConfig> {
         let none = Path::new("");
         self.surface_options(none, data, none, stage2)
-            .stage2_config(grid_n)
+            .surface_config(grid_n)
     }
 
     /// Stage 2 (αSurf): `train --stage surface --init STAGE1_RUN` with the overrides.
@@ -239,7 +248,7 @@ impl<'g> Steps<'g> {
         init: &Path,
         data: &Path,
         out: &Path,
-        stage2: &Stage2Overrides,
+        stage2: &SurfaceOverrides,
     ) -> Result<TrainedRun> {
         let opts = self.surface_options(init, data, out, stage2);
         let t = Instant::now();

@@ -3,7 +3,7 @@
 
 use crate::grid::Grid;
 use crate::run::{self, Open, RunDir, RunInfo, RunStage};
-use crate::train::{Preset, Stage1Config};
+use crate::train::{PlenoxelsConfig, Preset};
 use anyhow::{Context, Result};
 use serde_json::json;
 use std::path::PathBuf;
@@ -40,7 +40,7 @@ pub struct ImportOptions {
 /// `export`: the run's stage-1 grid as an svox2 checkpoint (written atomically); returns
 /// the grid.
 pub fn export(opts: &ExportOptions) -> Result<Grid> {
-    let ckpt_path = run::dir::stage1_checkpoint(&opts.run, "export")?;
+    let ckpt_path = run::dir::plenoxels_checkpoint(&opts.run, "export")?;
     run::outputs::check_output_file(&opts.out, &[&ckpt_path])?;
     let ck = crate::checkpoint::format::load(&ckpt_path)?;
     crate::grid::npz::save_svox2(&ck.grid, &opts.out)?;
@@ -59,7 +59,7 @@ pub fn import(opts: &ImportOptions) -> Result<Grid> {
         Open::Fresh
     };
     let run = RunDir::claim(&opts.out, RunStage::Plenoxels, open, &[&opts.ckpt, &data])?;
-    let mut cfg = Stage1Config::paper();
+    let mut cfg = PlenoxelsConfig::paper();
     cfg.preset = Preset::Imported;
     cfg.res = grid.res[0];
     cfg.upsample.clear();
@@ -81,7 +81,7 @@ pub fn import(opts: &ImportOptions) -> Result<Grid> {
     // Built beside the run and swapped in whole: a failure leaves a previous run as it was.
     run.write_whole(&info, |dir| {
         crate::checkpoint::format::save(
-            &dir.join(run::dir::STAGE1_CHECKPOINT),
+            &dir.join(run::dir::PLENOXELS_CHECKPOINT),
             &grid,
             &[
                 ("rms_density", &vec![0.0; n]),

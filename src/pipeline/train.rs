@@ -1,10 +1,10 @@
 //! `train` as library calls: [`train`] for the stage the options ask for, and `--stage all`
 //! ([`train_all`]): a parent run holding stage 1 in `plenoxels/` and stage 2 in `surface/`.
 
-use super::metrics::{Stage1Metrics, Stage2Metrics};
+use super::metrics::{PlenoxelsMetrics, SurfaceMetrics};
 use super::train_options::{Stage, TrainOptions};
 use super::train_run::{check_resumed_data, load_data, run_info, Trained};
-use super::{train_stage1, train_stage2};
+use super::{train_plenoxels, train_surface};
 use crate::gpu::Gpu;
 use crate::run::dir::{ALL_STAGE1, ALL_STAGE2};
 use crate::run::{RunDir, RunStage};
@@ -14,8 +14,8 @@ use anyhow::{bail, Result};
 /// already done).
 #[derive(Clone, Debug, Default)]
 pub struct TrainOutcome {
-    pub stage1: Option<Trained<Stage1Metrics>>,
-    pub stage2: Option<Trained<Stage2Metrics>>,
+    pub stage1: Option<Trained<PlenoxelsMetrics>>,
+    pub stage2: Option<Trained<SurfaceMetrics>>,
 }
 
 /// Train the stage(s) `opts` ask for on the Vulkan device `gpu` (`None`: the CPU twins).
@@ -23,12 +23,16 @@ pub fn train(opts: &TrainOptions, gpu: Option<&Gpu>) -> Result<TrainOutcome> {
     opts.check_stage_flags()?;
     Ok(match opts.stage {
         Stage::Plenoxels => TrainOutcome {
-            stage1: Some(train_stage1::train_stage1(opts, &load_data(opts)?, gpu)?),
+            stage1: Some(train_plenoxels::train_plenoxels(
+                opts,
+                &load_data(opts)?,
+                gpu,
+            )?),
             stage2: None,
         },
         Stage::Surface => TrainOutcome {
             stage1: None,
-            stage2: Some(train_stage2::train_stage2(opts, &load_data(opts)?, gpu)?),
+            stage2: Some(train_surface::train_surface(opts, &load_data(opts)?, gpu)?),
         },
         Stage::All => train_all(opts, gpu)?,
     })
@@ -91,10 +95,10 @@ pub fn train_all(opts: &TrainOptions, gpu: Option<&Gpu>) -> Result<TrainOutcome>
         eprintln!("--stage all --resume: stage 1 is done; resuming stage 2");
         None
     } else {
-        Some(train_stage1::train_stage1(&stage1_opts, &data, gpu)?)
+        Some(train_plenoxels::train_plenoxels(&stage1_opts, &data, gpu)?)
     };
     Ok(TrainOutcome {
         stage1,
-        stage2: Some(train_stage2::train_stage2(&stage2_opts, &data, gpu)?),
+        stage2: Some(train_surface::train_surface(&stage2_opts, &data, gpu)?),
     })
 }

@@ -6,7 +6,7 @@ use crate::backend::Backend;
 use crate::data::BackgroundMode;
 use crate::run::Open;
 use crate::train::config::GRID_RES;
-use crate::train::{Category, Preset, Stage1Config, SurfaceConfig};
+use crate::train::{Category, PlenoxelsConfig, Preset, SurfaceConfig};
 use anyhow::{bail, ensure, Context, Result};
 use serde::{de::DeserializeOwned, Serialize};
 use std::path::PathBuf;
@@ -163,8 +163,8 @@ impl TrainOptions {
     }
 
     /// The stage-1 configuration: the preset, then the overrides.
-    pub fn stage1_config(&self) -> Result<Stage1Config> {
-        let mut cfg = Stage1Config::preset(self.preset())?;
+    pub fn plenoxels_config(&self) -> Result<PlenoxelsConfig> {
+        let mut cfg = PlenoxelsConfig::preset(self.preset())?;
         cfg.seed = self.seed;
         if let Some(n) = self.iters {
             if n == 0 {
@@ -216,7 +216,7 @@ impl TrainOptions {
 
     /// Refuse a new stage-1 run whose grids or batch cannot fit in the memory this process may
     /// use, naming the flag that sized them.
-    pub fn check_stage1_memory(&self, cfg: &Stage1Config) -> Result<()> {
+    pub fn check_plenoxels_memory(&self, cfg: &PlenoxelsConfig) -> Result<()> {
         let (grid_bytes, grid_res) = cfg.peak_grid_bytes();
         let res_flag = self.res.map(|r| format!("--res {r}"));
         crate::run::memory::ensure_fits(
@@ -338,7 +338,7 @@ impl TrainOptions {
 
     /// The stage-2 configuration for a stage-1 grid of `grid_n`³ vertices: the preset fitted to the
     /// grid, then the command line's overrides.
-    pub fn stage2_config(&self, grid_n: u32) -> Result<SurfaceConfig> {
+    pub fn surface_config(&self, grid_n: u32) -> Result<SurfaceConfig> {
         let mut cfg = SurfaceConfig::preset(self.preset(), self.category())?;
         cfg.fit_grid(grid_n);
         cfg.seed = self.seed;
@@ -373,7 +373,7 @@ impl TrainOptions {
     }
 
     /// Refuse a new stage-2 run whose batch cannot fit in the memory this process may use.
-    pub fn check_stage2_memory(&self, cfg: &SurfaceConfig) -> Result<()> {
+    pub fn check_surface_memory(&self, cfg: &SurfaceConfig) -> Result<()> {
         let batch_flag = self.batch.map(|b| format!("--batch {b}"));
         check_batch_memory(
             cfg.batch,
@@ -443,7 +443,7 @@ mod tests {
             batch,
             ..TrainOptions::new(Stage::Plenoxels, "d".into(), "o".into())
         };
-        opts.stage1_config().unwrap().batch
+        opts.plenoxels_config().unwrap().batch
     }
 
     #[test]
@@ -464,9 +464,9 @@ mod tests {
             checkpoint_every: every,
             ..TrainOptions::new(Stage::All, "d".into(), "o".into())
         };
-        let stage2 = |o: &TrainOptions| o.stage2_config(128).unwrap();
+        let stage2 = |o: &TrainOptions| o.surface_config(128).unwrap();
         let preset = opts(None);
-        let (s1, s2) = (preset.stage1_config().unwrap(), stage2(&preset));
+        let (s1, s2) = (preset.plenoxels_config().unwrap(), stage2(&preset));
         assert_eq!(
             (s1.checkpoint_every, s1.checkpoint_min_seconds),
             (500, 60.0)
@@ -476,7 +476,7 @@ mod tests {
             (500, 60.0)
         );
         let given = opts(Some(7));
-        let (s1, s2) = (given.stage1_config().unwrap(), stage2(&given));
+        let (s1, s2) = (given.plenoxels_config().unwrap(), stage2(&given));
         assert_eq!((s1.checkpoint_every, s1.checkpoint_min_seconds), (7, 0.0));
         assert_eq!((s2.checkpoint_every, s2.checkpoint_min_seconds), (7, 0.0));
     }
@@ -489,13 +489,13 @@ mod tests {
             ..TrainOptions::new(Stage::Plenoxels, "d".into(), "o".into())
         };
         let cfg = opts(&["tv_sigma=1e-6", "lr_sigma.last=1", "batch=512"])
-            .stage1_config()
+            .plenoxels_config()
             .unwrap();
         assert_eq!(
             (cfg.tv_sigma, cfg.lr_sigma.last, cfg.batch),
             (1e-6, 1.0, 512)
         );
-        let err = |set: &[&str]| format!("{:#}", opts(set).stage1_config().unwrap_err());
+        let err = |set: &[&str]| format!("{:#}", opts(set).plenoxels_config().unwrap_err());
         assert!(
             err(&["tv_sigmaa=1"]).contains("--plenoxels-set tv_sigmaa=1: no configuration field")
         );
@@ -518,8 +518,8 @@ mod tests {
             );
         }
         let huge = opts(&["batch=4000000000"]);
-        let cfg = huge.stage1_config().unwrap();
-        let e = format!("{:#}", huge.check_stage1_memory(&cfg).unwrap_err());
+        let cfg = huge.plenoxels_config().unwrap();
+        let e = format!("{:#}", huge.check_plenoxels_memory(&cfg).unwrap_err());
         assert!(
             e.contains("--plenoxels-set batch=4000000000") && e.contains("memory"),
             "{e}"
@@ -528,7 +528,7 @@ mod tests {
             set: vec!["iters=0".into()],
             ..TrainOptions::new(Stage::Surface, "d".into(), "o".into())
         };
-        let e = format!("{:#}", stage2.stage2_config(64).unwrap_err());
+        let e = format!("{:#}", stage2.surface_config(64).unwrap_err());
         assert!(
             e.contains("--set iters=0") && e.contains("at least 1"),
             "{e}"

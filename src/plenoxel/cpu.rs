@@ -2,7 +2,8 @@
 
 use super::plan::{batch_grad_scale, PlenoxelPass, PlenoxelPlan, TvField};
 use super::{
-    march_params, state_bytes_of, Gradients, Plenoxels, PlenoxelsStage, StepParams, StepStats,
+    march_params, state_bytes_of, Gradients, PlenoxelsBackend, PlenoxelsStage, PlenoxelsStepParams,
+    PlenoxelsStepStats,
 };
 use crate::abi::buffers::Background;
 use crate::cpu::background_step::background_step;
@@ -11,7 +12,7 @@ use crate::cpu::plenoxel_fwd::render;
 use crate::cpu::plenoxel_train::{train, TrainGrads};
 use crate::cpu::plenoxel_weights::max_weights;
 use crate::cpu::sample_rays::sample_rays;
-use crate::cpu::{rmsprop_sparse, tv, Stage1Params};
+use crate::cpu::{rmsprop_sparse, tv, PlenoxelsOptimArrays};
 use crate::data::TrainViews;
 use crate::gpu::{timed, Phase, PhaseClock};
 use crate::grid::{Grid, SH_DIM};
@@ -34,7 +35,7 @@ pub struct CpuPlenoxels {
     touched: Vec<u32>,
     bg: Background,
     /// Figures of the `step_sampled` steps not yet taken.
-    done: Vec<StepStats>,
+    done: Vec<PlenoxelsStepStats>,
 }
 
 impl CpuPlenoxels {
@@ -110,7 +111,7 @@ impl CpuPlenoxels {
                     tv(&g.links, data, grad, &mut self.touched, chunk);
                 }
                 PlenoxelPass::RmsProp(h) => rmsprop_sparse(
-                    Stage1Params {
+                    PlenoxelsOptimArrays {
                         density: &mut self.grid.density,
                         sh: &mut self.grid.sh,
                         grad_density: &mut self.grad_density,
@@ -164,14 +165,19 @@ impl StageBackend<PlenoxelsStage> for CpuPlenoxels {
         "cpu"
     }
 
-    fn step(&mut self, rays: &[f32], targets: &[f32], p: &StepParams) -> Result<StepStats> {
+    fn step(
+        &mut self,
+        rays: &[f32],
+        targets: &[f32],
+        p: &PlenoxelsStepParams,
+    ) -> Result<PlenoxelsStepStats> {
         let mut clock = PhaseClock::start();
         let plan = PlenoxelPlan::step(p, self.grid.res, rays.len() / 6, self.bg.learned())?;
         let (loss, counts) = self.run_plan(&plan, rays, targets)?;
         let n = loss.len();
         let mse = loss.iter().map(|&l| l as f64).sum::<f64>() / (3 * n) as f64;
         clock.mark(Phase::Compute);
-        Ok(StepStats {
+        Ok(PlenoxelsStepStats {
             mse,
             counts,
             device_ns: 0.0,
@@ -184,7 +190,7 @@ impl StageBackend<PlenoxelsStage> for CpuPlenoxels {
         views: &TrainViews,
         seed: u64,
         n: usize,
-        p: &StepParams,
+        p: &PlenoxelsStepParams,
     ) -> Result<()> {
         super::uniform_views(views)?;
         let (batch, sampling) = timed(Phase::Sampling, || sample_rays(views.set(), seed, n))?;
@@ -194,7 +200,7 @@ impl StageBackend<PlenoxelsStage> for CpuPlenoxels {
         Ok(())
     }
 
-    fn take_stats(&mut self) -> Result<Vec<StepStats>> {
+    fn take_stats(&mut self) -> Result<Vec<PlenoxelsStepStats>> {
         Ok(std::mem::take(&mut self.done))
     }
 
@@ -242,7 +248,7 @@ impl StageBackend<PlenoxelsStage> for CpuPlenoxels {
     }
 }
 
-impl Plenoxels for CpuPlenoxels {
+impl PlenoxelsBackend for CpuPlenoxels {
     fn gradients(&mut self, rays: &[f32], targets: &[f32], stop_thresh: f32) -> Result<Gradients> {
         self.refresh_occupancy();
         let n = self.grid.allocated();

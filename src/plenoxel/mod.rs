@@ -30,7 +30,7 @@ pub struct TvParams {
 
 /// Everything one training step needs besides the rays.
 #[derive(Clone, Copy, Debug)]
-pub struct StepParams {
+pub struct PlenoxelsStepParams {
     pub lr_sigma: f32,
     pub lr_sh: f32,
     pub beta: f32,
@@ -43,7 +43,7 @@ pub struct StepParams {
 
 /// What a step reports back.
 #[derive(Clone, Copy, Debug, Default)]
-pub struct StepStats {
+pub struct PlenoxelsStepStats {
     /// Mean squared error over the batch's rays and channels.
     pub mse: f64,
     /// Samples shaded, evaluated at σ ≤ ε, skipped by the occupancy volume; gradient atomic adds.
@@ -70,31 +70,31 @@ pub struct PlenoxelsStage;
 
 impl Stage for PlenoxelsStage {
     const NAME: &'static str = "plenoxels";
-    const CHECKPOINT: &'static str = crate::run::dir::STAGE1_CHECKPOINT;
+    const CHECKPOINT: &'static str = crate::run::dir::PLENOXELS_CHECKPOINT;
     const STATE_NAMES: &'static [&'static str] = &["rms_density", "rms_sh"];
     /// `step` = steps done, `psnr_batch` = PSNR of that step's batch MSE, `elapsed_s` = seconds
     /// since training started.
     const LOG_HEADER: &'static str = "step,mse,psnr_batch,elapsed_s";
     type Grid = Grid;
-    type Params = StepParams;
-    type Stats = StepStats;
+    type Params = PlenoxelsStepParams;
+    type Stats = PlenoxelsStepStats;
     type PerRay = PlenoxelPerRay;
     type State = [Vec<f32>; 2];
 
-    fn mse(stats: &StepStats) -> f64 {
+    fn mse(stats: &PlenoxelsStepStats) -> f64 {
         stats.mse
     }
 
-    fn non_finite(stats: &StepStats) -> Option<String> {
+    fn non_finite(stats: &PlenoxelsStepStats) -> Option<String> {
         (!stats.mse.is_finite()).then(|| stats.mse.to_string())
     }
 
-    fn log_row(stats: &StepStats, step: u32, elapsed: f64) -> String {
+    fn log_row(stats: &PlenoxelsStepStats, step: u32, elapsed: f64) -> String {
         let mse = stats.mse;
         format!("{step},{mse:e},{:.4},{elapsed:.3}", psnr(mse))
     }
 
-    fn tally(totals: &mut PlenoxelPerRay, stats: &StepStats) {
+    fn tally(totals: &mut PlenoxelPerRay, stats: &PlenoxelsStepStats) {
         totals.add(&stats.counts);
     }
 
@@ -141,7 +141,7 @@ pub fn state_bytes_of((res, rows): ([u32; 3], usize)) -> u64 {
 
 /// The stage-1 backend: [`StageBackend`] and what only stage 1 does (its data-term gradients,
 /// renders and pruning weights).
-pub trait Plenoxels: StageBackend<PlenoxelsStage> {
+pub trait PlenoxelsBackend: StageBackend<PlenoxelsStage> {
     /// The data-term gradients of a batch without updating anything: per-ray squared error,
     /// dL/dσ, dL/dSH and, when it is learned, dL/dbg (L = mean squared error over rays and
     /// channels), and the sample counts.

@@ -3,7 +3,7 @@
 //! records its kernel, both top to bottom. The order: occupancy → fused forward/backward → TV on
 //! σ and SH → sparse RMSProp → background step (when it is learned).
 
-use super::StepParams;
+use super::PlenoxelsStepParams;
 use crate::abi::consts::TOUCH_ALL;
 use crate::abi::regularisers::TvChunk;
 use crate::abi::train::RmsProp;
@@ -47,7 +47,12 @@ pub fn batch_grad_scale(n_rays: usize) -> f32 {
 impl PlenoxelPlan {
     /// A training step on `n_rays` rays with `p` on a grid of resolution `res` (`learned_bg`: the
     /// background is learned). Refuses a TV chunk past the grid's slots.
-    pub fn step(p: &StepParams, res: [u32; 3], n_rays: usize, learned_bg: bool) -> Result<Self> {
+    pub fn step(
+        p: &PlenoxelsStepParams,
+        res: [u32; 3],
+        n_rays: usize,
+        learned_bg: bool,
+    ) -> Result<Self> {
         let mut passes = Self::gradients(p.stop_thresh, n_rays).passes;
         if let Some(t) = p.tv {
             let slots: u64 = res.iter().map(|&r| r as u64).product();
@@ -112,8 +117,8 @@ mod tests {
     use super::*;
     use crate::plenoxel::TvParams;
 
-    fn params(tv: Option<TvParams>) -> StepParams {
-        StepParams {
+    fn params(tv: Option<TvParams>) -> PlenoxelsStepParams {
+        PlenoxelsStepParams {
             lr_sigma: 30.0,
             lr_sh: 1e-2,
             beta: 0.95,

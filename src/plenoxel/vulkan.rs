@@ -4,7 +4,8 @@
 
 use super::plan::{PlenoxelPass, PlenoxelPlan, TvField};
 use super::{
-    march_params, state_bytes_of, Gradients, Plenoxels, PlenoxelsStage, StepParams, StepStats,
+    march_params, state_bytes_of, Gradients, PlenoxelsBackend, PlenoxelsStage, PlenoxelsStepParams,
+    PlenoxelsStepStats,
 };
 use crate::abi::buffers::Background;
 use crate::abi::buffers::PlenoxelParams;
@@ -30,7 +31,7 @@ pub struct VulkanPlenoxels {
     /// background: per ray 3 floats of output (rgb) for a render, the squared error (1 float)
     /// for training; per step a slot with the squared-error sum and the counters. First, so
     /// that dropping the backend waits for the steps before any buffer they use is freed.
-    queue: StepQueue<StepStats>,
+    queue: StepQueue<PlenoxelsStepStats>,
     gpu: Gpu,
     meta: Grid,
     links: GpuBuffer,
@@ -273,7 +274,7 @@ impl VulkanPlenoxels {
     /// Record the step's plan on one batch and submit it without waiting (up to
     /// `MAX_IN_FLIGHT` steps run on the device while the host records the next); its figures
     /// come back with [`Self::take_timed`].
-    pub fn submit_step(&mut self, src: TrainRays, p: &StepParams) -> Result<()> {
+    pub fn submit_step(&mut self, src: TrainRays, p: &PlenoxelsStepParams) -> Result<()> {
         let n = src.len();
         let mut clock = PhaseClock::start();
         let plan = PlenoxelPlan::step(p, self.meta.res, n, self.queue.bg_learned)?;
@@ -291,13 +292,17 @@ impl VulkanPlenoxels {
 
     /// The figures of every step submitted since they were last taken, in order, with the
     /// device times of their dispatches (waits for the steps in flight).
-    pub fn take_timed(&mut self) -> Result<Vec<(StepStats, BatchTimes)>> {
+    pub fn take_timed(&mut self) -> Result<Vec<(PlenoxelsStepStats, BatchTimes)>> {
         self.queue.take_timed()
     }
 
     /// One training step on `src`'s rays, waited for: its figures.
     /// The figures of earlier steps not yet taken stay for `take_stats`.
-    fn train_step(&mut self, src: TrainRays, p: &StepParams) -> Result<StepStats> {
+    fn train_step(
+        &mut self,
+        src: TrainRays,
+        p: &PlenoxelsStepParams,
+    ) -> Result<PlenoxelsStepStats> {
         self.submit_step(src, p)?;
         Ok(self.queue.last()?.0)
     }
@@ -320,7 +325,12 @@ impl StageBackend<PlenoxelsStage> for VulkanPlenoxels {
         "vulkan"
     }
 
-    fn step(&mut self, rays: &[f32], targets: &[f32], p: &StepParams) -> Result<StepStats> {
+    fn step(
+        &mut self,
+        rays: &[f32],
+        targets: &[f32],
+        p: &PlenoxelsStepParams,
+    ) -> Result<PlenoxelsStepStats> {
         self.train_step(TrainRays::Host { rays, targets }, p)
     }
 
@@ -329,13 +339,13 @@ impl StageBackend<PlenoxelsStage> for VulkanPlenoxels {
         views: &TrainViews,
         seed: u64,
         n: usize,
-        p: &StepParams,
+        p: &PlenoxelsStepParams,
     ) -> Result<()> {
         super::uniform_views(views)?;
         self.submit_step(views.train_rays(seed, n), p)
     }
 
-    fn take_stats(&mut self) -> Result<Vec<StepStats>> {
+    fn take_stats(&mut self) -> Result<Vec<PlenoxelsStepStats>> {
         self.queue.take_figures()
     }
 
@@ -386,7 +396,7 @@ impl StageBackend<PlenoxelsStage> for VulkanPlenoxels {
     }
 }
 
-impl Plenoxels for VulkanPlenoxels {
+impl PlenoxelsBackend for VulkanPlenoxels {
     fn gradients(&mut self, rays: &[f32], targets: &[f32], stop_thresh: f32) -> Result<Gradients> {
         self.settle()?;
         let n = rays.len() / 6;
@@ -488,10 +498,10 @@ impl Plenoxels for VulkanPlenoxels {
 }
 
 /// A step's figures from its slot: the squared-error sum, the counters.
-impl SlotFigures for StepStats {
+impl SlotFigures for PlenoxelsStepStats {
     fn read(readback: &Readback, slot: usize, n: usize) -> Result<Self> {
         let sum: Vec<f32> = readback.part(slot, 0)?;
-        Ok(StepStats {
+        Ok(PlenoxelsStepStats {
             mse: sum[0] as f64 / (3 * n.max(1)) as f64,
             counts: readback.part::<PlenoxelCounts>(slot, 1)?[0],
             device_ns: 0.0,

@@ -1,5 +1,5 @@
 //! Reader of the per-step training log `train_log.csv` that both training stages write into their
-//! run directory (header `step,mse,psnr_batch,elapsed_s`; see `crate::train::stage1::TRAIN_LOG`).
+//! run directory (header `step,mse,psnr_batch,elapsed_s`; see `crate::run::dir::TRAIN_LOG`).
 
 use anyhow::{bail, ensure, Context, Result};
 use std::path::Path;

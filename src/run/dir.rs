@@ -252,9 +252,9 @@ impl RunDir {
 /// stage-1 run's).
 fn holds_checkpoint(path: &Path) -> bool {
     [
-        path.join(STAGE1_CHECKPOINT),
-        path.join(STAGE2_CHECKPOINT),
-        path.join(ALL_STAGE1).join(STAGE1_CHECKPOINT),
+        path.join(PLENOXELS_CHECKPOINT),
+        path.join(SURFACE_CHECKPOINT),
+        path.join(ALL_STAGE1).join(PLENOXELS_CHECKPOINT),
     ]
     .iter()
     .any(|p| p.is_file())
@@ -320,9 +320,9 @@ pub fn read_info(run: &Path) -> Result<RunInfo> {
     let mut info: RunInfo =
         serde_json::from_str(&text).with_context(|| format!("parsing {}", p.display()))?;
     if info.stage.is_none() {
-        info.stage = if run.join(STAGE2_CHECKPOINT).exists() {
+        info.stage = if run.join(SURFACE_CHECKPOINT).exists() {
             Some(RunStage::Surface)
-        } else if run.join(STAGE1_CHECKPOINT).exists() {
+        } else if run.join(PLENOXELS_CHECKPOINT).exists() {
             Some(RunStage::Plenoxels)
         } else {
             None
@@ -333,15 +333,15 @@ pub fn read_info(run: &Path) -> Result<RunInfo> {
 
 /// The stage-1 checkpoint of a run, for a command that reads a stage-1 grid (`render`,
 /// `export`): a stage-2 or `--stage all` run is named as such instead of a bare missing file.
-pub fn stage1_checkpoint(run: &Path, command: &str) -> Result<PathBuf> {
-    let ck = run.join(STAGE1_CHECKPOINT);
+pub fn plenoxels_checkpoint(run: &Path, command: &str) -> Result<PathBuf> {
+    let ck = run.join(PLENOXELS_CHECKPOINT);
     if ck.is_file() {
         return Ok(ck);
     }
-    if run.join(STAGE2_CHECKPOINT).is_file() {
+    if run.join(SURFACE_CHECKPOINT).is_file() {
         bail!(
             "{command} reads a stage-1 (Plenoxels) run, and {} is a stage-2 (αSurf) run (it holds \
-             {STAGE2_CHECKPOINT}, no {STAGE1_CHECKPOINT}); give its stage-1 run{}",
+             {SURFACE_CHECKPOINT}, no {PLENOXELS_CHECKPOINT}); give its stage-1 run{}",
             run.display(),
             read_info(run)
                 .ok()
@@ -349,7 +349,7 @@ pub fn stage1_checkpoint(run: &Path, command: &str) -> Result<PathBuf> {
                 .map_or(String::new(), |i| format!(" ({})", i.display()))
         );
     }
-    if run.join(ALL_STAGE1).join(STAGE1_CHECKPOINT).is_file() {
+    if run.join(ALL_STAGE1).join(PLENOXELS_CHECKPOINT).is_file() {
         bail!(
             "{} is a `--stage all` run: give its stage-1 run {}",
             run.display(),
@@ -357,7 +357,7 @@ pub fn stage1_checkpoint(run: &Path, command: &str) -> Result<PathBuf> {
         );
     }
     bail!(
-        "{} holds no {STAGE1_CHECKPOINT}: not a trained stage-1 run",
+        "{} holds no {PLENOXELS_CHECKPOINT}: not a trained stage-1 run",
         run.display()
     )
 }
@@ -390,7 +390,7 @@ mod tests {
         // New folder: a run, locked.
         let mut r = RunDir::claim(&run, RunStage::Plenoxels, Open::Fresh, &[&data]).unwrap();
         r.write_info(&info(&data)).unwrap();
-        fs::write(r.file(STAGE1_CHECKPOINT), "x").unwrap();
+        fs::write(r.file(PLENOXELS_CHECKPOINT), "x").unwrap();
         let err = RunDir::claim(&run, RunStage::Plenoxels, Open::Resume, &[&data]).unwrap_err();
         assert!(
             format!("{err:#}").contains("already locked by this process"),
@@ -463,14 +463,14 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let run = dir.path().join("s2");
         fs::create_dir(&run).unwrap();
-        fs::write(run.join(STAGE2_CHECKPOINT), "x").unwrap();
+        fs::write(run.join(SURFACE_CHECKPOINT), "x").unwrap();
         fs::write(
             run.join(MARKER),
             r#"{"data": "/d", "downscale": 1, "init": "/runs/s1"}"#,
         )
         .unwrap();
         assert_eq!(read_info(&run).unwrap().stage, Some(RunStage::Surface));
-        let err = format!("{:#}", stage1_checkpoint(&run, "render").unwrap_err());
+        let err = format!("{:#}", plenoxels_checkpoint(&run, "render").unwrap_err());
         assert!(err.contains("stage-2") && err.contains("/runs/s1"), "{err}");
     }
 }

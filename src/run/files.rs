@@ -14,9 +14,9 @@ pub const TRAIN_LOG: &str = "train_log.csv";
 /// Folder of the end-of-run test renders.
 pub const TEST_RENDERS: &str = "test";
 /// Stage-1 checkpoint (svox2 arrays + optimiser state).
-pub const STAGE1_CHECKPOINT: &str = "plenoxels.npz";
+pub const PLENOXELS_CHECKPOINT: &str = "plenoxels.npz";
 /// Stage-2 checkpoint.
-pub const STAGE2_CHECKPOINT: &str = "surface.npz";
+pub const SURFACE_CHECKPOINT: &str = "surface.npz";
 /// `train --stage all`: the stage-1 run inside the parent run.
 pub const ALL_STAGE1: &str = "plenoxels";
 /// `train --stage all`: the stage-2 run inside the parent run.
@@ -29,8 +29,8 @@ pub const OWNED_FILES: [&str; 6] = [
     LOCK,
     METRICS,
     TRAIN_LOG,
-    STAGE1_CHECKPOINT,
-    STAGE2_CHECKPOINT,
+    PLENOXELS_CHECKPOINT,
+    SURFACE_CHECKPOINT,
 ];
 
 /// Whether an entry (directly in a run directory) is the run's: one of [`OWNED_FILES`], the test

@@ -18,7 +18,7 @@ use crate::cpu::surface_fwd::render;
 use crate::cpu::surface_opacity_reg::surface_opacity_reg;
 use crate::cpu::surface_reg::{normal_reg_passes, NormalScratch};
 use crate::cpu::surface_train::{train, SurfaceGrads, TrainInput};
-use crate::cpu::{surface_rmsprop, tv, Stage2Params};
+use crate::cpu::{surface_rmsprop, tv, SurfaceOptimArrays};
 use crate::data::TrainViews;
 use crate::gpu::{timed, Phase, PhaseClock};
 use crate::grid::row_slots;
@@ -192,7 +192,7 @@ impl CpuSurface {
                     let [sd, so, ss] = &mut self.state;
                     let g = &mut self.grid;
                     surface_rmsprop(
-                        Stage2Params {
+                        SurfaceOptimArrays {
                             delta: &mut g.delta,
                             opacity: &mut g.opacity,
                             sh: &mut g.sh,

@@ -90,7 +90,7 @@ pub struct SurfaceStage;
 
 impl Stage for SurfaceStage {
     const NAME: &'static str = "surface";
-    const CHECKPOINT: &'static str = crate::run::dir::STAGE2_CHECKPOINT;
+    const CHECKPOINT: &'static str = crate::run::dir::SURFACE_CHECKPOINT;
     const STATE_NAMES: &'static [&'static str] = &["rms_delta", "rms_opacity", "rms_sh"];
     /// Step, mse, batch PSNR, the unweighted entropy and consistency means, the regulariser
     /// loss (Lα + Ln), seconds since training started.

@@ -17,7 +17,7 @@ const FAST_BATCH_RES: u64 = 128;
 
 /// Everything that shapes a stage-1 run; stored in checkpoints and metrics.json.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Stage1Config {
+pub struct PlenoxelsConfig {
     pub preset: Preset,
     /// Grid resolution at the start.
     pub res: u32,
@@ -56,10 +56,10 @@ pub struct Stage1Config {
     pub seed: u64,
 }
 
-impl Stage1Config {
+impl PlenoxelsConfig {
     /// svox2's synthetic schedule: 256³ → 512³ at 38.4k steps, 128k steps of 5000 rays.
     pub fn paper() -> Self {
-        Stage1Config {
+        PlenoxelsConfig {
             preset: Preset::Paper,
             res: 256,
             upsample: vec![(38_400, 512)],
@@ -97,9 +97,9 @@ impl Stage1Config {
     }
 
     /// A CPU-sized schedule: 64³ → 128³, a few thousand steps, faster decays (its batch grows
-    /// with grids above 128³: [`Stage1Config::batch_for_grid`]).
+    /// with grids above 128³: [`PlenoxelsConfig::batch_for_grid`]).
     pub fn fast() -> Self {
-        Stage1Config {
+        PlenoxelsConfig {
             preset: Preset::Fast,
             res: 64,
             upsample: vec![(1000, 128)],
@@ -185,7 +185,7 @@ impl Stage1Config {
         Ok(())
     }
 
-    /// The checks of a new run's schedule beyond [`Stage1Config::validate`] (which a checkpoint's
+    /// The checks of a new run's schedule beyond [`PlenoxelsConfig::validate`] (which a checkpoint's
     /// configuration also passes, an import's among them: no steps, any grid): at least one
     /// step; every grid resolution in [`GRID_RES`]; upsampling at increasing steps before the
     /// last one, each to a finer grid.
@@ -261,8 +261,8 @@ impl Stage1Config {
     }
 }
 
-impl crate::checkpoint::Recorded for Stage1Config {
+impl crate::checkpoint::Recorded for PlenoxelsConfig {
     fn validate(&self) -> anyhow::Result<()> {
-        Stage1Config::validate(self)
+        PlenoxelsConfig::validate(self)
     }
 }

@@ -159,13 +159,13 @@ mod tests {
 
     #[test]
     fn configurations_saved_with_string_names_still_load() {
-        use crate::train::{Stage1Config, SurfaceConfig};
-        let s1: Stage1Config = serde_json::from_str(STAGE1_SAVED).unwrap();
+        use crate::train::{PlenoxelsConfig, SurfaceConfig};
+        let s1: PlenoxelsConfig = serde_json::from_str(STAGE1_SAVED).unwrap();
         assert_eq!(s1.preset, Preset::Fast);
         let again: serde_json::Value = serde_json::to_value(&s1).unwrap();
         assert_eq!(again["preset"], "fast");
         let imported = STAGE1_SAVED.replace(r#""preset":"fast""#, r#""preset":"imported""#);
-        let s1: Stage1Config = serde_json::from_str(&imported).unwrap();
+        let s1: PlenoxelsConfig = serde_json::from_str(&imported).unwrap();
         assert_eq!(s1.preset, Preset::Imported);
         let s2: SurfaceConfig = serde_json::from_str(STAGE2_SAVED).unwrap();
         assert_eq!((s2.preset, s2.category), (Preset::Fast, Category::Thin));

@@ -2,7 +2,7 @@
 //! targets.
 
 use crate::data::{view_rays, Dataset, Split};
-use crate::plenoxel::Plenoxels;
+use crate::plenoxel::PlenoxelsBackend;
 use crate::stage::psnr;
 use anyhow::{Context, Result};
 use std::path::Path;
@@ -61,7 +61,7 @@ fn render_averaged(
 /// Render every view of `split` through a stage-1 backend into `out/r_<i>.png` and measure PSNR
 /// (`per_axis`: see [`render_split_with`]).
 pub fn render_split(
-    backend: &mut dyn Plenoxels,
+    backend: &mut dyn PlenoxelsBackend,
     data: &Dataset,
     split: &Split,
     stop_thresh: f32,

@@ -374,10 +374,10 @@ fn non_finite_training_state_stops_the_run_and_keeps_the_last_checkpoint() {
     use alphasurf::data::{Dataset, LoadOptions};
     use alphasurf::plenoxel::CpuPlenoxels;
     use alphasurf::stage::StageBackend;
-    use alphasurf::train::{stage1, Stage1Config};
+    use alphasurf::train::{plenoxels_steps, PlenoxelsConfig};
     let dir = tempfile::tempdir().unwrap();
     let data = Dataset::load(&scene(dir.path()), &LoadOptions::default()).unwrap();
-    let mut cfg = Stage1Config::fast();
+    let mut cfg = PlenoxelsConfig::fast();
     (
         cfg.res,
         cfg.upsample,
@@ -389,7 +389,7 @@ fn non_finite_training_state_stops_the_run_and_keeps_the_last_checkpoint() {
     let run = dir.path().join("run");
     let grid = alphasurf::grid::Grid::sphere(16, [0.0; 3], [1.0; 3], 1.0, cfg.init_sigma);
     let mut b = CpuPlenoxels::new(grid);
-    stage1::train(&mut b, &data, &cfg, &run, 0, false).unwrap();
+    plenoxels_steps::train(&mut b, &data, &cfg, &run, 0, false).unwrap();
     let good = std::fs::read(alphasurf::checkpoint::path::<
         alphasurf::plenoxel::PlenoxelsStage,
     >(&run))
@@ -399,7 +399,7 @@ fn non_finite_training_state_stops_the_run_and_keeps_the_last_checkpoint() {
     poisoned.density.iter_mut().for_each(|v| *v = f32::NAN);
     b.load(poisoned, None).unwrap();
     cfg.iters = 8;
-    let err = stage1::train(&mut b, &data, &cfg, &run, 4, false).unwrap_err();
+    let err = plenoxels_steps::train(&mut b, &data, &cfg, &run, 4, false).unwrap_err();
     let msg = format!("{err:#}");
     assert!(msg.contains("non-finite"), "{msg}");
     assert_eq!(
@@ -800,7 +800,7 @@ fn learned_background_converges_to_the_backdrop_of_images_without_alpha() {
     let mut b = alphasurf::plenoxel::CpuPlenoxels::new(s1_ck.grid.clone());
     let (_, _, rec) = alphasurf::checkpoint::resume::<
         alphasurf::plenoxel::PlenoxelsStage,
-        alphasurf::train::Stage1Config,
+        alphasurf::train::PlenoxelsConfig,
         _,
     >(&mut b, &s1_path)
     .unwrap();
@@ -861,9 +861,9 @@ fn learned_background_converges_from_grey_on_the_device() {
     use alphasurf::abi::buffers::Background;
     use alphasurf::data::{BackgroundMode, Dataset, LoadOptions, TrainViews};
     use alphasurf::grid::Grid;
-    use alphasurf::plenoxel::{StepParams, VulkanPlenoxels};
+    use alphasurf::plenoxel::{PlenoxelsStepParams, VulkanPlenoxels};
     use alphasurf::stage::StageBackend;
-    use alphasurf::train::Stage1Config;
+    use alphasurf::train::PlenoxelsConfig;
     let dir = tempfile::tempdir().unwrap();
     let data = scene(dir.path());
     let backdrop = [0.2f32, 0.6, 0.9];
@@ -883,14 +883,14 @@ fn learned_background_converges_from_grey_on_the_device() {
         "border median {b:?}"
     );
     // From mid grey instead of the border median: the optimiser alone must find the backdrop.
-    let cfg = Stage1Config::fast();
+    let cfg = PlenoxelsConfig::fast();
     let gpu = alphasurf::gpu::test_gpu();
     let grid = Grid::sphere(32, [0.0; 3], [d.scene.radius; 3], 1.0, cfg.init_sigma);
     let mut vk = VulkanPlenoxels::new(gpu, grid).unwrap();
     vk.set_background(Background::new([0.5; 3], true)).unwrap();
     let views = TrainViews::new(&d.train, &d.scene).unwrap();
     for step in 0..200 {
-        let p = StepParams {
+        let p = PlenoxelsStepParams {
             lr_sigma: cfg.lr_sigma.at(step),
             lr_sh: cfg.lr_sh.at(step),
             beta: cfg.beta,

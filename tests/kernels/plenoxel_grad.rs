@@ -6,7 +6,7 @@
 use alphasurf::abi::buffers::Background;
 use alphasurf::check::TEST_BACKGROUND;
 use alphasurf::grid::{Grid, SH_DIM};
-use alphasurf::plenoxel::{CpuPlenoxels, Plenoxels};
+use alphasurf::plenoxel::{CpuPlenoxels, PlenoxelsBackend};
 use alphasurf::stage::StageBackend;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;

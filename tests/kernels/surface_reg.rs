@@ -17,7 +17,7 @@ use alphasurf::cpu::surface_delta_tv::delta_tv;
 use alphasurf::cpu::surface_normal_reg_pairs::NormalRegStats;
 use alphasurf::cpu::surface_opacity_reg::surface_opacity_reg;
 use alphasurf::cpu::surface_reg::{surface_normal_reg, tv_loss};
-use alphasurf::cpu::{surface_rmsprop, tv, Stage2Params};
+use alphasurf::cpu::{surface_rmsprop, tv, SurfaceOptimArrays};
 use alphasurf::grid::row_slots;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
@@ -674,7 +674,7 @@ fn surface_rmsprop_twin_updates_touched_groups_only() {
             delta_rows,
             opacity_rows,
         };
-        surface_rmsprop(Stage2Params::from_arrays(p), touched, &h);
+        surface_rmsprop(SurfaceOptimArrays::from_arrays(p), touched, &h);
     };
     // Vertices 0, 1 touched in every group, 2 not at all, 3 in σα only.
     let mut p = fresh();

@@ -288,9 +288,12 @@ fn sampler_is_seeded_uniform_and_matches_pixels() {
 }
 
 /// The stage-1 start both training tests share: a sphere on a 32³ grid, fixed rates, no TV.
-fn stage1_start() -> (alphasurf::grid::Grid, alphasurf::plenoxel::StepParams) {
+fn stage1_start() -> (
+    alphasurf::grid::Grid,
+    alphasurf::plenoxel::PlenoxelsStepParams,
+) {
     let grid = alphasurf::grid::Grid::sphere(32, [0.0; 3], [1.0; 3], 1.0, 0.1);
-    let p = alphasurf::plenoxel::StepParams {
+    let p = alphasurf::plenoxel::PlenoxelsStepParams {
         lr_sigma: 10.0,
         lr_sh: 1e-2,
         beta: 0.95,

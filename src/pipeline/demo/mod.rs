@@ -12,7 +12,7 @@ pub use table::{objects_table, table};
 
 use super::device::Devices;
 use super::extract::{LevelJob, DEFAULT_RAYS_PER_AXIS};
-use super::steps::{SceneSize, Stage1Overrides, Stage2Overrides, Steps, TrainedRun};
+use super::steps::{PlenoxelsOverrides, SceneSize, Steps, SurfaceOverrides, TrainedRun};
 use crate::backend::Backend;
 use crate::eval::Metrics;
 use crate::run::interrupt;
@@ -114,8 +114,8 @@ impl SizeArgs {
     }
 
     /// The stage-1 size: preset `fast` as is, or 64³ and 1000 steps with `--fast`.
-    pub fn train(&self, fast: bool) -> Stage1Overrides {
-        Stage1Overrides {
+    pub fn train(&self, fast: bool) -> PlenoxelsOverrides {
+        PlenoxelsOverrides {
             res: self.grid_res.or(fast.then_some(64)),
             iters: self.iters.or(fast.then_some(1000)),
             batch: self.batch,
@@ -496,7 +496,7 @@ fn demo_stage2(
             s2_dir.display()
         ),
     );
-    let stage2 = Stage2Overrides {
+    let stage2 = SurfaceOverrides {
         category: category(scene),
         iters: opts.size.surface_iters(opts.fast),
         set: opts.size.surface_set.clone(),

@@ -2,7 +2,7 @@
 //! step, upsampling with weight pruning on schedule, the background a run starts with, the test
 //! renders.
 
-use super::config::Stage1Config;
+use super::config::PlenoxelsConfig;
 use super::progress::Progress;
 use super::render::{render_split, RenderedSplit};
 use super::steps::{self, loop_schedule, LoopReport, LoopSchedule, StageSteps};
@@ -10,7 +10,7 @@ use crate::abi::buffers::PlenoxelPerRay;
 use crate::checkpoint::BackgroundRecord;
 use crate::data::{Dataset, Split, TrainViews};
 use crate::grid::{dilate, upsample, Grid};
-use crate::plenoxel::{Plenoxels, PlenoxelsStage, StepParams, TvParams};
+use crate::plenoxel::{PlenoxelsBackend, PlenoxelsStage, PlenoxelsStepParams, TvParams};
 use crate::run::memory;
 use anyhow::{bail, Context, Result};
 use rand::Rng;
@@ -20,7 +20,7 @@ use std::time::Instant;
 
 /// A finished stage-1 run: the loop's figures, the upsamplings' wall time and the grid's size.
 #[derive(Clone, Debug, Default, serde::Serialize)]
-pub struct Stage1Report {
+pub struct PlenoxelsReport {
     /// Per training ray: the march's counters (samples shaded, evaluated at σ ≤ ε, skipped by
     /// the occupancy volume; gradient atomic adds).
     pub run: LoopReport<PlenoxelPerRay>,
@@ -46,9 +46,9 @@ fn strided_rays(data: &Dataset, split: &Split, stride: u32) -> Vec<f32> {
 
 /// Prune by training-ray weight, dilate twice, resample to `new_res` (optimiser state resets).
 fn upsample_step(
-    backend: &mut dyn Plenoxels,
+    backend: &mut dyn PlenoxelsBackend,
     data: &Dataset,
-    cfg: &Stage1Config,
+    cfg: &PlenoxelsConfig,
     new_res: u32,
 ) -> Result<()> {
     let grid = backend.grid()?;
@@ -90,15 +90,15 @@ fn upsample_step(
 
 /// Stage 1's part of a run: its configuration, and the seconds its upsamplings took.
 pub struct PlenoxelsSteps<'a> {
-    pub cfg: &'a Stage1Config,
+    pub cfg: &'a PlenoxelsConfig,
     pub upsample_seconds: f64,
 }
 
 /// Stage 1's part of the loop.
-impl<'b> StageSteps<PlenoxelsStage, dyn Plenoxels + 'b> for PlenoxelsSteps<'_> {
-    type Config = Stage1Config;
+impl<'b> StageSteps<PlenoxelsStage, dyn PlenoxelsBackend + 'b> for PlenoxelsSteps<'_> {
+    type Config = PlenoxelsConfig;
 
-    fn config(&self) -> &Stage1Config {
+    fn config(&self) -> &PlenoxelsConfig {
         self.cfg
     }
 
@@ -114,7 +114,7 @@ impl<'b> StageSteps<PlenoxelsStage, dyn Plenoxels + 'b> for PlenoxelsSteps<'_> {
     /// (`BackgroundRecord::start_on`); a resumed run keeps the one its checkpoint holds.
     fn start(
         &mut self,
-        backend: &mut (dyn Plenoxels + 'b),
+        backend: &mut (dyn PlenoxelsBackend + 'b),
         data: &Dataset,
         start_step: u32,
     ) -> Result<()> {
@@ -126,7 +126,7 @@ impl<'b> StageSteps<PlenoxelsStage, dyn Plenoxels + 'b> for PlenoxelsSteps<'_> {
 
     fn before_step(
         &mut self,
-        backend: &mut (dyn Plenoxels + 'b),
+        backend: &mut (dyn PlenoxelsBackend + 'b),
         data: &Dataset,
         step: u32,
         progress: &mut Progress,
@@ -143,7 +143,7 @@ impl<'b> StageSteps<PlenoxelsStage, dyn Plenoxels + 'b> for PlenoxelsSteps<'_> {
         Ok(true)
     }
 
-    fn params(&mut self, step: u32, rng: &mut Pcg64) -> StepParams {
+    fn params(&mut self, step: u32, rng: &mut Pcg64) -> PlenoxelsStepParams {
         let cfg = self.cfg;
         let tv_on = !(cfg.tv_until_upsample && cfg.upsample.iter().any(|(s, _)| *s <= step));
         let slots = cfg.res_at(step).pow(3);
@@ -154,7 +154,7 @@ impl<'b> StageSteps<PlenoxelsStage, dyn Plenoxels + 'b> for PlenoxelsSteps<'_> {
             lambda_sigma: cfg.tv_sigma,
             lambda_sh: cfg.tv_sh,
         });
-        StepParams {
+        PlenoxelsStepParams {
             lr_sigma: cfg.lr_sigma.at(step),
             lr_sh: cfg.lr_sh.at(step),
             beta: cfg.beta,
@@ -170,13 +170,13 @@ impl<'b> StageSteps<PlenoxelsStage, dyn Plenoxels + 'b> for PlenoxelsSteps<'_> {
         self.cfg.upsample.iter().any(|(s, _)| *s == step)
     }
 
-    fn finish(&mut self, _: &mut (dyn Plenoxels + 'b)) -> Result<()> {
+    fn finish(&mut self, _: &mut (dyn PlenoxelsBackend + 'b)) -> Result<()> {
         Ok(())
     }
 
     fn render_test(
         &mut self,
-        backend: &mut (dyn Plenoxels + 'b),
+        backend: &mut (dyn PlenoxelsBackend + 'b),
         data: &Dataset,
         out: &Path,
     ) -> Result<RenderedSplit> {
@@ -187,20 +187,20 @@ impl<'b> StageSteps<PlenoxelsStage, dyn Plenoxels + 'b> for PlenoxelsSteps<'_> {
 /// Train stage 1 from `start_step` (0, or the step after a resumed checkpoint) to `cfg.iters`,
 /// then render the test split into `out/test/`.
 pub fn train(
-    backend: &mut dyn Plenoxels,
+    backend: &mut dyn PlenoxelsBackend,
     data: &Dataset,
-    cfg: &Stage1Config,
+    cfg: &PlenoxelsConfig,
     out: &Path,
     start_step: u32,
     show_progress: bool,
-) -> Result<(Stage1Report, RenderedSplit)> {
+) -> Result<(PlenoxelsReport, RenderedSplit)> {
     let mut steps = PlenoxelsSteps {
         cfg,
         upsample_seconds: 0.0,
     };
     let (run, rendered) = steps::run(backend, &mut steps, data, out, start_step, show_progress)?;
     let (res, rows) = backend.shape();
-    let report = Stage1Report {
+    let report = PlenoxelsReport {
         upsample_seconds: steps.upsample_seconds,
         allocated_vertices: rows,
         bytes_per_vertex: Grid::training_bytes(res, rows) / rows.max(1) as f64,

@@ -1,8 +1,8 @@
 //! Stage 2 (αSurf) as a library call: initialise the surface grid from a stage-1 run or an
 //! svox2 checkpoint (method.md §3.1), or resume a stage-2 run, train it, and write
-//! `metrics.json` ([`Stage2Metrics`]).
+//! `metrics.json` ([`SurfaceMetrics`]).
 
-use super::metrics::{Stage2Metrics, Stage2PerRay, Stage2Seconds};
+use super::metrics::{SurfaceMetrics, SurfacePerRay, SurfaceSeconds};
 use super::train_options::TrainOptions;
 use super::train_run::{check_resumed_data, resume, run_info, Loaded, Trained};
 use crate::checkpoint::format as checkpoint;
@@ -16,7 +16,7 @@ use crate::grid::{npz, Grid};
 use crate::run::identity::check_same_data;
 use crate::run::{self, RunDir, RunStage};
 use crate::surface::{CpuSurface, SurfaceBackend, SurfaceStage, VulkanSurface};
-use crate::train::{stage2, SurfaceConfig};
+use crate::train::{surface_steps, SurfaceConfig};
 use anyhow::{ensure, Context, Result};
 use std::path::Path;
 use std::time::Instant;
@@ -40,7 +40,7 @@ pub(super) fn make_backend(
 /// on `data` (unless `--allow-other-data`); one that stopped before its last step is named.
 fn load_init(opts: &TrainOptions, path: &Path, data: &Dataset) -> Result<(Grid, BackgroundRecord)> {
     let file = if path.is_dir() {
-        let ck = run::dir::stage1_checkpoint(path, "--init")?;
+        let ck = run::dir::plenoxels_checkpoint(path, "--init")?;
         if run::files::is_run(path) {
             let recorded = run::read_info(path)?;
             let now = run_info(opts, data, None)?;
@@ -86,8 +86,8 @@ fn fresh_start(
         .context("stage 2 needs --init STAGE1_RUN_DIR or --init ckpt.npz")?;
     let (density, bg) = load_init(opts, init, data)?;
     bg.ensure_mode(opts.background, &format!("--init {}", init.display()))?;
-    let cfg = opts.stage2_config(density.res.into_iter().max().unwrap_or(0))?;
-    opts.check_stage2_memory(&cfg)?;
+    let cfg = opts.surface_config(density.res.into_iter().max().unwrap_or(0))?;
+    opts.check_surface_memory(&cfg)?;
     let grid = SurfaceGrid::from_density(&density, &cfg.init)
         .with_context(|| format!("initialising the surfaces from {}", init.display()))?;
     eprintln!(
@@ -106,11 +106,11 @@ fn fresh_start(
 }
 
 /// Train stage 2 into `opts.out` on `gpu` (`None`: the CPU twins).
-pub fn train_stage2(
+pub fn train_surface(
     opts: &TrainOptions,
     data: &Loaded,
     gpu: Option<&Gpu>,
-) -> Result<Trained<Stage2Metrics>> {
+) -> Result<Trained<SurfaceMetrics>> {
     let t_all = Instant::now();
     // A new run's inputs and flags are checked before its folder is claimed.
     let fresh = if opts.resume {
@@ -155,13 +155,13 @@ pub fn train_stage2(
         cfg.lr_delta.init
     );
     let (report, rendered) =
-        stage2::train(backend.as_mut(), data, &cfg, &opts.out, start, !opts.quiet)?;
+        surface_steps::train(backend.as_mut(), data, &cfg, &opts.out, start, !opts.quiet)?;
     let r = &report.run.per_ray;
-    let metrics = Stage2Metrics {
+    let metrics = SurfaceMetrics {
         stage: RunStage::Surface.name().into(),
         backend: backend.name().into(),
         device: gpu.map(|g| g.info().name.clone()),
-        wall_seconds: Stage2Seconds {
+        wall_seconds: SurfaceSeconds {
             load: load_s,
             train: report.run.train_seconds,
             checkpoint: report.run.checkpoint_seconds,
@@ -172,7 +172,7 @@ pub fn train_stage2(
         final_train_mse: report.run.final_mse,
         test_psnr: report.run.test_psnr,
         test_psnr_per_view: rendered.psnr,
-        per_ray: Some(Stage2PerRay {
+        per_ray: Some(SurfacePerRay {
             cells: r.cells,
             solves: r.solves,
             culled_solves: r.culled,

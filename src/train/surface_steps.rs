@@ -19,7 +19,7 @@ use std::path::Path;
 /// A finished stage-2 run: the loop's figures (per training ray: the training pass's counters,
 /// `TrainCounts`) and the vertices before and after the pruning.
 #[derive(Clone, Debug, Default, serde::Serialize)]
-pub struct Stage2Report {
+pub struct SurfaceReport {
     pub run: LoopReport<TrainPerRay>,
     pub vertices_before_prune: usize,
     pub allocated_vertices: usize,
@@ -180,7 +180,7 @@ pub fn train(
     out: &Path,
     start_step: u32,
     show_progress: bool,
-) -> Result<(Stage2Report, RenderedSplit)> {
+) -> Result<(SurfaceReport, RenderedSplit)> {
     let mut steps = SurfaceSteps {
         cfg,
         res: [0; 3],
@@ -189,7 +189,7 @@ pub fn train(
         allocated_vertices: 0,
     };
     let (run, rendered) = steps::run(backend, &mut steps, data, out, start_step, show_progress)?;
-    let report = Stage2Report {
+    let report = SurfaceReport {
         run,
         vertices_before_prune: steps.vertices_before_prune,
         allocated_vertices: steps.allocated_vertices,

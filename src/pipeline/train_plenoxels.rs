@@ -1,21 +1,21 @@
 //! Stage 1 (Plenoxels) as a library call: claim the run directory, start a grid or resume the
-//! checkpoint, train, and write `metrics.json` ([`Stage1Metrics`]).
+//! checkpoint, train, and write `metrics.json` ([`PlenoxelsMetrics`]).
 
-use super::metrics::{SamplesPerRay, Stage1Metrics, Stage1Seconds};
+use super::metrics::{PlenoxelsMetrics, PlenoxelsSeconds, SamplesPerRay};
 use super::train_options::TrainOptions;
 use super::train_run::{check_resumed_data, resume, run_info, Loaded, Trained};
 use crate::checkpoint::BackgroundRecord;
 use crate::data::dataset::peak_rss_bytes;
 use crate::gpu::Gpu;
 use crate::grid::Grid;
-use crate::plenoxel::{CpuPlenoxels, Plenoxels, PlenoxelsStage, VulkanPlenoxels};
+use crate::plenoxel::{CpuPlenoxels, PlenoxelsBackend, PlenoxelsStage, VulkanPlenoxels};
 use crate::run::{RunDir, RunStage};
-use crate::train::{stage1, Stage1Config};
+use crate::train::{plenoxels_steps, PlenoxelsConfig};
 use anyhow::{bail, Result};
 use std::time::Instant;
 
 /// The Vulkan backend on `gpu`, or the CPU backend when there is none.
-pub fn make_backend(gpu: Option<&Gpu>, grid: Grid) -> Result<Box<dyn Plenoxels>> {
+pub fn make_backend(gpu: Option<&Gpu>, grid: Grid) -> Result<Box<dyn PlenoxelsBackend>> {
     Ok(match gpu {
         Some(gpu) => Box::new(VulkanPlenoxels::new(gpu, grid)?),
         None => Box::new(CpuPlenoxels::new(grid)),
@@ -23,18 +23,18 @@ pub fn make_backend(gpu: Option<&Gpu>, grid: Grid) -> Result<Box<dyn Plenoxels>>
 }
 
 /// Train stage 1 into `opts.out` on `gpu` (`None`: the CPU twins).
-pub fn train_stage1(
+pub fn train_plenoxels(
     opts: &TrainOptions,
     data: &Loaded,
     gpu: Option<&Gpu>,
-) -> Result<Trained<Stage1Metrics>> {
+) -> Result<Trained<PlenoxelsMetrics>> {
     let t_all = Instant::now();
     // A new run's flags are checked before its folder is claimed.
     let fresh_cfg = if opts.resume {
         None
     } else {
-        let cfg = opts.stage1_config()?;
-        opts.check_stage1_memory(&cfg)?;
+        let cfg = opts.plenoxels_config()?;
+        opts.check_plenoxels_memory(&cfg)?;
         Some(cfg)
     };
     let mut run = RunDir::claim(
@@ -58,7 +58,7 @@ pub fn train_stage1(
         (make_backend(gpu, grid)?, cfg, 0)
     } else {
         let make = |grid| make_backend(gpu, grid);
-        let flags = |cfg: &Stage1Config| check_resume_flags(opts, cfg);
+        let flags = |cfg: &PlenoxelsConfig| check_resume_flags(opts, cfg);
         match resume::<PlenoxelsStage, _, _, _>(opts, opts.iters, iters_of, make, flags)? {
             Ok(resumed) => resumed,
             Err(done) => return Ok(done),
@@ -79,13 +79,13 @@ pub fn train_stage1(
             .collect::<String>()
     );
     let (report, rendered) =
-        stage1::train(backend.as_mut(), data, &cfg, &opts.out, start, !opts.quiet)?;
+        plenoxels_steps::train(backend.as_mut(), data, &cfg, &opts.out, start, !opts.quiet)?;
     let spr = &report.run.per_ray;
-    let metrics = Stage1Metrics {
+    let metrics = PlenoxelsMetrics {
         stage: RunStage::Plenoxels.name().into(),
         backend: backend.name().into(),
         device: gpu.map(|g| g.info().name.clone()),
-        wall_seconds: Stage1Seconds {
+        wall_seconds: PlenoxelsSeconds {
             load: load_s,
             train: report.run.train_seconds,
             upsample: report.upsample_seconds,
@@ -115,7 +115,7 @@ pub fn train_stage1(
 
 /// On `--resume` the checkpoint's configuration wins: a flag that asks for something else is an
 /// error rather than silently ignored.
-fn check_resume_flags(opts: &TrainOptions, cfg: &Stage1Config) -> Result<()> {
+fn check_resume_flags(opts: &TrainOptions, cfg: &PlenoxelsConfig) -> Result<()> {
     let final_res = cfg.upsample.last().map_or(cfg.res, |u| u.1);
     let clashes = [
         ("--res", opts.res.is_some_and(|r| r != final_res)),
@@ -137,6 +137,6 @@ fn check_resume_flags(opts: &TrainOptions, cfg: &Stage1Config) -> Result<()> {
 }
 
 /// The step count of a configuration (what `--resume --iters` replaces).
-fn iters_of(cfg: &mut Stage1Config) -> &mut u32 {
+fn iters_of(cfg: &mut PlenoxelsConfig) -> &mut u32 {
     &mut cfg.iters
 }
