@@ -3,7 +3,7 @@
 
 use super::metrics::{PlenoxelsMetrics, PlenoxelsSeconds, SamplesPerRay};
 use super::train_options::TrainOptions;
-use super::train_run::{check_resumed_data, resume, run_info, Loaded, Trained};
+use super::train_run::{check_resumed_data, refuse_clashes, resume, run_info, Loaded, Trained};
 use crate::checkpoint::BackgroundRecord;
 use crate::data::dataset::peak_rss_bytes;
 use crate::gpu::Gpu;
@@ -11,7 +11,7 @@ use crate::grid::Grid;
 use crate::plenoxel::{CpuPlenoxels, PlenoxelsBackend, PlenoxelsStage, VulkanPlenoxels};
 use crate::run::{RunDir, RunStage};
 use crate::train::{plenoxels_steps, PlenoxelsConfig};
-use anyhow::{bail, Result};
+use anyhow::Result;
 use std::time::Instant;
 
 /// The Vulkan backend on `gpu`, or the CPU backend when there is none.
@@ -113,8 +113,7 @@ pub fn train_plenoxels(
     Ok(Trained::Done(metrics))
 }
 
-/// On `--resume` the checkpoint's configuration wins: a flag that asks for something else is an
-/// error rather than silently ignored.
+/// The flags `--resume` refuses to change in a stage-1 run.
 fn check_resume_flags(opts: &TrainOptions, cfg: &PlenoxelsConfig) -> Result<()> {
     let final_res = cfg.upsample.last().map_or(cfg.res, |u| u.1);
     let clashes = [
@@ -123,17 +122,11 @@ fn check_resume_flags(opts: &TrainOptions, cfg: &PlenoxelsConfig) -> Result<()> 
         ("--preset", opts.preset.is_some_and(|p| p != cfg.preset)),
         ("--plenoxels-set", !opts.plenoxels_set.is_empty()),
     ];
-    let named: Vec<&str> = clashes.iter().filter(|c| c.1).map(|c| c.0).collect();
-    if !named.is_empty() {
-        bail!(
-            "--resume continues the checkpoint's configuration (grid {final_res}³, batch {}, \
-             preset {}); {} cannot change it (only --iters can)",
-            cfg.batch,
-            cfg.preset,
-            named.join(", ")
-        );
-    }
-    Ok(())
+    let kept = format!(
+        "grid {final_res}³, batch {}, preset {}",
+        cfg.batch, cfg.preset
+    );
+    refuse_clashes(&clashes, &kept, "--iters")
 }
 
 /// The step count of a configuration (what `--resume --iters` replaces).

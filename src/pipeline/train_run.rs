@@ -183,3 +183,17 @@ where
     eprintln!("resuming {} at step {step} of {}", ckpt.display(), total);
     Ok(Ok((backend, cfg, step)))
 }
+
+/// On `--resume` the checkpoint's configuration wins: refuse the flags that ask for something
+/// else rather than ignoring them. `clashes` names each flag and whether it asks for another
+/// value; `kept` describes the checkpoint's configuration, `steps` the flags that may change it.
+pub(super) fn refuse_clashes(clashes: &[(&str, bool)], kept: &str, steps: &str) -> Result<()> {
+    let named: Vec<&str> = clashes.iter().filter(|c| c.1).map(|c| c.0).collect();
+    ensure!(
+        named.is_empty(),
+        "--resume continues the checkpoint's configuration ({kept}); {} cannot change it (only \
+         {steps} can)",
+        named.join(", ")
+    );
+    Ok(())
+}

@@ -4,7 +4,7 @@
 
 use super::metrics::{SurfaceMetrics, SurfacePerRay, SurfaceSeconds};
 use super::train_options::TrainOptions;
-use super::train_run::{check_resumed_data, resume, run_info, Loaded, Trained};
+use super::train_run::{check_resumed_data, refuse_clashes, resume, run_info, Loaded, Trained};
 use crate::checkpoint::format as checkpoint;
 use crate::checkpoint::BackgroundRecord;
 use crate::data::dataset::peak_rss_bytes;
@@ -17,7 +17,7 @@ use crate::run::identity::check_same_data;
 use crate::run::{self, RunDir, RunStage};
 use crate::surface::{CpuSurface, SurfaceBackend, SurfaceStage, VulkanSurface};
 use crate::train::{surface_steps, SurfaceConfig};
-use anyhow::{ensure, Context, Result};
+use anyhow::{Context, Result};
 use std::path::Path;
 use std::time::Instant;
 
@@ -192,8 +192,7 @@ pub fn train_surface(
     Ok(Trained::Done(metrics))
 }
 
-/// On `--resume` the checkpoint's configuration wins: a flag that asks for something else is an
-/// error rather than silently ignored.
+/// The flags `--resume` refuses to change in a stage-2 run.
 fn check_resume_flags(opts: &TrainOptions, cfg: &SurfaceConfig) -> Result<()> {
     let clashes = [
         ("--batch", opts.batch.is_some_and(|b| b != cfg.batch)),
@@ -205,17 +204,11 @@ fn check_resume_flags(opts: &TrainOptions, cfg: &SurfaceConfig) -> Result<()> {
         ("--set", !opts.set.is_empty()),
         ("--alpha-init-scale", opts.alpha_init_scale.is_some()),
     ];
-    let named: Vec<&str> = clashes.iter().filter(|c| c.1).map(|c| c.0).collect();
-    ensure!(
-        named.is_empty(),
-        "--resume continues the checkpoint's configuration (batch {}, category {}, preset {}); \
-         {} cannot change it (only --surface-iters / --iters can)",
-        cfg.batch,
-        cfg.category,
-        cfg.preset,
-        named.join(", ")
+    let kept = format!(
+        "batch {}, category {}, preset {}",
+        cfg.batch, cfg.category, cfg.preset
     );
-    Ok(())
+    refuse_clashes(&clashes, &kept, "--surface-iters / --iters")
 }
 
 /// The step count of a configuration (what `--resume --iters` replaces).
