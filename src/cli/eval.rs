@@ -59,10 +59,17 @@ pub fn run(opts: &EvaluateOptions) -> Result<()> {
         }
     );
     println!(
-        "gt   {}: {} points ({} after downsampling)",
+        "gt   {}: {} points ({} after downsampling{})",
         opts.gt.display(),
         e.n_gt_raw,
-        m.n_gt
+        m.n_gt,
+        match &e.visible {
+            Some((mask, _)) => format!(
+                " that {} marks: completeness counts only these",
+                mask.display()
+            ),
+            None => String::new(),
+        }
     );
     println!("{:<26} {:>12} {:>12}", "metric", "value", "×10⁻²");
     let row = |name: &str, v: f64| println!("{name:<26} {v:>12.6} {:>12.4}", v * 100.0);
@@ -106,6 +113,7 @@ pub fn run(opts: &EvaluateOptions) -> Result<()> {
             "eval_box": e.scored_box.as_ref().map(|(b, outside)| json!({
                 "bounds": b.bounds, "from": b.from, "pred_outside": outside,
             })),
+            "visible": e.visible.as_ref().map(|(mask, n)| json!({"mask": mask, "gt_scored": n})),
             "metrics": m,
             "load_s": e.load_s,
             "nn_s": e.nn_s,

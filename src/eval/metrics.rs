@@ -128,16 +128,19 @@ pub fn evaluate_groups(
 ) -> Result<Metrics> {
     anyhow::ensure!(!pred.is_empty(), "the predicted point cloud is empty");
     anyhow::ensure!(!gt.is_empty(), "the ground-truth point cloud is empty");
-    evaluate_indexed(pred, gt, &PointIndex::new(gt)?, groups, opts)
+    evaluate_indexed(pred, gt, &PointIndex::new(gt)?, groups, None, opts)
 }
 
 /// [`evaluate_groups`] with the GT cloud's k-d tree built once by the caller (`gt_index` over
-/// `gt`), for scoring many predicted clouds against one ground truth.
+/// `gt`), for scoring many predicted clouds against one ground truth. With `seen` (one flag per
+/// GT point), completeness (s2d, recall) counts only the GT points it marks, e.g. those a
+/// training view sees; accuracy (d2s, precision) is measured against every GT point.
 pub fn evaluate_indexed(
     pred: &[[f32; 3]],
     gt: &[[f32; 3]],
     gt_index: &PointIndex,
     groups: Option<(&[String], &[u32])>,
+    seen: Option<&[bool]>,
     opts: &EvalOptions,
 ) -> Result<Metrics> {
     anyhow::ensure!(!pred.is_empty(), "the predicted point cloud is empty");
@@ -151,8 +154,25 @@ pub fn evaluate_indexed(
         || gt_index.nearest_with_index(pred),
         || PointIndex::new(pred),
     );
-    let s2d = pred_index?.nearest_distances(gt);
-    let mut m = from_distances(&d2s, &s2d, opts);
+    let mut s2d = pred_index?.nearest_distances(gt);
+    if let Some(seen) = seen {
+        anyhow::ensure!(
+            seen.len() == gt.len(),
+            "a mask of {} flags for {} GT points",
+            seen.len(),
+            gt.len()
+        );
+        // NaN marks a GT point completeness leaves out (a distance between finite points is
+        // never NaN); the per-object split skips it too.
+        for (d, &s) in s2d.iter_mut().zip(seen) {
+            if !s {
+                *d = f64::NAN;
+            }
+        }
+    }
+    let scored: Vec<f64> = s2d.iter().copied().filter(|d| !d.is_nan()).collect();
+    anyhow::ensure!(!scored.is_empty(), "the mask leaves no GT point to score");
+    let mut m = from_distances(&d2s, &scored, opts);
     if let Some((names, of_gt)) = groups {
         anyhow::ensure!(
             of_gt.len() == gt.len(),

@@ -132,6 +132,9 @@ pub fn group_errors(
         }
     }
     for (&d, &g) in s2d.iter().zip(gt_group) {
+        if d.is_nan() {
+            continue; // left out of completeness (`metrics::evaluate_indexed`'s `seen`)
+        }
         let a = &mut acc[g as usize];
         a.n_gt += 1;
         if d < max_dist {

@@ -225,6 +225,26 @@ pub fn read_npy_f64(reader: impl Read) -> Result<(Vec<u64>, Vec<f64>)> {
     Ok((shape, values.map_err(read_error)?))
 }
 
+/// A 1-D boolean mask `.npy` file (bool or uint8, nonzero = true), e.g. a capture's
+/// `gt_points_visible.npy`.
+pub fn read_mask(path: &Path) -> Result<Vec<bool>> {
+    let read = || -> Result<Vec<bool>> {
+        let npy = NpyFile::new(BufReader::new(File::open(path)?)).context("bad npy header")?;
+        let shape = npy.shape().to_vec();
+        ensure!(shape.len() == 1, "shape {shape:?}, expected one dimension");
+        let descr = npy.dtype().descr();
+        let values: io::Result<Vec<bool>> = match npy.try_data::<bool>() {
+            Ok(r) => r.collect(),
+            Err(npy) => match npy.try_data::<u8>() {
+                Ok(r) => r.map(|v| v.map(|x| x != 0)).collect(),
+                Err(_) => bail!("dtype {descr}: expected bool or uint8"),
+            },
+        };
+        values.map_err(read_error)
+    };
+    read().with_context(|| format!("reading the mask {}", path.display()))
+}
+
 impl Array {
     /// The float data, or an error naming the actual dtype.
     pub fn into_f32(self, name: &str) -> Result<Vec<f32>> {

@@ -63,6 +63,13 @@ pub struct EvaluateOptions {
         allow_hyphen_values = true
     )]
     pub eval_box: Option<Vec<f32>>,
+    /// Count completeness (s2d, recall) only over the GT points this mask marks: a 1-D boolean
+    /// `.npy`, one flag per point of --gt as read, e.g. a forward-facing capture's
+    /// `gt_points_visible.npy` (the points a training view sees; its back is never seen).
+    /// Accuracy (d2s, precision) is still measured against every GT point. Default: the mask
+    /// the scene.json (--scene, or next to --gt) names when it says `"layout": "forward"`.
+    #[arg(long, value_name = "MASK.npy")]
+    pub visible: Option<PathBuf>,
     /// Print one JSON object with every figure as the last stdout line.
     #[arg(long)]
     pub json: bool,
@@ -76,15 +83,9 @@ pub struct ScoredBox {
     pub from: String,
 }
 
-/// `--box`, else the `eval_box` of the scene.json (`--scene`, or next to the GT cloud) when it
-/// has one; a malformed `eval_box` is an error naming the file.
-fn scored_box(opts: &EvaluateOptions) -> Result<Option<ScoredBox>> {
-    if let Some(v) = &opts.eval_box {
-        return Ok(Some(ScoredBox {
-            bounds: Aabb::from_values("--box", v)?,
-            from: "--box".into(),
-        }));
-    }
+/// The scene.json `--scene` names, else the one next to the GT cloud when there is one: its path
+/// and contents.
+fn scene_meta(opts: &EvaluateOptions) -> Result<Option<(PathBuf, serde_json::Value)>> {
     let path = match &opts.scene {
         Some(p) => p.clone(),
         None => opts.gt.with_file_name("scene.json"),
@@ -94,8 +95,23 @@ fn scored_box(opts: &EvaluateOptions) -> Result<Option<ScoredBox>> {
     }
     let text =
         std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
-    let meta: serde_json::Value = serde_json::from_str(&text)
+    let meta = serde_json::from_str(&text)
         .with_context(|| format!("{}: not valid JSON", path.display()))?;
+    Ok(Some((path, meta)))
+}
+
+/// `--box`, else the `eval_box` of the scene.json (`--scene`, or next to the GT cloud) when it
+/// has one; a malformed `eval_box` is an error naming the file.
+fn scored_box(opts: &EvaluateOptions) -> Result<Option<ScoredBox>> {
+    if let Some(v) = &opts.eval_box {
+        return Ok(Some(ScoredBox {
+            bounds: Aabb::from_values("--box", v)?,
+            from: "--box".into(),
+        }));
+    }
+    let Some((path, meta)) = scene_meta(opts)? else {
+        return Ok(None);
+    };
     let Some(b) = meta.get("eval_box") else {
         return Ok(None);
     };
@@ -110,6 +126,36 @@ fn scored_box(opts: &EvaluateOptions) -> Result<Option<ScoredBox>> {
         bounds: Aabb::from_values(&flag, &v)?,
         from: path.display().to_string(),
     }))
+}
+
+/// `--visible`, else, for a forward-facing capture (its scene.json says `"layout": "forward"`),
+/// the visibility mask its scene.json names (`visibility.file`): a forward-facing capture never
+/// sees the object's back, so completeness counts what a training view sees.
+fn visible_mask(opts: &EvaluateOptions) -> Result<Option<PathBuf>> {
+    if opts.visible.is_some() {
+        return Ok(opts.visible.clone());
+    }
+    let Some((path, meta)) = scene_meta(opts)? else {
+        return Ok(None);
+    };
+    if meta["layout"] != "forward" {
+        return Ok(None);
+    }
+    let file = meta["visibility"]["file"].as_str().with_context(|| {
+        format!(
+            "{}: a forward-facing capture without visibility.file (the mask of the GT points \
+             a training view sees)",
+            path.display()
+        )
+    })?;
+    let mask = path.with_file_name(file);
+    ensure!(
+        mask.is_file(),
+        "{}: visibility.file {} does not exist",
+        path.display(),
+        mask.display()
+    );
+    Ok(Some(mask))
 }
 
 /// A cloud read and thinned.
@@ -207,6 +253,7 @@ impl EvaluateOptions {
             downsample: DEFAULT_DOWNSAMPLE,
             scene: None,
             eval_box: None,
+            visible: None,
             json: false,
         }
     }
@@ -228,6 +275,9 @@ pub struct Evaluation {
     /// The box the predicted points were scored in, and how many (after downsampling) lay
     /// outside it.
     pub scored_box: Option<(ScoredBox, usize)>,
+    /// The mask completeness was counted over (--visible) and how many GT points (after
+    /// thinning) it marks.
+    pub visible: Option<(PathBuf, usize)>,
     /// Seconds reading and thinning, and finding the nearest points.
     pub load_s: f64,
     pub nn_s: f64,
@@ -240,6 +290,8 @@ pub struct GroundTruth {
     cloud: Loaded,
     groups: Option<ObjectSplit>,
     note: Option<String>,
+    /// `--visible`: the mask's path and its flag for each kept GT point.
+    seen: Option<(PathBuf, Vec<bool>)>,
     index: PointIndex,
     /// Seconds reading, thinning and indexing it.
     pub load_s: f64,
@@ -258,12 +310,20 @@ impl GroundTruth {
         );
         let mut note = None;
         let groups = groups(opts, cloud.n_raw, &cloud.kept, &mut note)?;
+        let seen = match visible_mask(opts)? {
+            Some(p) => {
+                let flags = seen_of(&p, &opts.gt, &cloud)?;
+                Some((p, flags))
+            }
+            None => None,
+        };
         let index = PointIndex::new(&cloud.points)?;
         Ok(GroundTruth {
             path: opts.gt.clone(),
             cloud,
             groups,
             note,
+            seen,
             index,
             load_s: t.elapsed().as_secs_f64(),
         })
@@ -278,7 +338,7 @@ impl GroundTruth {
     pub fn score(&self, opts: &EvaluateOptions) -> Result<Evaluation> {
         check(opts)?;
         ensure!(
-            opts.gt == self.path,
+            opts.gt == self.path && visible_mask(opts)? == self.seen.as_ref().map(|s| s.0.clone()),
             "scoring against {} with a ground truth loaded from {}",
             opts.gt.display(),
             self.path.display()
@@ -319,6 +379,7 @@ impl GroundTruth {
             self.groups
                 .as_ref()
                 .map(|g| (g.names.as_slice(), g.labels.as_slice())),
+            self.seen.as_ref().map(|s| s.1.as_slice()),
             &EvalOptions {
                 max_dist: opts.max_dist,
                 threshold: opts.threshold,
@@ -345,10 +406,29 @@ impl GroundTruth {
             objects_from: self.groups.as_ref().map(|g| g.path.clone()),
             note: self.note.clone(),
             scored_box,
+            visible: self
+                .seen
+                .as_ref()
+                .map(|(p, s)| (p.clone(), s.iter().filter(|&&v| v).count())),
             load_s,
             nn_s,
         })
     }
+}
+
+/// The flag of each kept (thinned) GT point from the mask at `path`, which must hold one flag per
+/// point of the GT file `gt` as read.
+fn seen_of(path: &Path, gt: &Path, cloud: &Loaded) -> Result<Vec<bool>> {
+    let mask = crate::grid::npz::read_mask(path)?;
+    ensure!(
+        mask.len() == cloud.n_raw,
+        "{}: {} flags, but {} holds {} points (--visible needs one flag per GT point)",
+        path.display(),
+        mask.len(),
+        gt.display(),
+        cloud.n_raw
+    );
+    Ok(cloud.kept.iter().map(|&i| mask[i]).collect())
 }
 
 fn check(opts: &EvaluateOptions) -> Result<()> {

@@ -761,3 +761,91 @@ fn eval_and_extract_score_within_a_box() {
         );
     }
 }
+
+/// A 1-D `.npy` file of `data`.
+fn write_npy<T: npyz::AutoSerialize + Copy>(path: &Path, data: &[T]) {
+    use npyz::WriterBuilder;
+    let mut out = Vec::new();
+    let mut w = npyz::WriteOptions::new()
+        .default_dtype()
+        .shape(&[data.len() as u64])
+        .writer(&mut out)
+        .begin_nd()
+        .unwrap();
+    w.extend(data.iter().copied()).unwrap();
+    w.finish().unwrap();
+    std::fs::write(path, out).unwrap();
+}
+
+#[test]
+fn eval_counts_completeness_over_the_visible_gt_points() {
+    let dir = tempfile::tempdir().unwrap();
+    // GT: a front sheet the prediction covers and a back sheet it misses (never seen).
+    let sheet = |z: f32| -> Vec<[f32; 3]> {
+        (0..1600)
+            .map(|i| [(i % 40) as f32 * 0.01, (i / 40) as f32 * 0.01, z])
+            .collect()
+    };
+    let (front, back) = (sheet(0.0), sheet(0.2));
+    let (gt, pred) = (dir.path().join("gt.ply"), dir.path().join("pred.ply"));
+    write_points(&gt, &[front.clone(), back.clone()].concat()).unwrap();
+    write_points(&pred, &front).unwrap();
+    let seen: Vec<bool> = (0..3200).map(|i| i < 1600).collect();
+    let mask = dir.path().join("visible.npy");
+    write_npy(&mask, &seen);
+    let run = |extra: &[&std::ffi::OsStr]| -> std::process::Output {
+        bin()
+            .args(["eval", "--json", "--downsample", "0", "--pred"])
+            .arg(&pred)
+            .arg("--gt")
+            .arg(&gt)
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    let metrics = |out: &std::process::Output| -> serde_json::Value {
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let text = String::from_utf8_lossy(&out.stdout);
+        serde_json::from_str(text.lines().last().unwrap()).unwrap()
+    };
+    let all = metrics(&run(&[]));
+    let visible = metrics(&run(&["--visible".as_ref(), mask.as_os_str()]));
+    // Without the mask the back sheet is half the GT and 0.2 from the prediction.
+    assert!((all["metrics"]["recall"].as_f64().unwrap() - 0.5).abs() < 1e-9);
+    assert!((all["metrics"]["mean_s2d"].as_f64().unwrap() - 0.1).abs() < 1e-6);
+    // With it completeness counts the front sheet only; accuracy is unchanged.
+    assert_eq!(visible["metrics"]["recall"].as_f64().unwrap(), 1.0);
+    assert_eq!(visible["metrics"]["mean_s2d"].as_f64().unwrap(), 0.0);
+    assert_eq!(visible["metrics"]["n_gt"].as_u64().unwrap(), 1600);
+    assert_eq!(visible["visible"]["gt_scored"].as_u64().unwrap(), 1600);
+    assert_eq!(visible["metrics"]["mean_d2s"], all["metrics"]["mean_d2s"]);
+    // A forward-facing capture's scene.json names its mask: used by default; an orbit's is not.
+    let scene = dir.path().join("scene.json");
+    for (layout, recall) in [("forward", 1.0), ("orbit", 0.5)] {
+        let meta = serde_json::json!({"layout": layout, "visibility": {"file": "visible.npy"}});
+        std::fs::write(&scene, meta.to_string()).unwrap();
+        let m = metrics(&run(&[]));
+        assert!((m["metrics"]["recall"].as_f64().unwrap() - recall).abs() < 1e-9, "{layout}");
+    }
+    std::fs::remove_file(&scene).unwrap();
+    // A mask of another length, or not boolean, is an error naming the file.
+    write_npy(&mask, &seen[..100]);
+    let out = run(&["--visible".as_ref(), mask.as_os_str()]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("visible.npy") && err.contains("100 flags"),
+        "{err}"
+    );
+    let floats = dir.path().join("floats.npy");
+    write_npy(&floats, &vec![1.0f32; 3200]);
+    let out = run(&["--visible".as_ref(), floats.as_os_str()]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("floats.npy") && err.contains("dtype"),
+        "{err}"
+    );
+}
