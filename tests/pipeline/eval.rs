@@ -368,6 +368,22 @@ fn bin() -> Command {
     c
 }
 
+/// `eval --json --downsample 0` of `pred` against `gt` with `extra` flags.
+fn eval_exact<S: AsRef<std::ffi::OsStr>>(
+    pred: &Path,
+    gt: &Path,
+    extra: &[S],
+) -> std::process::Output {
+    bin()
+        .args(["eval", "--json", "--downsample", "0", "--pred"])
+        .arg(pred)
+        .arg("--gt")
+        .arg(gt)
+        .args(extra)
+        .output()
+        .unwrap()
+}
+
 fn eval_cmd(pred: &Path, gt: &Path) -> std::process::Output {
     bin()
         .args(["eval", "--json", "--pred"])
@@ -677,14 +693,7 @@ fn eval_and_extract_score_within_a_box() {
     write_points(&gt, &object).unwrap();
     write_points(&pred, &[object.clone(), floor].concat()).unwrap();
     let chamfer = |extra: &[&str]| -> (f64, serde_json::Value) {
-        let out = bin()
-            .args(["eval", "--json", "--downsample", "0", "--pred"])
-            .arg(&pred)
-            .arg("--gt")
-            .arg(&gt)
-            .args(extra)
-            .output()
-            .unwrap();
+        let out = eval_exact(&pred, &gt, extra);
         assert!(
             out.status.success(),
             "{}",
@@ -793,16 +802,7 @@ fn eval_counts_completeness_over_the_visible_gt_points() {
     let seen: Vec<bool> = (0..3200).map(|i| i < 1600).collect();
     let mask = dir.path().join("visible.npy");
     write_npy(&mask, &seen);
-    let run = |extra: &[&std::ffi::OsStr]| -> std::process::Output {
-        bin()
-            .args(["eval", "--json", "--downsample", "0", "--pred"])
-            .arg(&pred)
-            .arg("--gt")
-            .arg(&gt)
-            .args(extra)
-            .output()
-            .unwrap()
-    };
+    let run = |extra: &[&std::ffi::OsStr]| eval_exact(&pred, &gt, extra);
     let metrics = |out: &std::process::Output| -> serde_json::Value {
         assert!(
             out.status.success(),
@@ -829,7 +829,10 @@ fn eval_counts_completeness_over_the_visible_gt_points() {
         let meta = serde_json::json!({"layout": layout, "visibility": {"file": "visible.npy"}});
         std::fs::write(&scene, meta.to_string()).unwrap();
         let m = metrics(&run(&[]));
-        assert!((m["metrics"]["recall"].as_f64().unwrap() - recall).abs() < 1e-9, "{layout}");
+        assert!(
+            (m["metrics"]["recall"].as_f64().unwrap() - recall).abs() < 1e-9,
+            "{layout}"
+        );
     }
     std::fs::remove_file(&scene).unwrap();
     // A mask of another length, or not boolean, is an error naming the file.
