@@ -100,6 +100,8 @@ fn named<'a, S: Stage>(state: &[&'a [f32]]) -> Vec<(&'static str, &'a [f32])> {
 pub trait Recorded: serde::Serialize + DeserializeOwned {
     /// Refuse values the stage cannot train with.
     fn validate(&self) -> Result<()>;
+    /// The run's step count (what `--resume --iters` replaces).
+    fn iters_mut(&mut self) -> &mut u32;
 }
 
 /// Restore grid, optimiser state, background and step from the checkpoint of stage `S` at

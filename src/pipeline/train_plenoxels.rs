@@ -59,7 +59,7 @@ pub fn train_plenoxels(
     } else {
         let make = |grid| make_backend(gpu, grid);
         let flags = |cfg: &PlenoxelsConfig| check_resume_flags(opts, cfg);
-        match resume::<PlenoxelsStage, _, _, _>(opts, opts.iters, iters_of, make, flags)? {
+        match resume::<PlenoxelsStage, _, _, _>(opts, opts.iters, make, flags)? {
             Ok(resumed) => resumed,
             Err(done) => return Ok(done),
         }
@@ -127,9 +127,4 @@ fn check_resume_flags(opts: &TrainOptions, cfg: &PlenoxelsConfig) -> Result<()> 
         cfg.batch, cfg.preset
     );
     refuse_clashes(&clashes, &kept, "--iters")
-}
-
-/// The step count of a configuration (what `--resume --iters` replaces).
-fn iters_of(cfg: &mut PlenoxelsConfig) -> &mut u32 {
-    &mut cfg.iters
 }

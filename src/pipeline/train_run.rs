@@ -144,13 +144,12 @@ pub(super) type Resumed<B, C> = (Box<B>, C, u32);
 /// Resumes the stage-`S` run in `opts.out` from its checkpoint: `make` builds the backend for
 /// the checkpoint's grid, which is then restored (optimiser state, background, step); the
 /// configuration must pass `check_flags` and the background match `--background`. `iters` (when
-/// given) replaces the step count that `total` points at in the configuration. Returns
+/// given) replaces the configuration's step count. Returns
 /// `Ok((backend, configuration, step))`, or `Err(Trained::AlreadyDone)` when the run is already
 /// at its last step.
 pub(super) fn resume<S, C, B, M>(
     opts: &TrainOptions,
     iters: Option<u32>,
-    total: impl FnOnce(&mut C) -> &mut u32,
     make: impl FnOnce(S::Grid) -> Result<Box<B>>,
     check_flags: impl FnOnce(&C) -> Result<()>,
 ) -> Result<Result<Resumed<B, C>, Trained<M>>>
@@ -169,7 +168,7 @@ where
     let (step, mut cfg, bg) = checkpoint::resume::<S, C, B>(backend.as_mut(), &ckpt)?;
     check_flags(&cfg)?;
     bg.ensure_mode(opts.background, "the checkpoint")?;
-    let total = total(&mut cfg);
+    let total = cfg.iters_mut();
     if let Some(n) = iters {
         *total = n; // extend (or shorten) the run; the schedules keep their lengths
     }

@@ -135,7 +135,7 @@ pub fn train_surface(
             let make = |grid| make_backend(gpu, grid);
             let flags = |cfg: &SurfaceConfig| check_resume_flags(opts, cfg);
             let iters = opts.surface_iters.or(opts.iters);
-            match resume::<SurfaceStage, _, _, _>(opts, iters, iters_of, make, flags)? {
+            match resume::<SurfaceStage, _, _, _>(opts, iters, make, flags)? {
                 Ok(resumed) => resumed,
                 Err(done) => return Ok(done),
             }
@@ -209,9 +209,4 @@ fn check_resume_flags(opts: &TrainOptions, cfg: &SurfaceConfig) -> Result<()> {
         cfg.batch, cfg.category, cfg.preset
     );
     refuse_clashes(&clashes, &kept, "--surface-iters / --iters")
-}
-
-/// The step count of a configuration (what `--resume --iters` replaces).
-fn iters_of(cfg: &mut SurfaceConfig) -> &mut u32 {
-    &mut cfg.iters
 }

@@ -265,4 +265,8 @@ impl crate::checkpoint::Recorded for PlenoxelsConfig {
     fn validate(&self) -> anyhow::Result<()> {
         PlenoxelsConfig::validate(self)
     }
+
+    fn iters_mut(&mut self) -> &mut u32 {
+        &mut self.iters
+    }
 }

@@ -372,6 +372,10 @@ impl crate::checkpoint::Recorded for SurfaceConfig {
     fn validate(&self) -> Result<()> {
         SurfaceConfig::validate(self)
     }
+
+    fn iters_mut(&mut self) -> &mut u32 {
+        &mut self.iters
+    }
 }
 
 #[cfg(test)]

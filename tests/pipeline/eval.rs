@@ -726,27 +726,13 @@ fn eval_and_extract_score_within_a_box() {
         (b["from"].as_str(), b["pred_outside"].as_u64()),
         (Some("--box"), Some(2000 - 17 * 17))
     );
-    let out = bin()
-        .args(["eval", "--pred"])
-        .arg(&pred)
-        .arg("--gt")
-        .arg(&gt)
-        .args(["--box", "5,5,5,6,6,6"])
-        .output()
-        .unwrap();
+    let out = eval_exact(&pred, &gt, &["--box", "5,5,5,6,6,6"]);
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(
         !out.status.success() && err.contains("evaluation box"),
         "{err}"
     );
-    let out = bin()
-        .args(["eval", "--pred"])
-        .arg(&pred)
-        .arg("--gt")
-        .arg(&gt)
-        .args(["--box", "1,0,0,0,1,1"])
-        .output()
-        .unwrap();
+    let out = eval_exact(&pred, &gt, &["--box", "1,0,0,0,1,1"]);
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(
         !out.status.success() && err.contains("--box") && err.contains("below"),
