@@ -15,13 +15,15 @@
 // Pass 0 draws ray i's key into scratch; sample_rays_sort sorts scratch into keys; pass 1 writes
 // the ray of the key at its position: origin = the view's camera centre in the scaled world, unit
 // direction = normalize(R·((x + ½ − cx)/fx, −(y + ½ − cy)/fy, −1)) as data::Camera::pixel_ray,
-// target = the pixel's composited RGB / 255.
+// target = the pixel's composited RGB / 255; for a forward-facing capture in NDC (ndc_near > 0)
+// that ray carried into NDC (lib/ndc.glsl).
 // Inputs: pixels (RGBA8 packed in a u32 per pixel, views × height × width, row-major), cams
 // (SampleCamera per view), focus (flat pixel indices, ascending; unread when focus_threshold is
 // 0), keys (pass 1). Outputs: scratch (the drawn keys, pass 0), rays (6
 // floats), targets (3 floats) and, with a focus, weights (pass 1: the ray's importance weight,
 // w_focus for a focus pixel, found by binary search, else w_other).
 #include "common.glsl"
+#include "ndc.glsl"
 layout(local_size_x = 256) in;
 
 layout(push_constant, scalar) uniform Push {
@@ -45,6 +47,11 @@ layout(push_constant, scalar) uniform Push {
     uint focus_threshold;
     float w_focus;
     float w_other;
+    // The NDC map (near, sx, sy; lib/ndc.glsl) of a forward-facing capture, the cameras given in
+    // its frame; near = 0: rays stay in the scaled world.
+    float ndc_near;
+    float ndc_sx;
+    float ndc_sy;
 } pc;
 
 // SplitMix64's output function (Steele, Lea & Flood 2014) on the counter seed + (i + 1)·γ.
@@ -122,6 +129,9 @@ void write_ray() {
     precise vec3 d = x_axis * dx + y_axis * dy + z_axis * -1.0;
     precise float len2 = d.x * d.x + d.y * d.y + d.z * d.z;
     d = d * (1.0 / sqrt(len2));
+    if (pc.ndc_near > 0.0) {
+        ndc_ray(origin, d, vec3(pc.ndc_near, pc.ndc_sx, pc.ndc_sy), origin, d);
+    }
     U64Buf rw = U64Buf(uint64_t(pc.rays) + 24ul * uint64_t(at));
     rw.v[0] = word(origin.x, origin.y);
     rw.v[1] = word(origin.z, d.x);

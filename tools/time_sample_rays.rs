@@ -50,6 +50,7 @@ fn main() -> Result<()> {
         images: images.iter().map(|i| i.as_slice()).collect(),
         cams: (0..n_views).map(cam).collect(),
         focus: Focus::none(),
+        ndc: None,
     };
 
     let gpu = Gpu::new(&Default::default())?;

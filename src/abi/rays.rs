@@ -8,6 +8,17 @@ use crate::abi::buffers::SampleCamera;
 use crate::abi::consts::SAMPLE_SORT_RAYS;
 use anyhow::{ensure, Result};
 use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+/// The constants of the NDC map of a forward-facing capture (`math::ndc`, `glsl/lib/ndc.glsl`):
+/// the near plane's depth `near` (> 0, the NDC frame's units) and the frame camera's 2·f_x/W and
+/// 2·f_y/H.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct NdcProjection {
+    pub near: f32,
+    pub sx: f32,
+    pub sy: f32,
+}
 
 /// The pixels and cameras a batch is drawn from: every view's RGBA8 image (composited colour,
 /// 4 bytes per pixel, row-major, the u32 per pixel the kernel reads) and camera.
@@ -19,6 +30,9 @@ pub struct SampleSet<'a> {
     pub cams: Vec<SampleCamera>,
     /// Pixels a share of each batch is drawn from ([`Focus::none`]: every ray uniform).
     pub focus: Focus,
+    /// A forward-facing capture's NDC map, the cameras given in its frame: each ray is carried
+    /// into NDC (`math::ndc::ndc_ray`). `None`: rays in the scaled world.
+    pub ndc: Option<NdcProjection>,
 }
 
 /// Pixels that a share of each batch is drawn from, uniformly among them; the rest of the batch
@@ -194,6 +208,16 @@ impl SampleSet<'_> {
             self.focus.n_pixels,
             self.n_pixels()
         );
+        if let Some(p) = self.ndc {
+            let positive = |x: f32| x > 0.0 && x.is_finite();
+            ensure!(
+                positive(p.near) && positive(p.sx) && positive(p.sy),
+                "an NDC map with near {}, 2f/W {}, 2f/H {}: each must be positive and finite",
+                p.near,
+                p.sx,
+                p.sy
+            );
+        }
         Ok(())
     }
 }

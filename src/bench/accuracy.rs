@@ -12,6 +12,7 @@
 //! (an older build) is trained again, never scored as this build's.
 
 use crate::backend::Backend;
+use crate::data::ndc::Space;
 use crate::pipeline::demo::{
     alphasurf_row, plenoxels_levels, plenoxels_levels_trimmed, Row, LEVELS,
 };
@@ -70,6 +71,10 @@ pub struct AccuracyArgs {
     /// Where the kernels run (resolved once).
     #[arg(long, value_enum, default_value_t = Backend::Auto)]
     pub backend: Backend,
+    /// Where each scene's grid lies, as `train --space` takes it (`auto`: NDC for a
+    /// forward-facing capture).
+    #[arg(long, value_enum, default_value_t = Space::Auto)]
+    pub space: Space,
     /// Output directory: one folder per scene (its runs, clouds and result.json) and
     /// accuracy.json. Default: runs/accuracy-N-PRESET-sSEED.
     #[arg(long)]
@@ -97,6 +102,9 @@ pub struct PlenoxelsSettings {
     /// `--plenoxels-set` overrides (absent from records written before it).
     #[serde(default)]
     pub set: Vec<String>,
+    /// `--space` (absent from records written before it: `auto`, which was the box then).
+    #[serde(default)]
+    pub space: Space,
 }
 
 impl PlenoxelsSettings {
@@ -642,6 +650,7 @@ pub fn run(args: &AccuracyArgs, devices: &mut Devices) -> Result<()> {
     let steps = Steps {
         preset: args.preset,
         seed: args.seed,
+        space: args.space,
         ..Steps::new(devices.for_backend(args.backend)?)
     };
     let out = args.out.clone().unwrap_or_else(|| {
@@ -730,6 +739,7 @@ fn scene_settings(
         seed: args.seed,
         backend: steps.backend(),
         set: args.plenoxels_set.clone(),
+        space: args.space,
     };
     if args.stage1_from.is_some() {
         // Another output's stage 1, whatever its seed, as long as the rest matches.
@@ -894,6 +904,7 @@ mod tests {
                     seed: 0,
                     backend: Backend::Cpu,
                     set: vec![],
+                    space: Space::Auto,
                 },
                 category,
                 seed: 0,

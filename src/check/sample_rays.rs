@@ -3,14 +3,15 @@
 //! uniform, and with a focus on a random fifth of the pixels) with `cpu::sample_rays`: the
 //! sorted pixel keys and the importance weights identical
 //! (integers: the same draws, the same order), origins identical (a copy of the camera's), unit
-//! directions within 4 ulp of 1 (2^-21: the kernel's division, square root and reciprocal may
+//! directions within 4 ulp of 1; rays carried into NDC (`glsl/lib/ndc.glsl`, forward-facing
+//! cameras) within that tolerance carried through the map plus [`NDC_OWN_ULP`] (2^-21: the kernel's division, square root and reciprocal may
 //! each be off by up to ~1 ulp where the driver does not round them exactly; its products and
 //! sums are `precise`), targets within 1 ulp of 1 (a byte over 255).
 
 use super::{CheckRow, Compare};
 use crate::abi::buffers::SampleCamera;
 use crate::abi::consts::SAMPLE_SORT_RAYS;
-use crate::abi::rays::{Focus, SampleSet};
+use crate::abi::rays::{Focus, NdcProjection, SampleSet};
 use crate::cpu::sample_rays::sample_rays;
 use crate::cpu::sample_rays_sort;
 use crate::data::camera::look_at;
@@ -22,6 +23,11 @@ use rand_pcg::Pcg64;
 
 /// Tolerance of the directions' components.
 pub const DIR_ABS: f64 = 4.0 * f32::EPSILON as f64;
+/// The NDC map's own rounding (ulp of max(1, |value|)) beyond what the direction's tolerance
+/// carries through it: its nine operations, the divisions and square root each up to ~1 ulp off
+/// where the driver does not round them exactly, the quotients d.x/d.z, o.x/n scaled by 2f/W
+/// (up to ~4 here).
+pub const NDC_OWN_ULP: f64 = 16.0;
 /// Tolerance of the targets.
 pub const TARGET_ABS: f64 = f32::EPSILON as f64;
 
@@ -57,6 +63,75 @@ fn views(rng: &mut Pcg64, n_views: usize, w: u32, h: u32) -> (Vec<Vec<u8>>, Vec<
     (images, cams)
 }
 
+/// Cameras of a forward-facing capture in its NDC frame: eyes in the plane z = 4 within ±1 of
+/// the axis, looking at the origin; the map's near plane at depth 2.
+fn ndc_views(
+    rng: &mut Pcg64,
+    n_views: usize,
+    w: u32,
+    h: u32,
+) -> (Vec<SampleCamera>, NdcProjection) {
+    let cams = (0..n_views)
+        .map(|_| {
+            let eye = Vec3::new(
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+                4.0,
+            );
+            let m = look_at(eye, Vec3::ZERO, Vec3::Y);
+            SampleCamera {
+                x_axis: m.x_axis.truncate().to_array(),
+                y_axis: m.y_axis.truncate().to_array(),
+                z_axis: m.z_axis.truncate().to_array(),
+                origin: eye.to_array(),
+                focal: [rng.random_range(30.0..60.0), rng.random_range(30.0..60.0)],
+                centre: [0.5 * w as f32, 0.5 * h as f32],
+            }
+        })
+        .collect();
+    let proj = NdcProjection {
+        near: 2.0,
+        sx: 2.0 * 45.0 / w as f32,
+        sy: 2.0 * 45.0 / h as f32,
+    };
+    (cams, proj)
+}
+
+/// The NDC map in f64 (`math::ndc::ndc_ray`'s formula).
+fn ndc_ray_f64(o: [f64; 3], d: [f64; 3], p: NdcProjection) -> [f64; 6] {
+    let (n, sx, sy) = (p.near as f64, p.sx as f64, p.sy as f64);
+    let t = -(n + o[2]) / d[2];
+    let (ox, oy) = ((o[0] + t * d[0]) / n, (o[1] + t * d[1]) / n);
+    let nd = [-sx * (d[0] / d[2] + ox), -sy * (d[1] / d[2] + oy), 2.0];
+    let len = (nd[0] * nd[0] + nd[1] * nd[1] + nd[2] * nd[2]).sqrt();
+    [
+        sx * ox,
+        sy * oy,
+        -1.0,
+        nd[0] / len,
+        nd[1] / len,
+        nd[2] / len,
+    ]
+}
+
+/// Per component of the NDC ray of (o, d), how far the direction's tolerance ([`DIR_ABS`] on
+/// each component of d) can move it: Σ_k |∂ray_i/∂d_k|·DIR_ABS, the derivatives by f64 central
+/// differences.
+fn ndc_propagated(o: [f64; 3], d: [f64; 3], p: NdcProjection) -> [f64; 6] {
+    let h = 1e-7;
+    let mut out = [0.0; 6];
+    for k in 0..3 {
+        let (mut a, mut b) = (d, d);
+        a[k] += h;
+        b[k] -= h;
+        let (ra, rb) = (ndc_ray_f64(o, a, p), ndc_ray_f64(o, b, p));
+        for i in 0..6 {
+            out[i] += ((ra[i] - rb[i]) / (2.0 * h)).abs() * DIR_ABS;
+        }
+    }
+    out
+}
+
 /// The `check-kernels` row of `sample_rays`, the whole draw: 7 views of 37×23 pixels, a batch of
 /// 2·SAMPLE_SORT_RAYS + 1808 rays (two full runs and a partial one, padded in the sort).
 pub fn check(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
@@ -69,6 +144,7 @@ pub fn check(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
         images: images.iter().map(|i| i.as_slice()).collect(),
         cams,
         focus: Focus::none(),
+        ndc: None,
     };
     let n = 2 * SAMPLE_SORT_RAYS as usize + 1808;
     let batch_seed: u64 = rng.random();
@@ -80,19 +156,39 @@ pub fn check(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
         .collect();
     let focus = Focus::new(focus_pixels, 0.5, n_pixels)?;
 
+    let (box_cams, (ndc_cams, proj)) = (set.cams.clone(), ndc_views(&mut rng, 7, w, h));
+
     let mut cmp = Compare::new(0.0, 0.0);
     let mut key_mismatches = 0;
     let ulp = |g: f64, c: f64| (g - c).abs() / f32::EPSILON as f64;
-    let (mut dir_ulp, mut target_ulp) = (0f64, 0f64);
-    // Both ways of drawing the keys, whichever the device uses in training, uniform and focused.
-    let cases = [KeyDraw::Device, KeyDraw::Host]
-        .into_iter()
-        .flat_map(|k| [(k, Focus::none()), (k, focus.clone())]);
-    for (key_draw, focus) in cases {
+    let (mut dir_ulp, mut target_ulp, mut ndc_ulp) = (0f64, 0f64, 0f64);
+    // Both ways of drawing the keys, whichever the device uses in training, uniform and focused,
+    // and the rays of a forward-facing capture carried into NDC.
+    let cases = [KeyDraw::Device, KeyDraw::Host].into_iter().flat_map(|k| {
+        [
+            (k, Focus::none(), None),
+            (k, focus.clone(), None),
+            (k, Focus::none(), Some(proj)),
+        ]
+    });
+    for (key_draw, focus, ndc) in cases {
         let focused = !focus.is_none();
         set.focus = focus;
+        set.cams = if ndc.is_some() {
+            ndc_cams.clone()
+        } else {
+            box_cams.clone()
+        };
+        set.ndc = None;
+        // The rays before the NDC map, from which the direction's tolerance is carried through it.
+        let plain = sample_rays(&set, batch_seed, n)?;
+        set.ndc = ndc;
         let want = sample_rays(&set, batch_seed, n)?;
-        let key_draw_name = format!("{key_draw:?}{}", if focused { " focused" } else { "" });
+        let key_draw_name = format!(
+            "{key_draw:?}{}{}",
+            if focused { " focused" } else { "" },
+            if ndc.is_some() { " NDC" } else { "" }
+        );
         let mut slot = None;
         let id = u64::MAX - 2 * seed - focused as u64;
         let views = TrainViewBuffers::ensure(&mut slot, gpu, id, &set, n)?;
@@ -126,13 +222,31 @@ pub fn check(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
             }
         }
         for i in 0..n {
+            let tol: [f64; 6] = match ndc {
+                None => [0.0, 0.0, 0.0, DIR_ABS, DIR_ABS, DIR_ABS],
+                Some(p) => {
+                    let r = &plain.rays[6 * i..6 * i + 6];
+                    let f = |k: usize| r[k] as f64;
+                    let carried = ndc_propagated([f(0), f(1), f(2)], [f(3), f(4), f(5)], p);
+                    std::array::from_fn(|k| {
+                        carried[k]
+                            + NDC_OWN_ULP
+                                * f32::EPSILON as f64
+                                * want.rays[6 * i + k].abs().max(1.0) as f64
+                    })
+                }
+            };
             for k in 0..6 {
                 let (g, c) = (rays[6 * i + k] as f64, want.rays[6 * i + k] as f64);
-                cmp.tol.abs = if k < 3 { 0.0 } else { DIR_ABS };
+                cmp.tol.abs = tol[k];
                 cmp.value(g, c, || {
                     format!("{key_draw_name} keys, ray {i} component {k}")
                 });
-                dir_ulp = dir_ulp.max(ulp(g, c));
+                if ndc.is_some() {
+                    ndc_ulp = ndc_ulp.max(ulp(g, c));
+                } else {
+                    dir_ulp = dir_ulp.max(ulp(g, c));
+                }
             }
             for k in 0..3 {
                 let (g, c) = (targets[3 * i + k] as f64, want.targets[3 * i + k] as f64);
@@ -144,16 +258,18 @@ pub fn check(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
     }
     cmp.tol.abs = DIR_ABS;
     let note = format!(
-        "{n} rays over 7 views of {w}×{h}, keys drawn on the device and on the host, uniform and \
-         with half from a focus of {} pixels: keys {} of {} identical; rays at most \
-         {dir_ulp:.2}, targets {target_ulp:.2} ulp(1) apart; tolerances: keys and origins exact, \
-         directions {:.0} ulp(1), targets 1 ulp(1)",
+        "{n} rays over 7 views of {w}×{h}, keys drawn on the device and on the host, uniform, \
+         with half from a focus of {} pixels, and carried into NDC: keys {} of {} identical; \
+         rays at most {dir_ulp:.2}, NDC rays {ndc_ulp:.2}, targets {target_ulp:.2} ulp(1) \
+         apart; tolerances: keys and origins exact, directions {:.0} ulp(1), NDC rays the \
+         direction's tolerance carried through the map (f64 central differences) + \
+         {NDC_OWN_ULP} ulp of max(1, |value|), targets 1 ulp(1)",
         focus.pixels().len(),
-        4 * n - key_mismatches,
-        4 * n,
+        6 * n - key_mismatches,
+        6 * n,
         DIR_ABS / f32::EPSILON as f64
     );
-    Ok(cmp.row(crate::kernels::sample_rays::INFO.name, 4 * n, note))
+    Ok(cmp.row(crate::kernels::sample_rays::INFO.name, 6 * n, note))
 }
 
 /// The `check-kernels` row of `sample_rays_sort`: batches of 2·SAMPLE_SORT_RAYS + 1808 keys (two

@@ -3,6 +3,7 @@
 //! foreground box found from the cameras, estimated object bounds, warnings, and the load time and
 //! memory.
 
+use crate::data::ndc::Space;
 use crate::data::{inspect::inspect, Aabb, Dataset, LoadOptions, SceneBox};
 use std::path::PathBuf;
 
@@ -28,6 +29,10 @@ pub struct InspectArgs {
         allow_hyphen_values = true
     )]
     pub scene_box: Option<Vec<f32>>,
+    /// Where the grid lies, as `train --space` takes it: `auto` says whether a forward-facing
+    /// capture gets NDC and why.
+    #[arg(long, value_enum, default_value_t = Space::Auto, conflicts_with_all = ["scene_box", "scale"])]
+    pub space: Space,
 }
 
 /// Runs `inspect`.
@@ -48,6 +53,7 @@ pub fn run(args: &InspectArgs) -> anyhow::Result<()> {
                 scale,
                 ..SceneBox::default()
             })),
+        space: args.space,
         ..Default::default()
     };
     let ds = Dataset::load(&args.dataset, &opts)?;

@@ -5,11 +5,13 @@
 
 use crate::abi::consts::SAMPLE_SORT_RAYS;
 use crate::abi::rays::{key_pixel, sorted_keys, SampleSet, SampledRays};
+use crate::math::ndc::ndc_ray;
 use anyhow::Result;
 use rayon::prelude::*;
 
 /// Ray (origin, unit direction) and target colour of the pixel `key` names, as the kernel
-/// computes them (the formula of `data::Camera::pixel_ray`, in its order of operations).
+/// computes them (the formula of `data::Camera::pixel_ray`, in its order of operations; then
+/// into NDC for a set that has the map).
 fn ray_of(set: &SampleSet, key: u64) -> ([f32; 6], [f32; 3]) {
     let (view, x, y) = key_pixel(key, set.key_bits());
     let c = &set.cams[view as usize];
@@ -19,7 +21,11 @@ fn ray_of(set: &SampleSet, key: u64) -> ([f32; 6], [f32; 3]) {
     let len2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
     let inv = 1.0 / len2.sqrt();
     let o = c.origin;
-    let ray = [o[0], o[1], o[2], d[0] * inv, d[1] * inv, d[2] * inv];
+    let d = [d[0] * inv, d[1] * inv, d[2] * inv];
+    let ray = match set.ndc {
+        Some(p) => ndc_ray(o, d, p),
+        None => [o[0], o[1], o[2], d[0], d[1], d[2]],
+    };
     let at = 4 * (y as usize * set.width as usize + x as usize);
     let px = &set.images[view as usize][at..at + 3];
     (ray, std::array::from_fn(|k| px[k] as f32 / 255.0))
@@ -83,6 +89,7 @@ mod tests {
             images: images.iter().map(|i| i.as_slice()).collect(),
             cams: vec![cam; images.len()],
             focus: Focus::none(),
+            ndc: None,
         }
     }
 

@@ -75,6 +75,7 @@ impl Aabb {
             scale,
             centre: 0.5 * (lo + hi) * scale,
             radius: 1.0,
+            ndc: None,
         }
     }
 

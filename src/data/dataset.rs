@@ -8,6 +8,7 @@ use super::camera::{Camera, SceneBox};
 use super::foreground::ForegroundBox;
 use super::image::RgbaImage;
 use super::layout::Layout;
+use super::ndc::Space;
 use std::path::PathBuf;
 
 /// How a dataset's views were split.
@@ -49,6 +50,9 @@ pub struct LoadOptions {
     /// The colour images with alpha or masks are composited on; `Learned` refuses them
     /// (`DataError::AlphaWithLearnedBackground`).
     pub background: BackgroundMode,
+    /// Where the grid lies when `scene` is `None`: the layout's box, or NDC for a
+    /// forward-facing capture ([`super::ndc::choose`]).
+    pub space: Space,
 }
 
 impl Default for LoadOptions {
@@ -57,6 +61,7 @@ impl Default for LoadOptions {
             downscale: 1,
             scene: None,
             background: BackgroundMode::White,
+            space: Space::Box,
         }
     }
 }
@@ -158,6 +163,8 @@ pub struct Dataset {
     pub test: Split,
     /// Scene normalisation.
     pub scene: SceneBox,
+    /// Which space the grid lies in and why (`LoadOptions::space`), for `inspect` and the log.
+    pub space: String,
     /// The foreground box the layout found from the cameras (captures without masks), whether
     /// or not `scene` was overridden.
     pub foreground: Option<ForegroundBox>,

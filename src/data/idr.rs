@@ -123,6 +123,7 @@ pub fn posed(root: &Path, k: u32) -> Result<Posed, DataError> {
         scale: (1.0 / s) as f32,
         centre: (c / s).as_vec3(),
         radius: 1.0,
+        ndc: None,
     };
     Ok(Posed {
         views: posed,
@@ -130,6 +131,7 @@ pub fn posed(root: &Path, k: u32) -> Result<Posed, DataError> {
         source: npz_path,
         scene,
         foreground: None,
+        nearest: None,
     })
 }
 

@@ -44,7 +44,10 @@ pub struct Inspection {
     pub split_rule: SplitRule,
     /// The foreground box found from the cameras, and how (captures without masks).
     pub foreground: Option<ForegroundBox>,
-    /// The scene box in Blender units.
+    /// Which space the grid lies in and why (`Dataset::space`).
+    pub space: String,
+    /// The scene box in Blender units (in NDC: the foreground box, or the NDC cube's bounds
+    /// from the near plane to twice its depth, where the checks below look).
     pub box_min: Vec3,
     /// See `box_min`.
     pub box_max: Vec3,
@@ -72,7 +75,11 @@ fn cropped_by_downscale(s: &Split) -> Option<String> {
 }
 
 pub fn inspect(ds: &Dataset) -> Inspection {
-    let (box_min, box_max) = ds.scene.blender_bounds();
+    let (box_min, box_max) = match (&ds.scene.ndc, &ds.foreground) {
+        (None, _) => ds.scene.blender_bounds(),
+        (Some(_), Some(fg)) => (fg.bounds.lo(), fg.bounds.hi()),
+        (Some(ndc), None) => ndc.near_bounds(),
+    };
     let mut warnings = Vec::new();
     let mut splits = Vec::new();
     for s in ds.splits() {
@@ -164,6 +171,7 @@ pub fn inspect(ds: &Dataset) -> Inspection {
         splits,
         split_rule: ds.split_rule.clone(),
         foreground: ds.foreground.clone(),
+        space: ds.space.clone(),
         box_min,
         box_max,
         object_bounds,
@@ -303,6 +311,7 @@ impl std::fmt::Display for Inspection {
             );
         }
         let _ = writeln!(s, "split: {}", self.split_rule);
+        let _ = writeln!(s, "grid space: {}", self.space);
         let _ = writeln!(
             s,
             "scene box (Blender units): {} .. {}",

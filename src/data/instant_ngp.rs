@@ -130,6 +130,7 @@ pub fn posed(root: &Path, k: u32) -> Result<Posed, DataError> {
         source: json,
         scene,
         foreground,
+        nearest: None,
     })
 }
 

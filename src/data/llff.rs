@@ -113,7 +113,18 @@ pub fn posed(root: &Path, k: u32) -> Result<Posed, DataError> {
         source: path,
         scene,
         foreground,
+        nearest: nearest_bound(&depths),
     })
+}
+
+/// The smallest positive near bound.
+fn nearest_bound(depths: &[(f64, f64)]) -> Option<f32> {
+    let near = depths
+        .iter()
+        .map(|d| d.0)
+        .filter(|&d| d > 0.0)
+        .fold(f64::INFINITY, f64::min);
+    near.is_finite().then_some(near as f32)
 }
 
 /// The cube from the nearest near depth to the farthest far depth along the mean camera's axis.

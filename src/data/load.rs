@@ -61,10 +61,11 @@ fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset, DataError> {
     }
     let layout = layout::detect(root)?;
     let bg = opts.background.initial_rgb();
-    let ((train, val_split, test), scene, foreground) = match &layout {
+    let ((train, val_split, test), scene, foreground, nearest) = match &layout {
         Layout::NerfSynthetic => (
             super::nerf_synthetic::load_splits(root, k, bg)?,
             SceneBox::default(),
+            None,
             None,
         ),
         Layout::Colmap { sparse, .. } => {
@@ -111,6 +112,23 @@ fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset, DataError> {
             });
         }
     }
+    let (scene, space) = match opts.scene {
+        Some(given) if given.ndc.is_some() => (given, "NDC (the run's)".to_string()),
+        Some(given) => (given, "box (given)".to_string()),
+        None => {
+            let cameras: Vec<_> = train.frames.iter().map(|f| f.camera).collect();
+            match super::ndc::choose(opts.space, &cameras, nearest) {
+                Ok((Some(ndc), why)) => (SceneBox::in_ndc(ndc), why),
+                Ok((None, why)) => (scene, why),
+                Err(msg) => {
+                    return Err(DataError::Format {
+                        path: root.to_path_buf(),
+                        msg,
+                    })
+                }
+            }
+        }
+    };
     let all = [Some(&train), val_split.as_ref(), Some(&test)];
     let splits = all.iter().flatten();
     let image_bytes = splits
@@ -125,7 +143,8 @@ fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset, DataError> {
         train,
         val_split,
         test,
-        scene: opts.scene.unwrap_or(scene),
+        scene,
+        space,
         foreground,
         split_rule,
         background: opts.background,

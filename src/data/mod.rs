@@ -18,6 +18,7 @@ pub mod instant_ngp;
 pub mod layout;
 pub mod llff;
 mod load;
+pub mod ndc;
 mod nerf_synthetic;
 pub mod sampler;
 mod transforms;

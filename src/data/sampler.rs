@@ -1,12 +1,11 @@
 //! Rays for training and rendering: a split's views as the seeded sampler of training batches
 //! reads them (uniform over all pixels of the split with replacement, or with a share from the
 //! pixels the object covers; deterministic for a seed),
-//! and the rays of a whole view. Rays are in the scaled world (Blender units × `SceneBox::scale`)
-//! with unit directions.
+//! and the rays of a whole view. Rays are in the grid's space (the scaled world, Blender units ×
+//! `SceneBox::scale`, or a forward-facing capture's NDC) with unit directions.
 
 use super::camera::SceneBox;
 use super::dataset::Split;
-use crate::abi::buffers::SampleCamera;
 use crate::abi::rays::{Focus, SampleSet};
 use crate::gpu::TrainRays;
 use anyhow::{Context, Result};
@@ -53,8 +52,9 @@ impl RayBatch {
     fn push(&mut self, split: &Split, scene: &SceneBox, view: usize, x: u32, y: u32) {
         let f = &split.frames[view];
         let (o, d) = f.camera.pixel_ray(x, y);
-        self.origins.push(scene.to_scaled(o).to_array());
-        self.dirs.push(d.to_array());
+        let r = scene.ray(o, d);
+        self.origins.push([r[0], r[1], r[2]]);
+        self.dirs.push([r[3], r[4], r[5]]);
         self.rgb.push(f.image.rgb(x, y));
         self.alpha.push(f.image.alpha(x, y));
     }
@@ -90,19 +90,10 @@ impl<'a> TrainViews<'a> {
             cams: split
                 .frames
                 .iter()
-                .map(|f| {
-                    let (c, m) = (&f.camera, f.camera.c2w);
-                    SampleCamera {
-                        x_axis: m.x_axis.truncate().to_array(),
-                        y_axis: m.y_axis.truncate().to_array(),
-                        z_axis: m.z_axis.truncate().to_array(),
-                        origin: scene.to_scaled(c.centre()).to_array(),
-                        focal: [c.fx, c.fy],
-                        centre: [c.cx, c.cy],
-                    }
-                })
+                .map(|f| scene.sample_camera(&f.camera))
                 .collect(),
             focus: Focus::none(),
+            ndc: scene.ndc.map(|n| n.projection),
         };
         set.validate()
             .with_context(|| format!("{} split of {}", split.name, split.source.display()))?;

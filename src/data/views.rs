@@ -51,16 +51,20 @@ pub struct Posed {
     /// The foreground box found from the cameras, when the layout looked for one (captures
     /// without masks).
     pub foreground: Option<ForegroundBox>,
+    /// The nearest scene depth in front of the cameras, when the layout knows it (sparse points
+    /// in view, LLFF's near bounds): where an NDC space puts its near plane (`super::ndc`).
+    pub nearest: Option<f32>,
 }
 
-/// A layout's splits, its scene normalisation and the foreground box it found (if any).
-pub type Loaded = (Splits, SceneBox, Option<ForegroundBox>);
+/// A layout's splits, its scene normalisation, the foreground box it found (if any) and the
+/// nearest scene depth (if known).
+pub type Loaded = (Splits, SceneBox, Option<ForegroundBox>, Option<f32>);
 
 impl Posed {
     /// Decodes the views into splits (`k`: the requested downscale; `bg`: the background).
     pub fn load(self, root: &Path, k: u32, bg: [f32; 3]) -> Result<Loaded, DataError> {
         let splits = load_splits(root, &self.source, self.views, &self.folders, k, bg)?;
-        Ok((splits, self.scene, self.foreground))
+        Ok((splits, self.scene, self.foreground, self.nearest))
     }
 
     /// The training split's views, without reading any image.

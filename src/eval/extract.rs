@@ -8,6 +8,7 @@
 use super::thin::thin_levels;
 use crate::abi::extract::{ExtractInput, ExtractPoint};
 use crate::cpu::extract_points::extract_points;
+use crate::data::ndc::Ndc;
 use crate::gpu::Gpu;
 use crate::io::{Extra, ExtraValues, PointCloud};
 use crate::kernels::extract_points::{Push, INFO};
@@ -177,18 +178,30 @@ pub struct GridFrame {
     pub radius: [f32; 3],
     /// Blender → scene scale (the scene box's 2/3 by default); positions are divided by it.
     pub scene_scale: f32,
+    /// The NDC space the grid's box lies in (forward-facing captures; then `scene_scale` is 1):
+    /// positions and normals are mapped back through it.
+    pub ndc: Option<Ndc>,
 }
 
 impl GridFrame {
     /// Continuous grid coordinates → Blender units ([`crate::grid::Grid::grid_to_world`], then
-    /// undo the scene scale).
+    /// undo the scene scale or the NDC map).
     pub fn to_blender(&self, g: [f32; 3]) -> [f32; 3] {
-        self.grid().grid_to_world(g).map(|w| w / self.scene_scale)
+        let w = self.grid().grid_to_world(g);
+        match &self.ndc {
+            Some(ndc) => ndc.to_world(w),
+            None => w.map(|w| w / self.scene_scale),
+        }
     }
 
-    /// Blender units → continuous grid coordinates (the inverse of [`GridFrame::to_blender`]).
+    /// Blender units → continuous grid coordinates (the inverse of [`GridFrame::to_blender`]; in
+    /// NDC a point behind the frame's camera plane maps to infinity, outside every grid).
     pub fn blender_to_grid(&self, p: [f32; 3]) -> [f32; 3] {
-        self.grid().world_to_grid(p.map(|x| x * self.scene_scale))
+        let w = match &self.ndc {
+            Some(ndc) => ndc.to_ndc(p).unwrap_or([f32::INFINITY; 3]),
+            None => p.map(|x| x * self.scene_scale),
+        };
+        self.grid().world_to_grid(w)
     }
 
     /// An empty grid over the frame's box (for its coordinate maps).
@@ -203,18 +216,32 @@ impl GridFrame {
         }
     }
 
-    /// A gradient with respect to grid coordinates → unit normal in world units (0 when the
-    /// gradient is 0). The chain rule scales axis i by N_i / (2 r_i); the scene scale is uniform.
-    pub fn normal(&self, grad: [f32; 3]) -> [f32; 3] {
-        let w: [f64; 3] = std::array::from_fn(|i| {
+    /// A gradient with respect to grid coordinates at grid point `g` → unit normal in world
+    /// units (0 when the gradient is 0). The chain rule scales axis i by N_i / (2 r_i), then
+    /// (NDC) through the map's Jacobian; the scene scale is uniform.
+    pub fn normal(&self, g: [f32; 3], grad: [f32; 3]) -> [f32; 3] {
+        let mut w: [f64; 3] = std::array::from_fn(|i| {
             grad[i] as f64 * self.res[i] as f64 / (2.0 * self.radius[i] as f64)
         });
+        if let Some(ndc) = &self.ndc {
+            w = ndc.gradient_to_world(self.grid().grid_to_world(g), w);
+        }
         let n = (w[0] * w[0] + w[1] * w[1] + w[2] * w[2]).sqrt();
         if n > 0.0 && n.is_finite() {
             w.map(|x| (x / n) as f32)
         } else {
             [0.0; 3]
         }
+    }
+
+    /// A world direction `v` at grid point `g` → the grid direction it moves along (not unit):
+    /// the scene scale (or, in NDC, the map's Jacobian), then N_i / (2 r_i) per axis.
+    pub fn direction_to_grid(&self, g: [f32; 3], v: [f32; 3]) -> [f32; 3] {
+        let w = match &self.ndc {
+            Some(ndc) => ndc.direction_to_ndc(self.grid().grid_to_world(g), v),
+            None => v.map(|x| x * self.scene_scale),
+        };
+        std::array::from_fn(|i| w[i] * self.res[i] as f32 / (2.0 * self.radius[i]))
     }
 }
 
@@ -239,13 +266,14 @@ pub fn to_cloud(
 ) -> Result<(PointCloud, ThinStats)> {
     let t0 = Instant::now();
     let [_, ry, rz] = frame.res.map(|r| r as usize);
+    let grid_at = |p: &ExtractPoint| -> [f32; 3] {
+        let s = p.cell as usize;
+        let v = [s / (ry * rz), (s / rz) % ry, s % rz];
+        std::array::from_fn(|i| v[i] as f32 + p.local[i])
+    };
     let xyz: Vec<[f32; 3]> = points
         .par_iter()
-        .map(|p| {
-            let s = p.cell as usize;
-            let v = [s / (ry * rz), (s / rz) % ry, s % rz];
-            frame.to_blender(std::array::from_fn(|i| v[i] as f32 + p.local[i]))
-        })
+        .map(|p| frame.to_blender(grid_at(p)))
         .collect();
     let level_idx: Vec<u32> = points.iter().map(|p| p.level).collect();
     let kept = thin_levels(&xyz, &level_idx, levels.len(), radius)?;
@@ -261,7 +289,7 @@ pub fn to_cloud(
         cloud.points.push(xyz[i]);
         lv.push(levels[p.level as usize]);
         al.push(p.alpha);
-        let n = frame.normal(p.grad);
+        let n = frame.normal(grid_at(p), p.grad);
         nx.push(n[0]);
         ny.push(n[1]);
         nz.push(n[2]);

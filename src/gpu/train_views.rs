@@ -8,7 +8,7 @@ use super::DeviceKind;
 use super::{Batch, Gpu, GpuBuffer};
 use crate::abi::buffers::SampleCamera;
 use crate::abi::consts::{SAMPLE_SORT_RAYS, SAMPLE_SORT_SIDE};
-use crate::abi::rays::{sorted_keys, SampleSet, SampledRays};
+use crate::abi::rays::{sorted_keys, NdcProjection, SampleSet, SampledRays};
 use crate::kernels::{sample_rays, sample_rays_sort};
 use anyhow::{ensure, Result};
 
@@ -64,6 +64,8 @@ pub struct TrainViewBuffers {
     focus_threshold: u32,
     /// Importance weights of a focus pixel and of any other (`Focus::weights`).
     focus_weights: (f32, f32),
+    /// The set's NDC map (`SampleSet::ndc`).
+    ndc: Option<NdcProjection>,
     width: u32,
     height: u32,
     n_pixels: u64,
@@ -109,6 +111,7 @@ impl TrainViewBuffers {
             n_focus: f.pixels().len() as u32,
             focus_threshold: f.threshold(),
             focus_weights: f.weights(),
+            ndc: set.ndc,
             width: set.width,
             height: set.height,
             n_pixels: set.n_pixels(),
@@ -177,6 +180,9 @@ impl TrainViewBuffers {
             focus_threshold: self.focus_threshold,
             w_focus: self.focus_weights.0,
             w_other: self.focus_weights.1,
+            ndc_near: self.ndc.map_or(0.0, |p| p.near),
+            ndc_sx: self.ndc.map_or(0.0, |p| p.sx),
+            ndc_sy: self.ndc.map_or(0.0, |p| p.sy),
             seed,
             n_pixels: self.n_pixels,
             width: self.width,
@@ -184,7 +190,6 @@ impl TrainViewBuffers {
             n_rays: n as u32,
             key_bits: self.key_bits,
             pass: 0,
-            ..Default::default()
         };
         match self.key_draw {
             // Draw the keys into scratch, sort them into keys per run.

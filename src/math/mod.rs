@@ -9,6 +9,7 @@ pub mod cubic;
 pub mod cubic_oracle;
 pub mod dda;
 pub mod madd;
+pub mod ndc;
 pub mod plenoxel;
 pub mod rmsprop;
 pub mod sh;

@@ -35,12 +35,13 @@ impl Mesh {
     /// Grid coordinates → Blender units, gradients → unit normals (as the point extraction maps
     /// its points, [`GridFrame`]).
     pub fn to_blender(mut self, frame: &GridFrame) -> Mesh {
+        self.normals
+            .par_iter_mut()
+            .zip(&self.positions)
+            .for_each(|(n, p)| *n = frame.normal(*p, *n));
         self.positions
             .par_iter_mut()
             .for_each(|p| *p = frame.to_blender(*p));
-        self.normals
-            .par_iter_mut()
-            .for_each(|n| *n = frame.normal(*n));
         self
     }
 

@@ -9,6 +9,7 @@
 use crate::abi::extract::ExtractInput;
 use crate::backend::Backend;
 use crate::checkpoint::format as checkpoint;
+use crate::data::ndc::Ndc;
 use crate::data::{Aabb, Dataset, SceneBox};
 use crate::eval::colour::Band0;
 use crate::eval::extract::{
@@ -239,7 +240,7 @@ pub struct MeshReport {
 pub fn extract(opts: &ExtractOptions, gpu: Option<&Gpu>) -> Result<ExtractReport> {
     let t0 = Instant::now();
     check_sampling(opts)?;
-    let scene_scale = scene_scale(opts)?;
+    let (scene_scale, ndc) = scene_space(opts)?;
     ensure!(
         opts.min_alpha.is_finite(),
         "--min-alpha must be a finite number, got {}",
@@ -284,7 +285,7 @@ pub fn extract(opts: &ExtractOptions, gpu: Option<&Gpu>) -> Result<ExtractReport
         "--levels: density levels must be positive (the rendered density is max(σ, 0)), got \
          {levels:?}"
     );
-    let frame = field.frame(scene_scale);
+    let frame = field.frame(scene_scale, ndc);
     // `on` needs the cameras; `auto` goes on without them (a run moved away from its dataset
     // still extracts), and says so.
     let trim = match (opts.trim_hidden, &field) {
@@ -355,16 +356,23 @@ fn check_sampling(opts: &ExtractOptions) -> Result<()> {
 const SCENE_SCALES: std::ops::RangeInclusive<f32> = 1e-6..=1e6;
 
 /// Dataset units → grid-scene scale: `--scene-scale`, else the run's recorded one, else the
-/// NeRF-synthetic box's.
-fn scene_scale(opts: &ExtractOptions) -> Result<f32> {
-    let recorded = opts
+/// NeRF-synthetic box's; and the NDC space the run recorded (forward-facing captures), which
+/// `--scene-scale` cannot be combined with.
+fn scene_space(opts: &ExtractOptions) -> Result<(f32, Option<Ndc>)> {
+    let info = opts
         .run
         .as_ref()
-        .and_then(|r| crate::run::read_info(r).ok())
-        .and_then(|info| info.scene_scale);
+        .and_then(|r| crate::run::read_info(r).ok());
+    let ndc = info.as_ref().and_then(|i| i.ndc);
+    if let (Some(s), Some(_)) = (opts.scene_scale, ndc) {
+        bail!(
+            "--scene-scale {s}: the run was trained in NDC (a forward-facing capture), which \
+             maps its grid back to dataset units by itself; leave --scene-scale out"
+        );
+    }
     let scale = opts
         .scene_scale
-        .or(recorded)
+        .or(info.and_then(|i| i.scene_scale))
         .unwrap_or(SceneBox::default().scale);
     ensure!(
         SCENE_SCALES.contains(&scale),
@@ -373,7 +381,7 @@ fn scene_scale(opts: &ExtractOptions) -> Result<f32> {
         SCENE_SCALES.start(),
         SCENE_SCALES.end()
     );
-    Ok(scale)
+    Ok((scale, ndc))
 }
 
 /// `--box`, checked.
@@ -409,7 +417,7 @@ impl Field {
         }
     }
 
-    fn frame(&self, scene_scale: f32) -> GridFrame {
+    fn frame(&self, scene_scale: f32, ndc: Option<Ndc>) -> GridFrame {
         let (res, center, radius) = match self {
             Field::Density(g) => (g.res, g.center, g.radius),
             Field::Surface(g, _) => (g.res, g.center, g.radius),
@@ -419,6 +427,7 @@ impl Field {
             center,
             radius,
             scene_scale,
+            ndc,
         }
     }
 }
@@ -443,7 +452,7 @@ pub fn extract_levels(
 ) -> Result<Vec<Result<(PointsReport, f64)>>> {
     let t0 = Instant::now();
     check_sampling(opts)?;
-    let frame_scale = scene_scale(opts)?;
+    let (frame_scale, ndc) = scene_space(opts)?;
     let keep_box = keep_box(opts)?;
     let (field, path) = load_grid(opts)?;
     let Field::Density(grid) = &field else {
@@ -453,7 +462,7 @@ pub fn extract_levels(
         );
     };
     let cells = allocated_cells(grid.res, &grid.links)?;
-    let frame = field.frame(frame_scale);
+    let frame = field.frame(frame_scale, ndc);
     let cameras = jobs
         .iter()
         .any(|j| j.trim_hidden)
@@ -546,6 +555,12 @@ fn training_cameras(opts: &ExtractOptions, frame: &GridFrame) -> Result<Vec<[f32
              off)"
         ),
     };
+    ensure!(
+        frame.ndc.is_none(),
+        "--trim-hidden casts rays from the training cameras through the grid, which lies in NDC \
+         for this run (a forward-facing capture: every camera sees the scene from the front, \
+         so little is hidden); pass --trim-hidden off"
+    );
     let poses = Dataset::train_poses(&dir)
         .context("--trim-hidden needs the training cameras (or pass --trim-hidden off)")?;
     Ok(poses
@@ -669,9 +684,7 @@ fn write_mesh(opts: &ExtractOptions, s: &Surfaces, out: &Path) -> Result<MeshRep
                     std::array::from_fn(|i| f.iter().map(|&k| v[k as usize][i]).sum::<f32>() / 3.0)
                 };
                 let o = s.frame.blender_to_grid(mean(&mesh.positions));
-                let n = mean(&mesh.normals);
-                let dir =
-                    std::array::from_fn(|i| n[i] * 2.0 * s.frame.radius[i] / s.frame.res[i] as f32);
+                let dir = s.frame.direction_to_grid(o, mean(&mesh.normals));
                 field.reaches(o, dir, s.levels[2], REACH)
             })
             .collect();

@@ -9,6 +9,7 @@ use super::train::train;
 use super::train_options::{Stage, TrainOptions};
 use super::train_run::Trained;
 use crate::backend::Backend;
+use crate::data::ndc::Space;
 use crate::eval::Metrics;
 use crate::gpu::Gpu;
 use crate::scene::{generate, GenerateOptions, SceneKind};
@@ -97,6 +98,8 @@ pub struct Steps<'g> {
     pub seed: u64,
     /// Progress bars (or, off a terminal, a line every 10 %) while training.
     pub progress: bool,
+    /// `train --space` of stage 1 (stage 2 takes its stage-1 run's).
+    pub space: Space,
 }
 
 impl<'g> Steps<'g> {
@@ -108,6 +111,7 @@ impl<'g> Steps<'g> {
             preset: Preset::Fast,
             seed: 0,
             progress: true,
+            space: Space::Auto,
         }
     }
 
@@ -164,6 +168,7 @@ impl<'g> Steps<'g> {
             seed: self.seed,
             overwrite: true,
             quiet: !self.progress,
+            space: self.space,
             ..TrainOptions::new(stage, data.to_path_buf(), out.to_path_buf())
         }
     }

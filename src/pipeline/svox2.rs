@@ -74,6 +74,7 @@ pub fn import(opts: &ImportOptions) -> Result<Grid> {
         background: crate::data::BackgroundMode::White,
         scene_scale: None,
         scene_box: None,
+        ndc: None,
         identity: None,
         init: None,
         imported_from: Some(opts.ckpt.clone()),

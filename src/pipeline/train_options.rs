@@ -3,6 +3,7 @@
 //! would ignore; and each stage's configuration built from them.
 
 use crate::backend::Backend;
+use crate::data::ndc::Space;
 use crate::data::BackgroundMode;
 use crate::run::Open;
 use crate::train::config::GRID_RES;
@@ -95,6 +96,14 @@ pub struct TrainOptions {
         allow_hyphen_values = true
     )]
     pub scene_box: Option<Vec<f32>>,
+    /// Where the grid lies. `auto`: NDC for a forward-facing capture (every camera looking
+    /// within 45° of their mean direction) whose nearest depth is known (sparse points in view,
+    /// LLFF's near bounds), else the box; `box`: the dataset's box (or `--box`); `ndc`: the
+    /// NDC cube of the mean camera, from the near plane (0.75 × the nearest depth) to infinite
+    /// depth, as the paper and svox2 train forward-facing captures. `inspect` says what `auto`
+    /// picks and why; run.json records it; `extract` writes points back in dataset units.
+    #[arg(long, value_enum, default_value_t = Space::Auto)]
+    pub space: Space,
     /// The colour behind the scene: images with alpha or masks are composited on it at load,
     /// and every render and training pass composites on it. `learned`: a constant colour
     /// trained with the scene, for images without alpha (it refuses images with alpha).
@@ -153,6 +162,7 @@ impl TrainOptions {
             seed: 0,
             downscale: 1,
             scene_box: None,
+            space: Space::Auto,
             background: BackgroundMode::White,
             checkpoint_every: None,
             resume: false,

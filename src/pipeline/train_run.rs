@@ -3,11 +3,12 @@
 
 use super::train_options::TrainOptions;
 use crate::checkpoint::{self, Recorded};
+use crate::data::ndc::Space;
 use crate::data::{Aabb, Dataset, LoadOptions, SceneBox};
 use crate::run::identity::{check_same_data, DataIdentity};
 use crate::run::RunInfo;
 use crate::stage::{Stage, StageBackend};
-use anyhow::{ensure, Context, Result};
+use anyhow::{bail, ensure, Context, Result};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -27,6 +28,7 @@ pub fn load_data(opts: &TrainOptions) -> Result<Loaded> {
             downscale: opts.downscale,
             background: opts.background,
             scene: scene_box(opts)?,
+            space: opts.space,
         },
     )?;
     for w in crate::data::inspect::inspect(&data).warnings {
@@ -48,31 +50,53 @@ fn scene_box(opts: &TrainOptions) -> Result<Option<SceneBox>> {
         .as_deref()
         .map(|v| Aabb::from_values("--box", v))
         .transpose()?;
-    // The recorded cube, and the normalisation exactly as the run had it (its scale and
-    // identity), so that the identity check compares equal values.
-    let recorded_in = |dir: &Path| -> Option<(Aabb, SceneBox)> {
+    ensure!(
+        given.is_none() || opts.space != Space::Ndc,
+        "--box and --space ndc: a box is a grid in dataset units, NDC one over the mean \
+         camera's view; give one of them"
+    );
+    // The recorded cube (none in NDC), and the normalisation exactly as the run had it (its
+    // scale and identity, or its NDC space), so that the identity check compares equal values.
+    let recorded_in = |dir: &Path| -> Option<(Option<Aabb>, SceneBox)> {
         let info = dir
             .join(crate::run::dir::MARKER)
             .is_file()
             .then(|| crate::run::read_info(dir).ok())
             .flatten()?;
+        if let Some(ndc) = info.ndc {
+            return Some((None, SceneBox::in_ndc(ndc)));
+        }
         let cube = info.scene_box?;
         let exact = match (info.scene_scale, &info.identity) {
             (Some(scale), Some(id)) => SceneBox {
                 scale,
                 centre: id.scene_centre.into(),
                 radius: id.scene_radius,
+                ndc: None,
             },
             _ => cube.scene_box(),
         };
-        Some((cube, exact))
+        Some((Some(cube), exact))
     };
     let recorded = match (opts.resume, opts.init.as_deref()) {
         (true, _) => recorded_in(&opts.out),
         (false, Some(init)) if init.is_dir() => recorded_in(init),
         _ => None,
     };
-    if let (Some(g), Some((r, _))) = (given, recorded) {
+    let source = || {
+        if opts.resume {
+            opts.out.display()
+        } else {
+            opts.init.as_deref().unwrap_or(&opts.out).display()
+        }
+    };
+    if let (Some(g), Some((None, _))) = (given, recorded) {
+        bail!(
+            "--box {g}: {} was trained in NDC (a forward-facing capture), not in a box; leave              --box out",
+            source()
+        );
+    }
+    if let (Some(g), Some((Some(r), _))) = (given, recorded) {
         // The recorded box is the grid's cube: --box must give that cube.
         let cube = Aabb::of_scene(&g.scene_box());
         let close = (cube.lo() - r.lo())
@@ -84,11 +108,7 @@ fn scene_box(opts: &TrainOptions) -> Result<Option<SceneBox>> {
             close,
             "--box {g}: the grid it needs ({cube}) is not the one {} was trained in ({r}); leave \
              --box out to use that one",
-            if opts.resume {
-                opts.out.display()
-            } else {
-                opts.init.as_deref().unwrap_or(&opts.out).display()
-            }
+            source()
         );
     }
     Ok(recorded.map(|r| r.1).or(given.map(|g| g.scene_box())))
@@ -104,7 +124,12 @@ pub fn run_info(opts: &TrainOptions, data: &Dataset, init: Option<PathBuf>) -> R
         downscale: opts.downscale,
         background: opts.background,
         scene_scale: Some(data.scene.scale),
-        scene_box: Some(Aabb::of_scene(&data.scene)),
+        scene_box: data
+            .scene
+            .ndc
+            .is_none()
+            .then(|| Aabb::of_scene(&data.scene)),
+        ndc: data.scene.ndc,
         identity: Some(DataIdentity::of(data)),
         init,
         imported_from: None,

@@ -21,6 +21,7 @@ use super::identity::DataIdentity;
 use super::lock::Lock;
 use super::outputs::{check_not_inside_inputs, dataset_containing};
 use super::replace::Replacement;
+use crate::data::ndc::Ndc;
 use crate::data::{Aabb, BackgroundMode};
 use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
@@ -75,6 +76,11 @@ pub struct RunInfo {
     /// imports).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub scene_box: Option<Aabb>,
+    /// The NDC space the grid lies in (forward-facing captures trained with `--space ndc` or
+    /// `auto`'s choice of it); then `scene_box` is absent and `extract` maps points back through
+    /// it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ndc: Option<Ndc>,
     /// The dataset's content fingerprint and scene box ([`super::identity`]), which `--resume`
     /// and `--init` compare; absent in runs written before it was recorded and in imports.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -374,6 +380,7 @@ mod tests {
             background: BackgroundMode::White,
             scene_scale: None,
             scene_box: None,
+            ndc: None,
             identity: None,
             init: None,
             imported_from: None,

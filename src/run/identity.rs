@@ -153,6 +153,7 @@ mod tests {
             background: BackgroundMode::White,
             scene_scale: scale,
             scene_box: None,
+            ndc: None,
             identity: id.map(|(f, r)| DataIdentity {
                 fingerprint: f.into(),
                 scene_centre: [0.0; 3],

@@ -36,8 +36,7 @@ fn strided_rays(data: &Dataset, split: &Split, stride: u32) -> Vec<f32> {
         for y in (0..split.height()).step_by(stride as usize) {
             for x in (0..split.width()).step_by(stride as usize) {
                 let (o, d) = f.camera.pixel_ray(x, y);
-                rays.extend_from_slice(&data.scene.to_scaled(o).to_array());
-                rays.extend_from_slice(&d.to_array());
+                rays.extend_from_slice(&data.scene.ray(o, d));
             }
         }
     }

@@ -38,8 +38,7 @@ fn render_averaged(
             let (x, y) = ((p % w) as f32, (p / w) as f32);
             for k in 0..per_pixel {
                 let (o, d) = camera.ray_at(x + off(k % n), y + off(k / n));
-                rays.extend_from_slice(&data.scene.to_scaled(o).to_array());
-                rays.extend_from_slice(&d.to_array());
+                rays.extend_from_slice(&data.scene.ray(o, d));
             }
         }
         let colours = render(&rays)?;

@@ -10,6 +10,7 @@ mod bench_accuracy;
 mod data_cli;
 mod demo_cli;
 mod mesh_cli;
+mod ndc_cli;
 mod probe_cli;
 mod safety_cli;
 mod surface_cli;

@@ -3,7 +3,10 @@
 //! and the split stated.
 
 use crate::data_common::shared_fixture;
-use alphasurf::data::{Dataset, LoadOptions, SplitRule};
+use alphasurf::abi::rays::key_pixel;
+use alphasurf::cpu::sample_rays::sample_rays;
+use alphasurf::data::ndc::Space;
+use alphasurf::data::{Dataset, LoadOptions, SplitRule, TrainViews};
 use glam::Vec3;
 
 /// The object's box from the fixture's `scene.json` (`bbox_min`, `bbox_max`).
@@ -102,4 +105,57 @@ fn llff_poses_bounds_load_as_the_colmap_model_does() {
         err.contains("1 images") && err.contains("poses_bounds.npy"),
         "{err}"
     );
+}
+
+/// `--space auto` gives the forward-facing fan NDC (its cameras look within 45° of their mean
+/// direction; the near plane from its sparse points) and the 360° birdcage its box; the object
+/// lies inside the NDC cube and every corner of it maps back; the rays the sampler draws on the
+/// device's formula are the host's NDC rays of the same pixels.
+#[test]
+fn forward_facing_capture_trains_in_ndc() {
+    let auto = LoadOptions {
+        space: Space::Auto,
+        ..Default::default()
+    };
+    let orbit = Dataset::load(&shared_fixture("capture_birdcage"), &auto).unwrap();
+    assert!(orbit.scene.ndc.is_none(), "{}", orbit.space);
+    assert!(
+        orbit.space.contains("not forward-facing"),
+        "{}",
+        orbit.space
+    );
+
+    let dir = shared_fixture("capture_fan_ff");
+    let ff = Dataset::load(&dir, &auto).unwrap();
+    let ndc = ff
+        .scene
+        .ndc
+        .unwrap_or_else(|| panic!("no NDC: {}", ff.space));
+    assert!(ff.space.starts_with("NDC"), "{}", ff.space);
+    let (lo, hi) = object_box(&dir);
+    for i in 0..8 {
+        let c = Vec3::select(glam::BVec3::new(i & 1 != 0, i & 2 != 0, i & 4 != 0), hi, lo);
+        let q = ndc.to_ndc(c.to_array()).unwrap();
+        assert!(q.iter().all(|v| v.abs() < 1.0), "corner {c} → NDC {q:?}");
+        let back = Vec3::from_array(ndc.to_world(q));
+        assert!(
+            (back - c).abs().max_element() < 1e-4,
+            "{c} → {q:?} → {back}"
+        );
+    }
+
+    let views = TrainViews::new(&ff.train, &ff.scene).unwrap();
+    let drawn = sample_rays(views.set(), 11, 2048).unwrap();
+    let bits = views.set().key_bits();
+    for (i, &k) in drawn.keys.iter().enumerate() {
+        let (v, x, y) = key_pixel(k, bits);
+        let (o, d) = ff.train.frames[v as usize].camera.pixel_ray(x, y);
+        let want = ff.scene.ray(o, d);
+        for (c, (&got, w)) in drawn.rays[6 * i..6 * i + 6].iter().zip(want).enumerate() {
+            assert!(
+                (got - w).abs() <= 1e-5 * w.abs().max(1.0),
+                "ray {i} ({v}, {x}, {y}) component {c}: sampler {got}, host {w}"
+            );
+        }
+    }
 }

@@ -101,6 +101,7 @@ fn view_rays_cover_the_image_in_row_order() {
         scale: 0.5,
         centre: Vec3::new(0.1, 0.0, 0.0),
         radius: 2.0,
+        ndc: None,
     };
     let b2 = view_rays(&ds.train, &sb, 0);
     assert_eq!(Vec3::from_array(b2.origins[i]), o * 0.5);

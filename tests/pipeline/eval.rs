@@ -188,6 +188,7 @@ fn frame(g: &Grid) -> GridFrame {
         center: g.center,
         radius: g.radius,
         scene_scale: 2.0 / 3.0,
+        ndc: None,
     }
 }
 

@@ -188,6 +188,7 @@ pub fn posed(root: &Path, sparse: &Path, k: u32) -> Result<Posed, DataError> {
         source: img_file,
         scene,
         foreground,
+        nearest: super::ndc::nearest_depth(&cameras, &points),
     })
 }
 
@@ -396,5 +397,6 @@ pub fn scene_box<'a>(
         scale: scale as f32,
         centre: (mid * scale).as_vec3(),
         radius: 1.0,
+        ndc: None,
     })
 }
