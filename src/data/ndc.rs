@@ -108,6 +108,17 @@ impl Ndc {
             .then(|| [-sx * q.x / q.z, -sy * q.y / q.z, 1.0 + 2.0 * n / q.z].map(|v| v as f32))
     }
 
+    /// A point (dataset units) in homogeneous NDC coordinates [x, y, z, w], w its depth along
+    /// the frame's view (−q.z): (x, y, z)/w is its NDC point when w > 0; a point on the frame
+    /// camera's plane has w = 0 (at infinity), one behind it w < 0 (reached from the scene
+    /// through infinity). From a point c of the cube, the line toward it runs along
+    /// (x, y, z) − w·c either way.
+    pub fn homogeneous(self, p: [f32; 3]) -> [f64; 4] {
+        let q = self.to_frame(DVec3::from_array(p.map(f64::from)));
+        let (n, sx, sy) = self.constants();
+        [sx * q.x, sy * q.y, -(q.z + 2.0 * n), -q.z]
+    }
+
     /// An NDC point (z < 1) → dataset units.
     pub fn to_world(self, p: [f32; 3]) -> [f32; 3] {
         let (n, sx, sy) = self.constants();
@@ -276,6 +287,27 @@ mod tests {
                 Camera::from_angle_x(look_at(eye, Vec3::ZERO, Vec3::Z), 64, 48, 0.8)
             })
             .collect()
+    }
+
+    /// The homogeneous point is the NDC point in front, and the line toward a camera behind the
+    /// frame's plane runs away from the scene's side of infinity.
+    #[test]
+    fn homogeneous_points_agree_with_the_map() {
+        let ndc = Ndc::fit(&cameras(), 1.5);
+        let p = [0.3f32, -0.4, 0.2];
+        let h = ndc.homogeneous(p);
+        let q = ndc.to_ndc(p).unwrap();
+        for i in 0..3 {
+            assert!((h[i] / h[3] - q[i] as f64).abs() < 1e-5);
+        }
+        // A camera 1 unit behind the frame's plane (w < 0): from the cube's centre the line
+        // toward it heads to the near face (−z in NDC), where the world segment leaves the cube.
+        let z = Vec3::from_array(ndc.axes[2]);
+        let behind = (Vec3::from_array(ndc.origin) + z).to_array();
+        let h = ndc.homogeneous(behind);
+        assert!(h[3] < 0.0);
+        // From the centre (c = 0) the line runs along (x, y, z).
+        assert!(h[2] < 0.0, "{h:?}");
     }
 
     #[test]

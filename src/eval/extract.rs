@@ -9,6 +9,7 @@ use super::thin::thin_levels;
 use crate::abi::extract::{ExtractInput, ExtractPoint};
 use crate::cpu::extract_points::extract_points;
 use crate::data::ndc::Ndc;
+use crate::eval::hidden::Viewpoint;
 use crate::gpu::Gpu;
 use crate::io::{Extra, ExtraValues, PointCloud};
 use crate::kernels::extract_points::{Push, INFO};
@@ -204,6 +205,23 @@ impl GridFrame {
         self.grid().world_to_grid(w)
     }
 
+    /// A camera centre (Blender units) as the hidden-surface trimming looks toward it: its grid
+    /// point (w = 1), or in NDC its homogeneous grid point (a camera near the frame's plane lies
+    /// at or beyond infinity there).
+    pub fn viewpoint(&self, p: [f32; 3]) -> Viewpoint {
+        let Some(ndc) = &self.ndc else {
+            let g = self.blender_to_grid(p);
+            return [g[0], g[1], g[2], 1.0];
+        };
+        let h = ndc.homogeneous(p);
+        let offset = self.grid().world_to_grid([0.0; 3]);
+        let g: [f32; 3] = std::array::from_fn(|i| {
+            let scale = self.res[i] as f64 / (2.0 * self.radius[i] as f64);
+            (h[i] * scale + h[3] * offset[i] as f64) as f32
+        });
+        [g[0], g[1], g[2], h[3] as f32]
+    }
+
     /// An empty grid over the frame's box (for its coordinate maps).
     fn grid(&self) -> crate::grid::Grid {
         crate::grid::Grid {
@@ -312,4 +330,60 @@ pub fn to_cloud(
         wall_ms: t0.elapsed().as_secs_f64() * 1e3,
     };
     Ok((cloud, stats))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::data::camera::{look_at, Camera};
+    use glam::Vec3;
+
+    /// From any cell, the line toward a camera's viewpoint starts along the grid image of the
+    /// world segment from the cell's centre to the camera (box and NDC grids; cameras in front
+    /// of, on and behind the NDC frame's plane).
+    #[test]
+    fn viewpoints_lie_along_the_segment_to_the_camera() {
+        let cams: Vec<Camera> = (0..9)
+            .map(|i| {
+                let eye = Vec3::new((i % 3) as f32 - 1.0, -3.0 + 0.3 * (i / 3) as f32, 0.2);
+                Camera::from_angle_x(look_at(eye, Vec3::ZERO, Vec3::Z), 64, 48, 0.8)
+            })
+            .collect();
+        let ndc = Ndc::fit(&cams, 1.5);
+        let base = GridFrame {
+            res: [64; 3],
+            center: [0.0; 3],
+            radius: [1.0; 3],
+            scene_scale: 2.0 / 3.0,
+            ndc: None,
+        };
+        for frame in [
+            base,
+            GridFrame {
+                scene_scale: 1.0,
+                ndc: Some(ndc),
+                ..base
+            },
+        ] {
+            for c in &cams {
+                let cam = c.centre().to_array();
+                let v = frame.viewpoint(cam);
+                for cell in [[32.5f32, 20.5, 40.5], [10.5, 50.5, 30.5], [60.5, 5.5, 33.5]] {
+                    let p = frame.to_blender(cell);
+                    let toward: [f32; 3] = std::array::from_fn(|i| p[i] + 1e-3 * (cam[i] - p[i]));
+                    let g = frame.blender_to_grid(toward);
+                    let seg: [f32; 3] = std::array::from_fn(|i| g[i] - cell[i]);
+                    let dir: [f32; 3] = std::array::from_fn(|i| v[i] - v[3] * cell[i]);
+                    let dot: f32 = (0..3).map(|i| seg[i] * dir[i]).sum();
+                    let norm = |a: [f32; 3]| a.iter().map(|x| x * x).sum::<f32>().sqrt();
+                    let cos = dot / (norm(seg) * norm(dir));
+                    assert!(
+                        cos > 0.999,
+                        "ndc {}: cell {cell:?}, camera {cam:?}: cos {cos}",
+                        frame.ndc.is_some()
+                    );
+                }
+            }
+        }
+    }
 }

@@ -17,6 +17,12 @@
 use crate::grid::slot_vertex;
 use rayon::prelude::*;
 
+/// A training camera as the trimming looks toward it from a cell: a point of grid space in
+/// homogeneous coordinates [x, y, z, w]. From a cell centre c the line toward it runs along
+/// (x, y, z) − w·c; with w > 0 it ends at (x, y, z)/w, with w ≤ 0 it leaves the grid first (a
+/// camera a projective grid such as NDC puts at or beyond infinity).
+pub type Viewpoint = [f32; 4];
+
 /// The trimming's parameters (in cells of the grid).
 #[derive(Clone, Copy, Debug, serde::Serialize)]
 pub struct HiddenTrim {
@@ -130,11 +136,11 @@ pub fn sphere_directions(n: u32) -> Vec<[f32; 3]> {
 
 /// The cells to keep of a grid of `res` vertices whose points (or faces) lie in the cells
 /// `item_cells` (corner-000 slots, one per item, in any order and repeated): those seen from one
-/// of `cameras` (camera centres in grid coordinates) or open (see the module comment).
+/// of `cameras` or open (see the module comment).
 pub fn kept_cells(
     res: [u32; 3],
     item_cells: &[u32],
-    cameras: &[[f32; 3]],
+    cameras: &[Viewpoint],
     t: &HiddenTrim,
 ) -> (Occupancy, HiddenStats) {
     let mut cells = item_cells.to_vec();
@@ -147,11 +153,11 @@ pub fn kept_cells(
 }
 
 /// For each of `cells` (corner-000 slots of the occupied cells), whether to keep it: seen from
-/// one of `cameras` (camera centres in grid coordinates) or open (see the module comment).
+/// one of `cameras` or open (see the module comment).
 fn visible_cells(
     occ: &Occupancy,
     cells: &[u32],
-    cameras: &[[f32; 3]],
+    cameras: &[Viewpoint],
     t: &HiddenTrim,
 ) -> (Vec<bool>, HiddenStats) {
     let t0 = std::time::Instant::now();
@@ -165,9 +171,11 @@ fn visible_cells(
             let c = occ.coords(s);
             let centre = c.map(|v| v as f32 + 0.5);
             let seen = cameras.iter().any(|cam| {
-                let d: [f32; 3] = std::array::from_fn(|i| cam[i] - centre[i]);
+                let d: [f32; 3] = std::array::from_fn(|i| cam[i] - cam[3] * centre[i]);
                 let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-                len > 0.0 && occ.clear(c, d.map(|x| x / len), t.skip, len)
+                // The distance to a finite camera is len / w; one at infinity lies past the grid.
+                let reach = if cam[3] > 0.0 { len / cam[3] } else { far };
+                len > 0.0 && occ.clear(c, d.map(|x| x / len), t.skip, reach)
             });
             if seen {
                 return 1;
@@ -228,6 +236,11 @@ mod tests {
     }
 
     fn keep_of(cells: &[u32], cameras: &[[f32; 3]]) -> Vec<bool> {
+        let points: Vec<Viewpoint> = cameras.iter().map(|c| [c[0], c[1], c[2], 1.0]).collect();
+        keep_from(cells, &points)
+    }
+
+    fn keep_from(cells: &[u32], cameras: &[Viewpoint]) -> Vec<bool> {
         let occ = Occupancy::new(RES, cells.iter().copied());
         visible_cells(&occ, cells, cameras, &HiddenTrim::default()).0
     }
@@ -291,6 +304,34 @@ mod tests {
             .collect();
         assert_eq!(bottom.len(), 16 * 16);
         assert!(bottom.iter().all(|&k| k), "the open underside was dropped");
+    }
+
+    /// A camera in homogeneous coordinates: the same point scaled by w > 0 sees what it sees;
+    /// one at infinity (w = 0) sees along its direction from every cell, as a projective grid's
+    /// (NDC's) cameras do, and one past infinity (w < 0) along the opposite of (x, y, z) − w·c.
+    #[test]
+    fn cameras_at_infinity_see_along_their_direction() {
+        let all: Vec<u32> = shell(4, 28).into_iter().chain(shell(12, 20)).collect();
+        let above = [16.5f32, 16.5, 60.0];
+        let finite = keep_of(&all, &[above]);
+        assert_eq!(keep_from(&all, &[[33.0, 33.0, 120.0, 2.0]]), finite);
+        // Straight up from every cell (w = 0), and straight down (w < 0: reached through
+        // infinity): the outer roof (floor) seen, the inner one hidden by it.
+        let at = |c| all.iter().position(|&s| s == slot(c)).unwrap();
+        for (cam, outer, inner) in [
+            ([0.0, 0.0, 1.0, 0.0], 28, 20),
+            ([0.0, 0.0, -1.0, -1e-9], 4, 12),
+        ] {
+            let keep = keep_from(&all, &[cam]);
+            assert!(
+                keep[at([16, 16, outer])],
+                "{cam:?}: the outer face was dropped"
+            );
+            assert!(
+                !keep[at([16, 16, inner])],
+                "{cam:?}: the inner face was kept"
+            );
+        }
     }
 
     #[test]

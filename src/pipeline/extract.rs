@@ -15,7 +15,7 @@ use crate::eval::colour::Band0;
 use crate::eval::extract::{
     allocated_cells, extract_sorted, to_cloud, ExtractBackend, GridFrame, KernelStats, ThinStats,
 };
-use crate::eval::hidden::{kept_cells, HiddenStats, HiddenTrim};
+use crate::eval::hidden::{kept_cells, HiddenStats, HiddenTrim, Viewpoint};
 use crate::eval::outer_level::{drop_outer_halo, Field as OuterField, REACH};
 use crate::gpu::Gpu;
 use crate::grid::surface::SurfaceGrid;
@@ -86,9 +86,11 @@ pub struct ExtractOptions {
     pub capacity: Option<usize>,
     /// Drop the points (and mesh faces) of cells that no training view sees and that other
     /// surfaces enclose (the inner level sets of solids; an unseen underside open below stays).
-    /// `auto`: on for a stage-2 run of category thin, off otherwise (semi-transparent layers are
-    /// seen through; stage-1 grids are the paper's Plenoxels baseline). Needs the training
-    /// cameras: without them `on` is an error and `auto` warns and keeps every cell.
+    /// `auto`: on for a stage-2 run of category thin in a box, off otherwise (semi-transparent
+    /// layers are seen through; stage-1 grids are the paper's Plenoxels baseline; a
+    /// forward-facing capture in NDC sees what lies behind a wire guard only through its gaps,
+    /// which the trim's occupancy closes). Needs the training cameras: without them `on` is an
+    /// error and `auto` warns and keeps every cell.
     #[arg(long, value_enum, default_value_t = Switch::Auto)]
     pub trim_hidden: Switch,
     /// Drop the points (and mesh faces) of the outermost level where, within 1.5 cells inward
@@ -290,7 +292,7 @@ pub fn extract(opts: &ExtractOptions, gpu: Option<&Gpu>) -> Result<ExtractReport
     // still extracts), and says so.
     let trim = match (opts.trim_hidden, &field) {
         (Switch::On, _) => Some(training_cameras(opts, &frame)?),
-        (Switch::Auto, Field::Surface(_, Some(Category::Thin))) => {
+        (Switch::Auto, Field::Surface(_, Some(Category::Thin))) if ndc.is_none() => {
             match training_cameras(opts, &frame) {
                 Ok(c) => Some(c),
                 Err(e) => {
@@ -511,7 +513,7 @@ struct Surfaces<'a> {
     res: [u32; 3],
     frame: GridFrame,
     /// Training camera centres in grid coordinates, when hidden surfaces are trimmed.
-    cameras: Option<&'a [[f32; 3]]>,
+    cameras: Option<&'a [Viewpoint]>,
     /// Drop the outermost level's halo around thick parts ([`crate::eval::outer_level`]).
     trim_outer: bool,
     /// `--box`: keep only what lies inside it (dataset units).
@@ -541,8 +543,9 @@ impl Surfaces<'_> {
     }
 }
 
-/// The training cameras' centres in grid coordinates, from `--data` or the run's dataset.
-fn training_cameras(opts: &ExtractOptions, frame: &GridFrame) -> Result<Vec<[f32; 3]>> {
+/// The training cameras' centres as the trimming looks toward them, from `--data` or the run's
+/// dataset.
+fn training_cameras(opts: &ExtractOptions, frame: &GridFrame) -> Result<Vec<Viewpoint>> {
     let info = opts.run.as_ref().map(|r| crate::run::read_info(r));
     let dir = match (&opts.data, info) {
         (Some(d), _) => d.clone(),
@@ -555,17 +558,11 @@ fn training_cameras(opts: &ExtractOptions, frame: &GridFrame) -> Result<Vec<[f32
              off)"
         ),
     };
-    ensure!(
-        frame.ndc.is_none(),
-        "--trim-hidden casts rays from the training cameras through the grid, which lies in NDC \
-         for this run (a forward-facing capture: every camera sees the scene from the front, \
-         so little is hidden); pass --trim-hidden off"
-    );
     let poses = Dataset::train_poses(&dir)
         .context("--trim-hidden needs the training cameras (or pass --trim-hidden off)")?;
     Ok(poses
         .iter()
-        .map(|c2w| frame.blender_to_grid(c2w.w_axis.truncate().to_array()))
+        .map(|c2w| frame.viewpoint(c2w.w_axis.truncate().to_array()))
         .collect())
 }
 

@@ -78,7 +78,7 @@ fn a_forward_facing_capture_trains_and_extracts_in_ndc() {
     // Points back in dataset units: most of the surface the views see lies within the room's
     // front half, around the fan (2.7 to 4 units from the cameras), not at NDC coordinates.
     let pts = dir.path().join("points.ply");
-    let (ok, _, stderr) = alphasurf(&[
+    let (ok, extracted, stderr) = alphasurf(&[
         "extract",
         "--backend",
         "cpu",
@@ -88,7 +88,23 @@ fn a_forward_facing_capture_trains_and_extracts_in_ndc() {
         path(&pts),
     ]);
     assert!(ok, "{stderr}");
-    assert!(stderr.contains("hidden surfaces not trimmed"), "{stderr}");
+    // The hidden-surface trim is off by default in NDC and looks toward the cameras when asked.
+    assert!(!extracted.contains("hidden surfaces"), "{extracted}");
+    let (ok, trimmed, _) = alphasurf(&[
+        "extract",
+        "--backend",
+        "cpu",
+        "--run",
+        path(&run.join("surface")),
+        "--out",
+        path(&dir.path().join("trimmed.ply")),
+        "--trim-hidden",
+        "on",
+    ]);
+    assert!(
+        ok && trimmed.contains("seen by a training camera"),
+        "{trimmed}"
+    );
     let (ok, stdout, stderr) = alphasurf(&[
         "eval",
         "--json",
