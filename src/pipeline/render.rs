@@ -115,11 +115,14 @@ pub fn render(opts: &RenderOptions, gpu: Option<&Gpu>) -> Result<RenderedSplit> 
     // The images at the size the run was trained on, so the PSNR is the one training reported.
     let downscale = info.as_ref().map_or(1, |i| i.downscale);
     run::outputs::check_output_dir(&opts.out, &[&ckpt_path, &data_dir])?;
+    // The rays in the grid's space as the run recorded it (its box or NDC space).
+    let scene = info.as_ref().ok().and_then(|i| i.scene()).map(|s| s.1);
     let data = Dataset::load(
         &data_dir,
         &LoadOptions {
             background: bg.mode,
             downscale,
+            scene,
             ..Default::default()
         },
     )?;

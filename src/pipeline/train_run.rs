@@ -55,28 +55,12 @@ fn scene_box(opts: &TrainOptions) -> Result<Option<SceneBox>> {
         "--box and --space ndc: a box is a grid in dataset units, NDC one over the mean \
          camera's view; give one of them"
     );
-    // The recorded cube (none in NDC), and the normalisation exactly as the run had it (its
-    // scale and identity, or its NDC space), so that the identity check compares equal values.
     let recorded_in = |dir: &Path| -> Option<(Option<Aabb>, SceneBox)> {
-        let info = dir
-            .join(crate::run::dir::MARKER)
+        dir.join(crate::run::dir::MARKER)
             .is_file()
             .then(|| crate::run::read_info(dir).ok())
-            .flatten()?;
-        if let Some(ndc) = info.ndc {
-            return Some((None, SceneBox::in_ndc(ndc)));
-        }
-        let cube = info.scene_box?;
-        let exact = match (info.scene_scale, &info.identity) {
-            (Some(scale), Some(id)) => SceneBox {
-                scale,
-                centre: id.scene_centre.into(),
-                radius: id.scene_radius,
-                ndc: None,
-            },
-            _ => cube.scene_box(),
-        };
-        Some((Some(cube), exact))
+            .flatten()?
+            .scene()
     };
     let recorded = match (opts.resume, opts.init.as_deref()) {
         (true, _) => recorded_in(&opts.out),

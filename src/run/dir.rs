@@ -22,7 +22,7 @@ use super::lock::Lock;
 use super::outputs::{check_not_inside_inputs, dataset_containing};
 use super::replace::Replacement;
 use crate::data::ndc::Ndc;
-use crate::data::{Aabb, BackgroundMode};
+use crate::data::{Aabb, BackgroundMode, SceneBox};
 use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
 use std::fs;
@@ -91,6 +91,28 @@ pub struct RunInfo {
     /// `import`: the svox2 checkpoint the run was made from.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub imported_from: Option<PathBuf>,
+}
+
+impl RunInfo {
+    /// The grid's space as the run recorded it: its cube (none in NDC) and the normalisation
+    /// exactly as the run had it (its scale and identity, or its NDC space), so that an identity
+    /// check compares equal values; `None` for a run that recorded no box.
+    pub fn scene(&self) -> Option<(Option<Aabb>, SceneBox)> {
+        if let Some(ndc) = self.ndc {
+            return Some((None, SceneBox::in_ndc(ndc)));
+        }
+        let cube = self.scene_box?;
+        let exact = match (self.scene_scale, &self.identity) {
+            (Some(scale), Some(id)) => SceneBox {
+                scale,
+                centre: id.scene_centre.into(),
+                radius: id.scene_radius,
+                ndc: None,
+            },
+            _ => cube.scene_box(),
+        };
+        Some((Some(cube), exact))
+    }
 }
 
 /// How a writer opens a run directory.

@@ -1,6 +1,6 @@
 //! A forward-facing capture end to end in NDC: `inspect` says why `--space auto` picks it, both
-//! stages train in it (recorded in run.json, taken over by stage 2), `extract` writes the
-//! surfaces back in dataset units around the object, and the flags that cannot go with NDC are
+//! stages train in it (recorded in run.json, taken over by stage 2), `render` renders in it,
+//! `extract` writes the surfaces back in dataset units around the object, and the flags that cannot go with NDC are
 //! refused with a message.
 
 use crate::data_common::shared_fixture;
@@ -74,6 +74,33 @@ fn a_forward_facing_capture_trains_and_extracts_in_ndc() {
         );
         assert!(info.get("scene_box").is_none(), "{info}");
     }
+
+    // `render` casts its rays in the run's recorded space: the test PSNR training reported.
+    let (ok, stdout, stderr) = alphasurf(&[
+        "render",
+        "--backend",
+        "cpu",
+        "--run",
+        path(&run.join("surface")),
+        "--out",
+        path(&dir.path().join("renders")),
+    ]);
+    assert!(ok, "{stderr}");
+    let mean: f64 = stdout
+        .lines()
+        .find_map(|l| l.strip_prefix("mean PSNR "))
+        .and_then(|l| l.split_whitespace().next())
+        .and_then(|v| v.parse().ok())
+        .expect("mean PSNR line");
+    let metrics: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(run.join("surface").join("metrics.json")).unwrap(),
+    )
+    .unwrap();
+    let trained = metrics["test_psnr"].as_f64().unwrap();
+    assert!(
+        (mean - trained).abs() < 0.01,
+        "render {mean} vs train {trained}"
+    );
 
     // Points back in dataset units: most of the surface the views see lies within the room's
     // front half, around the fan (2.7 to 4 units from the cameras), not at NDC coordinates.
