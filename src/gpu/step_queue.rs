@@ -4,11 +4,11 @@
 //! composite on (a learned one is stepped on the device, so a step needs no host round trip).
 
 use super::{
-    Batch, BatchTimes, Gpu, GpuBuffer, Phase, PhaseClock, RayBuffers, Readback, SampledAt,
+    record_loss_sum, Batch, BatchTimes, Gpu, GpuBuffer, Phase, PhaseClock, RayBuffers, Readback,
     StepMeta, StepTimes, StepsInFlight, TrainRays, TrainViewBuffers, STEP_SLOTS,
 };
 use crate::abi::buffers::Background;
-use crate::abi::rays::{SampleSet, SampledRays};
+use crate::abi::rays::SampledRays;
 use anyhow::{anyhow, Result};
 use std::cell::RefCell;
 
@@ -18,6 +18,16 @@ pub trait SlotFigures: Sized {
     fn read(readback: &Readback, slot: usize, n: usize) -> Result<Self>;
     /// Set the step's device time (ns) and host time by phase.
     fn set_times(&mut self, device_ns: f64, host: StepTimes);
+}
+
+/// Device addresses of a training batch: rays (6 floats each), targets (3 floats each),
+/// per-ray importance weights (0: every weight 1) and the per-ray output.
+#[derive(Clone, Copy, Debug)]
+pub struct BatchRays {
+    pub rays: u64,
+    pub targets: u64,
+    pub weights: u64,
+    pub out: u64,
 }
 
 /// The training steps of a Vulkan backend, with figures of type `F`.
@@ -108,6 +118,20 @@ impl<F: SlotFigures> StepQueue<F> {
         Ok(self.steps.get_mut().pending())
     }
 
+    /// Record summing the batch's per-ray losses (`n` rays, `fields` floats from each ray's
+    /// output of `stride` floats) into part 0 of `slot`.
+    pub fn record_loss_sum(
+        &self,
+        b: &mut Batch,
+        slot: usize,
+        n: usize,
+        stride: u32,
+        fields: u32,
+    ) -> Result<()> {
+        let out = self.rays.out().address();
+        record_loss_sum(b, out, self.readback.address(slot, 0), n, stride, fields)
+    }
+
     /// Submit a recorded step of `n` rays without waiting (up to `MAX_IN_FLIGHT` steps run on
     /// the device while the host records the next); `clock` has its host time so far.
     pub fn submit(&mut self, b: Batch, n: usize, mut clock: PhaseClock) -> Result<()> {
@@ -122,38 +146,60 @@ impl<F: SlotFigures> StepQueue<F> {
         )
     }
 
-    /// Before a batch of `n` rays drawn on the device from `set` (id `id`) is recorded: the set
-    /// uploaded unless it is there, room made for the batch; returns the address of the per-ray
-    /// output. The upload is charged to `clock`.
-    pub fn reserve_sampled(
+    /// Start the batch of a training step on `src`'s rays: uploaded (host rays), or drawn on the
+    /// device by `sample_rays` from the views (uploaded once) after `reset` is recorded; the
+    /// uploads are charged to `clock`'s upload, the draw's recording to its sampling. Returns
+    /// the batch with the addresses of its rays.
+    pub fn begin(
         &mut self,
         gpu: &Gpu,
-        id: u64,
-        set: &SampleSet,
-        n: usize,
+        src: TrainRays,
         clock: &mut PhaseClock,
-    ) -> Result<u64> {
-        TrainViewBuffers::ensure(&mut self.views, gpu, id, set, n)?;
+        reset: impl FnOnce(&mut Batch),
+    ) -> Result<(Batch, BatchRays)> {
+        let (id, set, seed, n) = match src {
+            TrainRays::Host { rays, targets } => {
+                return self.begin_host(gpu, rays, Some(targets), clock, reset)
+            }
+            TrainRays::Sampled { id, set, seed, n } => (id, set, seed, n),
+        };
+        let views = TrainViewBuffers::ensure(&mut self.views, gpu, id, set, n)?;
         let [_, _, out] = self.rays.reserve(gpu, n)?;
         clock.mark(Phase::Upload);
-        Ok(out)
+        let mut b = gpu.batch()?;
+        reset(&mut b);
+        let at = views.record_sample(&mut b, set, seed, n)?;
+        clock.mark(Phase::Sampling);
+        let at = BatchRays {
+            rays: at.rays,
+            targets: at.targets,
+            weights: at.weights,
+            out,
+        };
+        Ok((b, at))
     }
 
-    /// Record drawing the batch [`Self::reserve_sampled`] made room for (charged to `clock`);
-    /// the addresses of its rays, targets and weights.
-    pub fn record_sample(
-        &self,
-        b: &mut Batch,
-        set: &SampleSet,
-        seed: u64,
-        n: usize,
+    /// Upload `rays` (and `targets`) and start a batch with `reset` recorded (the upload charged
+    /// to `clock`). Returns the batch with the addresses of the rays (no weights).
+    pub fn begin_host(
+        &mut self,
+        gpu: &Gpu,
+        rays: &[f32],
+        targets: Option<&[f32]>,
         clock: &mut PhaseClock,
-    ) -> Result<SampledAt> {
-        let views = self.views.as_ref();
-        let views = views.ok_or_else(|| anyhow!("no room was made for a sampled batch"))?;
-        let at = views.record_sample(b, set, seed, n)?;
-        clock.mark(Phase::Sampling);
-        Ok(at)
+        reset: impl FnOnce(&mut Batch),
+    ) -> Result<(Batch, BatchRays)> {
+        let [rays, targets, out] = self.rays.upload(gpu, rays, targets)?;
+        clock.mark(Phase::Upload);
+        let mut b = gpu.batch()?;
+        reset(&mut b);
+        let at = BatchRays {
+            rays,
+            targets,
+            weights: 0,
+            out,
+        };
+        Ok((b, at))
     }
 
     /// The last sampled batch of `n` rays.
@@ -168,6 +214,15 @@ impl<F: SlotFigures> StepQueue<F> {
     pub fn background(&self) -> Result<Background> {
         self.settle()?;
         Ok(self.bg.download()?[0])
+    }
+
+    /// The gradient of the background (a learned one's, else zero), read and cleared.
+    pub fn take_background_grad(&self) -> Result<[f32; 3]> {
+        let mut bg = self.background()?;
+        let grad = bg.grad;
+        bg.grad = [0.0; 3];
+        self.bg.write(&[bg])?;
+        Ok(grad)
     }
 
     /// Replace the background (colour, whether it is learned, its optimiser state).

@@ -7,22 +7,19 @@ use super::{
     march_params, state_bytes_of, Gradients, PlenoxelsBackend, PlenoxelsStage, PlenoxelsStepParams,
     PlenoxelsStepStats,
 };
-use crate::abi::buffers::Background;
 use crate::abi::buffers::PlenoxelParams;
 use crate::abi::buffers::StepHeader;
 use crate::abi::rays::SampledRays;
-use crate::abi::regularisers::TvChunk;
 use crate::abi::step::{step_record, STEP_FLAGS, STEP_RESET_BYTES};
 use crate::abi::train::RmsProp;
-use crate::data::TrainViews;
 use crate::gpu::{
-    record_background_step, record_loss_sum, record_optim_args, Batch, BatchTimes, Gpu, GpuBuffer,
-    Phase, PhaseClock, Readback, SlotFigures, StepQueue, StepTimes, TrainRays,
+    record_background_step, record_optim_args, record_tv, Batch, BatchRays, Gpu, GpuBuffer,
+    PhaseClock, Readback, SlotFigures, StepQueue, StepTimes, TrainRays,
 };
 use crate::grid::{Grid, SH_DIM};
 use crate::kernels;
 use crate::math::plenoxel::{occ_dims, PlenoxelCounts};
-use crate::stage::StageBackend;
+use crate::stage::{StageBackend, StepStore};
 use anyhow::{ensure, Result};
 
 /// Device-resident stage-1 state.
@@ -106,11 +103,6 @@ impl VulkanPlenoxels {
         Ok(self.step.download_range::<StepHeader>(0, 1)?[0].stats)
     }
 
-    /// Record clearing the step's touched count and sample counters.
-    fn record_step_reset(&self, b: &mut Batch) {
-        b.fill_zero_range(&self.step, 0, STEP_RESET_BYTES);
-    }
-
     /// Record the sparse RMSProp step over the vertices touched this step.
     fn record_rmsprop(&self, b: &mut Batch, p: &RmsProp) -> Result<()> {
         record_optim_args(b, &self.step, &self.args)?;
@@ -133,43 +125,33 @@ impl VulkanPlenoxels {
         )
     }
 
-    /// Upload rays (and targets), start a batch and record the step reset (the upload charged to
-    /// `clock`). Returns the batch and the device addresses of the rays, targets and per-ray
-    /// output.
-    fn begin(
+    /// Start a batch with the step reset (clearing the touched count and sample counters) and
+    /// the training rays (uploaded, or drawn by `sample_rays`).
+    fn begin_train(
         &mut self,
-        rays: &[f32],
-        targets: Option<&[f32]>,
+        src: TrainRays,
         clock: &mut PhaseClock,
-    ) -> Result<(Batch, [u64; 3])> {
-        let addrs = self.queue.rays.upload(&self.gpu, rays, targets)?;
-        clock.mark(Phase::Upload);
-        let mut b = self.gpu.batch()?;
-        self.record_step_reset(&mut b);
-        Ok((b, addrs))
+    ) -> Result<(Batch, BatchRays)> {
+        if let TrainRays::Host { targets, .. } = src {
+            let n = src.len();
+            ensure!(
+                n > 0 && targets.len() == 3 * n,
+                "batch of {n} rays with {} targets",
+                targets.len() / 3
+            );
+        }
+        let step = &self.step;
+        let reset = |b: &mut Batch| b.fill_zero_range(step, 0, STEP_RESET_BYTES);
+        self.queue.begin(&self.gpu, src, clock, reset)
     }
 
-    /// Start a batch with the step reset and the training rays (uploaded, or drawn by
-    /// `sample_rays`). Returns it with the addresses of rays, targets and per-ray output.
-    fn begin_train(&mut self, src: TrainRays, clock: &mut PhaseClock) -> Result<(Batch, [u64; 3])> {
-        match src {
-            TrainRays::Host { rays, targets } => {
-                let n = src.len();
-                ensure!(
-                    n > 0 && targets.len() == 3 * n,
-                    "batch of {n} rays with {} targets",
-                    targets.len() / 3
-                );
-                self.begin(rays, Some(targets), clock)
-            }
-            TrainRays::Sampled { id, set, seed, n } => {
-                let out = self.queue.reserve_sampled(&self.gpu, id, set, n, clock)?;
-                let mut b = self.gpu.batch()?;
-                self.record_step_reset(&mut b);
-                let at = self.queue.record_sample(&mut b, set, seed, n, clock)?;
-                Ok((b, [at.rays, at.targets, out]))
-            }
-        }
+    /// Upload `rays` and start a batch with the step reset, for a render or a pass that reads
+    /// no targets.
+    fn begin_render(&mut self, rays: &[f32]) -> Result<(Batch, BatchRays)> {
+        let step = &self.step;
+        let reset = |b: &mut Batch| b.fill_zero_range(step, 0, STEP_RESET_BYTES);
+        let clock = &mut PhaseClock::start();
+        self.queue.begin_host(&self.gpu, rays, None, clock, reset)
     }
 
     /// Start the batch of `src`'s rays and record `plan`'s passes on it, in order.
@@ -188,7 +170,13 @@ impl VulkanPlenoxels {
                     stop_thresh,
                     grad_scale,
                 } => self.record_train(&mut b, *stop_thresh, *grad_scale, rays, n)?,
-                PlenoxelPass::Tv { field, chunk } => self.record_tv(&mut b, *field, chunk)?,
+                PlenoxelPass::Tv { field, chunk } => {
+                    let (data, grad) = match field {
+                        TvField::Density => (&self.density, &self.grad_density),
+                        TvField::Sh => (&self.sh, &self.grad_sh),
+                    };
+                    record_tv(&mut b, &self.links, data, grad, &self.step, chunk)?
+                }
                 PlenoxelPass::RmsProp(h) => self.record_rmsprop(&mut b, h)?,
                 PlenoxelPass::Background { lr, beta, eps } => {
                     record_background_step(&mut b, &self.queue.bg, *lr, *beta, *eps)?
@@ -205,7 +193,7 @@ impl VulkanPlenoxels {
         b: &mut Batch,
         stop_thresh: f32,
         grad_scale: f32,
-        [ray_buf, target_buf, loss_buf]: [u64; 3],
+        rays: BatchRays,
         n: usize,
     ) -> Result<()> {
         let mp = march_params(&self.meta, stop_thresh);
@@ -226,11 +214,11 @@ impl VulkanPlenoxels {
                 density: self.density.address(),
                 sh: self.sh.address(),
                 occ: self.occ.address(),
-                rays: ray_buf,
-                targets: target_buf,
+                rays: rays.rays,
+                targets: rays.targets,
                 grad_density: self.grad_density.address(),
                 grad_sh: self.grad_sh.address(),
-                ray_loss: loss_buf,
+                ray_loss: rays.out,
                 step: self.step.address(),
                 params: self.params.address(),
                 bg: self.queue.bg.address(),
@@ -241,70 +229,9 @@ impl VulkanPlenoxels {
         )
     }
 
-    /// Record TV on `field` over `c`'s slots (the dispatch covers the chunk and the slots whose
-    /// forward neighbours lie in it).
-    fn record_tv(&self, b: &mut Batch, field: TvField, c: &TvChunk) -> Result<()> {
-        let (data, grad) = match field {
-            TvField::Density => (&self.density, &self.grad_density),
-            TvField::Sh => (&self.sh, &self.grad_sh),
-        };
-        b.dispatch_1d(
-            &kernels::tv::INFO,
-            &kernels::tv::Push {
-                links: self.links.address(),
-                data: data.address(),
-                grad: grad.address(),
-                step: self.step.address(),
-                res: c.res,
-                start: c.start,
-                count: c.count,
-                channels: c.channels,
-                scale: c.scale,
-                touch_bits: c.touch,
-            },
-            c.count + c.res[1] * c.res[2],
-        )
-    }
-
     /// Wait for the steps in flight (before the host reads, writes or frees what they use).
     fn settle(&self) -> Result<()> {
         self.queue.settle()
-    }
-
-    /// Record the step's plan on one batch and submit it without waiting (up to
-    /// `MAX_IN_FLIGHT` steps run on the device while the host records the next); its figures
-    /// come back with [`Self::take_timed`].
-    pub fn submit_step(&mut self, src: TrainRays, p: &PlenoxelsStepParams) -> Result<()> {
-        let n = src.len();
-        let mut clock = PhaseClock::start();
-        let plan = PlenoxelPlan::step(p, self.meta.res, n, self.queue.bg_learned)?;
-        let slot = self.queue.slot_for(&src)?;
-        let mut b = self.record_plan(src, &plan, &mut clock)?;
-        // The step's figures into its slot: the squared error summed on the device, the
-        // counters copied.
-        let q = &self.queue;
-        let out = q.rays.out().address();
-        record_loss_sum(&mut b, out, q.readback.address(slot, 0), n, 1, 1)?;
-        let stats = std::mem::offset_of!(StepHeader, stats) as u64;
-        q.readback.copy(&mut b, slot, 1, &self.step, stats);
-        self.queue.submit(b, n, clock)
-    }
-
-    /// The figures of every step submitted since they were last taken, in order, with the
-    /// device times of their dispatches (waits for the steps in flight).
-    pub fn take_timed(&mut self) -> Result<Vec<(PlenoxelsStepStats, BatchTimes)>> {
-        self.queue.take_timed()
-    }
-
-    /// One training step on `src`'s rays, waited for: its figures.
-    /// The figures of earlier steps not yet taken stay for `take_stats`.
-    fn train_step(
-        &mut self,
-        src: TrainRays,
-        p: &PlenoxelsStepParams,
-    ) -> Result<PlenoxelsStepStats> {
-        self.submit_step(src, p)?;
-        Ok(self.queue.last()?.0)
     }
 
     /// The last sampled batch of `n` rays.
@@ -321,32 +248,26 @@ impl VulkanPlenoxels {
 }
 
 impl StageBackend<PlenoxelsStage> for VulkanPlenoxels {
-    fn name(&self) -> &'static str {
-        "vulkan"
+    fn store(&self) -> &dyn StepStore<PlenoxelsStepStats> {
+        &self.queue
     }
 
-    fn step(
-        &mut self,
-        rays: &[f32],
-        targets: &[f32],
-        p: &PlenoxelsStepParams,
-    ) -> Result<PlenoxelsStepStats> {
-        self.train_step(TrainRays::Host { rays, targets }, p)
+    fn store_mut(&mut self) -> &mut dyn StepStore<PlenoxelsStepStats> {
+        &mut self.queue
     }
 
-    fn step_sampled(
-        &mut self,
-        views: &TrainViews,
-        seed: u64,
-        n: usize,
-        p: &PlenoxelsStepParams,
-    ) -> Result<()> {
-        super::uniform_views(views)?;
-        self.submit_step(views.train_rays(seed, n), p)
-    }
-
-    fn take_stats(&mut self) -> Result<Vec<PlenoxelsStepStats>> {
-        self.queue.take_figures()
+    /// Record the step's plan on one batch with its figures into its slot (the squared error
+    /// summed on the device, the counters copied) and submit it without waiting.
+    fn submit(&mut self, src: TrainRays, p: &PlenoxelsStepParams) -> Result<()> {
+        let n = src.len();
+        let mut clock = PhaseClock::start();
+        let plan = PlenoxelPlan::step(p, self.meta.res, n, self.queue.bg_learned)?;
+        let slot = self.queue.slot_for(&src)?;
+        let mut b = self.record_plan(src, &plan, &mut clock)?;
+        self.queue.record_loss_sum(&mut b, slot, n, 1, 1)?;
+        let stats = std::mem::offset_of!(StepHeader, stats) as u64;
+        self.queue.readback.copy(&mut b, slot, 1, &self.step, stats);
+        self.queue.submit(b, n, clock)
     }
 
     fn grid(&self) -> Result<Grid> {
@@ -386,14 +307,6 @@ impl StageBackend<PlenoxelsStage> for VulkanPlenoxels {
         *self = fresh;
         Ok(())
     }
-
-    fn background(&self) -> Result<Background> {
-        self.queue.background()
-    }
-
-    fn set_background(&mut self, bg: Background) -> Result<()> {
-        self.queue.set_background(bg)
-    }
 }
 
 impl PlenoxelsBackend for VulkanPlenoxels {
@@ -404,16 +317,13 @@ impl PlenoxelsBackend for VulkanPlenoxels {
         let src = TrainRays::Host { rays, targets };
         self.record_plan(src, &plan, &mut PhaseClock::start())?
             .submit()?;
-        let mut bg: Background = self.queue.bg.download()?[0];
         let g = Gradients {
             ray_loss: self.ray_loss(n)?,
             density: self.grad_density.download()?,
             sh: self.grad_sh.download()?,
-            background: bg.grad,
+            background: self.queue.take_background_grad()?,
             counts: self.read_stats()?,
         };
-        bg.grad = [0.0; 3];
-        self.queue.bg.write(&[bg])?;
         // Leave no gradient or touched flag behind for the next step.
         let mut b = self.gpu.batch()?;
         b.fill_zero(&self.grad_density);
@@ -431,7 +341,7 @@ impl PlenoxelsBackend for VulkanPlenoxels {
         self.settle()?;
         let n = rays.len() / 6;
         let mp = march_params(&self.meta, stop_thresh);
-        let (mut b, [ray_buf, _, out_buf]) = self.begin(rays, None, &mut PhaseClock::start())?;
+        let (mut b, io) = self.begin_render(rays)?;
         self.record_occupancy(&mut b)?;
         b.dispatch_1d(
             &kernels::plenoxel_fwd::INFO,
@@ -440,8 +350,8 @@ impl PlenoxelsBackend for VulkanPlenoxels {
                 density: self.density.address(),
                 sh: self.sh.address(),
                 occ: self.occ.address(),
-                rays: ray_buf,
-                rgb: out_buf,
+                rays: io.rays,
+                rgb: io.out,
                 step: self.step.address(),
                 bg: self.queue.bg.address(),
                 res: self.meta.res,
@@ -464,7 +374,7 @@ impl PlenoxelsBackend for VulkanPlenoxels {
         let n = rays.len() / 6;
         let mp = march_params(&self.meta, stop_thresh);
         let out = self.gpu.zeros::<u32>(self.allocated())?;
-        let (mut b, [ray_buf, _, _]) = self.begin(rays, None, &mut PhaseClock::start())?;
+        let (mut b, io) = self.begin_render(rays)?;
         self.record_occupancy(&mut b)?;
         b.dispatch_1d(
             &kernels::plenoxel_weights::INFO,
@@ -473,7 +383,7 @@ impl PlenoxelsBackend for VulkanPlenoxels {
                 density: self.density.address(),
                 sh: self.sh.address(),
                 occ: self.occ.address(),
-                rays: ray_buf,
+                rays: io.rays,
                 max_weight: out.address(),
                 res: self.meta.res,
                 scale: mp.scale,

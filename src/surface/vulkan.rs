@@ -16,7 +16,6 @@ use super::{
     opacity_reg_invocations, surface_params, BlockRefresh, SurfaceBackend, SurfaceStage,
     SurfaceStepParams, SurfaceStepStats,
 };
-use crate::abi::buffers::Background;
 use crate::abi::buffers::StepHeader;
 use crate::abi::buffers::{RayLoss, SurfCounts, SurfOut, SurfParams, TrainCounts};
 use crate::abi::consts::LOSS_SUM_FIELDS;
@@ -25,9 +24,8 @@ use crate::abi::regularisers::TvChunk;
 use crate::abi::regularisers::{axis_neighbours, forward_reach};
 use crate::abi::step::{step_record, STEP_FLAGS, STEP_RESET_BYTES};
 use crate::abi::train::SurfaceLoss;
-use crate::data::TrainViews;
 use crate::gpu::{
-    record_background_step, record_loss_sum, Batch, BatchTimes, Gpu, GpuBuffer, Phase, PhaseClock,
+    record_background_step, record_tv, Batch, BatchRays, Gpu, GpuBuffer, Phase, PhaseClock,
     Readback, SlotFigures, StepQueue, StepTimes, TrainRays,
 };
 use crate::grid::row_slots;
@@ -42,7 +40,7 @@ use crate::math::surface_blocks::{alloc_box, complete_cells};
 use crate::math::surface_blocks::{
     surf_blocks_per_axis, surf_live_words, SURF_BLOCK_SHIFT_VULKAN, SURF_BOX_WORDS,
 };
-use crate::stage::StageBackend;
+use crate::stage::{StageBackend, StepStore};
 use anyhow::{ensure, Result};
 
 /// Regulariser values a step writes: Lα, Ln.
@@ -68,6 +66,14 @@ pub fn surf_params(sp: &SurfaceParams, loss: &SurfaceLoss, n_rays: usize) -> Sur
         levels,
         weights: [0, 0],
         count_per_structure: sp.truncation.per_structure_flag(),
+    }
+}
+
+/// Record the step reset (the touched count) and clearing the `counters`.
+fn record_reset(b: &mut Batch, step: &GpuBuffer, counters: [&GpuBuffer; 3]) {
+    b.fill_zero_range(step, 0, STEP_RESET_BYTES);
+    for c in counters {
+        b.fill_zero(c);
     }
 }
 
@@ -138,16 +144,6 @@ pub struct VulkanSurface {
     /// Regulariser values: Lα, Ln (floats); pairs skipped by Ln (u32).
     reg_loss: GpuBuffer,
     reg_skipped: GpuBuffer,
-}
-
-/// Device addresses of a training batch: rays (6 floats each), targets (3 floats each),
-/// per-ray importance weights (0: every weight 1) and the per-ray output.
-#[derive(Clone, Copy, Debug)]
-struct RayIo {
-    rays: u64,
-    targets: u64,
-    weights: u64,
-    out: u64,
 }
 
 impl VulkanSurface {
@@ -237,47 +233,13 @@ impl VulkanSurface {
         })
     }
 
-    /// Upload rays (and targets), start a batch and record the step reset (touched count) and the
-    /// counters' reset (the upload, and what preceded it since the last mark, charged to `clock`).
-    /// Returns the batch and the addresses of rays, targets and per-ray output.
-    fn begin(
-        &mut self,
-        rays: &[f32],
-        targets: Option<&[f32]>,
-        clock: &mut PhaseClock,
-    ) -> Result<(Batch, RayIo)> {
-        ensure!(
-            rays.len().is_multiple_of(6),
-            "rays must be 6 floats each, got {} floats",
-            rays.len()
-        );
-        let [rays, targets, out] = self.queue.rays.upload(&self.gpu, rays, targets)?;
-        clock.mark(Phase::Upload);
-        let b = self.begin_batch()?;
-        Ok((
-            b,
-            RayIo {
-                rays,
-                targets,
-                weights: 0,
-                out,
-            },
-        ))
-    }
-
-    /// A batch starting with the step reset (touched count) and the counters' reset.
-    fn begin_batch(&self) -> Result<Batch> {
-        let mut b = self.gpu.batch()?;
-        b.fill_zero_range(&self.step, 0, STEP_RESET_BYTES);
-        b.fill_zero(&self.stats);
-        b.fill_zero(&self.reg_loss);
-        b.fill_zero(&self.reg_skipped);
-        Ok(b)
-    }
-
     /// Start a batch with the resets and the training rays (uploaded, or drawn by
-    /// `sample_rays`). Returns it with the addresses of rays, targets, weights and per-ray output.
-    fn begin_train(&mut self, src: TrainRays, clock: &mut PhaseClock) -> Result<(Batch, RayIo)> {
+    /// `sample_rays`; what preceded since the last mark charged to `clock`'s recording).
+    fn begin_train(
+        &mut self,
+        src: TrainRays,
+        clock: &mut PhaseClock,
+    ) -> Result<(Batch, BatchRays)> {
         let n = src.len();
         if let TrainRays::Host { rays, targets } = src {
             ensure!(
@@ -288,23 +250,9 @@ impl VulkanSurface {
             );
         }
         clock.mark(Phase::Record);
-        match src {
-            TrainRays::Host { rays, targets } => self.begin(rays, Some(targets), clock),
-            TrainRays::Sampled { id, set, seed, n } => {
-                let out = self.queue.reserve_sampled(&self.gpu, id, set, n, clock)?;
-                let mut b = self.begin_batch()?;
-                let at = self.queue.record_sample(&mut b, set, seed, n, clock)?;
-                Ok((
-                    b,
-                    RayIo {
-                        rays: at.rays,
-                        targets: at.targets,
-                        weights: at.weights,
-                        out,
-                    },
-                ))
-            }
-        }
+        let (step, counters) = (&self.step, [&self.stats, &self.reg_loss, &self.reg_skipped]);
+        let reset = |b: &mut Batch| record_reset(b, step, counters);
+        self.queue.begin(&self.gpu, src, clock, reset)
     }
 
     /// The grid as the step plans see it.
@@ -318,7 +266,13 @@ impl VulkanSurface {
     }
 
     /// Record `plan`'s passes in order on the batch of `n` rays at `rays`.
-    fn record_plan(&self, b: &mut Batch, plan: &SurfacePlan, rays: RayIo, n: usize) -> Result<()> {
+    fn record_plan(
+        &self,
+        b: &mut Batch,
+        plan: &SurfacePlan,
+        rays: BatchRays,
+        n: usize,
+    ) -> Result<()> {
         for pass in plan.passes() {
             match pass {
                 SurfacePass::Blocks { margin } => self.record_blocks(b, *margin)?,
@@ -382,7 +336,7 @@ impl VulkanSurface {
         truncation: Truncation,
         stop_thresh: f32,
         loss: &SurfaceLoss,
-        io: RayIo,
+        io: BatchRays,
         n: usize,
     ) -> Result<()> {
         // The colour is the device's (`bg`); surface_fwd and surface_train read it there.
@@ -428,21 +382,20 @@ impl VulkanSurface {
         if start >= end {
             return Ok(());
         }
-        b.dispatch_1d(
-            &kernels::tv::INFO,
-            &kernels::tv::Push {
-                links: self.links.address(),
-                data: self.opacity.address(),
-                grad: self.grad[1].address(),
-                step: self.step.address(),
-                res,
-                start,
-                count: end - start,
-                channels: 1,
-                scale: c.scale,
-                touch_bits: c.touch,
-            },
-            end - start + res[1] * res[2],
+        let chunk = TvChunk {
+            res,
+            start,
+            count: end - start,
+            channels: 1,
+            ..*c
+        };
+        record_tv(
+            b,
+            &self.links,
+            &self.opacity,
+            &self.grad[1],
+            &self.step,
+            &chunk,
         )
     }
 
@@ -527,12 +480,9 @@ impl VulkanSurface {
             opacity: self.grad[1].download_range(0, rows)?,
             sh: self.grad[2].download_range(0, rows * SH_DIM)?,
             touched: self.step.download_range(STEP_FLAGS, rows)?,
-            background: self.queue.bg.download::<Background>()?[0].grad,
+            background: self.queue.take_background_grad()?,
             counts: self.read_train_counts()?,
         };
-        let mut bg = self.background()?;
-        bg.grad = [0.0; 3];
-        self.queue.bg.write(&[bg])?;
         // Leave no gradient or touched flag behind for the next step.
         let mut b = self.gpu.batch()?;
         for gb in &self.grad {
@@ -549,92 +499,45 @@ impl VulkanSurface {
         Ok(self.step.download_range::<StepHeader>(0, 1)?[0].count)
     }
 
-    /// Start the batch of a training step on `src`'s rays and record the step's plan; the
-    /// skip structure counts as rebuilt once the plan is recorded.
-    fn record_step(
-        &mut self,
-        src: TrainRays,
-        p: &SurfaceStepParams,
-        clock: &mut PhaseClock,
-    ) -> Result<Batch> {
-        let n = src.len();
-        let mut refresh = self.refresh;
-        let plan = SurfacePlan::step(p, &self.plan_grid(), n, self.queue.bg_learned, &mut refresh)?;
-        let (mut b, io) = self.begin_train(src, clock)?;
-        self.record_plan(&mut b, &plan, io, n)?;
-        self.refresh = refresh;
-        Ok(b)
-    }
-
     /// Wait for the steps in flight (before the host reads, writes or frees what they use).
     fn settle(&self) -> Result<()> {
         self.queue.settle()
     }
+}
 
-    /// Record one training step on `src`'s rays and submit it without waiting (up to
-    /// `MAX_IN_FLIGHT` steps run on the device while the host records the next); its figures
-    /// come back with [`Self::take_timed`].
-    pub fn submit_step(&mut self, src: TrainRays, p: &SurfaceStepParams) -> Result<()> {
+impl StageBackend<SurfaceStage> for VulkanSurface {
+    fn store(&self) -> &dyn StepStore<SurfaceStepStats> {
+        &self.queue
+    }
+
+    fn store_mut(&mut self) -> &mut dyn StepStore<SurfaceStepStats> {
+        &mut self.queue
+    }
+
+    /// Record the step's plan on one batch with its figures into its slot (per-ray losses
+    /// summed on the device, the regulariser values and counters copied) and submit it without
+    /// waiting; the skip structure counts as rebuilt once the plan is recorded.
+    fn submit(&mut self, src: TrainRays, p: &SurfaceStepParams) -> Result<()> {
         let n = src.len();
         let mut clock = PhaseClock::start();
         let slot = self.queue.slot_for(&src)?;
-        let mut b = self.record_step(src, p, &mut clock)?;
-        // The step's figures into its slot: per-ray losses summed on the device, the
-        // regulariser values and counters copied.
-        let stride = (std::mem::size_of::<RayLoss>() / 4) as u32;
+        let mut refresh = self.refresh;
+        let plan = SurfacePlan::step(p, &self.plan_grid(), n, self.queue.bg_learned, &mut refresh)?;
+        let (mut b, io) = self.begin_train(src, &mut clock)?;
+        self.record_plan(&mut b, &plan, io, n)?;
+        self.refresh = refresh;
         let q = &self.queue;
-        let out = q.rays.out().address();
-        record_loss_sum(&mut b, out, q.readback.address(slot, 0), n, stride, 3)?;
+        q.record_loss_sum(
+            &mut b,
+            slot,
+            n,
+            (std::mem::size_of::<RayLoss>() / 4) as u32,
+            3,
+        )?;
         q.readback.copy(&mut b, slot, 1, &self.reg_loss, 0);
         q.readback.copy(&mut b, slot, 2, &self.stats, 0);
         self.refresh.after_update(p.lr_delta, p.beta);
         self.queue.submit(b, n, clock)
-    }
-
-    /// The figures of every step submitted since they were last taken, in order, with the
-    /// device times of their dispatches (waits for the steps in flight).
-    pub fn take_timed(&mut self) -> Result<Vec<(SurfaceStepStats, BatchTimes)>> {
-        self.queue.take_timed()
-    }
-
-    /// One training step on `src`'s rays, waited for: its figures and the device times of its
-    /// dispatches. The figures of earlier steps not yet taken stay for `take_stats`.
-    pub fn step_timed(
-        &mut self,
-        src: TrainRays,
-        p: &SurfaceStepParams,
-    ) -> Result<(SurfaceStepStats, BatchTimes)> {
-        self.submit_step(src, p)?;
-        self.queue.last()
-    }
-}
-
-impl StageBackend<SurfaceStage> for VulkanSurface {
-    fn name(&self) -> &'static str {
-        "vulkan"
-    }
-
-    fn step(
-        &mut self,
-        rays: &[f32],
-        targets: &[f32],
-        p: &SurfaceStepParams,
-    ) -> Result<SurfaceStepStats> {
-        Ok(self.step_timed(TrainRays::Host { rays, targets }, p)?.0)
-    }
-
-    fn step_sampled(
-        &mut self,
-        views: &TrainViews,
-        seed: u64,
-        n: usize,
-        p: &SurfaceStepParams,
-    ) -> Result<()> {
-        self.submit_step(views.train_rays(seed, n), p)
-    }
-
-    fn take_stats(&mut self) -> Result<Vec<SurfaceStepStats>> {
-        self.queue.take_figures()
     }
 
     fn grid(&self) -> Result<SurfaceGrid> {
@@ -683,14 +586,6 @@ impl StageBackend<SurfaceStage> for VulkanSurface {
         *self = fresh;
         Ok(())
     }
-
-    fn background(&self) -> Result<Background> {
-        self.queue.background()
-    }
-
-    fn set_background(&mut self, bg: Background) -> Result<()> {
-        self.queue.set_background(bg)
-    }
 }
 
 impl SurfaceBackend for VulkanSurface {
@@ -709,7 +604,15 @@ impl SurfaceBackend for VulkanSurface {
             lambda_c: 0.0,
         };
         self.params.write(&[surf_params(&sp, &no_loss, n)])?;
-        let (mut b, io) = self.begin(rays, None, &mut PhaseClock::start())?;
+        ensure!(
+            rays.len().is_multiple_of(6),
+            "rays must be 6 floats each, got {} floats",
+            rays.len()
+        );
+        let (step, counters) = (&self.step, [&self.stats, &self.reg_loss, &self.reg_skipped]);
+        let reset = |b: &mut Batch| record_reset(b, step, counters);
+        let clock = &mut PhaseClock::start();
+        let (mut b, io) = self.queue.begin_host(&self.gpu, rays, None, clock, reset)?;
         if let Some(margin) = self.refresh.before_pass(0.0, 0.0) {
             self.record_blocks(&mut b, margin)?;
         }
