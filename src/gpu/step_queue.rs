@@ -1,14 +1,17 @@
-//! What both stages' Vulkan backends keep for their training steps: the steps in flight and their
-//! figures (each step's sums and counters copied into a readback slot, read in groups), the
-//! per-batch ray buffers, the training views on the device, and the background the kernels
-//! composite on (a learned one is stepped on the device, so a step needs no host round trip).
+//! What both stages' Vulkan backends keep for their training steps: the device, the steps in
+//! flight and their figures (each step's sums and counters copied into a readback slot, read in
+//! groups), the step record with the optimiser's indirect arguments, the per-batch ray buffers,
+//! the training views on the device, and the background the kernels composite on (a learned one
+//! is stepped on the device, so a step needs no host round trip).
 
 use super::{
-    record_loss_sum, Batch, BatchTimes, Gpu, GpuBuffer, Phase, PhaseClock, RayBuffers, Readback,
-    StepMeta, StepTimes, StepsInFlight, TrainRays, TrainViewBuffers, STEP_SLOTS,
+    record_loss_sum, record_optim_args, Batch, BatchTimes, Gpu, GpuBuffer, Phase, PhaseClock,
+    RayBuffers, Readback, StepMeta, StepTimes, StepsInFlight, TrainRays, TrainViewBuffers,
+    STEP_SLOTS,
 };
-use crate::abi::buffers::Background;
+use crate::abi::buffers::{Background, StepHeader};
 use crate::abi::rays::SampledRays;
+use crate::abi::step::{STEP_FLAGS, STEP_RESET_BYTES};
 use anyhow::{anyhow, Result};
 use std::cell::RefCell;
 
@@ -38,6 +41,13 @@ pub struct StepQueue<F> {
     steps: RefCell<StepsInFlight>,
     /// Figures of completed steps not yet taken.
     done: Vec<(F, BatchTimes)>,
+    gpu: Gpu,
+    /// The step record (glsl/lib/step.glsl): `StepHeader` (touched count, sample counters, n),
+    /// the touched flags and list.
+    pub step: GpuBuffer,
+    /// Indirect dispatch arguments of the optimiser's pass over the touched vertices
+    /// (`optim_args`).
+    pub args: GpuBuffer,
     /// The background (`Background`): read by the render and training kernels, and, when
     /// learned, its gradient accumulated and stepped on the device (`background_step`).
     pub bg: GpuBuffer,
@@ -53,12 +63,15 @@ pub struct StepQueue<F> {
 }
 
 impl<F: SlotFigures> StepQueue<F> {
-    /// A queue whose batches output `out_bytes` per ray and whose slots hold `parts` (bytes
-    /// each), on a white fixed background.
-    pub fn new(gpu: &Gpu, out_bytes: usize, parts: &[u64]) -> Result<Self> {
+    /// A queue on `gpu` with the step record `step` (u32 words), whose batches output
+    /// `out_bytes` per ray and whose slots hold `parts` (bytes each), on a white fixed background.
+    pub fn new(gpu: &Gpu, step: &[u32], out_bytes: usize, parts: &[u64]) -> Result<Self> {
         Ok(StepQueue {
             steps: RefCell::default(),
             done: Vec::new(),
+            gpu: gpu.clone(),
+            step: gpu.upload(step)?,
+            args: gpu.zeros::<u32>(3)?,
             bg: gpu.upload(&[Background::new([1.0; 3], false)])?,
             bg_learned: false,
             rays: RayBuffers::new(out_bytes),
@@ -70,6 +83,33 @@ impl<F: SlotFigures> StepQueue<F> {
     /// Wait for the steps in flight (before the host reads, writes or frees what they use).
     pub fn settle(&self) -> Result<()> {
         self.steps.borrow_mut().settle()
+    }
+
+    /// The device.
+    pub fn gpu(&self) -> &Gpu {
+        &self.gpu
+    }
+
+    /// The step record's header (as the last batch run left it).
+    pub fn header(&self) -> Result<StepHeader> {
+        Ok(self.step.download_range::<StepHeader>(0, 1)?[0])
+    }
+
+    /// Record `optim_args` on the step record: the indirect arguments in `args`.
+    pub fn record_optim_args(&self, b: &mut Batch) -> Result<()> {
+        record_optim_args(b, &self.step, &self.args)
+    }
+
+    /// Clear the gradient buffers `grads` and the touched flags of `rows` vertex rows (one
+    /// submission, waited for), so that no gradient or flag stays behind for the next step.
+    pub fn clear_gradients(&self, grads: &[&GpuBuffer], rows: usize) -> Result<()> {
+        let mut b = self.gpu.batch()?;
+        for g in grads {
+            b.fill_zero(g);
+        }
+        b.fill_zero_range(&self.step, 4 * STEP_FLAGS as u64, 4 * rows as u64);
+        b.submit()?;
+        Ok(())
     }
 
     /// Read the figures of every step submitted since the last read.
@@ -147,27 +187,26 @@ impl<F: SlotFigures> StepQueue<F> {
     }
 
     /// Start the batch of a training step on `src`'s rays: uploaded (host rays), or drawn on the
-    /// device by `sample_rays` from the views (uploaded once) after `reset` is recorded; the
-    /// uploads are charged to `clock`'s upload, the draw's recording to its sampling. Returns
-    /// the batch with the addresses of its rays.
+    /// device by `sample_rays` from the views (uploaded once); the batch opens with the step
+    /// reset (the step record's touched count and counters) and clearing `counters`. The uploads
+    /// are charged to `clock`'s upload, the draw's recording to its sampling. Returns the batch
+    /// with the addresses of its rays.
     pub fn begin(
         &mut self,
-        gpu: &Gpu,
         src: TrainRays,
         clock: &mut PhaseClock,
-        reset: impl FnOnce(&mut Batch),
+        counters: &[&GpuBuffer],
     ) -> Result<(Batch, BatchRays)> {
         let (id, set, seed, n) = match src {
             TrainRays::Host { rays, targets } => {
-                return self.begin_host(gpu, rays, Some(targets), clock, reset)
+                return self.begin_host(rays, Some(targets), clock, counters)
             }
             TrainRays::Sampled { id, set, seed, n } => (id, set, seed, n),
         };
-        let views = TrainViewBuffers::ensure(&mut self.views, gpu, id, set, n)?;
-        let [_, _, out] = self.rays.reserve(gpu, n)?;
+        let views = TrainViewBuffers::ensure(&mut self.views, &self.gpu, id, set, n)?;
+        let [_, _, out] = self.rays.reserve(&self.gpu, n)?;
         clock.mark(Phase::Upload);
-        let mut b = gpu.batch()?;
-        reset(&mut b);
+        let mut b = start_batch(&self.gpu, &self.step, counters)?;
         let at = views.record_sample(&mut b, set, seed, n)?;
         clock.mark(Phase::Sampling);
         let at = BatchRays {
@@ -179,20 +218,18 @@ impl<F: SlotFigures> StepQueue<F> {
         Ok((b, at))
     }
 
-    /// Upload `rays` (and `targets`) and start a batch with `reset` recorded (the upload charged
-    /// to `clock`). Returns the batch with the addresses of the rays (no weights).
+    /// Upload `rays` (and `targets`) and start a batch as [`Self::begin`] does (the upload
+    /// charged to `clock`). Returns the batch with the addresses of the rays (no weights).
     pub fn begin_host(
         &mut self,
-        gpu: &Gpu,
         rays: &[f32],
         targets: Option<&[f32]>,
         clock: &mut PhaseClock,
-        reset: impl FnOnce(&mut Batch),
+        counters: &[&GpuBuffer],
     ) -> Result<(Batch, BatchRays)> {
-        let [rays, targets, out] = self.rays.upload(gpu, rays, targets)?;
+        let [rays, targets, out] = self.rays.upload(&self.gpu, rays, targets)?;
         clock.mark(Phase::Upload);
-        let mut b = gpu.batch()?;
-        reset(&mut b);
+        let b = start_batch(&self.gpu, &self.step, counters)?;
         let at = BatchRays {
             rays,
             targets,
@@ -243,4 +280,14 @@ impl<F: SlotFigures> StepQueue<F> {
         fresh.done = std::mem::take(&mut self.done);
         Ok(())
     }
+}
+
+/// A batch opening with the step reset of the step record `step` and clearing `counters`.
+fn start_batch(gpu: &Gpu, step: &GpuBuffer, counters: &[&GpuBuffer]) -> Result<Batch> {
+    let mut b = gpu.batch()?;
+    b.fill_zero_range(step, 0, STEP_RESET_BYTES);
+    for c in counters {
+        b.fill_zero(c);
+    }
+    Ok(b)
 }

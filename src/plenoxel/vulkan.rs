@@ -10,16 +10,16 @@ use super::{
 use crate::abi::buffers::PlenoxelParams;
 use crate::abi::buffers::StepHeader;
 use crate::abi::rays::SampledRays;
-use crate::abi::step::{step_record, STEP_FLAGS, STEP_RESET_BYTES};
+use crate::abi::step::step_record;
 use crate::abi::train::RmsProp;
 use crate::gpu::{
-    record_background_step, record_optim_args, record_tv, Batch, BatchRays, Gpu, GpuBuffer,
-    PhaseClock, Readback, SlotFigures, StepQueue, StepTimes, TrainRays,
+    record_background_step, record_tv, Batch, BatchRays, Gpu, GpuBuffer, PhaseClock, Readback,
+    SlotFigures, StepQueue, StepTimes, TrainRays,
 };
 use crate::grid::{Grid, SH_DIM};
 use crate::kernels;
 use crate::math::plenoxel::{occ_dims, PlenoxelCounts};
-use crate::stage::{StageBackend, StepStore};
+use crate::stage::QueuedBackend;
 use anyhow::{ensure, Result};
 
 /// Device-resident stage-1 state.
@@ -29,7 +29,6 @@ pub struct VulkanPlenoxels {
     /// for training; per step a slot with the squared-error sum and the counters. First, so
     /// that dropping the backend waits for the steps before any buffer they use is freed.
     queue: StepQueue<PlenoxelsStepStats>,
-    gpu: Gpu,
     meta: Grid,
     links: GpuBuffer,
     density: GpuBuffer,
@@ -39,11 +38,6 @@ pub struct VulkanPlenoxels {
     grad_sh: GpuBuffer,
     state_density: GpuBuffer,
     state_sh: GpuBuffer,
-    /// Step record (glsl/lib/step.glsl): `StepHeader` (touched count, sample counters, n),
-    /// flags, list.
-    step: GpuBuffer,
-    /// Indirect dispatch arguments of rmsprop_sparse.
-    args: GpuBuffer,
     /// plenoxel_train's params buffer (written in each training batch's command stream).
     params: GpuBuffer,
 }
@@ -55,11 +49,11 @@ impl VulkanPlenoxels {
         Ok(VulkanPlenoxels {
             queue: StepQueue::new(
                 gpu,
+                &step_record(n, &[]),
                 3 * std::mem::size_of::<f32>(),
                 // The squared-error sum (one float), the counters.
                 &[4, std::mem::size_of::<PlenoxelCounts>() as u64],
             )?,
-            gpu: gpu.clone(),
             links: gpu.upload(&grid.links)?,
             density: gpu.upload(&grid.density)?,
             sh: gpu.upload(&grid.sh)?,
@@ -68,8 +62,6 @@ impl VulkanPlenoxels {
             grad_sh: gpu.zeros::<f32>(n * SH_DIM)?,
             state_density: gpu.zeros::<f32>(n)?,
             state_sh: gpu.zeros::<f32>(n * SH_DIM)?,
-            step: gpu.upload(&step_record(n, &[]))?,
-            args: gpu.zeros::<u32>(3)?,
             params: gpu.host_to_device::<PlenoxelParams>(1)?,
             meta: Grid {
                 links: Vec::new(),
@@ -100,12 +92,12 @@ impl VulkanPlenoxels {
     }
 
     fn read_stats(&self) -> Result<PlenoxelCounts> {
-        Ok(self.step.download_range::<StepHeader>(0, 1)?[0].stats)
+        Ok(self.queue.header()?.stats)
     }
 
     /// Record the sparse RMSProp step over the vertices touched this step.
     fn record_rmsprop(&self, b: &mut Batch, p: &RmsProp) -> Result<()> {
-        record_optim_args(b, &self.step, &self.args)?;
+        self.queue.record_optim_args(b)?;
         b.dispatch_indirect(
             &kernels::rmsprop_sparse::INFO,
             &kernels::rmsprop_sparse::Push {
@@ -115,13 +107,13 @@ impl VulkanPlenoxels {
                 grad_sh: self.grad_sh.address(),
                 state_density: self.state_density.address(),
                 state_sh: self.state_sh.address(),
-                step: self.step.address(),
+                step: self.queue.step.address(),
                 lr_sigma: p.lr_sigma,
                 lr_sh: p.lr_sh,
                 beta: p.beta,
                 eps: p.eps,
             },
-            &self.args,
+            &self.queue.args,
         )
     }
 
@@ -140,18 +132,14 @@ impl VulkanPlenoxels {
                 targets.len() / 3
             );
         }
-        let step = &self.step;
-        let reset = |b: &mut Batch| b.fill_zero_range(step, 0, STEP_RESET_BYTES);
-        self.queue.begin(&self.gpu, src, clock, reset)
+        self.queue.begin(src, clock, &[])
     }
 
     /// Upload `rays` and start a batch with the step reset, for a render or a pass that reads
     /// no targets.
     fn begin_render(&mut self, rays: &[f32]) -> Result<(Batch, BatchRays)> {
-        let step = &self.step;
-        let reset = |b: &mut Batch| b.fill_zero_range(step, 0, STEP_RESET_BYTES);
-        let clock = &mut PhaseClock::start();
-        self.queue.begin_host(&self.gpu, rays, None, clock, reset)
+        self.queue
+            .begin_host(rays, None, &mut PhaseClock::start(), &[])
     }
 
     /// Start the batch of `src`'s rays and record `plan`'s passes on it, in order.
@@ -175,7 +163,7 @@ impl VulkanPlenoxels {
                         TvField::Density => (&self.density, &self.grad_density),
                         TvField::Sh => (&self.sh, &self.grad_sh),
                     };
-                    record_tv(&mut b, &self.links, data, grad, &self.step, chunk)?
+                    record_tv(&mut b, &self.links, data, grad, &self.queue.step, chunk)?
                 }
                 PlenoxelPass::RmsProp(h) => self.record_rmsprop(&mut b, h)?,
                 PlenoxelPass::Background { lr, beta, eps } => {
@@ -219,7 +207,7 @@ impl VulkanPlenoxels {
                 grad_density: self.grad_density.address(),
                 grad_sh: self.grad_sh.address(),
                 ray_loss: rays.out,
-                step: self.step.address(),
+                step: self.queue.step.address(),
                 params: self.params.address(),
                 bg: self.queue.bg.address(),
                 res: self.meta.res,
@@ -247,31 +235,36 @@ impl VulkanPlenoxels {
     }
 }
 
-impl StageBackend<PlenoxelsStage> for VulkanPlenoxels {
-    fn store(&self) -> &dyn StepStore<PlenoxelsStepStats> {
+impl QueuedBackend<PlenoxelsStage> for VulkanPlenoxels {
+    fn queue(&self) -> &StepQueue<PlenoxelsStepStats> {
         &self.queue
     }
 
-    fn store_mut(&mut self) -> &mut dyn StepStore<PlenoxelsStepStats> {
+    fn queue_mut(&mut self) -> &mut StepQueue<PlenoxelsStepStats> {
         &mut self.queue
     }
 
-    /// Record the step's plan on one batch with its figures into its slot (the squared error
-    /// summed on the device, the counters copied) and submit it without waiting.
-    fn submit(&mut self, src: TrainRays, p: &PlenoxelsStepParams) -> Result<()> {
+    /// The step's plan, then its figures into `slot`: the squared error summed on the device,
+    /// the counters copied.
+    fn record_step(
+        &mut self,
+        src: TrainRays,
+        p: &PlenoxelsStepParams,
+        slot: usize,
+        clock: &mut PhaseClock,
+    ) -> Result<Batch> {
         let n = src.len();
-        let mut clock = PhaseClock::start();
         let plan = PlenoxelPlan::step(p, self.meta.res, n, self.queue.bg_learned)?;
-        let slot = self.queue.slot_for(&src)?;
-        let mut b = self.record_plan(src, &plan, &mut clock)?;
+        let mut b = self.record_plan(src, &plan, clock)?;
         self.queue.record_loss_sum(&mut b, slot, n, 1, 1)?;
         let stats = std::mem::offset_of!(StepHeader, stats) as u64;
-        self.queue.readback.copy(&mut b, slot, 1, &self.step, stats);
-        self.queue.submit(b, n, clock)
+        self.queue
+            .readback
+            .copy(&mut b, slot, 1, &self.queue.step, stats);
+        Ok(b)
     }
 
-    fn grid(&self) -> Result<Grid> {
-        self.settle()?;
+    fn download_grid(&self) -> Result<Grid> {
         Ok(Grid {
             links: self.links.download()?,
             density: self.density.download()?,
@@ -280,16 +273,15 @@ impl StageBackend<PlenoxelsStage> for VulkanPlenoxels {
         })
     }
 
-    fn optimizer_state(&self) -> Result<[Vec<f32>; 2]> {
-        self.settle()?;
+    fn download_state(&self) -> Result<[Vec<f32>; 2]> {
         Ok([self.state_density.download()?, self.state_sh.download()?])
     }
 
-    fn state_bytes(&self) -> u64 {
+    fn copy_bytes(&self) -> u64 {
         state_bytes_of(self.shape())
     }
 
-    fn load(&mut self, grid: Grid, state: Option<[Vec<f32>; 2]>) -> Result<()> {
+    fn rebuild(&self, grid: Grid, state: Option<[Vec<f32>; 2]>) -> Result<Self> {
         let n = grid.allocated();
         if let Some([sd, ss]) = &state {
             ensure!(
@@ -297,15 +289,12 @@ impl StageBackend<PlenoxelsStage> for VulkanPlenoxels {
                 "optimizer state does not match the grid"
             );
         }
-        let mut fresh = VulkanPlenoxels::new(&self.gpu, grid)?;
+        let fresh = VulkanPlenoxels::new(self.queue.gpu(), grid)?;
         if let Some([sd, ss]) = state {
             fresh.state_density.write(&sd)?;
             fresh.state_sh.write(&ss)?;
         }
-        // The background, the views and the figures of the steps so far stay.
-        self.queue.carry_into(&mut fresh.queue)?;
-        *self = fresh;
-        Ok(())
+        Ok(fresh)
     }
 }
 
@@ -324,16 +313,8 @@ impl PlenoxelsBackend for VulkanPlenoxels {
             background: self.queue.take_background_grad()?,
             counts: self.read_stats()?,
         };
-        // Leave no gradient or touched flag behind for the next step.
-        let mut b = self.gpu.batch()?;
-        b.fill_zero(&self.grad_density);
-        b.fill_zero(&self.grad_sh);
-        b.fill_zero_range(
-            &self.step,
-            4 * STEP_FLAGS as u64,
-            4 * self.allocated() as u64,
-        );
-        b.submit()?;
+        let grads = [&self.grad_density, &self.grad_sh];
+        self.queue.clear_gradients(&grads, self.allocated())?;
         Ok(g)
     }
 
@@ -352,7 +333,7 @@ impl PlenoxelsBackend for VulkanPlenoxels {
                 occ: self.occ.address(),
                 rays: io.rays,
                 rgb: io.out,
-                step: self.step.address(),
+                step: self.queue.step.address(),
                 bg: self.queue.bg.address(),
                 res: self.meta.res,
                 scale: mp.scale,
@@ -373,7 +354,7 @@ impl PlenoxelsBackend for VulkanPlenoxels {
         self.settle()?;
         let n = rays.len() / 6;
         let mp = march_params(&self.meta, stop_thresh);
-        let out = self.gpu.zeros::<u32>(self.allocated())?;
+        let out = self.queue.gpu().zeros::<u32>(self.allocated())?;
         let (mut b, io) = self.begin_render(rays)?;
         self.record_occupancy(&mut b)?;
         b.dispatch_1d(

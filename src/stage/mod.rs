@@ -4,10 +4,13 @@
 //! (`train::steps`) and the checkpoints (`checkpoint`) are written once over them; the stages are
 //! `plenoxel::PlenoxelsStage` (stage 1) and `surface::SurfaceStage` (stage 2). What the backends
 //! of one kind share whatever their stage, their background and the figures of the steps not yet
-//! taken, is a [`StepStore`] ([`store`]).
+//! taken, is a [`StepStore`] ([`store`]); a Vulkan backend's [`StageBackend`] is written once
+//! over [`QueuedBackend`] ([`queued`]).
 
+pub mod queued;
 pub mod store;
 
+pub use queued::QueuedBackend;
 pub use store::{HostRays, HostSteps, StepStore};
 
 use crate::abi::buffers::Background;

@@ -16,13 +16,12 @@ use super::{
     opacity_reg_invocations, surface_params, BlockRefresh, SurfaceBackend, SurfaceStage,
     SurfaceStepParams, SurfaceStepStats,
 };
-use crate::abi::buffers::StepHeader;
 use crate::abi::buffers::{RayLoss, SurfCounts, SurfOut, SurfParams, TrainCounts};
 use crate::abi::consts::LOSS_SUM_FIELDS;
 use crate::abi::normal_reg::NormalPrefix;
 use crate::abi::regularisers::TvChunk;
 use crate::abi::regularisers::{axis_neighbours, forward_reach};
-use crate::abi::step::{step_record, STEP_FLAGS, STEP_RESET_BYTES};
+use crate::abi::step::{step_record, STEP_FLAGS};
 use crate::abi::train::SurfaceLoss;
 use crate::gpu::{
     record_background_step, record_tv, Batch, BatchRays, Gpu, GpuBuffer, Phase, PhaseClock,
@@ -40,7 +39,7 @@ use crate::math::surface_blocks::{alloc_box, complete_cells};
 use crate::math::surface_blocks::{
     surf_blocks_per_axis, surf_live_words, SURF_BLOCK_SHIFT_VULKAN, SURF_BOX_WORDS,
 };
-use crate::stage::{StageBackend, StepStore};
+use crate::stage::QueuedBackend;
 use anyhow::{ensure, Result};
 
 /// Regulariser values a step writes: Lα, Ln.
@@ -69,14 +68,6 @@ pub fn surf_params(sp: &SurfaceParams, loss: &SurfaceLoss, n_rays: usize) -> Sur
     }
 }
 
-/// Record the step reset (the touched count) and clearing the `counters`.
-fn record_reset(b: &mut Batch, step: &GpuBuffer, counters: [&GpuBuffer; 3]) {
-    b.fill_zero_range(step, 0, STEP_RESET_BYTES);
-    for c in counters {
-        b.fill_zero(c);
-    }
-}
-
 const _: () = assert!(std::mem::size_of::<SurfCounts>() <= std::mem::size_of::<TrainCounts>());
 
 /// The data term of one training pass, read back (see [`VulkanSurface::gradients`]).
@@ -100,7 +91,6 @@ pub struct VulkanSurface {
     /// regulariser values and the counters. First, so that dropping the backend waits for the
     /// steps before any buffer they use is freed.
     queue: StepQueue<SurfaceStepStats>,
-    gpu: Gpu,
     /// The grid without its arrays (resolution, bounds, levels).
     meta: SurfaceGrid,
     rows: usize,
@@ -121,10 +111,6 @@ pub struct VulkanSurface {
     sh: GpuBuffer,
     grad: [GpuBuffer; 3],
     state: [GpuBuffer; 3],
-    /// Step record (glsl/lib/step.glsl): `StepHeader`, flags, list.
-    step: GpuBuffer,
-    /// Indirect dispatch arguments of surface_rmsprop.
-    args: GpuBuffer,
     /// The params buffer of surface_fwd and surface_train (written in each training batch's
     /// command stream, before a render).
     params: GpuBuffer,
@@ -173,9 +159,12 @@ impl VulkanSurface {
         let row_slot = row_slots(&grid.links, n);
         let normal_prefix = NormalPrefix::new(&grid.links, &row_slot, grid.res);
         let axis_nbrs = axis_neighbours(&grid.links, &row_slot, grid.res);
+        let mut step = step_record(n, &[]);
+        step.resize(STEP_FLAGS + 2 * rows, 0);
         Ok(VulkanSurface {
             queue: StepQueue::new(
                 gpu,
+                &step,
                 std::mem::size_of::<SurfOut>(),
                 &[
                     4 * LOSS_SUM_FIELDS as u64,
@@ -183,7 +172,6 @@ impl VulkanSurface {
                     std::mem::size_of::<TrainCounts>() as u64,
                 ],
             )?,
-            gpu: gpu.clone(),
             rows: n,
             links: gpu.upload(&grid.links)?,
             complete: {
@@ -207,12 +195,6 @@ impl VulkanSurface {
             sh: upload_nonempty(gpu, &grid.sh)?,
             grad: zeros3()?,
             state: zeros3()?,
-            step: {
-                let mut init = step_record(n, &[]);
-                init.resize(STEP_FLAGS + 2 * rows, 0);
-                gpu.upload(&init)?
-            },
-            args: gpu.zeros::<u32>(3)?,
             params: gpu.host_to_device::<SurfParams>(1)?,
             levels: gpu.upload(&levels)?,
             stats: gpu.zeros::<TrainCounts>(1)?,
@@ -250,9 +232,8 @@ impl VulkanSurface {
             );
         }
         clock.mark(Phase::Record);
-        let (step, counters) = (&self.step, [&self.stats, &self.reg_loss, &self.reg_skipped]);
-        let reset = |b: &mut Batch| record_reset(b, step, counters);
-        self.queue.begin(&self.gpu, src, clock, reset)
+        let counters = [&self.stats, &self.reg_loss, &self.reg_skipped];
+        self.queue.begin(src, clock, &counters)
     }
 
     /// The grid as the step plans see it.
@@ -302,7 +283,7 @@ impl VulkanSurface {
                     let io = NormalRegIo {
                         delta: self.delta.address(),
                         grad: self.grad[0].address(),
-                        step: self.step.address(),
+                        step: self.queue.step.address(),
                         loss: self.reg_loss.address() + 4,
                         skipped: self.reg_skipped.address(),
                     };
@@ -318,7 +299,8 @@ impl VulkanSurface {
                         grads: self.grad.each_ref().map(|g| g.address()),
                         states: self.state.each_ref().map(|g| g.address()),
                     };
-                    record_surface_rmsprop(b, &io, &self.step, &self.args, h)?;
+                    let q = &self.queue;
+                    record_surface_rmsprop(b, &io, &q.step, &q.args, h)?;
                 }
                 SurfacePass::Background { lr, beta, eps } => {
                     record_background_step(b, &self.queue.bg, *lr, *beta, *eps)?
@@ -362,7 +344,7 @@ impl VulkanSurface {
                 grad_sh: self.grad[2].address(),
                 out_rays: io.out,
                 stats: self.stats.address(),
-                step: self.step.address(),
+                step: self.queue.step.address(),
                 bg: self.queue.bg.address(),
                 n: self.meta.res[0],
                 block_shift: SURF_BLOCK_SHIFT_VULKAN,
@@ -394,7 +376,7 @@ impl VulkanSurface {
             &self.links,
             &self.opacity,
             &self.grad[1],
-            &self.step,
+            &self.queue.step,
             &chunk,
         )
     }
@@ -466,7 +448,7 @@ impl VulkanSurface {
         let plan = SurfacePlan::gradients(p, n, &mut refresh)?;
         let src = TrainRays::Host { rays, targets };
         let (mut b, mut io) = self.begin_train(src, &mut PhaseClock::start())?;
-        let weight_buf = weights.map(|w| self.gpu.upload(w)).transpose()?;
+        let weight_buf = weights.map(|w| self.queue.gpu().upload(w)).transpose()?;
         if let Some(w) = &weight_buf {
             io.weights = w.address();
         }
@@ -479,24 +461,19 @@ impl VulkanSurface {
             delta: self.grad[0].download_range(0, rows)?,
             opacity: self.grad[1].download_range(0, rows)?,
             sh: self.grad[2].download_range(0, rows * SH_DIM)?,
-            touched: self.step.download_range(STEP_FLAGS, rows)?,
+            touched: self.queue.step.download_range(STEP_FLAGS, rows)?,
             background: self.queue.take_background_grad()?,
             counts: self.read_train_counts()?,
         };
-        // Leave no gradient or touched flag behind for the next step.
-        let mut b = self.gpu.batch()?;
-        for gb in &self.grad {
-            b.fill_zero(gb);
-        }
-        b.fill_zero_range(&self.step, 4 * STEP_FLAGS as u64, 4 * rows.max(1) as u64);
-        b.submit()?;
+        let grads = self.grad.each_ref();
+        self.queue.clear_gradients(&grads, rows.max(1))?;
         Ok(g)
     }
 
     /// Number of vertices touched by the last step (read from the step record).
     pub fn last_touched(&self) -> Result<u32> {
         self.settle()?;
-        Ok(self.step.download_range::<StepHeader>(0, 1)?[0].count)
+        Ok(self.queue.header()?.count)
     }
 
     /// Wait for the steps in flight (before the host reads, writes or frees what they use).
@@ -505,43 +482,41 @@ impl VulkanSurface {
     }
 }
 
-impl StageBackend<SurfaceStage> for VulkanSurface {
-    fn store(&self) -> &dyn StepStore<SurfaceStepStats> {
+impl QueuedBackend<SurfaceStage> for VulkanSurface {
+    fn queue(&self) -> &StepQueue<SurfaceStepStats> {
         &self.queue
     }
 
-    fn store_mut(&mut self) -> &mut dyn StepStore<SurfaceStepStats> {
+    fn queue_mut(&mut self) -> &mut StepQueue<SurfaceStepStats> {
         &mut self.queue
     }
 
-    /// Record the step's plan on one batch with its figures into its slot (per-ray losses
-    /// summed on the device, the regulariser values and counters copied) and submit it without
-    /// waiting; the skip structure counts as rebuilt once the plan is recorded.
-    fn submit(&mut self, src: TrainRays, p: &SurfaceStepParams) -> Result<()> {
+    /// The step's plan, then its figures into `slot` (per-ray losses summed on the device, the
+    /// regulariser values and counters copied); the skip structure counts as rebuilt once the
+    /// plan is recorded.
+    fn record_step(
+        &mut self,
+        src: TrainRays,
+        p: &SurfaceStepParams,
+        slot: usize,
+        clock: &mut PhaseClock,
+    ) -> Result<Batch> {
         let n = src.len();
-        let mut clock = PhaseClock::start();
-        let slot = self.queue.slot_for(&src)?;
         let mut refresh = self.refresh;
         let plan = SurfacePlan::step(p, &self.plan_grid(), n, self.queue.bg_learned, &mut refresh)?;
-        let (mut b, io) = self.begin_train(src, &mut clock)?;
+        let (mut b, io) = self.begin_train(src, clock)?;
         self.record_plan(&mut b, &plan, io, n)?;
         self.refresh = refresh;
         let q = &self.queue;
-        q.record_loss_sum(
-            &mut b,
-            slot,
-            n,
-            (std::mem::size_of::<RayLoss>() / 4) as u32,
-            3,
-        )?;
+        let stride = (std::mem::size_of::<RayLoss>() / 4) as u32;
+        q.record_loss_sum(&mut b, slot, n, stride, 3)?;
         q.readback.copy(&mut b, slot, 1, &self.reg_loss, 0);
         q.readback.copy(&mut b, slot, 2, &self.stats, 0);
         self.refresh.after_update(p.lr_delta, p.beta);
-        self.queue.submit(b, n, clock)
+        Ok(b)
     }
 
-    fn grid(&self) -> Result<SurfaceGrid> {
-        self.settle()?;
+    fn download_grid(&self) -> Result<SurfaceGrid> {
         let rows = self.rows;
         Ok(SurfaceGrid {
             links: self.links.download()?,
@@ -552,13 +527,7 @@ impl StageBackend<SurfaceStage> for VulkanSurface {
         })
     }
 
-    fn state_bytes(&self) -> u64 {
-        let slots = self.meta.res.iter().map(|&r| r as u64).product();
-        state_bytes(slots, self.rows as u64, 2 + SH_DIM as u64)
-    }
-
-    fn optimizer_state(&self) -> Result<[Vec<f32>; 3]> {
-        self.settle()?;
+    fn download_state(&self) -> Result<[Vec<f32>; 3]> {
         let rows = self.rows;
         Ok([
             self.state[0].download_range(0, rows)?,
@@ -567,7 +536,12 @@ impl StageBackend<SurfaceStage> for VulkanSurface {
         ])
     }
 
-    fn load(&mut self, grid: SurfaceGrid, state: Option<[Vec<f32>; 3]>) -> Result<()> {
+    fn copy_bytes(&self) -> u64 {
+        let slots = self.meta.res.iter().map(|&r| r as u64).product();
+        state_bytes(slots, self.rows as u64, 2 + SH_DIM as u64)
+    }
+
+    fn rebuild(&self, grid: SurfaceGrid, state: Option<[Vec<f32>; 3]>) -> Result<Self> {
         let n = grid.delta.len();
         if let Some(s) = &state {
             ensure!(
@@ -575,16 +549,13 @@ impl StageBackend<SurfaceStage> for VulkanSurface {
                 "optimizer state does not match the surface grid"
             );
         }
-        let mut fresh = VulkanSurface::new(&self.gpu, grid)?;
+        let fresh = VulkanSurface::new(self.queue.gpu(), grid)?;
         if let Some(s) = state {
             for (buf, v) in fresh.state.iter().zip(&s) {
                 buf.write(v)?;
             }
         }
-        // The background, the views and the figures of the steps so far stay.
-        self.queue.carry_into(&mut fresh.queue)?;
-        *self = fresh;
-        Ok(())
+        Ok(fresh)
     }
 }
 
@@ -609,10 +580,9 @@ impl SurfaceBackend for VulkanSurface {
             "rays must be 6 floats each, got {} floats",
             rays.len()
         );
-        let (step, counters) = (&self.step, [&self.stats, &self.reg_loss, &self.reg_skipped]);
-        let reset = |b: &mut Batch| record_reset(b, step, counters);
+        let counters = [&self.stats, &self.reg_loss, &self.reg_skipped];
         let clock = &mut PhaseClock::start();
-        let (mut b, io) = self.queue.begin_host(&self.gpu, rays, None, clock, reset)?;
+        let (mut b, io) = self.queue.begin_host(rays, None, clock, &counters)?;
         if let Some(margin) = self.refresh.before_pass(0.0, 0.0) {
             self.record_blocks(&mut b, margin)?;
         }
