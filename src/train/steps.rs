@@ -58,28 +58,40 @@ pub trait StageSteps<S: Stage, B: StageBackend<S> + ?Sized> {
     type Config: Serialize;
     fn config(&self) -> &Self::Config;
     fn schedule(&self) -> LoopSchedule;
-    /// The training views batches are drawn from.
-    fn views<'d>(&self, data: &'d Dataset) -> Result<TrainViews<'d>>;
-    /// Before the first step of this process (`start_step`: 0, or the step after a resumed
-    /// checkpoint).
-    fn start(&mut self, backend: &mut B, data: &Dataset, start_step: u32) -> Result<()>;
-    /// Work due before `step` (its time is not the training's); whether there was any.
-    fn before_step(
-        &mut self,
-        backend: &mut B,
-        data: &Dataset,
-        step: u32,
-        progress: &mut Progress,
-    ) -> Result<bool>;
     /// The parameters of `step`, drawing what it needs from `rng` (after the batch's seed).
     fn params(&mut self, step: u32, rng: &mut Pcg64) -> S::Params;
-    /// Whether [`Self::before_step`] has work before `step` (the figures are read before it).
-    fn work_before(&self, step: u32) -> bool;
-    /// After the last step, before the last checkpoint.
-    fn finish(&mut self, backend: &mut B) -> Result<()>;
     /// Render the test split into `out`.
     fn render_test(&mut self, backend: &mut B, data: &Dataset, out: &Path)
         -> Result<RenderedSplit>;
+
+    /// The training views batches are drawn from (uniformly, unless a stage says otherwise).
+    fn views<'d>(&self, data: &'d Dataset) -> Result<TrainViews<'d>> {
+        TrainViews::new(&data.train, &data.scene)
+    }
+    /// Before the first step of this process (`start_step`: 0, or the step after a resumed
+    /// checkpoint); nothing unless a stage says otherwise.
+    fn start(&mut self, _backend: &mut B, _data: &Dataset, _start_step: u32) -> Result<()> {
+        Ok(())
+    }
+    /// Work due before `step` (its time is not the training's); whether there was any (none
+    /// unless a stage says otherwise).
+    fn before_step(
+        &mut self,
+        _backend: &mut B,
+        _data: &Dataset,
+        _step: u32,
+        _progress: &mut Progress,
+    ) -> Result<bool> {
+        Ok(false)
+    }
+    /// Whether [`Self::before_step`] has work before `step` (the figures are read before it).
+    fn work_before(&self, _step: u32) -> bool {
+        false
+    }
+    /// After the last step, before the last checkpoint; nothing unless a stage says otherwise.
+    fn finish(&mut self, _backend: &mut B) -> Result<()> {
+        Ok(())
+    }
 }
 
 /// Wall time per phase and throughput of a finished run.
