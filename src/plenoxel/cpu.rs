@@ -10,6 +10,7 @@ use crate::cpu::occupancy::{occupancy_rows, occupancy_slots};
 use crate::cpu::plenoxel_fwd::render;
 use crate::cpu::plenoxel_train::{train, TrainGrads};
 use crate::cpu::plenoxel_weights::max_weights;
+use crate::cpu::sample_rays::sample_rays;
 use crate::cpu::{rmsprop_sparse, tv, PlenoxelsOptimArrays};
 use crate::gpu::{Phase, PhaseClock, TrainRays};
 use crate::grid::{Grid, SH_DIM};
@@ -117,8 +118,8 @@ impl CpuPlenoxels {
                     &mut self.touched,
                     h,
                 ),
-                PlenoxelPass::Background { lr, beta, eps } => {
-                    background_step(&mut self.steps.bg, *lr, *beta, *eps);
+                PlenoxelPass::Background(s) => {
+                    background_step(&mut self.steps.bg, s.lr, s.beta, s.eps);
                 }
             }
         }
@@ -166,7 +167,7 @@ impl StageBackend<PlenoxelsStage> for CpuPlenoxels {
 
     fn submit(&mut self, src: TrainRays, p: &PlenoxelsStepParams) -> Result<()> {
         let mut clock = PhaseClock::start();
-        let batch = HostRays::of(src, &mut clock)?;
+        let batch = HostRays::of(src, &mut clock, sample_rays)?;
         let n = batch.rays.len() / 6;
         let plan = PlenoxelPlan::step(p, self.grid.res, n, self.steps.bg.learned())?;
         let (loss, counts) = self.run_plan(&plan, &batch.rays, &batch.targets)?;

@@ -166,8 +166,8 @@ impl VulkanPlenoxels {
                     record_tv(&mut b, &self.links, data, grad, &self.queue.step, chunk)?
                 }
                 PlenoxelPass::RmsProp(h) => self.record_rmsprop(&mut b, h)?,
-                PlenoxelPass::Background { lr, beta, eps } => {
-                    record_background_step(&mut b, &self.queue.bg, *lr, *beta, *eps)?
+                PlenoxelPass::Background(s) => {
+                    record_background_step(&mut b, &self.queue.bg, s.lr, s.beta, s.eps)?
                 }
             }
         }
@@ -215,11 +215,6 @@ impl VulkanPlenoxels {
             },
             n as u32,
         )
-    }
-
-    /// Wait for the steps in flight (before the host reads, writes or frees what they use).
-    fn settle(&self) -> Result<()> {
-        self.queue.settle()
     }
 
     /// The last sampled batch of `n` rays.
@@ -300,7 +295,7 @@ impl QueuedBackend<PlenoxelsStage> for VulkanPlenoxels {
 
 impl PlenoxelsBackend for VulkanPlenoxels {
     fn gradients(&mut self, rays: &[f32], targets: &[f32], stop_thresh: f32) -> Result<Gradients> {
-        self.settle()?;
+        self.queue.settle()?;
         let n = rays.len() / 6;
         let plan = PlenoxelPlan::gradients(stop_thresh, n);
         let src = TrainRays::Host { rays, targets };
@@ -319,7 +314,7 @@ impl PlenoxelsBackend for VulkanPlenoxels {
     }
 
     fn render(&mut self, rays: &[f32], stop_thresh: f32) -> Result<(Vec<f32>, PlenoxelCounts)> {
-        self.settle()?;
+        self.queue.settle()?;
         let n = rays.len() / 6;
         let mp = march_params(&self.meta, stop_thresh);
         let (mut b, io) = self.begin_render(rays)?;
@@ -351,7 +346,7 @@ impl PlenoxelsBackend for VulkanPlenoxels {
     }
 
     fn max_weights(&mut self, rays: &[f32], stop_thresh: f32) -> Result<Vec<f32>> {
-        self.settle()?;
+        self.queue.settle()?;
         let n = rays.len() / 6;
         let mp = march_params(&self.meta, stop_thresh);
         let out = self.queue.gpu().zeros::<u32>(self.allocated())?;
@@ -395,8 +390,7 @@ impl SlotFigures for PlenoxelsStepStats {
         Ok(PlenoxelsStepStats {
             mse: sum[0] as f64 / (3 * n.max(1)) as f64,
             counts: readback.part::<PlenoxelCounts>(slot, 1)?[0],
-            device_ns: 0.0,
-            host: Default::default(),
+            ..Default::default()
         })
     }
 

@@ -1,10 +1,10 @@
 //! What a backend keeps for the training loop besides its grid, the same for both stages: the
 //! background the kernels composite on and the figures of the steps not yet taken. A Vulkan
 //! backend keeps them in its [`StepQueue`] (the background and the figures on the device); a CPU
-//! backend in [`HostSteps`], which also draws a sampled batch on the host ([`HostRays`]).
+//! backend in [`HostSteps`], and it draws a sampled batch on the host ([`HostRays`]).
 
 use crate::abi::buffers::Background;
-use crate::cpu::sample_rays::sample_rays;
+use crate::abi::rays::{SampleSet, SampledRays};
 use crate::gpu::{Phase, PhaseClock, SlotFigures, StepQueue, TrainRays};
 use anyhow::{anyhow, Result};
 use std::borrow::Cow;
@@ -103,9 +103,13 @@ pub struct HostRays<'a> {
 }
 
 impl<'a> HostRays<'a> {
-    /// `src`'s rays: as given, or drawn with `sample_rays` (its time charged to `clock`'s
-    /// sampling).
-    pub fn of(src: TrainRays<'a>, clock: &mut PhaseClock) -> Result<Self> {
+    /// `src`'s rays: as given, or drawn by `draw` (the CPU backends': the `sample_rays` twin;
+    /// its time charged to `clock`'s sampling).
+    pub fn of(
+        src: TrainRays<'a>,
+        clock: &mut PhaseClock,
+        draw: impl FnOnce(&SampleSet, u64, usize) -> Result<SampledRays>,
+    ) -> Result<Self> {
         Ok(match src {
             TrainRays::Host { rays, targets } => HostRays {
                 rays: rays.into(),
@@ -113,7 +117,7 @@ impl<'a> HostRays<'a> {
                 weights: None,
             },
             TrainRays::Sampled { set, seed, n, .. } => {
-                let batch = sample_rays(set, seed, n)?;
+                let batch = draw(set, seed, n)?;
                 clock.mark(Phase::Sampling);
                 HostRays {
                     rays: batch.rays.into(),

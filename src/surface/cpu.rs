@@ -10,6 +10,7 @@ use crate::abi::normal_reg::NormalPrefix;
 use crate::abi::regularisers::{axis_neighbours, forward_reach};
 use crate::abi::surface_grid::SurfaceGridRef;
 use crate::cpu::background_step::background_step;
+use crate::cpu::sample_rays::sample_rays;
 use crate::cpu::surface_blocks::SkipAllocation;
 use crate::cpu::surface_delta_tv::delta_tv;
 use crate::cpu::surface_fwd::render;
@@ -201,8 +202,8 @@ impl CpuSurface {
                         h,
                     );
                 }
-                SurfacePass::Background { lr, beta, eps } => {
-                    background_step(&mut self.steps.bg, *lr, *beta, *eps);
+                SurfacePass::Background(s) => {
+                    background_step(&mut self.steps.bg, s.lr, s.beta, s.eps);
                 }
             }
         }
@@ -261,7 +262,7 @@ impl StageBackend<SurfaceStage> for CpuSurface {
 
     fn submit(&mut self, src: TrainRays, p: &SurfaceStepParams) -> Result<()> {
         let mut clock = PhaseClock::start();
-        let batch = HostRays::of(src, &mut clock)?;
+        let batch = HostRays::of(src, &mut clock, sample_rays)?;
         let stats = self.step_on(&batch, p, clock)?;
         self.steps.push(stats);
         Ok(())

@@ -302,8 +302,8 @@ impl VulkanSurface {
                     let q = &self.queue;
                     record_surface_rmsprop(b, &io, &q.step, &q.args, h)?;
                 }
-                SurfacePass::Background { lr, beta, eps } => {
-                    record_background_step(b, &self.queue.bg, *lr, *beta, *eps)?
+                SurfacePass::Background(s) => {
+                    record_background_step(b, &self.queue.bg, s.lr, s.beta, s.eps)?
                 }
             }
         }
@@ -437,7 +437,7 @@ impl VulkanSurface {
         weights: Option<&[f32]>,
         p: &SurfaceStepParams,
     ) -> Result<SurfaceGradients> {
-        self.settle()?;
+        self.queue.settle()?;
         let n = rays.len() / 6;
         ensure!(
             weights.is_none_or(|w| w.len() == n),
@@ -472,13 +472,8 @@ impl VulkanSurface {
 
     /// Number of vertices touched by the last step (read from the step record).
     pub fn last_touched(&self) -> Result<u32> {
-        self.settle()?;
+        self.queue.settle()?;
         Ok(self.queue.header()?.count)
-    }
-
-    /// Wait for the steps in flight (before the host reads, writes or frees what they use).
-    fn settle(&self) -> Result<()> {
-        self.queue.settle()
     }
 }
 
@@ -566,7 +561,7 @@ impl SurfaceBackend for VulkanSurface {
         truncation: Truncation,
         stop_thresh: f32,
     ) -> Result<(Vec<f32>, SurfCounts)> {
-        self.settle()?;
+        self.queue.settle()?;
         let n = rays.len() / 6;
         let sp = surface_params(&self.meta, truncation, stop_thresh, [1.0; 3]);
         let no_loss = SurfaceLoss {
@@ -625,8 +620,7 @@ impl SlotFigures for SurfaceStepStats {
             consistency: sums[2] as f64 / nf,
             reg_loss: reg.iter().map(|&x| x as f64).sum(),
             counts: readback.part::<TrainCounts>(slot, 2)?[0],
-            device_ns: 0.0,
-            host: Default::default(),
+            ..Default::default()
         })
     }
 
