@@ -24,6 +24,20 @@ pub struct PlenoxelsSeconds {
     pub total: f64,
 }
 
+impl PlenoxelsSeconds {
+    /// A run's wall time `s` with the upsamplings' `upsample` seconds.
+    pub fn with_upsample(s: SurfaceSeconds, upsample: f64) -> Self {
+        PlenoxelsSeconds {
+            load: s.load,
+            train: s.train,
+            upsample,
+            checkpoint: s.checkpoint,
+            render_test: s.render_test,
+            total: s.total,
+        }
+    }
+}
+
 /// Samples per training ray of stage 1.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct SamplesPerRay {
@@ -76,7 +90,7 @@ pub struct PlenoxelsFigures {
     pub bytes_per_vertex: f64,
 }
 
-/// Wall time of a stage-2 run's phases, seconds.
+/// Wall time of a stage-2 run's phases, seconds (of a stage-1 run: all but the upsamplings').
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct SurfaceSeconds {
     /// Reading the dataset.

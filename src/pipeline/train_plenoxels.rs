@@ -33,11 +33,11 @@ pub fn train_plenoxels(
     data: &Loaded,
     gpu: Option<&Gpu>,
 ) -> Result<Trained<PlenoxelsMetrics>> {
-    let t_all = Instant::now();
+    let timing = (data.seconds, Instant::now());
     // A new run's flags are checked before its folder is claimed.
     let fresh_cfg = (!opts.resume).then(|| fresh_config(opts)).transpose()?;
     let mut run = claim(opts, RunStage::Plenoxels, &[&opts.data], &data.data)?;
-    let (load_s, data) = (data.seconds, &data.data);
+    let data = &data.data;
     let (mut backend, cfg, start) = if let Some(cfg) = fresh_cfg {
         let grid = Grid::sphere(
             cfg.res,
@@ -72,14 +72,6 @@ pub fn train_plenoxels(
     let (report, rendered) =
         plenoxels_steps::train(backend.as_mut(), data, &cfg, &opts.out, start, !opts.quiet)?;
     let r = &report.run;
-    let seconds = PlenoxelsSeconds {
-        load: load_s,
-        train: r.train_seconds,
-        upsample: report.upsample_seconds,
-        checkpoint: r.checkpoint_seconds,
-        render_test: r.render_seconds,
-        total: load_s + t_all.elapsed().as_secs_f64(),
-    };
     let figures = PlenoxelsFigures {
         samples_per_ray: Some(SamplesPerRay {
             shaded: r.per_ray.shaded,
@@ -90,7 +82,9 @@ pub fn train_plenoxels(
         allocated_vertices: report.allocated_vertices,
         bytes_per_vertex: report.bytes_per_vertex,
     };
-    let trainer = Trainer::of(RunStage::Plenoxels, backend.as_ref(), gpu, data)?;
+    let trainer = Trainer::of(RunStage::Plenoxels, backend.as_ref(), gpu, data, timing)?;
+    let upsample = report.upsample_seconds;
+    let seconds = |s| PlenoxelsSeconds::with_upsample(s, upsample);
     trainer.finish(&run, (r, rendered), seconds, figures, cfg)
 }
 

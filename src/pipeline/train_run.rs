@@ -1,7 +1,7 @@
 //! What both training stages share: the dataset as loaded for training, a run's `run.json`, how a
 //! training call ended, resuming from a checkpoint, and the `metrics.json` of a finished run.
 
-use super::metrics::TrainMetrics;
+use super::metrics::{SurfaceSeconds, TrainMetrics};
 use super::train_options::TrainOptions;
 use crate::checkpoint::{self, BackgroundRecord, Recorded};
 use crate::data::dataset::peak_rss_bytes;
@@ -218,41 +218,57 @@ pub(super) fn refuse_clashes(clashes: &[(&str, bool)], kept: &str, steps: &str) 
     Ok(())
 }
 
-/// Who trained a run: what both stages' `metrics.json` record of it besides its figures.
+/// Who trained a run and since when: what both stages' `metrics.json` record of it besides its
+/// figures.
 pub(super) struct Trainer {
     stage: RunStage,
     backend: &'static str,
     device: Option<String>,
     background: BackgroundRecord,
+    /// Seconds reading the dataset, and when the training call started.
+    load: f64,
+    started: Instant,
 }
 
 impl Trainer {
-    /// A `stage` run trained by `backend` on `gpu` (`None`: the CPU twins) on `data`, with the
-    /// background as `backend` holds it now.
+    /// A `stage` run trained by `backend` on `gpu` (`None`: the CPU twins) on `data` (loaded in
+    /// `load` seconds) by a call that started at `started`, with the background as `backend`
+    /// holds it now.
     pub(super) fn of<S: Stage, B: StageBackend<S> + ?Sized>(
         stage: RunStage,
         backend: &B,
         gpu: Option<&Gpu>,
         data: &Dataset,
+        (load, started): (f64, Instant),
     ) -> Result<Self> {
         Ok(Trainer {
             stage,
             backend: backend.name(),
             device: gpu.map(|g| g.info().name.clone()),
             background: BackgroundRecord::of(data.background, &backend.background()?),
+            load,
+            started,
         })
     }
 
     /// Write the `metrics.json` of the finished run into `run`: the loop's `report` and the test
-    /// renders, with the stage's wall time per phase, its own figures and its configuration.
+    /// renders, with the stage's wall time per phase (`seconds` of the phases both stages have),
+    /// its own figures and its configuration.
     pub(super) fn finish<W: Serialize, X: Serialize, C: Serialize, P>(
         self,
         run: &RunDir,
         (report, rendered): (&LoopReport<P>, RenderedSplit),
-        wall_seconds: W,
+        seconds: impl FnOnce(SurfaceSeconds) -> W,
         figures: X,
         config: C,
     ) -> Result<Trained<TrainMetrics<W, X, C>>> {
+        let wall_seconds = seconds(SurfaceSeconds {
+            load: self.load,
+            train: report.train_seconds,
+            checkpoint: report.checkpoint_seconds,
+            render_test: report.render_seconds,
+            total: self.load + self.started.elapsed().as_secs_f64(),
+        });
         let metrics = TrainMetrics {
             stage: self.stage.name().into(),
             backend: self.backend.into(),

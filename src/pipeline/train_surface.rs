@@ -2,7 +2,7 @@
 //! svox2 checkpoint (method.md §3.1), or resume a stage-2 run, train it, and write
 //! `metrics.json` ([`SurfaceMetrics`]).
 
-use super::metrics::{SurfaceFigures, SurfaceMetrics, SurfacePerRay, SurfaceSeconds};
+use super::metrics::{SurfaceFigures, SurfaceMetrics, SurfacePerRay};
 use super::train_options::TrainOptions;
 use super::train_run::{claim, refuse_clashes, resume, run_info, Loaded, Trained, Trainer};
 use crate::checkpoint::format as checkpoint;
@@ -110,7 +110,7 @@ pub fn train_surface(
     data: &Loaded,
     gpu: Option<&Gpu>,
 ) -> Result<Trained<SurfaceMetrics>> {
-    let t_all = Instant::now();
+    let timing = (data.seconds, Instant::now());
     // A new run's inputs and flags are checked before its folder is claimed.
     let fresh = (!opts.resume)
         .then(|| fresh_start(opts, &data.data))
@@ -118,7 +118,7 @@ pub fn train_surface(
     let mut inputs = vec![opts.data.as_path()];
     inputs.extend(opts.init.as_deref());
     let mut run = claim(opts, RunStage::Surface, &inputs, &data.data)?;
-    let (load_s, data) = (data.seconds, &data.data);
+    let data = &data.data;
     let (mut backend, cfg, start) = match fresh {
         Some((grid, cfg, bg)) => {
             let mut b = make_backend(gpu, grid)?;
@@ -151,13 +151,6 @@ pub fn train_surface(
     let (report, rendered) =
         surface_steps::train(backend.as_mut(), data, &cfg, &opts.out, start, !opts.quiet)?;
     let r = &report.run;
-    let seconds = SurfaceSeconds {
-        load: load_s,
-        train: r.train_seconds,
-        checkpoint: r.checkpoint_seconds,
-        render_test: r.render_seconds,
-        total: load_s + t_all.elapsed().as_secs_f64(),
-    };
     let per_ray = &r.per_ray;
     let figures = SurfaceFigures {
         per_ray: Some(SurfacePerRay {
@@ -173,8 +166,8 @@ pub fn train_surface(
         vertices_before_prune: Some(report.vertices_before_prune),
         allocated_vertices: report.allocated_vertices,
     };
-    let trainer = Trainer::of(RunStage::Surface, backend.as_ref(), gpu, data)?;
-    trainer.finish(&run, (r, rendered), seconds, figures, cfg)
+    let trainer = Trainer::of(RunStage::Surface, backend.as_ref(), gpu, data, timing)?;
+    trainer.finish(&run, (r, rendered), |s| s, figures, cfg)
 }
 
 /// The flags `--resume` refuses to change in a stage-2 run.

@@ -5,7 +5,7 @@
 use super::config::PlenoxelsConfig;
 use super::progress::Progress;
 use super::render::{render_split, RenderedSplit};
-use super::steps::{self, loop_schedule, LoopReport, LoopSchedule, StageSteps};
+use super::steps::{self, LoopReport, StageSteps};
 use crate::abi::buffers::PlenoxelPerRay;
 use crate::checkpoint::BackgroundRecord;
 use crate::data::{Dataset, Split};
@@ -100,10 +100,6 @@ impl<'b> StageSteps<PlenoxelsStage, dyn PlenoxelsBackend + 'b> for PlenoxelsStep
 
     fn config(&self) -> &PlenoxelsConfig {
         self.cfg
-    }
-
-    fn schedule(&self) -> LoopSchedule {
-        loop_schedule!(self.cfg)
     }
 
     /// From step 0 the background starts as `data.background` says

@@ -38,6 +38,11 @@ pub struct LoopSchedule {
     pub checkpoint_min_seconds: f32,
 }
 
+/// A stage configuration's [`LoopSchedule`].
+pub trait Scheduled {
+    fn schedule(&self) -> LoopSchedule;
+}
+
 /// The [`LoopSchedule`] of a stage configuration: its fields of the same names.
 macro_rules! loop_schedule {
     ($c:expr) => {
@@ -54,10 +59,9 @@ pub(crate) use loop_schedule;
 
 /// What a stage does around the shared loop, on backends of type `B`.
 pub trait StageSteps<S: Stage, B: StageBackend<S> + ?Sized> {
-    /// The configuration each checkpoint records.
-    type Config: Serialize;
+    /// The configuration each checkpoint records, with the loop's schedule.
+    type Config: Serialize + Scheduled;
     fn config(&self) -> &Self::Config;
-    fn schedule(&self) -> LoopSchedule;
     /// The parameters of `step`, drawing what it needs from `rng` (after the batch's seed).
     fn params(&mut self, step: u32, rng: &mut Pcg64) -> S::Params;
     /// Render the test split into `out`.
@@ -129,7 +133,7 @@ where
     std::fs::create_dir_all(out)
         .with_context(|| format!("creating run directory {}", out.display()))?;
     let _catch = interrupt::catch();
-    let sched = stage.schedule();
+    let sched = stage.config().schedule();
     let ck = RunCheckpoints {
         path: checkpoint::path::<S>(out),
         config: serde_json::to_value(stage.config()).context("recording the configuration")?,

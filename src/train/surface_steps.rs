@@ -3,7 +3,7 @@
 //! α ≥ `prune_alpha` are dropped before the last checkpoint and the test renders.
 
 use super::render::{render_split_with, RenderedSplit};
-use super::steps::{self, loop_schedule, LoopReport, LoopSchedule, StageSteps};
+use super::steps::{self, LoopReport, StageSteps};
 use super::surface_config::SurfaceConfig;
 use crate::abi::buffers::TrainPerRay;
 use crate::abi::regularisers::{delta_tv_chunk, opacity_tv_chunk, OpacityChunk};
@@ -93,10 +93,6 @@ impl<'b> StageSteps<SurfaceStage, dyn SurfaceBackend + 'b> for SurfaceSteps<'_> 
 
     fn config(&self) -> &SurfaceConfig {
         self.cfg
-    }
-
-    fn schedule(&self) -> LoopSchedule {
-        loop_schedule!(self.cfg)
     }
 
     fn views<'d>(&self, data: &'d Dataset) -> Result<TrainViews<'d>> {
