@@ -13,6 +13,7 @@ use crate::abi::buffers::{Background, StepHeader};
 use crate::abi::rays::SampledRays;
 use crate::abi::step::{STEP_FLAGS, STEP_RESET_BYTES};
 use anyhow::{anyhow, Result};
+use bytemuck::Pod;
 use std::cell::RefCell;
 
 /// A step's figures as its readback slot holds them.
@@ -237,6 +238,11 @@ impl<F: SlotFigures> StepQueue<F> {
             out,
         };
         Ok((b, at))
+    }
+
+    /// The first `n` elements of the last batch's per-ray output.
+    pub fn ray_output<T: Pod>(&self, n: usize) -> Result<Vec<T>> {
+        self.rays.out().download_range(0, n)
     }
 
     /// The last sampled batch of `n` rays.

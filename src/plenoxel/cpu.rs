@@ -37,12 +37,7 @@ pub struct CpuPlenoxels {
 impl CpuPlenoxels {
     pub fn new(grid: Grid) -> Self {
         let mut b = CpuPlenoxels {
-            grid: Grid {
-                links: Vec::new(),
-                density: Vec::new(),
-                sh: Vec::new(),
-                ..grid.clone()
-            },
+            grid: grid.clone().without_arrays(),
             occ: Vec::new(),
             slots: Vec::new(),
             grad_density: Vec::new(),

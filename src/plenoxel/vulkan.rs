@@ -63,12 +63,7 @@ impl VulkanPlenoxels {
             state_density: gpu.zeros::<f32>(n)?,
             state_sh: gpu.zeros::<f32>(n * SH_DIM)?,
             params: gpu.host_to_device::<PlenoxelParams>(1)?,
-            meta: Grid {
-                links: Vec::new(),
-                density: Vec::new(),
-                sh: Vec::new(),
-                ..grid
-            },
+            meta: grid.without_arrays(),
         })
     }
 
@@ -221,13 +216,6 @@ impl VulkanPlenoxels {
     pub fn sampled_batch(&self, n: usize) -> Result<SampledRays> {
         self.queue.sampled_batch(n)
     }
-
-    /// Per-ray squared error of the last training pass over `n` rays.
-    fn ray_loss(&self, n: usize) -> Result<Vec<f32>> {
-        let mut loss: Vec<f32> = self.queue.rays.out().download()?;
-        loss.truncate(n);
-        Ok(loss)
-    }
 }
 
 impl QueuedBackend<PlenoxelsStage> for VulkanPlenoxels {
@@ -302,7 +290,7 @@ impl PlenoxelsBackend for VulkanPlenoxels {
         self.record_plan(src, &plan, &mut PhaseClock::start())?
             .submit()?;
         let g = Gradients {
-            ray_loss: self.ray_loss(n)?,
+            ray_loss: self.queue.ray_output(n)?,
             density: self.grad_density.download()?,
             sh: self.grad_sh.download()?,
             background: self.queue.take_background_grad()?,
@@ -340,9 +328,7 @@ impl PlenoxelsBackend for VulkanPlenoxels {
             n as u32,
         )?;
         b.submit()?;
-        let mut rgb: Vec<f32> = self.queue.rays.out().download()?;
-        rgb.truncate(3 * n);
-        Ok((rgb, self.read_stats()?))
+        Ok((self.queue.ray_output(3 * n)?, self.read_stats()?))
     }
 
     fn max_weights(&mut self, rays: &[f32], stop_thresh: f32) -> Result<Vec<f32>> {

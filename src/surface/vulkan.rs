@@ -205,13 +205,7 @@ impl VulkanSurface {
             normal_prefix,
             reg_loss: gpu.zeros::<f32>(REG_VALUES)?,
             reg_skipped: gpu.zeros::<u32>(1)?,
-            meta: SurfaceGrid {
-                links: Vec::new(),
-                delta: Vec::new(),
-                opacity: Vec::new(),
-                sh: Vec::new(),
-                ..grid
-            },
+            meta: grid.without_arrays(),
         })
     }
 
@@ -423,10 +417,6 @@ impl VulkanSurface {
         Ok(self.stats.download_range::<TrainCounts>(0, 1)?[0])
     }
 
-    fn ray_loss(&self, n: usize) -> Result<Vec<RayLoss>> {
-        self.queue.rays.out().download_range(0, n)
-    }
-
     /// The training pass alone (no regulariser, no update) on rays with optional per-ray
     /// importance `weights`: per-ray losses, the gradients, the touched flags and the counters;
     /// gradients and flags are cleared afterwards.
@@ -457,7 +447,7 @@ impl VulkanSurface {
         b.submit()?;
         let rows = self.rows;
         let g = SurfaceGradients {
-            ray_loss: self.ray_loss(n)?,
+            ray_loss: self.queue.ray_output(n)?,
             delta: self.grad[0].download_range(0, rows)?,
             opacity: self.grad[1].download_range(0, rows)?,
             sh: self.grad[2].download_range(0, rows * SH_DIM)?,
@@ -602,7 +592,7 @@ impl SurfaceBackend for VulkanSurface {
             n as u32,
         )?;
         b.submit()?;
-        let out: Vec<SurfOut> = self.queue.rays.out().download_range(0, n)?;
+        let out: Vec<SurfOut> = self.queue.ray_output(n)?;
         let counts = self.stats.download_range::<SurfCounts>(0, 1)?[0];
         Ok((out.iter().flat_map(|o| o.rgb).collect(), counts))
     }
