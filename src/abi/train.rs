@@ -3,6 +3,21 @@
 
 use crate::abi::step::RowRange;
 
+/// Hyper-parameters of one RMSProp step of a learned background (`background_step`).
+#[derive(Clone, Copy, Debug)]
+pub struct BackgroundStep {
+    pub lr: f32,
+    pub beta: f32,
+    pub eps: f32,
+}
+
+impl BackgroundStep {
+    /// The step of a background when it is learned (`None` when it is fixed).
+    pub fn when_learned(learned: bool, lr: f32, beta: f32, eps: f32) -> Option<Self> {
+        learned.then_some(BackgroundStep { lr, beta, eps })
+    }
+}
+
 /// Hyper-parameters of one RMSProp step.
 #[derive(Clone, Copy, Debug)]
 pub struct RmsProp {

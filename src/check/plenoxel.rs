@@ -15,7 +15,7 @@ use crate::cpu::background_step::background_step;
 use crate::cpu::occupancy;
 use crate::cpu::optim_args::optim_args;
 use crate::cpu::{rmsprop_sparse, tv, PlenoxelsOptimArrays};
-use crate::gpu::{record_optim_args, Gpu, GpuBuffer};
+use crate::gpu::{record_optim_args, record_tv, Gpu, GpuBuffer};
 use crate::grid::{Grid, SH_DIM};
 use crate::kernels;
 use crate::math::plenoxel::PlenoxelCounts;
@@ -434,22 +434,9 @@ pub fn check_tv(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
             let db = gpu.upload(data)?;
             let gb = gpu.zeros::<f32>(data.len())?;
             let step = gpu.upload(&step_buffer(g.allocated(), &[]))?;
-            gpu.run_1d(
-                &kernels::tv::INFO,
-                &kernels::tv::Push {
-                    links: links.address(),
-                    data: db.address(),
-                    grad: gb.address(),
-                    step: step.address(),
-                    res: g.res,
-                    start,
-                    count,
-                    channels,
-                    scale: 0.7,
-                    touch_bits: c.touch,
-                },
-                count + g.res[1] * g.res[2],
-            )?;
+            let mut b = gpu.batch()?;
+            record_tv(&mut b, &links, &db, &gb, &step, &c)?;
+            b.submit()?;
             let got: Vec<f32> = gb.download()?;
             for (i, (&a, &b)) in got.iter().zip(&want).enumerate() {
                 cmp.value(a as f64, b as f64, || {

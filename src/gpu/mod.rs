@@ -3,7 +3,7 @@
 //! submission with timestamp queries (`batch`), per-kernel profiles (`profile`), and what the Vulkan
 //! backends share: per-batch ray buffers (`ray_buffers`), per-step results in a ring of
 //! host-visible slots (`readback`) with the step's loss summed on the device (`loss_sum`), the
-//! steps submitted and not yet read (`in_flight`), the `optim_args` recording (`optim_args`), the
+//! steps submitted and not yet read (`in_flight`), the `optim_args` and `tv` recordings (`optim_args`, `tv`), the
 //! host time of a training step by phase (`step_times`), the training views and the batches
 //! sampled from them (`train_views`).
 
@@ -23,6 +23,7 @@ mod readback;
 mod step_queue;
 mod step_times;
 mod train_views;
+mod tv;
 
 pub use background_step::record_background_step;
 pub use batch::{Batch, BatchTimes, InFlight};
@@ -35,9 +36,10 @@ pub use optim_args::record_optim_args;
 pub use profile::Profile;
 pub use ray_buffers::RayBuffers;
 pub use readback::{Readback, STEP_SLOTS};
-pub use step_queue::{SlotFigures, StepQueue};
+pub use step_queue::{BatchRays, SlotFigures, StepQueue};
 pub use step_times::{timed, Phase, PhaseClock, StepTimes};
 pub use train_views::{record_sort_runs, KeyDraw, SampledAt, TrainRays, TrainViewBuffers};
+pub use tv::record_tv;
 
 use std::sync::OnceLock;
 

@@ -1,15 +1,19 @@
-//! What both stages' Vulkan backends keep for their training steps: the steps in flight and their
-//! figures (each step's sums and counters copied into a readback slot, read in groups), the
-//! per-batch ray buffers, the training views on the device, and the background the kernels
-//! composite on (a learned one is stepped on the device, so a step needs no host round trip).
+//! What both stages' Vulkan backends keep for their training steps: the device, the steps in
+//! flight and their figures (each step's sums and counters copied into a readback slot, read in
+//! groups), the step record with the optimiser's indirect arguments, the per-batch ray buffers,
+//! the training views on the device, and the background the kernels composite on (a learned one
+//! is stepped on the device, so a step needs no host round trip).
 
 use super::{
-    Batch, BatchTimes, Gpu, GpuBuffer, Phase, PhaseClock, RayBuffers, Readback, SampledAt,
-    StepMeta, StepTimes, StepsInFlight, TrainRays, TrainViewBuffers, STEP_SLOTS,
+    record_loss_sum, record_optim_args, Batch, BatchTimes, Gpu, GpuBuffer, Phase, PhaseClock,
+    RayBuffers, Readback, StepMeta, StepTimes, StepsInFlight, TrainRays, TrainViewBuffers,
+    STEP_SLOTS,
 };
-use crate::abi::buffers::Background;
-use crate::abi::rays::{SampleSet, SampledRays};
+use crate::abi::buffers::{Background, StepHeader};
+use crate::abi::rays::SampledRays;
+use crate::abi::step::{STEP_FLAGS, STEP_RESET_BYTES};
 use anyhow::{anyhow, Result};
+use bytemuck::Pod;
 use std::cell::RefCell;
 
 /// A step's figures as its readback slot holds them.
@@ -20,6 +24,16 @@ pub trait SlotFigures: Sized {
     fn set_times(&mut self, device_ns: f64, host: StepTimes);
 }
 
+/// Device addresses of a training batch: rays (6 floats each), targets (3 floats each),
+/// per-ray importance weights (0: every weight 1) and the per-ray output.
+#[derive(Clone, Copy, Debug)]
+pub struct BatchRays {
+    pub rays: u64,
+    pub targets: u64,
+    pub weights: u64,
+    pub out: u64,
+}
+
 /// The training steps of a Vulkan backend, with figures of type `F`.
 pub struct StepQueue<F> {
     /// Steps submitted and not yet read. First, so that dropping the queue waits for them before
@@ -28,6 +42,13 @@ pub struct StepQueue<F> {
     steps: RefCell<StepsInFlight>,
     /// Figures of completed steps not yet taken.
     done: Vec<(F, BatchTimes)>,
+    gpu: Gpu,
+    /// The step record (glsl/lib/step.glsl): `StepHeader` (touched count, sample counters, n),
+    /// the touched flags and list.
+    pub step: GpuBuffer,
+    /// Indirect dispatch arguments of the optimiser's pass over the touched vertices
+    /// (`optim_args`).
+    pub args: GpuBuffer,
     /// The background (`Background`): read by the render and training kernels, and, when
     /// learned, its gradient accumulated and stepped on the device (`background_step`).
     pub bg: GpuBuffer,
@@ -43,12 +64,15 @@ pub struct StepQueue<F> {
 }
 
 impl<F: SlotFigures> StepQueue<F> {
-    /// A queue whose batches output `out_bytes` per ray and whose slots hold `parts` (bytes
-    /// each), on a white fixed background.
-    pub fn new(gpu: &Gpu, out_bytes: usize, parts: &[u64]) -> Result<Self> {
+    /// A queue on `gpu` with the step record `step` (u32 words), whose batches output
+    /// `out_bytes` per ray and whose slots hold `parts` (bytes each), on a white fixed background.
+    pub fn new(gpu: &Gpu, step: &[u32], out_bytes: usize, parts: &[u64]) -> Result<Self> {
         Ok(StepQueue {
             steps: RefCell::default(),
             done: Vec::new(),
+            gpu: gpu.clone(),
+            step: gpu.upload(step)?,
+            args: gpu.zeros::<u32>(3)?,
             bg: gpu.upload(&[Background::new([1.0; 3], false)])?,
             bg_learned: false,
             rays: RayBuffers::new(out_bytes),
@@ -60,6 +84,33 @@ impl<F: SlotFigures> StepQueue<F> {
     /// Wait for the steps in flight (before the host reads, writes or frees what they use).
     pub fn settle(&self) -> Result<()> {
         self.steps.borrow_mut().settle()
+    }
+
+    /// The device.
+    pub fn gpu(&self) -> &Gpu {
+        &self.gpu
+    }
+
+    /// The step record's header (as the last batch run left it).
+    pub fn header(&self) -> Result<StepHeader> {
+        Ok(self.step.download_range::<StepHeader>(0, 1)?[0])
+    }
+
+    /// Record `optim_args` on the step record: the indirect arguments in `args`.
+    pub fn record_optim_args(&self, b: &mut Batch) -> Result<()> {
+        record_optim_args(b, &self.step, &self.args)
+    }
+
+    /// Clear the gradient buffers `grads` and the touched flags of `rows` vertex rows (one
+    /// submission, waited for), so that no gradient or flag stays behind for the next step.
+    pub fn clear_gradients(&self, grads: &[&GpuBuffer], rows: usize) -> Result<()> {
+        let mut b = self.gpu.batch()?;
+        for g in grads {
+            b.fill_zero(g);
+        }
+        b.fill_zero_range(&self.step, 4 * STEP_FLAGS as u64, 4 * rows as u64);
+        b.submit()?;
+        Ok(())
     }
 
     /// Read the figures of every step submitted since the last read.
@@ -108,6 +159,20 @@ impl<F: SlotFigures> StepQueue<F> {
         Ok(self.steps.get_mut().pending())
     }
 
+    /// Record summing the batch's per-ray losses (`n` rays, `fields` floats from each ray's
+    /// output of `stride` floats) into part 0 of `slot`.
+    pub fn record_loss_sum(
+        &self,
+        b: &mut Batch,
+        slot: usize,
+        n: usize,
+        stride: u32,
+        fields: u32,
+    ) -> Result<()> {
+        let out = self.rays.out().address();
+        record_loss_sum(b, out, self.readback.address(slot, 0), n, stride, fields)
+    }
+
     /// Submit a recorded step of `n` rays without waiting (up to `MAX_IN_FLIGHT` steps run on
     /// the device while the host records the next); `clock` has its host time so far.
     pub fn submit(&mut self, b: Batch, n: usize, mut clock: PhaseClock) -> Result<()> {
@@ -122,38 +187,62 @@ impl<F: SlotFigures> StepQueue<F> {
         )
     }
 
-    /// Before a batch of `n` rays drawn on the device from `set` (id `id`) is recorded: the set
-    /// uploaded unless it is there, room made for the batch; returns the address of the per-ray
-    /// output. The upload is charged to `clock`.
-    pub fn reserve_sampled(
+    /// Start the batch of a training step on `src`'s rays: uploaded (host rays), or drawn on the
+    /// device by `sample_rays` from the views (uploaded once); the batch opens with the step
+    /// reset (the step record's touched count and counters) and clearing `counters`. The uploads
+    /// are charged to `clock`'s upload, the draw's recording to its sampling. Returns the batch
+    /// with the addresses of its rays.
+    pub fn begin(
         &mut self,
-        gpu: &Gpu,
-        id: u64,
-        set: &SampleSet,
-        n: usize,
+        src: TrainRays,
         clock: &mut PhaseClock,
-    ) -> Result<u64> {
-        TrainViewBuffers::ensure(&mut self.views, gpu, id, set, n)?;
-        let [_, _, out] = self.rays.reserve(gpu, n)?;
+        counters: &[&GpuBuffer],
+    ) -> Result<(Batch, BatchRays)> {
+        let (id, set, seed, n) = match src {
+            TrainRays::Host { rays, targets } => {
+                return self.begin_host(rays, Some(targets), clock, counters)
+            }
+            TrainRays::Sampled { id, set, seed, n } => (id, set, seed, n),
+        };
+        let views = TrainViewBuffers::ensure(&mut self.views, &self.gpu, id, set, n)?;
+        let [_, _, out] = self.rays.reserve(&self.gpu, n)?;
         clock.mark(Phase::Upload);
-        Ok(out)
+        let mut b = start_batch(&self.gpu, &self.step, counters)?;
+        let at = views.record_sample(&mut b, set, seed, n)?;
+        clock.mark(Phase::Sampling);
+        let at = BatchRays {
+            rays: at.rays,
+            targets: at.targets,
+            weights: at.weights,
+            out,
+        };
+        Ok((b, at))
     }
 
-    /// Record drawing the batch [`Self::reserve_sampled`] made room for (charged to `clock`);
-    /// the addresses of its rays, targets and weights.
-    pub fn record_sample(
-        &self,
-        b: &mut Batch,
-        set: &SampleSet,
-        seed: u64,
-        n: usize,
+    /// Upload `rays` (and `targets`) and start a batch as [`Self::begin`] does (the upload
+    /// charged to `clock`). Returns the batch with the addresses of the rays (no weights).
+    pub fn begin_host(
+        &mut self,
+        rays: &[f32],
+        targets: Option<&[f32]>,
         clock: &mut PhaseClock,
-    ) -> Result<SampledAt> {
-        let views = self.views.as_ref();
-        let views = views.ok_or_else(|| anyhow!("no room was made for a sampled batch"))?;
-        let at = views.record_sample(b, set, seed, n)?;
-        clock.mark(Phase::Sampling);
-        Ok(at)
+        counters: &[&GpuBuffer],
+    ) -> Result<(Batch, BatchRays)> {
+        let [rays, targets, out] = self.rays.upload(&self.gpu, rays, targets)?;
+        clock.mark(Phase::Upload);
+        let b = start_batch(&self.gpu, &self.step, counters)?;
+        let at = BatchRays {
+            rays,
+            targets,
+            weights: 0,
+            out,
+        };
+        Ok((b, at))
+    }
+
+    /// The first `n` elements of the last batch's per-ray output.
+    pub fn ray_output<T: Pod>(&self, n: usize) -> Result<Vec<T>> {
+        self.rays.out().download_range(0, n)
     }
 
     /// The last sampled batch of `n` rays.
@@ -168,6 +257,15 @@ impl<F: SlotFigures> StepQueue<F> {
     pub fn background(&self) -> Result<Background> {
         self.settle()?;
         Ok(self.bg.download()?[0])
+    }
+
+    /// The gradient of the background (a learned one's, else zero), read and cleared.
+    pub fn take_background_grad(&self) -> Result<[f32; 3]> {
+        let mut bg = self.background()?;
+        let grad = bg.grad;
+        bg.grad = [0.0; 3];
+        self.bg.write(&[bg])?;
+        Ok(grad)
     }
 
     /// Replace the background (colour, whether it is learned, its optimiser state).
@@ -188,4 +286,14 @@ impl<F: SlotFigures> StepQueue<F> {
         fresh.done = std::mem::take(&mut self.done);
         Ok(())
     }
+}
+
+/// A batch opening with the step reset of the step record `step` and clearing `counters`.
+fn start_batch(gpu: &Gpu, step: &GpuBuffer, counters: &[&GpuBuffer]) -> Result<Batch> {
+    let mut b = gpu.batch()?;
+    b.fill_zero_range(step, 0, STEP_RESET_BYTES);
+    for c in counters {
+        b.fill_zero(c);
+    }
+    Ok(b)
 }

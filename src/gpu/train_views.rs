@@ -264,7 +264,8 @@ pub fn record_sort_runs(b: &mut Batch, src: &GpuBuffer, dst: &GpuBuffer, n: usiz
     b.dispatch_1d(&sample_rays_sort::INFO, &push, runs * SAMPLE_SORT_SIDE)
 }
 
-/// The rays of a training pass on a Vulkan backend.
+/// The rays of a training step: given on the host, or a batch to draw from training views (a
+/// Vulkan backend draws it on the device, a CPU backend on the host).
 #[derive(Clone, Copy)]
 pub enum TrainRays<'a> {
     /// Rays (6 floats each) and targets (3 floats each) from the host, uploaded.

@@ -60,6 +60,16 @@ pub fn state_bytes(slots: u64, rows: u64, channels: u64) -> u64 {
 }
 
 impl Grid {
+    /// The grid's resolution and placement without its arrays (links, density, SH).
+    pub fn without_arrays(self) -> Grid {
+        Grid {
+            links: Vec::new(),
+            density: Vec::new(),
+            sh: Vec::new(),
+            ..self
+        }
+    }
+
     /// Total number of vertex slots in `links`.
     pub fn slots(&self) -> usize {
         self.res.iter().map(|&r| r as usize).product()

@@ -45,6 +45,17 @@ pub struct SurfaceGrid {
 }
 
 impl SurfaceGrid {
+    /// The grid's resolution, placement, levels and scale without its arrays (links, δ, σα, SH).
+    pub fn without_arrays(self) -> SurfaceGrid {
+        SurfaceGrid {
+            links: Vec::new(),
+            delta: Vec::new(),
+            opacity: Vec::new(),
+            sh: Vec::new(),
+            ..self
+        }
+    }
+
     /// Borrowed view for the surface renderers (cubic grids only).
     pub fn as_ref(&self) -> SurfaceGridRef<'_> {
         SurfaceGridRef {

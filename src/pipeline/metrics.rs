@@ -1,6 +1,7 @@
-//! A training run's `metrics.json`, typed: [`PlenoxelsMetrics`] for a stage-1 (Plenoxels) run,
-//! [`SurfaceMetrics`] for a stage-2 (αSurf) run. The JSON layout is the one runs have always
-//! written; counters added over time are `Option`s, absent in runs written before them.
+//! A training run's `metrics.json`, typed: [`TrainMetrics`], what both stages record, with
+//! [`PlenoxelsMetrics`] for a stage-1 (Plenoxels) run and [`SurfaceMetrics`] for a stage-2
+//! (αSurf) run. The JSON layout is the one runs have always written; counters added over time
+//! are `Option`s, absent in runs written before them.
 
 use crate::checkpoint::BackgroundRecord;
 use crate::run::dir::METRICS;
@@ -23,6 +24,20 @@ pub struct PlenoxelsSeconds {
     pub total: f64,
 }
 
+impl PlenoxelsSeconds {
+    /// A run's wall time `s` with the upsamplings' `upsample` seconds.
+    pub fn with_upsample(s: SurfaceSeconds, upsample: f64) -> Self {
+        PlenoxelsSeconds {
+            load: s.load,
+            train: s.train,
+            upsample,
+            checkpoint: s.checkpoint,
+            render_test: s.render_test,
+            total: s.total,
+        }
+    }
+}
+
 /// Samples per training ray of stage 1.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct SamplesPerRay {
@@ -34,36 +49,48 @@ pub struct SamplesPerRay {
     pub skipped: f64,
 }
 
-/// `metrics.json` of a stage-1 run.
+/// `metrics.json` of a training run: what both stages record, with the stage's wall time per
+/// phase `W`, its own figures `X` (their fields stand between the test PSNR and the peak memory,
+/// as runs have always written them) and its configuration `C`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct PlenoxelsMetrics {
-    /// "plenoxels".
+pub struct TrainMetrics<W, X, C> {
+    /// "plenoxels" or "surface".
     pub stage: String,
     /// The backend's name ("cpu", "vulkan").
     pub backend: String,
     /// The Vulkan device's name (`None` on the CPU backend).
     #[serde(default)]
     pub device: Option<String>,
-    pub wall_seconds: PlenoxelsSeconds,
+    pub wall_seconds: W,
     pub train_rays_per_s: f64,
     pub final_train_mse: f64,
     /// Mean PSNR over the test views, dB.
     pub test_psnr: f64,
     pub test_psnr_per_view: Vec<f64>,
-    pub samples_per_ray: Option<SamplesPerRay>,
-    pub atomic_adds_per_ray: Option<f64>,
-    pub allocated_vertices: usize,
-    /// Bytes per vertex with its optimiser state.
-    pub bytes_per_vertex: f64,
+    #[serde(flatten)]
+    pub figures: X,
     /// Peak resident memory of the process (where the platform reports it).
     pub peak_rss_bytes: Option<u64>,
     /// The background at the end (a learned colour's value; absent in older runs: white).
     #[serde(default)]
     pub background: BackgroundRecord,
-    pub config: PlenoxelsConfig,
+    pub config: C,
 }
 
-/// Wall time of a stage-2 run's phases, seconds.
+/// `metrics.json` of a stage-1 run.
+pub type PlenoxelsMetrics = TrainMetrics<PlenoxelsSeconds, PlenoxelsFigures, PlenoxelsConfig>;
+
+/// What a stage-1 run records besides [`TrainMetrics`]' shared fields.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PlenoxelsFigures {
+    pub samples_per_ray: Option<SamplesPerRay>,
+    pub atomic_adds_per_ray: Option<f64>,
+    pub allocated_vertices: usize,
+    /// Bytes per vertex with its optimiser state.
+    pub bytes_per_vertex: f64,
+}
+
+/// Wall time of a stage-2 run's phases, seconds (of a stage-1 run: all but the upsamplings').
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct SurfaceSeconds {
     /// Reading the dataset.
@@ -96,31 +123,15 @@ pub struct SurfacePerRay {
 }
 
 /// `metrics.json` of a stage-2 run.
+pub type SurfaceMetrics = TrainMetrics<SurfaceSeconds, SurfaceFigures, SurfaceConfig>;
+
+/// What a stage-2 run records besides [`TrainMetrics`]' shared fields.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct SurfaceMetrics {
-    /// "surface".
-    pub stage: String,
-    /// The backend's name ("cpu", "vulkan").
-    pub backend: String,
-    /// The Vulkan device's name (`None` on the CPU backend).
-    #[serde(default)]
-    pub device: Option<String>,
-    pub wall_seconds: SurfaceSeconds,
-    pub train_rays_per_s: f64,
-    pub final_train_mse: f64,
-    /// Mean PSNR over the test views, dB.
-    pub test_psnr: f64,
-    pub test_psnr_per_view: Vec<f64>,
+pub struct SurfaceFigures {
     pub per_ray: Option<SurfacePerRay>,
     /// Vertices before dropping the surfaces with α below the configuration's `prune_alpha`.
     pub vertices_before_prune: Option<usize>,
     pub allocated_vertices: usize,
-    /// Peak resident memory of the process (where the platform reports it).
-    pub peak_rss_bytes: Option<u64>,
-    /// The background at the end (a learned colour's value; absent in older runs: white).
-    #[serde(default)]
-    pub background: BackgroundRecord,
-    pub config: SurfaceConfig,
 }
 
 /// Read the `metrics.json` of the run in `dir`.
@@ -135,7 +146,8 @@ impl PlenoxelsMetrics {
     /// The lines `train` prints when stage 1 ends: per-view PSNR, per-ray counters, the summary.
     pub fn summary(&self) -> String {
         let mut s = views(&self.test_psnr_per_view);
-        if let (Some(spr), Some(adds)) = (&self.samples_per_ray, self.atomic_adds_per_ray) {
+        let f = &self.figures;
+        if let (Some(spr), Some(adds)) = (&f.samples_per_ray, f.atomic_adds_per_ray) {
             s += &format!(
                 "per training ray: {:.1} samples shaded, {:.1} evaluated empty, {:.1} skipped by \
                  the occupancy volume; {:.1} gradient atomic adds\n",
@@ -147,8 +159,8 @@ impl PlenoxelsMetrics {
              with optimiser state), {:.1} s\n",
             self.test_psnr,
             self.train_rays_per_s,
-            self.allocated_vertices,
-            self.bytes_per_vertex,
+            f.allocated_vertices,
+            f.bytes_per_vertex,
             self.wall_seconds.total
         )
     }
@@ -158,7 +170,8 @@ impl SurfaceMetrics {
     /// The lines `train` prints when stage 2 ends: per-view PSNR, per-ray counters, the summary.
     pub fn summary(&self) -> String {
         let mut s = views(&self.test_psnr_per_view);
-        if let Some(r) = &self.per_ray {
+        let f = &self.figures;
+        if let Some(r) = &f.per_ray {
             s += &format!(
                 "per training ray: {:.1} cells read ({:.1} empty blocks skipped), {:.2} cubic \
                  solves ({:.1} skipped by min/max or segment culling), {:.2} hits, {:.2} cut by \
@@ -178,9 +191,9 @@ impl SurfaceMetrics {
              α < {} ({} before), {:.1} s\n",
             self.test_psnr,
             self.train_rays_per_s,
-            self.allocated_vertices,
+            f.allocated_vertices,
             self.config.prune_alpha,
-            self.vertices_before_prune
+            f.vertices_before_prune
                 .map_or("?".to_string(), |n| n.to_string()),
             self.wall_seconds.total
         )
@@ -261,11 +274,14 @@ mod tests {
     fn the_typed_metrics_read_and_write_the_untyped_layout() {
         let v = stage1_untyped();
         let m: PlenoxelsMetrics = serde_json::from_value(v.clone()).unwrap();
-        assert_eq!(m.samples_per_ray.as_ref().unwrap().empty, 20.25);
+        assert_eq!(m.figures.samples_per_ray.as_ref().unwrap().empty, 20.25);
         assert_eq!(serde_json::to_value(&m).unwrap(), with_white_background(v));
         let v = stage2_untyped();
         let m: SurfaceMetrics = serde_json::from_value(v.clone()).unwrap();
-        assert_eq!(m.per_ray.as_ref().unwrap().blocks_skipped, Some(3.0));
+        assert_eq!(
+            m.figures.per_ray.as_ref().unwrap().blocks_skipped,
+            Some(3.0)
+        );
         assert_eq!(serde_json::to_value(&m).unwrap(), with_white_background(v));
     }
 
@@ -281,7 +297,7 @@ mod tests {
             v.as_object_mut().unwrap().remove(k);
         }
         let m: PlenoxelsMetrics = serde_json::from_value(v).unwrap();
-        assert_eq!((&m.device, m.atomic_adds_per_ray), (&None, None));
+        assert_eq!((&m.device, m.figures.atomic_adds_per_ray), (&None, None));
         assert!(m.summary().contains("stage 1 done: test PSNR 21.90 dB"));
         assert!(!m.summary().contains("per training ray"));
         let mut v = stage2_untyped();
@@ -294,14 +310,15 @@ mod tests {
             v.as_object_mut().unwrap().remove(k);
         }
         let m: SurfaceMetrics = serde_json::from_value(v).unwrap();
-        assert_eq!((m.per_ray, m.vertices_before_prune), (None, None));
+        let f = m.figures;
+        assert_eq!((f.per_ray, f.vertices_before_prune), (None, None));
         let mut v = stage2_untyped();
         v["per_ray"]
             .as_object_mut()
             .unwrap()
             .remove("blocks_skipped");
         let m: SurfaceMetrics = serde_json::from_value(v).unwrap();
-        assert_eq!(m.per_ray.unwrap().blocks_skipped, None);
+        assert_eq!(m.figures.per_ray.unwrap().blocks_skipped, None);
         // A stage-2 file is not a stage-1 run's metrics.
         assert!(serde_json::from_value::<PlenoxelsMetrics>(stage2_untyped()).is_err());
     }

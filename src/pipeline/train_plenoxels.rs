@@ -1,15 +1,13 @@
 //! Stage 1 (Plenoxels) as a library call: claim the run directory, start a grid or resume the
 //! checkpoint, train, and write `metrics.json` ([`PlenoxelsMetrics`]).
 
-use super::metrics::{PlenoxelsMetrics, PlenoxelsSeconds, SamplesPerRay};
+use super::metrics::{PlenoxelsFigures, PlenoxelsMetrics, PlenoxelsSeconds, SamplesPerRay};
 use super::train_options::TrainOptions;
-use super::train_run::{check_resumed_data, refuse_clashes, resume, run_info, Loaded, Trained};
-use crate::checkpoint::BackgroundRecord;
-use crate::data::dataset::peak_rss_bytes;
+use super::train_run::{claim, refuse_clashes, resume, run_info, Loaded, Trained, Trainer};
 use crate::gpu::Gpu;
 use crate::grid::Grid;
 use crate::plenoxel::{CpuPlenoxels, PlenoxelsBackend, PlenoxelsStage, VulkanPlenoxels};
-use crate::run::{RunDir, RunStage};
+use crate::run::RunStage;
 use crate::train::{plenoxels_steps, PlenoxelsConfig};
 use anyhow::Result;
 use std::time::Instant;
@@ -22,31 +20,24 @@ pub fn make_backend(gpu: Option<&Gpu>, grid: Grid) -> Result<Box<dyn PlenoxelsBa
     })
 }
 
+/// The configuration of a new stage-1 run, refused when its grid does not fit in memory.
+fn fresh_config(opts: &TrainOptions) -> Result<PlenoxelsConfig> {
+    let cfg = opts.plenoxels_config()?;
+    opts.check_plenoxels_memory(&cfg)?;
+    Ok(cfg)
+}
+
 /// Train stage 1 into `opts.out` on `gpu` (`None`: the CPU twins).
 pub fn train_plenoxels(
     opts: &TrainOptions,
     data: &Loaded,
     gpu: Option<&Gpu>,
 ) -> Result<Trained<PlenoxelsMetrics>> {
-    let t_all = Instant::now();
+    let timing = (data.seconds, Instant::now());
     // A new run's flags are checked before its folder is claimed.
-    let fresh_cfg = if opts.resume {
-        None
-    } else {
-        let cfg = opts.plenoxels_config()?;
-        opts.check_plenoxels_memory(&cfg)?;
-        Some(cfg)
-    };
-    let mut run = RunDir::claim(
-        &opts.out,
-        RunStage::Plenoxels,
-        opts.open_mode(),
-        &[&opts.data],
-    )?;
-    let (load_s, data) = (data.seconds, &data.data);
-    if opts.resume {
-        check_resumed_data(opts, data)?;
-    }
+    let fresh_cfg = (!opts.resume).then(|| fresh_config(opts)).transpose()?;
+    let mut run = claim(opts, RunStage::Plenoxels, &[&opts.data], &data.data)?;
+    let data = &data.data;
     let (mut backend, cfg, start) = if let Some(cfg) = fresh_cfg {
         let grid = Grid::sphere(
             cfg.res,
@@ -80,37 +71,21 @@ pub fn train_plenoxels(
     );
     let (report, rendered) =
         plenoxels_steps::train(backend.as_mut(), data, &cfg, &opts.out, start, !opts.quiet)?;
-    let spr = &report.run.per_ray;
-    let metrics = PlenoxelsMetrics {
-        stage: RunStage::Plenoxels.name().into(),
-        backend: backend.name().into(),
-        device: gpu.map(|g| g.info().name.clone()),
-        wall_seconds: PlenoxelsSeconds {
-            load: load_s,
-            train: report.run.train_seconds,
-            upsample: report.upsample_seconds,
-            checkpoint: report.run.checkpoint_seconds,
-            render_test: report.run.render_seconds,
-            total: load_s + t_all.elapsed().as_secs_f64(),
-        },
-        train_rays_per_s: report.run.train_rays_per_s,
-        final_train_mse: report.run.final_mse,
-        test_psnr: report.run.test_psnr,
-        test_psnr_per_view: rendered.psnr,
+    let r = &report.run;
+    let figures = PlenoxelsFigures {
         samples_per_ray: Some(SamplesPerRay {
-            shaded: spr.shaded,
-            empty: spr.empty,
-            skipped: spr.skipped,
+            shaded: r.per_ray.shaded,
+            empty: r.per_ray.empty,
+            skipped: r.per_ray.skipped,
         }),
-        atomic_adds_per_ray: Some(spr.atomic_adds),
+        atomic_adds_per_ray: Some(r.per_ray.atomic_adds),
         allocated_vertices: report.allocated_vertices,
         bytes_per_vertex: report.bytes_per_vertex,
-        peak_rss_bytes: peak_rss_bytes(),
-        background: BackgroundRecord::of(data.background, &backend.background()?),
-        config: cfg,
     };
-    run.write_metrics(&metrics)?;
-    Ok(Trained::Done(metrics))
+    let trainer = Trainer::of(RunStage::Plenoxels, backend.as_ref(), gpu, data, timing)?;
+    let upsample = report.upsample_seconds;
+    let seconds = |s| PlenoxelsSeconds::with_upsample(s, upsample);
+    trainer.finish(&run, (r, rendered), seconds, figures, cfg)
 }
 
 /// The flags `--resume` refuses to change in a stage-1 run.

@@ -1,14 +1,20 @@
 //! What both training stages share: the dataset as loaded for training, a run's `run.json`, how a
-//! training call ended, and resuming from a checkpoint.
+//! training call ended, resuming from a checkpoint, and the `metrics.json` of a finished run.
 
+use super::metrics::{SurfaceSeconds, TrainMetrics};
 use super::train_options::TrainOptions;
-use crate::checkpoint::{self, Recorded};
+use crate::checkpoint::{self, BackgroundRecord, Recorded};
+use crate::data::dataset::peak_rss_bytes;
 use crate::data::ndc::Space;
 use crate::data::{Aabb, Dataset, LoadOptions, SceneBox};
+use crate::gpu::Gpu;
 use crate::run::identity::{check_same_data, DataIdentity};
-use crate::run::RunInfo;
+use crate::run::{RunDir, RunInfo, RunStage};
 use crate::stage::{Stage, StageBackend};
+use crate::train::steps::LoopReport;
+use crate::train::RenderedSplit;
 use anyhow::{bail, ensure, Context, Result};
+use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -134,6 +140,21 @@ pub fn check_resumed_data(opts: &TrainOptions, data: &Dataset) -> Result<()> {
     )
 }
 
+/// Claim `opts.out` for a `stage` run on `inputs` (`RunDir::claim`); resuming, refuse a run
+/// trained on another dataset than `data` ([`check_resumed_data`]).
+pub(super) fn claim(
+    opts: &TrainOptions,
+    stage: RunStage,
+    inputs: &[&Path],
+    data: &Dataset,
+) -> Result<RunDir> {
+    let run = RunDir::claim(&opts.out, stage, opts.open_mode(), inputs)?;
+    if opts.resume {
+        check_resumed_data(opts, data)?;
+    }
+    Ok(run)
+}
+
 /// How a training call ended.
 #[derive(Clone, Debug)]
 pub enum Trained<M> {
@@ -204,4 +225,74 @@ pub(super) fn refuse_clashes(clashes: &[(&str, bool)], kept: &str, steps: &str) 
         named.join(", ")
     );
     Ok(())
+}
+
+/// Who trained a run and since when: what both stages' `metrics.json` record of it besides its
+/// figures.
+pub(super) struct Trainer {
+    stage: RunStage,
+    backend: &'static str,
+    device: Option<String>,
+    background: BackgroundRecord,
+    /// Seconds reading the dataset, and when the training call started.
+    load: f64,
+    started: Instant,
+}
+
+impl Trainer {
+    /// A `stage` run trained by `backend` on `gpu` (`None`: the CPU twins) on `data` (loaded in
+    /// `load` seconds) by a call that started at `started`, with the background as `backend`
+    /// holds it now.
+    pub(super) fn of<S: Stage, B: StageBackend<S> + ?Sized>(
+        stage: RunStage,
+        backend: &B,
+        gpu: Option<&Gpu>,
+        data: &Dataset,
+        (load, started): (f64, Instant),
+    ) -> Result<Self> {
+        Ok(Trainer {
+            stage,
+            backend: backend.name(),
+            device: gpu.map(|g| g.info().name.clone()),
+            background: BackgroundRecord::of(data.background, &backend.background()?),
+            load,
+            started,
+        })
+    }
+
+    /// Write the `metrics.json` of the finished run into `run`: the loop's `report` and the test
+    /// renders, with the stage's wall time per phase (`seconds` of the phases both stages have),
+    /// its own figures and its configuration.
+    pub(super) fn finish<W: Serialize, X: Serialize, C: Serialize, P>(
+        self,
+        run: &RunDir,
+        (report, rendered): (&LoopReport<P>, RenderedSplit),
+        seconds: impl FnOnce(SurfaceSeconds) -> W,
+        figures: X,
+        config: C,
+    ) -> Result<Trained<TrainMetrics<W, X, C>>> {
+        let wall_seconds = seconds(SurfaceSeconds {
+            load: self.load,
+            train: report.train_seconds,
+            checkpoint: report.checkpoint_seconds,
+            render_test: report.render_seconds,
+            total: self.load + self.started.elapsed().as_secs_f64(),
+        });
+        let metrics = TrainMetrics {
+            stage: self.stage.name().into(),
+            backend: self.backend.into(),
+            device: self.device,
+            wall_seconds,
+            train_rays_per_s: report.train_rays_per_s,
+            final_train_mse: report.final_mse,
+            test_psnr: report.test_psnr,
+            test_psnr_per_view: rendered.psnr,
+            figures,
+            peak_rss_bytes: peak_rss_bytes(),
+            background: self.background,
+            config,
+        };
+        run.write_metrics(&metrics)?;
+        Ok(Trained::Done(metrics))
+    }
 }

@@ -2,19 +2,18 @@
 //! svox2 checkpoint (method.md §3.1), or resume a stage-2 run, train it, and write
 //! `metrics.json` ([`SurfaceMetrics`]).
 
-use super::metrics::{SurfaceMetrics, SurfacePerRay, SurfaceSeconds};
+use super::metrics::{SurfaceFigures, SurfaceMetrics, SurfacePerRay};
 use super::train_options::TrainOptions;
-use super::train_run::{check_resumed_data, refuse_clashes, resume, run_info, Loaded, Trained};
+use super::train_run::{claim, refuse_clashes, resume, run_info, Loaded, Trained, Trainer};
 use crate::checkpoint::format as checkpoint;
 use crate::checkpoint::BackgroundRecord;
-use crate::data::dataset::peak_rss_bytes;
 use crate::data::BackgroundMode;
 use crate::data::Dataset;
 use crate::gpu::Gpu;
 use crate::grid::surface::SurfaceGrid;
 use crate::grid::{npz, Grid};
 use crate::run::identity::check_same_data;
-use crate::run::{self, RunDir, RunStage};
+use crate::run::{self, RunStage};
 use crate::surface::{CpuSurface, SurfaceBackend, SurfaceStage, VulkanSurface};
 use crate::train::{surface_steps, SurfaceConfig};
 use anyhow::{Context, Result};
@@ -111,20 +110,15 @@ pub fn train_surface(
     data: &Loaded,
     gpu: Option<&Gpu>,
 ) -> Result<Trained<SurfaceMetrics>> {
-    let t_all = Instant::now();
+    let timing = (data.seconds, Instant::now());
     // A new run's inputs and flags are checked before its folder is claimed.
-    let fresh = if opts.resume {
-        None
-    } else {
-        Some(fresh_start(opts, &data.data)?)
-    };
+    let fresh = (!opts.resume)
+        .then(|| fresh_start(opts, &data.data))
+        .transpose()?;
     let mut inputs = vec![opts.data.as_path()];
     inputs.extend(opts.init.as_deref());
-    let mut run = RunDir::claim(&opts.out, RunStage::Surface, opts.open_mode(), &inputs)?;
-    let (load_s, data) = (data.seconds, &data.data);
-    if opts.resume {
-        check_resumed_data(opts, data)?;
-    }
+    let mut run = claim(opts, RunStage::Surface, &inputs, &data.data)?;
+    let data = &data.data;
     let (mut backend, cfg, start) = match fresh {
         Some((grid, cfg, bg)) => {
             let mut b = make_backend(gpu, grid)?;
@@ -156,40 +150,24 @@ pub fn train_surface(
     );
     let (report, rendered) =
         surface_steps::train(backend.as_mut(), data, &cfg, &opts.out, start, !opts.quiet)?;
-    let r = &report.run.per_ray;
-    let metrics = SurfaceMetrics {
-        stage: RunStage::Surface.name().into(),
-        backend: backend.name().into(),
-        device: gpu.map(|g| g.info().name.clone()),
-        wall_seconds: SurfaceSeconds {
-            load: load_s,
-            train: report.run.train_seconds,
-            checkpoint: report.run.checkpoint_seconds,
-            render_test: report.run.render_seconds,
-            total: load_s + t_all.elapsed().as_secs_f64(),
-        },
-        train_rays_per_s: report.run.train_rays_per_s,
-        final_train_mse: report.run.final_mse,
-        test_psnr: report.run.test_psnr,
-        test_psnr_per_view: rendered.psnr,
+    let r = &report.run;
+    let per_ray = &r.per_ray;
+    let figures = SurfaceFigures {
         per_ray: Some(SurfacePerRay {
-            cells: r.cells,
-            solves: r.solves,
-            culled_solves: r.culled,
-            hits: r.hits,
-            cut_hits: r.cut,
-            guarded_hits: r.guarded,
-            atomic_adds: r.atomic_adds,
-            blocks_skipped: Some(r.blocks_skipped),
+            cells: per_ray.cells,
+            solves: per_ray.solves,
+            culled_solves: per_ray.culled,
+            hits: per_ray.hits,
+            cut_hits: per_ray.cut,
+            guarded_hits: per_ray.guarded,
+            atomic_adds: per_ray.atomic_adds,
+            blocks_skipped: Some(per_ray.blocks_skipped),
         }),
         vertices_before_prune: Some(report.vertices_before_prune),
         allocated_vertices: report.allocated_vertices,
-        peak_rss_bytes: peak_rss_bytes(),
-        background: BackgroundRecord::of(data.background, &backend.background()?),
-        config: cfg,
     };
-    run.write_metrics(&metrics)?;
-    Ok(Trained::Done(metrics))
+    let trainer = Trainer::of(RunStage::Surface, backend.as_ref(), gpu, data, timing)?;
+    trainer.finish(&run, (r, rendered), |s| s, figures, cfg)
 }
 
 /// The flags `--resume` refuses to change in a stage-2 run.

@@ -5,7 +5,6 @@ use super::{
     march_params, state_bytes_of, Gradients, PlenoxelsBackend, PlenoxelsStage, PlenoxelsStepParams,
     PlenoxelsStepStats,
 };
-use crate::abi::buffers::Background;
 use crate::cpu::background_step::background_step;
 use crate::cpu::occupancy::{occupancy_rows, occupancy_slots};
 use crate::cpu::plenoxel_fwd::render;
@@ -13,12 +12,11 @@ use crate::cpu::plenoxel_train::{train, TrainGrads};
 use crate::cpu::plenoxel_weights::max_weights;
 use crate::cpu::sample_rays::sample_rays;
 use crate::cpu::{rmsprop_sparse, tv, PlenoxelsOptimArrays};
-use crate::data::TrainViews;
-use crate::gpu::{timed, Phase, PhaseClock};
+use crate::gpu::{Phase, PhaseClock, TrainRays};
 use crate::grid::{Grid, SH_DIM};
 use crate::math::plenoxel::MarchParams;
 use crate::math::plenoxel::{GridRef, PlenoxelCounts};
-use crate::stage::{StageBackend, StateFn};
+use crate::stage::{HostRays, HostSteps, StageBackend, StateFn, StepStore};
 use anyhow::{ensure, Result};
 
 /// Grid, occupancy, gradient accumulators and RMSProp state on the host.
@@ -33,20 +31,13 @@ pub struct CpuPlenoxels {
     state_density: Vec<f32>,
     state_sh: Vec<f32>,
     touched: Vec<u32>,
-    bg: Background,
-    /// Figures of the `step_sampled` steps not yet taken.
-    done: Vec<PlenoxelsStepStats>,
+    steps: HostSteps<PlenoxelsStepStats>,
 }
 
 impl CpuPlenoxels {
     pub fn new(grid: Grid) -> Self {
         let mut b = CpuPlenoxels {
-            grid: Grid {
-                links: Vec::new(),
-                density: Vec::new(),
-                sh: Vec::new(),
-                ..grid.clone()
-            },
+            grid: grid.clone().without_arrays(),
             occ: Vec::new(),
             slots: Vec::new(),
             grad_density: Vec::new(),
@@ -54,8 +45,7 @@ impl CpuPlenoxels {
             state_density: Vec::new(),
             state_sh: Vec::new(),
             touched: Vec::new(),
-            bg: Background::new([1.0; 3], false),
-            done: Vec::new(),
+            steps: HostSteps::default(),
         };
         b.load(grid, None).expect("a fresh state always fits");
         b
@@ -85,12 +75,13 @@ impl CpuPlenoxels {
                     stop_thresh,
                     grad_scale,
                 } => {
-                    let learned = self.bg.learned();
+                    let bg = &mut self.steps.bg;
+                    let rgb = bg.rgb;
                     let grads = TrainGrads {
                         density: &mut self.grad_density,
                         sh: &mut self.grad_sh,
                         touched: &mut self.touched,
-                        background: learned.then_some(&mut self.bg.grad),
+                        background: bg.learned().then_some(&mut bg.grad),
                     };
                     out = data_term(
                         &grid_ref(&self.grid, &self.occ),
@@ -98,7 +89,7 @@ impl CpuPlenoxels {
                         rays,
                         targets,
                         *grad_scale,
-                        self.bg.rgb,
+                        rgb,
                         grads,
                     )?;
                 }
@@ -122,8 +113,8 @@ impl CpuPlenoxels {
                     &mut self.touched,
                     h,
                 ),
-                PlenoxelPass::Background { lr, beta, eps } => {
-                    background_step(&mut self.bg, *lr, *beta, *eps);
+                PlenoxelPass::Background(s) => {
+                    background_step(&mut self.steps.bg, s.lr, s.beta, s.eps);
                 }
             }
         }
@@ -161,47 +152,29 @@ fn data_term(
 }
 
 impl StageBackend<PlenoxelsStage> for CpuPlenoxels {
-    fn name(&self) -> &'static str {
-        "cpu"
+    fn store(&self) -> &dyn StepStore<PlenoxelsStepStats> {
+        &self.steps
     }
 
-    fn step(
-        &mut self,
-        rays: &[f32],
-        targets: &[f32],
-        p: &PlenoxelsStepParams,
-    ) -> Result<PlenoxelsStepStats> {
+    fn store_mut(&mut self) -> &mut dyn StepStore<PlenoxelsStepStats> {
+        &mut self.steps
+    }
+
+    fn submit(&mut self, src: TrainRays, p: &PlenoxelsStepParams) -> Result<()> {
         let mut clock = PhaseClock::start();
-        let plan = PlenoxelPlan::step(p, self.grid.res, rays.len() / 6, self.bg.learned())?;
-        let (loss, counts) = self.run_plan(&plan, rays, targets)?;
-        let n = loss.len();
-        let mse = loss.iter().map(|&l| l as f64).sum::<f64>() / (3 * n) as f64;
+        let batch = HostRays::of(src, &mut clock, sample_rays)?;
+        let n = batch.rays.len() / 6;
+        let plan = PlenoxelPlan::step(p, self.grid.res, n, self.steps.bg.learned())?;
+        let (loss, counts) = self.run_plan(&plan, &batch.rays, &batch.targets)?;
+        let mse = loss.iter().map(|&l| l as f64).sum::<f64>() / (3 * loss.len()) as f64;
         clock.mark(Phase::Compute);
-        Ok(PlenoxelsStepStats {
+        self.steps.push(PlenoxelsStepStats {
             mse,
             counts,
             device_ns: 0.0,
             host: clock.times,
-        })
-    }
-
-    fn step_sampled(
-        &mut self,
-        views: &TrainViews,
-        seed: u64,
-        n: usize,
-        p: &PlenoxelsStepParams,
-    ) -> Result<()> {
-        super::uniform_views(views)?;
-        let (batch, sampling) = timed(Phase::Sampling, || sample_rays(views.set(), seed, n))?;
-        let mut stats = self.step(&batch.rays, &batch.targets, p)?;
-        stats.host.add(&sampling);
-        self.done.push(stats);
+        });
         Ok(())
-    }
-
-    fn take_stats(&mut self) -> Result<Vec<PlenoxelsStepStats>> {
-        Ok(std::mem::take(&mut self.done))
     }
 
     fn grid(&self) -> Result<Grid> {
@@ -237,15 +210,6 @@ impl StageBackend<PlenoxelsStage> for CpuPlenoxels {
         self.refresh_occupancy();
         Ok(())
     }
-
-    fn background(&self) -> Result<Background> {
-        Ok(self.bg)
-    }
-
-    fn set_background(&mut self, bg: Background) -> Result<()> {
-        self.bg = bg;
-        Ok(())
-    }
 }
 
 impl PlenoxelsBackend for CpuPlenoxels {
@@ -258,7 +222,7 @@ impl PlenoxelsBackend for CpuPlenoxels {
             density: &mut density,
             sh: &mut sh,
             touched: &mut touched,
-            background: self.bg.learned().then_some(&mut background),
+            background: self.steps.bg.learned().then_some(&mut background),
         };
         let (ray_loss, counts) = data_term(
             &grid_ref(&self.grid, &self.occ),
@@ -266,7 +230,7 @@ impl PlenoxelsBackend for CpuPlenoxels {
             rays,
             targets,
             batch_grad_scale(rays.len() / 6),
-            self.bg.rgb,
+            self.steps.bg.rgb,
             grads,
         )?;
         Ok(Gradients {
@@ -281,7 +245,7 @@ impl PlenoxelsBackend for CpuPlenoxels {
     fn render(&mut self, rays: &[f32], stop_thresh: f32) -> Result<(Vec<f32>, PlenoxelCounts)> {
         self.refresh_occupancy();
         let mp = march_params(&self.grid, stop_thresh);
-        Ok(render(&self.view(), rays, &mp, self.bg.rgb))
+        Ok(render(&self.view(), rays, &mp, self.steps.bg.rgb))
     }
 
     fn max_weights(&mut self, rays: &[f32], stop_thresh: f32) -> Result<Vec<f32>> {

@@ -102,6 +102,16 @@ impl Stage for PlenoxelsStage {
         totals.scaled(f)
     }
 
+    /// Stage 1's kernel and twin take no importance weights, so its batches must be drawn
+    /// uniformly: an error for views with a focus (`data::TrainViews::focused`).
+    fn check_views(views: &TrainViews) -> Result<()> {
+        anyhow::ensure!(
+            views.set().focus.is_none(),
+            "stage 1 draws its batches uniformly (focused views were given)"
+        );
+        Ok(())
+    }
+
     fn save(
         path: &Path,
         grid: &Grid,
@@ -152,16 +162,6 @@ pub trait PlenoxelsBackend: StageBackend<PlenoxelsStage> {
     fn max_weights(&mut self, rays: &[f32], stop_thresh: f32) -> Result<Vec<f32>>;
     /// Vertices per axis and allocated vertices of the current grid (nothing copied).
     fn shape(&self) -> ([u32; 3], usize);
-}
-
-/// Stage 1's kernel and twin take no importance weights, so its batches must be drawn
-/// uniformly: an error for views with a focus (`data::TrainViews::focused`).
-pub fn uniform_views(views: &TrainViews) -> Result<()> {
-    anyhow::ensure!(
-        views.set().focus.is_none(),
-        "stage 1 draws its batches uniformly (focused views were given)"
-    );
-    Ok(())
 }
 
 /// Ray → grid mapping of a grid: grid = p·scale + offset.

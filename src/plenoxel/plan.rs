@@ -6,7 +6,7 @@
 use super::PlenoxelsStepParams;
 use crate::abi::consts::TOUCH_ALL;
 use crate::abi::regularisers::TvChunk;
-use crate::abi::train::RmsProp;
+use crate::abi::train::{BackgroundStep, RmsProp};
 use crate::grid::SH_DIM;
 use anyhow::{ensure, Result};
 
@@ -30,7 +30,7 @@ pub enum PlenoxelPass {
     /// Sparse RMSProp over the touched vertices (`optim_args` → `rmsprop_sparse`).
     RmsProp(RmsProp),
     /// RMSProp on a learned background (`background_step`).
-    Background { lr: f32, beta: f32, eps: f32 },
+    Background(BackgroundStep),
 }
 
 /// The passes of one stage-1 step, in order.
@@ -83,13 +83,8 @@ impl PlenoxelPlan {
             beta: p.beta,
             eps: p.eps,
         }));
-        if learned_bg {
-            passes.push(PlenoxelPass::Background {
-                lr: p.lr_bg,
-                beta: p.beta,
-                eps: p.eps,
-            });
-        }
+        let bg = BackgroundStep::when_learned(learned_bg, p.lr_bg, p.beta, p.eps);
+        passes.extend(bg.map(PlenoxelPass::Background));
         Ok(PlenoxelPlan { passes })
     }
 
@@ -143,7 +138,7 @@ mod tests {
                     field: TvField::Sh, ..
                 } => "tv_sh",
                 PlenoxelPass::RmsProp(_) => "rmsprop",
-                PlenoxelPass::Background { .. } => "background",
+                PlenoxelPass::Background(_) => "background",
             })
             .collect()
     }

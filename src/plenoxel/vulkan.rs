@@ -7,22 +7,19 @@ use super::{
     march_params, state_bytes_of, Gradients, PlenoxelsBackend, PlenoxelsStage, PlenoxelsStepParams,
     PlenoxelsStepStats,
 };
-use crate::abi::buffers::Background;
 use crate::abi::buffers::PlenoxelParams;
 use crate::abi::buffers::StepHeader;
 use crate::abi::rays::SampledRays;
-use crate::abi::regularisers::TvChunk;
-use crate::abi::step::{step_record, STEP_FLAGS, STEP_RESET_BYTES};
+use crate::abi::step::step_record;
 use crate::abi::train::RmsProp;
-use crate::data::TrainViews;
 use crate::gpu::{
-    record_background_step, record_loss_sum, record_optim_args, Batch, BatchTimes, Gpu, GpuBuffer,
-    Phase, PhaseClock, Readback, SlotFigures, StepQueue, StepTimes, TrainRays,
+    record_background_step, record_tv, Batch, BatchRays, Gpu, GpuBuffer, PhaseClock, Readback,
+    SlotFigures, StepQueue, StepTimes, TrainRays,
 };
 use crate::grid::{Grid, SH_DIM};
 use crate::kernels;
 use crate::math::plenoxel::{occ_dims, PlenoxelCounts};
-use crate::stage::StageBackend;
+use crate::stage::QueuedBackend;
 use anyhow::{ensure, Result};
 
 /// Device-resident stage-1 state.
@@ -32,7 +29,6 @@ pub struct VulkanPlenoxels {
     /// for training; per step a slot with the squared-error sum and the counters. First, so
     /// that dropping the backend waits for the steps before any buffer they use is freed.
     queue: StepQueue<PlenoxelsStepStats>,
-    gpu: Gpu,
     meta: Grid,
     links: GpuBuffer,
     density: GpuBuffer,
@@ -42,11 +38,6 @@ pub struct VulkanPlenoxels {
     grad_sh: GpuBuffer,
     state_density: GpuBuffer,
     state_sh: GpuBuffer,
-    /// Step record (glsl/lib/step.glsl): `StepHeader` (touched count, sample counters, n),
-    /// flags, list.
-    step: GpuBuffer,
-    /// Indirect dispatch arguments of rmsprop_sparse.
-    args: GpuBuffer,
     /// plenoxel_train's params buffer (written in each training batch's command stream).
     params: GpuBuffer,
 }
@@ -58,11 +49,11 @@ impl VulkanPlenoxels {
         Ok(VulkanPlenoxels {
             queue: StepQueue::new(
                 gpu,
+                &step_record(n, &[]),
                 3 * std::mem::size_of::<f32>(),
                 // The squared-error sum (one float), the counters.
                 &[4, std::mem::size_of::<PlenoxelCounts>() as u64],
             )?,
-            gpu: gpu.clone(),
             links: gpu.upload(&grid.links)?,
             density: gpu.upload(&grid.density)?,
             sh: gpu.upload(&grid.sh)?,
@@ -71,15 +62,8 @@ impl VulkanPlenoxels {
             grad_sh: gpu.zeros::<f32>(n * SH_DIM)?,
             state_density: gpu.zeros::<f32>(n)?,
             state_sh: gpu.zeros::<f32>(n * SH_DIM)?,
-            step: gpu.upload(&step_record(n, &[]))?,
-            args: gpu.zeros::<u32>(3)?,
             params: gpu.host_to_device::<PlenoxelParams>(1)?,
-            meta: Grid {
-                links: Vec::new(),
-                density: Vec::new(),
-                sh: Vec::new(),
-                ..grid
-            },
+            meta: grid.without_arrays(),
         })
     }
 
@@ -103,17 +87,12 @@ impl VulkanPlenoxels {
     }
 
     fn read_stats(&self) -> Result<PlenoxelCounts> {
-        Ok(self.step.download_range::<StepHeader>(0, 1)?[0].stats)
-    }
-
-    /// Record clearing the step's touched count and sample counters.
-    fn record_step_reset(&self, b: &mut Batch) {
-        b.fill_zero_range(&self.step, 0, STEP_RESET_BYTES);
+        Ok(self.queue.header()?.stats)
     }
 
     /// Record the sparse RMSProp step over the vertices touched this step.
     fn record_rmsprop(&self, b: &mut Batch, p: &RmsProp) -> Result<()> {
-        record_optim_args(b, &self.step, &self.args)?;
+        self.queue.record_optim_args(b)?;
         b.dispatch_indirect(
             &kernels::rmsprop_sparse::INFO,
             &kernels::rmsprop_sparse::Push {
@@ -123,53 +102,39 @@ impl VulkanPlenoxels {
                 grad_sh: self.grad_sh.address(),
                 state_density: self.state_density.address(),
                 state_sh: self.state_sh.address(),
-                step: self.step.address(),
+                step: self.queue.step.address(),
                 lr_sigma: p.lr_sigma,
                 lr_sh: p.lr_sh,
                 beta: p.beta,
                 eps: p.eps,
             },
-            &self.args,
+            &self.queue.args,
         )
     }
 
-    /// Upload rays (and targets), start a batch and record the step reset (the upload charged to
-    /// `clock`). Returns the batch and the device addresses of the rays, targets and per-ray
-    /// output.
-    fn begin(
+    /// Start a batch with the step reset (clearing the touched count and sample counters) and
+    /// the training rays (uploaded, or drawn by `sample_rays`).
+    fn begin_train(
         &mut self,
-        rays: &[f32],
-        targets: Option<&[f32]>,
+        src: TrainRays,
         clock: &mut PhaseClock,
-    ) -> Result<(Batch, [u64; 3])> {
-        let addrs = self.queue.rays.upload(&self.gpu, rays, targets)?;
-        clock.mark(Phase::Upload);
-        let mut b = self.gpu.batch()?;
-        self.record_step_reset(&mut b);
-        Ok((b, addrs))
+    ) -> Result<(Batch, BatchRays)> {
+        if let TrainRays::Host { targets, .. } = src {
+            let n = src.len();
+            ensure!(
+                n > 0 && targets.len() == 3 * n,
+                "batch of {n} rays with {} targets",
+                targets.len() / 3
+            );
+        }
+        self.queue.begin(src, clock, &[])
     }
 
-    /// Start a batch with the step reset and the training rays (uploaded, or drawn by
-    /// `sample_rays`). Returns it with the addresses of rays, targets and per-ray output.
-    fn begin_train(&mut self, src: TrainRays, clock: &mut PhaseClock) -> Result<(Batch, [u64; 3])> {
-        match src {
-            TrainRays::Host { rays, targets } => {
-                let n = src.len();
-                ensure!(
-                    n > 0 && targets.len() == 3 * n,
-                    "batch of {n} rays with {} targets",
-                    targets.len() / 3
-                );
-                self.begin(rays, Some(targets), clock)
-            }
-            TrainRays::Sampled { id, set, seed, n } => {
-                let out = self.queue.reserve_sampled(&self.gpu, id, set, n, clock)?;
-                let mut b = self.gpu.batch()?;
-                self.record_step_reset(&mut b);
-                let at = self.queue.record_sample(&mut b, set, seed, n, clock)?;
-                Ok((b, [at.rays, at.targets, out]))
-            }
-        }
+    /// Upload `rays` and start a batch with the step reset, for a render or a pass that reads
+    /// no targets.
+    fn begin_render(&mut self, rays: &[f32]) -> Result<(Batch, BatchRays)> {
+        self.queue
+            .begin_host(rays, None, &mut PhaseClock::start(), &[])
     }
 
     /// Start the batch of `src`'s rays and record `plan`'s passes on it, in order.
@@ -188,10 +153,16 @@ impl VulkanPlenoxels {
                     stop_thresh,
                     grad_scale,
                 } => self.record_train(&mut b, *stop_thresh, *grad_scale, rays, n)?,
-                PlenoxelPass::Tv { field, chunk } => self.record_tv(&mut b, *field, chunk)?,
+                PlenoxelPass::Tv { field, chunk } => {
+                    let (data, grad) = match field {
+                        TvField::Density => (&self.density, &self.grad_density),
+                        TvField::Sh => (&self.sh, &self.grad_sh),
+                    };
+                    record_tv(&mut b, &self.links, data, grad, &self.queue.step, chunk)?
+                }
                 PlenoxelPass::RmsProp(h) => self.record_rmsprop(&mut b, h)?,
-                PlenoxelPass::Background { lr, beta, eps } => {
-                    record_background_step(&mut b, &self.queue.bg, *lr, *beta, *eps)?
+                PlenoxelPass::Background(s) => {
+                    record_background_step(&mut b, &self.queue.bg, s.lr, s.beta, s.eps)?
                 }
             }
         }
@@ -205,7 +176,7 @@ impl VulkanPlenoxels {
         b: &mut Batch,
         stop_thresh: f32,
         grad_scale: f32,
-        [ray_buf, target_buf, loss_buf]: [u64; 3],
+        rays: BatchRays,
         n: usize,
     ) -> Result<()> {
         let mp = march_params(&self.meta, stop_thresh);
@@ -226,12 +197,12 @@ impl VulkanPlenoxels {
                 density: self.density.address(),
                 sh: self.sh.address(),
                 occ: self.occ.address(),
-                rays: ray_buf,
-                targets: target_buf,
+                rays: rays.rays,
+                targets: rays.targets,
                 grad_density: self.grad_density.address(),
                 grad_sh: self.grad_sh.address(),
-                ray_loss: loss_buf,
-                step: self.step.address(),
+                ray_loss: rays.out,
+                step: self.queue.step.address(),
                 params: self.params.address(),
                 bg: self.queue.bg.address(),
                 res: self.meta.res,
@@ -241,116 +212,42 @@ impl VulkanPlenoxels {
         )
     }
 
-    /// Record TV on `field` over `c`'s slots (the dispatch covers the chunk and the slots whose
-    /// forward neighbours lie in it).
-    fn record_tv(&self, b: &mut Batch, field: TvField, c: &TvChunk) -> Result<()> {
-        let (data, grad) = match field {
-            TvField::Density => (&self.density, &self.grad_density),
-            TvField::Sh => (&self.sh, &self.grad_sh),
-        };
-        b.dispatch_1d(
-            &kernels::tv::INFO,
-            &kernels::tv::Push {
-                links: self.links.address(),
-                data: data.address(),
-                grad: grad.address(),
-                step: self.step.address(),
-                res: c.res,
-                start: c.start,
-                count: c.count,
-                channels: c.channels,
-                scale: c.scale,
-                touch_bits: c.touch,
-            },
-            c.count + c.res[1] * c.res[2],
-        )
-    }
-
-    /// Wait for the steps in flight (before the host reads, writes or frees what they use).
-    fn settle(&self) -> Result<()> {
-        self.queue.settle()
-    }
-
-    /// Record the step's plan on one batch and submit it without waiting (up to
-    /// `MAX_IN_FLIGHT` steps run on the device while the host records the next); its figures
-    /// come back with [`Self::take_timed`].
-    pub fn submit_step(&mut self, src: TrainRays, p: &PlenoxelsStepParams) -> Result<()> {
-        let n = src.len();
-        let mut clock = PhaseClock::start();
-        let plan = PlenoxelPlan::step(p, self.meta.res, n, self.queue.bg_learned)?;
-        let slot = self.queue.slot_for(&src)?;
-        let mut b = self.record_plan(src, &plan, &mut clock)?;
-        // The step's figures into its slot: the squared error summed on the device, the
-        // counters copied.
-        let q = &self.queue;
-        let out = q.rays.out().address();
-        record_loss_sum(&mut b, out, q.readback.address(slot, 0), n, 1, 1)?;
-        let stats = std::mem::offset_of!(StepHeader, stats) as u64;
-        q.readback.copy(&mut b, slot, 1, &self.step, stats);
-        self.queue.submit(b, n, clock)
-    }
-
-    /// The figures of every step submitted since they were last taken, in order, with the
-    /// device times of their dispatches (waits for the steps in flight).
-    pub fn take_timed(&mut self) -> Result<Vec<(PlenoxelsStepStats, BatchTimes)>> {
-        self.queue.take_timed()
-    }
-
-    /// One training step on `src`'s rays, waited for: its figures.
-    /// The figures of earlier steps not yet taken stay for `take_stats`.
-    fn train_step(
-        &mut self,
-        src: TrainRays,
-        p: &PlenoxelsStepParams,
-    ) -> Result<PlenoxelsStepStats> {
-        self.submit_step(src, p)?;
-        Ok(self.queue.last()?.0)
-    }
-
     /// The last sampled batch of `n` rays.
     pub fn sampled_batch(&self, n: usize) -> Result<SampledRays> {
         self.queue.sampled_batch(n)
     }
-
-    /// Per-ray squared error of the last training pass over `n` rays.
-    fn ray_loss(&self, n: usize) -> Result<Vec<f32>> {
-        let mut loss: Vec<f32> = self.queue.rays.out().download()?;
-        loss.truncate(n);
-        Ok(loss)
-    }
 }
 
-impl StageBackend<PlenoxelsStage> for VulkanPlenoxels {
-    fn name(&self) -> &'static str {
-        "vulkan"
+impl QueuedBackend<PlenoxelsStage> for VulkanPlenoxels {
+    fn queue(&self) -> &StepQueue<PlenoxelsStepStats> {
+        &self.queue
     }
 
-    fn step(
+    fn queue_mut(&mut self) -> &mut StepQueue<PlenoxelsStepStats> {
+        &mut self.queue
+    }
+
+    /// The step's plan, then its figures into `slot`: the squared error summed on the device,
+    /// the counters copied.
+    fn record_step(
         &mut self,
-        rays: &[f32],
-        targets: &[f32],
+        src: TrainRays,
         p: &PlenoxelsStepParams,
-    ) -> Result<PlenoxelsStepStats> {
-        self.train_step(TrainRays::Host { rays, targets }, p)
+        slot: usize,
+        clock: &mut PhaseClock,
+    ) -> Result<Batch> {
+        let n = src.len();
+        let plan = PlenoxelPlan::step(p, self.meta.res, n, self.queue.bg_learned)?;
+        let mut b = self.record_plan(src, &plan, clock)?;
+        self.queue.record_loss_sum(&mut b, slot, n, 1, 1)?;
+        let stats = std::mem::offset_of!(StepHeader, stats) as u64;
+        self.queue
+            .readback
+            .copy(&mut b, slot, 1, &self.queue.step, stats);
+        Ok(b)
     }
 
-    fn step_sampled(
-        &mut self,
-        views: &TrainViews,
-        seed: u64,
-        n: usize,
-        p: &PlenoxelsStepParams,
-    ) -> Result<()> {
-        super::uniform_views(views)?;
-        self.submit_step(views.train_rays(seed, n), p)
-    }
-
-    fn take_stats(&mut self) -> Result<Vec<PlenoxelsStepStats>> {
-        self.queue.take_figures()
-    }
-
-    fn grid(&self) -> Result<Grid> {
-        self.settle()?;
+    fn download_grid(&self) -> Result<Grid> {
         Ok(Grid {
             links: self.links.download()?,
             density: self.density.download()?,
@@ -359,16 +256,15 @@ impl StageBackend<PlenoxelsStage> for VulkanPlenoxels {
         })
     }
 
-    fn optimizer_state(&self) -> Result<[Vec<f32>; 2]> {
-        self.settle()?;
+    fn download_state(&self) -> Result<[Vec<f32>; 2]> {
         Ok([self.state_density.download()?, self.state_sh.download()?])
     }
 
-    fn state_bytes(&self) -> u64 {
+    fn copy_bytes(&self) -> u64 {
         state_bytes_of(self.shape())
     }
 
-    fn load(&mut self, grid: Grid, state: Option<[Vec<f32>; 2]>) -> Result<()> {
+    fn rebuild(&self, grid: Grid, state: Option<[Vec<f32>; 2]>) -> Result<Self> {
         let n = grid.allocated();
         if let Some([sd, ss]) = &state {
             ensure!(
@@ -376,62 +272,40 @@ impl StageBackend<PlenoxelsStage> for VulkanPlenoxels {
                 "optimizer state does not match the grid"
             );
         }
-        let mut fresh = VulkanPlenoxels::new(&self.gpu, grid)?;
+        let fresh = VulkanPlenoxels::new(self.queue.gpu(), grid)?;
         if let Some([sd, ss]) = state {
             fresh.state_density.write(&sd)?;
             fresh.state_sh.write(&ss)?;
         }
-        // The background, the views and the figures of the steps so far stay.
-        self.queue.carry_into(&mut fresh.queue)?;
-        *self = fresh;
-        Ok(())
-    }
-
-    fn background(&self) -> Result<Background> {
-        self.queue.background()
-    }
-
-    fn set_background(&mut self, bg: Background) -> Result<()> {
-        self.queue.set_background(bg)
+        Ok(fresh)
     }
 }
 
 impl PlenoxelsBackend for VulkanPlenoxels {
     fn gradients(&mut self, rays: &[f32], targets: &[f32], stop_thresh: f32) -> Result<Gradients> {
-        self.settle()?;
+        self.queue.settle()?;
         let n = rays.len() / 6;
         let plan = PlenoxelPlan::gradients(stop_thresh, n);
         let src = TrainRays::Host { rays, targets };
         self.record_plan(src, &plan, &mut PhaseClock::start())?
             .submit()?;
-        let mut bg: Background = self.queue.bg.download()?[0];
         let g = Gradients {
-            ray_loss: self.ray_loss(n)?,
+            ray_loss: self.queue.ray_output(n)?,
             density: self.grad_density.download()?,
             sh: self.grad_sh.download()?,
-            background: bg.grad,
+            background: self.queue.take_background_grad()?,
             counts: self.read_stats()?,
         };
-        bg.grad = [0.0; 3];
-        self.queue.bg.write(&[bg])?;
-        // Leave no gradient or touched flag behind for the next step.
-        let mut b = self.gpu.batch()?;
-        b.fill_zero(&self.grad_density);
-        b.fill_zero(&self.grad_sh);
-        b.fill_zero_range(
-            &self.step,
-            4 * STEP_FLAGS as u64,
-            4 * self.allocated() as u64,
-        );
-        b.submit()?;
+        let grads = [&self.grad_density, &self.grad_sh];
+        self.queue.clear_gradients(&grads, self.allocated())?;
         Ok(g)
     }
 
     fn render(&mut self, rays: &[f32], stop_thresh: f32) -> Result<(Vec<f32>, PlenoxelCounts)> {
-        self.settle()?;
+        self.queue.settle()?;
         let n = rays.len() / 6;
         let mp = march_params(&self.meta, stop_thresh);
-        let (mut b, [ray_buf, _, out_buf]) = self.begin(rays, None, &mut PhaseClock::start())?;
+        let (mut b, io) = self.begin_render(rays)?;
         self.record_occupancy(&mut b)?;
         b.dispatch_1d(
             &kernels::plenoxel_fwd::INFO,
@@ -440,9 +314,9 @@ impl PlenoxelsBackend for VulkanPlenoxels {
                 density: self.density.address(),
                 sh: self.sh.address(),
                 occ: self.occ.address(),
-                rays: ray_buf,
-                rgb: out_buf,
-                step: self.step.address(),
+                rays: io.rays,
+                rgb: io.out,
+                step: self.queue.step.address(),
                 bg: self.queue.bg.address(),
                 res: self.meta.res,
                 scale: mp.scale,
@@ -454,17 +328,15 @@ impl PlenoxelsBackend for VulkanPlenoxels {
             n as u32,
         )?;
         b.submit()?;
-        let mut rgb: Vec<f32> = self.queue.rays.out().download()?;
-        rgb.truncate(3 * n);
-        Ok((rgb, self.read_stats()?))
+        Ok((self.queue.ray_output(3 * n)?, self.read_stats()?))
     }
 
     fn max_weights(&mut self, rays: &[f32], stop_thresh: f32) -> Result<Vec<f32>> {
-        self.settle()?;
+        self.queue.settle()?;
         let n = rays.len() / 6;
         let mp = march_params(&self.meta, stop_thresh);
-        let out = self.gpu.zeros::<u32>(self.allocated())?;
-        let (mut b, [ray_buf, _, _]) = self.begin(rays, None, &mut PhaseClock::start())?;
+        let out = self.queue.gpu().zeros::<u32>(self.allocated())?;
+        let (mut b, io) = self.begin_render(rays)?;
         self.record_occupancy(&mut b)?;
         b.dispatch_1d(
             &kernels::plenoxel_weights::INFO,
@@ -473,7 +345,7 @@ impl PlenoxelsBackend for VulkanPlenoxels {
                 density: self.density.address(),
                 sh: self.sh.address(),
                 occ: self.occ.address(),
-                rays: ray_buf,
+                rays: io.rays,
                 max_weight: out.address(),
                 res: self.meta.res,
                 scale: mp.scale,
@@ -504,8 +376,7 @@ impl SlotFigures for PlenoxelsStepStats {
         Ok(PlenoxelsStepStats {
             mse: sum[0] as f64 / (3 * n.max(1)) as f64,
             counts: readback.part::<PlenoxelCounts>(slot, 1)?[0],
-            device_ns: 0.0,
-            host: Default::default(),
+            ..Default::default()
         })
     }
 

@@ -4,7 +4,6 @@ use super::plan::{PlanGrid, SurfacePass, SurfacePlan};
 use super::{
     surface_params, BlockRefresh, SurfaceBackend, SurfaceStage, SurfaceStepParams, SurfaceStepStats,
 };
-use crate::abi::buffers::Background;
 use crate::abi::buffers::SurfCounts;
 use crate::abi::buffers::{RayLoss, TrainCounts};
 use crate::abi::normal_reg::NormalPrefix;
@@ -19,15 +18,14 @@ use crate::cpu::surface_opacity_reg::surface_opacity_reg;
 use crate::cpu::surface_reg::{normal_reg_passes, NormalScratch};
 use crate::cpu::surface_train::{train, SurfaceGrads, TrainInput};
 use crate::cpu::{surface_rmsprop, tv, SurfaceOptimArrays};
-use crate::data::TrainViews;
-use crate::gpu::{timed, Phase, PhaseClock};
+use crate::gpu::{Phase, PhaseClock, TrainRays};
 use crate::grid::row_slots;
 use crate::grid::state_bytes;
 use crate::grid::surface::SurfaceGrid;
 use crate::grid::SH_DIM;
 use crate::math::surface::Truncation;
 use crate::math::surface_blocks::{SkipRef, SURF_BLOCK_SHIFT_CPU};
-use crate::stage::{StageBackend, StateFn};
+use crate::stage::{HostRays, HostSteps, StageBackend, StateFn, StepStore};
 use anyhow::{ensure, Result};
 
 /// The grid for the kernels' twins, whose links [`CpuSurface::new`] checked (they never change
@@ -59,9 +57,7 @@ pub struct CpuSurface {
     blocks: Vec<u32>,
     skip: SkipAllocation,
     refresh: BlockRefresh,
-    bg: Background,
-    /// Figures of the `step_sampled` steps not yet taken.
-    done: Vec<SurfaceStepStats>,
+    steps: HostSteps<SurfaceStepStats>,
 }
 
 impl CpuSurface {
@@ -85,8 +81,7 @@ impl CpuSurface {
             grad: [vec![0.0; n], vec![0.0; n], vec![0.0; n * SH_DIM]],
             state: [vec![0.0; n], vec![0.0; n], vec![0.0; n * SH_DIM]],
             touched: vec![0; n],
-            bg: Background::new([1.0; 3], false),
-            done: Vec::new(),
+            steps: HostSteps::default(),
         })
     }
 
@@ -112,7 +107,7 @@ impl CpuSurface {
             normals: &self.normals,
             delta_reach: self.axis_reach,
         };
-        SurfacePlan::step(p, &g, n_rays, self.bg.learned(), &mut self.refresh)
+        SurfacePlan::step(p, &g, n_rays, self.steps.bg.learned(), &mut self.refresh)
     }
 
     /// Run `plan`'s passes in order, the kernels' twins, on the batch `rays`, `targets` (with
@@ -133,8 +128,8 @@ impl CpuSurface {
                     stop_thresh,
                     loss,
                 } => {
-                    let sp = surface_params(&self.grid, *truncation, *stop_thresh, self.bg.rgb);
-                    let learned = self.bg.learned();
+                    let bg = &mut self.steps.bg;
+                    let sp = surface_params(&self.grid, *truncation, *stop_thresh, bg.rgb);
                     let [gd, go, gs] = &mut self.grad;
                     (out.losses, out.counts) = train(
                         &grid_ref(&self.grid),
@@ -154,7 +149,7 @@ impl CpuSurface {
                             opacity: go,
                             sh: gs,
                             touched: &mut self.touched,
-                            background: learned.then_some(&mut self.bg.grad),
+                            background: bg.learned().then_some(&mut bg.grad),
                         },
                     )?;
                 }
@@ -207,30 +202,29 @@ impl CpuSurface {
                         h,
                     );
                 }
-                SurfacePass::Background { lr, beta, eps } => {
-                    background_step(&mut self.bg, *lr, *beta, *eps);
+                SurfacePass::Background(s) => {
+                    background_step(&mut self.steps.bg, s.lr, s.beta, s.eps);
                 }
             }
         }
         Ok(out)
     }
 
-    /// One training step on a batch with optional per-ray importance weights.
-    fn step_weighted(
+    /// One training step on `batch`; `clock` has the step's host time so far.
+    fn step_on(
         &mut self,
-        rays: &[f32],
-        targets: &[f32],
-        weights: Option<&[f32]>,
+        batch: &HostRays,
         p: &SurfaceStepParams,
+        mut clock: PhaseClock,
     ) -> Result<SurfaceStepStats> {
-        let mut clock = PhaseClock::start();
-        let n = rays.len() / 6;
+        let n = batch.rays.len() / 6;
         let plan = self.plan(p, n)?;
+        let weights = batch.weights.as_deref();
         let PassOutput {
             losses,
             counts,
             reg_loss,
-        } = self.run_plan(&plan, rays, targets, weights)?;
+        } = self.run_plan(&plan, &batch.rays, &batch.targets, weights)?;
         self.refresh.after_update(p.lr_delta, p.beta);
         let nf = n.max(1) as f64;
         let mut stats = SurfaceStepStats {
@@ -258,36 +252,20 @@ struct PassOutput {
 }
 
 impl StageBackend<SurfaceStage> for CpuSurface {
-    fn name(&self) -> &'static str {
-        "cpu"
+    fn store(&self) -> &dyn StepStore<SurfaceStepStats> {
+        &self.steps
     }
 
-    fn step(
-        &mut self,
-        rays: &[f32],
-        targets: &[f32],
-        p: &SurfaceStepParams,
-    ) -> Result<SurfaceStepStats> {
-        self.step_weighted(rays, targets, None, p)
+    fn store_mut(&mut self) -> &mut dyn StepStore<SurfaceStepStats> {
+        &mut self.steps
     }
 
-    fn step_sampled(
-        &mut self,
-        views: &TrainViews,
-        seed: u64,
-        n: usize,
-        p: &SurfaceStepParams,
-    ) -> Result<()> {
-        let (batch, sampling) = timed(Phase::Sampling, || sample_rays(views.set(), seed, n))?;
-        let weights = (!batch.weights.is_empty()).then_some(batch.weights.as_slice());
-        let mut stats = self.step_weighted(&batch.rays, &batch.targets, weights, p)?;
-        stats.host.add(&sampling);
-        self.done.push(stats);
+    fn submit(&mut self, src: TrainRays, p: &SurfaceStepParams) -> Result<()> {
+        let mut clock = PhaseClock::start();
+        let batch = HostRays::of(src, &mut clock, sample_rays)?;
+        let stats = self.step_on(&batch, p, clock)?;
+        self.steps.push(stats);
         Ok(())
-    }
-
-    fn take_stats(&mut self) -> Result<Vec<SurfaceStepStats>> {
-        Ok(std::mem::take(&mut self.done))
     }
 
     fn grid(&self) -> Result<SurfaceGrid> {
@@ -319,20 +297,10 @@ impl StageBackend<SurfaceStage> for CpuSurface {
             state[0].len() == n && state[1].len() == n && state[2].len() == n * SH_DIM,
             "optimizer state does not match the surface grid"
         );
-        let (bg, done) = (self.bg, std::mem::take(&mut self.done));
+        let steps = std::mem::take(&mut self.steps);
         *self = CpuSurface::new(grid)?;
         self.state = state;
-        self.bg = bg;
-        self.done = done;
-        Ok(())
-    }
-
-    fn background(&self) -> Result<Background> {
-        Ok(self.bg)
-    }
-
-    fn set_background(&mut self, bg: Background) -> Result<()> {
-        self.bg = bg;
+        self.steps = steps;
         Ok(())
     }
 }
@@ -344,7 +312,7 @@ impl SurfaceBackend for CpuSurface {
         truncation: Truncation,
         stop_thresh: f32,
     ) -> Result<(Vec<f32>, SurfCounts)> {
-        let sp = surface_params(&self.grid, truncation, stop_thresh, self.bg.rgb);
+        let sp = surface_params(&self.grid, truncation, stop_thresh, self.steps.bg.rgb);
         self.refresh_blocks(0.0, 0.0)?;
         let skip = SkipRef {
             words: &self.blocks,

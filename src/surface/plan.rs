@@ -11,6 +11,7 @@ use crate::abi::regularisers::DeltaTvChunk;
 use crate::abi::regularisers::OpacityChunk;
 use crate::abi::regularisers::TvChunk;
 use crate::abi::step::RowRange;
+use crate::abi::train::BackgroundStep;
 use crate::abi::train::SurfaceLoss;
 use crate::abi::train::SurfaceRmsProp;
 use crate::math::surface::Truncation;
@@ -38,7 +39,7 @@ pub enum SurfacePass {
     /// RMSProp on the touched groups and the regularisers' rows (`surface_rmsprop`).
     RmsProp(SurfaceRmsProp),
     /// RMSProp on a learned background (`background_step`).
-    Background { lr: f32, beta: f32, eps: f32 },
+    Background(BackgroundStep),
 }
 
 /// What the plan needs to know of the grid a backend holds.
@@ -138,13 +139,8 @@ impl SurfacePlan {
             delta_rows,
             opacity_rows: regs.opacity_log.map(|c| c.range()).unwrap_or_default(),
         }));
-        if learned_bg {
-            passes.push(SurfacePass::Background {
-                lr: p.lr_bg,
-                beta: p.beta,
-                eps: p.eps,
-            });
-        }
+        let bg = BackgroundStep::when_learned(learned_bg, p.lr_bg, p.beta, p.eps);
+        passes.extend(bg.map(SurfacePass::Background));
         Ok(SurfacePlan { passes })
     }
 
@@ -280,7 +276,7 @@ mod tests {
                 SurfacePass::OpacityLog(_) => "opacity_log",
                 SurfacePass::Normals(_) => "normals",
                 SurfacePass::RmsProp(_) => "rmsprop",
-                SurfacePass::Background { .. } => "background",
+                SurfacePass::Background(_) => "background",
             })
             .collect()
     }

@@ -16,18 +16,15 @@ use super::{
     opacity_reg_invocations, surface_params, BlockRefresh, SurfaceBackend, SurfaceStage,
     SurfaceStepParams, SurfaceStepStats,
 };
-use crate::abi::buffers::Background;
-use crate::abi::buffers::StepHeader;
 use crate::abi::buffers::{RayLoss, SurfCounts, SurfOut, SurfParams, TrainCounts};
 use crate::abi::consts::LOSS_SUM_FIELDS;
 use crate::abi::normal_reg::NormalPrefix;
 use crate::abi::regularisers::TvChunk;
 use crate::abi::regularisers::{axis_neighbours, forward_reach};
-use crate::abi::step::{step_record, STEP_FLAGS, STEP_RESET_BYTES};
+use crate::abi::step::{step_record, STEP_FLAGS};
 use crate::abi::train::SurfaceLoss;
-use crate::data::TrainViews;
 use crate::gpu::{
-    record_background_step, record_loss_sum, Batch, BatchTimes, Gpu, GpuBuffer, Phase, PhaseClock,
+    record_background_step, record_tv, Batch, BatchRays, Gpu, GpuBuffer, Phase, PhaseClock,
     Readback, SlotFigures, StepQueue, StepTimes, TrainRays,
 };
 use crate::grid::row_slots;
@@ -42,7 +39,7 @@ use crate::math::surface_blocks::{alloc_box, complete_cells};
 use crate::math::surface_blocks::{
     surf_blocks_per_axis, surf_live_words, SURF_BLOCK_SHIFT_VULKAN, SURF_BOX_WORDS,
 };
-use crate::stage::StageBackend;
+use crate::stage::QueuedBackend;
 use anyhow::{ensure, Result};
 
 /// Regulariser values a step writes: Lα, Ln.
@@ -94,7 +91,6 @@ pub struct VulkanSurface {
     /// regulariser values and the counters. First, so that dropping the backend waits for the
     /// steps before any buffer they use is freed.
     queue: StepQueue<SurfaceStepStats>,
-    gpu: Gpu,
     /// The grid without its arrays (resolution, bounds, levels).
     meta: SurfaceGrid,
     rows: usize,
@@ -115,10 +111,6 @@ pub struct VulkanSurface {
     sh: GpuBuffer,
     grad: [GpuBuffer; 3],
     state: [GpuBuffer; 3],
-    /// Step record (glsl/lib/step.glsl): `StepHeader`, flags, list.
-    step: GpuBuffer,
-    /// Indirect dispatch arguments of surface_rmsprop.
-    args: GpuBuffer,
     /// The params buffer of surface_fwd and surface_train (written in each training batch's
     /// command stream, before a render).
     params: GpuBuffer,
@@ -138,16 +130,6 @@ pub struct VulkanSurface {
     /// Regulariser values: Lα, Ln (floats); pairs skipped by Ln (u32).
     reg_loss: GpuBuffer,
     reg_skipped: GpuBuffer,
-}
-
-/// Device addresses of a training batch: rays (6 floats each), targets (3 floats each),
-/// per-ray importance weights (0: every weight 1) and the per-ray output.
-#[derive(Clone, Copy, Debug)]
-struct RayIo {
-    rays: u64,
-    targets: u64,
-    weights: u64,
-    out: u64,
 }
 
 impl VulkanSurface {
@@ -177,9 +159,12 @@ impl VulkanSurface {
         let row_slot = row_slots(&grid.links, n);
         let normal_prefix = NormalPrefix::new(&grid.links, &row_slot, grid.res);
         let axis_nbrs = axis_neighbours(&grid.links, &row_slot, grid.res);
+        let mut step = step_record(n, &[]);
+        step.resize(STEP_FLAGS + 2 * rows, 0);
         Ok(VulkanSurface {
             queue: StepQueue::new(
                 gpu,
+                &step,
                 std::mem::size_of::<SurfOut>(),
                 &[
                     4 * LOSS_SUM_FIELDS as u64,
@@ -187,7 +172,6 @@ impl VulkanSurface {
                     std::mem::size_of::<TrainCounts>() as u64,
                 ],
             )?,
-            gpu: gpu.clone(),
             rows: n,
             links: gpu.upload(&grid.links)?,
             complete: {
@@ -211,12 +195,6 @@ impl VulkanSurface {
             sh: upload_nonempty(gpu, &grid.sh)?,
             grad: zeros3()?,
             state: zeros3()?,
-            step: {
-                let mut init = step_record(n, &[]);
-                init.resize(STEP_FLAGS + 2 * rows, 0);
-                gpu.upload(&init)?
-            },
-            args: gpu.zeros::<u32>(3)?,
             params: gpu.host_to_device::<SurfParams>(1)?,
             levels: gpu.upload(&levels)?,
             stats: gpu.zeros::<TrainCounts>(1)?,
@@ -227,57 +205,17 @@ impl VulkanSurface {
             normal_prefix,
             reg_loss: gpu.zeros::<f32>(REG_VALUES)?,
             reg_skipped: gpu.zeros::<u32>(1)?,
-            meta: SurfaceGrid {
-                links: Vec::new(),
-                delta: Vec::new(),
-                opacity: Vec::new(),
-                sh: Vec::new(),
-                ..grid
-            },
+            meta: grid.without_arrays(),
         })
     }
 
-    /// Upload rays (and targets), start a batch and record the step reset (touched count) and the
-    /// counters' reset (the upload, and what preceded it since the last mark, charged to `clock`).
-    /// Returns the batch and the addresses of rays, targets and per-ray output.
-    fn begin(
-        &mut self,
-        rays: &[f32],
-        targets: Option<&[f32]>,
-        clock: &mut PhaseClock,
-    ) -> Result<(Batch, RayIo)> {
-        ensure!(
-            rays.len().is_multiple_of(6),
-            "rays must be 6 floats each, got {} floats",
-            rays.len()
-        );
-        let [rays, targets, out] = self.queue.rays.upload(&self.gpu, rays, targets)?;
-        clock.mark(Phase::Upload);
-        let b = self.begin_batch()?;
-        Ok((
-            b,
-            RayIo {
-                rays,
-                targets,
-                weights: 0,
-                out,
-            },
-        ))
-    }
-
-    /// A batch starting with the step reset (touched count) and the counters' reset.
-    fn begin_batch(&self) -> Result<Batch> {
-        let mut b = self.gpu.batch()?;
-        b.fill_zero_range(&self.step, 0, STEP_RESET_BYTES);
-        b.fill_zero(&self.stats);
-        b.fill_zero(&self.reg_loss);
-        b.fill_zero(&self.reg_skipped);
-        Ok(b)
-    }
-
     /// Start a batch with the resets and the training rays (uploaded, or drawn by
-    /// `sample_rays`). Returns it with the addresses of rays, targets, weights and per-ray output.
-    fn begin_train(&mut self, src: TrainRays, clock: &mut PhaseClock) -> Result<(Batch, RayIo)> {
+    /// `sample_rays`; what preceded since the last mark charged to `clock`'s recording).
+    fn begin_train(
+        &mut self,
+        src: TrainRays,
+        clock: &mut PhaseClock,
+    ) -> Result<(Batch, BatchRays)> {
         let n = src.len();
         if let TrainRays::Host { rays, targets } = src {
             ensure!(
@@ -288,23 +226,8 @@ impl VulkanSurface {
             );
         }
         clock.mark(Phase::Record);
-        match src {
-            TrainRays::Host { rays, targets } => self.begin(rays, Some(targets), clock),
-            TrainRays::Sampled { id, set, seed, n } => {
-                let out = self.queue.reserve_sampled(&self.gpu, id, set, n, clock)?;
-                let mut b = self.begin_batch()?;
-                let at = self.queue.record_sample(&mut b, set, seed, n, clock)?;
-                Ok((
-                    b,
-                    RayIo {
-                        rays: at.rays,
-                        targets: at.targets,
-                        weights: at.weights,
-                        out,
-                    },
-                ))
-            }
-        }
+        let counters = [&self.stats, &self.reg_loss, &self.reg_skipped];
+        self.queue.begin(src, clock, &counters)
     }
 
     /// The grid as the step plans see it.
@@ -318,7 +241,13 @@ impl VulkanSurface {
     }
 
     /// Record `plan`'s passes in order on the batch of `n` rays at `rays`.
-    fn record_plan(&self, b: &mut Batch, plan: &SurfacePlan, rays: RayIo, n: usize) -> Result<()> {
+    fn record_plan(
+        &self,
+        b: &mut Batch,
+        plan: &SurfacePlan,
+        rays: BatchRays,
+        n: usize,
+    ) -> Result<()> {
         for pass in plan.passes() {
             match pass {
                 SurfacePass::Blocks { margin } => self.record_blocks(b, *margin)?,
@@ -348,7 +277,7 @@ impl VulkanSurface {
                     let io = NormalRegIo {
                         delta: self.delta.address(),
                         grad: self.grad[0].address(),
-                        step: self.step.address(),
+                        step: self.queue.step.address(),
                         loss: self.reg_loss.address() + 4,
                         skipped: self.reg_skipped.address(),
                     };
@@ -364,10 +293,11 @@ impl VulkanSurface {
                         grads: self.grad.each_ref().map(|g| g.address()),
                         states: self.state.each_ref().map(|g| g.address()),
                     };
-                    record_surface_rmsprop(b, &io, &self.step, &self.args, h)?;
+                    let q = &self.queue;
+                    record_surface_rmsprop(b, &io, &q.step, &q.args, h)?;
                 }
-                SurfacePass::Background { lr, beta, eps } => {
-                    record_background_step(b, &self.queue.bg, *lr, *beta, *eps)?
+                SurfacePass::Background(s) => {
+                    record_background_step(b, &self.queue.bg, s.lr, s.beta, s.eps)?
                 }
             }
         }
@@ -382,7 +312,7 @@ impl VulkanSurface {
         truncation: Truncation,
         stop_thresh: f32,
         loss: &SurfaceLoss,
-        io: RayIo,
+        io: BatchRays,
         n: usize,
     ) -> Result<()> {
         // The colour is the device's (`bg`); surface_fwd and surface_train read it there.
@@ -408,7 +338,7 @@ impl VulkanSurface {
                 grad_sh: self.grad[2].address(),
                 out_rays: io.out,
                 stats: self.stats.address(),
-                step: self.step.address(),
+                step: self.queue.step.address(),
                 bg: self.queue.bg.address(),
                 n: self.meta.res[0],
                 block_shift: SURF_BLOCK_SHIFT_VULKAN,
@@ -428,21 +358,20 @@ impl VulkanSurface {
         if start >= end {
             return Ok(());
         }
-        b.dispatch_1d(
-            &kernels::tv::INFO,
-            &kernels::tv::Push {
-                links: self.links.address(),
-                data: self.opacity.address(),
-                grad: self.grad[1].address(),
-                step: self.step.address(),
-                res,
-                start,
-                count: end - start,
-                channels: 1,
-                scale: c.scale,
-                touch_bits: c.touch,
-            },
-            end - start + res[1] * res[2],
+        let chunk = TvChunk {
+            res,
+            start,
+            count: end - start,
+            channels: 1,
+            ..*c
+        };
+        record_tv(
+            b,
+            &self.links,
+            &self.opacity,
+            &self.grad[1],
+            &self.queue.step,
+            &chunk,
         )
     }
 
@@ -488,10 +417,6 @@ impl VulkanSurface {
         Ok(self.stats.download_range::<TrainCounts>(0, 1)?[0])
     }
 
-    fn ray_loss(&self, n: usize) -> Result<Vec<RayLoss>> {
-        self.queue.rays.out().download_range(0, n)
-    }
-
     /// The training pass alone (no regulariser, no update) on rays with optional per-ray
     /// importance `weights`: per-ray losses, the gradients, the touched flags and the counters;
     /// gradients and flags are cleared afterwards.
@@ -502,7 +427,7 @@ impl VulkanSurface {
         weights: Option<&[f32]>,
         p: &SurfaceStepParams,
     ) -> Result<SurfaceGradients> {
-        self.settle()?;
+        self.queue.settle()?;
         let n = rays.len() / 6;
         ensure!(
             weights.is_none_or(|w| w.len() == n),
@@ -513,7 +438,7 @@ impl VulkanSurface {
         let plan = SurfacePlan::gradients(p, n, &mut refresh)?;
         let src = TrainRays::Host { rays, targets };
         let (mut b, mut io) = self.begin_train(src, &mut PhaseClock::start())?;
-        let weight_buf = weights.map(|w| self.gpu.upload(w)).transpose()?;
+        let weight_buf = weights.map(|w| self.queue.gpu().upload(w)).transpose()?;
         if let Some(w) = &weight_buf {
             io.weights = w.address();
         }
@@ -522,39 +447,43 @@ impl VulkanSurface {
         b.submit()?;
         let rows = self.rows;
         let g = SurfaceGradients {
-            ray_loss: self.ray_loss(n)?,
+            ray_loss: self.queue.ray_output(n)?,
             delta: self.grad[0].download_range(0, rows)?,
             opacity: self.grad[1].download_range(0, rows)?,
             sh: self.grad[2].download_range(0, rows * SH_DIM)?,
-            touched: self.step.download_range(STEP_FLAGS, rows)?,
-            background: self.queue.bg.download::<Background>()?[0].grad,
+            touched: self.queue.step.download_range(STEP_FLAGS, rows)?,
+            background: self.queue.take_background_grad()?,
             counts: self.read_train_counts()?,
         };
-        let mut bg = self.background()?;
-        bg.grad = [0.0; 3];
-        self.queue.bg.write(&[bg])?;
-        // Leave no gradient or touched flag behind for the next step.
-        let mut b = self.gpu.batch()?;
-        for gb in &self.grad {
-            b.fill_zero(gb);
-        }
-        b.fill_zero_range(&self.step, 4 * STEP_FLAGS as u64, 4 * rows.max(1) as u64);
-        b.submit()?;
+        let grads = self.grad.each_ref();
+        self.queue.clear_gradients(&grads, rows.max(1))?;
         Ok(g)
     }
 
     /// Number of vertices touched by the last step (read from the step record).
     pub fn last_touched(&self) -> Result<u32> {
-        self.settle()?;
-        Ok(self.step.download_range::<StepHeader>(0, 1)?[0].count)
+        self.queue.settle()?;
+        Ok(self.queue.header()?.count)
+    }
+}
+
+impl QueuedBackend<SurfaceStage> for VulkanSurface {
+    fn queue(&self) -> &StepQueue<SurfaceStepStats> {
+        &self.queue
     }
 
-    /// Start the batch of a training step on `src`'s rays and record the step's plan; the
-    /// skip structure counts as rebuilt once the plan is recorded.
+    fn queue_mut(&mut self) -> &mut StepQueue<SurfaceStepStats> {
+        &mut self.queue
+    }
+
+    /// The step's plan, then its figures into `slot` (per-ray losses summed on the device, the
+    /// regulariser values and counters copied); the skip structure counts as rebuilt once the
+    /// plan is recorded.
     fn record_step(
         &mut self,
         src: TrainRays,
         p: &SurfaceStepParams,
+        slot: usize,
         clock: &mut PhaseClock,
     ) -> Result<Batch> {
         let n = src.len();
@@ -563,82 +492,16 @@ impl VulkanSurface {
         let (mut b, io) = self.begin_train(src, clock)?;
         self.record_plan(&mut b, &plan, io, n)?;
         self.refresh = refresh;
-        Ok(b)
-    }
-
-    /// Wait for the steps in flight (before the host reads, writes or frees what they use).
-    fn settle(&self) -> Result<()> {
-        self.queue.settle()
-    }
-
-    /// Record one training step on `src`'s rays and submit it without waiting (up to
-    /// `MAX_IN_FLIGHT` steps run on the device while the host records the next); its figures
-    /// come back with [`Self::take_timed`].
-    pub fn submit_step(&mut self, src: TrainRays, p: &SurfaceStepParams) -> Result<()> {
-        let n = src.len();
-        let mut clock = PhaseClock::start();
-        let slot = self.queue.slot_for(&src)?;
-        let mut b = self.record_step(src, p, &mut clock)?;
-        // The step's figures into its slot: per-ray losses summed on the device, the
-        // regulariser values and counters copied.
-        let stride = (std::mem::size_of::<RayLoss>() / 4) as u32;
         let q = &self.queue;
-        let out = q.rays.out().address();
-        record_loss_sum(&mut b, out, q.readback.address(slot, 0), n, stride, 3)?;
+        let stride = (std::mem::size_of::<RayLoss>() / 4) as u32;
+        q.record_loss_sum(&mut b, slot, n, stride, 3)?;
         q.readback.copy(&mut b, slot, 1, &self.reg_loss, 0);
         q.readback.copy(&mut b, slot, 2, &self.stats, 0);
         self.refresh.after_update(p.lr_delta, p.beta);
-        self.queue.submit(b, n, clock)
+        Ok(b)
     }
 
-    /// The figures of every step submitted since they were last taken, in order, with the
-    /// device times of their dispatches (waits for the steps in flight).
-    pub fn take_timed(&mut self) -> Result<Vec<(SurfaceStepStats, BatchTimes)>> {
-        self.queue.take_timed()
-    }
-
-    /// One training step on `src`'s rays, waited for: its figures and the device times of its
-    /// dispatches. The figures of earlier steps not yet taken stay for `take_stats`.
-    pub fn step_timed(
-        &mut self,
-        src: TrainRays,
-        p: &SurfaceStepParams,
-    ) -> Result<(SurfaceStepStats, BatchTimes)> {
-        self.submit_step(src, p)?;
-        self.queue.last()
-    }
-}
-
-impl StageBackend<SurfaceStage> for VulkanSurface {
-    fn name(&self) -> &'static str {
-        "vulkan"
-    }
-
-    fn step(
-        &mut self,
-        rays: &[f32],
-        targets: &[f32],
-        p: &SurfaceStepParams,
-    ) -> Result<SurfaceStepStats> {
-        Ok(self.step_timed(TrainRays::Host { rays, targets }, p)?.0)
-    }
-
-    fn step_sampled(
-        &mut self,
-        views: &TrainViews,
-        seed: u64,
-        n: usize,
-        p: &SurfaceStepParams,
-    ) -> Result<()> {
-        self.submit_step(views.train_rays(seed, n), p)
-    }
-
-    fn take_stats(&mut self) -> Result<Vec<SurfaceStepStats>> {
-        self.queue.take_figures()
-    }
-
-    fn grid(&self) -> Result<SurfaceGrid> {
-        self.settle()?;
+    fn download_grid(&self) -> Result<SurfaceGrid> {
         let rows = self.rows;
         Ok(SurfaceGrid {
             links: self.links.download()?,
@@ -649,13 +512,7 @@ impl StageBackend<SurfaceStage> for VulkanSurface {
         })
     }
 
-    fn state_bytes(&self) -> u64 {
-        let slots = self.meta.res.iter().map(|&r| r as u64).product();
-        state_bytes(slots, self.rows as u64, 2 + SH_DIM as u64)
-    }
-
-    fn optimizer_state(&self) -> Result<[Vec<f32>; 3]> {
-        self.settle()?;
+    fn download_state(&self) -> Result<[Vec<f32>; 3]> {
         let rows = self.rows;
         Ok([
             self.state[0].download_range(0, rows)?,
@@ -664,7 +521,12 @@ impl StageBackend<SurfaceStage> for VulkanSurface {
         ])
     }
 
-    fn load(&mut self, grid: SurfaceGrid, state: Option<[Vec<f32>; 3]>) -> Result<()> {
+    fn copy_bytes(&self) -> u64 {
+        let slots = self.meta.res.iter().map(|&r| r as u64).product();
+        state_bytes(slots, self.rows as u64, 2 + SH_DIM as u64)
+    }
+
+    fn rebuild(&self, grid: SurfaceGrid, state: Option<[Vec<f32>; 3]>) -> Result<Self> {
         let n = grid.delta.len();
         if let Some(s) = &state {
             ensure!(
@@ -672,24 +534,13 @@ impl StageBackend<SurfaceStage> for VulkanSurface {
                 "optimizer state does not match the surface grid"
             );
         }
-        let mut fresh = VulkanSurface::new(&self.gpu, grid)?;
+        let fresh = VulkanSurface::new(self.queue.gpu(), grid)?;
         if let Some(s) = state {
             for (buf, v) in fresh.state.iter().zip(&s) {
                 buf.write(v)?;
             }
         }
-        // The background, the views and the figures of the steps so far stay.
-        self.queue.carry_into(&mut fresh.queue)?;
-        *self = fresh;
-        Ok(())
-    }
-
-    fn background(&self) -> Result<Background> {
-        self.queue.background()
-    }
-
-    fn set_background(&mut self, bg: Background) -> Result<()> {
-        self.queue.set_background(bg)
+        Ok(fresh)
     }
 }
 
@@ -700,7 +551,7 @@ impl SurfaceBackend for VulkanSurface {
         truncation: Truncation,
         stop_thresh: f32,
     ) -> Result<(Vec<f32>, SurfCounts)> {
-        self.settle()?;
+        self.queue.settle()?;
         let n = rays.len() / 6;
         let sp = surface_params(&self.meta, truncation, stop_thresh, [1.0; 3]);
         let no_loss = SurfaceLoss {
@@ -709,7 +560,14 @@ impl SurfaceBackend for VulkanSurface {
             lambda_c: 0.0,
         };
         self.params.write(&[surf_params(&sp, &no_loss, n)])?;
-        let (mut b, io) = self.begin(rays, None, &mut PhaseClock::start())?;
+        ensure!(
+            rays.len().is_multiple_of(6),
+            "rays must be 6 floats each, got {} floats",
+            rays.len()
+        );
+        let counters = [&self.stats, &self.reg_loss, &self.reg_skipped];
+        let clock = &mut PhaseClock::start();
+        let (mut b, io) = self.queue.begin_host(rays, None, clock, &counters)?;
         if let Some(margin) = self.refresh.before_pass(0.0, 0.0) {
             self.record_blocks(&mut b, margin)?;
         }
@@ -734,7 +592,7 @@ impl SurfaceBackend for VulkanSurface {
             n as u32,
         )?;
         b.submit()?;
-        let out: Vec<SurfOut> = self.queue.rays.out().download_range(0, n)?;
+        let out: Vec<SurfOut> = self.queue.ray_output(n)?;
         let counts = self.stats.download_range::<SurfCounts>(0, 1)?[0];
         Ok((out.iter().flat_map(|o| o.rgb).collect(), counts))
     }
@@ -752,8 +610,7 @@ impl SlotFigures for SurfaceStepStats {
             consistency: sums[2] as f64 / nf,
             reg_loss: reg.iter().map(|&x| x as f64).sum(),
             counts: readback.part::<TrainCounts>(slot, 2)?[0],
-            device_ns: 0.0,
-            host: Default::default(),
+            ..Default::default()
         })
     }
 

@@ -3,6 +3,7 @@
 
 use super::preset::Preset;
 use super::schedule::DelayedExp;
+use super::steps::{loop_schedule, LoopSchedule, Scheduled};
 use serde::{Deserialize, Serialize};
 
 /// The presets' least time between periodic checkpoints (both stages), in seconds.
@@ -258,6 +259,12 @@ impl PlenoxelsConfig {
             .iter()
             .rfind(|(s, _)| *s <= t)
             .map_or(self.res, |(_, r)| *r)
+    }
+}
+
+impl Scheduled for PlenoxelsConfig {
+    fn schedule(&self) -> LoopSchedule {
+        loop_schedule!(self)
     }
 }
 

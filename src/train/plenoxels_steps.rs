@@ -5,10 +5,10 @@
 use super::config::PlenoxelsConfig;
 use super::progress::Progress;
 use super::render::{render_split, RenderedSplit};
-use super::steps::{self, loop_schedule, LoopReport, LoopSchedule, StageSteps};
+use super::steps::{self, LoopReport, StageSteps};
 use crate::abi::buffers::PlenoxelPerRay;
 use crate::checkpoint::BackgroundRecord;
-use crate::data::{Dataset, Split, TrainViews};
+use crate::data::{Dataset, Split};
 use crate::grid::{dilate, upsample, Grid};
 use crate::plenoxel::{PlenoxelsBackend, PlenoxelsStage, PlenoxelsStepParams, TvParams};
 use crate::run::memory;
@@ -101,14 +101,6 @@ impl<'b> StageSteps<PlenoxelsStage, dyn PlenoxelsBackend + 'b> for PlenoxelsStep
         self.cfg
     }
 
-    fn schedule(&self) -> LoopSchedule {
-        loop_schedule!(self.cfg)
-    }
-
-    fn views<'d>(&self, data: &'d Dataset) -> Result<TrainViews<'d>> {
-        TrainViews::new(&data.train, &data.scene)
-    }
-
     /// From step 0 the background starts as `data.background` says
     /// (`BackgroundRecord::start_on`); a resumed run keeps the one its checkpoint holds.
     fn start(
@@ -167,10 +159,6 @@ impl<'b> StageSteps<PlenoxelsStage, dyn PlenoxelsBackend + 'b> for PlenoxelsStep
 
     fn work_before(&self, step: u32) -> bool {
         self.cfg.upsample.iter().any(|(s, _)| *s == step)
-    }
-
-    fn finish(&mut self, _: &mut (dyn PlenoxelsBackend + 'b)) -> Result<()> {
-        Ok(())
     }
 
     fn render_test(

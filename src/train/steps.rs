@@ -38,6 +38,11 @@ pub struct LoopSchedule {
     pub checkpoint_min_seconds: f32,
 }
 
+/// A stage configuration's [`LoopSchedule`].
+pub trait Scheduled {
+    fn schedule(&self) -> LoopSchedule;
+}
+
 /// The [`LoopSchedule`] of a stage configuration: its fields of the same names.
 macro_rules! loop_schedule {
     ($c:expr) => {
@@ -54,32 +59,43 @@ pub(crate) use loop_schedule;
 
 /// What a stage does around the shared loop, on backends of type `B`.
 pub trait StageSteps<S: Stage, B: StageBackend<S> + ?Sized> {
-    /// The configuration each checkpoint records.
-    type Config: Serialize;
+    /// The configuration each checkpoint records, with the loop's schedule.
+    type Config: Serialize + Scheduled;
     fn config(&self) -> &Self::Config;
-    fn schedule(&self) -> LoopSchedule;
-    /// The training views batches are drawn from.
-    fn views<'d>(&self, data: &'d Dataset) -> Result<TrainViews<'d>>;
-    /// Before the first step of this process (`start_step`: 0, or the step after a resumed
-    /// checkpoint).
-    fn start(&mut self, backend: &mut B, data: &Dataset, start_step: u32) -> Result<()>;
-    /// Work due before `step` (its time is not the training's); whether there was any.
-    fn before_step(
-        &mut self,
-        backend: &mut B,
-        data: &Dataset,
-        step: u32,
-        progress: &mut Progress,
-    ) -> Result<bool>;
     /// The parameters of `step`, drawing what it needs from `rng` (after the batch's seed).
     fn params(&mut self, step: u32, rng: &mut Pcg64) -> S::Params;
-    /// Whether [`Self::before_step`] has work before `step` (the figures are read before it).
-    fn work_before(&self, step: u32) -> bool;
-    /// After the last step, before the last checkpoint.
-    fn finish(&mut self, backend: &mut B) -> Result<()>;
     /// Render the test split into `out`.
     fn render_test(&mut self, backend: &mut B, data: &Dataset, out: &Path)
         -> Result<RenderedSplit>;
+
+    /// The training views batches are drawn from (uniformly, unless a stage says otherwise).
+    fn views<'d>(&self, data: &'d Dataset) -> Result<TrainViews<'d>> {
+        TrainViews::new(&data.train, &data.scene)
+    }
+    /// Before the first step of this process (`start_step`: 0, or the step after a resumed
+    /// checkpoint); nothing unless a stage says otherwise.
+    fn start(&mut self, _backend: &mut B, _data: &Dataset, _start_step: u32) -> Result<()> {
+        Ok(())
+    }
+    /// Work due before `step` (its time is not the training's); whether there was any (none
+    /// unless a stage says otherwise).
+    fn before_step(
+        &mut self,
+        _backend: &mut B,
+        _data: &Dataset,
+        _step: u32,
+        _progress: &mut Progress,
+    ) -> Result<bool> {
+        Ok(false)
+    }
+    /// Whether [`Self::before_step`] has work before `step` (the figures are read before it).
+    fn work_before(&self, _step: u32) -> bool {
+        false
+    }
+    /// After the last step, before the last checkpoint; nothing unless a stage says otherwise.
+    fn finish(&mut self, _backend: &mut B) -> Result<()> {
+        Ok(())
+    }
 }
 
 /// Wall time per phase and throughput of a finished run.
@@ -117,7 +133,7 @@ where
     std::fs::create_dir_all(out)
         .with_context(|| format!("creating run directory {}", out.display()))?;
     let _catch = interrupt::catch();
-    let sched = stage.schedule();
+    let sched = stage.config().schedule();
     let ck = RunCheckpoints {
         path: checkpoint::path::<S>(out),
         config: serde_json::to_value(stage.config()).context("recording the configuration")?,

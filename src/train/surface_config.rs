@@ -5,6 +5,7 @@
 use super::config::CHECKPOINT_MIN_SECONDS;
 use super::preset::{Category, Preset};
 use super::schedule::DelayedExp;
+use super::steps::{loop_schedule, LoopSchedule, Scheduled};
 use crate::grid::surface::SurfaceInit;
 use crate::math::surface::{Truncation, TruncationCount};
 use anyhow::{bail, ensure, Result};
@@ -365,6 +366,12 @@ impl SurfaceConfig {
         c.checkpoint_every = c.checkpoint_every.min(iters).max(1);
         c.iters = iters;
         c
+    }
+}
+
+impl Scheduled for SurfaceConfig {
+    fn schedule(&self) -> LoopSchedule {
+        loop_schedule!(self)
     }
 }
 

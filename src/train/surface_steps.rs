@@ -2,9 +2,8 @@
 //! truncation and regularisers of each step; at the end the surfaces that cannot reach
 //! α ≥ `prune_alpha` are dropped before the last checkpoint and the test renders.
 
-use super::progress::Progress;
 use super::render::{render_split_with, RenderedSplit};
-use super::steps::{self, loop_schedule, LoopReport, LoopSchedule, StageSteps};
+use super::steps::{self, LoopReport, StageSteps};
 use super::surface_config::SurfaceConfig;
 use crate::abi::buffers::TrainPerRay;
 use crate::abi::regularisers::{delta_tv_chunk, opacity_tv_chunk, OpacityChunk};
@@ -96,10 +95,6 @@ impl<'b> StageSteps<SurfaceStage, dyn SurfaceBackend + 'b> for SurfaceSteps<'_> 
         self.cfg
     }
 
-    fn schedule(&self) -> LoopSchedule {
-        loop_schedule!(self.cfg)
-    }
-
     fn views<'d>(&self, data: &'d Dataset) -> Result<TrainViews<'d>> {
         TrainViews::new(&data.train, &data.scene)?.focused(self.cfg.ray_focus)
     }
@@ -115,16 +110,6 @@ impl<'b> StageSteps<SurfaceStage, dyn SurfaceBackend + 'b> for SurfaceSteps<'_> 
         Ok(())
     }
 
-    fn before_step(
-        &mut self,
-        _: &mut (dyn SurfaceBackend + 'b),
-        _: &Dataset,
-        _: u32,
-        _: &mut Progress,
-    ) -> Result<bool> {
-        Ok(false)
-    }
-
     fn params(&mut self, step: u32, rng: &mut Pcg64) -> SurfaceStepParams {
         let draws = [
             rng.random::<u32>().into(),
@@ -133,10 +118,6 @@ impl<'b> StageSteps<SurfaceStage, dyn SurfaceBackend + 'b> for SurfaceSteps<'_> 
         ];
         let truncation = self.cfg.truncation(step);
         step_params(self.cfg, self.res, self.rows, step, truncation, draws)
-    }
-
-    fn work_before(&self, _: u32) -> bool {
-        false
     }
 
     /// Drop the surfaces that cannot reach α ≥ prune_alpha; the optimiser state ends with them.

@@ -2,10 +2,20 @@
 //! figures and optimiser state and how a checkpoint stores them; a [`StageBackend`] holds a
 //! stage's grid on the Vulkan device or on the host and steps it. The training loop
 //! (`train::steps`) and the checkpoints (`checkpoint`) are written once over them; the stages are
-//! `plenoxel::PlenoxelsStage` (stage 1) and `surface::SurfaceStage` (stage 2).
+//! `plenoxel::PlenoxelsStage` (stage 1) and `surface::SurfaceStage` (stage 2). What the backends
+//! of one kind share whatever their stage, their background and the figures of the steps not yet
+//! taken, is a [`StepStore`] ([`store`]); a Vulkan backend's [`StageBackend`] is written once
+//! over [`QueuedBackend`] ([`queued`]).
+
+pub mod queued;
+pub mod store;
+
+pub use queued::QueuedBackend;
+pub use store::{HostRays, HostSteps, StepStore};
 
 use crate::abi::buffers::Background;
 use crate::data::TrainViews;
+use crate::gpu::TrainRays;
 use anyhow::{anyhow, Result};
 use std::path::Path;
 
@@ -48,6 +58,10 @@ pub trait Stage: 'static {
     fn tally(totals: &mut Self::PerRay, stats: &Self::Stats);
     /// A run's sum of counters scaled by `f` (1 / training rays: per ray).
     fn scaled(totals: &Self::PerRay, f: f64) -> Self::PerRay;
+    /// Refuse training views the stage cannot draw its batches from (none by default).
+    fn check_views(_views: &TrainViews) -> Result<()> {
+        Ok(())
+    }
 
     /// Write a checkpoint atomically with the named optimiser arrays, refusing non-finite values
     /// (the previous file stays).
@@ -87,27 +101,17 @@ impl<const N: usize> StateArrays for [Vec<f32>; N] {
 pub type StateFn<'a, S> = dyn FnMut(&<S as Stage>::Grid, &[&[f32]]) -> Result<()> + 'a;
 
 /// A compute backend of stage `S` holding its grid and optimiser state: the GLSL kernels on the
-/// Vulkan device, or their CPU twins.
+/// Vulkan device, or their CPU twins. A backend submits steps; what it shares with the other
+/// stage's backend of its kind (background, figures) sits in its [`StepStore`].
 pub trait StageBackend<S: Stage> {
-    /// Backend name for logs ("vulkan" or "cpu").
-    fn name(&self) -> &'static str;
-    /// One optimisation step on a batch: `rays` 6 floats per ray, `targets` 3 per ray.
-    fn step(&mut self, rays: &[f32], targets: &[f32], p: &S::Params) -> Result<S::Stats>;
-    /// One optimisation step on the batch of `n` rays drawn from `views` with `seed`
-    /// (`data::TrainViews::sample`): the CPU backend draws it on the host; the Vulkan backend
-    /// draws it on the device, from views it uploads once, and returns once the step is
-    /// submitted (the device may still run it). Its figures come with [`Self::take_stats`].
-    fn step_sampled(
-        &mut self,
-        views: &TrainViews,
-        seed: u64,
-        n: usize,
-        p: &S::Params,
-    ) -> Result<()>;
-    /// The figures of every `step_sampled` step since the last call, in order (waits for the
-    /// steps still running). A backend keeps at most [`crate::gpu::STEP_SLOTS`] steps' figures
-    /// on the device and reads them into host memory when that many have not been taken.
-    fn take_stats(&mut self) -> Result<Vec<S::Stats>>;
+    /// The background and the figures of the steps not yet taken.
+    fn store(&self) -> &dyn StepStore<S::Stats>;
+    fn store_mut(&mut self) -> &mut dyn StepStore<S::Stats>;
+    /// One optimisation step on `src`'s rays: the CPU backend runs it (drawing a sampled batch
+    /// on the host); the Vulkan backend records it, drawing a sampled batch on the device from
+    /// views it uploads once, and returns once it is submitted (the device may still run it).
+    /// Its figures come with [`Self::take_stats`].
+    fn submit(&mut self, src: TrainRays, p: &S::Params) -> Result<()>;
     /// The current grid.
     fn grid(&self) -> Result<S::Grid>;
     /// The optimiser's running averages.
@@ -123,10 +127,43 @@ pub trait StageBackend<S: Stage> {
     /// Replace grid and optimiser state (after resampling or pruning, or when resuming); the
     /// background stays.
     fn load(&mut self, grid: S::Grid, state: Option<S::State>) -> Result<()>;
+
+    /// Backend name for logs ("vulkan" or "cpu").
+    fn name(&self) -> &'static str {
+        self.store().kind()
+    }
+    /// One optimisation step on a batch, waited for: `rays` 6 floats per ray, `targets` 3 per
+    /// ray. The figures of earlier steps not yet taken stay for [`Self::take_stats`].
+    fn step(&mut self, rays: &[f32], targets: &[f32], p: &S::Params) -> Result<S::Stats> {
+        self.submit(TrainRays::Host { rays, targets }, p)?;
+        self.store_mut().last()
+    }
+    /// One optimisation step on the batch of `n` rays drawn from `views` with `seed`
+    /// (`data::TrainViews::sample`), submitted as [`Self::submit`] says.
+    fn step_sampled(
+        &mut self,
+        views: &TrainViews,
+        seed: u64,
+        n: usize,
+        p: &S::Params,
+    ) -> Result<()> {
+        S::check_views(views)?;
+        self.submit(views.train_rays(seed, n), p)
+    }
+    /// The figures of every submitted step since the last call, in order (waits for the steps
+    /// still running). A Vulkan backend keeps at most [`crate::gpu::STEP_SLOTS`] steps' figures
+    /// on the device and reads them into host memory when that many have not been taken.
+    fn take_stats(&mut self) -> Result<Vec<S::Stats>> {
+        self.store_mut().take()
+    }
     /// The background with its optimiser state (white and fixed unless set).
-    fn background(&self) -> Result<Background>;
+    fn background(&self) -> Result<Background> {
+        self.store().background()
+    }
     /// Replace the background (colour, whether it is learned, its optimiser state).
-    fn set_background(&mut self, bg: Background) -> Result<()>;
+    fn set_background(&mut self, bg: Background) -> Result<()> {
+        self.store_mut().set_background(bg)
+    }
 }
 
 /// PSNR in dB of a mean squared error on [0, 1] colours.

@@ -1,0 +1,130 @@
+//! What a backend keeps for the training loop besides its grid, the same for both stages: the
+//! background the kernels composite on and the figures of the steps not yet taken. A Vulkan
+//! backend keeps them in its [`StepQueue`] (the background and the figures on the device); a CPU
+//! backend in [`HostSteps`], and it draws a sampled batch on the host ([`HostRays`]).
+
+use crate::abi::buffers::Background;
+use crate::abi::rays::{SampleSet, SampledRays};
+use crate::gpu::{Phase, PhaseClock, SlotFigures, StepQueue, TrainRays};
+use anyhow::{anyhow, Result};
+use std::borrow::Cow;
+
+/// The background and the figures (of type `F`) of the steps a backend has not handed out.
+pub trait StepStore<F> {
+    /// The kind of backend ("vulkan" or "cpu").
+    fn kind(&self) -> &'static str;
+    /// The figures of every step since the last call, in order (waits for the steps running).
+    fn take(&mut self) -> Result<Vec<F>>;
+    /// The figures of the step submitted last, waited for; those of earlier steps stay.
+    fn last(&mut self) -> Result<F>;
+    /// The background with its optimiser state.
+    fn background(&self) -> Result<Background>;
+    /// Replace the background (colour, whether it is learned, its optimiser state).
+    fn set_background(&mut self, bg: Background) -> Result<()>;
+}
+
+impl<F: SlotFigures> StepStore<F> for StepQueue<F> {
+    fn kind(&self) -> &'static str {
+        "vulkan"
+    }
+
+    fn take(&mut self) -> Result<Vec<F>> {
+        self.take_figures()
+    }
+
+    fn last(&mut self) -> Result<F> {
+        Ok(StepQueue::last(self)?.0)
+    }
+
+    fn background(&self) -> Result<Background> {
+        StepQueue::background(self)
+    }
+
+    fn set_background(&mut self, bg: Background) -> Result<()> {
+        StepQueue::set_background(self, bg)
+    }
+}
+
+/// A CPU backend's background and the figures of its steps not yet taken.
+pub struct HostSteps<F> {
+    pub bg: Background,
+    done: Vec<F>,
+}
+
+impl<F> Default for HostSteps<F> {
+    /// A white, fixed background and no figures.
+    fn default() -> Self {
+        HostSteps {
+            bg: Background::new([1.0; 3], false),
+            done: Vec::new(),
+        }
+    }
+}
+
+impl<F> HostSteps<F> {
+    /// Keep the figures of a step until they are taken.
+    pub fn push(&mut self, figures: F) {
+        self.done.push(figures);
+    }
+}
+
+impl<F> StepStore<F> for HostSteps<F> {
+    fn kind(&self) -> &'static str {
+        "cpu"
+    }
+
+    fn take(&mut self) -> Result<Vec<F>> {
+        Ok(std::mem::take(&mut self.done))
+    }
+
+    fn last(&mut self) -> Result<F> {
+        let last = self.done.pop();
+        last.ok_or_else(|| anyhow!("a submitted step left no figures"))
+    }
+
+    fn background(&self) -> Result<Background> {
+        Ok(self.bg)
+    }
+
+    fn set_background(&mut self, bg: Background) -> Result<()> {
+        self.bg = bg;
+        Ok(())
+    }
+}
+
+/// The rays of a training step on the host: borrowed from the caller, or drawn from the views.
+pub struct HostRays<'a> {
+    /// 6 floats per ray.
+    pub rays: Cow<'a, [f32]>,
+    /// 3 floats per ray.
+    pub targets: Cow<'a, [f32]>,
+    /// Per-ray importance weights (`None`: every weight 1).
+    pub weights: Option<Vec<f32>>,
+}
+
+impl<'a> HostRays<'a> {
+    /// `src`'s rays: as given, or drawn by `draw` (the CPU backends': the `sample_rays` twin;
+    /// its time charged to `clock`'s sampling).
+    pub fn of(
+        src: TrainRays<'a>,
+        clock: &mut PhaseClock,
+        draw: impl FnOnce(&SampleSet, u64, usize) -> Result<SampledRays>,
+    ) -> Result<Self> {
+        Ok(match src {
+            TrainRays::Host { rays, targets } => HostRays {
+                rays: rays.into(),
+                targets: targets.into(),
+                weights: None,
+            },
+            TrainRays::Sampled { set, seed, n, .. } => {
+                let batch = draw(set, seed, n)?;
+                clock.mark(Phase::Sampling);
+                HostRays {
+                    rays: batch.rays.into(),
+                    targets: batch.targets.into(),
+                    weights: (!batch.weights.is_empty()).then_some(batch.weights),
+                }
+            }
+        })
+    }
+}
