@@ -5,7 +5,8 @@ use crate::data_common;
 
 use std::process::Command;
 
-fn alphasurf(args: &[&str]) -> (bool, String, String) {
+/// Runs `alphasurf` with `args`: whether it succeeded, its stdout and stderr.
+pub fn alphasurf(args: &[&str]) -> (bool, String, String) {
     let out = Command::new(env!("CARGO_BIN_EXE_alphasurf"))
         .args(args)
         .output()

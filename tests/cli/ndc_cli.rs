@@ -3,21 +3,9 @@
 //! `extract` writes the surfaces back in dataset units around the object, and the flags that cannot go with NDC are
 //! refused with a message.
 
+use crate::data_cli::alphasurf;
 use crate::data_common::shared_fixture;
 use std::path::Path;
-use std::process::Command;
-
-fn alphasurf(args: &[&str]) -> (bool, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_alphasurf"))
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        out.status.success(),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
-}
 
 fn path(p: &Path) -> &str {
     p.to_str().unwrap()
@@ -75,16 +63,22 @@ fn a_forward_facing_capture_trains_and_extracts_in_ndc() {
         assert!(info.get("scene_box").is_none(), "{info}");
     }
 
+    // `render` / `extract` of the stage-2 run on the CPU into `out`.
+    let surface = run.join("surface");
+    let of_surface = |command: &str, out: &Path, extra: &[&str]| {
+        let args = [
+            command,
+            "--backend",
+            "cpu",
+            "--run",
+            path(&surface),
+            "--out",
+            path(out),
+        ];
+        alphasurf(&[&args[..], extra].concat())
+    };
     // `render` casts its rays in the run's recorded space: the test PSNR training reported.
-    let (ok, stdout, stderr) = alphasurf(&[
-        "render",
-        "--backend",
-        "cpu",
-        "--run",
-        path(&run.join("surface")),
-        "--out",
-        path(&dir.path().join("renders")),
-    ]);
+    let (ok, stdout, stderr) = of_surface("render", &dir.path().join("renders"), &[]);
     assert!(ok, "{stderr}");
     let mean: f64 = stdout
         .lines()
@@ -92,10 +86,9 @@ fn a_forward_facing_capture_trains_and_extracts_in_ndc() {
         .and_then(|l| l.split_whitespace().next())
         .and_then(|v| v.parse().ok())
         .expect("mean PSNR line");
-    let metrics: serde_json::Value = serde_json::from_str(
-        &std::fs::read_to_string(run.join("surface").join("metrics.json")).unwrap(),
-    )
-    .unwrap();
+    let metrics: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(surface.join("metrics.json")).unwrap())
+            .unwrap();
     let trained = metrics["test_psnr"].as_f64().unwrap();
     assert!(
         (mean - trained).abs() < 0.01,
@@ -105,29 +98,12 @@ fn a_forward_facing_capture_trains_and_extracts_in_ndc() {
     // Points back in dataset units: most of the surface the views see lies within the room's
     // front half, around the fan (2.7 to 4 units from the cameras), not at NDC coordinates.
     let pts = dir.path().join("points.ply");
-    let (ok, extracted, stderr) = alphasurf(&[
-        "extract",
-        "--backend",
-        "cpu",
-        "--run",
-        path(&run.join("surface")),
-        "--out",
-        path(&pts),
-    ]);
+    let (ok, extracted, stderr) = of_surface("extract", &pts, &[]);
     assert!(ok, "{stderr}");
     // The hidden-surface trim is off by default in NDC and looks toward the cameras when asked.
     assert!(!extracted.contains("hidden surfaces"), "{extracted}");
-    let (ok, trimmed, _) = alphasurf(&[
-        "extract",
-        "--backend",
-        "cpu",
-        "--run",
-        path(&run.join("surface")),
-        "--out",
-        path(&dir.path().join("trimmed.ply")),
-        "--trim-hidden",
-        "on",
-    ]);
+    let trimmed_ply = dir.path().join("trimmed.ply");
+    let (ok, trimmed, _) = of_surface("extract", &trimmed_ply, &["--trim-hidden", "on"]);
     assert!(
         ok && trimmed.contains("seen by a training camera"),
         "{trimmed}"
@@ -162,15 +138,8 @@ fn a_forward_facing_capture_trains_and_extracts_in_ndc() {
         "-1,-1,-1,1,1,1",
     ]);
     assert!(!ok && stderr.contains("--box and --space ndc"), "{stderr}");
-    let (ok, _, stderr) = alphasurf(&[
-        "extract",
-        "--run",
-        path(&run.join("surface")),
-        "--out",
-        path(&dir.path().join("p2.ply")),
-        "--scene-scale",
-        "0.5",
-    ]);
+    let p2 = dir.path().join("p2.ply");
+    let (ok, _, stderr) = of_surface("extract", &p2, &["--scene-scale", "0.5"]);
     assert!(!ok && stderr.contains("trained in NDC"), "{stderr}");
     let (ok, _, stderr) = alphasurf(&[
         "train",
