@@ -2,7 +2,7 @@
 //! `train`, `extract` and `eval`, a scene's `eval_box`, the foreground box found from the cameras
 //! and the box a run records.
 
-use super::camera::SceneBox;
+use super::scene_box::SceneBox;
 use anyhow::{ensure, Result};
 use glam::Vec3;
 use serde::{Deserialize, Serialize};

@@ -4,7 +4,8 @@
 //! The layouts' readers live in `nerf_synthetic`, `colmap` and `idr`.
 
 use super::background::BackgroundMode;
-use super::camera::{Camera, SceneBox};
+use super::camera::Camera;
+use super::scene_box::SceneBox;
 use super::foreground::ForegroundBox;
 use super::image::RgbaImage;
 use super::layout::Layout;

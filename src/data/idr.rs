@@ -9,7 +9,8 @@
 //! sphere's cube: scale 1/s, centre c/s, radius 1. IDR renders pixel (x, y) through image point
 //! (x, y) (pixel centres at integers, OpenCV); ours are at +0.5, so cx = K₀₂ + 0.5, cy = K₁₂ + 0.5.
 
-use super::camera::{Camera, SceneBox};
+use super::camera::Camera;
+use super::scene_box::SceneBox;
 use super::distortion::Distortion;
 use super::error::DataError;
 use super::image::image_size;

@@ -15,7 +15,7 @@
 //! (and mask in `masks/`) and those folders exist, as nerfstudio writes them.
 
 use super::aabb::Aabb;
-use super::camera::SceneBox;
+use super::scene_box::SceneBox;
 use super::error::DataError;
 use super::foreground::{self, ForegroundBox};
 use super::image::image_size;

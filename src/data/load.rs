@@ -1,7 +1,7 @@
 //! Loading a dataset directory: detect its layout, call that layout's reader, check that every
 //! split has one image size, and measure the load.
 
-use super::camera::SceneBox;
+use super::scene_box::SceneBox;
 use super::dataset::{peak_rss_bytes, Dataset, LoadOptions, LoadReport, SplitRule};
 use super::error::DataError;
 use super::layout::{self, Layout};

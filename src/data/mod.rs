@@ -21,12 +21,14 @@ mod load;
 pub mod ndc;
 mod nerf_synthetic;
 pub mod sampler;
+pub mod scene_box;
 mod transforms;
 pub mod views;
 
 pub use aabb::Aabb;
 pub use background::BackgroundMode;
-pub use camera::{look_at, Camera, SceneBox};
+pub use camera::{look_at, Camera};
+pub use scene_box::SceneBox;
 pub use dataset::{Dataset, Frame, LoadOptions, LoadReport, Split, SplitRule};
 pub use error::DataError;
 pub use foreground::ForegroundBox;

@@ -4,7 +4,8 @@
 //! undistortion, the held-out split (`split.json`, else every 8th view by name, as in LLFF and
 //! mip-NeRF practice) and parallel decoding.
 
-use super::camera::{Camera, SceneBox};
+use super::camera::Camera;
+use super::scene_box::SceneBox;
 use super::dataset::{Frame, Split, SplitRule, Splits};
 use super::distortion::{undistort, Distortion, Pinhole};
 use super::error::DataError;

@@ -13,7 +13,8 @@
 pub mod binary;
 pub mod text;
 
-use super::camera::{Camera, SceneBox};
+use super::camera::Camera;
+use super::scene_box::SceneBox;
 use super::distortion::Distortion;
 use super::error::DataError;
 use super::views::{self, Posed, View};
