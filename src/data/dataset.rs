@@ -5,11 +5,11 @@
 
 use super::background::BackgroundMode;
 use super::camera::Camera;
-use super::scene_box::SceneBox;
 use super::foreground::ForegroundBox;
 use super::image::RgbaImage;
 use super::layout::Layout;
 use super::ndc::Space;
+use super::scene_box::SceneBox;
 use std::path::PathBuf;
 
 /// How a dataset's views were split.

@@ -10,10 +10,10 @@
 //! (x, y) (pixel centres at integers, OpenCV); ours are at +0.5, so cx = K₀₂ + 0.5, cy = K₁₂ + 0.5.
 
 use super::camera::Camera;
-use super::scene_box::SceneBox;
 use super::distortion::Distortion;
 use super::error::DataError;
 use super::image::image_size;
+use super::scene_box::SceneBox;
 use super::views::{self, Posed, View};
 use crate::grid::npz::NpzReader;
 use glam::{DMat3, DMat4, DVec3, DVec4, Mat4};

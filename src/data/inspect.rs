@@ -151,12 +151,16 @@ pub fn inspect(ds: &Dataset) -> Inspection {
             ));
         }
     }
-    let object_bounds = visual_hull_bounds(&ds.train, box_min, box_max);
+    // Without alpha or masks there is nothing to carve with (the warning above says so).
+    let any_alpha = ds.train.frames.iter().any(|f| f.image.had_alpha);
+    let object_bounds = any_alpha
+        .then(|| visual_hull_bounds(&ds.train, box_min, box_max))
+        .flatten();
     match object_bounds {
-        None => warnings.push(
-            "no object bounds: the training masks carve away the whole box (or there is no alpha)"
-                .into(),
-        ),
+        None if !any_alpha => {}
+        None => {
+            warnings.push("no object bounds: the training masks carve away the whole box".into())
+        }
         Some((lo, hi)) => {
             let cell = (box_max - box_min) / HULL_RES as f32;
             if lo.cmple(box_min + cell).any() || hi.cmpge(box_max - cell).any() {

@@ -15,10 +15,10 @@
 //! (and mask in `masks/`) and those folders exist, as nerfstudio writes them.
 
 use super::aabb::Aabb;
-use super::scene_box::SceneBox;
 use super::error::DataError;
 use super::foreground::{self, ForegroundBox};
 use super::image::image_size;
+use super::scene_box::SceneBox;
 use super::transforms::{
     parse_matrix, parse_transform, read_json, relative_path, resolve_image, FrameJson, Intrinsics,
 };

@@ -14,9 +14,9 @@ pub mod binary;
 pub mod text;
 
 use super::camera::Camera;
-use super::scene_box::SceneBox;
 use super::distortion::Distortion;
 use super::error::DataError;
+use super::scene_box::SceneBox;
 use super::views::{self, Posed, View};
 use glam::{DMat3, DVec3, Mat4, Vec3};
 use std::collections::HashMap;
