@@ -47,6 +47,10 @@ pub struct ForegroundBox {
     pub bounds: Aabb,
     /// How it was found, for `inspect`.
     pub how: String,
+    /// The sparse points' box (1st–99th percentile per axis): the room the object stands in, for
+    /// `inspect`'s advice on 360° captures (without a background model the floor and walls the
+    /// views see can only be density inside the grid). `None` without enough sparse points.
+    pub room: Option<Aabb>,
 }
 
 /// The foreground box of a capture from its cameras and (when it has them) sparse points;
@@ -71,6 +75,7 @@ pub fn find(cameras: &[Camera], points: &[[f64; 3]]) -> Option<ForegroundBox> {
         return Some(ForegroundBox {
             bounds: Aabb::new(lo.as_vec3(), hi.as_vec3()),
             how: format!("{at}; {how}"),
+            room: room(points),
         });
     }
     // The half-width of the median camera's view at the convergence point.
@@ -95,7 +100,27 @@ pub fn find(cameras: &[Camera], points: &[[f64; 3]]) -> Option<ForegroundBox> {
              spans there",
             if points.is_empty() { "no" } else { "too few" }
         ),
+        room: room(points),
     })
+}
+
+/// The 1st–99th percentile box of the sparse points, per axis; `None` below [`MIN_POINTS`].
+fn room(points: &[[f64; 3]]) -> Option<Aabb> {
+    let finite: Vec<&[f64; 3]> = points
+        .iter()
+        .filter(|p| p.iter().all(|v| v.is_finite()))
+        .collect();
+    if finite.len() < MIN_POINTS {
+        return None;
+    }
+    let (mut lo, mut hi) = ([0f32; 3], [0f32; 3]);
+    for a in 0..3 {
+        let mut v: Vec<f64> = finite.iter().map(|p| p[a]).collect();
+        v.sort_by(f64::total_cmp);
+        let at = |q: f64| v[(q * (v.len() - 1) as f64).round() as usize] as f32;
+        (lo[a], hi[a]) = (at(0.01), at(0.99));
+    }
+    Some(Aabb::new(Vec3::from_array(lo), Vec3::from_array(hi)))
 }
 
 /// The reweighted least-squares point nearest to the optical axes, and the median distance of

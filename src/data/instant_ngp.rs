@@ -116,6 +116,7 @@ pub fn posed(root: &Path, k: u32) -> Result<Posed, DataError> {
                 fg.bounds.hi().clamp(b.lo(), b.hi()),
             ),
             how: format!("{}; inside aabb_scale's box", fg.how),
+            ..fg
         },
         None => fg,
     });

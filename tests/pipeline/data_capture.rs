@@ -5,6 +5,7 @@
 use crate::data_common::shared_fixture;
 use alphasurf::abi::rays::key_pixel;
 use alphasurf::cpu::sample_rays::sample_rays;
+use alphasurf::data::inspect::inspect;
 use alphasurf::data::ndc::Space;
 use alphasurf::data::{Dataset, LoadOptions, SplitRule, TrainViews};
 use glam::Vec3;
@@ -124,6 +125,26 @@ fn forward_facing_capture_trains_in_ndc() {
         "{}",
         orbit.space
     );
+    // In its foreground box the orbit gets the advice to train in the room, with the room's box.
+    let advice = |ds: &Dataset| {
+        inspect(ds)
+            .warnings
+            .into_iter()
+            .find(|w| w.contains("train in the room: --box="))
+    };
+    let room = advice(&orbit).expect("the room advice for the 360° capture");
+    let bounds: Vec<f32> = room
+        .rsplit("--box=")
+        .next()
+        .unwrap()
+        .split(',')
+        .map(|v| v.parse().unwrap())
+        .collect();
+    let (lo, hi) = object_box(&shared_fixture("capture_birdcage"));
+    assert!(
+        (0..3).all(|a| bounds[a] <= lo[a] && bounds[3 + a] >= hi[a]),
+        "the room {bounds:?} does not hold the object {lo}..{hi}"
+    );
 
     let dir = shared_fixture("capture_fan_ff");
     let ff = Dataset::load(&dir, &auto).unwrap();
@@ -132,6 +153,7 @@ fn forward_facing_capture_trains_in_ndc() {
         .ndc
         .unwrap_or_else(|| panic!("no NDC: {}", ff.space));
     assert!(ff.space.starts_with("NDC"), "{}", ff.space);
+    assert!(advice(&ff).is_none());
     let (lo, hi) = object_box(&dir);
     for i in 0..8 {
         let c = Vec3::select(glam::BVec3::new(i & 1 != 0, i & 2 != 0, i & 4 != 0), hi, lo);
