@@ -47,9 +47,10 @@ pub fn load_data(opts: &TrainOptions) -> Result<Loaded> {
 }
 
 /// The scene box to train in, when not the dataset's own: `--box`; else, resuming, the one the
-/// run recorded; else, for stage 2 from a stage-1 run directory, the one that run recorded (a
-/// grid is only valid in the box it was trained in). `--box` on a run that recorded another box
-/// is refused.
+/// run recorded; else, for stage 2 from a stage-1 run directory (or a checkpoint in one), the
+/// one that run recorded (a grid is only valid in the box or NDC space it was trained in).
+/// `--box` on a run that recorded another box, and `--space box|ndc` on a run trained in the
+/// other space, are refused.
 fn scene_box(opts: &TrainOptions) -> Result<Option<SceneBox>> {
     let given = opts
         .scene_box
@@ -68,9 +69,11 @@ fn scene_box(opts: &TrainOptions) -> Result<Option<SceneBox>> {
             .flatten()?
             .scene()
     };
+    // A checkpoint file's run is the directory that holds it.
     let recorded = match (opts.resume, opts.init.as_deref()) {
         (true, _) => recorded_in(&opts.out),
         (false, Some(init)) if init.is_dir() => recorded_in(init),
+        (false, Some(init)) => init.parent().and_then(recorded_in),
         _ => None,
     };
     let source = || {
@@ -80,6 +83,24 @@ fn scene_box(opts: &TrainOptions) -> Result<Option<SceneBox>> {
             opts.init.as_deref().unwrap_or(&opts.out).display()
         }
     };
+    let recorded_ndc = recorded.map(|r| r.1.ndc.is_some());
+    let clash = match (opts.space, recorded_ndc) {
+        (Space::Box, Some(true)) => Some("NDC"),
+        (Space::Ndc, Some(false)) => Some("a box"),
+        _ => None,
+    };
+    if let Some(was) = clash {
+        bail!(
+            "--space {}: {} was trained in {was}, and a grid is only valid in the space it was \
+             trained in; leave --space out",
+            if opts.space == Space::Box {
+                "box"
+            } else {
+                "ndc"
+            },
+            source()
+        );
+    }
     if let (Some(g), Some((None, _))) = (given, recorded) {
         bail!(
             "--box {g}: {} was trained in NDC (a forward-facing capture), not in a box; leave              --box out",

@@ -123,6 +123,24 @@ fn a_forward_facing_capture_trains_and_extracts_in_ndc() {
     let s2d = e["metrics"]["mean_s2d"].as_f64().unwrap();
     assert!(s2d < 0.05, "mean GT → pred distance {s2d}: {e}");
 
+    // Stage 2 from the NDC stage-1 checkpoint file takes its run's space; asking for a box
+    // there is refused.
+    let ckpt = run.join("plenoxels").join("plenoxels.npz");
+    let (ok, _, stderr) = alphasurf(&[
+        "train",
+        "--stage",
+        "surface",
+        "--init",
+        path(&ckpt),
+        "--data",
+        path(&data),
+        "--out",
+        path(&dir.path().join("s2box")),
+        "--space",
+        "box",
+    ]);
+    assert!(!ok && stderr.contains("was trained in NDC"), "{stderr}");
+
     // What cannot go with NDC.
     let (ok, _, stderr) = alphasurf(&[
         "train",
