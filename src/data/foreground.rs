@@ -34,6 +34,9 @@ pub const NEIGHBOUR_RADIUS: f64 = 0.03;
 pub const MIN_NEIGHBOURS: usize = 2;
 /// The box grows by this share of its size on each side.
 pub const GROW: f64 = 0.05;
+/// Per-axis percentiles of sparse points that bound a scene (robust to stray points): the room's
+/// box here, the COLMAP layout's box of the points in view.
+pub const POINT_PERCENTILES: (f64, f64) = (0.01, 0.99);
 /// Fewest points the box may be taken from.
 const MIN_POINTS: usize = 20;
 /// RANSAC draws per plane, and the most planes removed.
@@ -47,7 +50,7 @@ pub struct ForegroundBox {
     pub bounds: Aabb,
     /// How it was found, for `inspect`.
     pub how: String,
-    /// The sparse points' box (1st–99th percentile per axis): the room the object stands in, for
+    /// The sparse points' box ([`POINT_PERCENTILES`] per axis): the room the object stands in, for
     /// `inspect`'s advice on 360° captures (without a background model the floor and walls the
     /// views see can only be density inside the grid). `None` without enough sparse points.
     pub room: Option<Aabb>,
@@ -104,23 +107,35 @@ pub fn find(cameras: &[Camera], points: &[[f64; 3]]) -> Option<ForegroundBox> {
     })
 }
 
-/// The 1st–99th percentile box of the sparse points, per axis; `None` below [`MIN_POINTS`].
+/// The sparse points' box at [`POINT_PERCENTILES`]; `None` below [`MIN_POINTS`] finite points.
 fn room(points: &[[f64; 3]]) -> Option<Aabb> {
     let finite: Vec<&[f64; 3]> = points
         .iter()
         .filter(|p| p.iter().all(|v| v.is_finite()))
         .collect();
-    if finite.len() < MIN_POINTS {
-        return None;
-    }
-    let (mut lo, mut hi) = ([0f32; 3], [0f32; 3]);
+    (finite.len() >= MIN_POINTS).then(|| {
+        let (lo, hi) = percentile_bounds(&finite, POINT_PERCENTILES);
+        Aabb::new(
+            DVec3::from_array(lo).as_vec3(),
+            DVec3::from_array(hi).as_vec3(),
+        )
+    })
+}
+
+/// The value at quantile `q` ∈ [0, 1] of ascending `sorted` (nearest rank); `sorted` not empty.
+pub fn percentile<T: Copy>(sorted: &[T], q: f64) -> T {
+    sorted[(q * (sorted.len() - 1) as f64).round() as usize]
+}
+
+/// Per axis, the `q.0` and `q.1` quantiles of `points` (not empty): a box robust to stray points.
+pub fn percentile_bounds(points: &[&[f64; 3]], q: (f64, f64)) -> ([f64; 3], [f64; 3]) {
+    let (mut lo, mut hi) = ([0f64; 3], [0f64; 3]);
     for a in 0..3 {
-        let mut v: Vec<f64> = finite.iter().map(|p| p[a]).collect();
+        let mut v: Vec<f64> = points.iter().map(|p| p[a]).collect();
         v.sort_by(f64::total_cmp);
-        let at = |q: f64| v[(q * (v.len() - 1) as f64).round() as usize] as f32;
-        (lo[a], hi[a]) = (at(0.01), at(0.99));
+        (lo[a], hi[a]) = (percentile(&v, q.0), percentile(&v, q.1));
     }
-    Some(Aabb::new(Vec3::from_array(lo), Vec3::from_array(hi)))
+    (lo, hi)
 }
 
 /// The reweighted least-squares point nearest to the optical axes, and the median distance of

@@ -4,10 +4,12 @@
 //! spans the NDC cube [−1, 1]³: the frame camera's view from the near plane to infinite depth.
 
 use super::camera::Camera;
+use super::foreground::percentile;
 use crate::abi::buffers::SampleCamera;
 use crate::abi::rays::NdcProjection;
 use crate::math::ndc::ndc_ray;
 use glam::{DMat3, DVec3, Mat3, Vec3};
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 /// A layout is forward-facing when every training camera looks within this angle (degrees) of
@@ -79,9 +81,8 @@ impl Ndc {
     /// A camera as the ray sampler takes it, in the frame (the sampler then maps each ray with
     /// [`NdcProjection`]).
     pub fn sample_camera(&self, c: &Camera) -> SampleCamera {
-        let r = Mat3::from_cols_array_2d(&self.axes).transpose();
         let m = c.c2w;
-        let axis = |a: Vec3| (r * a).to_array();
+        let axis = |a: Vec3| self.frame_direction(a).to_array();
         SampleCamera {
             x_axis: axis(m.x_axis.truncate()),
             y_axis: axis(m.y_axis.truncate()),
@@ -95,17 +96,19 @@ impl Ndc {
     /// The NDC ray (origin, unit direction) of a ray from `o` along unit `d`, dataset units: the
     /// host's copy of the sampler's map (the same camera-frame values, then `ndc_ray`).
     pub fn ray(&self, o: Vec3, d: Vec3) -> [f32; 6] {
-        let r = Mat3::from_cols_array_2d(&self.axes).transpose();
         let of = self.to_frame(o.as_dvec3()).as_vec3().to_array();
-        ndc_ray(of, (r * d).to_array(), self.projection)
+        ndc_ray(of, self.frame_direction(d).to_array(), self.projection)
+    }
+
+    /// A direction in dataset units → the frame (f32, as the sampler's cameras carry it).
+    fn frame_direction(&self, d: Vec3) -> Vec3 {
+        Mat3::from_cols_array_2d(&self.axes).transpose() * d
     }
 
     /// A point in dataset units → NDC; `None` behind the frame's camera plane.
     pub fn to_ndc(self, p: [f32; 3]) -> Option<[f32; 3]> {
-        let q = self.to_frame(DVec3::from_array(p.map(f64::from)));
-        let (n, sx, sy) = self.constants();
-        (q.z < 0.0)
-            .then(|| [-sx * q.x / q.z, -sy * q.y / q.z, 1.0 + 2.0 * n / q.z].map(|v| v as f32))
+        let [x, y, z, w] = self.homogeneous(p);
+        (w > 0.0).then(|| [x / w, y / w, z / w].map(|v| v as f32))
     }
 
     /// A point (dataset units) in homogeneous NDC coordinates [x, y, z, w], w its depth along
@@ -119,12 +122,17 @@ impl Ndc {
         [sx * q.x, sy * q.y, -(q.z + 2.0 * n), -q.z]
     }
 
-    /// An NDC point (z < 1) → dataset units.
-    pub fn to_world(self, p: [f32; 3]) -> [f32; 3] {
+    /// An NDC point (z < 1) → the frame (f64).
+    fn frame_point(self, p: [f32; 3]) -> DVec3 {
         let (n, sx, sy) = self.constants();
         let [x, y, z] = p.map(f64::from);
         let qz = 2.0 * n / (z - 1.0);
-        let q = DVec3::new(-x * qz / sx, -y * qz / sy, qz);
+        DVec3::new(-x * qz / sx, -y * qz / sy, qz)
+    }
+
+    /// An NDC point (z < 1) → dataset units.
+    pub fn to_world(self, p: [f32; 3]) -> [f32; 3] {
+        let q = self.frame_point(p);
         (self.rotation() * q + DVec3::from_array(self.origin.map(f64::from)))
             .as_vec3()
             .to_array()
@@ -134,9 +142,8 @@ impl Ndc {
     /// units (the chain rule through the map's Jacobian; direction and length).
     pub fn gradient_to_world(&self, p: [f32; 3], g: [f64; 3]) -> [f64; 3] {
         let (n, sx, sy) = self.constants();
-        let [x, y, z] = p.map(f64::from);
-        let qz = 2.0 * n / (z - 1.0);
-        let (qx, qy) = (-x * qz / sx, -y * qz / sy);
+        let q = self.frame_point(p);
+        let (qx, qy, qz) = (q.x, q.y, q.z);
         let gq = DVec3::new(
             -sx / qz * g[0],
             -sy / qz * g[1],
@@ -149,9 +156,8 @@ impl Ndc {
     /// (the map's Jacobian times `v`).
     pub fn direction_to_ndc(&self, p: [f32; 3], v: [f32; 3]) -> [f32; 3] {
         let (n, sx, sy) = self.constants();
-        let [x, y, z] = p.map(f64::from);
-        let qz = 2.0 * n / (z - 1.0);
-        let (qx, qy) = (-x * qz / sx, -y * qz / sy);
+        let q = self.frame_point(p);
+        let (qx, qy, qz) = (q.x, q.y, q.z);
         let vq = self.rotation().transpose() * DVec3::from_array(v.map(f64::from));
         [
             -sx * (vq.x / qz - qx * vq.z / (qz * qz)),
@@ -203,7 +209,7 @@ pub fn view_spread_deg(cameras: &[Camera]) -> f64 {
 /// [`NEAR_PERCENTILE`] of the depths of the sparse points inside its image, the smallest.
 pub fn nearest_depth(cameras: &[Camera], points: &[[f64; 3]]) -> Option<f32> {
     cameras
-        .iter()
+        .par_iter()
         .filter_map(|c| {
             let w2c = c.c2w.as_dmat4().inverse();
             let mut d: Vec<f32> = points
@@ -219,9 +225,9 @@ pub fn nearest_depth(cameras: &[Camera], points: &[[f64; 3]]) -> Option<f32> {
                 })
                 .collect();
             d.sort_by(f32::total_cmp);
-            (!d.is_empty()).then(|| d[(NEAR_PERCENTILE * (d.len() - 1) as f64).round() as usize])
+            (!d.is_empty()).then(|| percentile(&d, NEAR_PERCENTILE))
         })
-        .reduce(f32::min)
+        .reduce_with(f32::min)
 }
 
 /// The space `want` resolves to for these training cameras and nearest scene depth, and why

@@ -16,6 +16,7 @@ pub mod text;
 use super::camera::Camera;
 use super::distortion::Distortion;
 use super::error::DataError;
+use super::foreground::{percentile_bounds, POINT_PERCENTILES};
 use super::scene_box::SceneBox;
 use super::views::{self, Posed, View};
 use glam::{DMat3, DVec3, Mat4, Vec3};
@@ -39,9 +40,6 @@ pub const MODELS: [(&str, usize); 11] = [
 
 /// The models the loader reads, for messages.
 const SUPPORTED: &str = "PINHOLE, SIMPLE_PINHOLE, SIMPLE_RADIAL, RADIAL, OPENCV";
-
-/// Percentiles of the in-view sparse points (per axis) that bound the scene.
-pub const POINT_PERCENTILES: (f64, f64) = (0.01, 0.99);
 
 /// The scene box's half-size over the points' half-extent.
 pub const BOX_MARGIN: f64 = 1.1;
@@ -375,13 +373,7 @@ pub fn scene_box<'a>(
     if kept.is_empty() {
         return None;
     }
-    let (mut lo, mut hi) = ([0f64; 3], [0f64; 3]);
-    for a in 0..3 {
-        let mut v: Vec<f64> = kept.iter().map(|p| p[a]).collect();
-        v.sort_by(f64::total_cmp);
-        let at = |q: f64| v[(q * (v.len() - 1) as f64).round() as usize];
-        (lo[a], hi[a]) = (at(POINT_PERCENTILES.0), at(POINT_PERCENTILES.1));
-    }
+    let (lo, hi) = percentile_bounds(&kept, POINT_PERCENTILES);
     let mid = DVec3::from_array(lo).lerp(DVec3::from_array(hi), 0.5);
     let half = (0..3).map(|a| 0.5 * (hi[a] - lo[a])).fold(0.0, f64::max) * BOX_MARGIN;
     // A single point (or a flat set) still gets a box: a tenth of the camera distance.
