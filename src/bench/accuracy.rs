@@ -36,7 +36,8 @@ use std::time::Instant;
 pub struct AccuracyArgs {
     /// Scene folders (NeRF-synthetic layout with `gt_points.ply`), e.g. the development set
     /// `../shared/fixtures/*/`. Each scene's category comes from its folder name's first word
-    /// (`thin_lyre` → thin) unless `--category` is given.
+    /// (`thin_lyre` → thin; `capture_…`, a photographed capture, → real) unless `--category` is
+    /// given.
     #[arg(long, required = true, num_args = 1..)]
     pub data: Vec<PathBuf>,
     /// Stage-2 category for every scene.
@@ -279,13 +280,20 @@ pub struct CategoryMean {
     pub stage2_psnr: Option<f64>,
 }
 
-/// The category of a scene folder: `--category`, else its name's first word.
+/// The folder-name word of a photographed capture; its scenes take category real.
+const CAPTURE_WORD: &str = "capture";
+
+/// The category of a scene folder: `--category`, else its name's first word (a category's name,
+/// or [`CAPTURE_WORD`] for real).
 pub fn scene_category(dir: &Path, given: Option<Category>) -> Result<Category> {
     if let Some(c) = given {
         return Ok(c);
     }
     let name = scene_name(dir);
     let first = name.split(['_', '-']).next().unwrap_or("");
+    if first == CAPTURE_WORD {
+        return Ok(Category::Real);
+    }
     match Category::value_variants()
         .iter()
         .find(|c| c.name() == first)
@@ -293,7 +301,7 @@ pub fn scene_category(dir: &Path, given: Option<Category>) -> Result<Category> {
         Some(&c) => Ok(c),
         None => bail!(
             "{}: cannot tell the scene's category from its folder name (expected it to start \
-             with one of {} and '_'); pass --category",
+             with one of {}, {CAPTURE_WORD} and '_'); pass --category",
             dir.display(),
             Category::value_variants()
                 .iter()
@@ -946,6 +954,11 @@ mod tests {
         let e = c("x/lyre", None).unwrap_err().to_string();
         assert!(e.contains("x/lyre") && e.contains("--category"), "{e}");
         assert!(c("x/thinner_lyre", None).is_err());
+        assert_eq!(c("x/capture_fan_ff", None).unwrap(), Category::Real);
+        assert_eq!(
+            c("x/capture_fan_ff", Some(Category::Thin)).unwrap(),
+            Category::Thin
+        );
     }
 
     #[test]
