@@ -322,20 +322,17 @@ impl VulkanSurface {
         let plan = SurfacePlan::gradients(p, n, &mut refresh)?;
         self.run_plan(&plan, rays, targets, weights)?;
         self.refresh = refresh;
-        let touched = self
-            .core
-            .queue
-            .step
-            .download_range(STEP_FLAGS, self.core.bufs.rows())?;
-        let [delta, opacity, sh] =
-            StateArrays::from_arrays(self.core.bufs.take_grads(&self.core.queue)?)?;
+        let (q, bufs) = (&self.core.queue, &self.core.bufs);
+        // The touched flags before the gradients are taken: taking them clears the flags.
+        let touched = q.step.download_range(STEP_FLAGS, bufs.rows())?;
+        let [delta, opacity, sh] = StateArrays::from_arrays(bufs.take_grads(q)?)?;
         Ok(SurfaceGradients {
-            ray_loss: self.core.queue.ray_output(n)?,
+            ray_loss: q.ray_output(n)?,
             delta,
             opacity,
             sh,
             touched,
-            background: self.core.queue.take_background_grad()?,
+            background: q.take_background_grad()?,
             counts: self.read_train_counts()?,
         })
     }
