@@ -137,7 +137,7 @@ pub fn time_steps(
             for s in backend.take_stats()? {
                 f.mean_mse += s.mse / steps as f64;
                 f.per_ray.add(&s.counts);
-                times.add(0.0, &s.host, s.device_ns);
+                times.add(0.0, &s.timing.host, s.timing.device_ns);
             }
         }
     }

@@ -131,7 +131,7 @@ fn time_surface(
             for s in backend.take_stats()? {
                 f.mean_mse += s.mse / args.steps as f64;
                 counts.add(&s.counts);
-                times.add(0.0, &s.host, s.device_ns);
+                times.add(0.0, &s.timing.host, s.timing.device_ns);
             }
         }
     }

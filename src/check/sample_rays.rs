@@ -11,7 +11,7 @@
 use super::{CheckRow, Compare};
 use crate::abi::buffers::SampleCamera;
 use crate::abi::consts::SAMPLE_SORT_RAYS;
-use crate::abi::rays::{Focus, NdcProjection, SampleSet};
+use crate::abi::rays::{Focus, NdcProjection, SampleSet, SampledRays};
 use crate::cpu::sample_rays::sample_rays;
 use crate::cpu::sample_rays_sort;
 use crate::data::camera::look_at;
@@ -160,8 +160,7 @@ pub fn check(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
 
     let mut cmp = Compare::new(0.0, 0.0);
     let mut key_mismatches = 0;
-    let ulp = |g: f64, c: f64| (g - c).abs() / f32::EPSILON as f64;
-    let (mut dir_ulp, mut target_ulp, mut ndc_ulp) = (0f64, 0f64, 0f64);
+    let mut apart = UlpApart::default();
     // Both ways of drawing the keys, whichever the device uses in training, uniform and focused,
     // and the rays of a forward-facing capture carried into NDC.
     let cases = [KeyDraw::Device, KeyDraw::Host].into_iter().flat_map(|k| {
@@ -184,83 +183,29 @@ pub fn check(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
         let plain = sample_rays(&set, batch_seed, n)?;
         set.ndc = ndc;
         let want = sample_rays(&set, batch_seed, n)?;
-        let key_draw_name = format!(
+        let name = format!(
             "{key_draw:?}{}{}",
             if focused { " focused" } else { "" },
             if ndc.is_some() { " NDC" } else { "" }
         );
-        let mut slot = None;
         let id = u64::MAX - 2 * seed - focused as u64;
-        let views = TrainViewBuffers::ensure(&mut slot, gpu, id, &set, n)?;
-        views.key_draw = key_draw;
-        let mut b = gpu.batch()?;
-        views.record_sample(&mut b, &set, batch_seed, n)?;
-        b.submit()?;
-        let got = views.download_batch(n)?;
-        let (rays, targets, keys) = (&got.rays, &got.targets, &got.keys);
-        if got.weights != want.weights {
-            cmp.failures += 1;
-            if cmp.first_failure.is_none() {
-                cmp.first_failure = Some(format!(
-                    "{key_draw_name}: importance weights differ ({} on the device, {} in the twin)",
-                    got.weights.len(),
-                    want.weights.len()
-                ));
-            }
-        }
-
-        for (i, (g, c)) in keys.iter().zip(&want.keys).enumerate() {
-            cmp.compared += 1;
-            if g != c {
-                key_mismatches += 1;
-                cmp.failures += 1;
-                if cmp.first_failure.is_none() {
-                    cmp.first_failure = Some(format!(
-                        "{key_draw_name} keys, ray {i}: gpu {g:#x} cpu {c:#x}"
-                    ));
-                }
-            }
-        }
-        for i in 0..n {
-            let tol: [f64; 6] = match ndc {
-                None => [0.0, 0.0, 0.0, DIR_ABS, DIR_ABS, DIR_ABS],
-                Some(p) => {
-                    let r = &plain.rays[6 * i..6 * i + 6];
-                    let f = |k: usize| r[k] as f64;
-                    let carried = ndc_propagated([f(0), f(1), f(2)], [f(3), f(4), f(5)], p);
-                    std::array::from_fn(|k| {
-                        carried[k]
-                            + NDC_OWN_ULP
-                                * f32::EPSILON as f64
-                                * want.rays[6 * i + k].abs().max(1.0) as f64
-                    })
-                }
-            };
-            for k in 0..6 {
-                let (g, c) = (rays[6 * i + k] as f64, want.rays[6 * i + k] as f64);
-                cmp.tol.abs = tol[k];
-                cmp.value(g, c, || {
-                    format!("{key_draw_name} keys, ray {i} component {k}")
-                });
-                if ndc.is_some() {
-                    ndc_ulp = ndc_ulp.max(ulp(g, c));
-                } else {
-                    dir_ulp = dir_ulp.max(ulp(g, c));
-                }
-            }
-            for k in 0..3 {
-                let (g, c) = (targets[3 * i + k] as f64, want.targets[3 * i + k] as f64);
-                cmp.tol.abs = TARGET_ABS;
-                cmp.value(g, c, || format!("{key_draw_name} keys, ray {i} target {k}"));
-                target_ulp = target_ulp.max(ulp(g, c));
-            }
-        }
+        let got = draw_on_device(gpu, &set, key_draw, id, batch_seed, n)?;
+        let case = Case {
+            name: &name,
+            got: &got,
+            want: &want,
+            plain: &plain,
+            ndc,
+        };
+        key_mismatches += compare_keys(&mut cmp, &case);
+        compare_rays(&mut cmp, &mut apart, &case);
     }
     cmp.tol.abs = DIR_ABS;
+    let UlpApart { dir, ndc, target } = apart;
     let note = format!(
         "{n} rays over 7 views of {w}×{h}, keys drawn on the device and on the host, uniform, \
          with half from a focus of {} pixels, and carried into NDC: keys {} of {} identical; \
-         rays at most {dir_ulp:.2}, NDC rays {ndc_ulp:.2}, targets {target_ulp:.2} ulp(1) \
+         rays at most {dir:.2}, NDC rays {ndc:.2}, targets {target:.2} ulp(1) \
          apart; tolerances: keys and origins exact, directions {:.0} ulp(1), NDC rays the \
          direction's tolerance carried through the map (f64 central differences) + \
          {NDC_OWN_ULP} ulp of max(1, |value|), targets 1 ulp(1)",
@@ -270,6 +215,115 @@ pub fn check(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
         DIR_ABS / f32::EPSILON as f64
     );
     Ok(cmp.row(crate::kernels::sample_rays::INFO.name, 6 * n, note))
+}
+
+/// The largest differences between device and twin seen, in ulp(1): directions, NDC rays,
+/// targets.
+#[derive(Default)]
+struct UlpApart {
+    dir: f64,
+    ndc: f64,
+    target: f64,
+}
+
+/// One case of the draw: its name in failures, the device's batch, the twin's, the twin's rays
+/// before the NDC map (`ndc`: the map, if any).
+struct Case<'a> {
+    name: &'a str,
+    got: &'a SampledRays,
+    want: &'a SampledRays,
+    plain: &'a SampledRays,
+    ndc: Option<NdcProjection>,
+}
+
+/// The batch of `n` rays drawn from `set` with `seed` on the device, its keys drawn as
+/// `key_draw` (the views uploaded under `id`).
+fn draw_on_device(
+    gpu: &Gpu,
+    set: &SampleSet,
+    key_draw: KeyDraw,
+    id: u64,
+    seed: u64,
+    n: usize,
+) -> Result<SampledRays> {
+    let mut slot = None;
+    let views = TrainViewBuffers::ensure(&mut slot, gpu, id, set, n)?;
+    views.key_draw = key_draw;
+    let mut b = gpu.batch()?;
+    views.record_sample(&mut b, set, seed, n)?;
+    b.submit()?;
+    views.download_batch(n)
+}
+
+/// Compare the case's importance weights and keys (exact); returns the keys that differ.
+fn compare_keys(cmp: &mut Compare, case: &Case) -> usize {
+    let (got, want, name) = (case.got, case.want, case.name);
+    if got.weights != want.weights {
+        cmp.failures += 1;
+        if cmp.first_failure.is_none() {
+            cmp.first_failure = Some(format!(
+                "{name}: importance weights differ ({} on the device, {} in the twin)",
+                got.weights.len(),
+                want.weights.len()
+            ));
+        }
+    }
+    let mut mismatches = 0;
+    for (i, (g, c)) in got.keys.iter().zip(&want.keys).enumerate() {
+        cmp.compared += 1;
+        if g != c {
+            mismatches += 1;
+            cmp.failures += 1;
+            if cmp.first_failure.is_none() {
+                cmp.first_failure = Some(format!("{name} keys, ray {i}: gpu {g:#x} cpu {c:#x}"));
+            }
+        }
+    }
+    mismatches
+}
+
+/// Compare the case's rays (origins exact, directions within [`DIR_ABS`], NDC rays within the
+/// direction's tolerance carried through the map) and targets (within [`TARGET_ABS`]), keeping
+/// the largest differences in `apart`.
+fn compare_rays(cmp: &mut Compare, apart: &mut UlpApart, case: &Case) {
+    let (got, want, name) = (case.got, case.want, case.name);
+    let ulp = |g: f64, c: f64| (g - c).abs() / f32::EPSILON as f64;
+    for i in 0..want.rays.len() / 6 {
+        let tol: [f64; 6] = match case.ndc {
+            None => [0.0, 0.0, 0.0, DIR_ABS, DIR_ABS, DIR_ABS],
+            Some(p) => {
+                let r = &case.plain.rays[6 * i..6 * i + 6];
+                let f = |k: usize| r[k] as f64;
+                let carried = ndc_propagated([f(0), f(1), f(2)], [f(3), f(4), f(5)], p);
+                std::array::from_fn(|k| {
+                    carried[k]
+                        + NDC_OWN_ULP
+                            * f32::EPSILON as f64
+                            * want.rays[6 * i + k].abs().max(1.0) as f64
+                })
+            }
+        };
+        for (k, &tol) in tol.iter().enumerate() {
+            let (g, c) = (got.rays[6 * i + k] as f64, want.rays[6 * i + k] as f64);
+            cmp.tol.abs = tol;
+            cmp.value(g, c, || format!("{name} keys, ray {i} component {k}"));
+            let max = if case.ndc.is_some() {
+                &mut apart.ndc
+            } else {
+                &mut apart.dir
+            };
+            *max = max.max(ulp(g, c));
+        }
+        for k in 0..3 {
+            let (g, c) = (
+                got.targets[3 * i + k] as f64,
+                want.targets[3 * i + k] as f64,
+            );
+            cmp.tol.abs = TARGET_ABS;
+            cmp.value(g, c, || format!("{name} keys, ray {i} target {k}"));
+            apart.target = apart.target.max(ulp(g, c));
+        }
+    }
 }
 
 /// The `check-kernels` row of `sample_rays_sort`: batches of 2·SAMPLE_SORT_RAYS + 1808 keys (two

@@ -16,7 +16,8 @@
 
 use super::aabb::Aabb;
 use super::camera::Camera;
-use crate::eval::knn::PointIndex;
+use crate::math::knn::{to_f64, PointIndex};
+use crate::math::percentile::percentile_bounds;
 use glam::{DMat3, DVec3, Vec3};
 use rand::{Rng, SeedableRng};
 
@@ -122,22 +123,6 @@ fn room(points: &[[f64; 3]]) -> Option<Aabb> {
     })
 }
 
-/// The value at quantile `q` ∈ [0, 1] of ascending `sorted` (nearest rank); `sorted` not empty.
-pub fn percentile<T: Copy>(sorted: &[T], q: f64) -> T {
-    sorted[(q * (sorted.len() - 1) as f64).round() as usize]
-}
-
-/// Per axis, the `q.0` and `q.1` quantiles of `points` (not empty): a box robust to stray points.
-pub fn percentile_bounds(points: &[&[f64; 3]], q: (f64, f64)) -> ([f64; 3], [f64; 3]) {
-    let (mut lo, mut hi) = ([0f64; 3], [0f64; 3]);
-    for a in 0..3 {
-        let mut v: Vec<f64> = points.iter().map(|p| p[a]).collect();
-        v.sort_by(f64::total_cmp);
-        (lo[a], hi[a]) = (percentile(&v, q.0), percentile(&v, q.1));
-    }
-    (lo, hi)
-}
-
 /// The reweighted least-squares point nearest to the optical axes, and the median distance of
 /// the axes from it.
 fn convergence(cameras: &[Camera]) -> Option<(DVec3, f64)> {
@@ -225,7 +210,7 @@ fn from_points(p: DVec3, d: f64, points: &[[f64; 3]]) -> Option<(DVec3, DVec3, S
         .iter()
         .filter(|q| {
             // The point itself is within the radius too.
-            let q64 = crate::eval::knn::to_f64(q);
+            let q64 = to_f64(q);
             index.count_within(&q64, radius, cap) > MIN_NEIGHBOURS
         })
         .map(|q| Vec3::from_array(*q).as_dvec3())

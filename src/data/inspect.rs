@@ -5,8 +5,9 @@
 //! reaching outside the box).
 
 use super::camera::ray_box;
-use super::dataset::{Dataset, Split, SplitRule};
+use super::dataset::Dataset;
 use super::foreground::ForegroundBox;
+use super::split::{Split, SplitRule};
 use glam::{Mat4, Vec3, Vec4};
 use rayon::prelude::*;
 use std::fmt::Write as _;

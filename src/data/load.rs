@@ -1,10 +1,11 @@
 //! Loading a dataset directory: detect its layout, call that layout's reader, check that every
 //! split has one image size, and measure the load.
 
-use super::dataset::{peak_rss_bytes, Dataset, LoadOptions, LoadReport, SplitRule};
+use super::dataset::{peak_rss_bytes, Dataset, LoadOptions, LoadReport};
 use super::error::DataError;
 use super::layout::{self, Layout};
 use super::scene_box::SceneBox;
+use super::split::SplitRule;
 use anyhow::Context;
 use glam::Mat4;
 use std::path::Path;

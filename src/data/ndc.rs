@@ -4,10 +4,10 @@
 //! spans the NDC cube [−1, 1]³: the frame camera's view from the near plane to infinite depth.
 
 use super::camera::Camera;
-use super::foreground::percentile;
 use crate::abi::buffers::SampleCamera;
 use crate::abi::rays::NdcProjection;
 use crate::math::ndc::ndc_ray;
+use crate::math::percentile::percentile;
 use glam::{DMat3, DVec3, Mat3, Vec3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};

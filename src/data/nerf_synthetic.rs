@@ -4,10 +4,10 @@
 //! loaded in parallel, composited on the background, optionally box-downscaled, and held as 8-bit
 //! RGBA.
 
-use super::dataset::{Frame, Split};
 use super::distortion::{undistort, Pinhole};
 use super::error::DataError;
 use super::image::{composite_and_downscale, decode_file, RgbaImage};
+use super::split::{Frame, Split};
 use super::transforms::{parse_transform, read_json, resolve_image, FrameJson, Intrinsics};
 use glam::Mat4;
 use rayon::prelude::*;

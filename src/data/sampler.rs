@@ -4,8 +4,8 @@
 //! and the rays of a whole view. Rays are in the grid's space (the scaled world, Blender units ×
 //! `SceneBox::scale`, or a forward-facing capture's NDC) with unit directions.
 
-use super::dataset::Split;
 use super::scene_box::SceneBox;
+use super::split::Split;
 use crate::abi::rays::{Focus, SampleSet};
 use crate::gpu::TrainRays;
 use anyhow::{Context, Result};

@@ -5,12 +5,12 @@
 //! mip-NeRF practice) and parallel decoding.
 
 use super::camera::Camera;
-use super::dataset::{Frame, Split, SplitRule, Splits};
 use super::distortion::{undistort, Distortion, Pinhole};
 use super::error::DataError;
 use super::foreground::ForegroundBox;
 use super::image::{composite_and_downscale, decode_file, RgbaImage};
 use super::scene_box::SceneBox;
+use super::split::{Frame, Split, SplitRule, Splits};
 use rayon::prelude::*;
 use serde::Deserialize;
 use std::collections::HashMap;

@@ -5,8 +5,8 @@
 //! points with d2s < `threshold`, recall = fraction of GT points with s2d < `threshold`,
 //! F1 = 2PR / (P + R) (0 when both are 0). Means are summed in point order (deterministic).
 
-use super::knn::PointIndex;
 use super::objects::{group_errors, GroupError};
+use crate::math::knn::PointIndex;
 use anyhow::Result;
 
 /// Protocol parameters.

@@ -5,14 +5,14 @@
 //!
 //! Two exact strategies, picked by the neighbourhood size measured on a sample of points:
 //! - few neighbours (the usual radius, about the point spacing): each point's earlier
-//!   neighbours are found in parallel (one k-d tree query per point, [`super::PointIndex`]) and
+//!   neighbours are found in parallel (one k-d tree query per point, [`crate::math::knn::PointIndex`]) and
 //!   one sequential pass over those short lists makes the decisions in order;
 //! - many (a radius far above the spacing, where those lists make the cost quadratic): the kept
 //!   points are held in a hash grid of cells one radius wide, and each decision looks at the kept
 //!   points of 27 cells. Kept points are more than a radius apart, so a cell holds a bounded
 //!   number of them: O(n) at any radius.
 
-use super::knn::{to_f64, PointIndex};
+use crate::math::knn::{to_f64, PointIndex};
 use anyhow::Result;
 use rayon::prelude::*;
 use std::collections::HashMap;

@@ -208,6 +208,16 @@ impl Gpu {
         Ok(buf)
     }
 
+    /// A device buffer holding `data`, or one zero element when `data` is empty (a buffer a
+    /// kernel binds but reads nothing of).
+    pub fn upload_nonempty<T: Pod>(&self, data: &[T]) -> Result<GpuBuffer> {
+        if data.is_empty() {
+            self.zeros::<T>(1)
+        } else {
+            self.upload(data)
+        }
+    }
+
     /// A zero-filled device buffer of `len` elements of `T`.
     pub fn zeros<T: Pod>(&self, len: usize) -> Result<GpuBuffer> {
         self.zeros_in::<T>(len, MemoryLocation::GpuOnly, "zeros")

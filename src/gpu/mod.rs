@@ -1,7 +1,7 @@
 //! Vulkan compute runtime: instance and device choice (`device`), the context with its allocator
 //! and pipelines (`context`), RAII buffers addressed by device address (`buffer`), batched
 //! submission with timestamp queries (`batch`), per-kernel profiles (`profile`), and what the Vulkan
-//! backends share: per-batch ray buffers (`ray_buffers`), per-step results in a ring of
+//! backends share: the grid's links and optimised arrays (`grid_buffers`), per-batch ray buffers (`ray_buffers`), per-step results in a ring of
 //! host-visible slots (`readback`) with the step's loss summed on the device (`loss_sum`), the
 //! steps submitted and not yet read (`in_flight`), the `optim_args` and `tv` recordings (`optim_args`, `tv`), the
 //! host time of a training step by phase (`step_times`), the training views and the batches
@@ -13,6 +13,7 @@ mod buffer;
 mod context;
 mod device;
 mod frame;
+mod grid_buffers;
 mod in_flight;
 mod instance;
 mod loss_sum;
@@ -30,6 +31,7 @@ pub use batch::{Batch, BatchTimes, InFlight};
 pub use buffer::GpuBuffer;
 pub use context::{list_devices, Gpu, GpuOptions};
 pub use device::{pick_default, DeviceInfo, DeviceKind};
+pub use grid_buffers::GridBuffers;
 pub use in_flight::{StepMeta, StepsInFlight, MAX_IN_FLIGHT};
 pub use loss_sum::record_loss_sum;
 pub use optim_args::record_optim_args;
@@ -37,7 +39,7 @@ pub use profile::Profile;
 pub use ray_buffers::RayBuffers;
 pub use readback::{Readback, STEP_SLOTS};
 pub use step_queue::{BatchRays, SlotFigures, StepQueue};
-pub use step_times::{timed, Phase, PhaseClock, StepTimes};
+pub use step_times::{timed, Phase, PhaseClock, StepTimes, StepTiming};
 pub use train_views::{record_sort_runs, KeyDraw, SampledAt, TrainRays, TrainViewBuffers};
 pub use tv::record_tv;
 

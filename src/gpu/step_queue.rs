@@ -5,23 +5,20 @@
 //! is stepped on the device, so a step needs no host round trip).
 
 use super::{
-    record_loss_sum, record_optim_args, Batch, BatchTimes, Gpu, GpuBuffer, Phase, PhaseClock,
-    RayBuffers, Readback, StepMeta, StepTimes, StepsInFlight, TrainRays, TrainViewBuffers,
-    STEP_SLOTS,
+    record_loss_sum, record_optim_args, Batch, Gpu, GpuBuffer, Phase, PhaseClock, RayBuffers,
+    Readback, StepMeta, StepTiming, StepsInFlight, TrainRays, TrainViewBuffers, STEP_SLOTS,
 };
 use crate::abi::buffers::{Background, StepHeader};
 use crate::abi::rays::SampledRays;
 use crate::abi::step::{STEP_FLAGS, STEP_RESET_BYTES};
-use anyhow::{anyhow, Result};
+use anyhow::{anyhow, ensure, Result};
 use bytemuck::Pod;
 use std::cell::RefCell;
 
 /// A step's figures as its readback slot holds them.
 pub trait SlotFigures: Sized {
-    /// The figures of a step of `n` rays in `slot` of `readback` (times not yet set).
+    /// The figures of a step of `n` rays in `slot` of `readback` (their timing apart).
     fn read(readback: &Readback, slot: usize, n: usize) -> Result<Self>;
-    /// Set the step's device time (ns) and host time by phase.
-    fn set_times(&mut self, device_ns: f64, host: StepTimes);
 }
 
 /// Device addresses of a training batch: rays (6 floats each), targets (3 floats each),
@@ -40,8 +37,8 @@ pub struct StepQueue<F> {
     /// any buffer they use is freed (a backend holds its queue as its first field for the same
     /// reason). In a `RefCell` because reading state (`grid`, …) must wait for them too.
     steps: RefCell<StepsInFlight>,
-    /// Figures of completed steps not yet taken.
-    done: Vec<(F, BatchTimes)>,
+    /// Figures of completed steps not yet taken, with the steps' timing.
+    done: Vec<(F, StepTiming)>,
     gpu: Gpu,
     /// The step record (glsl/lib/step.glsl): `StepHeader` (touched count, sample counters, n),
     /// the touched flags and list.
@@ -108,7 +105,9 @@ impl<F: SlotFigures> StepQueue<F> {
         for g in grads {
             b.fill_zero(g);
         }
-        b.fill_zero_range(&self.step, 4 * STEP_FLAGS as u64, 4 * rows as u64);
+        if rows > 0 {
+            b.fill_zero_range(&self.step, 4 * STEP_FLAGS as u64, 4 * rows as u64);
+        }
         b.submit()?;
         Ok(())
     }
@@ -118,32 +117,30 @@ impl<F: SlotFigures> StepQueue<F> {
         let steps = self.steps.get_mut().take()?;
         for (slot, (meta, times)) in steps.into_iter().enumerate() {
             let mut clock = PhaseClock::start();
-            let mut figures = F::read(&self.readback, slot, meta.n)?;
+            let figures = F::read(&self.readback, slot, meta.n)?;
             clock.mark(Phase::Readback);
             let mut host = meta.host;
             host.add(&times.host);
             host.add(&clock.times);
-            figures.set_times(times.total_ns(), host);
-            self.done.push((figures, times));
+            let timing = StepTiming {
+                device_ns: times.total_ns(),
+                host,
+            };
+            self.done.push((figures, timing));
         }
         Ok(())
     }
 
-    /// The figures of every step submitted since they were last taken, in order, with the
-    /// device times of their dispatches (waits for the steps in flight).
-    pub fn take_timed(&mut self) -> Result<Vec<(F, BatchTimes)>> {
+    /// The figures of every step submitted since they were last taken, in order, with their
+    /// timing (waits for the steps in flight).
+    pub fn take(&mut self) -> Result<Vec<(F, StepTiming)>> {
         self.collect()?;
         Ok(std::mem::take(&mut self.done))
     }
 
-    /// The figures of every step submitted since they were last taken, in order.
-    pub fn take_figures(&mut self) -> Result<Vec<F>> {
-        Ok(self.take_timed()?.into_iter().map(|(f, _)| f).collect())
-    }
-
-    /// The figures of the step submitted last, waited for; those of earlier steps not yet taken
-    /// stay.
-    pub fn last(&mut self) -> Result<(F, BatchTimes)> {
+    /// The figures of the step submitted last with its timing, waited for; those of earlier
+    /// steps not yet taken stay.
+    pub fn last(&mut self) -> Result<(F, StepTiming)> {
         self.collect()?;
         let last = self.done.pop();
         last.ok_or_else(|| anyhow!("a submitted step left no figures"))
@@ -187,8 +184,9 @@ impl<F: SlotFigures> StepQueue<F> {
         )
     }
 
-    /// Start the batch of a training step on `src`'s rays: uploaded (host rays), or drawn on the
-    /// device by `sample_rays` from the views (uploaded once); the batch opens with the step
+    /// Start the batch of a training step on `src`'s rays: uploaded (host rays: 6 floats and a
+    /// 3-float target each, at least one), or drawn on the device by `sample_rays` from the views
+    /// (uploaded once); the batch opens with the step
     /// reset (the step record's touched count and counters) and clearing `counters`. The uploads
     /// are charged to `clock`'s upload, the draw's recording to its sampling. Returns the batch
     /// with the addresses of its rays.
@@ -200,7 +198,14 @@ impl<F: SlotFigures> StepQueue<F> {
     ) -> Result<(Batch, BatchRays)> {
         let (id, set, seed, n) = match src {
             TrainRays::Host { rays, targets } => {
-                return self.begin_host(rays, Some(targets), clock, counters)
+                let n = rays.len() / 6;
+                ensure!(
+                    n > 0 && rays.len() == 6 * n && targets.len() == 3 * n,
+                    "batch of {} ray floats with {} target floats",
+                    rays.len(),
+                    targets.len()
+                );
+                return self.begin_host(rays, Some(targets), clock, counters);
             }
             TrainRays::Sampled { id, set, seed, n } => (id, set, seed, n),
         };

@@ -1,6 +1,7 @@
 //! Where the wall time of a training step goes on the host: [`StepTimes`], milliseconds per phase,
 //! measured by a [`PhaseClock`] whose spans are contiguous, so the phases of a step add up to the
-//! time between the clock's start and its last mark.
+//! time between the clock's start and its last mark; with the device time of its kernels, a
+//! step's [`StepTiming`].
 
 use std::time::Instant;
 
@@ -45,6 +46,15 @@ pub struct StepTimes {
     pub bookkeeping: f64,
     /// Wall time in no named phase (calls between the spans); set by whoever measured the wall.
     pub other: f64,
+}
+
+/// Where a training step's time went: its kernels on the device and its phases on the host.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct StepTiming {
+    /// Device time of the step's kernels in ns (0 on the CPU backend).
+    pub device_ns: f64,
+    /// Host time of the step by phase (upload to readback on Vulkan, compute on the CPU).
+    pub host: StepTimes,
 }
 
 impl Phase {

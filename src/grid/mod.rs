@@ -59,9 +59,36 @@ pub fn state_bytes(slots: u64, rows: u64, channels: u64) -> u64 {
     4 * (slots + 2 * rows * channels)
 }
 
-impl Grid {
-    /// The grid's resolution and placement without its arrays (links, density, SH).
-    pub fn without_arrays(self) -> Grid {
+/// A sparse grid as an optimiser sees it: the links and the per-vertex arrays it steps (in the
+/// order of the stage's running averages), apart from the rest (resolution, placement, …).
+pub trait SparseArrays: Clone {
+    /// Row of each vertex slot, < 0 where none is allocated.
+    fn links(&self) -> &[i32];
+    /// Allocated vertex rows.
+    fn rows(&self) -> usize;
+    /// The optimised arrays, in order.
+    fn arrays(&self) -> Vec<&[f32]>;
+    /// The grid without its links and arrays.
+    fn without_arrays(self) -> Self;
+    /// The grid with `links` and `arrays` (in the order of [`Self::arrays`]) for its own.
+    fn with_arrays(self, links: Vec<i32>, arrays: Vec<Vec<f32>>) -> anyhow::Result<Self>;
+}
+
+impl SparseArrays for Grid {
+    fn links(&self) -> &[i32] {
+        &self.links
+    }
+
+    fn rows(&self) -> usize {
+        self.allocated()
+    }
+
+    /// σ, SH.
+    fn arrays(&self) -> Vec<&[f32]> {
+        vec![&self.density, &self.sh]
+    }
+
+    fn without_arrays(self) -> Grid {
         Grid {
             links: Vec::new(),
             density: Vec::new(),
@@ -70,6 +97,20 @@ impl Grid {
         }
     }
 
+    fn with_arrays(self, links: Vec<i32>, arrays: Vec<Vec<f32>>) -> anyhow::Result<Grid> {
+        let [density, sh] = arrays
+            .try_into()
+            .map_err(|a: Vec<_>| anyhow::anyhow!("{} arrays for a grid of 2", a.len()))?;
+        Ok(Grid {
+            links,
+            density,
+            sh,
+            ..self
+        })
+    }
+}
+
+impl Grid {
     /// Total number of vertex slots in `links`.
     pub fn slots(&self) -> usize {
         self.res.iter().map(|&r| r as usize).product()

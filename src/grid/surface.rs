@@ -3,7 +3,7 @@
 //! dilated twice over the 26-neighbourhood; rescale δ and τ by the mean forward-difference
 //! gradient norm so δ is SDF-like; raw opacity σα = s·σ; SH copied.
 
-use super::{cells_then_corners, dilate, Grid, SH_DIM};
+use super::{cells_then_corners, dilate, Grid, SparseArrays, SH_DIM};
 use crate::abi::surface_grid::SurfaceGridRef;
 use anyhow::{bail, ensure, Result};
 use rayon::prelude::*;
@@ -44,9 +44,21 @@ pub struct SurfaceGrid {
     pub gradient_scale: f32,
 }
 
-impl SurfaceGrid {
-    /// The grid's resolution, placement, levels and scale without its arrays (links, δ, σα, SH).
-    pub fn without_arrays(self) -> SurfaceGrid {
+/// The links and δ, σα, SH; resolution, placement, levels and scale apart.
+impl SparseArrays for SurfaceGrid {
+    fn links(&self) -> &[i32] {
+        &self.links
+    }
+
+    fn rows(&self) -> usize {
+        self.delta.len()
+    }
+
+    fn arrays(&self) -> Vec<&[f32]> {
+        vec![&self.delta, &self.opacity, &self.sh]
+    }
+
+    fn without_arrays(self) -> SurfaceGrid {
         SurfaceGrid {
             links: Vec::new(),
             delta: Vec::new(),
@@ -56,6 +68,21 @@ impl SurfaceGrid {
         }
     }
 
+    fn with_arrays(self, links: Vec<i32>, arrays: Vec<Vec<f32>>) -> Result<SurfaceGrid> {
+        let [delta, opacity, sh] = arrays
+            .try_into()
+            .map_err(|a: Vec<_>| anyhow::anyhow!("{} arrays for a surface grid of 3", a.len()))?;
+        Ok(SurfaceGrid {
+            links,
+            delta,
+            opacity,
+            sh,
+            ..self
+        })
+    }
+}
+
+impl SurfaceGrid {
     /// Borrowed view for the surface renderers (cubic grids only).
     pub fn as_ref(&self) -> SurfaceGridRef<'_> {
         SurfaceGridRef {

@@ -1,4 +1,6 @@
-//! Numerics shared by the CPU twins and the f64 oracles: the Rust twins of `glsl/lib/`.
+//! Numerics shared by the CPU twins and the f64 oracles: the Rust twins of `glsl/lib/`; and the
+//! geometry the data and the evaluation share: nearest neighbours in a point cloud ([`knn`]) and
+//! percentile boxes of points ([`percentile`]).
 
 // These twins of `glsl/lib/` mirror its loops index for index; iterator rewrites would hide that.
 // `!(a < b)` is deliberate where NaN must take the same branch as on the GPU.
@@ -8,8 +10,10 @@ pub mod atomic;
 pub mod cubic;
 pub mod cubic_oracle;
 pub mod dda;
+pub mod knn;
 pub mod madd;
 pub mod ndc;
+pub mod percentile;
 pub mod plenoxel;
 pub mod rmsprop;
 pub mod sh;

@@ -11,8 +11,9 @@
 
 use crate::data::Aabb;
 use crate::eval::objects::{load_groups, GtGroups};
-use crate::eval::{evaluate_indexed, thin, EvalOptions, Metrics, PointIndex};
+use crate::eval::{evaluate_indexed, thin, EvalOptions, Metrics};
 use crate::io::read_points;
+use crate::math::knn::PointIndex;
 use crate::mesh::ply::{has_faces, read_mesh_ply};
 use anyhow::{ensure, Context, Result};
 use std::path::{Path, PathBuf};

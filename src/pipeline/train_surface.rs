@@ -12,7 +12,7 @@ use crate::data::Dataset;
 use crate::gpu::Gpu;
 use crate::grid::surface::SurfaceGrid;
 use crate::grid::{npz, Grid};
-use crate::run::identity::check_same_data;
+use crate::run::same_data::check_same_data;
 use crate::run::{self, RunStage};
 use crate::surface::{CpuSurface, SurfaceBackend, SurfaceStage, VulkanSurface};
 use crate::train::{surface_steps, SurfaceConfig};

@@ -12,8 +12,8 @@ use crate::cpu::plenoxel_train::{train, TrainGrads};
 use crate::cpu::plenoxel_weights::max_weights;
 use crate::cpu::sample_rays::sample_rays;
 use crate::cpu::{rmsprop_sparse, tv, PlenoxelsOptimArrays};
-use crate::gpu::{Phase, PhaseClock, TrainRays};
-use crate::grid::{Grid, SH_DIM};
+use crate::gpu::{Phase, PhaseClock, StepTiming, TrainRays};
+use crate::grid::{Grid, SparseArrays, SH_DIM};
 use crate::math::plenoxel::MarchParams;
 use crate::math::plenoxel::{GridRef, PlenoxelCounts};
 use crate::stage::{HostRays, HostSteps, StageBackend, StateFn, StepStore};
@@ -171,8 +171,10 @@ impl StageBackend<PlenoxelsStage> for CpuPlenoxels {
         self.steps.push(PlenoxelsStepStats {
             mse,
             counts,
-            device_ns: 0.0,
-            host: clock.times,
+            timing: StepTiming {
+                host: clock.times,
+                ..Default::default()
+            },
         });
         Ok(())
     }

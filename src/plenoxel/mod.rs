@@ -11,6 +11,7 @@ pub use vulkan::VulkanPlenoxels;
 use crate::abi::buffers::PlenoxelPerRay;
 use crate::checkpoint::{self, format};
 use crate::data::TrainViews;
+use crate::gpu::StepTiming;
 use crate::grid::state_bytes;
 use crate::grid::{Grid, SH_DIM};
 use crate::math::plenoxel::MarchParams;
@@ -48,10 +49,8 @@ pub struct PlenoxelsStepStats {
     pub mse: f64,
     /// Samples shaded, evaluated at σ ≤ ε, skipped by the occupancy volume; gradient atomic adds.
     pub counts: PlenoxelCounts,
-    /// Device time of the step's kernels in ns (0 on the CPU backend).
-    pub device_ns: f64,
-    /// Host time of the step by phase (upload to readback on Vulkan, compute on the CPU).
-    pub host: crate::gpu::StepTimes,
+    /// Device and host time of the step.
+    pub timing: StepTiming,
 }
 
 /// Output of `Plenoxels::gradients`.
@@ -83,6 +82,10 @@ impl Stage for PlenoxelsStage {
 
     fn mse(stats: &PlenoxelsStepStats) -> f64 {
         stats.mse
+    }
+
+    fn timing(stats: &mut PlenoxelsStepStats) -> &mut StepTiming {
+        &mut stats.timing
     }
 
     fn non_finite(stats: &PlenoxelsStepStats) -> Option<String> {

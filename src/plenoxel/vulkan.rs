@@ -4,7 +4,7 @@
 
 use super::plan::{PlenoxelPass, PlenoxelPlan, TvField};
 use super::{
-    march_params, state_bytes_of, Gradients, PlenoxelsBackend, PlenoxelsStage, PlenoxelsStepParams,
+    march_params, Gradients, PlenoxelsBackend, PlenoxelsStage, PlenoxelsStepParams,
     PlenoxelsStepStats,
 };
 use crate::abi::buffers::PlenoxelParams;
@@ -14,30 +14,26 @@ use crate::abi::step::step_record;
 use crate::abi::train::RmsProp;
 use crate::gpu::{
     record_background_step, record_tv, Batch, BatchRays, Gpu, GpuBuffer, PhaseClock, Readback,
-    SlotFigures, StepQueue, StepTimes, TrainRays,
+    SlotFigures, TrainRays,
 };
-use crate::grid::{Grid, SH_DIM};
+use crate::grid::Grid;
 use crate::kernels;
 use crate::math::plenoxel::{occ_dims, PlenoxelCounts};
-use crate::stage::QueuedBackend;
-use anyhow::{ensure, Result};
+use crate::stage::{QueuedBackend, QueuedGrid, StateArrays};
+use anyhow::Result;
+
+/// Where σ and SH sit in the grid's arrays (the order of `PlenoxelsStage::STATE_NAMES`).
+const DENSITY: usize = 0;
+const SH: usize = 1;
 
 /// Device-resident stage-1 state.
 pub struct VulkanPlenoxels {
-    /// The steps in flight, their figures, the ray buffers, the training views and the
-    /// background: per ray 3 floats of output (rgb) for a render, the squared error (1 float)
-    /// for training; per step a slot with the squared-error sum and the counters. First, so
-    /// that dropping the backend waits for the steps before any buffer they use is freed.
-    queue: StepQueue<PlenoxelsStepStats>,
-    meta: Grid,
-    links: GpuBuffer,
-    density: GpuBuffer,
-    sh: GpuBuffer,
+    /// The queue (per ray 3 floats of output, rgb, for a render, the squared error, 1 float,
+    /// for training; per step a slot with the squared-error sum and the counters) and the grid
+    /// (σ, SH). First, so that dropping the backend waits for the steps before any buffer they
+    /// use is freed.
+    core: QueuedGrid<PlenoxelsStage>,
     occ: GpuBuffer,
-    grad_density: GpuBuffer,
-    grad_sh: GpuBuffer,
-    state_density: GpuBuffer,
-    state_sh: GpuBuffer,
     /// plenoxel_train's params buffer (written in each training batch's command stream).
     params: GpuBuffer,
 }
@@ -46,40 +42,25 @@ impl VulkanPlenoxels {
     pub fn new(gpu: &Gpu, grid: Grid) -> Result<Self> {
         let n = grid.allocated();
         let nb = occ_dims(grid.res);
+        // Per step: the squared-error sum (one float), the counters.
+        let parts = [4, std::mem::size_of::<PlenoxelCounts>() as u64];
+        let step = step_record(n, &[]);
         Ok(VulkanPlenoxels {
-            queue: StepQueue::new(
-                gpu,
-                &step_record(n, &[]),
-                3 * std::mem::size_of::<f32>(),
-                // The squared-error sum (one float), the counters.
-                &[4, std::mem::size_of::<PlenoxelCounts>() as u64],
-            )?,
-            links: gpu.upload(&grid.links)?,
-            density: gpu.upload(&grid.density)?,
-            sh: gpu.upload(&grid.sh)?,
+            core: QueuedGrid::new(gpu, grid, &step, 3 * std::mem::size_of::<f32>(), &parts)?,
             occ: gpu.zeros::<u32>((nb[0] * nb[1] * nb[2]) as usize)?,
-            grad_density: gpu.zeros::<f32>(n)?,
-            grad_sh: gpu.zeros::<f32>(n * SH_DIM)?,
-            state_density: gpu.zeros::<f32>(n)?,
-            state_sh: gpu.zeros::<f32>(n * SH_DIM)?,
             params: gpu.host_to_device::<PlenoxelParams>(1)?,
-            meta: grid.without_arrays(),
         })
     }
 
-    fn allocated(&self) -> usize {
-        (self.density.size() / 4) as usize
-    }
-
     fn record_occupancy(&self, b: &mut Batch) -> Result<()> {
-        let nb = occ_dims(self.meta.res);
+        let nb = occ_dims(self.core.meta.res);
         b.dispatch_1d(
             &kernels::occupancy::INFO,
             &kernels::occupancy::Push {
-                links: self.links.address(),
-                density: self.density.address(),
+                links: self.core.bufs.links.address(),
+                density: self.core.bufs.values[DENSITY].address(),
                 occ: self.occ.address(),
-                res: self.meta.res,
+                res: self.core.meta.res,
                 ..Default::default()
             },
             nb[0] * nb[1] * nb[2],
@@ -87,86 +68,37 @@ impl VulkanPlenoxels {
     }
 
     fn read_stats(&self) -> Result<PlenoxelCounts> {
-        Ok(self.queue.header()?.stats)
+        Ok(self.core.queue.header()?.stats)
     }
 
     /// Record the sparse RMSProp step over the vertices touched this step.
     fn record_rmsprop(&self, b: &mut Batch, p: &RmsProp) -> Result<()> {
-        self.queue.record_optim_args(b)?;
+        self.core.queue.record_optim_args(b)?;
         b.dispatch_indirect(
             &kernels::rmsprop_sparse::INFO,
             &kernels::rmsprop_sparse::Push {
-                density: self.density.address(),
-                sh: self.sh.address(),
-                grad_density: self.grad_density.address(),
-                grad_sh: self.grad_sh.address(),
-                state_density: self.state_density.address(),
-                state_sh: self.state_sh.address(),
-                step: self.queue.step.address(),
+                density: self.core.bufs.values[DENSITY].address(),
+                sh: self.core.bufs.values[SH].address(),
+                grad_density: self.core.bufs.grads[DENSITY].address(),
+                grad_sh: self.core.bufs.grads[SH].address(),
+                state_density: self.core.bufs.states[DENSITY].address(),
+                state_sh: self.core.bufs.states[SH].address(),
+                step: self.core.queue.step.address(),
                 lr_sigma: p.lr_sigma,
                 lr_sh: p.lr_sh,
                 beta: p.beta,
                 eps: p.eps,
             },
-            &self.queue.args,
+            &self.core.queue.args,
         )
-    }
-
-    /// Start a batch with the step reset (clearing the touched count and sample counters) and
-    /// the training rays (uploaded, or drawn by `sample_rays`).
-    fn begin_train(
-        &mut self,
-        src: TrainRays,
-        clock: &mut PhaseClock,
-    ) -> Result<(Batch, BatchRays)> {
-        if let TrainRays::Host { targets, .. } = src {
-            let n = src.len();
-            ensure!(
-                n > 0 && targets.len() == 3 * n,
-                "batch of {n} rays with {} targets",
-                targets.len() / 3
-            );
-        }
-        self.queue.begin(src, clock, &[])
     }
 
     /// Upload `rays` and start a batch with the step reset, for a render or a pass that reads
     /// no targets.
     fn begin_render(&mut self, rays: &[f32]) -> Result<(Batch, BatchRays)> {
-        self.queue
+        self.core
+            .queue
             .begin_host(rays, None, &mut PhaseClock::start(), &[])
-    }
-
-    /// Start the batch of `src`'s rays and record `plan`'s passes on it, in order.
-    fn record_plan(
-        &mut self,
-        src: TrainRays,
-        plan: &PlenoxelPlan,
-        clock: &mut PhaseClock,
-    ) -> Result<Batch> {
-        let n = src.len();
-        let (mut b, rays) = self.begin_train(src, clock)?;
-        for pass in plan.passes() {
-            match pass {
-                PlenoxelPass::Occupancy => self.record_occupancy(&mut b)?,
-                PlenoxelPass::Train {
-                    stop_thresh,
-                    grad_scale,
-                } => self.record_train(&mut b, *stop_thresh, *grad_scale, rays, n)?,
-                PlenoxelPass::Tv { field, chunk } => {
-                    let (data, grad) = match field {
-                        TvField::Density => (&self.density, &self.grad_density),
-                        TvField::Sh => (&self.sh, &self.grad_sh),
-                    };
-                    record_tv(&mut b, &self.links, data, grad, &self.queue.step, chunk)?
-                }
-                PlenoxelPass::RmsProp(h) => self.record_rmsprop(&mut b, h)?,
-                PlenoxelPass::Background(s) => {
-                    record_background_step(&mut b, &self.queue.bg, s.lr, s.beta, s.eps)?
-                }
-            }
-        }
-        Ok(b)
     }
 
     /// Write the params buffer for a training pass over `n` rays (in the command stream) and
@@ -179,7 +111,7 @@ impl VulkanPlenoxels {
         rays: BatchRays,
         n: usize,
     ) -> Result<()> {
-        let mp = march_params(&self.meta, stop_thresh);
+        let mp = march_params(&self.core.meta, stop_thresh);
         b.update(
             &self.params,
             0,
@@ -193,19 +125,19 @@ impl VulkanPlenoxels {
         b.dispatch_1d(
             &kernels::plenoxel_train::INFO,
             &kernels::plenoxel_train::Push {
-                links: self.links.address(),
-                density: self.density.address(),
-                sh: self.sh.address(),
+                links: self.core.bufs.links.address(),
+                density: self.core.bufs.values[DENSITY].address(),
+                sh: self.core.bufs.values[SH].address(),
                 occ: self.occ.address(),
                 rays: rays.rays,
                 targets: rays.targets,
-                grad_density: self.grad_density.address(),
-                grad_sh: self.grad_sh.address(),
+                grad_density: self.core.bufs.grads[DENSITY].address(),
+                grad_sh: self.core.bufs.grads[SH].address(),
                 ray_loss: rays.out,
-                step: self.queue.step.address(),
+                step: self.core.queue.step.address(),
                 params: self.params.address(),
-                bg: self.queue.bg.address(),
-                res: self.meta.res,
+                bg: self.core.queue.bg.address(),
+                res: self.core.meta.res,
                 n_rays: n as u32,
             },
             n as u32,
@@ -214,111 +146,109 @@ impl VulkanPlenoxels {
 
     /// The last sampled batch of `n` rays.
     pub fn sampled_batch(&self, n: usize) -> Result<SampledRays> {
-        self.queue.sampled_batch(n)
+        self.core.queue.sampled_batch(n)
     }
 }
 
 impl QueuedBackend<PlenoxelsStage> for VulkanPlenoxels {
-    fn queue(&self) -> &StepQueue<PlenoxelsStepStats> {
-        &self.queue
+    type Plan = PlenoxelPlan;
+
+    fn core(&self) -> &QueuedGrid<PlenoxelsStage> {
+        &self.core
     }
 
-    fn queue_mut(&mut self) -> &mut StepQueue<PlenoxelsStepStats> {
-        &mut self.queue
+    fn core_mut(&mut self) -> &mut QueuedGrid<PlenoxelsStage> {
+        &mut self.core
     }
 
-    /// The step's plan, then its figures into `slot`: the squared error summed on the device,
-    /// the counters copied.
-    fn record_step(
-        &mut self,
-        src: TrainRays,
-        p: &PlenoxelsStepParams,
-        slot: usize,
-        clock: &mut PhaseClock,
-    ) -> Result<Batch> {
-        let n = src.len();
-        let plan = PlenoxelPlan::step(p, self.meta.res, n, self.queue.bg_learned)?;
-        let mut b = self.record_plan(src, &plan, clock)?;
-        self.queue.record_loss_sum(&mut b, slot, n, 1, 1)?;
+    fn plan_step(&mut self, p: &PlenoxelsStepParams, n: usize) -> Result<PlenoxelPlan> {
+        PlenoxelPlan::step(p, self.core.meta.res, n, self.core.queue.bg_learned)
+    }
+
+    /// The step reset alone: the kernels' counters sit in the step record.
+    fn begin(&mut self, src: TrainRays, clock: &mut PhaseClock) -> Result<(Batch, BatchRays)> {
+        self.core.queue.begin(src, clock, &[])
+    }
+
+    fn record_plan(
+        &self,
+        b: &mut Batch,
+        plan: &PlenoxelPlan,
+        rays: BatchRays,
+        n: usize,
+    ) -> Result<()> {
+        let core = &self.core;
+        for pass in plan.passes() {
+            match pass {
+                PlenoxelPass::Occupancy => self.record_occupancy(b)?,
+                PlenoxelPass::Train {
+                    stop_thresh,
+                    grad_scale,
+                } => self.record_train(b, *stop_thresh, *grad_scale, rays, n)?,
+                PlenoxelPass::Tv { field, chunk } => {
+                    let i = match field {
+                        TvField::Density => DENSITY,
+                        TvField::Sh => SH,
+                    };
+                    let (data, grad) = (&core.bufs.values[i], &core.bufs.grads[i]);
+                    record_tv(b, &core.bufs.links, data, grad, &core.queue.step, chunk)?
+                }
+                PlenoxelPass::RmsProp(h) => self.record_rmsprop(b, h)?,
+                PlenoxelPass::Background(s) => {
+                    record_background_step(b, &core.queue.bg, s.lr, s.beta, s.eps)?
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The squared error summed on the device, the counters copied.
+    fn record_figures(&self, b: &mut Batch, slot: usize, n: usize) -> Result<()> {
+        let q = &self.core.queue;
+        q.record_loss_sum(b, slot, n, 1, 1)?;
         let stats = std::mem::offset_of!(StepHeader, stats) as u64;
-        self.queue
-            .readback
-            .copy(&mut b, slot, 1, &self.queue.step, stats);
-        Ok(b)
+        q.readback.copy(b, slot, 1, &q.step, stats);
+        Ok(())
     }
 
-    fn download_grid(&self) -> Result<Grid> {
-        Ok(Grid {
-            links: self.links.download()?,
-            density: self.density.download()?,
-            sh: self.sh.download()?,
-            ..self.meta.clone()
-        })
-    }
-
-    fn download_state(&self) -> Result<[Vec<f32>; 2]> {
-        Ok([self.state_density.download()?, self.state_sh.download()?])
-    }
-
-    fn copy_bytes(&self) -> u64 {
-        state_bytes_of(self.shape())
-    }
-
-    fn rebuild(&self, grid: Grid, state: Option<[Vec<f32>; 2]>) -> Result<Self> {
-        let n = grid.allocated();
-        if let Some([sd, ss]) = &state {
-            ensure!(
-                sd.len() == n && ss.len() == n * SH_DIM,
-                "optimizer state does not match the grid"
-            );
-        }
-        let fresh = VulkanPlenoxels::new(self.queue.gpu(), grid)?;
-        if let Some([sd, ss]) = state {
-            fresh.state_density.write(&sd)?;
-            fresh.state_sh.write(&ss)?;
-        }
-        Ok(fresh)
+    fn fresh(&self, grid: Grid) -> Result<Self> {
+        VulkanPlenoxels::new(self.core.queue.gpu(), grid)
     }
 }
 
 impl PlenoxelsBackend for VulkanPlenoxels {
     fn gradients(&mut self, rays: &[f32], targets: &[f32], stop_thresh: f32) -> Result<Gradients> {
-        self.queue.settle()?;
         let n = rays.len() / 6;
         let plan = PlenoxelPlan::gradients(stop_thresh, n);
-        let src = TrainRays::Host { rays, targets };
-        self.record_plan(src, &plan, &mut PhaseClock::start())?
-            .submit()?;
-        let g = Gradients {
-            ray_loss: self.queue.ray_output(n)?,
-            density: self.grad_density.download()?,
-            sh: self.grad_sh.download()?,
-            background: self.queue.take_background_grad()?,
+        self.run_plan(&plan, rays, targets, None)?;
+        let [density, sh] = StateArrays::from_arrays(self.core.bufs.take_grads(&self.core.queue)?)?;
+        Ok(Gradients {
+            ray_loss: self.core.queue.ray_output(n)?,
+            density,
+            sh,
+            background: self.core.queue.take_background_grad()?,
             counts: self.read_stats()?,
-        };
-        let grads = [&self.grad_density, &self.grad_sh];
-        self.queue.clear_gradients(&grads, self.allocated())?;
-        Ok(g)
+        })
     }
 
     fn render(&mut self, rays: &[f32], stop_thresh: f32) -> Result<(Vec<f32>, PlenoxelCounts)> {
-        self.queue.settle()?;
+        self.core.queue.settle()?;
         let n = rays.len() / 6;
-        let mp = march_params(&self.meta, stop_thresh);
+        let mp = march_params(&self.core.meta, stop_thresh);
         let (mut b, io) = self.begin_render(rays)?;
         self.record_occupancy(&mut b)?;
         b.dispatch_1d(
             &kernels::plenoxel_fwd::INFO,
             &kernels::plenoxel_fwd::Push {
-                links: self.links.address(),
-                density: self.density.address(),
-                sh: self.sh.address(),
+                links: self.core.bufs.links.address(),
+                density: self.core.bufs.values[DENSITY].address(),
+                sh: self.core.bufs.values[SH].address(),
                 occ: self.occ.address(),
                 rays: io.rays,
                 rgb: io.out,
-                step: self.queue.step.address(),
-                bg: self.queue.bg.address(),
-                res: self.meta.res,
+                step: self.core.queue.step.address(),
+                bg: self.core.queue.bg.address(),
+                res: self.core.meta.res,
                 scale: mp.scale,
                 offset: mp.offset,
                 n_rays: n as u32,
@@ -328,26 +258,26 @@ impl PlenoxelsBackend for VulkanPlenoxels {
             n as u32,
         )?;
         b.submit()?;
-        Ok((self.queue.ray_output(3 * n)?, self.read_stats()?))
+        Ok((self.core.queue.ray_output(3 * n)?, self.read_stats()?))
     }
 
     fn max_weights(&mut self, rays: &[f32], stop_thresh: f32) -> Result<Vec<f32>> {
-        self.queue.settle()?;
+        self.core.queue.settle()?;
         let n = rays.len() / 6;
-        let mp = march_params(&self.meta, stop_thresh);
-        let out = self.queue.gpu().zeros::<u32>(self.allocated())?;
+        let mp = march_params(&self.core.meta, stop_thresh);
+        let out = self.core.queue.gpu().zeros::<u32>(self.core.bufs.rows())?;
         let (mut b, io) = self.begin_render(rays)?;
         self.record_occupancy(&mut b)?;
         b.dispatch_1d(
             &kernels::plenoxel_weights::INFO,
             &kernels::plenoxel_weights::Push {
-                links: self.links.address(),
-                density: self.density.address(),
-                sh: self.sh.address(),
+                links: self.core.bufs.links.address(),
+                density: self.core.bufs.values[DENSITY].address(),
+                sh: self.core.bufs.values[SH].address(),
                 occ: self.occ.address(),
                 rays: io.rays,
                 max_weight: out.address(),
-                res: self.meta.res,
+                res: self.core.meta.res,
                 scale: mp.scale,
                 offset: mp.offset,
                 n_rays: n as u32,
@@ -365,7 +295,7 @@ impl PlenoxelsBackend for VulkanPlenoxels {
     }
 
     fn shape(&self) -> ([u32; 3], usize) {
-        (self.meta.res, self.allocated())
+        (self.core.meta.res, self.core.bufs.rows())
     }
 }
 
@@ -378,10 +308,5 @@ impl SlotFigures for PlenoxelsStepStats {
             counts: readback.part::<PlenoxelCounts>(slot, 1)?[0],
             ..Default::default()
         })
-    }
-
-    fn set_times(&mut self, device_ns: f64, host: StepTimes) {
-        self.device_ns = device_ns;
-        self.host = host;
     }
 }

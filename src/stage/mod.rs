@@ -5,17 +5,18 @@
 //! `plenoxel::PlenoxelsStage` (stage 1) and `surface::SurfaceStage` (stage 2). What the backends
 //! of one kind share whatever their stage, their background and the figures of the steps not yet
 //! taken, is a [`StepStore`] ([`store`]); a Vulkan backend's [`StageBackend`] is written once
-//! over [`QueuedBackend`] ([`queued`]).
+//! over [`QueuedBackend`], with its queue and grid buffers in a [`QueuedGrid`] ([`queued`]).
 
 pub mod queued;
 pub mod store;
 
-pub use queued::QueuedBackend;
+pub use queued::{QueuedBackend, QueuedGrid};
 pub use store::{HostRays, HostSteps, StepStore};
 
 use crate::abi::buffers::Background;
 use crate::data::TrainViews;
-use crate::gpu::TrainRays;
+use crate::gpu::{StepTiming, TrainRays};
+use crate::grid::SparseArrays;
 use anyhow::{anyhow, Result};
 use std::path::Path;
 
@@ -38,7 +39,7 @@ pub trait Stage: 'static {
     /// Header line of the per-step training log ([`Stage::log_row`]'s columns).
     const LOG_HEADER: &'static str;
     /// The trained grid.
-    type Grid: Send + 'static;
+    type Grid: SparseArrays + Send + 'static;
     /// Everything one training step needs besides the rays.
     type Params;
     /// What a training step reports back.
@@ -50,6 +51,8 @@ pub trait Stage: 'static {
 
     /// Mean squared error of a step's batch.
     fn mse(stats: &Self::Stats) -> f64;
+    /// Where a step's figures keep its timing (set by the backend that ran it).
+    fn timing(stats: &mut Self::Stats) -> &mut StepTiming;
     /// The step's loss figures, when one of them is not finite (named with their values).
     fn non_finite(stats: &Self::Stats) -> Option<String>;
     /// The log row of a step (`step` = steps done, `elapsed` = seconds since training started).

@@ -1,11 +1,12 @@
 //! What a backend keeps for the training loop besides its grid, the same for both stages: the
 //! background the kernels composite on and the figures of the steps not yet taken. A Vulkan
-//! backend keeps them in its [`StepQueue`] (the background and the figures on the device); a CPU
-//! backend in [`HostSteps`], and it draws a sampled batch on the host ([`HostRays`]).
+//! backend keeps them in the queue of its [`super::QueuedGrid`] (the background and the figures
+//! on the device); a CPU backend in [`HostSteps`], and it draws a sampled batch on the host
+//! ([`HostRays`]).
 
 use crate::abi::buffers::Background;
 use crate::abi::rays::{SampleSet, SampledRays};
-use crate::gpu::{Phase, PhaseClock, SlotFigures, StepQueue, TrainRays};
+use crate::gpu::{Phase, PhaseClock, TrainRays};
 use anyhow::{anyhow, Result};
 use std::borrow::Cow;
 
@@ -21,28 +22,6 @@ pub trait StepStore<F> {
     fn background(&self) -> Result<Background>;
     /// Replace the background (colour, whether it is learned, its optimiser state).
     fn set_background(&mut self, bg: Background) -> Result<()>;
-}
-
-impl<F: SlotFigures> StepStore<F> for StepQueue<F> {
-    fn kind(&self) -> &'static str {
-        "vulkan"
-    }
-
-    fn take(&mut self) -> Result<Vec<F>> {
-        self.take_figures()
-    }
-
-    fn last(&mut self) -> Result<F> {
-        Ok(StepQueue::last(self)?.0)
-    }
-
-    fn background(&self) -> Result<Background> {
-        StepQueue::background(self)
-    }
-
-    fn set_background(&mut self, bg: Background) -> Result<()> {
-        StepQueue::set_background(self, bg)
-    }
 }
 
 /// A CPU backend's background and the figures of its steps not yet taken.

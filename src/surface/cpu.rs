@@ -18,7 +18,7 @@ use crate::cpu::surface_opacity_reg::surface_opacity_reg;
 use crate::cpu::surface_reg::{normal_reg_passes, NormalScratch};
 use crate::cpu::surface_train::{train, SurfaceGrads, TrainInput};
 use crate::cpu::{surface_rmsprop, tv, SurfaceOptimArrays};
-use crate::gpu::{Phase, PhaseClock, TrainRays};
+use crate::gpu::{Phase, PhaseClock, StepTiming, TrainRays};
 use crate::grid::row_slots;
 use crate::grid::state_bytes;
 use crate::grid::surface::SurfaceGrid;
@@ -233,11 +233,10 @@ impl CpuSurface {
             consistency: losses.iter().map(|l| l.consistency as f64).sum::<f64>() / nf,
             reg_loss,
             counts,
-            device_ns: 0.0,
-            host: Default::default(),
+            timing: StepTiming::default(),
         };
         clock.mark(Phase::Compute);
-        stats.host = clock.times;
+        stats.timing.host = clock.times;
         Ok(stats)
     }
 }

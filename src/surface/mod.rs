@@ -20,6 +20,7 @@ use crate::abi::regularisers::OpacityChunk;
 use crate::abi::regularisers::TvChunk;
 use crate::abi::train::SurfaceLoss;
 use crate::checkpoint;
+use crate::gpu::StepTiming;
 use crate::grid::surface::SurfaceGrid;
 use crate::math::surface::SurfaceParams;
 use crate::math::surface::Truncation;
@@ -79,10 +80,8 @@ pub struct SurfaceStepStats {
     pub reg_loss: f64,
     /// Counters of the training pass (see `abi::buffers::TrainCounts`).
     pub counts: TrainCounts,
-    /// Device time of the step's kernels in ns (0 on the CPU backend).
-    pub device_ns: f64,
-    /// Host time of the step by phase (upload to readback on Vulkan, compute on the CPU).
-    pub host: crate::gpu::StepTimes,
+    /// Device and host time of the step.
+    pub timing: StepTiming,
 }
 
 /// Stage 2: the αSurf surface grid.
@@ -104,6 +103,10 @@ impl Stage for SurfaceStage {
 
     fn mse(stats: &SurfaceStepStats) -> f64 {
         stats.mse
+    }
+
+    fn timing(stats: &mut SurfaceStepStats) -> &mut StepTiming {
+        &mut stats.timing
     }
 
     fn non_finite(s: &SurfaceStepStats) -> Option<String> {

@@ -25,23 +25,14 @@ pub struct NormalRegBuffers {
     pub corners: GpuBuffer,
 }
 
-/// A buffer holding `v`, or one zero element when `v` is empty.
-pub(super) fn upload_nonempty<T: bytemuck::Pod>(gpu: &Gpu, v: &[T]) -> Result<GpuBuffer> {
-    if v.is_empty() {
-        gpu.zeros::<T>(1)
-    } else {
-        gpu.upload(v)
-    }
-}
-
 impl NormalRegBuffers {
     /// The buffers of the grid of `prefix`.
     pub fn new(gpu: &Gpu, prefix: &NormalPrefix) -> Result<Self> {
         let rows = (prefix.rows() as usize).max(1);
         let b = NormalRegBuffers {
-            nbr: upload_nonempty(gpu, prefix.neighbours())?,
-            cell_rows: upload_nonempty(gpu, prefix.cell_rows())?,
-            corner_rows: upload_nonempty(gpu, prefix.corner_rows())?,
+            nbr: gpu.upload_nonempty(prefix.neighbours())?,
+            cell_rows: gpu.upload_nonempty(prefix.cell_rows())?,
+            corner_rows: gpu.upload_nonempty(prefix.corner_rows())?,
             n_cells: prefix.cell_rows().len() as u32,
             n_corners: prefix.corner_rows().len() as u32,
             normals: gpu.zeros::<f32>(NORMALS_STRIDE * rows)?,

@@ -8,7 +8,7 @@
 //! (optim_args → indirect) the flagged groups of the touched vertices; background_step).
 
 use super::delta_tv::{record_delta_tv, DeltaTvIo, Q_FLOATS};
-use super::normal_reg::{record_normal_reg, upload_nonempty, NormalRegBuffers, NormalRegIo};
+use super::normal_reg::{record_normal_reg, NormalRegBuffers, NormalRegIo};
 use super::plan::{PlanGrid, SurfacePass, SurfacePlan};
 use super::rmsprop::{record_surface_rmsprop, SurfaceOptimIo};
 use super::skip::{record_skip_structure, SkipIo};
@@ -24,13 +24,11 @@ use crate::abi::regularisers::{axis_neighbours, forward_reach};
 use crate::abi::step::{step_record, STEP_FLAGS};
 use crate::abi::train::SurfaceLoss;
 use crate::gpu::{
-    record_background_step, record_tv, Batch, BatchRays, Gpu, GpuBuffer, Phase, PhaseClock,
-    Readback, SlotFigures, StepQueue, StepTimes, TrainRays,
+    record_background_step, record_tv, Batch, BatchRays, Gpu, GpuBuffer, PhaseClock, Readback,
+    SlotFigures, TrainRays,
 };
 use crate::grid::row_slots;
-use crate::grid::state_bytes;
 use crate::grid::surface::SurfaceGrid;
-use crate::grid::SH_DIM;
 use crate::kernels;
 use crate::math::surface::SurfaceParams;
 use crate::math::surface::Truncation;
@@ -39,8 +37,13 @@ use crate::math::surface_blocks::{alloc_box, complete_cells};
 use crate::math::surface_blocks::{
     surf_blocks_per_axis, surf_live_words, SURF_BLOCK_SHIFT_VULKAN, SURF_BOX_WORDS,
 };
-use crate::stage::QueuedBackend;
+use crate::stage::{QueuedBackend, QueuedGrid, StateArrays};
 use anyhow::{ensure, Result};
+
+/// Where δ, σα and SH sit in the grid's arrays (the order of `SurfaceStage::STATE_NAMES`).
+const DELTA: usize = 0;
+const OPACITY: usize = 1;
+const SH: usize = 2;
 
 /// Regulariser values a step writes: Lα, Ln.
 const REG_VALUES: usize = 2;
@@ -85,16 +88,12 @@ pub struct SurfaceGradients {
 
 /// Device-resident stage-2 state.
 pub struct VulkanSurface {
-    /// The steps in flight, their figures, the ray buffers, the training views and the
-    /// background: per ray `RayLoss` (16 bytes) of output for training, `SurfOut` (20 bytes) for
-    /// rendering; per step a slot with the loss sums (squared error, entropy, consistency), the
-    /// regulariser values and the counters. First, so that dropping the backend waits for the
-    /// steps before any buffer they use is freed.
-    queue: StepQueue<SurfaceStepStats>,
-    /// The grid without its arrays (resolution, bounds, levels).
-    meta: SurfaceGrid,
-    rows: usize,
-    links: GpuBuffer,
+    /// The queue (per ray `RayLoss`, 16 bytes, of output for training, `SurfOut`, 20 bytes, for
+    /// rendering; per step a slot with the loss sums, squared error, entropy and consistency, the
+    /// regulariser values and the counters) and the grid (δ, σα, SH; resolution, bounds,
+    /// levels). First, so that dropping the backend waits for the steps before any buffer they
+    /// use is freed.
+    core: QueuedGrid<SurfaceStage>,
     /// Complete-cell bits ([`complete_cells`], `complete_words` words, static), then the walks'
     /// skip structure: as many live-cell words (`surface_live_cells`) and the nb³ block words
     /// (level masks, `surface_blocks`, and empty radii, `surface_block_radius`), rebuilt whenever
@@ -106,11 +105,6 @@ pub struct VulkanSurface {
     refresh: BlockRefresh,
     /// Slots [first, last] of the allocated vertices (Lδ's TV needs no other slots).
     allocated_span: (u32, u32),
-    delta: GpuBuffer,
-    opacity: GpuBuffer,
-    sh: GpuBuffer,
-    grad: [GpuBuffer; 3],
-    state: [GpuBuffer; 3],
     /// The params buffer of surface_fwd and surface_train (written in each training batch's
     /// command stream, before a render).
     params: GpuBuffer,
@@ -149,31 +143,17 @@ impl VulkanSurface {
         let rows = n.max(1);
         let mut levels = grid.levels.clone();
         levels.resize(SURF_MAX_LEVELS, 0.0);
-        let zeros3 = || -> Result<[GpuBuffer; 3]> {
-            Ok([
-                gpu.zeros::<f32>(rows)?,
-                gpu.zeros::<f32>(rows)?,
-                gpu.zeros::<f32>(rows * SH_DIM)?,
-            ])
-        };
         let row_slot = row_slots(&grid.links, n);
         let normal_prefix = NormalPrefix::new(&grid.links, &row_slot, grid.res);
         let axis_nbrs = axis_neighbours(&grid.links, &row_slot, grid.res);
         let mut step = step_record(n, &[]);
         step.resize(STEP_FLAGS + 2 * rows, 0);
+        let parts = [
+            4 * LOSS_SUM_FIELDS as u64,
+            4 * REG_VALUES as u64,
+            std::mem::size_of::<TrainCounts>() as u64,
+        ];
         Ok(VulkanSurface {
-            queue: StepQueue::new(
-                gpu,
-                &step,
-                std::mem::size_of::<SurfOut>(),
-                &[
-                    4 * LOSS_SUM_FIELDS as u64,
-                    4 * REG_VALUES as u64,
-                    std::mem::size_of::<TrainCounts>() as u64,
-                ],
-            )?,
-            rows: n,
-            links: gpu.upload(&grid.links)?,
             complete: {
                 let mut words = complete_cells(&grid.links, grid.res[0]);
                 let nb = surf_blocks_per_axis(grid.res[0], SURF_BLOCK_SHIFT_VULKAN) as usize;
@@ -190,57 +170,208 @@ impl VulkanSurface {
                 grid.links.iter().position(|&l| l >= 0).unwrap_or(0) as u32,
                 grid.links.iter().rposition(|&l| l >= 0).unwrap_or(0) as u32,
             ),
-            delta: upload_nonempty(gpu, &grid.delta)?,
-            opacity: upload_nonempty(gpu, &grid.opacity)?,
-            sh: upload_nonempty(gpu, &grid.sh)?,
-            grad: zeros3()?,
-            state: zeros3()?,
             params: gpu.host_to_device::<SurfParams>(1)?,
             levels: gpu.upload(&levels)?,
             stats: gpu.zeros::<TrainCounts>(1)?,
-            axis_nbrs: upload_nonempty(gpu, &axis_nbrs)?,
+            axis_nbrs: gpu.upload_nonempty(&axis_nbrs)?,
             axis_reach: forward_reach(&axis_nbrs),
             tv_dirs: gpu.zeros::<f32>(Q_FLOATS * n.max(1))?,
             normal_bufs: NormalRegBuffers::new(gpu, &normal_prefix)?,
             normal_prefix,
             reg_loss: gpu.zeros::<f32>(REG_VALUES)?,
             reg_skipped: gpu.zeros::<u32>(1)?,
-            meta: grid.without_arrays(),
+            core: QueuedGrid::new(gpu, grid, &step, std::mem::size_of::<SurfOut>(), &parts)?,
         })
-    }
-
-    /// Start a batch with the resets and the training rays (uploaded, or drawn by
-    /// `sample_rays`; what preceded since the last mark charged to `clock`'s recording).
-    fn begin_train(
-        &mut self,
-        src: TrainRays,
-        clock: &mut PhaseClock,
-    ) -> Result<(Batch, BatchRays)> {
-        let n = src.len();
-        if let TrainRays::Host { rays, targets } = src {
-            ensure!(
-                n > 0 && targets.len() == 3 * n && rays.len() == 6 * n,
-                "batch of {} ray floats with {} target floats",
-                rays.len(),
-                targets.len()
-            );
-        }
-        clock.mark(Phase::Record);
-        let counters = [&self.stats, &self.reg_loss, &self.reg_skipped];
-        self.queue.begin(src, clock, &counters)
     }
 
     /// The grid as the step plans see it.
     fn plan_grid(&self) -> PlanGrid<'_> {
         PlanGrid {
-            res: self.meta.res,
-            rows: self.rows as u32,
+            res: self.core.meta.res,
+            rows: self.core.bufs.rows() as u32,
             normals: &self.normal_prefix,
             delta_reach: self.axis_reach,
         }
     }
 
-    /// Record `plan`'s passes in order on the batch of `n` rays at `rays`.
+    /// Write the params buffer for a training pass over `n` rays (in the command stream) and
+    /// record `surface_train`.
+    fn record_train(
+        &self,
+        b: &mut Batch,
+        truncation: Truncation,
+        stop_thresh: f32,
+        loss: &SurfaceLoss,
+        io: BatchRays,
+        n: usize,
+    ) -> Result<()> {
+        // The colour is the device's (`bg`); surface_fwd and surface_train read it there.
+        let sp = surface_params(&self.core.meta, truncation, stop_thresh, [1.0; 3]);
+        let prm = SurfParams {
+            weights: [io.weights as u32, (io.weights >> 32) as u32],
+            ..surf_params(&sp, loss, n)
+        };
+        b.update(&self.params, 0, &[prm])?;
+        b.dispatch_1d(
+            &kernels::surface_train::INFO,
+            &kernels::surface_train::Push {
+                links: self.core.bufs.links.address(),
+                skip: self.skip_address(),
+                delta: self.core.bufs.values[DELTA].address(),
+                opacity: self.core.bufs.values[OPACITY].address(),
+                sh: self.core.bufs.values[SH].address(),
+                params: self.params.address(),
+                rays: io.rays,
+                targets: io.targets,
+                grad_delta: self.core.bufs.grads[DELTA].address(),
+                grad_opacity: self.core.bufs.grads[OPACITY].address(),
+                grad_sh: self.core.bufs.grads[SH].address(),
+                out_rays: io.out,
+                stats: self.stats.address(),
+                step: self.core.queue.step.address(),
+                bg: self.core.queue.bg.address(),
+                n: self.core.meta.res[0],
+                block_shift: SURF_BLOCK_SHIFT_VULKAN,
+            },
+            n as u32,
+        )
+    }
+
+    /// Record TVα. Its chunk is dispatched over its intersection with the span of allocated
+    /// slots: a slot outside it holds no vertex, and every term of the chunk (a vertex and its
+    /// forward neighbours) lies inside it, so the gradient is the whole chunk's.
+    fn record_opacity_tv(&self, b: &mut Batch, c: &TvChunk) -> Result<()> {
+        let res = self.core.meta.res;
+        let (first, last) = self.allocated_span;
+        let start = c.start.max(first);
+        let end = c.start.saturating_add(c.count).min(last + 1);
+        if start >= end {
+            return Ok(());
+        }
+        let chunk = TvChunk {
+            res,
+            start,
+            count: end - start,
+            channels: 1,
+            ..*c
+        };
+        record_tv(
+            b,
+            &self.core.bufs.links,
+            &self.core.bufs.values[OPACITY],
+            &self.core.bufs.grads[OPACITY],
+            &self.core.queue.step,
+            &chunk,
+        )
+    }
+
+    /// Device address of the skip structure (after the complete-cell bits).
+    fn skip_address(&self) -> u64 {
+        self.complete.address() + 4 * self.complete_words
+    }
+
+    /// Record `surface_live_cells` and `surface_blocks`: the skip structure of the current δ
+    /// (live-cell bits, and level masks per 4³-cell block), ranges widened by `margin` (see
+    /// `BlockRefresh`), so the walks skip only cells and blocks that cannot hold a hit.
+    fn record_blocks(&self, b: &mut Batch, margin: f32) -> Result<()> {
+        let nb = surf_blocks_per_axis(self.core.meta.res[0], SURF_BLOCK_SHIFT_VULKAN) as u64;
+        record_skip_structure(
+            b,
+            &SkipIo {
+                complete: self.complete.address(),
+                links: self.core.bufs.links.address(),
+                delta: self.core.bufs.values[DELTA].address(),
+                levels: self.levels.address(),
+                skip: self.skip_address(),
+                scratch: self.skip_address()
+                    + 4 * (self.complete_words + nb * nb * nb + SURF_BOX_WORDS as u64),
+                n: self.core.meta.res[0],
+                n_levels: self.core.meta.levels.len() as u32,
+                shift: SURF_BLOCK_SHIFT_VULKAN,
+            },
+            margin,
+        )
+    }
+
+    /// The addresses Lδ's passes work on.
+    fn delta_tv_io(&self) -> DeltaTvIo {
+        DeltaTvIo {
+            nbr: self.axis_nbrs.address(),
+            delta: self.core.bufs.values[DELTA].address(),
+            q: self.tv_dirs.address(),
+            grad: self.core.bufs.grads[DELTA].address(),
+        }
+    }
+
+    fn read_train_counts(&self) -> Result<TrainCounts> {
+        Ok(self.stats.download_range::<TrainCounts>(0, 1)?[0])
+    }
+
+    /// The training pass alone (no regulariser, no update) on rays with optional per-ray
+    /// importance `weights`: per-ray losses, the gradients, the touched flags and the counters;
+    /// gradients and flags are cleared afterwards.
+    pub fn gradients(
+        &mut self,
+        rays: &[f32],
+        targets: &[f32],
+        weights: Option<&[f32]>,
+        p: &SurfaceStepParams,
+    ) -> Result<SurfaceGradients> {
+        let n = rays.len() / 6;
+        let mut refresh = self.refresh;
+        let plan = SurfacePlan::gradients(p, n, &mut refresh)?;
+        self.run_plan(&plan, rays, targets, weights)?;
+        self.refresh = refresh;
+        let (q, bufs) = (&self.core.queue, &self.core.bufs);
+        // The touched flags before the gradients are taken: taking them clears the flags.
+        let touched = q.step.download_range(STEP_FLAGS, bufs.rows())?;
+        let [delta, opacity, sh] = StateArrays::from_arrays(bufs.take_grads(q)?)?;
+        Ok(SurfaceGradients {
+            ray_loss: q.ray_output(n)?,
+            delta,
+            opacity,
+            sh,
+            touched,
+            background: q.take_background_grad()?,
+            counts: self.read_train_counts()?,
+        })
+    }
+
+    /// Number of vertices touched by the last step (read from the step record).
+    pub fn last_touched(&self) -> Result<u32> {
+        self.core.queue.settle()?;
+        Ok(self.core.queue.header()?.count)
+    }
+}
+
+impl QueuedBackend<SurfaceStage> for VulkanSurface {
+    type Plan = SurfacePlan;
+
+    fn core(&self) -> &QueuedGrid<SurfaceStage> {
+        &self.core
+    }
+
+    fn core_mut(&mut self) -> &mut QueuedGrid<SurfaceStage> {
+        &mut self.core
+    }
+
+    /// The plan, with the skip structure counted as rebuilt where the plan rebuilds it and δ's
+    /// drift by the step's update added.
+    fn plan_step(&mut self, p: &SurfaceStepParams, n: usize) -> Result<SurfacePlan> {
+        let mut refresh = self.refresh;
+        let learned = self.core.queue.bg_learned;
+        let plan = SurfacePlan::step(p, &self.plan_grid(), n, learned, &mut refresh)?;
+        self.refresh = refresh;
+        self.refresh.after_update(p.lr_delta, p.beta);
+        Ok(plan)
+    }
+
+    /// The step reset with the training pass's counters and the regulariser values cleared.
+    fn begin(&mut self, src: TrainRays, clock: &mut PhaseClock) -> Result<(Batch, BatchRays)> {
+        let counters = [&self.stats, &self.reg_loss, &self.reg_skipped];
+        self.core.queue.begin(src, clock, &counters)
+    }
+
     fn record_plan(
         &self,
         b: &mut Batch,
@@ -263,8 +394,8 @@ impl VulkanSurface {
                 SurfacePass::OpacityLog(c) => b.dispatch_1d(
                     &kernels::surface_opacity_reg::INFO,
                     &kernels::surface_opacity_reg::Push {
-                        opacity: self.opacity.address(),
-                        grad: self.grad[1].address(),
+                        opacity: self.core.bufs.values[OPACITY].address(),
+                        grad: self.core.bufs.grads[OPACITY].address(),
                         loss: self.reg_loss.address(),
                         rows: c.rows,
                         start: c.start,
@@ -275,9 +406,9 @@ impl VulkanSurface {
                 )?,
                 SurfacePass::Normals(c) => {
                     let io = NormalRegIo {
-                        delta: self.delta.address(),
-                        grad: self.grad[0].address(),
-                        step: self.queue.step.address(),
+                        delta: self.core.bufs.values[DELTA].address(),
+                        grad: self.core.bufs.grads[DELTA].address(),
+                        step: self.core.queue.step.address(),
                         loss: self.reg_loss.address() + 4,
                         skipped: self.reg_skipped.address(),
                     };
@@ -285,262 +416,33 @@ impl VulkanSurface {
                 }
                 SurfacePass::RmsProp(h) => {
                     let io = SurfaceOptimIo {
-                        params: [
-                            self.delta.address(),
-                            self.opacity.address(),
-                            self.sh.address(),
-                        ],
-                        grads: self.grad.each_ref().map(|g| g.address()),
-                        states: self.state.each_ref().map(|g| g.address()),
+                        params: std::array::from_fn(|i| self.core.bufs.values[i].address()),
+                        grads: std::array::from_fn(|i| self.core.bufs.grads[i].address()),
+                        states: std::array::from_fn(|i| self.core.bufs.states[i].address()),
                     };
-                    let q = &self.queue;
+                    let q = &self.core.queue;
                     record_surface_rmsprop(b, &io, &q.step, &q.args, h)?;
                 }
                 SurfacePass::Background(s) => {
-                    record_background_step(b, &self.queue.bg, s.lr, s.beta, s.eps)?
+                    record_background_step(b, &self.core.queue.bg, s.lr, s.beta, s.eps)?
                 }
             }
         }
         Ok(())
     }
 
-    /// Write the params buffer for a training pass over `n` rays (in the command stream) and
-    /// record `surface_train`.
-    fn record_train(
-        &self,
-        b: &mut Batch,
-        truncation: Truncation,
-        stop_thresh: f32,
-        loss: &SurfaceLoss,
-        io: BatchRays,
-        n: usize,
-    ) -> Result<()> {
-        // The colour is the device's (`bg`); surface_fwd and surface_train read it there.
-        let sp = surface_params(&self.meta, truncation, stop_thresh, [1.0; 3]);
-        let prm = SurfParams {
-            weights: [io.weights as u32, (io.weights >> 32) as u32],
-            ..surf_params(&sp, loss, n)
-        };
-        b.update(&self.params, 0, &[prm])?;
-        b.dispatch_1d(
-            &kernels::surface_train::INFO,
-            &kernels::surface_train::Push {
-                links: self.links.address(),
-                skip: self.skip_address(),
-                delta: self.delta.address(),
-                opacity: self.opacity.address(),
-                sh: self.sh.address(),
-                params: self.params.address(),
-                rays: io.rays,
-                targets: io.targets,
-                grad_delta: self.grad[0].address(),
-                grad_opacity: self.grad[1].address(),
-                grad_sh: self.grad[2].address(),
-                out_rays: io.out,
-                stats: self.stats.address(),
-                step: self.queue.step.address(),
-                bg: self.queue.bg.address(),
-                n: self.meta.res[0],
-                block_shift: SURF_BLOCK_SHIFT_VULKAN,
-            },
-            n as u32,
-        )
-    }
-
-    /// Record TVα. Its chunk is dispatched over its intersection with the span of allocated
-    /// slots: a slot outside it holds no vertex, and every term of the chunk (a vertex and its
-    /// forward neighbours) lies inside it, so the gradient is the whole chunk's.
-    fn record_opacity_tv(&self, b: &mut Batch, c: &TvChunk) -> Result<()> {
-        let res = self.meta.res;
-        let (first, last) = self.allocated_span;
-        let start = c.start.max(first);
-        let end = c.start.saturating_add(c.count).min(last + 1);
-        if start >= end {
-            return Ok(());
-        }
-        let chunk = TvChunk {
-            res,
-            start,
-            count: end - start,
-            channels: 1,
-            ..*c
-        };
-        record_tv(
-            b,
-            &self.links,
-            &self.opacity,
-            &self.grad[1],
-            &self.queue.step,
-            &chunk,
-        )
-    }
-
-    /// Device address of the skip structure (after the complete-cell bits).
-    fn skip_address(&self) -> u64 {
-        self.complete.address() + 4 * self.complete_words
-    }
-
-    /// Record `surface_live_cells` and `surface_blocks`: the skip structure of the current δ
-    /// (live-cell bits, and level masks per 4³-cell block), ranges widened by `margin` (see
-    /// `BlockRefresh`), so the walks skip only cells and blocks that cannot hold a hit.
-    fn record_blocks(&self, b: &mut Batch, margin: f32) -> Result<()> {
-        let nb = surf_blocks_per_axis(self.meta.res[0], SURF_BLOCK_SHIFT_VULKAN) as u64;
-        record_skip_structure(
-            b,
-            &SkipIo {
-                complete: self.complete.address(),
-                links: self.links.address(),
-                delta: self.delta.address(),
-                levels: self.levels.address(),
-                skip: self.skip_address(),
-                scratch: self.skip_address()
-                    + 4 * (self.complete_words + nb * nb * nb + SURF_BOX_WORDS as u64),
-                n: self.meta.res[0],
-                n_levels: self.meta.levels.len() as u32,
-                shift: SURF_BLOCK_SHIFT_VULKAN,
-            },
-            margin,
-        )
-    }
-
-    /// The addresses Lδ's passes work on.
-    fn delta_tv_io(&self) -> DeltaTvIo {
-        DeltaTvIo {
-            nbr: self.axis_nbrs.address(),
-            delta: self.delta.address(),
-            q: self.tv_dirs.address(),
-            grad: self.grad[0].address(),
-        }
-    }
-
-    fn read_train_counts(&self) -> Result<TrainCounts> {
-        Ok(self.stats.download_range::<TrainCounts>(0, 1)?[0])
-    }
-
-    /// The training pass alone (no regulariser, no update) on rays with optional per-ray
-    /// importance `weights`: per-ray losses, the gradients, the touched flags and the counters;
-    /// gradients and flags are cleared afterwards.
-    pub fn gradients(
-        &mut self,
-        rays: &[f32],
-        targets: &[f32],
-        weights: Option<&[f32]>,
-        p: &SurfaceStepParams,
-    ) -> Result<SurfaceGradients> {
-        self.queue.settle()?;
-        let n = rays.len() / 6;
-        ensure!(
-            weights.is_none_or(|w| w.len() == n),
-            "{} weights for {n} rays",
-            weights.map_or(0, |w| w.len())
-        );
-        let mut refresh = self.refresh;
-        let plan = SurfacePlan::gradients(p, n, &mut refresh)?;
-        let src = TrainRays::Host { rays, targets };
-        let (mut b, mut io) = self.begin_train(src, &mut PhaseClock::start())?;
-        let weight_buf = weights.map(|w| self.queue.gpu().upload(w)).transpose()?;
-        if let Some(w) = &weight_buf {
-            io.weights = w.address();
-        }
-        self.record_plan(&mut b, &plan, io, n)?;
-        self.refresh = refresh;
-        b.submit()?;
-        let rows = self.rows;
-        let g = SurfaceGradients {
-            ray_loss: self.queue.ray_output(n)?,
-            delta: self.grad[0].download_range(0, rows)?,
-            opacity: self.grad[1].download_range(0, rows)?,
-            sh: self.grad[2].download_range(0, rows * SH_DIM)?,
-            touched: self.queue.step.download_range(STEP_FLAGS, rows)?,
-            background: self.queue.take_background_grad()?,
-            counts: self.read_train_counts()?,
-        };
-        let grads = self.grad.each_ref();
-        self.queue.clear_gradients(&grads, rows.max(1))?;
-        Ok(g)
-    }
-
-    /// Number of vertices touched by the last step (read from the step record).
-    pub fn last_touched(&self) -> Result<u32> {
-        self.queue.settle()?;
-        Ok(self.queue.header()?.count)
-    }
-}
-
-impl QueuedBackend<SurfaceStage> for VulkanSurface {
-    fn queue(&self) -> &StepQueue<SurfaceStepStats> {
-        &self.queue
-    }
-
-    fn queue_mut(&mut self) -> &mut StepQueue<SurfaceStepStats> {
-        &mut self.queue
-    }
-
-    /// The step's plan, then its figures into `slot` (per-ray losses summed on the device, the
-    /// regulariser values and counters copied); the skip structure counts as rebuilt once the
-    /// plan is recorded.
-    fn record_step(
-        &mut self,
-        src: TrainRays,
-        p: &SurfaceStepParams,
-        slot: usize,
-        clock: &mut PhaseClock,
-    ) -> Result<Batch> {
-        let n = src.len();
-        let mut refresh = self.refresh;
-        let plan = SurfacePlan::step(p, &self.plan_grid(), n, self.queue.bg_learned, &mut refresh)?;
-        let (mut b, io) = self.begin_train(src, clock)?;
-        self.record_plan(&mut b, &plan, io, n)?;
-        self.refresh = refresh;
-        let q = &self.queue;
+    /// Per-ray losses summed on the device, the regulariser values and the counters copied.
+    fn record_figures(&self, b: &mut Batch, slot: usize, n: usize) -> Result<()> {
+        let q = &self.core.queue;
         let stride = (std::mem::size_of::<RayLoss>() / 4) as u32;
-        q.record_loss_sum(&mut b, slot, n, stride, 3)?;
-        q.readback.copy(&mut b, slot, 1, &self.reg_loss, 0);
-        q.readback.copy(&mut b, slot, 2, &self.stats, 0);
-        self.refresh.after_update(p.lr_delta, p.beta);
-        Ok(b)
+        q.record_loss_sum(b, slot, n, stride, 3)?;
+        q.readback.copy(b, slot, 1, &self.reg_loss, 0);
+        q.readback.copy(b, slot, 2, &self.stats, 0);
+        Ok(())
     }
 
-    fn download_grid(&self) -> Result<SurfaceGrid> {
-        let rows = self.rows;
-        Ok(SurfaceGrid {
-            links: self.links.download()?,
-            delta: self.delta.download_range(0, rows)?,
-            opacity: self.opacity.download_range(0, rows)?,
-            sh: self.sh.download_range(0, rows * SH_DIM)?,
-            ..self.meta.clone()
-        })
-    }
-
-    fn download_state(&self) -> Result<[Vec<f32>; 3]> {
-        let rows = self.rows;
-        Ok([
-            self.state[0].download_range(0, rows)?,
-            self.state[1].download_range(0, rows)?,
-            self.state[2].download_range(0, rows * SH_DIM)?,
-        ])
-    }
-
-    fn copy_bytes(&self) -> u64 {
-        let slots = self.meta.res.iter().map(|&r| r as u64).product();
-        state_bytes(slots, self.rows as u64, 2 + SH_DIM as u64)
-    }
-
-    fn rebuild(&self, grid: SurfaceGrid, state: Option<[Vec<f32>; 3]>) -> Result<Self> {
-        let n = grid.delta.len();
-        if let Some(s) = &state {
-            ensure!(
-                s[0].len() == n && s[1].len() == n && s[2].len() == n * SH_DIM,
-                "optimizer state does not match the surface grid"
-            );
-        }
-        let fresh = VulkanSurface::new(self.queue.gpu(), grid)?;
-        if let Some(s) = state {
-            for (buf, v) in fresh.state.iter().zip(&s) {
-                buf.write(v)?;
-            }
-        }
-        Ok(fresh)
+    fn fresh(&self, grid: SurfaceGrid) -> Result<Self> {
+        VulkanSurface::new(self.core.queue.gpu(), grid)
     }
 }
 
@@ -551,9 +453,9 @@ impl SurfaceBackend for VulkanSurface {
         truncation: Truncation,
         stop_thresh: f32,
     ) -> Result<(Vec<f32>, SurfCounts)> {
-        self.queue.settle()?;
+        self.core.queue.settle()?;
         let n = rays.len() / 6;
-        let sp = surface_params(&self.meta, truncation, stop_thresh, [1.0; 3]);
+        let sp = surface_params(&self.core.meta, truncation, stop_thresh, [1.0; 3]);
         let no_loss = SurfaceLoss {
             grad_scale: 0.0,
             lambda_h: 0.0,
@@ -567,23 +469,23 @@ impl SurfaceBackend for VulkanSurface {
         );
         let counters = [&self.stats, &self.reg_loss, &self.reg_skipped];
         let clock = &mut PhaseClock::start();
-        let (mut b, io) = self.queue.begin_host(rays, None, clock, &counters)?;
+        let (mut b, io) = self.core.queue.begin_host(rays, None, clock, &counters)?;
         if let Some(margin) = self.refresh.before_pass(0.0, 0.0) {
             self.record_blocks(&mut b, margin)?;
         }
         b.dispatch_1d(
             &kernels::surface_fwd::INFO,
             &kernels::surface_fwd::Push {
-                links: self.links.address(),
-                delta: self.delta.address(),
-                opacity: self.opacity.address(),
-                sh: self.sh.address(),
+                links: self.core.bufs.links.address(),
+                delta: self.core.bufs.values[DELTA].address(),
+                opacity: self.core.bufs.values[OPACITY].address(),
+                sh: self.core.bufs.values[SH].address(),
                 params: self.params.address(),
                 rays: io.rays,
                 out_rays: io.out,
                 stats: self.stats.address(),
-                bg: self.queue.bg.address(),
-                n: self.meta.res[0],
+                bg: self.core.queue.bg.address(),
+                n: self.core.meta.res[0],
                 blocks: self.skip_address(),
                 block_skip: 1,
                 block_shift: SURF_BLOCK_SHIFT_VULKAN,
@@ -592,7 +494,7 @@ impl SurfaceBackend for VulkanSurface {
             n as u32,
         )?;
         b.submit()?;
-        let out: Vec<SurfOut> = self.queue.ray_output(n)?;
+        let out: Vec<SurfOut> = self.core.queue.ray_output(n)?;
         let counts = self.stats.download_range::<SurfCounts>(0, 1)?[0];
         Ok((out.iter().flat_map(|o| o.rgb).collect(), counts))
     }
@@ -612,10 +514,5 @@ impl SlotFigures for SurfaceStepStats {
             counts: readback.part::<TrainCounts>(slot, 2)?[0],
             ..Default::default()
         })
-    }
-
-    fn set_times(&mut self, device_ns: f64, host: StepTimes) {
-        self.device_ns = device_ns;
-        self.host = host;
     }
 }

@@ -408,7 +408,7 @@ fn steps_in_flight_match_steps_waited_for() {
             a.mse,
             b.mse
         );
-        assert!(b.device_ns > 0.0, "step {s} has no device time");
+        assert!(b.timing.device_ns > 0.0, "step {s} has no device time");
     }
     let (ga, gb) = (waited.grid().unwrap(), queued.grid().unwrap());
     let diff = ga

@@ -4,8 +4,8 @@
 
 use super::{objects_table, table, Row};
 use crate::backend::Backend;
-use crate::eval::PointIndex;
 use crate::io::read_points;
+use crate::math::knn::PointIndex;
 use crate::mesh::ply::read_mesh_ply;
 use crate::pipeline::extract::DEFAULT_RAYS_PER_AXIS;
 use crate::pipeline::steps::TrainedRun;
