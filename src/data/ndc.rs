@@ -403,24 +403,20 @@ mod tests {
         assert!(ndc.is_some() && why.starts_with("NDC"), "{why}");
         assert!(choose(Space::Auto, &ff, None).unwrap().0.is_none());
         assert!(choose(Space::Ndc, &ff, None).is_err());
-        let orbit: Vec<Camera> = (0..8)
-            .map(|i| {
-                let a = i as f32 * 0.785;
-                let eye = Vec3::new(4.0 * a.cos(), 4.0 * a.sin(), 1.0);
-                Camera::from_angle_x(look_at(eye, Vec3::ZERO, Vec3::Z), 64, 48, 0.8)
-            })
-            .collect();
-        let (ndc, why) = choose(Space::Auto, &orbit, Some(2.0)).unwrap();
+        // Eight cameras on a circle of radius 4 at height z, aimed at the origin.
+        let circle = |z: f32| -> Vec<Camera> {
+            (0..8)
+                .map(|i| {
+                    let a = i as f32 * 0.785;
+                    let eye = Vec3::new(4.0 * a.cos(), 4.0 * a.sin(), z);
+                    Camera::from_angle_x(look_at(eye, Vec3::ZERO, Vec3::Z), 64, 48, 0.8)
+                })
+                .collect()
+        };
+        let (ndc, why) = choose(Space::Auto, &circle(1.0), Some(2.0)).unwrap();
         assert!(ndc.is_none() && why.contains("not forward-facing"), "{why}");
         // Asked for, NDC is refused only where a camera looks away from the rest (its rays
         // would run behind the NDC frame): cameras around a level circle.
-        let level: Vec<Camera> = (0..8)
-            .map(|i| {
-                let a = i as f32 * 0.785;
-                let eye = Vec3::new(4.0 * a.cos(), 4.0 * a.sin(), 0.0);
-                Camera::from_angle_x(look_at(eye, Vec3::ZERO, Vec3::Z), 64, 48, 0.8)
-            })
-            .collect();
-        assert!(choose(Space::Ndc, &level, Some(2.0)).is_err());
+        assert!(choose(Space::Ndc, &circle(0.0), Some(2.0)).is_err());
     }
 }
