@@ -70,6 +70,30 @@ abi_structs! {
         avg: [f32; 3],
     }
 
+    /// The background of a 360° capture (`--background spheres`, `math::background_msi`):
+    /// `layers` spheres around `centre`, their radii evenly spaced in inverse distance
+    /// (1/r_l = inv_r0 − l·inv_step), each an octahedral map of `size` × `size` texels of
+    /// (σ, r, g, b). A ray is composited over the layers it leaves, nearest first, in front of
+    /// `Background::rgb`, behind the grid.
+    struct BackgroundSpheres {
+        /// Centre of the spheres (the grid box's), scaled units.
+        centre: [f32; 3],
+        /// Number of spheres (0: none, the colour alone).
+        layers: u32,
+        /// Texels per side of each sphere's map.
+        size: u32,
+        /// 1 / the innermost radius.
+        inv_r0: f32,
+        /// Decrement of 1/r from one sphere to the next.
+        inv_step: f32,
+        /// ≠ 0: the training kernels add dL/d(texel values) into `grad`.
+        learn: u32,
+        /// Device addresses (low, high 32 bits) of the texel values (layer, row, column, then
+        /// σ, r, g, b) and of their gradient.
+        table: [u32; 2],
+        grad: [u32; 2],
+    }
+
     /// Per-ray output of `surface_fwd`.
     struct SurfOut {
         /// Colour composited on the background.

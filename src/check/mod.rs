@@ -3,6 +3,7 @@
 
 use crate::gpu::Gpu;
 
+pub mod background_msi;
 pub mod cases;
 pub mod cubic_solve;
 pub mod dda_walk;

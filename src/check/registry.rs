@@ -5,8 +5,9 @@
 //! to compile, and the tests below fail when a kernel's header names another twin.
 
 use super::{
-    cubic_solve, dda_walk, extract_points, fill_pattern, loss_sum, plenoxel, sample_rays, sh_eval,
-    surface_blocks, surface_faces, surface_fwd, surface_reg, surface_train, trilerp_eval, CheckFn,
+    background_msi, cubic_solve, dda_walk, extract_points, fill_pattern, loss_sum, plenoxel,
+    sample_rays, sh_eval, surface_blocks, surface_faces, surface_fwd, surface_reg, surface_train,
+    trilerp_eval, CheckFn,
 };
 use crate::kernels::Kernel;
 
@@ -32,6 +33,10 @@ macro_rules! twin {
 /// The registry entry of `kernel`.
 pub fn entry(kernel: Kernel) -> Entry {
     match kernel {
+        Kernel::background_msi_eval => {
+            twin!(crate::cpu::background_msi_eval;
+            "background_msi_eval" => background_msi::check)
+        }
         Kernel::background_step => twin!(crate::cpu::background_step::background_step;
             "background_step" => plenoxel::check_background_step),
         Kernel::cubic_solve => twin!(crate::cpu::cubic_solve::cubic_solve;

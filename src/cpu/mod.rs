@@ -5,6 +5,7 @@
 // `!(a < b)` is deliberate where NaN must take the same branch as on the GPU.
 #![allow(clippy::needless_range_loop, clippy::neg_cmp_op_on_partial_ord)]
 
+mod background_msi_eval;
 pub mod background_step;
 pub mod cubic_solve;
 mod dda_walk;
@@ -33,6 +34,7 @@ pub mod surface_train;
 mod trilerp_eval;
 mod tv;
 
+pub use background_msi_eval::background_msi_eval;
 pub use dda_walk::dda_walk;
 pub use fill_pattern::fill_pattern;
 pub use loss_sum::loss_sum;

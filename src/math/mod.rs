@@ -7,6 +7,7 @@
 #![allow(clippy::needless_range_loop, clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod atomic;
+pub mod background_msi;
 pub mod cubic;
 pub mod cubic_oracle;
 pub mod dda;

@@ -42,6 +42,7 @@ macro_rules! rows {
 }
 
 rows!(
+    background_msi_eval,
     background_step,
     cubic_solve,
     dda_walk,

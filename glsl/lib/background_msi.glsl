@@ -1,0 +1,175 @@
+// background_msi.glsl — the background of a 360° capture: concentric spheres around the grid
+// box (src/abi/buffers.rs `BackgroundSpheres`). A ray meets every sphere it leaves, nearest
+// first; the exit point, seen from the centre, indexes the sphere's octahedral map (bilinear,
+// its border folded where the octahedron's edges meet), whose texel (σ, r, g, b) gives
+// α = 1 − exp(−max(σ, 0)), c = max(rgb, 0). B = Σ_l T_l α_l c_l + T_L·rgb.
+// Needs GL_EXT_shader_atomic_float for bg_msi_backward.
+// Rust twin: math::background_msi (exit_point, octahedral_uv, taps, composite, backward).
+#ifndef BACKGROUND_MSI_GLSL
+#define BACKGROUND_MSI_GLSL
+
+const uint BG_TEXEL = 4u;
+
+// Radius of sphere l.
+float bg_msi_radius(BackgroundSpheres s, uint l) {
+    precise float inv = s.inv_r0 - float(l) * s.inv_step;
+    return 1.0 / inv;
+}
+
+// Where the ray from oc (origin − centre) along unit d leaves the sphere of radius r, from the
+// centre: h + √(r² − |h|²)·d, h the line's point nearest the centre. false where the line
+// misses or touches the sphere, or leaves it behind the origin.
+bool bg_msi_exit(vec3 oc, vec3 d, float r, out vec3 p) {
+    precise float b = dot(oc, d);
+    precise vec3 h = oc - b * d;
+    precise float disc = r * r - dot(h, h);
+    p = vec3(0.0);
+    if (!(disc > 0.0)) return false;
+    float s = sqrt(disc);
+    if (!(s > b)) return false;
+    precise vec3 q = h + s * d;
+    p = q;
+    return true;
+}
+
+// Texel coordinates in [−½, size − ½]² of direction p in the octahedral map.
+vec2 bg_msi_uv(vec3 p, uint size) {
+    precise float s = abs(p.x) + abs(p.y) + abs(p.z);
+    float a = p.x / s;
+    float b = p.y / s;
+    if (p.z < 0.0) {
+        float fa = 1.0 - abs(b);
+        float fb = 1.0 - abs(a);
+        a = p.x >= 0.0 ? fa : -fa;
+        b = p.y >= 0.0 ? fb : -fb;
+    }
+    float n = float(size);
+    precise vec2 uv = (vec2(a, b) + 1.0) * 0.5 * n - 0.5;
+    return uv;
+}
+
+// The texel a tap one past the border reads: the border's halves mirrored about their midpoints.
+uint bg_msi_fold(int i, int j, int n) {
+    if (i < 0) {
+        i = 0;
+        j = n - 1 - j;
+    } else if (i >= n) {
+        i = n - 1;
+        j = n - 1 - j;
+    }
+    if (j < 0) {
+        j = 0;
+        i = n - 1 - i;
+    } else if (j >= n) {
+        j = n - 1;
+        i = n - 1 - i;
+    }
+    return uint(j * n + i);
+}
+
+// Where a ray reads sphere l: the first value of each of its four texels in the table, their
+// bilinear weights.
+struct BgTaps {
+    uint at[4];
+    float w[4];
+};
+
+bool bg_msi_taps(BackgroundSpheres s, uint l, vec3 oc, vec3 d, out BgTaps t) {
+    vec3 p;
+    if (!bg_msi_exit(oc, d, bg_msi_radius(s, l), p)) return false;
+    float n = float(s.size);
+    vec2 uv = clamp(bg_msi_uv(p, s.size), vec2(-0.5), vec2(n - 0.5));
+    vec2 f0 = floor(uv);
+    vec2 f = uv - f0;
+    int i = int(f0.x), j = int(f0.y), sz = int(s.size);
+    uint base = l * s.size * s.size;
+    t.at[0] = (base + bg_msi_fold(i, j, sz)) * BG_TEXEL;
+    t.at[1] = (base + bg_msi_fold(i + 1, j, sz)) * BG_TEXEL;
+    t.at[2] = (base + bg_msi_fold(i, j + 1, sz)) * BG_TEXEL;
+    t.at[3] = (base + bg_msi_fold(i + 1, j + 1, sz)) * BG_TEXEL;
+    precise float w0 = (1.0 - f.x) * (1.0 - f.y);
+    precise float w1 = f.x * (1.0 - f.y);
+    precise float w2 = (1.0 - f.x) * f.y;
+    precise float w3 = f.x * f.y;
+    t.w[0] = w0;
+    t.w[1] = w1;
+    t.w[2] = w2;
+    t.w[3] = w3;
+    return true;
+}
+
+// The interpolated (σ, r, g, b) at the taps, summed in tap order as the twin.
+vec4 bg_msi_value(F32Buf table, BgTaps t) {
+    precise vec4 v = vec4(0.0);
+    for (int k = 0; k < 4; k++) {
+        vec4 x = vec4(table.v[t.at[k]], table.v[t.at[k] + 1u], table.v[t.at[k] + 2u],
+                      table.v[t.at[k] + 3u]);
+        precise vec4 acc = v + t.w[k] * x;
+        v = acc;
+    }
+    return v;
+}
+
+float bg_msi_alpha(float sigma) {
+    return 1.0 - exp(-max(sigma, 0.0));
+}
+
+// The background colour of the ray (o, unit d) in front of rgb, and T_L in `t_out`.
+vec3 bg_msi_composite(BackgroundSpheres s, vec3 o, vec3 d, vec3 rgb, out float t_out) {
+    F32Buf table = F32Buf(packUint2x32(s.table));
+    precise vec3 oc = o - s.centre;
+    vec3 color = vec3(0.0);
+    float T = 1.0;
+    for (uint l = 0u; l < s.layers; l++) {
+        BgTaps tp;
+        if (!bg_msi_taps(s, l, oc, d, tp)) continue;
+        vec4 v = bg_msi_value(table, tp);
+        float alpha = bg_msi_alpha(v.x);
+        vec3 c = max(v.yzw, vec3(0.0));
+        precise float wt = T * alpha;
+        precise vec3 acc = color + wt * c;
+        color = acc;
+        precise float tn = T * (1.0 - alpha);
+        T = tn;
+    }
+    t_out = T;
+    precise vec3 outc = color + T * rgb;
+    return outc;
+}
+
+// dL/d(texel values) of the ray given dL/dB = g and total = B (float atomics into s.grad).
+void bg_msi_backward(BackgroundSpheres s, vec3 o, vec3 d, vec3 total, vec3 g) {
+    F32Buf table = F32Buf(packUint2x32(s.table));
+    F32Buf grad = F32Buf(packUint2x32(s.grad));
+    precise vec3 oc = o - s.centre;
+    vec3 accum = vec3(0.0);
+    float T = 1.0;
+    for (uint l = 0u; l < s.layers; l++) {
+        BgTaps tp;
+        if (!bg_msi_taps(s, l, oc, d, tp)) continue;
+        vec4 v = bg_msi_value(table, tp);
+        float alpha = bg_msi_alpha(v.x);
+        vec3 c = max(v.yzw, vec3(0.0));
+        precise float wt = T * alpha;
+        precise vec3 acc = accum + wt * c;
+        accum = acc;
+        precise float tn = T * (1.0 - alpha);
+        vec4 dv = vec4(0.0);
+        if (v.x > 0.0) {
+            precise vec3 e = g * (tn * c - (total - accum));
+            precise float ds = e.x + e.y + e.z;
+            dv.x = ds;
+        }
+        for (int ch = 0; ch < 3; ch++) {
+            if (v[1 + ch] > 0.0) dv[1 + ch] = g[ch] * wt;
+        }
+        for (int k = 0; k < 4; k++) {
+            for (int j = 0; j < 4; j++) {
+                if (dv[j] != 0.0) atomicAdd(grad.v[tp.at[k] + uint(j)], tp.w[k] * dv[j]);
+            }
+        }
+        T = tn;
+    }
+}
+
+#endif

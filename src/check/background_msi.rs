@@ -1,0 +1,162 @@
+//! Parity of `glsl/background_msi_eval.comp` (the library `glsl/lib/background_msi.glsl`) with
+//! `cpu::background_msi_eval`: each ray's background colour and T_L, and the table's gradient.
+//!
+//! Rays come from cameras on a sphere of radius 4 around spheres of radius 1.2 … 30 (some
+//! spheres the cameras are outside of, some rays missing them), among them rays along the axes
+//! and the octahedral map's folds (z = 0, x = 0, y = 0). The table is random (σ ∈ [−0.5, 3]:
+//! transparent, clamped and nearly opaque texels; colours ∈ [−0.2, 1.2]: clamped ones).
+//! Rays that pass a sphere nearer than 0.1 r to tangency are left out: there the exit point's
+//! square root amplifies rounding without bound (a geometric fact, not a kernel's).
+
+use super::{grad_outliers, rel_l2, CheckRow, Compare, TEST_BACKGROUND};
+use crate::abi::buffers::BackgroundSpheres;
+use crate::gpu::Gpu;
+use crate::kernels::background_msi_eval::{Push, INFO};
+use crate::math::background_msi::TEXEL;
+use anyhow::Result;
+use rand::{Rng, SeedableRng};
+use rand_pcg::Pcg64;
+
+/// Texels per side of the test maps.
+const SIZE: u32 = 16;
+/// Spheres of the test.
+const LAYERS: u32 = 8;
+
+/// The test's spheres, table, rays (6 floats) and upstream gradients (3 floats).
+pub fn cases(count: usize, seed: u64) -> (BackgroundSpheres, Vec<f32>, Vec<f32>, Vec<f32>) {
+    let mut rng = Pcg64::seed_from_u64(seed);
+    let s = BackgroundSpheres::spanning([0.05, -0.1, 0.2], 1.2, 30.0, LAYERS, SIZE);
+    let table: Vec<f32> = (0..s.table_len())
+        .map(|i| match i % TEXEL {
+            0 => rng.random_range(-0.5f32..3.0),
+            _ => rng.random_range(-0.2f32..1.2),
+        })
+        .collect();
+    let (mut rays, mut upstream) = (Vec::new(), Vec::new());
+    while rays.len() < 6 * count {
+        let o: [f32; 3] = loop {
+            let v = [(); 3].map(|_| rng.random_range(-1f32..1.0));
+            let n = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+            if n > 0.1 {
+                break v.map(|x| 4.0 * x / n);
+            }
+        };
+        let d = match rays.len() / 6 % 4 {
+            // Along an axis or in a fold's plane.
+            0 => {
+                let mut d = [(); 3].map(|_| rng.random_range(-1f32..1.0));
+                d[rng.random_range(0..3)] = 0.0;
+                if rng.random_bool(0.3) {
+                    d[rng.random_range(0..3)] = 0.0;
+                }
+                d
+            }
+            _ => [(); 3].map(|_| rng.random_range(-1f32..1.0)),
+        };
+        let n = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+        if n < 1e-3 {
+            continue;
+        }
+        let d = d.map(|x| x / n);
+        if near_tangent(&s, o, d) {
+            continue;
+        }
+        rays.extend_from_slice(&o);
+        rays.extend_from_slice(&d);
+        upstream.extend((0..3).map(|_| rng.random_range(-1f32..1.0)));
+    }
+    (s, table, rays, upstream)
+}
+
+/// Whether the ray passes some sphere within 0.1 r of tangency (f64).
+fn near_tangent(s: &BackgroundSpheres, o: [f32; 3], d: [f32; 3]) -> bool {
+    let oc: [f64; 3] = std::array::from_fn(|i| (o[i] - s.centre[i]) as f64);
+    let b: f64 = (0..3).map(|i| oc[i] * d[i] as f64).sum();
+    let h2: f64 = (0..3).map(|i| (oc[i] - b * d[i] as f64).powi(2)).sum();
+    (0..s.layers).any(|l| {
+        let r = s.radius(l) as f64;
+        let disc = r * r - h2;
+        disc.abs() < 0.01 * r * r
+    })
+}
+
+/// Runs the kernel: per ray (B, T_L), and the table's gradient.
+pub fn run_gpu(
+    gpu: &Gpu,
+    s: &BackgroundSpheres,
+    table: &[f32],
+    rays: &[f32],
+    upstream: &[f32],
+) -> Result<(Vec<f32>, Vec<f32>)> {
+    let n = rays.len() / 6;
+    let t = gpu.upload(table)?;
+    let g = gpu.zeros::<f32>(table.len())?;
+    let split = |a: u64| [a as u32, (a >> 32) as u32];
+    let sp = gpu.upload(&[BackgroundSpheres {
+        table: split(t.address()),
+        grad: split(g.address()),
+        ..*s
+    }])?;
+    let r = gpu.upload(rays)?;
+    let u = gpu.upload(upstream)?;
+    let out = gpu.zeros::<f32>(4 * n)?;
+    let push = Push {
+        spheres: sp.address(),
+        rays: r.address(),
+        upstream: u.address(),
+        out_: out.address(),
+        rgb: TEST_BACKGROUND,
+        n: n as u32,
+    };
+    gpu.run_1d(&INFO, &push, n as u32)?;
+    Ok((out.download()?, g.download()?))
+}
+
+/// Elementwise tolerance on B and T_L: the octahedral coordinate carries ≲ 2⁻¹⁸ of error (its
+/// division and |p|₁ sum, the exit point's square root away from tangency: tens of ulps), so the
+/// texel position ≲ size·2⁻¹⁹ texels, and a value read at most that times the largest step
+/// between neighbouring texel values (< 3.5 here) per sphere; plus 16 ulp of 1 (exp, products).
+pub fn abs_tolerance() -> f64 {
+    LAYERS as f64 * SIZE as f64 * 2f64.powi(-19) * 3.5 + 16.0 * f64::from(f32::EPSILON)
+}
+
+/// 50k rays, GPU against the CPU twin.
+pub fn check(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
+    let (s, table, rays, upstream) = cases(50_000, seed);
+    let (got, got_grad) = run_gpu(gpu, &s, &table, &rays, &upstream)?;
+    let mut want = vec![0.0; got.len()];
+    let mut want_grad = vec![0.0; table.len()];
+    crate::cpu::background_msi_eval(
+        &s,
+        &table,
+        &rays,
+        &upstream,
+        TEST_BACKGROUND,
+        &mut want,
+        &mut want_grad,
+    );
+    let mut cmp = Compare::new(abs_tolerance(), 0.0);
+    for (i, (g, w)) in got.chunks_exact(4).zip(want.chunks_exact(4)).enumerate() {
+        for k in 0..4 {
+            cmp.value(g[k] as f64, w[k] as f64, || {
+                format!("ray {i} {}", ["B.r", "B.g", "B.b", "T"][k])
+            });
+        }
+    }
+    // The gradient sums many rays per texel in another order: the training kernels' bounds.
+    let e = rel_l2(&got_grad, &want_grad);
+    let bad = grad_outliers(&got_grad, &want_grad);
+    let nonzero = want_grad.iter().filter(|&&x| x != 0.0).count();
+    if e > 1e-4 || bad > want_grad.len() / 1000 || nonzero < want_grad.len() / 2 {
+        cmp.failures += 1;
+        cmp.first_failure.get_or_insert_with(|| {
+            format!("table gradient: rel L2 {e:.2e}, {bad} off, {nonzero} nonzero")
+        });
+    }
+    let note = format!(
+        "B, T_L: |Δ| ≤ layers·size·2⁻¹⁹·3.5 + 16 ulp (texel position error × largest texel step); \
+         table grad rel L2 {e:.1e} (≤ 1e-4; ≤ 0.1% elements off), {nonzero} of {} nonzero",
+        want_grad.len()
+    );
+    Ok(cmp.row(INFO.name, rays.len() / 6, note))
+}
