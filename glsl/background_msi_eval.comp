@@ -7,6 +7,7 @@
 // Outputs: `out_` (4 floats per ray: B, then T_L); the table's gradient += (float atomics).
 // CPU twin: `cpu::background_msi_eval`.
 #extension GL_EXT_shader_atomic_float : require
+#define BG_MSI_BACKWARD
 #include "common.glsl"
 #include "background_msi.glsl"
 layout(local_size_x = 64) in;

@@ -2,12 +2,13 @@
 // plenoxel_fwd — stage-1 volume rendering of a batch of rays (method.md §2).
 // Thread mapping: one invocation per ray.
 // Inputs: the grid (links, density, sh, occupancy), rays as 6 floats (scene origin, unit
-// direction), grid = p·scale + offset, stop threshold on transmittance, bg (Background: the
-// colour composited behind: C = Σ w_i c_i + T·bg.rgb).
+// direction), grid = p·scale + offset, stop threshold on transmittance, bg (Background: what is
+// composited behind: C = Σ w_i c_i + T·B, B its colour behind its spheres, background.glsl).
 // Outputs: rgb (3 floats per ray); step-buffer counters += samples shaded,
 // samples evaluated at σ ≤ 1e-8, samples skipped by the occupancy volume (subgroup-reduced).
 // CPU twin: `cpu::plenoxel_fwd::render`.
 #include "common.glsl"
+#include "background.glsl"
 layout(local_size_x = 64) in;
 
 layout(push_constant, scalar) uniform Push {
@@ -55,7 +56,8 @@ void main() {
             if (T < pc.stop_thresh) break;
         }
     }
-    precise vec3 outc = color + T * pc.bg.v[0].rgb;
+    float t_bg;
+    precise vec3 outc = color + T * background_behind(pc.bg.v[0], ro, rd, t_bg);
     pc.rgb.v[3u * r] = outc.x;
     pc.rgb.v[3u * r + 1u] = outc.y;
     pc.rgb.v[3u * r + 2u] = outc.z;

@@ -7,11 +7,14 @@
 // corner: the basis Y_k is constant along a ray).
 // Thread mapping: one invocation per ray.
 // Inputs: grid, occupancy, rays (6 floats), targets (3 floats), params (PlenoxelParams: scale,
-// offset, stop threshold, grad_scale), res, bg (Background: C = Σ w_i c_i + T·bg.rgb).
+// offset, stop threshold, grad_scale), res, bg (Background: C = Σ w_i c_i + T·B, B the colour
+// behind the spheres in front of it, background.glsl).
 // Outputs: grad_density, grad_sh (+= by float atomics; each vertex that gets one is touched), ray_loss[r] = Σ_channels (C − target)²,
-// when bg.learn ≠ 0, bg.grad += Σ_rays dL/dC·T (subgroup-reduced float atomics),
+// when bg.learn ≠ 0, bg.grad += Σ_rays dL/dC·T·T_L (subgroup-reduced float atomics), learned
+// spheres' gradient += (background_msi.glsl),
 // sample counters as in plenoxel_fwd, touched vertices listed in the step buffer. CPU twin: `cpu::plenoxel_train::train`.
 #extension GL_EXT_shader_atomic_float : require
+#define BG_MSI_BACKWARD
 #include "common.glsl"
 #include "background.glsl"
 layout(local_size_x = 64) in;
@@ -97,12 +100,17 @@ void main() {
         T = tn;
         if (T < stop_thresh) break;
     }
-    precise vec3 total = color + T * pc.bg.v[0].rgb;
+    Background bgr = pc.bg.v[0];
+    float t_bg;
+    vec3 behind = background_behind(bgr, ro, rd, t_bg);
+    precise vec3 total = color + T * behind;
     precise vec3 diff = total - target;
     pc.ray_loss.v[r] = dot(diff, diff);
     vec3 g_c = prm.grad_scale * diff;
-    // dL/dbg = g·T_final (T before the backward pass reuses it).
-    vec3 g_bg = g_c * T;
+    // dL/dB = g·T_final, dL/dbg = g·T_final·T_L (T before the backward pass reuses it).
+    precise vec3 g_behind = g_c * T;
+    precise vec3 g_bg = g_behind * t_bg;
+    background_spheres_grad(bgr, ro, rd, behind, g_behind);
 
     // Backward: the same samples again, in the same order.
     // Per-cell gradient accumulators, flushed when the sample's cell changes.

@@ -7,7 +7,7 @@
 // coefficients once per cell; per level τ_i that passes min/max, then segment
 // culling (surf_segment_mask) the crossings of δ − τ_i on [0, L); only rising (front-face) crossings are hits, sorted by s within the cell; at
 // hit j: α = 1 − exp(−max(σα, 0)), colour max(0, SH + 0.5) (trilerped at the hit, basis on the unit
-// scene direction), α̃ = α·γ_a(k); C = Σ w_j c_j + T·bg, k the truncation count: j, or with
+// scene direction), α̃ = α·γ_a(k); C = Σ w_j c_j + T·B (B: bg behind the ray), k the truncation count: j, or with
 // count_per_structure the hits since the ray last entered level 0 (surf_restart). A hit with
 // k ≥ a (γ = 0, not shaded, counted as cut) ends the ray, or is passed over when counting per
 // structure; the ray also stops once T < stop_thresh.
@@ -19,7 +19,7 @@
 // hits); a cell whose live bit is clear (kernel surface_live_cells) is passed over unread.
 // Inputs: links (n³ i32, < 0 unallocated), per allocated vertex delta, opacity (raw σα) and sh
 // (27), params (SurfParams: scale, offset, a, stop_thresh, n_rays, levels[n_levels ≤ 8]; the loss
-// weights unused), bg (Background: rgb), rays (6 floats: scene origin, direction), blocks
+// weights unused), bg (Background: its colour behind its spheres, background.glsl), rays (6 floats: scene origin, direction), blocks
 // (live-cell words, nb³ u32 level masks, the allocated box; read only when block_skip ≠ 0),
 // block_shift.
 // Outputs: out[r] = (rgb, transmittance, hits composited); stats (SurfCounts) += cells read (live
@@ -27,6 +27,7 @@
 // hits cut by truncation, blocks skipped (subgroup-reduced atomics).
 // CPU twin: `cpu::surface_fwd::render`.
 #include "common.glsl"
+#include "background.glsl"
 // Every hit of a cell: a is not bounded here (surface.glsl).
 #define SURF_CELL_KEEP 16u
 #include "surface.glsl"
@@ -158,7 +159,8 @@ void main() {
     cnt.culled = walk.counts.culled;
     cnt.blocks_skipped = walk.counts.blocks_skipped;
     SurfOut o;
-    precise vec3 outc = color + T * pc.bg.v[0].rgb;
+    float t_bg;
+    precise vec3 outc = color + T * background_behind(pc.bg.v[0], ro, rd, t_bg);
     o.rgb = outc;
     o.transmittance = T;
     o.hits = j;

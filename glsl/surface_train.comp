@@ -29,9 +29,10 @@
 // lambda_c, n_rays, the levels; n_levels used; the address of the per-ray importance weights ω
 // of a focused batch, gpu::TrainViewBuffers, 0: ω = 1: the ray's loss terms are ω times the
 // unweighted ones, its gradients and the RayLoss it reports alike); rays (6 floats), targets
-// (3 floats); bg (the background composited behind the last hit: C = Σ w_j c_j + T·bg.rgb).
+// (3 floats); bg (the background composited behind the last hit: C = Σ w_j c_j + T·B, B the
+// colour behind the spheres, background.glsl; stage 2 does not train the spheres).
 // Outputs: grad_delta, grad_opacity, grad_sh += (float atomics), touched list (step buffer);
-// when bg.learn ≠ 0, bg.grad += Σ_rays dL/dC·T (subgroup-reduced float atomics);
+// when bg.learn ≠ 0, bg.grad += Σ_rays dL/dC·T·T_L (subgroup-reduced float atomics);
 // out_rays[r] = RayLoss (squared error, entropy, consistency, hits composited); stats
 // (TrainCounts) += cells read (live cells: links and δ loaded), cubic solves, solves culled
 // (min/max or segment), hits composited, hits cut by truncation, guarded hits, gradient atomic
@@ -259,7 +260,8 @@ void main() {
     float wj[SURF_MAX_HITS];
     vec3 color = surf_composite(rec, nh, tr, wj);
     float t_last = tr[SURF_MAX_HITS];
-    vec3 bg = pc.bg.v[0].rgb;
+    float t_bg;
+    vec3 bg = background_behind(pc.bg.v[0], ro, rd, t_bg);
     precise vec3 total = color + t_last * bg;
     precise vec3 diff = total - target;
     RayLoss o;
@@ -307,6 +309,9 @@ void main() {
         surf_sums_add(sums, wt, dds, d_sa, d_raw);
     }
     cnt.atomic_adds += flush(cur, y, sums);
-    if (pc.bg.v[0].learn != 0u) BACKGROUND_GRAD_ADD(pc.bg, d_c * t_last);
+    if (pc.bg.v[0].learn != 0u) {
+        precise vec3 g_bg = (d_c * t_last) * t_bg;
+        BACKGROUND_GRAD_ADD(pc.bg, g_bg);
+    }
     TRAIN_COUNTS_SUBGROUP_ADD(pc.stats.v[0], cnt);
 }

@@ -3,7 +3,8 @@
 // first; the exit point, seen from the centre, indexes the sphere's octahedral map (bilinear,
 // its border folded where the octahedron's edges meet), whose texel (σ, r, g, b) gives
 // α = 1 − exp(−max(σ, 0)), c = max(rgb, 0). B = Σ_l T_l α_l c_l + T_L·rgb.
-// Needs GL_EXT_shader_atomic_float for bg_msi_backward.
+// bg_msi_backward exists where the kernel defines BG_MSI_BACKWARD (and enables
+// GL_EXT_shader_atomic_float) before including this file.
 // Rust twin: math::background_msi (exit_point, octahedral_uv, taps, composite, backward).
 #ifndef BACKGROUND_MSI_GLSL
 #define BACKGROUND_MSI_GLSL
@@ -137,6 +138,7 @@ vec3 bg_msi_composite(BackgroundSpheres s, vec3 o, vec3 d, vec3 rgb, out float t
     return outc;
 }
 
+#ifdef BG_MSI_BACKWARD
 // dL/d(texel values) of the ray given dL/dB = g and total = B (float atomics into s.grad).
 void bg_msi_backward(BackgroundSpheres s, vec3 o, vec3 d, vec3 total, vec3 g) {
     F32Buf table = F32Buf(packUint2x32(s.table));
@@ -171,5 +173,6 @@ void bg_msi_backward(BackgroundSpheres s, vec3 o, vec3 d, vec3 total, vec3 g) {
         T = tn;
     }
 }
+#endif
 
 #endif

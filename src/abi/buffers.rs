@@ -68,6 +68,9 @@ abi_structs! {
         grad: [f32; 3],
         /// RMSProp running average of grad² (`background_step`).
         avg: [f32; 3],
+        /// Device address (low, high 32 bits) of the `BackgroundSpheres` in front of `rgb`; 0:
+        /// none (always 0 on the host: the CPU backends hold their spheres themselves).
+        spheres: [u32; 2],
     }
 
     /// The background of a 360° capture (`--background spheres`, `math::background_msi`):

@@ -3,18 +3,46 @@
 
 use crate::abi::step::RowRange;
 
+/// The background spheres' RMSProp rates against the grid's (svox2's `tnt` rates: σ 3 = 0.1 ×
+/// 30, colour 0.1 = 10 × 0.01), following the grid's schedules.
+pub const SPHERE_LR_SIGMA_SCALE: f32 = 0.1;
+pub const SPHERE_LR_COLOUR_SCALE: f32 = 10.0;
+
 /// Hyper-parameters of one RMSProp step of a learned background (`background_step`).
 #[derive(Clone, Copy, Debug)]
 pub struct BackgroundStep {
+    /// The colour's rate.
     pub lr: f32,
+    /// The grid's σ rate at the step (the spheres' σ steps at a multiple of it).
+    pub lr_sigma: f32,
     pub beta: f32,
     pub eps: f32,
 }
 
 impl BackgroundStep {
     /// The step of a background when it is learned (`None` when it is fixed).
-    pub fn when_learned(learned: bool, lr: f32, beta: f32, eps: f32) -> Option<Self> {
-        learned.then_some(BackgroundStep { lr, beta, eps })
+    pub fn when_learned(
+        learned: bool,
+        lr: f32,
+        lr_sigma: f32,
+        beta: f32,
+        eps: f32,
+    ) -> Option<Self> {
+        learned.then_some(BackgroundStep {
+            lr,
+            lr_sigma,
+            beta,
+            eps,
+        })
+    }
+
+    /// The rates of the spheres' σ and colour ([`SPHERE_LR_SIGMA_SCALE`],
+    /// [`SPHERE_LR_COLOUR_SCALE`]).
+    pub fn sphere_rates(&self) -> [f32; 2] {
+        [
+            self.lr_sigma * SPHERE_LR_SIGMA_SCALE,
+            self.lr * SPHERE_LR_COLOUR_SCALE,
+        ]
     }
 }
 

@@ -13,6 +13,7 @@
 
 use crate::backend::Backend;
 use crate::data::ndc::Space;
+use crate::data::BackgroundMode;
 use crate::pipeline::demo::{
     alphasurf_row, plenoxels_levels, plenoxels_levels_trimmed, Row, LEVELS,
 };
@@ -76,6 +77,10 @@ pub struct AccuracyArgs {
     /// forward-facing capture).
     #[arg(long, value_enum, default_value_t = Space::Auto)]
     pub space: Space,
+    /// What rays are composited on, as `train --background` takes it (`spheres`: a 360°
+    /// capture's room on learned spheres around the grid box).
+    #[arg(long, value_enum, default_value_t = BackgroundMode::White)]
+    pub background: BackgroundMode,
     /// Output directory: one folder per scene (its runs, clouds and result.json) and
     /// accuracy.json. Default: runs/accuracy-N-PRESET-sSEED.
     #[arg(long)]
@@ -106,6 +111,9 @@ pub struct PlenoxelsSettings {
     /// `--space` (absent from records written before it: `auto`, which was the box then).
     #[serde(default)]
     pub space: Space,
+    /// `--background` (absent from records written before it: white).
+    #[serde(default)]
+    pub background: BackgroundMode,
 }
 
 impl PlenoxelsSettings {
@@ -659,6 +667,7 @@ pub fn run(args: &AccuracyArgs, devices: &mut Devices) -> Result<()> {
         preset: args.preset,
         seed: args.seed,
         space: args.space,
+        background: args.background,
         ..Steps::new(devices.for_backend(args.backend)?)
     };
     let out = args.out.clone().unwrap_or_else(|| {
@@ -748,6 +757,7 @@ fn scene_settings(
         backend: steps.backend(),
         set: args.plenoxels_set.clone(),
         space: args.space,
+        background: args.background,
     };
     if args.stage1_from.is_some() {
         // Another output's stage 1, whatever its seed, as long as the rest matches.
@@ -913,6 +923,7 @@ mod tests {
                     backend: Backend::Cpu,
                     set: vec![],
                     space: Space::Auto,
+                    background: BackgroundMode::White,
                 },
                 category,
                 seed: 0,

@@ -9,9 +9,12 @@
 //! square root amplifies rounding without bound (a geometric fact, not a kernel's).
 
 use super::{grad_outliers, rel_l2, CheckRow, Compare, TEST_BACKGROUND};
-use crate::abi::buffers::BackgroundSpheres;
-use crate::gpu::Gpu;
+use crate::abi::buffers::{Background, BackgroundSpheres};
+use crate::abi::train::BackgroundStep;
+use crate::gpu::{Gpu, SphereBuffers};
+use crate::kernels;
 use crate::kernels::background_msi_eval::{Push, INFO};
+use crate::math::background_msi::SphereTable;
 use crate::math::background_msi::TEXEL;
 use anyhow::Result;
 use rand::{Rng, SeedableRng};
@@ -112,6 +115,34 @@ pub fn run_gpu(
     Ok((out.download()?, g.download()?))
 }
 
+/// Spheres for the render and training rows of both stages: around their test grids' box
+/// [−1, 1]³ (cameras within 3 of it), 4 spheres of 8² texels, random values as [`cases`].
+pub fn test_spheres(seed: u64) -> SphereTable {
+    let mut rng = Pcg64::seed_from_u64(seed ^ 0x5be7e5);
+    let shape = BackgroundSpheres::spanning([0.0; 3], 3f32.sqrt(), 12.0, 4, 8);
+    let table: Vec<f32> = (0..shape.table_len())
+        .map(|i| match i % TEXEL {
+            0 => rng.random_range(-0.5f32..3.0),
+            _ => rng.random_range(-0.2f32..1.2),
+        })
+        .collect();
+    SphereTable {
+        avg: vec![0.0; table.len()],
+        shape,
+        table,
+    }
+}
+
+/// The bound [`abs_tolerance`] explains, for `s`: its spheres, texels a side and largest step
+/// between neighbouring values.
+pub fn abs_bound(s: &SphereTable) -> f64 {
+    let (lo, hi) = s
+        .table
+        .iter()
+        .fold((f32::MAX, f32::MIN), |(lo, hi), &v| (lo.min(v), hi.max(v)));
+    s.shape.layers as f64 * s.shape.size as f64 * 2f64.powi(-19) * (hi - lo) as f64
+}
+
 /// Elementwise tolerance on B and T_L: the octahedral coordinate carries ≲ 2⁻¹⁸ of error (its
 /// division and |p|₁ sum, the exit point's square root away from tangency: tens of ulps), so the
 /// texel position ≲ size·2⁻¹⁹ texels, and a value read at most that times the largest step
@@ -159,4 +190,80 @@ pub fn check(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
         want_grad.len()
     );
     Ok(cmp.row(INFO.name, rays.len() / 6, note))
+}
+
+/// `background_spheres_step` against its twin: a random table whose gradient spans 1e-6 … 1e2
+/// (a sixth of it zero: those values must not move) and whose running averages are zero (a
+/// first step) for a quarter of the values; the tolerance of `background_step`'s row (the same
+/// RMSProp arithmetic).
+pub fn check_step(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
+    let mut rng = Pcg64::seed_from_u64(seed);
+    let (s, table, _, _) = cases(0, seed);
+    let grad: Vec<f32> = (0..table.len())
+        .map(|i| {
+            if i % 6 == 5 {
+                0.0
+            } else {
+                rng.random_range(-1f32..1.0) * 10f32.powi(i as i32 % 9 - 6)
+            }
+        })
+        .collect();
+    let avg: Vec<f32> = (0..table.len())
+        .map(|i| {
+            if i % 4 == 0 {
+                0.0
+            } else {
+                rng.random_range(0f32..2.0) * (grad[i] * grad[i]).max(1e-12)
+            }
+        })
+        .collect();
+    let mut want = SphereTable {
+        shape: BackgroundSpheres { learn: 1, ..s },
+        table,
+        avg,
+    };
+    let bufs = SphereBuffers::upload(gpu, &want)?;
+    bufs.grad.write(&grad)?;
+    let step = BackgroundStep {
+        lr: 0.01,
+        lr_sigma: 30.0,
+        beta: 0.95,
+        eps: 1e-8,
+    };
+    let [lr_sigma, lr_colour] = step.sphere_rates();
+    let mut b = gpu.batch()?;
+    crate::gpu::record_background_step(
+        &mut b,
+        &gpu.upload(&[Background::default()])?,
+        Some(&bufs),
+        &step,
+    )?;
+    b.submit()?;
+    let got = bufs.download()?;
+    let got_grad = bufs.take_grad()?;
+    let mut want_grad = grad.clone();
+    crate::cpu::background_spheres_step::background_spheres_step(
+        &mut want,
+        &mut want_grad,
+        lr_sigma,
+        lr_colour,
+        step.beta,
+        step.eps,
+    );
+    let mut cmp = Compare::new(1e-6, 1e-5);
+    for (name, a, b) in [
+        ("value", &got.table, &want.table),
+        ("avg", &got.avg, &want.avg),
+        ("grad", &got_grad, &want_grad),
+    ] {
+        for (i, (x, y)) in a.iter().zip(b.iter()).enumerate() {
+            cmp.value(*x as f64, *y as f64, || format!("{name} {i}"));
+        }
+    }
+    let still = grad.iter().filter(|&&g| g == 0.0).count();
+    Ok(cmp.row(
+        kernels::background_spheres_step::INFO.name,
+        grad.len(),
+        format!("{still} values without gradient (left as they were); σ rate {lr_sigma}, colour rate {lr_colour}"),
+    ))
 }

@@ -4,9 +4,9 @@
 //! the box, grazing, missing); the render and training passes composite on [`TEST_BACKGROUND`]
 //! (learned in training, so its gradient is compared too). Also `background_step`.
 
-use super::{grad_outliers, rel_l2, CheckRow, Compare, TEST_BACKGROUND};
-use crate::abi::buffers::Background;
+use super::{background_msi, grad_outliers, rel_l2, CheckRow, Compare, TEST_BACKGROUND};
 use crate::abi::buffers::StepHeader;
+use crate::abi::buffers::{Background, BackgroundSpheres};
 use crate::abi::consts::TOUCH_ALL;
 use crate::abi::regularisers::TvChunk;
 use crate::abi::step::{step_record, STEP_FLAGS};
@@ -18,6 +18,7 @@ use crate::cpu::{rmsprop_sparse, tv, PlenoxelsOptimArrays};
 use crate::gpu::{record_optim_args, record_tv, Gpu, GpuBuffer};
 use crate::grid::{Grid, SH_DIM};
 use crate::kernels;
+use crate::math::background_msi::SphereTable;
 use crate::math::plenoxel::PlenoxelCounts;
 use crate::plenoxel::{CpuPlenoxels, PlenoxelsBackend, VulkanPlenoxels};
 use crate::stage::StageBackend;
@@ -157,22 +158,47 @@ pub fn check_occupancy(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
     ))
 }
 
-/// The two backends on `g`, composited on [`TEST_BACKGROUND`] (`learn`: learned).
-fn backends(gpu: &Gpu, g: Grid, learn: bool) -> Result<(CpuPlenoxels, VulkanPlenoxels)> {
+/// The two backends on `g`, composited on [`TEST_BACKGROUND`] (`learn`: learned), in front of
+/// `spheres` (learned with it) when given.
+fn backends(
+    gpu: &Gpu,
+    g: Grid,
+    learn: bool,
+    spheres: Option<&SphereTable>,
+) -> Result<(CpuPlenoxels, VulkanPlenoxels)> {
     let bg = Background::new(TEST_BACKGROUND, learn);
+    let spheres = spheres.map(|s| SphereTable {
+        shape: BackgroundSpheres {
+            learn: u32::from(learn),
+            ..s.shape
+        },
+        ..s.clone()
+    });
     let mut cpu = CpuPlenoxels::new(g.clone());
     cpu.set_background(bg)?;
+    cpu.set_spheres(spheres.clone())?;
     let mut vk = VulkanPlenoxels::new(gpu, g)?;
     vk.set_background(bg)?;
+    vk.set_spheres(spheres)?;
     Ok((cpu, vk))
 }
 
 pub fn check_fwd(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
+    fwd_row(gpu, seed, None)
+}
+
+/// `plenoxel_fwd` with spheres behind the grid (`background_msi::test_spheres`).
+pub fn check_fwd_spheres(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
+    fwd_row(gpu, seed, Some(&background_msi::test_spheres(seed)))
+}
+
+/// The render row; with spheres, the tolerance adds their bound (`background_msi::abs_bound`).
+fn fwd_row(gpu: &Gpu, seed: u64, spheres: Option<&SphereTable>) -> Result<CheckRow> {
     let (g, rays, _) = test_scene(seed, 40, 4000);
-    let (mut cpu, mut vk) = backends(gpu, g, false)?;
+    let (mut cpu, mut vk) = backends(gpu, g, false, spheres)?;
     let (want, wc) = cpu.render(&rays, STOP)?;
     let (got, gc) = vk.render(&rays, STOP)?;
-    let mut cmp = Compare::new(2e-5, 2e-4);
+    let mut cmp = Compare::new(2e-5 + spheres.map_or(0.0, background_msi::abs_bound), 2e-4);
     for (i, (&a, &b)) in got.iter().zip(&want).enumerate() {
         cmp.value(a as f64, b as f64, || {
             format!("ray {} channel {}", i / 3, i % 3)
@@ -183,17 +209,33 @@ pub fn check_fwd(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
         cmp.failures += 1;
         cmp.first_failure.get_or_insert_with(|| counts_note(gc, wc));
     }
-    Ok(cmp.row("plenoxel_fwd", rays.len() / 6, counts_note(gc, wc)))
+    let name = if spheres.is_some() {
+        "plenoxel_fwd_spheres"
+    } else {
+        "plenoxel_fwd"
+    };
+    Ok(cmp.row(name, rays.len() / 6, counts_note(gc, wc)))
 }
 
 pub fn check_train(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
+    train_row(gpu, seed, None)
+}
+
+/// `plenoxel_train` with learned spheres behind the grid: their gradient compared too.
+pub fn check_train_spheres(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
+    train_row(gpu, seed, Some(&background_msi::test_spheres(seed)))
+}
+
+fn train_row(gpu: &Gpu, seed: u64, spheres: Option<&SphereTable>) -> Result<CheckRow> {
     let (g, rays, targets) = test_scene(seed, 40, 4000);
-    let (mut cpu, mut vk) = backends(gpu, g, true)?;
+    let (mut cpu, mut vk) = backends(gpu, g, true, spheres)?;
     let want = cpu.gradients(&rays, &targets, STOP)?;
     let got = vk.gradients(&rays, &targets, STOP)?;
     // Per-ray losses elementwise; atomically accumulated gradients by aggregate measures, and
-    // elementwise against the largest magnitude (summation order differs run to run).
-    let mut cmp = Compare::new(1e-5, 1e-3);
+    // elementwise against the largest magnitude (summation order differs run to run). Spheres
+    // add their bound on B times the loss's slope in B: Σ_ch 2·|C − target| ≤ 3·2·1.4 < 9.
+    let sphere_bound = spheres.map_or(0.0, background_msi::abs_bound);
+    let mut cmp = Compare::new(1e-5 + 9.0 * sphere_bound, 1e-3);
     for (i, (&a, &b)) in got.ray_loss.iter().zip(&want.ray_loss).enumerate() {
         cmp.value(a as f64, b as f64, || format!("ray {i} loss"));
     }
@@ -206,7 +248,11 @@ pub fn check_train(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
     for (name, a, b) in [
         ("dσ", &got.density, &want.density),
         ("dSH", &got.sh, &want.sh),
+        ("d(sphere texels)", &got.spheres, &want.spheres),
     ] {
+        if spheres.is_none() && b.is_empty() && a.is_empty() {
+            continue;
+        }
         let e = rel_l2(a, b);
         worst = worst.max(e);
         let bad = grad_outliers(a, b);
@@ -228,12 +274,32 @@ pub fn check_train(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
             )
         });
     }
+    let reached = want.spheres.iter().filter(|&&g| g != 0.0).count();
+    if spheres.is_some() && reached < want.spheres.len() / 4 {
+        cmp.failures += 1;
+        cmp.first_failure.get_or_insert_with(|| {
+            format!(
+                "only {reached} of {} sphere values reached",
+                want.spheres.len()
+            )
+        });
+    }
     let note = format!(
         "grad rel L2 {worst:.1e} (≤ 1e-4; elementwise |Δ| ≤ 1e-4·max|g| + 1e-3·|g| for all but 0.1%), \
-         dbg rel L2 {e_bg:.1e} (≤ 1e-4); {}",
-        counts_note(got.counts, want.counts)
+         dbg rel L2 {e_bg:.1e} (≤ 1e-4); {}{}",
+        counts_note(got.counts, want.counts),
+        if spheres.is_some() {
+            format!("; {reached} of {} sphere values with a gradient", want.spheres.len())
+        } else {
+            String::new()
+        }
     );
-    Ok(cmp.row("plenoxel_train", rays.len() / 6, note))
+    let name = if spheres.is_some() {
+        "plenoxel_train_spheres"
+    } else {
+        "plenoxel_train"
+    };
+    Ok(cmp.row(name, rays.len() / 6, note))
 }
 
 pub fn check_weights(gpu: &Gpu, seed: u64) -> Result<CheckRow> {

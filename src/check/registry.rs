@@ -37,6 +37,10 @@ pub fn entry(kernel: Kernel) -> Entry {
             twin!(crate::cpu::background_msi_eval;
             "background_msi_eval" => background_msi::check)
         }
+        Kernel::background_spheres_step => {
+            twin!(crate::cpu::background_spheres_step::background_spheres_step;
+            "background_spheres_step" => background_msi::check_step)
+        }
         Kernel::background_step => twin!(crate::cpu::background_step::background_step;
             "background_step" => plenoxel::check_background_step),
         Kernel::cubic_solve => twin!(crate::cpu::cubic_solve::cubic_solve;
@@ -53,9 +57,11 @@ pub fn entry(kernel: Kernel) -> Entry {
         Kernel::optim_args => twin!(crate::cpu::optim_args::optim_args;
             "optim_args" => plenoxel::check_optim_args),
         Kernel::plenoxel_fwd => twin!(crate::cpu::plenoxel_fwd::render;
-            "plenoxel_fwd" => plenoxel::check_fwd),
+            "plenoxel_fwd" => plenoxel::check_fwd,
+            "plenoxel_fwd_spheres" => plenoxel::check_fwd_spheres),
         Kernel::plenoxel_train => twin!(crate::cpu::plenoxel_train::train;
-            "plenoxel_train" => plenoxel::check_train),
+            "plenoxel_train" => plenoxel::check_train,
+            "plenoxel_train_spheres" => plenoxel::check_train_spheres),
         Kernel::plenoxel_weights => twin!(crate::cpu::plenoxel_weights::max_weights;
             "plenoxel_weights" => plenoxel::check_weights),
         Kernel::rmsprop_sparse => twin!(crate::cpu::rmsprop_sparse;
@@ -73,6 +79,7 @@ pub fn entry(kernel: Kernel) -> Entry {
             "surface_delta_tv" => surface_reg::check_delta_tv),
         Kernel::surface_fwd => twin!(crate::cpu::surface_fwd::render;
             "surface_fwd" => surface_fwd::check,
+            "surface_fwd_spheres" => surface_fwd::check_spheres,
             "surface_faces" => surface_faces::check),
         Kernel::surface_live_cells => twin!(crate::cpu::surface_live_cells::surface_live_cells;
             "surface_live_cells" => surface_blocks::check_live),
@@ -93,7 +100,8 @@ pub fn entry(kernel: Kernel) -> Entry {
         Kernel::surface_rmsprop => twin!(crate::cpu::surface_rmsprop;
             "surface_rmsprop" => surface_reg::check_rmsprop),
         Kernel::surface_train => twin!(crate::cpu::surface_train::train;
-            "surface_train" => surface_train::check),
+            "surface_train" => surface_train::check,
+            "surface_train_spheres" => surface_train::check_spheres),
         Kernel::trilerp_eval => {
             twin!(crate::cpu::trilerp_eval; "trilerp_eval" => trilerp_eval::check)
         }

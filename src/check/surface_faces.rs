@@ -184,6 +184,7 @@ fn run_field(
             truncation: 1e6.into(),
             stop_thresh: 1e-4,
             background: [1.0; 3],
+            spheres: None,
         };
         let ray_buf: Vec<f32> = rays
             .iter()

@@ -13,14 +13,16 @@
 //! `exp`/`cos` differ by an ulp, which can also flip an early-termination test), counted, and
 //! capped at [`EXCUSED_CAP_FRAC`] of the rays. The summed counters must agree within 0.5 % + 4.
 
-use super::{CheckRow, Compare, TEST_BACKGROUND};
+use super::{background_msi, CheckRow, Compare, TEST_BACKGROUND};
 use crate::abi::buffers::Background;
 use crate::abi::surface_grid::SurfaceGridRef;
 use crate::abi::train::SurfaceLoss;
 use crate::cpu::surface_blocks::build_blocks;
 use crate::cpu::surface_fwd::{render, validate_blocks, validate_inputs, SurfCounts};
 use crate::gpu::Gpu;
+use crate::gpu::{address_words, SphereBuffers};
 use crate::kernels::surface_fwd::{Push, INFO};
+use crate::math::background_msi::SphereTable;
 use crate::math::surface::SurfaceParams;
 use crate::math::surface::{SurfOut, Truncation, TruncationCount};
 use crate::math::surface_blocks::{
@@ -29,6 +31,7 @@ use crate::math::surface_blocks::{
 use anyhow::Result;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
+use std::sync::Arc;
 
 /// Grid vertices per axis of the test scene.
 pub const RES: u32 = 24;
@@ -71,6 +74,7 @@ impl SurfaceScene {
             truncation: truncation.into(),
             stop_thresh: stop,
             background: TEST_BACKGROUND,
+            spheres: None,
         }
     }
 
@@ -231,7 +235,15 @@ pub fn render_gpu(
         lambda_c: 0.0,
     };
     let params = gpu.upload(&[crate::surface::surf_params(p, &no_loss, n_rays)])?;
-    let bg = gpu.upload(&[Background::new(p.background, false)])?;
+    let spheres = p
+        .spheres
+        .as_deref()
+        .map(|t| SphereBuffers::upload(gpu, t))
+        .transpose()?;
+    let bg = gpu.upload(&[Background {
+        spheres: address_words(spheres.as_ref().map_or(0, |s| s.shape_buf.address())),
+        ..Background::new(p.background, false)
+    }])?;
     let one = |v: &[f32]| {
         if v.is_empty() {
             vec![0.0f32]
@@ -275,10 +287,25 @@ pub fn render_gpu(
 
 /// The parity row.
 pub fn check(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
+    check_with(gpu, seed, None)
+}
+
+/// The row with spheres behind the surfaces (`background_msi::test_spheres`): the tolerance adds
+/// their bound.
+pub fn check_spheres(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
+    check_with(
+        gpu,
+        seed,
+        Some(Arc::new(background_msi::test_spheres(seed))),
+    )
+}
+
+fn check_with(gpu: &Gpu, seed: u64, spheres: Option<Arc<SphereTable>>) -> Result<CheckRow> {
     let scene = test_scene(seed, RES);
     let rays = test_rays(&scene, seed, 3000);
     let n_rays = rays.len() / 6;
-    let mut cmp = Compare::new(1e-4, 1e-4);
+    let bound = spheres.as_deref().map_or(0.0, background_msi::abs_bound);
+    let mut cmp = Compare::new(1e-4 + bound, 1e-4);
     let mut excused = 0usize;
     let mut notes = Vec::new();
     // Block masks of the scene (exact skipping; the Vulkan backend's 4³ blocks), and random ones
@@ -318,7 +345,7 @@ pub fn check(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
                 ""
             }
         );
-        let p = scene.params(t, stop);
+        let p = scene.params(t, stop).with_spheres(spheres.clone());
         let blocks = Some(SkipRef { words, shift });
         let (want, wc) = render(&scene.grid(), &rays, &p, blocks)?;
         let (got, gc, _) = render_gpu(gpu, &scene.grid(), &rays, &p, blocks)?;
@@ -352,7 +379,11 @@ pub fn check(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
             .get_or_insert_with(|| format!("{excused} rays with differing hit counts > cap {cap}"));
     }
     Ok(cmp.row(
-        "surface_fwd",
+        if spheres.is_some() {
+            "surface_fwd_spheres"
+        } else {
+            "surface_fwd"
+        },
         skips.len() * n_rays,
         format!(
             "hits exact, {excused} rays excused (cap {cap}, 0.5 %); scene blocks, then random blocks, then scene blocks counting per structure; cells/solves/culled/hits/cut/skips {}",

@@ -1,14 +1,55 @@
 //! A run's background as its checkpoints and metrics record it: the mode, the colour and, when
-//! it is learned, the optimiser's running average; carried from stage 1 into stage 2.
+//! it is learned, the optimiser's running average; its spheres' shape (their texel values and
+//! running averages are arrays of the checkpoint, [`SPHERE_ARRAYS`]); carried from stage 1 into
+//! stage 2.
 
-use crate::abi::buffers::Background;
+use super::format::{self, OptimArrays};
+use crate::abi::buffers::{Background, BackgroundSpheres};
 use crate::data::{BackgroundMode, Dataset};
-use anyhow::{ensure, Context, Result};
+use crate::math::background_msi::SphereTable;
+use anyhow::{bail, ensure, Context, Result};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 /// Key of the record in a checkpoint's metadata.
 pub const META_KEY: &str = "background";
+
+/// Names of the spheres' texel values and running averages among a checkpoint's arrays.
+pub const SPHERE_ARRAYS: [&str; 2] = ["background_spheres", "background_spheres_avg"];
+
+/// The shape of a background's spheres (`abi::buffers::BackgroundSpheres` without addresses).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SpheresShape {
+    pub centre: [f32; 3],
+    pub layers: u32,
+    pub size: u32,
+    pub inv_r0: f32,
+    pub inv_step: f32,
+}
+
+impl SpheresShape {
+    fn of(s: &BackgroundSpheres) -> Self {
+        SpheresShape {
+            centre: s.centre,
+            layers: s.layers,
+            size: s.size,
+            inv_r0: s.inv_r0,
+            inv_step: s.inv_step,
+        }
+    }
+
+    fn spheres(&self, learn: bool) -> BackgroundSpheres {
+        BackgroundSpheres {
+            centre: self.centre,
+            layers: self.layers,
+            size: self.size,
+            inv_r0: self.inv_r0,
+            inv_step: self.inv_step,
+            learn: u32::from(learn),
+            ..Default::default()
+        }
+    }
+}
 
 /// The background of a run at a step (default: white, of runs that did not record one).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -18,6 +59,9 @@ pub struct BackgroundRecord {
     pub rgb: [f32; 3],
     /// RMSProp running average of a learned colour's gradient (zero when fixed).
     pub avg: [f32; 3],
+    /// The spheres in front of the colour (`--background spheres`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub spheres: Option<SpheresShape>,
 }
 
 impl Default for BackgroundRecord {
@@ -33,6 +77,7 @@ impl BackgroundRecord {
             mode,
             rgb: mode.initial_rgb(),
             avg: [0.0; 3],
+            spheres: None,
         }
     }
 
@@ -49,13 +94,82 @@ impl BackgroundRecord {
         r
     }
 
+    /// The spheres a run of this background starts stage 1 with on `data`, a grid `res` wide
+    /// at its end: around the grid box, in the colour the record starts with.
+    pub fn start_spheres(&self, data: &Dataset, res: u32) -> Result<Option<SphereTable>> {
+        if !self.mode.spheres() {
+            return Ok(None);
+        }
+        let scene = &data.scene;
+        if scene.ndc.is_some() {
+            bail!(
+                "--background spheres: {} trains in NDC (a forward-facing capture), whose grid \
+                 reaches infinite depth already; use --background learned, or --space box",
+                data.root.display()
+            );
+        }
+        let cameras: Vec<[f32; 3]> = data
+            .train
+            .frames
+            .iter()
+            .map(|f| scene.to_scaled(f.camera.centre()).to_array())
+            .collect();
+        let centre = scene.centre.to_array();
+        Ok(Some(SphereTable::around(
+            centre,
+            scene.radius,
+            &cameras,
+            res,
+            self.rgb,
+        )))
+    }
+
     /// What a backend holds, of a run in `mode`.
-    pub fn of(mode: BackgroundMode, bg: &Background) -> Self {
+    pub fn of(mode: BackgroundMode, bg: &Background, spheres: Option<&SphereTable>) -> Self {
         BackgroundRecord {
             mode,
             rgb: bg.rgb,
             avg: bg.avg,
+            spheres: spheres.map(|s| SpheresShape::of(&s.shape)),
         }
+    }
+
+    /// The spheres this record names, read from its checkpoint at `path` (only their arrays),
+    /// learned or not.
+    pub fn read_spheres(&self, path: &Path, learn: bool) -> Result<Option<SphereTable>> {
+        if self.spheres.is_none() {
+            return Ok(None);
+        }
+        let arrays = format::read_named(path, &SPHERE_ARRAYS)?;
+        self.spheres_in(&arrays, learn, path)
+    }
+
+    /// The spheres this record names, from the arrays of its checkpoint at `path` (`arrays`:
+    /// by name), learned or not. `None` when it has none.
+    pub fn spheres_in(
+        &self,
+        arrays: &OptimArrays,
+        learn: bool,
+        path: &Path,
+    ) -> Result<Option<SphereTable>> {
+        let Some(shape) = &self.spheres else {
+            return Ok(None);
+        };
+        let shape = shape.spheres(learn);
+        let [table, avg] = SPHERE_ARRAYS.map(|name| format::optim_array(arrays, name, path));
+        let (table, avg) = (table?, avg?);
+        ensure!(
+            table.len() == shape.table_len() && avg.len() == table.len(),
+            "{}: the background spheres ({} of {}² texels) need {} values; the arrays hold {} \
+             and {}",
+            path.display(),
+            shape.layers,
+            shape.size,
+            shape.table_len(),
+            table.len(),
+            avg.len()
+        );
+        Ok(Some(SphereTable { shape, table, avg }))
     }
 
     /// The kernels' background (no gradient pending).
@@ -74,8 +188,16 @@ impl BackgroundRecord {
         };
         let r: Self = serde_json::from_value(v.clone())
             .with_context(|| format!("{}: metadata '{META_KEY}' is invalid", path.display()))?;
+        let shape_finite = r.spheres.is_none_or(|s| {
+            s.centre
+                .iter()
+                .chain([&s.inv_r0, &s.inv_step])
+                .all(|x| x.is_finite())
+                && s.inv_r0 > 0.0
+                && s.inv_r0 - s.inv_step * s.layers.saturating_sub(1) as f32 > 0.0
+        });
         ensure!(
-            r.rgb.iter().chain(&r.avg).all(|x| x.is_finite()),
+            shape_finite && r.rgb.iter().chain(&r.avg).all(|x| x.is_finite()),
             "{}: metadata '{META_KEY}' has a non-finite value: {r:?}",
             path.display()
         );

@@ -115,6 +115,38 @@ fn read(r: &mut NpzReader) -> Result<Checkpoint> {
     Ok(Checkpoint { grid, optim, meta })
 }
 
+/// The arrays `names` among the optimiser-state arrays of the checkpoint at `path` (those it
+/// has, validated as [`load`] does), without reading the rest.
+pub fn read_named(path: &Path, names: &[&str]) -> Result<OptimArrays> {
+    let mut r = NpzReader::open(path)?;
+    let mut out = Vec::new();
+    for name in names {
+        let array = format!("{OPTIM_PREFIX}{name}");
+        if !r.contains(&array) {
+            continue;
+        }
+        let a = r
+            .read(&array)
+            .with_context(|| format!("{}", path.display()))?;
+        ensure!(
+            a.shape.len() == 1,
+            "{}: array '{array}' has shape {:?}, expected 1-D",
+            path.display(),
+            a.shape
+        );
+        let v = a.into_f32(&array)?;
+        if let Some(j) = v.iter().position(|x| !x.is_finite()) {
+            bail!(
+                "{}: array '{array}': non-finite value {} at {j}",
+                path.display(),
+                v[j]
+            );
+        }
+        out.push((name.to_string(), v));
+    }
+    Ok(out)
+}
+
 /// Named optimiser-state arrays, in file order.
 pub type OptimArrays = Vec<(String, Vec<f32>)>;
 

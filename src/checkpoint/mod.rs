@@ -11,7 +11,9 @@ pub mod writer;
 
 pub use background::BackgroundRecord;
 
+use crate::abi::buffers::Background;
 use crate::data::BackgroundMode;
+use crate::math::background_msi::SphereTable;
 use crate::stage::{Stage, StageBackend, StateArrays};
 use anyhow::{Context, Result};
 use serde::de::DeserializeOwned;
@@ -34,23 +36,32 @@ pub struct RunCheckpoints {
 }
 
 impl RunCheckpoints {
-    /// The metadata of the checkpoint of `step`, with the backend's background.
-    fn meta<S: Stage, B: StageBackend<S> + ?Sized>(
+    /// The metadata of the checkpoint of `step`, with the background `bg` and its `spheres`.
+    fn meta<S: Stage>(
         &self,
-        backend: &B,
+        bg: &Background,
+        spheres: Option<&SphereTable>,
         step: u32,
-    ) -> Result<serde_json::Value> {
-        let bg = BackgroundRecord::of(self.mode, &backend.background()?);
-        Ok(json!({
+    ) -> serde_json::Value {
+        let bg = BackgroundRecord::of(self.mode, bg, spheres);
+        json!({
             "stage": S::NAME, "step": step, "config": self.config, background::META_KEY: bg
-        }))
+        })
     }
 
     /// Write the checkpoint of `step` atomically, now (refuses non-finite values).
     fn save<S: Stage, B: StageBackend<S> + ?Sized>(&self, backend: &B, step: u32) -> Result<()> {
-        let meta = self.meta(backend, step)?;
+        let spheres = backend.spheres()?;
+        let meta = self.meta::<S>(&backend.background()?, spheres.as_ref(), step);
         backend
-            .with_state(&mut |grid, state| S::save(&self.path, grid, &named::<S>(state), &meta))
+            .with_state(&mut |grid, state| {
+                S::save(
+                    &self.path,
+                    grid,
+                    &named::<S>(state, spheres.as_ref()),
+                    &meta,
+                )
+            })
             .with_context(|| format!("after step {step}"))
     }
 
@@ -61,13 +72,19 @@ impl RunCheckpoints {
         backend: &B,
         step: u32,
     ) -> Result<impl FnOnce() -> Result<()> + Send + 'static> {
-        let meta = self.meta(backend, step)?;
+        let spheres = backend.spheres()?;
+        let meta = self.meta::<S>(&backend.background()?, spheres.as_ref(), step);
         let grid = backend.grid()?;
         let state = backend.optimizer_state()?;
         let path = self.path.clone();
         Ok(move || {
-            S::save(&path, &grid, &named::<S>(&state.arrays()), &meta)
-                .with_context(|| format!("after step {step}"))
+            S::save(
+                &path,
+                &grid,
+                &named::<S>(&state.arrays(), spheres.as_ref()),
+                &meta,
+            )
+            .with_context(|| format!("after step {step}"))
         })
     }
 
@@ -87,13 +104,24 @@ impl RunCheckpoints {
     }
 }
 
-/// The optimiser arrays with their names.
-fn named<'a, S: Stage>(state: &[&'a [f32]]) -> Vec<(&'static str, &'a [f32])> {
-    S::STATE_NAMES
+/// The optimiser arrays with their names, and the background spheres' arrays.
+fn named<'a, S: Stage>(
+    state: &[&'a [f32]],
+    spheres: Option<&'a SphereTable>,
+) -> Vec<(&'static str, &'a [f32])> {
+    let mut arrays: Vec<_> = S::STATE_NAMES
         .iter()
         .copied()
         .zip(state.iter().copied())
-        .collect()
+        .collect();
+    if let Some(s) = spheres {
+        arrays.extend(
+            background::SPHERE_ARRAYS
+                .into_iter()
+                .zip([&s.table[..], &s.avg[..]]),
+        );
+    }
+    arrays
 }
 
 /// A configuration a checkpoint records.
@@ -117,7 +145,18 @@ pub fn resume<S: Stage, C: Recorded, B: StageBackend<S> + ?Sized>(
     let bg = BackgroundRecord::from_meta(&saved.meta, path)?;
     backend.load(saved.grid, Some(saved.state))?;
     backend.set_background(bg.kernel())?;
+    backend.set_spheres(saved.spheres)?;
     Ok((step, cfg, bg))
+}
+
+/// The background spheres a checkpoint of stage `S` holds (learned if `S` trains them), from its
+/// metadata and arrays.
+pub fn spheres_of<S: Stage>(
+    optim: &format::OptimArrays,
+    meta: &serde_json::Value,
+    path: &Path,
+) -> Result<Option<SphereTable>> {
+    BackgroundRecord::from_meta(meta, path)?.spheres_in(optim, S::TRAINS_SPHERES, path)
 }
 
 /// The optimiser arrays named by `S::STATE_NAMES`, from a loaded checkpoint's arrays.

@@ -6,6 +6,7 @@
 #![allow(clippy::needless_range_loop, clippy::neg_cmp_op_on_partial_ord)]
 
 mod background_msi_eval;
+pub mod background_spheres_step;
 pub mod background_step;
 pub mod cubic_solve;
 mod dda_walk;

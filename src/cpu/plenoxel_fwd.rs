@@ -2,16 +2,18 @@
 //! `math::plenoxel`.
 
 use crate::abi::consts::REPLAY;
+use crate::math::background_msi::BackgroundView;
 use crate::math::plenoxel::{forward, march_init, ray, GridRef, MarchParams, PlenoxelCounts};
 use crate::math::sh::sh_basis;
 use rayon::prelude::*;
 
-/// Twin of `plenoxel_fwd.comp`: rgb per ray (composited on `bg`) and the summed sample counts.
+/// Twin of `plenoxel_fwd.comp`: rgb per ray (composited on what `bg` puts behind it) and the
+/// summed sample counts.
 pub fn render(
     g: &GridRef,
     rays: &[f32],
     mp: &MarchParams,
-    bg: [f32; 3],
+    bg: &BackgroundView,
 ) -> (Vec<f32>, PlenoxelCounts) {
     let n = rays.len() / 6;
     let out: Vec<([f32; 3], PlenoxelCounts)> = (0..n)
@@ -30,7 +32,11 @@ pub fn render(
                 ),
                 None => ([0.0; 3], 1.0),
             };
-            (std::array::from_fn(|ch| color[ch] + t_acc * bg[ch]), counts)
+            let (behind, _) = bg.behind(ro, rd);
+            (
+                std::array::from_fn(|ch| color[ch] + t_acc * behind[ch]),
+                counts,
+            )
         })
         .collect();
     let counts = out.iter().fold(PlenoxelCounts::default(), |a, o| a + o.1);

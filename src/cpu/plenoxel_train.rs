@@ -3,6 +3,7 @@
 
 use crate::abi::consts::REPLAY;
 use crate::math::atomic;
+use crate::math::background_msi::{backward, BackgroundView};
 use crate::math::plenoxel::{
     forward, march_init, march_next, ray, sample_alpha, sample_at, sample_color_raw, GridRef,
     MarchParams, PlenoxelCounts,
@@ -17,26 +18,31 @@ pub struct TrainGrads<'a> {
     pub density: &'a mut [f32],
     pub sh: &'a mut [f32],
     pub touched: &'a mut [u32],
-    /// dL/dbg (a learned background), or `None` (fixed: not accumulated).
+    /// dL/dbg (a learned background colour), or `None` (fixed: not accumulated).
     pub background: Option<&'a mut [f32; 3]>,
+    /// dL/d(texel values) of learned background spheres, or `None`.
+    pub spheres: Option<&'a mut [f32]>,
 }
 
 /// Twin of `plenoxel_train.comp`: returns per-ray squared error and the sample counts, adds
-/// dL/dσ and dL/dSH (dL/dC = grad_scale·(C − target), C composited on `bg`) into `grads`, and
-/// dL/dbg = Σ_rays dL/dC·T when `grads.background` is given.
+/// dL/dσ and dL/dSH (dL/dC = grad_scale·(C − target), C = C_grid + T·B, B what `bg` puts
+/// behind the ray) into `grads`, dL/dbg = Σ_rays dL/dC·T·T_L when `grads.background` is given,
+/// and the spheres' texel gradient (`math::background_msi::backward` with dL/dB = dL/dC·T) when
+/// `grads.spheres` is.
 pub fn train(
     g: &GridRef,
     rays: &[f32],
     targets: &[f32],
     mp: &MarchParams,
     grad_scale: f32,
-    bg: [f32; 3],
+    bg: &BackgroundView,
     grads: TrainGrads,
 ) -> (Vec<f32>, PlenoxelCounts) {
     let n = rays.len() / 6;
     let gd = atomic::as_atomic(grads.density);
     let gs = atomic::as_atomic(grads.sh);
     let touched = atomic::as_atomic_u32(grads.touched);
+    let sphere_grad = grads.spheres.map(atomic::as_atomic);
     let out: Vec<(f32, [f32; 3], PlenoxelCounts)> = (0..n)
         .into_par_iter()
         .map(|r| {
@@ -51,11 +57,16 @@ pub fn train(
                 None => ([0.0; 3], 1.0),
             };
             let shaded = counts.shaded as usize;
-            let total: [f32; 3] = std::array::from_fn(|ch| color[ch] + t_acc * bg[ch]);
+            let (behind, t_bg) = bg.behind(ro, rd);
+            let total: [f32; 3] = std::array::from_fn(|ch| color[ch] + t_acc * behind[ch]);
             let diff: [f32; 3] = std::array::from_fn(|ch| total[ch] - target[ch]);
             let loss = diff[0] * diff[0] + diff[1] * diff[1] + diff[2] * diff[2];
             let g_c = diff.map(|d| grad_scale * d);
-            let g_bg = g_c.map(|gc| gc * t_acc);
+            let g_behind = g_c.map(|gc| gc * t_acc);
+            let g_bg = g_behind.map(|g| g * t_bg);
+            if let (Some(grad), Some((s, table))) = (sphere_grad, bg.spheres) {
+                backward(s, table, grad, ro, rd, behind, g_behind);
+            }
 
             let Some(m) = &m else {
                 return (loss, g_bg, counts);

@@ -91,11 +91,12 @@ pub fn render_ray(
         }
     }
     let w = walk.counts;
+    let (behind, _) = p.behind().behind(ro, rd);
     (cnt.cells, cnt.solves, cnt.culled, cnt.blocks_skipped) =
         (w.cells, w.solves, w.culled, w.blocks_skipped);
     (
         SurfOut {
-            rgb: std::array::from_fn(|ch| color[ch] + t_acc * p.background[ch]),
+            rgb: std::array::from_fn(|ch| color[ch] + t_acc * behind[ch]),
             transmittance: t_acc,
             hits: j,
         },

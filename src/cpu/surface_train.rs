@@ -240,7 +240,8 @@ fn hit_records(g: &SurfaceGridRef, tr: &Trace, y: &[f32; 9], a: f32) -> Vec<HitR
 
 /// Twin of `surface_train.comp`: per-ray losses and the summed counters; dL/dδ, dL/dσα and
 /// dL/dSH are added into `grads` and every vertex receiving a gradient is flagged; dL/dbg =
-/// Σ_rays dL/dC·T is added when `grads.background` is given. `blocks`: the
+/// Σ_rays dL/dC·T·T_L is added when `grads.background` is given (the background's spheres,
+/// `p.spheres`, are composited but not trained). `blocks`: the
 /// `surface_blocks` masks of the current δ (the kernel always skips with them; `None` walks every
 /// cell, with the same result).
 pub fn train(
@@ -406,11 +407,12 @@ fn train_ray(
     let tr = trace_ray(g, ro, rd, p, blocks, &mut cnt);
     let y = sh_basis(ray_unit(rd));
     let rec = hit_records(g, &tr, &y, p.truncation.a);
-    let t = ray_terms(&rec, tr.inv_len, target, loss, p.background);
+    let (behind, t_bg) = p.behind().behind(ro, rd);
+    let t = ray_terms(&rec, tr.inv_len, target, loss, behind);
     // Reverse pass: colour and entropy seen from behind each hit (behind the last: the
     // background); per-corner sums over consecutive hits in one cell, flushed when the cell
     // changes.
-    let mut s_c = p.background;
+    let mut s_c = behind;
     let mut s_e = 0.0f32;
     let mut acc = CellAcc::default();
     for (j, hk) in rec.iter().enumerate().rev() {
@@ -429,7 +431,7 @@ fn train_ray(
     }
     cnt.atomic_adds += acc.flush(out, &y);
     let t_last = t.tr[SURF_MAX_HITS];
-    (t.loss, t.d_c.map(|d| d * t_last), cnt)
+    (t.loss, t.d_c.map(|d| (d * t_last) * t_bg), cnt)
 }
 
 /// The current cell, its corner links and its per-corner gradient sums.

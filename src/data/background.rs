@@ -15,6 +15,10 @@ pub enum BackgroundMode {
     /// A constant RGB colour trained with the scene, for images without alpha or masks (real
     /// photos of an object in front of a plain backdrop).
     Learned,
+    /// Learned spheres around the grid box in front of a learned colour: a 360° capture whose
+    /// rays see a room behind the object (svox2's background for Tanks and Temples). Stage 1
+    /// learns them; stage 2 keeps them.
+    Spheres,
 }
 
 impl BackgroundMode {
@@ -25,13 +29,18 @@ impl BackgroundMode {
         match self {
             BackgroundMode::White => [1.0; 3],
             BackgroundMode::Black => [0.0; 3],
-            BackgroundMode::Learned => [0.5; 3],
+            BackgroundMode::Learned | BackgroundMode::Spheres => [0.5; 3],
         }
     }
 
     /// Whether the colour is trained.
     pub fn learned(self) -> bool {
-        self == BackgroundMode::Learned
+        matches!(self, BackgroundMode::Learned | BackgroundMode::Spheres)
+    }
+
+    /// Whether the background has spheres.
+    pub fn spheres(self) -> bool {
+        self == BackgroundMode::Spheres
     }
 
     /// The name on the command line.
@@ -40,6 +49,7 @@ impl BackgroundMode {
             BackgroundMode::White => "white",
             BackgroundMode::Black => "black",
             BackgroundMode::Learned => "learned",
+            BackgroundMode::Spheres => "spheres",
         }
     }
 }

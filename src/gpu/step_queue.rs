@@ -5,12 +5,14 @@
 //! is stepped on the device, so a step needs no host round trip).
 
 use super::{
-    record_loss_sum, record_optim_args, Batch, Gpu, GpuBuffer, Phase, PhaseClock, RayBuffers,
-    Readback, StepMeta, StepTiming, StepsInFlight, TrainRays, TrainViewBuffers, STEP_SLOTS,
+    address_words, record_loss_sum, record_optim_args, Batch, Gpu, GpuBuffer, Phase, PhaseClock,
+    RayBuffers, Readback, SphereBuffers, StepMeta, StepTiming, StepsInFlight, TrainRays,
+    TrainViewBuffers, STEP_SLOTS,
 };
 use crate::abi::buffers::{Background, StepHeader};
 use crate::abi::rays::SampledRays;
 use crate::abi::step::{STEP_FLAGS, STEP_RESET_BYTES};
+use crate::math::background_msi::SphereTable;
 use anyhow::{anyhow, ensure, Result};
 use bytemuck::Pod;
 use std::cell::RefCell;
@@ -51,6 +53,8 @@ pub struct StepQueue<F> {
     pub bg: GpuBuffer,
     /// Whether `bg` is learned (the host's copy of its flag: `background_step` is recorded then).
     pub bg_learned: bool,
+    /// The background's spheres (`bg` holds their address).
+    pub spheres: Option<SphereBuffers>,
     /// Per-batch rays, targets and per-ray output.
     pub rays: RayBuffers,
     /// Per training step since the figures were last read, a slot.
@@ -72,6 +76,7 @@ impl<F: SlotFigures> StepQueue<F> {
             args: gpu.zeros::<u32>(3)?,
             bg: gpu.upload(&[Background::new([1.0; 3], false)])?,
             bg_learned: false,
+            spheres: None,
             rays: RayBuffers::new(out_bytes),
             readback: Readback::new(gpu, parts, STEP_SLOTS)?,
             views: None,
@@ -273,12 +278,44 @@ impl<F: SlotFigures> StepQueue<F> {
         Ok(grad)
     }
 
-    /// Replace the background (colour, whether it is learned, its optimiser state).
+    /// The gradient of the spheres (learned ones', else empty), read and cleared.
+    pub fn take_sphere_grad(&self) -> Result<Vec<f32>> {
+        self.settle()?;
+        match self.spheres.as_ref().filter(|s| s.shape.learn != 0) {
+            Some(s) => s.take_grad(),
+            None => Ok(Vec::new()),
+        }
+    }
+
+    /// Replace the background (colour, whether it is learned, its optimiser state), in front
+    /// of the spheres the queue holds.
     pub fn set_background(&mut self, bg: Background) -> Result<()> {
         self.settle()?;
-        self.bg.write(&[bg])?;
+        let spheres = self.spheres.as_ref().map_or(0, |s| s.shape_buf.address());
+        self.bg.write(&[Background {
+            spheres: address_words(spheres),
+            ..bg
+        }])?;
         self.bg_learned = bg.learned();
         Ok(())
+    }
+
+    /// The background's spheres with their optimiser state.
+    pub fn spheres(&self) -> Result<Option<SphereTable>> {
+        self.settle()?;
+        self.spheres
+            .as_ref()
+            .map(SphereBuffers::download)
+            .transpose()
+    }
+
+    /// Replace the background's spheres.
+    pub fn set_spheres(&mut self, spheres: Option<SphereTable>) -> Result<()> {
+        let bg = self.background()?;
+        self.spheres = spheres
+            .map(|t| SphereBuffers::upload(&self.gpu, &t))
+            .transpose()?;
+        self.set_background(bg)
     }
 
     /// Hand the background, the training views and the figures not yet taken to `fresh`, the
@@ -286,6 +323,7 @@ impl<F: SlotFigures> StepQueue<F> {
     /// in go with this queue).
     pub fn carry_into(&mut self, fresh: &mut Self) -> Result<()> {
         self.collect()?;
+        fresh.spheres = self.spheres.take();
         fresh.set_background(self.background()?)?;
         fresh.views = self.views.take();
         fresh.done = std::mem::take(&mut self.done);

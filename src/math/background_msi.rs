@@ -14,6 +14,13 @@ use std::sync::atomic::AtomicU32;
 /// Values per texel: σ, then the colour (r, g, b) before its clamp at 0.
 pub const TEXEL: usize = 4;
 
+/// Spheres of a background.
+pub const SPHERE_LAYERS: u32 = 16;
+/// σ of every texel at the start (svox2's `init_sigma_bg`): each sphere lets 90 % through.
+pub const SPHERE_INIT_SIGMA: f32 = 0.1;
+/// The outermost sphere's radius over the farthest training camera's distance from the centre.
+pub const SPHERE_FAR_OVER_CAMERAS: f32 = 4.0;
+
 fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
@@ -175,6 +182,30 @@ pub fn composite(
     (std::array::from_fn(|ch| color[ch] + t * rgb[ch]), t)
 }
 
+/// What a ray meets behind the grid, as the twins read it: the colour, and the spheres with their
+/// texel values when the run has them.
+#[derive(Clone, Copy, Debug)]
+pub struct BackgroundView<'a> {
+    pub rgb: [f32; 3],
+    pub spheres: Option<(&'a BackgroundSpheres, &'a [f32])>,
+}
+
+impl BackgroundView<'_> {
+    /// The colour `rgb` alone.
+    pub fn colour(rgb: [f32; 3]) -> Self {
+        BackgroundView { rgb, spheres: None }
+    }
+
+    /// The background B of the ray from `o` along unit `d` and the weight T_L of the colour in
+    /// it (`rgb` and 1 without spheres, bit for bit).
+    pub fn behind(&self, o: [f32; 3], d: [f32; 3]) -> ([f32; 3], f32) {
+        match self.spheres {
+            Some((s, table)) => composite(s, table, o, d, self.rgb),
+            None => (self.rgb, 1.0),
+        }
+    }
+}
+
 /// Adds dL/d(texel values) of the ray from `o` along `d` to `grad` (float atomics, as the
 /// kernels), given dL/dB = `g` and the ray's `total` = B from [`composite`]: per sphere
 /// dL/dσ = Σ_ch g·(T_{l+1} c_l − (B − B_≤l)) where σ > 0, dL/dc_l = g·T_l α_l where the colour
@@ -220,6 +251,70 @@ pub fn backward(
             }
         }
         t = tn;
+    }
+}
+
+/// A background's spheres on the host: their shape, texel values (σ, r, g, b per texel) and the
+/// values' RMSProp running averages.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SphereTable {
+    pub shape: BackgroundSpheres,
+    pub table: Vec<f32>,
+    pub avg: Vec<f32>,
+}
+
+impl SphereTable {
+    /// Spheres around the grid box `centre ± radius` (scaled units) of a grid `res` wide: the
+    /// first one around the box's corners, the last [`SPHERE_FAR_OVER_CAMERAS`] times as far as
+    /// the farthest camera (`cameras`: their centres); maps of res/2 texels a side; every texel
+    /// σ = [`SPHERE_INIT_SIGMA`] and colour `rgb`; learned.
+    pub fn around(
+        centre: [f32; 3],
+        radius: f32,
+        cameras: &[[f32; 3]],
+        res: u32,
+        rgb: [f32; 3],
+    ) -> Self {
+        let r0 = radius * 3f32.sqrt();
+        let farthest = cameras
+            .iter()
+            .map(|c| {
+                (0..3)
+                    .map(|i| (c[i] - centre[i]).powi(2))
+                    .sum::<f32>()
+                    .sqrt()
+            })
+            .fold(0f32, f32::max);
+        let far = (SPHERE_FAR_OVER_CAMERAS * farthest).max(2.0 * r0);
+        let shape = BackgroundSpheres {
+            learn: 1,
+            ..BackgroundSpheres::spanning(centre, r0, far, SPHERE_LAYERS, (res / 2).max(1))
+        };
+        let texel = [SPHERE_INIT_SIGMA, rgb[0], rgb[1], rgb[2]];
+        let table: Vec<f32> = texel
+            .iter()
+            .copied()
+            .cycle()
+            .take(shape.table_len())
+            .collect();
+        SphereTable {
+            shape,
+            avg: vec![0.0; table.len()],
+            table,
+        }
+    }
+
+    /// The background `rgb` behind these spheres, as the twins read it.
+    pub fn view(&self, rgb: [f32; 3]) -> BackgroundView<'_> {
+        BackgroundView {
+            rgb,
+            spheres: Some((&self.shape, &self.table)),
+        }
+    }
+
+    /// Whether the training passes accumulate their gradient.
+    pub fn learned(&self) -> bool {
+        self.shape.learn != 0
     }
 }
 

@@ -10,10 +10,12 @@
 //! a level's value there is the same trilerp of the shared corners on both sides, and a crossing
 //! there belongs to the entered cell, which is told the sign before it ([`FaceSigns`]).
 
+use super::background_msi::{BackgroundView, SphereTable};
 use super::cubic::{exit_sign, solve_crossings, trilerp_level, CellCubic};
 use super::dda::{ray_unit, Dda};
 use super::madd::madd;
 use super::trilerp::trilerp;
+use std::sync::Arc;
 
 pub use crate::abi::consts::{SURF_MAX_LEVELS, SURF_SEGMENT_MARGIN};
 /// Bound of a cell's hit list: ≤ 3 crossings per level.
@@ -504,6 +506,23 @@ pub struct SurfaceParams {
     pub truncation: Truncation,
     /// Stop once transmittance falls below this.
     pub stop_thresh: f32,
-    /// The colour composited behind the last hit: C = Σ w_j c_j + T·background.
+    /// The colour composited behind the last hit: C = Σ w_j c_j + T·B, B the colour behind
+    /// `spheres` when there are any.
     pub background: [f32; 3],
+    pub spheres: Option<Arc<SphereTable>>,
+}
+
+impl SurfaceParams {
+    /// What a ray meets behind the last hit, as the twins read it.
+    pub fn behind(&self) -> BackgroundView<'_> {
+        match &self.spheres {
+            Some(s) => s.view(self.background),
+            None => BackgroundView::colour(self.background),
+        }
+    }
+
+    /// These parameters with the background's `spheres` behind the grid.
+    pub fn with_spheres(self, spheres: Option<Arc<SphereTable>>) -> Self {
+        SurfaceParams { spheres, ..self }
+    }
 }

@@ -10,6 +10,7 @@ use super::train_options::{Stage, TrainOptions};
 use super::train_run::Trained;
 use crate::backend::Backend;
 use crate::data::ndc::Space;
+use crate::data::BackgroundMode;
 use crate::eval::Metrics;
 use crate::gpu::Gpu;
 use crate::scene::{generate, GenerateOptions, SceneKind};
@@ -100,6 +101,8 @@ pub struct Steps<'g> {
     pub progress: bool,
     /// `train --space` of stage 1 (stage 2 takes its stage-1 run's).
     pub space: Space,
+    /// `train --background` of both stages.
+    pub background: BackgroundMode,
 }
 
 impl<'g> Steps<'g> {
@@ -112,6 +115,7 @@ impl<'g> Steps<'g> {
             seed: 0,
             progress: true,
             space: Space::Auto,
+            background: BackgroundMode::White,
         }
     }
 
@@ -169,6 +173,7 @@ impl<'g> Steps<'g> {
             overwrite: true,
             quiet: !self.progress,
             space: self.space,
+            background: self.background,
             ..TrainOptions::new(stage, data.to_path_buf(), out.to_path_buf())
         }
     }

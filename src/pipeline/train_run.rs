@@ -276,7 +276,11 @@ impl Trainer {
             stage,
             backend: backend.name(),
             device: gpu.map(|g| g.info().name.clone()),
-            background: BackgroundRecord::of(data.background, &backend.background()?),
+            background: BackgroundRecord::of(
+                data.background,
+                &backend.background()?,
+                backend.spheres()?.as_ref(),
+            ),
             load,
             started,
         })

@@ -12,6 +12,7 @@ use crate::data::Dataset;
 use crate::gpu::Gpu;
 use crate::grid::surface::SurfaceGrid;
 use crate::grid::{npz, Grid};
+use crate::math::background_msi::SphereTable;
 use crate::run::same_data::check_same_data;
 use crate::run::{self, RunStage};
 use crate::surface::{CpuSurface, SurfaceBackend, SurfaceStage, VulkanSurface};
@@ -35,9 +36,10 @@ pub(super) fn make_backend(
 }
 
 /// The stage-1 grid `--init` names (a run directory: its plenoxels.npz, or an npz file) and the
-/// background it trained with (an svox2 `ckpt.npz`: white). A stage-1 run must have been trained
-/// on `data` (unless `--allow-other-data`); one that stopped before its last step is named.
-fn load_init(opts: &TrainOptions, path: &Path, data: &Dataset) -> Result<(Grid, BackgroundRecord)> {
+/// background it trained with (an svox2 `ckpt.npz`: white), with its spheres (kept, not
+/// learned). A stage-1 run must have been trained on `data` (unless `--allow-other-data`); one
+/// that stopped before its last step is named.
+fn load_init(opts: &TrainOptions, path: &Path, data: &Dataset) -> Result<(Grid, InitBackground)> {
     let file = if path.is_dir() {
         let ck = run::dir::plenoxels_checkpoint(path, "--init")?;
         if run::files::is_run(path) {
@@ -70,7 +72,20 @@ fn load_init(opts: &TrainOptions, path: &Path, data: &Dataset) -> Result<(Grid, 
         Some(meta) => BackgroundRecord::from_meta(meta, &file)?,
         None => BackgroundRecord::start(BackgroundMode::White),
     };
-    Ok((grid, bg))
+    let spheres = bg.read_spheres(&file, false)?;
+    Ok((
+        grid,
+        InitBackground {
+            record: bg,
+            spheres,
+        },
+    ))
+}
+
+/// A run's background as stage 2 starts from it.
+struct InitBackground {
+    record: BackgroundRecord,
+    spheres: Option<SphereTable>,
 }
 
 /// A new stage-2 grid, its configuration and its background (stage 1's, carried on) from
@@ -78,13 +93,14 @@ fn load_init(opts: &TrainOptions, path: &Path, data: &Dataset) -> Result<(Grid, 
 fn fresh_start(
     opts: &TrainOptions,
     data: &Dataset,
-) -> Result<(SurfaceGrid, SurfaceConfig, BackgroundRecord)> {
+) -> Result<(SurfaceGrid, SurfaceConfig, InitBackground)> {
     let init = opts
         .init
         .as_ref()
         .context("stage 2 needs --init STAGE1_RUN_DIR or --init ckpt.npz")?;
     let (density, bg) = load_init(opts, init, data)?;
-    bg.ensure_mode(opts.background, &format!("--init {}", init.display()))?;
+    bg.record
+        .ensure_mode(opts.background, &format!("--init {}", init.display()))?;
     let cfg = opts.surface_config(density.res.into_iter().max().unwrap_or(0))?;
     opts.check_surface_memory(&cfg)?;
     let grid = SurfaceGrid::from_density(&density, &cfg.init)
@@ -122,7 +138,8 @@ pub fn train_surface(
     let (mut backend, cfg, start) = match fresh {
         Some((grid, cfg, bg)) => {
             let mut b = make_backend(gpu, grid)?;
-            b.set_background(bg.kernel())?;
+            b.set_background(bg.record.kernel())?;
+            b.set_spheres(bg.spheres)?;
             (b, cfg, 0)
         }
         None => {

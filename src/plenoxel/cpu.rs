@@ -5,7 +5,6 @@ use super::{
     march_params, state_bytes_of, Gradients, PlenoxelsBackend, PlenoxelsStage, PlenoxelsStepParams,
     PlenoxelsStepStats,
 };
-use crate::cpu::background_step::background_step;
 use crate::cpu::occupancy::{occupancy_rows, occupancy_slots};
 use crate::cpu::plenoxel_fwd::render;
 use crate::cpu::plenoxel_train::{train, TrainGrads};
@@ -14,6 +13,7 @@ use crate::cpu::sample_rays::sample_rays;
 use crate::cpu::{rmsprop_sparse, tv, PlenoxelsOptimArrays};
 use crate::gpu::{Phase, PhaseClock, StepTiming, TrainRays};
 use crate::grid::{Grid, SparseArrays, SH_DIM};
+use crate::math::background_msi::BackgroundView;
 use crate::math::plenoxel::MarchParams;
 use crate::math::plenoxel::{GridRef, PlenoxelCounts};
 use crate::stage::{HostRays, HostSteps, StageBackend, StateFn, StepStore};
@@ -75,13 +75,13 @@ impl CpuPlenoxels {
                     stop_thresh,
                     grad_scale,
                 } => {
-                    let bg = &mut self.steps.bg;
-                    let rgb = bg.rgb;
+                    let (view, background, spheres) = self.steps.train_grads();
                     let grads = TrainGrads {
                         density: &mut self.grad_density,
                         sh: &mut self.grad_sh,
                         touched: &mut self.touched,
-                        background: bg.learned().then_some(&mut bg.grad),
+                        background,
+                        spheres,
                     };
                     out = data_term(
                         &grid_ref(&self.grid, &self.occ),
@@ -89,7 +89,7 @@ impl CpuPlenoxels {
                         rays,
                         targets,
                         *grad_scale,
-                        rgb,
+                        &view,
                         grads,
                     )?;
                 }
@@ -113,9 +113,7 @@ impl CpuPlenoxels {
                     &mut self.touched,
                     h,
                 ),
-                PlenoxelPass::Background(s) => {
-                    background_step(&mut self.steps.bg, s.lr, s.beta, s.eps);
-                }
+                PlenoxelPass::Background(s) => self.steps.step_background(s),
             }
         }
         Ok(out)
@@ -139,7 +137,7 @@ fn data_term(
     rays: &[f32],
     targets: &[f32],
     grad_scale: f32,
-    bg: [f32; 3],
+    bg: &BackgroundView,
     grads: TrainGrads,
 ) -> Result<(Vec<f32>, PlenoxelCounts)> {
     let n = rays.len() / 6;
@@ -220,11 +218,22 @@ impl PlenoxelsBackend for CpuPlenoxels {
         let n = self.grid.allocated();
         let (mut density, mut sh, mut touched) = (vec![0.0; n], vec![0.0; n * SH_DIM], vec![0; n]);
         let mut background = [0.0; 3];
+        let st = &self.steps;
+        let learned_spheres = st.spheres.as_ref().is_some_and(|s| s.learned());
+        let mut spheres = vec![
+            0.0;
+            if learned_spheres {
+                st.sphere_grad.len()
+            } else {
+                0
+            }
+        ];
         let grads = TrainGrads {
             density: &mut density,
             sh: &mut sh,
             touched: &mut touched,
-            background: self.steps.bg.learned().then_some(&mut background),
+            background: st.bg.learned().then_some(&mut background),
+            spheres: learned_spheres.then_some(&mut spheres[..]),
         };
         let (ray_loss, counts) = data_term(
             &grid_ref(&self.grid, &self.occ),
@@ -232,7 +241,7 @@ impl PlenoxelsBackend for CpuPlenoxels {
             rays,
             targets,
             batch_grad_scale(rays.len() / 6),
-            self.steps.bg.rgb,
+            &st.view(),
             grads,
         )?;
         Ok(Gradients {
@@ -240,6 +249,7 @@ impl PlenoxelsBackend for CpuPlenoxels {
             density,
             sh,
             background,
+            spheres,
             counts,
         })
     }
@@ -247,7 +257,7 @@ impl PlenoxelsBackend for CpuPlenoxels {
     fn render(&mut self, rays: &[f32], stop_thresh: f32) -> Result<(Vec<f32>, PlenoxelCounts)> {
         self.refresh_occupancy();
         let mp = march_params(&self.grid, stop_thresh);
-        Ok(render(&self.view(), rays, &mp, self.steps.bg.rgb))
+        Ok(render(&self.view(), rays, &mp, &self.steps.view()))
     }
 
     fn max_weights(&mut self, rays: &[f32], stop_thresh: f32) -> Result<Vec<f32>> {

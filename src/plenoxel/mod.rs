@@ -61,6 +61,8 @@ pub struct Gradients {
     pub sh: Vec<f32>,
     /// dL/dbg of a learned background (zero when it is fixed).
     pub background: [f32; 3],
+    /// dL/d(texel values) of learned background spheres (empty without them).
+    pub spheres: Vec<f32>,
     pub counts: PlenoxelCounts,
 }
 
@@ -69,6 +71,7 @@ pub struct PlenoxelsStage;
 
 impl Stage for PlenoxelsStage {
     const NAME: &'static str = "plenoxels";
+    const TRAINS_SPHERES: bool = true;
     const CHECKPOINT: &'static str = crate::run::dir::PLENOXELS_CHECKPOINT;
     const STATE_NAMES: &'static [&'static str] = &["rms_density", "rms_sh"];
     /// `step` = steps done, `psnr_batch` = PSNR of that step's batch MSE, `elapsed_s` = seconds
@@ -129,6 +132,7 @@ impl Stage for PlenoxelsStage {
         let ck = format::load(path)?;
         Ok(Saved {
             state: checkpoint::state_of::<Self>(&ck.optim, path)?,
+            spheres: checkpoint::spheres_of::<Self>(&ck.optim, &ck.meta, path)?,
             grid: ck.grid,
             meta: ck.meta,
         })

@@ -83,7 +83,7 @@ impl PlenoxelPlan {
             beta: p.beta,
             eps: p.eps,
         }));
-        let bg = BackgroundStep::when_learned(learned_bg, p.lr_bg, p.beta, p.eps);
+        let bg = BackgroundStep::when_learned(learned_bg, p.lr_bg, p.lr_sigma, p.beta, p.eps);
         passes.extend(bg.map(PlenoxelPass::Background));
         Ok(PlenoxelPlan { passes })
     }

@@ -195,7 +195,7 @@ impl QueuedBackend<PlenoxelsStage> for VulkanPlenoxels {
                 }
                 PlenoxelPass::RmsProp(h) => self.record_rmsprop(b, h)?,
                 PlenoxelPass::Background(s) => {
-                    record_background_step(b, &core.queue.bg, s.lr, s.beta, s.eps)?
+                    record_background_step(b, &core.queue.bg, core.queue.spheres.as_ref(), s)?
                 }
             }
         }
@@ -227,6 +227,7 @@ impl PlenoxelsBackend for VulkanPlenoxels {
             density,
             sh,
             background: self.core.queue.take_background_grad()?,
+            spheres: self.core.queue.take_sphere_grad()?,
             counts: self.read_stats()?,
         })
     }

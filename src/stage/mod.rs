@@ -17,6 +17,7 @@ use crate::abi::buffers::Background;
 use crate::data::TrainViews;
 use crate::gpu::{StepTiming, TrainRays};
 use crate::grid::SparseArrays;
+use crate::math::background_msi::SphereTable;
 use anyhow::{anyhow, Result};
 use std::path::Path;
 
@@ -25,6 +26,8 @@ pub struct Saved<S: Stage> {
     pub grid: S::Grid,
     /// The optimiser's running averages, in the order of [`Stage::STATE_NAMES`].
     pub state: S::State,
+    /// The background's spheres ([`Stage::TRAINS_SPHERES`] says whether they are learned).
+    pub spheres: Option<SphereTable>,
     pub meta: serde_json::Value,
 }
 
@@ -34,6 +37,8 @@ pub trait Stage: 'static {
     const NAME: &'static str;
     /// File name of the stage's checkpoint inside a run directory.
     const CHECKPOINT: &'static str;
+    /// Whether the stage trains a background's spheres (stage 1) or keeps them (stage 2).
+    const TRAINS_SPHERES: bool;
     /// Names of the optimiser's running averages, as a checkpoint stores them.
     const STATE_NAMES: &'static [&'static str];
     /// Header line of the per-step training log ([`Stage::log_row`]'s columns).
@@ -166,6 +171,14 @@ pub trait StageBackend<S: Stage> {
     /// Replace the background (colour, whether it is learned, its optimiser state).
     fn set_background(&mut self, bg: Background) -> Result<()> {
         self.store_mut().set_background(bg)
+    }
+    /// The background's spheres with their optimiser state (`None`: the colour alone).
+    fn spheres(&self) -> Result<Option<SphereTable>> {
+        self.store().spheres()
+    }
+    /// Replace them (learned when their shape says so; stage 2 never steps them).
+    fn set_spheres(&mut self, spheres: Option<SphereTable>) -> Result<()> {
+        self.store_mut().set_spheres(spheres)
     }
 }
 

@@ -12,6 +12,7 @@ use crate::gpu::{
     TrainRays,
 };
 use crate::grid::SparseArrays;
+use crate::math::background_msi::SphereTable;
 use anyhow::{ensure, Result};
 
 /// What a Vulkan backend of stage `S` holds whatever its stage: the queue of its steps, and its
@@ -80,6 +81,14 @@ where
 
     fn set_background(&mut self, bg: Background) -> Result<()> {
         self.queue.set_background(bg)
+    }
+
+    fn spheres(&self) -> Result<Option<SphereTable>> {
+        self.queue.spheres()
+    }
+
+    fn set_spheres(&mut self, spheres: Option<SphereTable>) -> Result<()> {
+        self.queue.set_spheres(spheres)
     }
 }
 

@@ -6,9 +6,15 @@
 
 use crate::abi::buffers::Background;
 use crate::abi::rays::{SampleSet, SampledRays};
+use crate::abi::train::BackgroundStep;
+use crate::cpu::background_spheres_step::background_spheres_step;
+use crate::cpu::background_step::background_step;
 use crate::gpu::{Phase, PhaseClock, TrainRays};
+use crate::math::background_msi::BackgroundView;
+use crate::math::background_msi::SphereTable;
 use anyhow::{anyhow, Result};
 use std::borrow::Cow;
+use std::sync::Arc;
 
 /// The background and the figures (of type `F`) of the steps a backend has not handed out.
 pub trait StepStore<F> {
@@ -22,11 +28,18 @@ pub trait StepStore<F> {
     fn background(&self) -> Result<Background>;
     /// Replace the background (colour, whether it is learned, its optimiser state).
     fn set_background(&mut self, bg: Background) -> Result<()>;
+    /// The background's spheres with their optimiser state (`None`: the colour alone).
+    fn spheres(&self) -> Result<Option<SphereTable>>;
+    /// Replace them (learned when their shape says so).
+    fn set_spheres(&mut self, spheres: Option<SphereTable>) -> Result<()>;
 }
 
 /// A CPU backend's background and the figures of its steps not yet taken.
 pub struct HostSteps<F> {
     pub bg: Background,
+    /// The background's spheres, and their gradient of the step so far.
+    pub spheres: Option<Arc<SphereTable>>,
+    pub sphere_grad: Vec<f32>,
     done: Vec<F>,
 }
 
@@ -35,6 +48,8 @@ impl<F> Default for HostSteps<F> {
     fn default() -> Self {
         HostSteps {
             bg: Background::new([1.0; 3], false),
+            spheres: None,
+            sphere_grad: Vec::new(),
             done: Vec::new(),
         }
     }
@@ -44,6 +59,58 @@ impl<F> HostSteps<F> {
     /// Keep the figures of a step until they are taken.
     pub fn push(&mut self, figures: F) {
         self.done.push(figures);
+    }
+
+    /// The background as the twins read it.
+    pub fn view(&self) -> BackgroundView<'_> {
+        match &self.spheres {
+            Some(s) => s.view(self.bg.rgb),
+            None => BackgroundView::colour(self.bg.rgb),
+        }
+    }
+
+    /// The background's gradients a training pass adds to: the colour's when it is learned,
+    /// the spheres' when they are, and the background as the pass reads it.
+    pub fn train_grads(
+        &mut self,
+    ) -> (
+        BackgroundView<'_>,
+        Option<&mut [f32; 3]>,
+        Option<&mut [f32]>,
+    ) {
+        let HostSteps {
+            bg,
+            spheres,
+            sphere_grad,
+            ..
+        } = self;
+        let learned = spheres.as_ref().is_some_and(|s| s.learned());
+        let view = match spheres {
+            Some(s) => s.view(bg.rgb),
+            None => BackgroundView::colour(bg.rgb),
+        };
+        (
+            view,
+            bg.learned().then_some(&mut bg.grad),
+            learned.then_some(&mut sphere_grad[..]),
+        )
+    }
+
+    /// The background step: the colour's (twin of `background_step`) and, when they are
+    /// learned, the spheres' (twin of `background_spheres_step`).
+    pub fn step_background(&mut self, s: &BackgroundStep) {
+        background_step(&mut self.bg, s.lr, s.beta, s.eps);
+        if let Some(sp) = self.spheres.as_mut().filter(|sp| sp.learned()) {
+            let [lr_sigma, lr_colour] = s.sphere_rates();
+            background_spheres_step(
+                Arc::make_mut(sp),
+                &mut self.sphere_grad,
+                lr_sigma,
+                lr_colour,
+                s.beta,
+                s.eps,
+            );
+        }
     }
 }
 
@@ -67,6 +134,16 @@ impl<F> StepStore<F> for HostSteps<F> {
 
     fn set_background(&mut self, bg: Background) -> Result<()> {
         self.bg = bg;
+        Ok(())
+    }
+
+    fn spheres(&self) -> Result<Option<SphereTable>> {
+        Ok(self.spheres.as_deref().cloned())
+    }
+
+    fn set_spheres(&mut self, spheres: Option<SphereTable>) -> Result<()> {
+        self.sphere_grad = vec![0.0; spheres.as_ref().map_or(0, |s| s.table.len())];
+        self.spheres = spheres.map(Arc::new);
         Ok(())
     }
 }

@@ -9,7 +9,6 @@ use crate::abi::buffers::{RayLoss, TrainCounts};
 use crate::abi::normal_reg::NormalPrefix;
 use crate::abi::regularisers::{axis_neighbours, forward_reach};
 use crate::abi::surface_grid::SurfaceGridRef;
-use crate::cpu::background_step::background_step;
 use crate::cpu::sample_rays::sample_rays;
 use crate::cpu::surface_blocks::SkipAllocation;
 use crate::cpu::surface_delta_tv::delta_tv;
@@ -129,7 +128,8 @@ impl CpuSurface {
                     loss,
                 } => {
                     let bg = &mut self.steps.bg;
-                    let sp = surface_params(&self.grid, *truncation, *stop_thresh, bg.rgb);
+                    let sp = surface_params(&self.grid, *truncation, *stop_thresh, bg.rgb)
+                        .with_spheres(self.steps.spheres.clone());
                     let [gd, go, gs] = &mut self.grad;
                     (out.losses, out.counts) = train(
                         &grid_ref(&self.grid),
@@ -202,9 +202,7 @@ impl CpuSurface {
                         h,
                     );
                 }
-                SurfacePass::Background(s) => {
-                    background_step(&mut self.steps.bg, s.lr, s.beta, s.eps);
-                }
+                SurfacePass::Background(s) => self.steps.step_background(s),
             }
         }
         Ok(out)
@@ -311,7 +309,8 @@ impl SurfaceBackend for CpuSurface {
         truncation: Truncation,
         stop_thresh: f32,
     ) -> Result<(Vec<f32>, SurfCounts)> {
-        let sp = surface_params(&self.grid, truncation, stop_thresh, self.steps.bg.rgb);
+        let sp = surface_params(&self.grid, truncation, stop_thresh, self.steps.bg.rgb)
+            .with_spheres(self.steps.spheres.clone());
         self.refresh_blocks(0.0, 0.0)?;
         let skip = SkipRef {
             words: &self.blocks,

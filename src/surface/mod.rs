@@ -89,6 +89,7 @@ pub struct SurfaceStage;
 
 impl Stage for SurfaceStage {
     const NAME: &'static str = "surface";
+    const TRAINS_SPHERES: bool = false;
     const CHECKPOINT: &'static str = crate::run::dir::SURFACE_CHECKPOINT;
     const STATE_NAMES: &'static [&'static str] = &["rms_delta", "rms_opacity", "rms_sh"];
     /// Step, mse, batch PSNR, the unweighted entropy and consistency means, the regulariser
@@ -152,6 +153,7 @@ impl Stage for SurfaceStage {
         let ck = checkpoint::surface::load(path)?;
         Ok(Saved {
             state: checkpoint::state_of::<Self>(&ck.optim, path)?,
+            spheres: checkpoint::spheres_of::<Self>(&ck.optim, &ck.meta, path)?,
             grid: ck.grid,
             meta: ck.meta,
         })
@@ -227,6 +229,7 @@ pub fn surface_params(
         truncation,
         stop_thresh,
         background,
+        spheres: None,
     }
 }
 

@@ -423,9 +423,12 @@ impl QueuedBackend<SurfaceStage> for VulkanSurface {
                     let q = &self.core.queue;
                     record_surface_rmsprop(b, &io, &q.step, &q.args, h)?;
                 }
-                SurfacePass::Background(s) => {
-                    record_background_step(b, &self.core.queue.bg, s.lr, s.beta, s.eps)?
-                }
+                SurfacePass::Background(s) => record_background_step(
+                    b,
+                    &self.core.queue.bg,
+                    self.core.queue.spheres.as_ref(),
+                    s,
+                )?,
             }
         }
         Ok(())

@@ -102,7 +102,8 @@ impl<'b> StageSteps<PlenoxelsStage, dyn PlenoxelsBackend + 'b> for PlenoxelsStep
     }
 
     /// From step 0 the background starts as `data.background` says
-    /// (`BackgroundRecord::start_on`); a resumed run keeps the one its checkpoint holds.
+    /// (`BackgroundRecord::start_on`, with its spheres sized for the last resolution); a resumed
+    /// run keeps the one its checkpoint holds.
     fn start(
         &mut self,
         backend: &mut (dyn PlenoxelsBackend + 'b),
@@ -110,7 +111,10 @@ impl<'b> StageSteps<PlenoxelsStage, dyn PlenoxelsBackend + 'b> for PlenoxelsStep
         start_step: u32,
     ) -> Result<()> {
         if start_step == 0 {
-            backend.set_background(BackgroundRecord::start_on(data).kernel())?;
+            let bg = BackgroundRecord::start_on(data);
+            backend.set_background(bg.kernel())?;
+            let res = self.cfg.res_at(self.cfg.iters);
+            backend.set_spheres(bg.start_spheres(data, res)?)?;
         }
         Ok(())
     }

@@ -976,3 +976,129 @@ fn the_scene_box_travels_with_the_run() {
         "{err}"
     );
 }
+
+/// Replace the scene's RGBA images by RGB ones composited on a backdrop that varies with the
+/// ray's direction: a distant environment, which spheres can hold and one colour cannot.
+fn drop_alpha_on_environment(data: &Path) {
+    use alphasurf::data::{Dataset, LoadOptions};
+    let env = |d: glam::Vec3| [0.5 + 0.4 * d.x, 0.5 + 0.4 * d.y, 0.5 + 0.3 * d.z];
+    let d = Dataset::load(data, &LoadOptions::default()).unwrap();
+    for f in d
+        .train
+        .frames
+        .iter()
+        .chain(&d.val().frames)
+        .chain(&d.test.frames)
+    {
+        let rgba = image::open(&f.file).unwrap().to_rgba8();
+        let rgb = image::RgbImage::from_fn(rgba.width(), rgba.height(), |x, y| {
+            let p = rgba.get_pixel(x, y).0;
+            let a = p[3] as f32 / 255.0;
+            let e = env(f.camera.pixel_ray(x, y).1);
+            image::Rgb(std::array::from_fn(|c| {
+                ((p[c] as f32 / 255.0 * a + (1.0 - a) * e[c]) * 255.0).round() as u8
+            }))
+        });
+        rgb.save(&f.file).unwrap();
+    }
+}
+
+/// `--background spheres`: stage 1 learns an environment one colour cannot hold, its checkpoint
+/// keeps the spheres (resume restores them bit for bit), stage 2 and `render` composite on them.
+#[test]
+fn background_spheres_learn_the_environment_and_travel_with_the_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = scene(dir.path());
+    drop_alpha_on_environment(&data);
+    let stage1 = |name: &str, background: &str| {
+        let run = dir.path().join(name);
+        train(
+            &data,
+            &run,
+            "cpu",
+            &[
+                "--stage",
+                "plenoxels",
+                "--iters",
+                "300",
+                "--background",
+                background,
+            ],
+        );
+        run
+    };
+    let (colour, spheres) = (stage1("learned", "learned"), stage1("spheres", "spheres"));
+    let psnr = |run: &Path| metrics(run)["test_psnr"].as_f64().unwrap();
+    let (p_colour, p_spheres) = (psnr(&colour), psnr(&spheres));
+    eprintln!("stage-1 test PSNR: one learned colour {p_colour:.2} dB, spheres {p_spheres:.2} dB");
+    assert!(
+        p_spheres > p_colour + 3.0,
+        "spheres {p_spheres:.2} dB against one colour {p_colour:.2} dB"
+    );
+    let m = metrics(&spheres);
+    assert_eq!(m["background"]["mode"], "spheres");
+    assert_eq!(m["background"]["spheres"]["layers"], 16);
+    // The checkpoint holds the spheres: resumed into a fresh backend they come back as trained.
+    let ck = spheres.join("plenoxels.npz");
+    let saved = alphasurf::checkpoint::format::load(&ck).unwrap();
+    let mut b = alphasurf::plenoxel::CpuPlenoxels::new(saved.grid.clone());
+    alphasurf::checkpoint::resume::<
+        alphasurf::plenoxel::PlenoxelsStage,
+        alphasurf::train::PlenoxelsConfig,
+        _,
+    >(&mut b, &ck)
+    .unwrap();
+    use alphasurf::stage::StageBackend;
+    let s = b.spheres().unwrap().expect("spheres restored");
+    let table = &saved
+        .optim
+        .iter()
+        .find(|(n, _)| n == "background_spheres")
+        .unwrap()
+        .1;
+    assert!(s.learned() && &s.table == table && s.avg.iter().any(|&a| a > 0.0));
+    // Stage 2 composites on them (kept, not learned): its test PSNR is the one `render` gives.
+    let s2 = dir.path().join("s2");
+    run_ok(
+        bin()
+            .args(["train", "--stage", "surface", "--init"])
+            .arg(&spheres)
+            .arg("--data")
+            .arg(&data)
+            .arg("--out")
+            .arg(&s2)
+            .args(["--backend", "cpu", "--background", "spheres", "--quiet"])
+            .args(["--surface-iters", "100", "--batch", "2048"]),
+    );
+    let s2_psnr = psnr(&s2);
+    assert_eq!(
+        metrics(&s2)["background"]["spheres"],
+        m["background"]["spheres"]
+    );
+    let rendered = render_mean_psnr(
+        bin()
+            .args(["render", "--run"])
+            .arg(&s2)
+            .arg("--out")
+            .arg(dir.path().join("renders"))
+            .args(["--backend", "cpu"]),
+    );
+    eprintln!("stage 2: test PSNR {s2_psnr:.3} dB, rendered {rendered:.3} dB");
+    assert!((rendered - s2_psnr).abs() < 0.01, "{rendered} vs {s2_psnr}");
+    // A white stage 2 on a spheres run is refused, naming the mode to pass.
+    let out = bin()
+        .args(["train", "--stage", "surface", "--init"])
+        .arg(&spheres)
+        .arg("--data")
+        .arg(&data)
+        .arg("--out")
+        .arg(dir.path().join("white"))
+        .args(["--backend", "cpu", "--quiet"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("--background spheres"),
+        "{err}"
+    );
+}

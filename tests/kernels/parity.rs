@@ -43,6 +43,7 @@ macro_rules! rows {
 
 rows!(
     background_msi_eval,
+    background_spheres_step,
     background_step,
     cubic_solve,
     dda_walk,
@@ -52,7 +53,9 @@ rows!(
     occupancy,
     optim_args,
     plenoxel_fwd,
+    plenoxel_fwd_spheres,
     plenoxel_train,
+    plenoxel_train_spheres,
     plenoxel_weights,
     rmsprop_sparse,
     sample_rays,
@@ -62,6 +65,7 @@ rows!(
     surface_blocks,
     surface_delta_tv,
     surface_fwd,
+    surface_fwd_spheres,
     surface_faces,
     surface_live_cells,
     surface_normal_reg_cells,
@@ -70,6 +74,7 @@ rows!(
     surface_opacity_reg,
     surface_rmsprop,
     surface_train,
+    surface_train_spheres,
     trilerp_eval,
     tv,
 );

@@ -252,6 +252,7 @@ fn backward_matches_central_differences(truncation: Truncation) {
         truncation,
         stop_thresh: 0.0,
         background: TEST_BACKGROUND,
+        spheres: None,
     };
     let lp = SurfaceLoss {
         grad_scale: 1.0,
