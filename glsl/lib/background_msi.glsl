@@ -115,8 +115,13 @@ float bg_msi_alpha(float sigma) {
     return 1.0 - exp(-max(sigma, 0.0));
 }
 
-// The background colour of the ray (o, unit d) in front of rgb, and T_L in `t_out`.
-vec3 bg_msi_composite(BackgroundSpheres s, vec3 o, vec3 d, vec3 rgb, out float t_out) {
+// The spheres the ray (o, unit d) leaves, nearest first: returns B (in front of rgb) and T_L in
+// `t_out`; with `back` (only where BG_MSI_BACKWARD is defined) adds dL/d(texel values) of the
+// ray given dL/dB = g and its B = total to s.grad (float atomics): per sphere
+// dL/dσ = Σ_ch g·(T_{l+1} c_l − (B − B_≤l)) where σ > 0, dL/dc = g·T_l α_l where the colour is
+// positive, spread over the taps by their weights. One loop for both, as the twin's `march`.
+vec3 bg_msi_march(BackgroundSpheres s, vec3 o, vec3 d, vec3 rgb, bool back, vec3 total, vec3 g,
+                  out float t_out) {
     F32Buf table = F32Buf(packUint2x32(s.table));
     precise vec3 oc = o - s.centre;
     vec3 color = vec3(0.0);
@@ -131,6 +136,25 @@ vec3 bg_msi_composite(BackgroundSpheres s, vec3 o, vec3 d, vec3 rgb, out float t
         precise vec3 acc = color + wt * c;
         color = acc;
         precise float tn = T * (1.0 - alpha);
+#ifdef BG_MSI_BACKWARD
+        if (back) {
+            F32Buf grad = F32Buf(packUint2x32(s.grad));
+            vec4 dv = vec4(0.0);
+            if (v.x > 0.0) {
+                precise vec3 e = g * (tn * c - (total - color));
+                precise float ds = e.x + e.y + e.z;
+                dv.x = ds;
+            }
+            for (int ch = 0; ch < 3; ch++) {
+                if (v[1 + ch] > 0.0) dv[1 + ch] = g[ch] * wt;
+            }
+            for (int k = 0; k < 4; k++) {
+                for (int j = 0; j < 4; j++) {
+                    if (dv[j] != 0.0) atomicAdd(grad.v[tp.at[k] + uint(j)], tp.w[k] * dv[j]);
+                }
+            }
+        }
+#endif
         T = tn;
     }
     t_out = T;
@@ -138,40 +162,16 @@ vec3 bg_msi_composite(BackgroundSpheres s, vec3 o, vec3 d, vec3 rgb, out float t
     return outc;
 }
 
+// The background colour of the ray (o, unit d) in front of rgb, and T_L in `t_out`.
+vec3 bg_msi_composite(BackgroundSpheres s, vec3 o, vec3 d, vec3 rgb, out float t_out) {
+    return bg_msi_march(s, o, d, rgb, false, vec3(0.0), vec3(0.0), t_out);
+}
+
 #ifdef BG_MSI_BACKWARD
-// dL/d(texel values) of the ray given dL/dB = g and total = B (float atomics into s.grad).
+// dL/d(texel values) of the ray given dL/dB = g and total = B (bg_msi_march).
 void bg_msi_backward(BackgroundSpheres s, vec3 o, vec3 d, vec3 total, vec3 g) {
-    F32Buf table = F32Buf(packUint2x32(s.table));
-    F32Buf grad = F32Buf(packUint2x32(s.grad));
-    precise vec3 oc = o - s.centre;
-    vec3 accum = vec3(0.0);
-    float T = 1.0;
-    for (uint l = 0u; l < s.layers; l++) {
-        BgTaps tp;
-        if (!bg_msi_taps(s, l, oc, d, tp)) continue;
-        vec4 v = bg_msi_value(table, tp);
-        float alpha = bg_msi_alpha(v.x);
-        vec3 c = max(v.yzw, vec3(0.0));
-        precise float wt = T * alpha;
-        precise vec3 acc = accum + wt * c;
-        accum = acc;
-        precise float tn = T * (1.0 - alpha);
-        vec4 dv = vec4(0.0);
-        if (v.x > 0.0) {
-            precise vec3 e = g * (tn * c - (total - accum));
-            precise float ds = e.x + e.y + e.z;
-            dv.x = ds;
-        }
-        for (int ch = 0; ch < 3; ch++) {
-            if (v[1 + ch] > 0.0) dv[1 + ch] = g[ch] * wt;
-        }
-        for (int k = 0; k < 4; k++) {
-            for (int j = 0; j < 4; j++) {
-                if (dv[j] != 0.0) atomicAdd(grad.v[tp.at[k] + uint(j)], tp.w[k] * dv[j]);
-            }
-        }
-        T = tn;
-    }
+    float t;
+    bg_msi_march(s, o, d, vec3(0.0), true, total, g, t);
 }
 #endif
 

@@ -13,7 +13,7 @@
 
 use crate::backend::Backend;
 use crate::data::ndc::Space;
-use crate::data::BackgroundMode;
+use crate::data::{BackgroundMode, Dataset, LoadOptions};
 use crate::pipeline::demo::{
     alphasurf_row, plenoxels_levels, plenoxels_levels_trimmed, Row, LEVELS,
 };
@@ -79,7 +79,7 @@ pub struct AccuracyArgs {
     pub space: Space,
     /// What rays are composited on, as `train --background` takes it (`spheres`: a 360°
     /// capture's room on learned spheres around the grid box).
-    #[arg(long, value_enum, default_value_t = BackgroundMode::White)]
+    #[arg(long, value_enum, default_value_t = BackgroundMode::Auto)]
     pub background: BackgroundMode,
     /// Output directory: one folder per scene (its runs, clouds and result.json) and
     /// accuracy.json. Default: runs/accuracy-N-PRESET-sSEED.
@@ -112,7 +112,7 @@ pub struct PlenoxelsSettings {
     #[serde(default)]
     pub space: Space,
     /// `--background` (absent from records written before it: white).
-    #[serde(default)]
+    #[serde(default = "BackgroundMode::unrecorded")]
     pub background: BackgroundMode,
 }
 
@@ -288,19 +288,29 @@ pub struct CategoryMean {
     pub stage2_psnr: Option<f64>,
 }
 
-/// The folder-name word of a photographed capture; its scenes take category real.
+/// The folder-name word of a photographed capture: category real when it trains in NDC (the
+/// supplement's real-world set-up, forward-facing), translucent in a box (a 360° capture on
+/// background spheres: the grid in dataset units, as the film scenes'; docs/results.md).
 const CAPTURE_WORD: &str = "capture";
 
 /// The category of a scene folder: `--category`, else its name's first word (a category's name,
-/// or [`CAPTURE_WORD`] for real).
-pub fn scene_category(dir: &Path, given: Option<Category>) -> Result<Category> {
+/// or [`CAPTURE_WORD`]: real or translucent as `in_ndc` says where it trains).
+pub fn scene_category(
+    dir: &Path,
+    given: Option<Category>,
+    in_ndc: impl FnOnce() -> Result<bool>,
+) -> Result<Category> {
     if let Some(c) = given {
         return Ok(c);
     }
     let name = scene_name(dir);
     let first = name.split(['_', '-']).next().unwrap_or("");
     if first == CAPTURE_WORD {
-        return Ok(Category::Real);
+        return Ok(if in_ndc()? {
+            Category::Real
+        } else {
+            Category::Translucent
+        });
     }
     match Category::value_variants()
         .iter()
@@ -680,10 +690,11 @@ pub fn run(args: &AccuracyArgs, devices: &mut Devices) -> Result<()> {
     });
     let todo = scenes_to_run(args)?;
     let mut results = Vec::new();
-    for (i, (data, name, category)) in todo.into_iter().enumerate() {
+    for (i, sc) in todo.into_iter().enumerate() {
+        let name = sc.name.clone();
         let dir = out.join(&name);
         std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
-        let (settings, expected) = scene_settings(&steps, args, &dir, data, category)?;
+        let (settings, expected) = scene_settings(&steps, args, &dir, sc)?;
         let path = dir.join("result.json");
         eprintln!(
             "\n=== bench accuracy [{}/{}] {name} ({}) → {}",
@@ -723,18 +734,52 @@ pub fn run(args: &AccuracyArgs, devices: &mut Devices) -> Result<()> {
 
 /// Each `--data` folder with its name and category, checked before the first scene trains so
 /// that a bad folder or a name clash fails at once.
-fn scenes_to_run(args: &AccuracyArgs) -> Result<Vec<(PathBuf, String, Category)>> {
-    let mut todo = Vec::new();
+fn scenes_to_run(args: &AccuracyArgs) -> Result<Vec<Scene>> {
+    let mut todo: Vec<Scene> = Vec::new();
     for d in &args.data {
         ensure!(d.is_dir(), "{}: not a directory", d.display());
         let name = scene_name(d);
         ensure!(
-            todo.iter().all(|(_, n, _)| n != &name),
+            todo.iter().all(|s| s.name != name),
             "two scenes are named {name:?}: their folders would collide under --out"
         );
-        todo.push((d.clone(), name, scene_category(d, args.category)?));
+        // Where the scene trains and on what, as `train` decides (`--space`, `--background`);
+        // a folder whose category its name cannot tell is refused before it is read.
+        let load = || {
+            let opts = LoadOptions {
+                background: args.background,
+                space: args.space,
+                ..Default::default()
+            };
+            Dataset::load(d, &opts)
+        };
+        let mut loaded = None;
+        let category = scene_category(d, args.category, || {
+            let data = load()?;
+            let ndc = data.scene.ndc.is_some();
+            loaded = Some(data);
+            Ok(ndc)
+        })?;
+        let data = match loaded {
+            Some(data) => data,
+            None => load()?,
+        };
+        todo.push(Scene {
+            category,
+            background: data.background,
+            data: d.clone(),
+            name,
+        });
     }
     Ok(todo)
+}
+
+/// A scene to run: its folder, name, category and background (`--background` resolved).
+struct Scene {
+    data: PathBuf,
+    name: String,
+    category: Category,
+    background: BackgroundMode,
 }
 
 /// A scene's settings and this build's configurations for them. With `--stage1-from`, the
@@ -744,11 +789,11 @@ fn scene_settings(
     steps: &Steps,
     args: &AccuracyArgs,
     dir: &Path,
-    data: PathBuf,
-    category: Category,
+    scene: Scene,
 ) -> Result<(Settings, Expected)> {
+    let category = scene.category;
     let mut stage1 = PlenoxelsSettings {
-        data,
+        data: scene.data,
         res: args.res,
         iters: args.iters,
         batch: args.batch,
@@ -757,7 +802,7 @@ fn scene_settings(
         backend: steps.backend(),
         set: args.plenoxels_set.clone(),
         space: args.space,
-        background: args.background,
+        background: scene.background,
     };
     if args.stage1_from.is_some() {
         // Another output's stage 1, whatever its seed, as long as the rest matches.
@@ -955,7 +1000,7 @@ mod tests {
 
     #[test]
     fn categories_come_from_folder_names_or_the_flag() {
-        let c = |p: &str, g: Option<Category>| scene_category(Path::new(p), g);
+        let c = |p: &str, g: Option<Category>| scene_category(Path::new(p), g, || Ok(true));
         assert_eq!(c("fixtures/thin_lyre", None).unwrap(), Category::Thin);
         assert_eq!(
             c("x/translucent_lampshade/", None).unwrap(),
@@ -966,6 +1011,9 @@ mod tests {
         assert!(e.contains("x/lyre") && e.contains("--category"), "{e}");
         assert!(c("x/thinner_lyre", None).is_err());
         assert_eq!(c("x/capture_fan_ff", None).unwrap(), Category::Real);
+        // A capture in a box (360°, on background spheres): translucent.
+        let boxed = scene_category(Path::new("x/capture_birdcage"), None, || Ok(false));
+        assert_eq!(boxed.unwrap(), Category::Translucent);
         assert_eq!(
             c("x/capture_fan_ff", Some(Category::Thin)).unwrap(),
             Category::Thin

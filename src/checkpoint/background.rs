@@ -205,10 +205,11 @@ impl BackgroundRecord {
     }
 
     /// Refuse a run whose `--background` differs from this record's (`what` names the record's
-    /// source): the images were composited, and the grid trained, on this one.
+    /// source): the images were composited, and the grid trained, on this one. `auto` takes
+    /// the record's.
     pub fn ensure_mode(&self, asked: BackgroundMode, what: &str) -> Result<()> {
         ensure!(
-            asked == self.mode,
+            asked == self.mode || asked == BackgroundMode::Auto,
             "--background {} but {what} trained with --background {}; pass --background {}",
             asked.name(),
             self.mode.name(),

@@ -7,8 +7,13 @@ use serde::{Deserialize, Serialize};
 #[derive(clap::ValueEnum, Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum BackgroundMode {
-    /// White (1, 1, 1): NeRF-synthetic practice.
+    /// What the data calls for: white for images with alpha (or masks) and for forward-facing
+    /// captures in NDC (whose grid reaches infinite depth), spheres for images without alpha
+    /// in a box (a 360° capture whose views see a room); resuming, or stage 2 from a run
+    /// directory: that run's.
     #[default]
+    Auto,
+    /// White (1, 1, 1): NeRF-synthetic practice.
     White,
     /// Black (0, 0, 0).
     Black,
@@ -22,15 +27,31 @@ pub enum BackgroundMode {
 }
 
 impl BackgroundMode {
-    /// The colour images are composited on at load, and a fixed background's colour: white,
-    /// black, or, learned, mid grey (images with alpha are refused then, so it composites
+    /// The colour images are composited on at load, and a fixed background's colour: white
+    /// (also `Auto`'s: it resolves to white where images have alpha), black, or, learned, mid grey (images with alpha are refused then, so it composites
     /// nothing; a learned run starts from its images' border colour, `checkpoint::BackgroundRecord`).
     pub fn initial_rgb(self) -> [f32; 3] {
         match self {
-            BackgroundMode::White => [1.0; 3],
+            BackgroundMode::Auto | BackgroundMode::White => [1.0; 3],
             BackgroundMode::Black => [0.0; 3],
             BackgroundMode::Learned | BackgroundMode::Spheres => [0.5; 3],
         }
+    }
+
+    /// `Auto` resolved for a dataset: whether any image had alpha, whether its grid lies in
+    /// NDC; other modes as they are.
+    pub fn resolve(self, had_alpha: bool, ndc: bool) -> Self {
+        match self {
+            BackgroundMode::Auto if had_alpha || ndc => BackgroundMode::White,
+            BackgroundMode::Auto => BackgroundMode::Spheres,
+            m => m,
+        }
+    }
+
+    /// What records written before the background was recorded trained with (serde's default
+    /// for them).
+    pub fn unrecorded() -> Self {
+        BackgroundMode::White
     }
 
     /// Whether the colour is trained.
@@ -46,6 +67,7 @@ impl BackgroundMode {
     /// The name on the command line.
     pub fn name(self) -> &'static str {
         match self {
+            BackgroundMode::Auto => "auto",
             BackgroundMode::White => "white",
             BackgroundMode::Black => "black",
             BackgroundMode::Learned => "learned",

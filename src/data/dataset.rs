@@ -34,7 +34,7 @@ impl Default for LoadOptions {
         LoadOptions {
             downscale: 1,
             scene: None,
-            background: BackgroundMode::White,
+            background: BackgroundMode::Auto,
             space: Space::Box,
         }
     }

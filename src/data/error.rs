@@ -7,9 +7,9 @@ use std::path::PathBuf;
 /// A dataset that cannot be loaded, and why.
 #[derive(Debug, thiserror::Error)]
 pub enum DataError {
-    /// `--background learned` on a dataset whose images have alpha or masks.
+    /// `--background learned` or `spheres` on a dataset whose images have alpha or masks.
     #[error(
-        "{}: image {} has alpha (or a mask): `--background learned` is for images without one; \
+        "{}: image {} has alpha (or a mask): `--background {mode}` is for images without one; \
          use `--background white` or `black` to composite on that colour",
         path.display(),
         image.display()
@@ -19,6 +19,8 @@ pub enum DataError {
         path: PathBuf,
         /// The first image with alpha.
         image: PathBuf,
+        /// The learned mode asked for (`learned`, `spheres`).
+        mode: &'static str,
     },
     /// The dataset directory does not exist or is not a directory.
     #[error("{}: dataset directory does not exist or is not a directory", path.display())]

@@ -4,6 +4,7 @@
 //! training alpha masks, and warnings (no alpha channel, cameras not looking at the box, objects
 //! reaching outside the box).
 
+use super::background::BackgroundMode;
 use super::camera::ray_box;
 use super::dataset::Dataset;
 use super::foreground::ForegroundBox;
@@ -47,6 +48,8 @@ pub struct Inspection {
     pub foreground: Option<ForegroundBox>,
     /// Which space the grid lies in and why (`Dataset::space`).
     pub space: String,
+    /// The background training composites on (`--background auto` resolved for the data).
+    pub background: BackgroundMode,
     /// The scene box in Blender units (in NDC: the foreground box, or the NDC cube's bounds
     /// from the near plane to twice its depth, where the checks below look).
     pub box_min: Vec3,
@@ -75,21 +78,28 @@ fn cropped_by_downscale(s: &Split) -> Option<String> {
     })
 }
 
-/// Advice for a capture trained in its foreground box: no background model holds the floor
-/// and walls its views see, so they become density inside the box (measured on
-/// `capture_birdcage`, docs/results.md); the room's box keeps them where they are.
+/// Advice for a capture trained in its foreground box without background spheres: nothing but
+/// density inside the box can then hold the floor and walls its views see (measured on
+/// `capture_birdcage`, docs/results.md).
 fn room_advice(ds: &Dataset) -> Option<String> {
     let fg = ds.foreground.as_ref()?;
     let room = fg.room?;
     let in_foreground = ds.scene == fg.bounds.scene_box();
     let (lo, hi) = (room.lo(), room.hi());
-    in_foreground.then(|| {
+    (in_foreground && !ds.background.spheres()).then(|| {
         format!(
-            "the grid is the foreground box, and no background model exists yet: the floor and \
-             walls these views see can only be density inside it (capture_birdcage at 128³: \
-             Chamfer ×10⁻² 12.7 in its foreground box, 3.9 in the room; docs/results.md). To \
-             keep them outside the object, train in the room: --box={:.2},{:.2},{:.2},{:.2},{:.2},{:.2}",
-            lo.x, lo.y, lo.z, hi.x, hi.y, hi.z
+            "the grid is the foreground box on --background {}: the floor and walls these views \
+             see can only be density inside the box (capture_birdcage at 128³: Chamfer ×10⁻² \
+             12.7 so, 3.9 in the room, 1.02 on spheres; docs/results.md). Leave --background \
+             out (auto) or pass --background spheres to hold them on learned spheres around the \
+             box, or train in the room: --box={:.2},{:.2},{:.2},{:.2},{:.2},{:.2}",
+            ds.background.name(),
+            lo.x,
+            lo.y,
+            lo.z,
+            hi.x,
+            hi.y,
+            hi.z
         )
     })
 }
@@ -197,6 +207,7 @@ pub fn inspect(ds: &Dataset) -> Inspection {
         split_rule: ds.split_rule.clone(),
         foreground: ds.foreground.clone(),
         space: ds.space.clone(),
+        background: ds.background,
         box_min,
         box_max,
         object_bounds,
@@ -337,6 +348,11 @@ impl std::fmt::Display for Inspection {
         }
         let _ = writeln!(s, "split: {}", self.split_rule);
         let _ = writeln!(s, "grid space: {}", self.space);
+        let _ = writeln!(
+            s,
+            "background (--background auto): {}",
+            self.background.name()
+        );
         let _ = writeln!(
             s,
             "scene box (Blender units): {} .. {}",

@@ -95,6 +95,7 @@ fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset, DataError> {
             return Err(DataError::AlphaWithLearnedBackground {
                 path: root.to_path_buf(),
                 image: f.file.clone(),
+                mode: opts.background.name(),
             });
         }
     }
@@ -131,6 +132,12 @@ fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset, DataError> {
         }
     };
     let all = [Some(&train), val_split.as_ref(), Some(&test)];
+    let had_alpha = all
+        .iter()
+        .flatten()
+        .flat_map(|s| &s.frames)
+        .any(|f| f.image.had_alpha);
+    let background = opts.background.resolve(had_alpha, scene.ndc.is_some());
     let splits = all.iter().flatten();
     let image_bytes = splits
         .clone()
@@ -148,7 +155,7 @@ fn load(root: &Path, opts: &LoadOptions) -> Result<Dataset, DataError> {
         space,
         foreground,
         split_rule,
-        background: opts.background,
+        background,
         report: LoadReport {
             seconds: t0.elapsed().as_secs_f64(),
             image_bytes,

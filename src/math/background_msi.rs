@@ -165,6 +165,26 @@ pub fn composite(
     d: [f32; 3],
     rgb: [f32; 3],
 ) -> ([f32; 3], f32) {
+    march(s, table, o, d, rgb, None)
+}
+
+/// What [`backward`] adds to: the gradient, the ray's B, and dL/dB.
+struct Backward<'a> {
+    grad: &'a [AtomicU32],
+    total: [f32; 3],
+    g: [f32; 3],
+}
+
+/// The spheres the ray leaves, nearest first: B and T_L as [`composite`] returns them, and with
+/// `back` the texel gradient added as [`backward`] says (one loop for both, as the kernel's).
+fn march(
+    s: &BackgroundSpheres,
+    table: &[f32],
+    o: [f32; 3],
+    d: [f32; 3],
+    rgb: [f32; 3],
+    back: Option<Backward>,
+) -> ([f32; 3], f32) {
     let oc = offset(s, o);
     let mut color = [0f32; 3];
     let mut t = 1f32;
@@ -177,7 +197,28 @@ pub fn composite(
         for ch in 0..3 {
             color[ch] += wt * c[ch];
         }
-        t *= 1.0 - alpha;
+        let tn = t * (1.0 - alpha);
+        if let Some(b) = &back {
+            let mut dv = [0f32; TEXEL];
+            if ly.value[0] > 0.0 {
+                dv[0] = (0..3)
+                    .map(|ch| b.g[ch] * (tn * c[ch] - (b.total[ch] - color[ch])))
+                    .sum();
+            }
+            for ch in 0..3 {
+                if ly.value[1 + ch] > 0.0 {
+                    dv[1 + ch] = b.g[ch] * wt;
+                }
+            }
+            for (at, w) in ly.taps {
+                for k in 0..TEXEL {
+                    if dv[k] != 0.0 {
+                        atomic::add(&b.grad[at + k], w * dv[k]);
+                    }
+                }
+            }
+        }
+        t = tn;
     }
     (std::array::from_fn(|ch| color[ch] + t * rgb[ch]), t)
 }
@@ -219,39 +260,7 @@ pub fn backward(
     total: [f32; 3],
     g: [f32; 3],
 ) {
-    let oc = offset(s, o);
-    let mut accum = [0f32; 3];
-    let mut t = 1f32;
-    for l in 0..s.layers {
-        let Some(ly) = layer(s, table, l, oc, d) else {
-            continue;
-        };
-        let (alpha, c) = shade(&ly.value);
-        let wt = t * alpha;
-        for ch in 0..3 {
-            accum[ch] += wt * c[ch];
-        }
-        let tn = t * (1.0 - alpha);
-        let mut dv = [0f32; TEXEL];
-        if ly.value[0] > 0.0 {
-            dv[0] = (0..3)
-                .map(|ch| g[ch] * (tn * c[ch] - (total[ch] - accum[ch])))
-                .sum();
-        }
-        for ch in 0..3 {
-            if ly.value[1 + ch] > 0.0 {
-                dv[1 + ch] = g[ch] * wt;
-            }
-        }
-        for (at, w) in ly.taps {
-            for k in 0..TEXEL {
-                if dv[k] != 0.0 {
-                    atomic::add(&grad[at + k], w * dv[k]);
-                }
-            }
-        }
-        t = tn;
-    }
+    march(s, table, o, d, [0.0; 3], Some(Backward { grad, total, g }));
 }
 
 /// A background's spheres on the host: their shape, texel values (σ, r, g, b per texel) and the

@@ -115,7 +115,7 @@ impl<'g> Steps<'g> {
             seed: 0,
             progress: true,
             space: Space::Auto,
-            background: BackgroundMode::White,
+            background: BackgroundMode::Auto,
         }
     }
 

@@ -104,10 +104,14 @@ pub struct TrainOptions {
     /// picks and why; run.json records it; `extract` writes points back in dataset units.
     #[arg(long, value_enum, default_value_t = Space::Auto)]
     pub space: Space,
-    /// The colour behind the scene: images with alpha or masks are composited on it at load,
-    /// and every render and training pass composites on it. `learned`: a constant colour
-    /// trained with the scene, for images without alpha (it refuses images with alpha).
-    #[arg(long, value_enum, default_value_t = BackgroundMode::White)]
+    /// What lies behind the scene: images with alpha or masks are composited on it at load,
+    /// and every render and training pass composites on it. `auto`: white for images with
+    /// alpha and for forward-facing captures in NDC, `spheres` for a 360° capture without
+    /// alpha (resuming or from `--init RUN`: that run's); `learned`: a constant colour trained
+    /// with the scene; `spheres`: learned spheres around the grid box in front of a learned
+    /// colour, for views that see a room (stage 1 trains them, stage 2 keeps them). The
+    /// learned ones refuse images with alpha.
+    #[arg(long, value_enum, default_value_t = BackgroundMode::Auto)]
     pub background: BackgroundMode,
     /// Write a checkpoint exactly every N steps. Default: the preset's (`fast` 500 steps, `paper`
     /// 5000), at the first such step a minute or more after the last checkpoint.
@@ -163,7 +167,7 @@ impl TrainOptions {
             downscale: 1,
             scene_box: None,
             space: Space::Auto,
-            background: BackgroundMode::White,
+            background: BackgroundMode::Auto,
             checkpoint_every: None,
             resume: false,
             overwrite: false,

@@ -6,7 +6,7 @@ use super::train_options::TrainOptions;
 use crate::checkpoint::{self, BackgroundRecord, Recorded};
 use crate::data::dataset::peak_rss_bytes;
 use crate::data::ndc::Space;
-use crate::data::{Aabb, Dataset, LoadOptions, SceneBox};
+use crate::data::{Aabb, BackgroundMode, Dataset, LoadOptions, SceneBox};
 use crate::gpu::Gpu;
 use crate::run::identity::DataIdentity;
 use crate::run::same_data::check_same_data;
@@ -29,12 +29,17 @@ pub struct Loaded {
 /// [`scene_box`] picks; `inspect`'s warnings are repeated on stderr.
 pub fn load_data(opts: &TrainOptions) -> Result<Loaded> {
     let t = Instant::now();
+    let recorded = recorded_run(opts);
+    let background = match (opts.background, &recorded) {
+        (BackgroundMode::Auto, Some(info)) => info.background,
+        (asked, _) => asked,
+    };
     let data = Dataset::load(
         &opts.data,
         &LoadOptions {
             downscale: opts.downscale,
-            background: opts.background,
-            scene: scene_box(opts)?,
+            background,
+            scene: scene_box(opts, recorded.as_ref())?,
             space: opts.space,
         },
     )?;
@@ -47,12 +52,29 @@ pub fn load_data(opts: &TrainOptions) -> Result<Loaded> {
     })
 }
 
+/// The `run.json` of the run being resumed, or of the stage-1 run `--init` names (a checkpoint
+/// file's run is the directory that holds it); `None` when there is none.
+fn recorded_run(opts: &TrainOptions) -> Option<RunInfo> {
+    let recorded_in = |dir: &Path| -> Option<RunInfo> {
+        dir.join(crate::run::dir::MARKER)
+            .is_file()
+            .then(|| crate::run::read_info(dir).ok())
+            .flatten()
+    };
+    match (opts.resume, opts.init.as_deref()) {
+        (true, _) => recorded_in(&opts.out),
+        (false, Some(init)) if init.is_dir() => recorded_in(init),
+        (false, Some(init)) => init.parent().and_then(recorded_in),
+        _ => None,
+    }
+}
+
 /// The scene box to train in, when not the dataset's own: `--box`; else, resuming, the one the
 /// run recorded; else, for stage 2 from a stage-1 run directory (or a checkpoint in one), the
 /// one that run recorded (a grid is only valid in the box or NDC space it was trained in).
 /// `--box` on a run that recorded another box, and `--space box|ndc` on a run trained in the
 /// other space, are refused.
-fn scene_box(opts: &TrainOptions) -> Result<Option<SceneBox>> {
+fn scene_box(opts: &TrainOptions, recorded: Option<&RunInfo>) -> Result<Option<SceneBox>> {
     let given = opts
         .scene_box
         .as_deref()
@@ -63,20 +85,7 @@ fn scene_box(opts: &TrainOptions) -> Result<Option<SceneBox>> {
         "--box and --space ndc: a box is a grid in dataset units, NDC one over the mean \
          camera's view; give one of them"
     );
-    let recorded_in = |dir: &Path| -> Option<(Option<Aabb>, SceneBox)> {
-        dir.join(crate::run::dir::MARKER)
-            .is_file()
-            .then(|| crate::run::read_info(dir).ok())
-            .flatten()?
-            .scene()
-    };
-    // A checkpoint file's run is the directory that holds it.
-    let recorded = match (opts.resume, opts.init.as_deref()) {
-        (true, _) => recorded_in(&opts.out),
-        (false, Some(init)) if init.is_dir() => recorded_in(init),
-        (false, Some(init)) => init.parent().and_then(recorded_in),
-        _ => None,
-    };
+    let recorded = recorded.and_then(|i| i.scene());
     let source = || {
         if opts.resume {
             opts.out.display()
@@ -104,7 +113,8 @@ fn scene_box(opts: &TrainOptions) -> Result<Option<SceneBox>> {
     }
     if let (Some(g), Some((None, _))) = (given, recorded) {
         bail!(
-            "--box {g}: {} was trained in NDC (a forward-facing capture), not in a box; leave              --box out",
+            "--box {g}: {} was trained in NDC (a forward-facing capture), not in a box; leave \
+             --box out",
             source()
         );
     }
@@ -134,7 +144,7 @@ pub fn run_info(opts: &TrainOptions, data: &Dataset, init: Option<PathBuf>) -> R
         data: std::fs::canonicalize(&opts.data)
             .with_context(|| format!("dataset {}", opts.data.display()))?,
         downscale: opts.downscale,
-        background: opts.background,
+        background: data.background,
         scene_scale: Some(data.scene.scale),
         scene_box: data
             .scene

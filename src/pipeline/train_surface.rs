@@ -99,8 +99,9 @@ fn fresh_start(
         .as_ref()
         .context("stage 2 needs --init STAGE1_RUN_DIR or --init ckpt.npz")?;
     let (density, bg) = load_init(opts, init, data)?;
+    // `auto` resolved for the data (for a stage-1 run directory: that run's mode).
     bg.record
-        .ensure_mode(opts.background, &format!("--init {}", init.display()))?;
+        .ensure_mode(data.background, &format!("--init {}", init.display()))?;
     let cfg = opts.surface_config(density.res.into_iter().max().unwrap_or(0))?;
     opts.check_surface_memory(&cfg)?;
     let grid = SurfaceGrid::from_density(&density, &cfg.init)

@@ -62,10 +62,10 @@ pub struct RunInfo {
     pub data: PathBuf,
     /// Image downscale factor used in training.
     pub downscale: u32,
-    /// `--background`: what the images were composited on and training composited on (absent
-    /// in runs written before it was recorded: white). A learned colour is in the checkpoints
-    /// and metrics.json.
-    #[serde(default)]
+    /// `--background` as the data resolved it: what the images were composited on and training
+    /// composited on (absent in runs written before it was recorded: white). A learned colour
+    /// and spheres are in the checkpoints (the colour also in metrics.json).
+    #[serde(default = "BackgroundMode::unrecorded")]
     pub background: BackgroundMode,
     /// Dataset units → the grid's world (the scene box's scale the run trained with; `extract`
     /// writes points back in dataset units with it). Absent in runs written before it was

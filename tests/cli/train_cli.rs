@@ -713,20 +713,32 @@ fn black_background_trains_and_renders_on_black() {
     );
     assert!((mean - psnr).abs() < 0.01, "render {mean} vs train {psnr}");
     // Resuming under another background is refused, naming both.
-    let out = bin()
-        .args(["train", "--data"])
-        .arg(&data)
-        .arg("--out")
-        .arg(&run)
-        .args(["--backend", "cpu", "--resume", "--iters", "70", "--quiet"])
-        .output()
-        .unwrap();
+    let resume = |extra: &[&str]| {
+        bin()
+            .args(["train", "--data"])
+            .arg(&data)
+            .arg("--out")
+            .arg(&run)
+            .args(["--backend", "cpu", "--resume", "--iters", "70", "--quiet"])
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    let out = resume(&["--background", "white"]);
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success(), "resumed on white");
     assert!(
         err.contains("--background white") && err.contains("--background black"),
         "{err}"
     );
+    // Without --background (auto) the run goes on with its own.
+    let out = resume(&[]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(metrics(&run)["background"]["mode"], "black");
 }
 
 #[test]
@@ -1093,7 +1105,7 @@ fn background_spheres_learn_the_environment_and_travel_with_the_run() {
         .arg(&data)
         .arg("--out")
         .arg(dir.path().join("white"))
-        .args(["--backend", "cpu", "--quiet"])
+        .args(["--backend", "cpu", "--background", "white", "--quiet"])
         .output()
         .unwrap();
     let err = String::from_utf8_lossy(&out.stderr);

@@ -7,7 +7,7 @@ use alphasurf::abi::rays::key_pixel;
 use alphasurf::cpu::sample_rays::sample_rays;
 use alphasurf::data::inspect::inspect;
 use alphasurf::data::ndc::Space;
-use alphasurf::data::{Dataset, LoadOptions, SplitRule, TrainViews};
+use alphasurf::data::{BackgroundMode, Dataset, LoadOptions, SplitRule, TrainViews};
 use glam::Vec3;
 
 /// The object's box from the fixture's `scene.json` (`bbox_min`, `bbox_max`).
@@ -125,14 +125,23 @@ fn forward_facing_capture_trains_in_ndc() {
         "{}",
         orbit.space
     );
-    // In its foreground box the orbit gets the advice to train in the room, with the room's box.
+    // Without alpha in a box, `auto` puts the room on background spheres: no advice then. On a
+    // white background the orbit gets the advice to use them, or to train in the room's box.
+    assert_eq!(orbit.background, BackgroundMode::Spheres);
     let advice = |ds: &Dataset| {
         inspect(ds)
             .warnings
             .into_iter()
             .find(|w| w.contains("train in the room: --box="))
     };
-    let room = advice(&orbit).expect("the room advice for the 360° capture");
+    assert!(advice(&orbit).is_none());
+    let white = LoadOptions {
+        background: BackgroundMode::White,
+        ..auto
+    };
+    let orbit_white = Dataset::load(&shared_fixture("capture_birdcage"), &white).unwrap();
+    let room = advice(&orbit_white).expect("the room advice for the 360° capture on white");
+    assert!(room.contains("--background spheres"), "{room}");
     let bounds: Vec<f32> = room
         .rsplit("--box=")
         .next()
@@ -154,6 +163,11 @@ fn forward_facing_capture_trains_in_ndc() {
         .unwrap_or_else(|| panic!("no NDC: {}", ff.space));
     assert!(ff.space.starts_with("NDC"), "{}", ff.space);
     assert!(advice(&ff).is_none());
+    assert_eq!(
+        ff.background,
+        BackgroundMode::White,
+        "NDC reaches infinite depth"
+    );
     let (lo, hi) = object_box(&dir);
     for i in 0..8 {
         let c = Vec3::select(glam::BVec3::new(i & 1 != 0, i & 2 != 0, i & 4 != 0), hi, lo);
