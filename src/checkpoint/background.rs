@@ -94,9 +94,9 @@ impl BackgroundRecord {
         r
     }
 
-    /// The spheres a run of this background starts stage 1 with on `data`, a grid `res` wide
-    /// at its end: around the grid box, in the colour the record starts with.
-    pub fn start_spheres(&self, data: &Dataset, res: u32) -> Result<Option<SphereTable>> {
+    /// The spheres a run of this background starts stage 1 with on `data`: around the grid
+    /// box, in the colour the record starts with.
+    pub fn start_spheres(&self, data: &Dataset) -> Result<Option<SphereTable>> {
         if !self.mode.spheres() {
             return Ok(None);
         }
@@ -119,7 +119,6 @@ impl BackgroundRecord {
             centre,
             scene.radius,
             &cameras,
-            res,
             self.rgb,
         )))
     }

@@ -102,8 +102,8 @@ impl<'b> StageSteps<PlenoxelsStage, dyn PlenoxelsBackend + 'b> for PlenoxelsStep
     }
 
     /// From step 0 the background starts as `data.background` says
-    /// (`BackgroundRecord::start_on`, with its spheres sized for the last resolution); a resumed
-    /// run keeps the one its checkpoint holds.
+    /// (`BackgroundRecord::start_on`, with its spheres); a resumed run keeps the one its
+    /// checkpoint holds.
     fn start(
         &mut self,
         backend: &mut (dyn PlenoxelsBackend + 'b),
@@ -113,8 +113,7 @@ impl<'b> StageSteps<PlenoxelsStage, dyn PlenoxelsBackend + 'b> for PlenoxelsStep
         if start_step == 0 {
             let bg = BackgroundRecord::start_on(data);
             backend.set_background(bg.kernel())?;
-            let res = self.cfg.res_at(self.cfg.iters);
-            backend.set_spheres(bg.start_spheres(data, res)?)?;
+            backend.set_spheres(bg.start_spheres(data)?)?;
         }
         Ok(())
     }
