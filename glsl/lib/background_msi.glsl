@@ -21,9 +21,11 @@ float bg_msi_radius(BackgroundSpheres s, uint l) {
 // centre: h + √(r² − |h|²)·d, h the line's point nearest the centre. false where the line
 // misses or touches the sphere, or leaves it behind the origin.
 bool bg_msi_exit(vec3 oc, vec3 d, float r, out vec3 p) {
-    precise float b = dot(oc, d);
+    // Sums of products written out (not dot(), which a driver may fuse): the twin's order, and
+    // the branches below take the same side on every device.
+    precise float b = oc.x * d.x + oc.y * d.y + oc.z * d.z;
     precise vec3 h = oc - b * d;
-    precise float disc = r * r - dot(h, h);
+    precise float disc = r * r - (h.x * h.x + h.y * h.y + h.z * h.z);
     p = vec3(0.0);
     if (!(disc > 0.0)) return false;
     float s = sqrt(disc);
