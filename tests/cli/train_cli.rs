@@ -28,18 +28,16 @@ fn run_ok(cmd: &mut Command) -> String {
 }
 
 fn scene(dir: &Path) -> PathBuf {
+    scene_of(dir, 32, 12)
+}
+
+/// The solid scene in `dir/scene`: `views` training views of `res`² pixels.
+fn scene_of(dir: &Path, res: u32, views: u32) -> PathBuf {
     let data = dir.join("scene");
     run_ok(
         bin()
-            .args([
-                "make-scene",
-                "--kind",
-                "solid",
-                "--res",
-                "32",
-                "--views",
-                "12",
-            ])
+            .args(["make-scene", "--kind", "solid", "--res", &res.to_string()])
+            .args(["--views", &views.to_string()])
             .args(["--spp", "1", "--gt-spacing", "0.05", "--out"])
             .arg(&data),
     );
@@ -1022,21 +1020,7 @@ fn background_spheres_learn_the_environment_and_travel_with_the_run() {
     let dir = tempfile::tempdir().unwrap();
     // Enough rays to reach the spheres' texels the test views see (40 views of 64² pixels: 160k
     // pixels for 16 maps of 32² texels; the `scene` helper's 12 of 32² leave most unseen).
-    let data = dir.path().join("scene");
-    run_ok(
-        bin()
-            .args([
-                "make-scene",
-                "--kind",
-                "solid",
-                "--res",
-                "64",
-                "--views",
-                "40",
-            ])
-            .args(["--spp", "1", "--gt-spacing", "0.05", "--out"])
-            .arg(&data),
-    );
+    let data = scene_of(dir.path(), 64, 40);
     drop_alpha_on_environment(&data);
     let stage1 = |name: &str, background: &str| {
         let run = dir.path().join(name);
