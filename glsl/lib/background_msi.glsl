@@ -51,23 +51,17 @@ vec2 bg_msi_uv(vec3 p, uint size) {
     return uv;
 }
 
+// One axis of bg_msi_fold: a coordinate a one past the border (−1 or n) comes back to the
+// border, and the other coordinate b mirrors about the map's middle.
+ivec2 bg_msi_fold_axis(int a, int b, int n) {
+    return (a < 0 || a >= n) ? ivec2(clamp(a, 0, n - 1), n - 1 - b) : ivec2(a, b);
+}
+
 // The texel a tap one past the border reads: the border's halves mirrored about their midpoints.
 uint bg_msi_fold(int i, int j, int n) {
-    if (i < 0) {
-        i = 0;
-        j = n - 1 - j;
-    } else if (i >= n) {
-        i = n - 1;
-        j = n - 1 - j;
-    }
-    if (j < 0) {
-        j = 0;
-        i = n - 1 - i;
-    } else if (j >= n) {
-        j = n - 1;
-        i = n - 1 - i;
-    }
-    return uint(j * n + i);
+    ivec2 ij = bg_msi_fold_axis(i, j, n);
+    ivec2 ji = bg_msi_fold_axis(ij.y, ij.x, n);
+    return uint(ji.x * n + ji.y);
 }
 
 // Where a ray reads sphere l: the first value of each of its four texels in the table, their

@@ -2,7 +2,7 @@
 //! the colour, clamped to [0, 1]; `background_spheres_step` for the spheres' texels) and the
 //! spheres' buffers, shared by both Vulkan backends.
 
-use super::{Batch, Gpu, GpuBuffer};
+use super::{address_words, Batch, Gpu, GpuBuffer};
 use crate::abi::buffers::BackgroundSpheres;
 use crate::abi::train::BackgroundStep;
 use crate::kernels;
@@ -17,11 +17,6 @@ pub struct SphereBuffers {
     pub table: GpuBuffer,
     pub grad: GpuBuffer,
     pub avg: GpuBuffer,
-}
-
-/// A device address as the kernels' structs hold it (low, high 32 bits).
-pub fn address_words(a: u64) -> [u32; 2] {
-    [a as u32, (a >> 32) as u32]
 }
 
 impl SphereBuffers {

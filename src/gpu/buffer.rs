@@ -10,6 +10,11 @@ use gpu_allocator::vulkan::{Allocation, AllocationCreateDesc, AllocationScheme};
 use gpu_allocator::MemoryLocation;
 use std::sync::atomic::Ordering;
 
+/// A device address as the kernels' structs hold it (low, high 32 bits).
+pub fn address_words(a: u64) -> [u32; 2] {
+    [a as u32, (a >> 32) as u32]
+}
+
 /// A storage buffer on the device, freed when dropped. Kernels see it through `address()`.
 pub struct GpuBuffer {
     gpu: Gpu,

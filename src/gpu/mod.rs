@@ -26,9 +26,9 @@ mod step_times;
 mod train_views;
 mod tv;
 
-pub use background_step::{address_words, record_background_step, SphereBuffers};
+pub use background_step::{record_background_step, SphereBuffers};
 pub use batch::{Batch, BatchTimes, InFlight};
-pub use buffer::GpuBuffer;
+pub use buffer::{address_words, GpuBuffer};
 pub use context::{list_devices, Gpu, GpuOptions};
 pub use device::{pick_default, DeviceInfo, DeviceKind};
 pub use grid_buffers::GridBuffers;

@@ -92,23 +92,21 @@ pub fn octahedral_uv(p: [f32; 3], size: u32) -> [f32; 2] {
     [(a + 1.0) * 0.5 * n - 0.5, (b + 1.0) * 0.5 * n - 0.5]
 }
 
+/// One axis of [`fold`]: a coordinate `a` one past the border (−1 or n) comes back to the
+/// border, and the other coordinate `b` mirrors about the map's middle.
+fn fold_axis(a: i32, b: i32, n: i32) -> (i32, i32) {
+    if a < 0 || a >= n {
+        (a.clamp(0, n - 1), n - 1 - b)
+    } else {
+        (a, b)
+    }
+}
+
 /// The texel (column `i`, row `j`) a bilinear tap one texel past the map's border reads: the
 /// octahedron's edges are the border's halves mirrored about their midpoints.
-fn fold(mut i: i32, mut j: i32, n: i32) -> u32 {
-    if i < 0 {
-        i = 0;
-        j = n - 1 - j;
-    } else if i >= n {
-        i = n - 1;
-        j = n - 1 - j;
-    }
-    if j < 0 {
-        j = 0;
-        i = n - 1 - i;
-    } else if j >= n {
-        j = n - 1;
-        i = n - 1 - i;
-    }
+fn fold(i: i32, j: i32, n: i32) -> u32 {
+    let (i, j) = fold_axis(i, j, n);
+    let (j, i) = fold_axis(j, i, n);
     (j * n + i) as u32
 }
 
@@ -236,10 +234,13 @@ pub struct BackgroundView<'a> {
     pub spheres: Option<(&'a BackgroundSpheres, &'a [f32])>,
 }
 
-impl BackgroundView<'_> {
-    /// The colour `rgb` alone.
-    pub fn colour(rgb: [f32; 3]) -> Self {
-        BackgroundView { rgb, spheres: None }
+impl<'a> BackgroundView<'a> {
+    /// The colour `rgb`, behind `spheres` when there are any.
+    pub fn new(rgb: [f32; 3], spheres: Option<&'a SphereTable>) -> Self {
+        BackgroundView {
+            rgb,
+            spheres: spheres.map(|s| (&s.shape, &s.table[..])),
+        }
     }
 
     /// The background B of the ray from `o` along unit `d` and the weight T_L of the colour in
@@ -309,14 +310,6 @@ impl SphereTable {
             shape,
             avg: vec![0.0; table.len()],
             table,
-        }
-    }
-
-    /// The background `rgb` behind these spheres, as the twins read it.
-    pub fn view(&self, rgb: [f32; 3]) -> BackgroundView<'_> {
-        BackgroundView {
-            rgb,
-            spheres: Some((&self.shape, &self.table)),
         }
     }
 

@@ -515,10 +515,7 @@ pub struct SurfaceParams {
 impl SurfaceParams {
     /// What a ray meets behind the last hit, as the twins read it.
     pub fn behind(&self) -> BackgroundView<'_> {
-        match &self.spheres {
-            Some(s) => s.view(self.background),
-            None => BackgroundView::colour(self.background),
-        }
+        BackgroundView::new(self.background, self.spheres.as_deref())
     }
 
     /// These parameters with the background's `spheres` behind the grid.

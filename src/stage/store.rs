@@ -63,10 +63,7 @@ impl<F> HostSteps<F> {
 
     /// The background as the twins read it.
     pub fn view(&self) -> BackgroundView<'_> {
-        match &self.spheres {
-            Some(s) => s.view(self.bg.rgb),
-            None => BackgroundView::colour(self.bg.rgb),
-        }
+        BackgroundView::new(self.bg.rgb, self.spheres.as_deref())
     }
 
     /// The background's gradients a training pass adds to: the colour's when it is learned,
@@ -85,10 +82,7 @@ impl<F> HostSteps<F> {
             ..
         } = self;
         let learned = spheres.as_ref().is_some_and(|s| s.learned());
-        let view = match spheres {
-            Some(s) => s.view(bg.rgb),
-            None => BackgroundView::colour(bg.rgb),
-        };
+        let view = BackgroundView::new(bg.rgb, spheres.as_deref());
         (
             view,
             bg.learned().then_some(&mut bg.grad),

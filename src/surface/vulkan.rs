@@ -24,8 +24,8 @@ use crate::abi::regularisers::{axis_neighbours, forward_reach};
 use crate::abi::step::{step_record, STEP_FLAGS};
 use crate::abi::train::SurfaceLoss;
 use crate::gpu::{
-    record_background_step, record_tv, Batch, BatchRays, Gpu, GpuBuffer, PhaseClock, Readback,
-    SlotFigures, TrainRays,
+    address_words, record_background_step, record_tv, Batch, BatchRays, Gpu, GpuBuffer, PhaseClock,
+    Readback, SlotFigures, TrainRays,
 };
 use crate::grid::row_slots;
 use crate::grid::surface::SurfaceGrid;
@@ -208,7 +208,7 @@ impl VulkanSurface {
         // The colour is the device's (`bg`); surface_fwd and surface_train read it there.
         let sp = surface_params(&self.core.meta, truncation, stop_thresh, [1.0; 3]);
         let prm = SurfParams {
-            weights: [io.weights as u32, (io.weights >> 32) as u32],
+            weights: address_words(io.weights),
             ..surf_params(&sp, loss, n)
         };
         b.update(&self.params, 0, &[prm])?;
