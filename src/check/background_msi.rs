@@ -73,7 +73,7 @@ pub fn cases(count: usize, seed: u64) -> (SphereTable, Vec<f32>, Vec<f32>) {
             continue;
         }
         let d = d.map(|x| x / n);
-        if near_tangent(&s, o, d) {
+        if near_tangent(s, o, d) {
             continue;
         }
         rays.extend_from_slice(&o);
