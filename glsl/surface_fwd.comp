@@ -8,9 +8,10 @@
 // culling (surf_segment_mask) the crossings of δ − τ_i on [0, L); only rising (front-face) crossings are hits, sorted by s within the cell; at
 // hit j: α = 1 − exp(−max(σα, 0)), colour max(0, SH + 0.5) (trilerped at the hit, basis on the unit
 // scene direction), α̃ = α·γ_a(k); C = Σ w_j c_j + T·B (B: bg behind the ray), k the truncation count: j, or with
-// count_per_structure the hits since the ray last entered level 0 (surf_restart). A hit with
-// k ≥ a (γ = 0, not shaded, counted as cut) ends the ray, or is passed over when counting per
-// structure; the ray also stops once T < stop_thresh.
+// truncation_count ≠ SURF_COUNT_RAY the hits since the ray last entered level 0 (surf_restart). A
+// hit with k ≥ its limit (a, or 1 behind the first structure with SURF_COUNT_THROUGH: γ = 0, not
+// shaded, counted as cut) ends the ray, or is passed over when counting per structure; the ray
+// also stops once T < stop_thresh.
 // Skipping (block_skip ≠ 0) with the skip structure `blocks` (glsl/lib/surface_blocks.glsl): the
 // walk covers only the ray's span inside the allocated box (surf_box_span); a cell whose
 // 2^block_shift-cell block has level mask 0 (kernel surface_blocks) is not read and the walk
@@ -75,9 +76,11 @@ void main() {
     float T = 1.0;
     uint j = 0u;
     // The truncation count: j itself, or with counting per structure the hits since the ray last
-    // entered level 0 (surf_restart).
+    // entered level 0 (surf_restart), truncated from k ≥ limit.
     uint k = 0u;
-    bool per_structure = prm.count_per_structure != 0u;
+    float limit = a;
+    uint structures = 0u;
+    bool per_structure = prm.truncation_count != SURF_COUNT_RAY;
     SurfCounts cnt = SURF_COUNTS_ZERO;
     SkipRef blocks = SkipRef(pc.block_skip != 0u, pc.block_shift);
     CellWalk walk = cell_walk_new(og, dn, lv, nl, blocks);
@@ -105,10 +108,10 @@ void main() {
         face_neg = eneg;
         for (uint h = 0u; h < nh; h++) {
             float s_hit = surf_pop(hs);
-            surf_restart(per_structure, s_hit, outer, k);
+            surf_restart(prm.truncation_count, a, s_hit, outer, k, limit, structures);
             // A truncated hit (γ = 0) ends the ray, or with counting per structure is passed
             // over (a later structure restarts the count).
-            if (float(k) >= a) {
+            if (float(k) >= limit) {
                 cnt.cut++;
                 if (per_structure && T >= SURF_PASS_MIN_T) continue;
                 done = true;

@@ -165,10 +165,12 @@ uint walk_hits(vec3 og, vec3 dn, float lv[SURF_MAX_LEVELS], uint nl, SurfParams 
     float T = 1.0;
     uint j = 0u;
     // The truncation count: j itself, or with counting per structure the hits since the ray last
-    // entered level 0 (surf_restart).
+    // entered level 0 (surf_restart), truncated from k ≥ limit.
     uint k = 0u;
+    float limit = a;
+    uint structures = 0u;
     uint sid = 0u;
-    bool per_structure = prm.count_per_structure != 0u;
+    bool per_structure = prm.truncation_count != SURF_COUNT_RAY;
     SkipRef blocks = SkipRef(true, pc.block_shift);
     CellWalk walk = cell_walk_new(og, dn, lv, nl, blocks);
     WalkCell cell;
@@ -198,10 +200,10 @@ uint walk_hits(vec3 og, vec3 dn, float lv[SURF_MAX_LEVELS], uint nl, SurfParams 
         uint nk = min(nh, SURF_CELL_KEEP);
         for (uint h = 0u; h < nk; h++) {
             precise float s_hit = surf_pop(hs);
-            surf_restart(per_structure, s_hit, outer, k);
+            surf_restart(prm.truncation_count, a, s_hit, outer, k, limit, structures);
             // A truncated hit (γ = 0) ends the ray, or with counting per structure is passed
             // over (a later structure restarts the count); a full record ends it.
-            if (float(k) >= a || j >= SURF_MAX_HITS) {
+            if (float(k) >= limit || j >= SURF_MAX_HITS) {
                 cnt.cut++;
                 if (per_structure && j < SURF_MAX_HITS && T >= SURF_PASS_MIN_T) continue;
                 done = true;

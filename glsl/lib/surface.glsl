@@ -189,21 +189,28 @@ uint surf_cell_hits(float c[8], vec3 cc, vec3 q0, vec3 q1, float L, float lv[SUR
     return n;
 }
 
-// Counting per structure (`per_structure`, SurfParams::count_per_structure): a popped hit s that
-// is one of the cell's front crossings of level 0 (`outer`; the outermost level, as levels
-// increase) is where the ray enters a structure from outside every level set, so the truncation
-// count k restarts at 0 there; each structure along the ray then gets γ_a for its own first hits,
-// and a surface seen through another is composited, while the inner levels of one structure are
-// still truncated. A matched value is consumed: of two equal hits one restarts the count.
-void surf_restart(bool per_structure, float s, inout vec2 outer, inout uint k) {
-    if (!per_structure) return;
+// The truncation count of a ray (`mode`: SurfParams::truncation_count, SURF_COUNT_*): k hits
+// counted, a hit truncated (γ = 0) from k ≥ limit (a at the start), `structures` entered so far.
+// Counting per structure, a popped hit s that is one of the cell's front crossings of level 0
+// (`outer`; the outermost level, as levels increase) is where the ray enters a structure from
+// outside every level set, so k restarts at 0 there with limit a (SURF_COUNT_STRUCTURE, and the
+// first structure of SURF_COUNT_THROUGH) or min(a, 1) (the structures behind it with
+// SURF_COUNT_THROUGH): each structure along the ray gets its own first hits, while the inner
+// levels of one structure are still truncated. A matched value is consumed: of two equal hits one
+// restarts the count. Twin: math::surface::RayCount::restart.
+void surf_restart(uint mode, float a, float s, inout vec2 outer, inout uint k, inout float limit,
+                  inout uint structures) {
+    if (mode == SURF_COUNT_RAY) return;
     if (s == outer.x) {
         outer.x = SURF_NO_HIT;
-        k = 0u;
     } else if (s == outer.y) {
         outer.y = SURF_NO_HIT;
-        k = 0u;
+    } else {
+        return;
     }
+    k = 0u;
+    limit = (mode == SURF_COUNT_THROUGH && structures > 0u) ? min(a, 1.0) : a;
+    structures++;
 }
 
 // Truncation weight γ_a(j) = ½(1 − cos(π·clamp(a − j, 0, 1))): exactly 1 for j ≤ a − 1 and

@@ -37,10 +37,11 @@ abi_structs! {
         /// `surface_train`: the device address of the per-ray importance weights of a focused
         /// batch (low, high 32 bits); 0: every weight is 1.
         weights: [u32; 2],
-        /// 1: the truncation count restarts at every front crossing of level 0 (counted per
-        /// structure, `math::surface::TruncationCount::Structure`); 0: it counts every front hit
-        /// of the ray (the paper's rule).
-        count_per_structure: u32,
+        /// How the truncation count runs (`math::surface::TruncationCount`): `SURF_COUNT_RAY`
+        /// over every front hit of the ray (the paper's rule); `SURF_COUNT_STRUCTURE` restarting
+        /// at every front crossing of level 0; `SURF_COUNT_THROUGH` restarting there, with one
+        /// hit for each structure behind the first.
+        truncation_count: u32,
     }
 
     /// The params buffer of `plenoxel_train` (its push block would pass lavapipe's 128-byte

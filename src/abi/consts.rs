@@ -93,6 +93,12 @@ abi_consts! {
     /// transmittance is at least this (1/256): below it, what lies behind could change the
     /// colour by less than one step of the 8-bit images, so the ray ends there.
     SURF_PASS_MIN_T: f32 = 0.00390625;
+    /// `SurfParams::truncation_count`: how the truncation count runs along a ray
+    /// (`math::surface::TruncationCount`): over every front hit, restarting per structure, or
+    /// restarting per structure with one hit for each structure behind the first.
+    SURF_COUNT_RAY: u32 = 0;
+    SURF_COUNT_STRUCTURE: u32 = 1;
+    SURF_COUNT_THROUGH: u32 = 2;
     /// Relative guard on the implicit derivative's denominator f′(s) (surface_train).
     FPRIME_GUARD: f32 = 1e-3;
 

@@ -15,6 +15,9 @@ pub struct BackgroundStep {
     pub lr: f32,
     /// The grid's σ rate at the step (the spheres' σ steps at a multiple of it).
     pub lr_sigma: f32,
+    /// Weight λ of the spheres' TV, added to their gradient before their step
+    /// (`BackgroundSpheres::tv_chunk`; 0: none).
+    pub sphere_tv: f32,
     pub beta: f32,
     pub eps: f32,
 }
@@ -25,12 +28,14 @@ impl BackgroundStep {
         learned: bool,
         lr: f32,
         lr_sigma: f32,
+        sphere_tv: f32,
         beta: f32,
         eps: f32,
     ) -> Option<Self> {
         learned.then_some(BackgroundStep {
             lr,
             lr_sigma,
+            sphere_tv,
             beta,
             eps,
         })

@@ -127,6 +127,7 @@ pub fn time_steps(
         stop_thresh: cfg.stop_thresh,
         tv: None,
         lr_bg: cfg.lr_sh.at(cfg.iters),
+        tv_background: cfg.tv_background,
     };
     backend.step_sampled(&views, 7, batch as usize, &p)?;
     backend.take_stats()?;

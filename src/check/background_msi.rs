@@ -186,7 +186,7 @@ pub fn check(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
 /// `background_spheres_step` against its twin: a random table whose gradient spans 1e-6 … 1e2
 /// (a sixth of it zero: those values must not move) and whose running averages are zero (a
 /// first step) for a quarter of the values; the tolerance of `background_step`'s row (the same
-/// RMSProp arithmetic).
+/// RMSProp arithmetic). Without the spheres' TV (its own row, [`check_tv`]).
 pub fn check_step(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
     let mut rng = Pcg64::seed_from_u64(seed);
     let (
@@ -221,9 +221,11 @@ pub fn check_step(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
     };
     let bufs = SphereBuffers::upload(gpu, &want)?;
     bufs.grad.write(&grad)?;
+    // The spheres' TV has its own row (`check_tv`).
     let step = BackgroundStep {
         lr: 0.01,
         lr_sigma: 30.0,
+        sphere_tv: 0.0,
         beta: 0.95,
         eps: 1e-8,
     };
@@ -233,6 +235,7 @@ pub fn check_step(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
         &mut b,
         &gpu.upload(&[Background::default()])?,
         Some(&bufs),
+        &gpu.zeros::<u32>(1)?,
         &step,
     )?;
     b.submit()?;
@@ -262,5 +265,44 @@ pub fn check_step(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
         kernels::background_spheres_step::INFO.name,
         grad.len(),
         format!("{still} values without gradient (left as they were); σ rate {lr_sigma}, colour rate {lr_colour}"),
+    ))
+}
+
+/// The spheres' TV (`tv` on the texel table, `record_sphere_tv`) against its twin
+/// `cpu::background_spheres_step::sphere_tv`: a random table, the gradient starting nonzero (TV
+/// adds to it), a weight whose per-texel scale is `tv`'s row's 0.7; one map of the table made
+/// flat (its within-map differences exactly 0). Tolerance: the `tv` row's (the same kernel).
+pub fn check_tv(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
+    let mut rng = Pcg64::seed_from_u64(seed);
+    let (mut t, _, _) = cases(0, seed);
+    let map = (t.shape.size * t.shape.size) as usize * TEXEL;
+    let flat = [0.3f32, 0.2, 0.5, 0.7];
+    for (i, v) in t.table[map..2 * map].iter_mut().enumerate() {
+        *v = flat[i % TEXEL];
+    }
+    let texels = (t.table.len() / TEXEL) as f32;
+    let lambda = 0.7 * texels;
+    let start: Vec<f32> = (0..t.table.len())
+        .map(|_| rng.random_range(-1f32..1.0))
+        .collect();
+    let bufs = SphereBuffers::upload(gpu, &t)?;
+    bufs.grad.write(&start)?;
+    let mut b = gpu.batch()?;
+    crate::gpu::record_sphere_tv(&mut b, &bufs, &gpu.zeros::<u32>(1)?, lambda)?;
+    b.submit()?;
+    let got = bufs.take_grad()?;
+    let mut want = start;
+    crate::cpu::background_spheres_step::sphere_tv(&t, &mut want, lambda);
+    let mut cmp = Compare::new(1e-6, 1e-4);
+    for (i, (x, y)) in got.iter().zip(&want).enumerate() {
+        cmp.value(*x as f64, *y as f64, || format!("gradient {i}"));
+    }
+    Ok(cmp.row(
+        "tv_spheres",
+        got.len(),
+        format!(
+            "{} spheres of {}² texels, λ {lambda} (scale 0.7), gradient added to; one map flat",
+            t.shape.layers, t.shape.size
+        ),
     ))
 }

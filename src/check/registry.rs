@@ -105,7 +105,8 @@ pub fn entry(kernel: Kernel) -> Entry {
         Kernel::trilerp_eval => {
             twin!(crate::cpu::trilerp_eval; "trilerp_eval" => trilerp_eval::check)
         }
-        Kernel::tv => twin!(crate::cpu::tv; "tv" => plenoxel::check_tv),
+        Kernel::tv => twin!(crate::cpu::tv; "tv" => plenoxel::check_tv,
+            "tv_spheres" => background_msi::check_tv),
     }
 }
 

@@ -326,25 +326,25 @@ fn check_with(gpu: &Gpu, seed: u64, spheres: Option<Arc<SphereTable>>) -> Result
             }
         })
         .collect();
-    let per_structure = |a| Truncation {
-        a,
-        count: TruncationCount::Structure,
-    };
+    let counted = |a, count| Truncation { a, count };
     let skips = [
         (3.5f32.into(), 1e-4f32, &real, SURF_BLOCK_SHIFT_VULKAN),
         (100.0.into(), 1e-3, &random, SURF_BLOCK_SHIFT_CPU),
-        (per_structure(1.5), 1e-4, &real, SURF_BLOCK_SHIFT_VULKAN),
+        (
+            counted(1.5, TruncationCount::Structure),
+            1e-4,
+            &real,
+            SURF_BLOCK_SHIFT_VULKAN,
+        ),
+        (
+            counted(2.5, TruncationCount::Through),
+            1e-4,
+            &real,
+            SURF_BLOCK_SHIFT_VULKAN,
+        ),
     ];
     for (t, stop, words, shift) in skips {
-        let a = format!(
-            "{}{}",
-            t.a,
-            if t.count == TruncationCount::Structure {
-                " per structure"
-            } else {
-                ""
-            }
-        );
+        let a = format!("{} counted per {:?}", t.a, t.count);
         let p = scene.params(t, stop).with_spheres(spheres.clone());
         let blocks = Some(SkipRef { words, shift });
         let (want, wc) = render(&scene.grid(), &rays, &p, blocks)?;
@@ -386,7 +386,7 @@ fn check_with(gpu: &Gpu, seed: u64, spheres: Option<Arc<SphereTable>>) -> Result
         },
         skips.len() * n_rays,
         format!(
-            "hits exact, {excused} rays excused (cap {cap}, 0.5 %); scene blocks, then random blocks, then scene blocks counting per structure; cells/solves/culled/hits/cut/skips {}",
+            "hits exact, {excused} rays excused (cap {cap}, 0.5 %); scene blocks, then random blocks, then scene blocks counting per structure and through (a 1.5, 2.5); cells/solves/culled/hits/cut/skips {}",
             notes.join("; ")
         ),
     ))

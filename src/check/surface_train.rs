@@ -509,14 +509,12 @@ fn check_with(gpu: &Gpu, seed: u64, spheres: Option<Arc<SphereTable>>) -> Result
             targets,
             weights,
         };
-        let per_structure = Truncation {
-            a: 1.5,
-            count: TruncationCount::Structure,
-        };
+        let counted = |a, count| Truncation { a, count };
         let settings = [
             (3.5f32.into(), 1e-4f32),
             (8.0.into(), 1e-3),
-            (per_structure, 1e-4),
+            (counted(1.5, TruncationCount::Structure), 1e-4),
+            (counted(2.5, TruncationCount::Through), 1e-4),
         ];
         let settings = if spheres.is_some() {
             &settings[..1]
@@ -526,18 +524,14 @@ fn check_with(gpu: &Gpu, seed: u64, spheres: Option<Arc<SphereTable>>) -> Result
         for &(t, stop) in settings {
             let p = pass_params(t, stop, 0.5, 0.2);
             let what = format!(
-                "{variant}{} a {}{}",
+                "{variant}{} a {} counted per {:?}",
                 if batch.weights.is_some() {
                     " weighted"
                 } else {
                     ""
                 },
                 t.a,
-                if t.count == TruncationCount::Structure {
-                    " per structure"
-                } else {
-                    ""
-                }
+                t.count
             );
             let guard = *variant == "guard";
             let pass = Pass {

@@ -132,21 +132,29 @@ pub trait Recorded: serde::Serialize + DeserializeOwned {
     fn iters_mut(&mut self) -> &mut u32;
 }
 
-/// Restore grid, optimiser state, background and step from the checkpoint of stage `S` at
-/// `path` into `backend`; returns the next step, the configuration and the background.
+/// What [`resume`] restores: the backend holding the checkpoint's grid, optimiser state and
+/// background, the next step, the configuration and the background's record.
+pub type Restored<B, C> = (Box<B>, u32, C, BackgroundRecord);
+
+/// Open the checkpoint of stage `S` at `path` (read once): its configuration and background
+/// checked, then the backend `make` builds on its grid given its optimiser state, background and
+/// spheres.
 pub fn resume<S: Stage, C: Recorded, B: StageBackend<S> + ?Sized>(
-    backend: &mut B,
+    make: impl FnOnce(S::Grid) -> Result<Box<B>>,
     path: &Path,
-) -> Result<(u32, C, BackgroundRecord)> {
+) -> Result<Restored<B, C>> {
     let saved = S::load(path)?;
     let (step, cfg) = format::meta_step_config::<C>(&saved.meta, S::NAME, path)?;
     cfg.validate()
         .with_context(|| format!("{}: invalid configuration", path.display()))?;
     let bg = BackgroundRecord::from_meta(&saved.meta, path)?;
-    backend.load(saved.grid, Some(saved.state))?;
+    let mut backend = make(saved.grid)?;
+    backend
+        .load_state(saved.state)
+        .with_context(|| format!("{}: optimiser state", path.display()))?;
     backend.set_background(bg.kernel())?;
     backend.set_spheres(saved.spheres)?;
-    Ok((step, cfg, bg))
+    Ok((backend, step, cfg, bg))
 }
 
 /// The background spheres a checkpoint of stage `S` holds (learned if `S` trains them), from its

@@ -8,8 +8,8 @@ use crate::math::dda::ray_unit;
 use crate::math::sh::sh_basis;
 use crate::math::surface::SurfaceParams;
 use crate::math::surface::{
-    surf_alpha, surf_cell_hits, surf_gamma, surf_ray, surf_restart, FaceSigns, SurfOut, Truncation,
-    TruncationCount, SURF_MAX_LEVELS,
+    surf_alpha, surf_cell_hits, surf_gamma, surf_ray, FaceSigns, RayCount, SurfOut, Truncation,
+    SURF_MAX_LEVELS,
 };
 use crate::math::surface_blocks::{surf_blocks_per_axis, surf_live_words, SkipRef, SURF_BOX_WORDS};
 use crate::math::surface_walk::CellWalk;
@@ -35,8 +35,8 @@ pub fn render_ray(
     let mut t_acc = 1.0f32;
     let mut j = 0u32;
     // The truncation count: j itself, or per structure the hits since the ray entered level 0.
-    let mut k = 0u32;
     let Truncation { a, count } = p.truncation;
+    let mut rc = RayCount::new(a);
     let mut cnt = SurfCounts::default();
     let mut walk = CellWalk::new(g, og, dn, levels, blocks);
     let mut face = FaceSigns::default();
@@ -51,10 +51,10 @@ pub fn render_ray(
         };
         let mut outer = hits.outer;
         for &s in hits.as_slice() {
-            surf_restart(count, s, &mut outer, &mut k);
-            if k as f32 >= a {
+            rc.restart(count, a, s, &mut outer);
+            if rc.truncated() {
                 cnt.cut += 1;
-                if count == TruncationCount::Structure && t_acc >= SURF_PASS_MIN_T {
+                if count.passes_over() && t_acc >= SURF_PASS_MIN_T {
                     continue;
                 }
                 break 'walk;
@@ -65,7 +65,7 @@ pub fn render_ray(
             for i in 0..8 {
                 sa += wt[i] * g.opacity[lk[i] as usize];
             }
-            let at = surf_alpha(sa) * surf_gamma(a, k);
+            let at = surf_alpha(sa) * surf_gamma(a, rc.k);
             let mut sh = [0f32; 27];
             for i in 0..8 {
                 let row = &g.sh[lk[i] as usize * 27..lk[i] as usize * 27 + 27];
@@ -83,7 +83,7 @@ pub fn render_ray(
             }
             t_acc *= 1.0 - at;
             j += 1;
-            k += 1;
+            rc.k += 1;
             cnt.hits += 1;
             if t_acc < p.stop_thresh {
                 break 'walk;

@@ -35,8 +35,8 @@ use crate::math::sh::sh_basis;
 use crate::math::step::touch_mask;
 use crate::math::surface::SurfaceParams;
 use crate::math::surface::{
-    surf_alpha, surf_cell_hits, surf_gamma, surf_ray, surf_restart, FaceSigns, Truncation,
-    TruncationCount, SURF_MAX_LEVELS,
+    surf_alpha, surf_cell_hits, surf_gamma, surf_ray, FaceSigns, RayCount, Truncation,
+    SURF_MAX_LEVELS,
 };
 use crate::math::surface_blocks::SkipRef;
 use crate::math::surface_train::{
@@ -122,8 +122,8 @@ pub fn trace_ray(
     let mut t_acc = 1.0f32;
     // The truncation count: the record index, or per structure the hits since the ray entered
     // level 0.
-    let mut k = 0u32;
     let Truncation { a, count } = p.truncation;
+    let mut rc = RayCount::new(a);
     let mut walk = CellWalk::new(g, og, dn, levels, blocks);
     let mut face = FaceSigns::default();
     'walk: for cell in walk.by_ref() {
@@ -145,13 +145,10 @@ pub fn trace_ray(
             .take(SURF_MAX_HITS)
         {
             let j = tr.n;
-            surf_restart(count, s, &mut outer, &mut k);
-            if k as f32 >= a || j >= SURF_MAX_HITS {
+            rc.restart(count, a, s, &mut outer);
+            if rc.truncated() || j >= SURF_MAX_HITS {
                 cnt.cut += 1;
-                if count == TruncationCount::Structure
-                    && j < SURF_MAX_HITS
-                    && t_acc >= SURF_PASS_MIN_T
-                {
+                if count.passes_over() && j < SURF_MAX_HITS && t_acc >= SURF_PASS_MIN_T {
                     continue;
                 }
                 break 'walk;
@@ -165,17 +162,17 @@ pub fn trace_ray(
                 s,
                 len: piece.t1 - piece.t0,
                 level: lv,
-                count: k,
+                count: rc.k,
             };
             let wt = trilerp_weights(hit_point(&h, dn));
             let mut sa = 0.0f32;
             for i in 0..8 {
                 sa += wt[i] * g.opacity[lk[i] as usize];
             }
-            let at = surf_alpha(sa) * surf_gamma(a, k);
+            let at = surf_alpha(sa) * surf_gamma(a, rc.k);
             tr.hits[j] = h;
             tr.n += 1;
-            k += 1;
+            rc.k += 1;
             cnt.hits += 1;
             t_acc *= 1.0 - at;
             if t_acc < p.stop_thresh {

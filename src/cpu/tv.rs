@@ -112,7 +112,7 @@ fn slot_grad(data: &[f32], sl: &SlotLinks, g: &mut [f32]) {
 const PIECE: usize = 4096;
 
 /// grad += ∂(scale·Σ_chunk TV)/∂data, per allocated vertex and channel; every vertex written is
-/// flagged in `touched` with the chunk's bits.
+/// flagged in `touched` with the chunk's bits (none, and `touched` unread, when they are 0).
 pub fn tv(links: &[i32], data: &[f32], grad: &mut [f32], touched: &mut [u32], c: &TvChunk) {
     let (ry, rz) = (c.res[1] as usize, c.res[2] as usize);
     let n = c.channels as usize;
@@ -139,7 +139,9 @@ pub fn tv(links: &[i32], data: &[f32], grad: &mut [f32], touched: &mut [u32], c:
     for (rows, grads) in pieces {
         for (i, &l) in rows.iter().enumerate() {
             let g = &grads[i * n..(i + 1) * n];
-            touched[l] |= c.touch;
+            if c.touch != 0 {
+                touched[l] |= c.touch;
+            }
             for (dst, gv) in grad[l * n..(l + 1) * n].iter_mut().zip(g) {
                 *dst += c.scale * gv;
             }

@@ -1,8 +1,8 @@
 //! The learned background on the device: recording its optimiser step (`background_step` for
-//! the colour, clamped to [0, 1]; `background_spheres_step` for the spheres' texels) and the
-//! spheres' buffers, shared by both Vulkan backends.
+//! the colour, clamped to [0, 1]; `tv` and `background_spheres_step` for the spheres' texels)
+//! and the spheres' buffers, shared by both Vulkan backends.
 
-use super::{address_words, Batch, Gpu, GpuBuffer};
+use super::{address_words, record_tv, Batch, Gpu, GpuBuffer};
 use crate::abi::buffers::BackgroundSpheres;
 use crate::abi::train::BackgroundStep;
 use crate::kernels;
@@ -17,6 +17,8 @@ pub struct SphereBuffers {
     pub table: GpuBuffer,
     pub grad: GpuBuffer,
     pub avg: GpuBuffer,
+    /// The links of the spheres' TV (`BackgroundSpheres::tv_links`).
+    pub tv_links: GpuBuffer,
 }
 
 impl SphereBuffers {
@@ -32,6 +34,7 @@ impl SphereBuffers {
         };
         Ok(SphereBuffers {
             shape_buf: gpu.upload(&[shape])?,
+            tv_links: gpu.upload_nonempty(&t.shape.tv_links())?,
             shape,
             table,
             grad,
@@ -66,11 +69,13 @@ impl SphereBuffers {
 }
 
 /// Records one optimiser step of the background held in `bg` (a `Background` buffer) and, when
-/// they are learned, of its `spheres`.
+/// they are learned, of its `spheres`: their TV (`tv`, when `s.sphere_tv` > 0; `step` is the
+/// step record its push block names, untouched), then their step.
 pub fn record_background_step(
     b: &mut Batch,
     bg: &GpuBuffer,
     spheres: Option<&SphereBuffers>,
+    step: &GpuBuffer,
     s: &BackgroundStep,
 ) -> Result<()> {
     b.dispatch_1d(
@@ -87,6 +92,9 @@ pub fn record_background_step(
     let Some(sp) = spheres.filter(|sp| sp.shape.learn != 0) else {
         return Ok(());
     };
+    if s.sphere_tv > 0.0 {
+        record_sphere_tv(b, sp, step, s.sphere_tv)?;
+    }
     let [lr_sigma, lr_colour] = s.sphere_rates();
     let n = sp.shape.table_len() as u32;
     b.dispatch_1d(
@@ -103,4 +111,17 @@ pub fn record_background_step(
         },
         n,
     )
+}
+
+/// Records the gradient of the spheres' TV of weight `lambda` added to their gradient (`tv` with
+/// `BackgroundSpheres::tv_chunk`'s chunk; `step`: the step record the kernel's push block names,
+/// untouched). Twin: `cpu::background_spheres_step::sphere_tv`.
+pub fn record_sphere_tv(
+    b: &mut Batch,
+    sp: &SphereBuffers,
+    step: &GpuBuffer,
+    lambda: f32,
+) -> Result<()> {
+    let chunk = sp.shape.tv_chunk(lambda);
+    record_tv(b, &sp.tv_links, &sp.table, &sp.grad, step, &chunk)
 }

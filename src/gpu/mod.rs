@@ -26,7 +26,7 @@ mod step_times;
 mod train_views;
 mod tv;
 
-pub use background_step::{record_background_step, SphereBuffers};
+pub use background_step::{record_background_step, record_sphere_tv, SphereBuffers};
 pub use batch::{Batch, BatchTimes, InFlight};
 pub use buffer::{address_words, GpuBuffer};
 pub use context::{list_devices, Gpu, GpuOptions};

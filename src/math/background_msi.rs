@@ -8,6 +8,7 @@
 //! trigonometry), so the kernel and this twin agree to a few ulps.
 
 use crate::abi::buffers::BackgroundSpheres;
+use crate::abi::regularisers::TvChunk;
 use crate::math::atomic;
 use std::sync::atomic::AtomicU32;
 
@@ -57,6 +58,28 @@ impl BackgroundSpheres {
     /// Floats in the texel table (and in its gradient).
     pub fn table_len(&self) -> usize {
         self.layers as usize * self.size as usize * self.size as usize * TEXEL
+    }
+
+    /// The spheres' TV as `tv` computes it on a grid: the table read as a (layer, row, column)
+    /// grid of [`TEXEL`] channels whose slot s holds texel s (identity links), every texel in
+    /// the chunk, loss = λ/texels · Σ TV. Neighbours are the next sphere and the next texel of
+    /// the map (none past a map's border); no touched flags (the spheres' step visits every
+    /// value with a gradient).
+    pub fn tv_chunk(&self, lambda: f32) -> TvChunk {
+        let texels = self.layers * self.size * self.size;
+        TvChunk {
+            res: [self.layers, self.size, self.size],
+            start: 0,
+            count: texels,
+            channels: TEXEL as u32,
+            scale: lambda / texels.max(1) as f32,
+            touch: 0,
+        }
+    }
+
+    /// The links the spheres' TV reads: slot s holds texel s.
+    pub fn tv_links(&self) -> Vec<i32> {
+        (0..(self.layers * self.size * self.size) as i32).collect()
     }
 }
 

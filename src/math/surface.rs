@@ -15,6 +15,7 @@ use super::cubic::{exit_sign, solve_crossings, trilerp_level, CellCubic};
 use super::dda::{ray_unit, Dda};
 use super::madd::madd;
 use super::trilerp::trilerp;
+use crate::abi::consts::{SURF_COUNT_RAY, SURF_COUNT_STRUCTURE, SURF_COUNT_THROUGH};
 use std::sync::Arc;
 
 pub use crate::abi::consts::{SURF_MAX_LEVELS, SURF_SEGMENT_MARGIN};
@@ -102,7 +103,7 @@ pub struct CellHits {
 /// An empty slot of a hit list (the GLSL's `SURF_NO_HIT`).
 pub const SURF_NO_HIT: f32 = f32::MAX;
 
-/// How the truncation count j of γ_a(j) runs along a ray (`SurfParams::count_per_structure`).
+/// How the truncation count j of γ_a(j) runs along a ray (`SurfParams::truncation_count`).
 #[derive(
     Clone,
     Copy,
@@ -120,8 +121,12 @@ pub enum TruncationCount {
     #[default]
     Ray,
     /// Per structure: the count restarts where the ray enters level 0 (the outermost level) from
-    /// outside ([`surf_restart`]); a truncated hit is passed over, not the end of the ray.
+    /// outside ([`RayCount::restart`]); a truncated hit is passed over, not the end of the ray.
     Structure,
+    /// Per structure as `Structure`, but each structure behind the first the ray enters gets
+    /// its first hit alone (its outermost level): a surface seen through another is composited,
+    /// while its inner levels are composited only by rays that meet it first.
+    Through,
 }
 
 /// Truncated compositing: γ_a(k) with k counted as `count` says.
@@ -141,30 +146,72 @@ impl From<f32> for Truncation {
     }
 }
 
-impl Truncation {
-    /// `SurfParams::count_per_structure`.
-    pub fn per_structure_flag(&self) -> u32 {
-        (self.count == TruncationCount::Structure) as u32
+impl TruncationCount {
+    /// `SurfParams::truncation_count`.
+    pub fn code(self) -> u32 {
+        match self {
+            TruncationCount::Ray => SURF_COUNT_RAY,
+            TruncationCount::Structure => SURF_COUNT_STRUCTURE,
+            TruncationCount::Through => SURF_COUNT_THROUGH,
+        }
+    }
+
+    /// Whether a truncated hit is passed over (while T ≥ `SURF_PASS_MIN_T`) rather than ending
+    /// the ray: when a later structure may restart the count.
+    pub fn passes_over(self) -> bool {
+        self != TruncationCount::Ray
     }
 }
 
-/// Counting per structure: a popped hit `s` that is one of the cell's front crossings of level 0
-/// (`outer`; the outermost level, as levels increase) is where the ray enters a structure from
-/// outside every level set, so the truncation count `k` restarts at 0 there: each structure along
-/// the ray gets γ_a for its own first hits, a surface seen through another is composited, and
-/// the inner levels of one structure are still truncated. A matched value is consumed: of two
-/// equal hits one restarts the count. (The GLSL's `surf_restart`: the kernels' hit lists hold s
-/// values only.)
-pub fn surf_restart(count: TruncationCount, s: f32, outer: &mut [f32; 2], k: &mut u32) {
-    if count == TruncationCount::Ray {
-        return;
+/// The truncation count of a ray as it walks: `k` hits counted, a hit truncated (γ = 0) from
+/// `k ≥ limit`; `structures` entered so far. (The GLSL keeps the three in registers.)
+#[derive(Clone, Copy, Debug)]
+pub struct RayCount {
+    pub k: u32,
+    pub limit: f32,
+    structures: u32,
+}
+
+impl RayCount {
+    /// A ray's count before its first hit, with truncation parameter `a`.
+    pub fn new(a: f32) -> Self {
+        RayCount {
+            k: 0,
+            limit: a,
+            structures: 0,
+        }
     }
-    if s == outer[0] {
-        outer[0] = SURF_NO_HIT;
-        *k = 0;
-    } else if s == outer[1] {
-        outer[1] = SURF_NO_HIT;
-        *k = 0;
+
+    /// Counting per structure: a popped hit `s` that is one of the cell's front crossings of
+    /// level 0 (`outer`; the outermost level, as levels increase) is where the ray enters a
+    /// structure from outside every level set, so the count restarts at 0 there, its limit `a`
+    /// (`Structure`, and the first structure of `Through`) or 1 (the structures behind it with
+    /// `Through`); each structure along the ray gets its own first hits, and the inner levels of
+    /// one structure are still truncated. A matched value is consumed: of two equal hits one
+    /// restarts the count. (The GLSL's `surf_restart`: the kernels' hit lists hold s values only.)
+    pub fn restart(&mut self, count: TruncationCount, a: f32, s: f32, outer: &mut [f32; 2]) {
+        if count == TruncationCount::Ray {
+            return;
+        }
+        if s == outer[0] {
+            outer[0] = SURF_NO_HIT;
+        } else if s == outer[1] {
+            outer[1] = SURF_NO_HIT;
+        } else {
+            return;
+        }
+        self.k = 0;
+        self.limit = if count == TruncationCount::Through && self.structures > 0 {
+            a.min(1.0)
+        } else {
+            a
+        };
+        self.structures += 1;
+    }
+
+    /// Whether the next hit is truncated.
+    pub fn truncated(&self) -> bool {
+        self.k as f32 >= self.limit
     }
 }
 
@@ -340,6 +387,41 @@ pub fn surf_alpha(sa: f32) -> f32 {
 mod tests {
     use super::*;
     use crate::math::cubic::cell_cubic;
+
+    #[test]
+    fn counts_restart_per_structure_and_through_keeps_one_hit_behind_the_first() {
+        // Two structures along the ray: levels 0, 1, 2 of the first at s = 0.1, 0.2, 0.3, levels
+        // 0, 1 of the second at 0.6, 0.7 (the level-0 crossings are the cells' `outer` hits).
+        let hits = [0.1f32, 0.2, 0.3, 0.6, 0.7];
+        let a = 2.0;
+        for (count, want) in [
+            (TruncationCount::Ray, [true, true, false, false, false]),
+            (TruncationCount::Structure, [true, true, false, true, true]),
+            (TruncationCount::Through, [true, true, false, true, false]),
+        ] {
+            let mut rc = RayCount::new(a);
+            let kept = hits.map(|s| {
+                let mut outer = if s == 0.1 || s == 0.6 {
+                    [s, SURF_NO_HIT]
+                } else {
+                    [SURF_NO_HIT; 2]
+                };
+                rc.restart(count, a, s, &mut outer);
+                let keep = !rc.truncated();
+                rc.k += u32::from(keep);
+                keep
+            });
+            assert_eq!(kept, want, "{count:?}");
+            assert_eq!(count.passes_over(), count != TruncationCount::Ray);
+        }
+        // While a decays above 1, a structure behind the first still keeps one hit.
+        let mut rc = RayCount::new(3.4);
+        let mut outer = [0.5, SURF_NO_HIT];
+        rc.restart(TruncationCount::Through, 3.4, 0.1, &mut [0.1, SURF_NO_HIT]);
+        rc.k = 3;
+        rc.restart(TruncationCount::Through, 3.4, 0.5, &mut outer);
+        assert_eq!((rc.k, rc.limit, outer[0]), (0, 1.0, SURF_NO_HIT));
+    }
 
     #[test]
     fn gamma_ends_and_blend() {

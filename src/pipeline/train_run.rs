@@ -226,8 +226,7 @@ where
         "--resume: no checkpoint at {}",
         ckpt.display()
     );
-    let mut backend = make(S::load(&ckpt)?.grid)?;
-    let (step, mut cfg, bg) = checkpoint::resume::<S, C, B>(backend.as_mut(), &ckpt)?;
+    let (backend, step, mut cfg, bg) = checkpoint::resume::<S, C, B>(make, &ckpt)?;
     check_flags(&cfg)?;
     bg.ensure_mode(opts.background, "the checkpoint")?;
     let total = cfg.iters_mut();

@@ -193,22 +193,31 @@ impl StageBackend<PlenoxelsStage> for CpuPlenoxels {
         f(&self.grid, &[&self.state_density, &self.state_sh])
     }
 
-    fn load(&mut self, grid: Grid, state: Option<[Vec<f32>; 2]>) -> Result<()> {
-        let n = grid.allocated();
-        let [sd, ss] = state.unwrap_or_else(|| [vec![0.0; n], vec![0.0; n * SH_DIM]]);
+    fn load_state(&mut self, state: [Vec<f32>; 2]) -> Result<()> {
+        let n = self.grid.allocated();
+        let [sd, ss] = state;
         ensure!(
             sd.len() == n && ss.len() == n * SH_DIM,
-            "optimizer state does not match the grid"
+            "optimizer state of {} + {} floats does not match the grid's {n} vertices",
+            sd.len(),
+            ss.len()
         );
-        self.grad_density = vec![0.0; n];
-        self.grad_sh = vec![0.0; n * SH_DIM];
         self.state_density = sd;
         self.state_sh = ss;
+        Ok(())
+    }
+
+    fn load(&mut self, grid: Grid, state: Option<[Vec<f32>; 2]>) -> Result<()> {
+        let n = grid.allocated();
+        self.grad_density = vec![0.0; n];
+        self.grad_sh = vec![0.0; n * SH_DIM];
+        self.state_density = vec![0.0; n];
+        self.state_sh = vec![0.0; n * SH_DIM];
         self.touched = vec![0; n];
         self.slots = occupancy_slots(&grid.links, n);
         self.grid = grid;
         self.refresh_occupancy();
-        Ok(())
+        state.map_or(Ok(()), |s| self.load_state(s))
     }
 }
 

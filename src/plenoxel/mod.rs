@@ -40,6 +40,8 @@ pub struct PlenoxelsStepParams {
     pub tv: Option<TvParams>,
     /// RMSProp rate of a learned background (`background_step`; unused when it is fixed).
     pub lr_bg: f32,
+    /// Weight of the TV on a learned background's spheres (unused without them).
+    pub tv_background: f32,
 }
 
 /// What a step reports back.

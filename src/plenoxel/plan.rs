@@ -83,7 +83,14 @@ impl PlenoxelPlan {
             beta: p.beta,
             eps: p.eps,
         }));
-        let bg = BackgroundStep::when_learned(learned_bg, p.lr_bg, p.lr_sigma, p.beta, p.eps);
+        let bg = BackgroundStep::when_learned(
+            learned_bg,
+            p.lr_bg,
+            p.lr_sigma,
+            p.tv_background,
+            p.beta,
+            p.eps,
+        );
         passes.extend(bg.map(PlenoxelPass::Background));
         Ok(PlenoxelPlan { passes })
     }
@@ -121,6 +128,7 @@ mod tests {
             stop_thresh: 1e-4,
             tv,
             lr_bg: 1e-2,
+            tv_background: 1e-3,
         }
     }
 
@@ -176,6 +184,7 @@ mod tests {
                     assert_eq!(chunk.scale, lambda / 412.0);
                     assert_eq!(chunk.touch, TOUCH_ALL);
                 }
+                PlenoxelPass::Background(s) => assert_eq!(s.sphere_tv, 1e-3),
                 _ => {}
             }
         }

@@ -195,7 +195,8 @@ impl QueuedBackend<PlenoxelsStage> for VulkanPlenoxels {
                 }
                 PlenoxelPass::RmsProp(h) => self.record_rmsprop(b, h)?,
                 PlenoxelPass::Background(s) => {
-                    record_background_step(b, &core.queue.bg, core.queue.spheres.as_ref(), s)?
+                    let q = &core.queue;
+                    record_background_step(b, &q.bg, q.spheres.as_ref(), &q.step, s)?
                 }
             }
         }

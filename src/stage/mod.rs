@@ -132,9 +132,11 @@ pub trait StageBackend<S: Stage> {
         let state = self.optimizer_state()?;
         f(&self.grid()?, &state.arrays())
     }
-    /// Replace grid and optimiser state (after resampling or pruning, or when resuming); the
-    /// background stays.
+    /// Replace grid and optimiser state (after resampling or pruning); the background stays.
     fn load(&mut self, grid: S::Grid, state: Option<S::State>) -> Result<()>;
+    /// Replace the optimiser state of the grid the backend holds (when resuming: the backend
+    /// was built on the checkpoint's grid); an error when its arrays do not match the grid.
+    fn load_state(&mut self, state: S::State) -> Result<()>;
 
     /// Backend name for logs ("vulkan" or "cpu").
     fn name(&self) -> &'static str {

@@ -196,6 +196,11 @@ where
         self.core().bufs.state_bytes()
     }
 
+    fn load_state(&mut self, state: S::State) -> Result<()> {
+        self.core().queue.settle()?;
+        self.core().bufs.write_states(&state.arrays())
+    }
+
     fn load(&mut self, grid: S::Grid, state: Option<S::State>) -> Result<()> {
         let mut fresh = self.fresh(grid)?;
         if let Some(state) = state {

@@ -7,7 +7,7 @@
 use crate::abi::buffers::Background;
 use crate::abi::rays::{SampleSet, SampledRays};
 use crate::abi::train::BackgroundStep;
-use crate::cpu::background_spheres_step::background_spheres_step;
+use crate::cpu::background_spheres_step::step_spheres;
 use crate::cpu::background_step::background_step;
 use crate::gpu::{Phase, PhaseClock, TrainRays};
 use crate::math::background_msi::BackgroundView;
@@ -91,19 +91,11 @@ impl<F> HostSteps<F> {
     }
 
     /// The background step: the colour's (twin of `background_step`) and, when they are
-    /// learned, the spheres' (twin of `background_spheres_step`).
+    /// learned, the spheres' (their TV, then the twin of `background_spheres_step`).
     pub fn step_background(&mut self, s: &BackgroundStep) {
         background_step(&mut self.bg, s.lr, s.beta, s.eps);
         if let Some(sp) = self.spheres.as_mut().filter(|sp| sp.learned()) {
-            let [lr_sigma, lr_colour] = s.sphere_rates();
-            background_spheres_step(
-                Arc::make_mut(sp),
-                &mut self.sphere_grad,
-                lr_sigma,
-                lr_colour,
-                s.beta,
-                s.eps,
-            );
+            step_spheres(Arc::make_mut(sp), &mut self.sphere_grad, s);
         }
     }
 }

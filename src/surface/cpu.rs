@@ -287,18 +287,22 @@ impl StageBackend<SurfaceStage> for CpuSurface {
         f(&self.grid, &[sd, so, ss])
     }
 
-    fn load(&mut self, grid: SurfaceGrid, state: Option<[Vec<f32>; 3]>) -> Result<()> {
-        let n = grid.delta.len();
-        let state = state.unwrap_or_else(|| [vec![0.0; n], vec![0.0; n], vec![0.0; n * SH_DIM]]);
+    fn load_state(&mut self, state: [Vec<f32>; 3]) -> Result<()> {
+        let n = self.grid.delta.len();
         ensure!(
             state[0].len() == n && state[1].len() == n && state[2].len() == n * SH_DIM,
-            "optimizer state does not match the surface grid"
+            "optimizer state of {:?} floats does not match the surface grid's {n} vertices",
+            state.each_ref().map(|s| s.len())
         );
+        self.state = state;
+        Ok(())
+    }
+
+    fn load(&mut self, grid: SurfaceGrid, state: Option<[Vec<f32>; 3]>) -> Result<()> {
         let steps = std::mem::take(&mut self.steps);
         *self = CpuSurface::new(grid)?;
-        self.state = state;
         self.steps = steps;
-        Ok(())
+        state.map_or(Ok(()), |s| self.load_state(s))
     }
 }
 

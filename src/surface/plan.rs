@@ -140,7 +140,7 @@ impl SurfacePlan {
             opacity_rows: regs.opacity_log.map(|c| c.range()).unwrap_or_default(),
         }));
         // Stage 2 keeps a background's spheres as stage 1 left them: no σ rate.
-        let bg = BackgroundStep::when_learned(learned_bg, p.lr_bg, 0.0, p.beta, p.eps);
+        let bg = BackgroundStep::when_learned(learned_bg, p.lr_bg, 0.0, 0.0, p.beta, p.eps);
         passes.extend(bg.map(SurfacePass::Background));
         Ok(SurfacePlan { passes })
     }

@@ -67,7 +67,7 @@ pub fn surf_params(sp: &SurfaceParams, loss: &SurfaceLoss, n_rays: usize) -> Sur
         n_levels: sp.levels.len() as u32,
         levels,
         weights: [0, 0],
-        count_per_structure: sp.truncation.per_structure_flag(),
+        truncation_count: sp.truncation.count.code(),
     }
 }
 
@@ -423,12 +423,10 @@ impl QueuedBackend<SurfaceStage> for VulkanSurface {
                     let q = &self.core.queue;
                     record_surface_rmsprop(b, &io, &q.step, &q.args, h)?;
                 }
-                SurfacePass::Background(s) => record_background_step(
-                    b,
-                    &self.core.queue.bg,
-                    self.core.queue.spheres.as_ref(),
-                    s,
-                )?,
+                SurfacePass::Background(s) => {
+                    let q = &self.core.queue;
+                    record_background_step(b, &q.bg, q.spheres.as_ref(), &q.step, s)?
+                }
             }
         }
         Ok(())

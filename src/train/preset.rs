@@ -162,6 +162,8 @@ mod tests {
         use crate::train::{PlenoxelsConfig, SurfaceConfig};
         let s1: PlenoxelsConfig = serde_json::from_str(STAGE1_SAVED).unwrap();
         assert_eq!(s1.preset, Preset::Fast);
+        // Written before the background's spheres had a TV: none.
+        assert_eq!(s1.tv_background, 0.0);
         let again: serde_json::Value = serde_json::to_value(&s1).unwrap();
         assert_eq!(again["preset"], "fast");
         let imported = STAGE1_SAVED.replace(r#""preset":"fast""#, r#""preset":"imported""#);

@@ -60,9 +60,10 @@ pub struct SurfaceConfig {
     /// Truncation parameter a.
     pub a: Linear,
     /// How the truncation count runs along a ray: over every front hit (`ray`, the paper's
-    /// rule) or per structure (`structure`: it restarts where the ray enters the outermost level,
-    /// so a surface seen through another keeps its hits). Absent from checkpoints written before
-    /// it: those counted per ray.
+    /// rule), per structure (`structure`: it restarts where the ray enters the outermost level,
+    /// so a surface seen through another keeps its hits), or per structure with one hit for each
+    /// structure behind the first (`through`: a surface seen through another keeps its outermost
+    /// level). Absent from checkpoints written before it: those counted per ray.
     #[serde(default)]
     pub truncation_count: TruncationCount,
     /// Entropy weight LH (per-ray term, mean over the batch).
@@ -179,6 +180,9 @@ impl SurfaceConfig {
         match category {
             Category::Thin | Category::Synthetic => {}
             Category::Translucent => {
+                // Surfaces behind semi-transparent ones: each structure behind the first the
+                // ray enters keeps its outermost level (docs/tuning.md).
+                c.truncation_count = TruncationCount::Through;
                 c.lambda_delta = 1e-5;
                 c.lambda_alpha = 1e-11;
                 c.lambda_n1 = Linear {

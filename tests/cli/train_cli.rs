@@ -807,12 +807,11 @@ fn learned_background_converges_to_the_backdrop_of_images_without_alpha() {
     meta["background"]["rgb"] = serde_json::json!([0.5, 0.5, 0.5]);
     alphasurf::checkpoint::format::save(&s1_path, &s1_ck.grid, &optim_refs(&s1_ck.optim), &meta)
         .unwrap();
-    let mut b = alphasurf::plenoxel::CpuPlenoxels::new(s1_ck.grid.clone());
-    let (_, _, rec) = alphasurf::checkpoint::resume::<
+    let (b, _, _, rec) = alphasurf::checkpoint::resume::<
         alphasurf::plenoxel::PlenoxelsStage,
         alphasurf::train::PlenoxelsConfig,
         _,
-    >(&mut b, &s1_path)
+    >(cpu_plenoxels, &s1_path)
     .unwrap();
     use alphasurf::stage::StageBackend;
     let restored = b.background().unwrap();
@@ -908,6 +907,7 @@ fn learned_background_converges_from_grey_on_the_device() {
             stop_thresh: cfg.stop_thresh,
             tv: None,
             lr_bg: cfg.lr_sh.at(step),
+            tv_background: cfg.tv_background,
         };
         vk.step_sampled(&views, 3 + step as u64, 2048, &p).unwrap();
     }
@@ -1055,12 +1055,11 @@ fn background_spheres_learn_the_environment_and_travel_with_the_run() {
     // The checkpoint holds the spheres: resumed into a fresh backend they come back as trained.
     let ck = spheres.join("plenoxels.npz");
     let saved = alphasurf::checkpoint::format::load(&ck).unwrap();
-    let mut b = alphasurf::plenoxel::CpuPlenoxels::new(saved.grid.clone());
-    alphasurf::checkpoint::resume::<
+    let (b, ..) = alphasurf::checkpoint::resume::<
         alphasurf::plenoxel::PlenoxelsStage,
         alphasurf::train::PlenoxelsConfig,
         _,
-    >(&mut b, &ck)
+    >(cpu_plenoxels, &ck)
     .unwrap();
     use alphasurf::stage::StageBackend;
     let s = b.spheres().unwrap().expect("spheres restored");
@@ -1115,4 +1114,11 @@ fn background_spheres_learn_the_environment_and_travel_with_the_run() {
         !out.status.success() && err.contains("--background spheres"),
         "{err}"
     );
+}
+
+/// A CPU stage-1 backend on `grid` (what `checkpoint::resume` builds in the tests).
+fn cpu_plenoxels(
+    grid: alphasurf::grid::Grid,
+) -> anyhow::Result<Box<alphasurf::plenoxel::CpuPlenoxels>> {
+    Ok(Box::new(alphasurf::plenoxel::CpuPlenoxels::new(grid)))
 }

@@ -77,6 +77,7 @@ rows!(
     surface_train_spheres,
     trilerp_eval,
     tv,
+    tv_spheres,
 );
 
 #[test]

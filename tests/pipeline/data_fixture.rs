@@ -301,6 +301,7 @@ fn stage1_start() -> (
         stop_thresh: 1e-4,
         tv: None,
         lr_bg: 1e-2,
+        tv_background: 0.0,
     };
     (grid, p)
 }
