@@ -7,6 +7,7 @@ use super::format::{self, OptimArrays};
 use crate::abi::buffers::{Background, BackgroundSpheres};
 use crate::data::{BackgroundMode, Dataset};
 use crate::math::background_msi::SphereTable;
+use crate::stage::{Stage, StageBackend};
 use anyhow::{bail, ensure, Context, Result};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -16,6 +17,29 @@ pub const META_KEY: &str = "background";
 
 /// Names of the spheres' texel values and running averages among a checkpoint's arrays.
 pub const SPHERE_ARRAYS: [&str; 2] = ["background_spheres", "background_spheres_avg"];
+
+/// What a run shows behind its grid, as a checkpoint holds it: the background's record and its
+/// spheres (texel values and running averages), kept (stage 2, `render`) or learned (stage 1).
+pub struct Backdrop {
+    pub record: BackgroundRecord,
+    pub spheres: Option<SphereTable>,
+}
+
+impl Backdrop {
+    /// The backdrop of the checkpoint at `path` (`meta`: its metadata, `optim`: its arrays),
+    /// its spheres kept.
+    pub fn kept(meta: &serde_json::Value, optim: &OptimArrays, path: &Path) -> Result<Self> {
+        let record = BackgroundRecord::from_meta(meta, path)?;
+        let spheres = record.spheres_in(optim, false, path)?;
+        Ok(Backdrop { record, spheres })
+    }
+
+    /// Give `backend` this background and its spheres.
+    pub fn install<S: Stage, B: StageBackend<S> + ?Sized>(self, backend: &mut B) -> Result<()> {
+        backend.set_background(self.record.kernel())?;
+        backend.set_spheres(self.spheres)
+    }
+}
 
 /// The shape of a background's spheres (`abi::buffers::BackgroundSpheres` without addresses).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]

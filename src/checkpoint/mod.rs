@@ -9,7 +9,7 @@ pub mod format;
 pub mod surface;
 pub mod writer;
 
-pub use background::BackgroundRecord;
+pub use background::{Backdrop, BackgroundRecord};
 
 use crate::abi::buffers::Background;
 use crate::data::BackgroundMode;
@@ -152,8 +152,11 @@ pub fn resume<S: Stage, C: Recorded, B: StageBackend<S> + ?Sized>(
     backend
         .load_state(saved.state)
         .with_context(|| format!("{}: optimiser state", path.display()))?;
-    backend.set_background(bg.kernel())?;
-    backend.set_spheres(saved.spheres)?;
+    let backdrop = Backdrop {
+        record: bg,
+        spheres: saved.spheres,
+    };
+    backdrop.install(backend.as_mut())?;
     Ok((backend, step, cfg, bg))
 }
 

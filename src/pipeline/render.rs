@@ -6,11 +6,10 @@
 use super::{train_plenoxels, train_surface};
 use crate::backend::Backend;
 use crate::checkpoint::format as checkpoint;
-use crate::checkpoint::BackgroundRecord;
+use crate::checkpoint::Backdrop;
 use crate::data::{Dataset, LoadOptions};
 use crate::gpu::Gpu;
 use crate::grid::surface::SurfaceGrid;
-use crate::math::background_msi::SphereTable;
 use crate::math::surface::Truncation;
 use crate::run::dir::{ALL_STAGE1, ALL_STAGE2, SURFACE_CHECKPOINT};
 use crate::run::{self, read_info};
@@ -66,9 +65,6 @@ enum Trained {
     },
 }
 
-/// A run's background and its spheres.
-type Backdrop = (BackgroundRecord, Option<SphereTable>);
-
 /// Load the checkpoint of the run `run`: its surface.npz (stage 2) if there is one, else its
 /// plenoxels.npz (stage 1), with its background and the background's spheres.
 fn load_run(run: &Path) -> Result<(Trained, Backdrop, PathBuf)> {
@@ -77,14 +73,13 @@ fn load_run(run: &Path) -> Result<(Trained, Backdrop, PathBuf)> {
         let ck = crate::checkpoint::surface::load(&surface)?;
         let (step, cfg) =
             checkpoint::meta_step_config::<SurfaceConfig>(&ck.meta, "surface", &surface)?;
-        let bg = BackgroundRecord::from_meta(&ck.meta, &surface)?;
-        let spheres = bg.spheres_in(&ck.optim, false, &surface)?;
+        let backdrop = Backdrop::kept(&ck.meta, &ck.optim, &surface)?;
         let trained = Trained::Surface {
             grid: ck.grid,
             truncation: cfg.truncation(step),
             stop_thresh: cfg.stop_thresh,
         };
-        return Ok((trained, (bg, spheres), surface));
+        return Ok((trained, backdrop, surface));
     }
     if run.join(ALL_STAGE2).join(SURFACE_CHECKPOINT).is_file() {
         bail!(
@@ -96,8 +91,7 @@ fn load_run(run: &Path) -> Result<(Trained, Backdrop, PathBuf)> {
     }
     let path = run::dir::plenoxels_checkpoint(run, "render")?;
     let ck = checkpoint::load(&path)?;
-    let bg = BackgroundRecord::from_meta(&ck.meta, &path)?;
-    let spheres = bg.spheres_in(&ck.optim, false, &path)?;
+    let backdrop = Backdrop::kept(&ck.meta, &ck.optim, &path)?;
     let stop_thresh = serde_json::from_value::<PlenoxelsConfig>(ck.meta["config"].clone())
         .map(|c| c.stop_thresh)
         .unwrap_or(1e-7);
@@ -105,13 +99,13 @@ fn load_run(run: &Path) -> Result<(Trained, Backdrop, PathBuf)> {
         grid: ck.grid,
         stop_thresh,
     };
-    Ok((trained, (bg, spheres), path))
+    Ok((trained, backdrop, path))
 }
 
 /// Render the split `opts.split` of the run `opts.run` into `opts.out` on `gpu` (`None`: the CPU
 /// twins); returns the per-view and mean PSNR.
 pub fn render(opts: &RenderOptions, gpu: Option<&Gpu>) -> Result<RenderedSplit> {
-    let (trained, (bg, spheres), ckpt_path) = load_run(&opts.run)?;
+    let (trained, backdrop, ckpt_path) = load_run(&opts.run)?;
     let info = read_info(&opts.run);
     let data_dir = match (&opts.data, &info) {
         (Some(d), _) => d.clone(),
@@ -126,7 +120,7 @@ pub fn render(opts: &RenderOptions, gpu: Option<&Gpu>) -> Result<RenderedSplit> 
     let data = Dataset::load(
         &data_dir,
         &LoadOptions {
-            background: bg.mode,
+            background: backdrop.record.mode,
             downscale,
             scene,
             ..Default::default()
@@ -146,8 +140,7 @@ pub fn render(opts: &RenderOptions, gpu: Option<&Gpu>) -> Result<RenderedSplit> 
     match trained {
         Trained::Density { grid, stop_thresh } => {
             let mut backend = train_plenoxels::make_backend(gpu, grid)?;
-            backend.set_background(bg.kernel())?;
-            backend.set_spheres(spheres)?;
+            backdrop.install(backend.as_mut())?;
             render_split(
                 backend.as_mut(),
                 &data,
@@ -163,8 +156,7 @@ pub fn render(opts: &RenderOptions, gpu: Option<&Gpu>) -> Result<RenderedSplit> 
             stop_thresh,
         } => {
             let mut backend = train_surface::make_backend(gpu, grid)?;
-            backend.set_background(bg.kernel())?;
-            backend.set_spheres(spheres)?;
+            backdrop.install(backend.as_mut())?;
             render_split_with(
                 &mut |rays| Ok(backend.render(rays, truncation, stop_thresh)?.0),
                 &data,

@@ -6,13 +6,12 @@ use super::metrics::{SurfaceFigures, SurfaceMetrics, SurfacePerRay};
 use super::train_options::TrainOptions;
 use super::train_run::{claim, refuse_clashes, resume, run_info, Loaded, Trained, Trainer};
 use crate::checkpoint::format as checkpoint;
-use crate::checkpoint::BackgroundRecord;
+use crate::checkpoint::{Backdrop, BackgroundRecord};
 use crate::data::BackgroundMode;
 use crate::data::Dataset;
 use crate::gpu::Gpu;
 use crate::grid::surface::SurfaceGrid;
 use crate::grid::{npz, Grid};
-use crate::math::background_msi::SphereTable;
 use crate::run::same_data::check_same_data;
 use crate::run::{self, RunStage};
 use crate::surface::{CpuSurface, SurfaceBackend, SurfaceStage, VulkanSurface};
@@ -39,7 +38,7 @@ pub(super) fn make_backend(
 /// background it trained with (an svox2 `ckpt.npz`: white), with its spheres (kept, not
 /// learned). A stage-1 run must have been trained on `data` (unless `--allow-other-data`); one
 /// that stopped before its last step is named.
-fn load_init(opts: &TrainOptions, path: &Path, data: &Dataset) -> Result<(Grid, InitBackground)> {
+fn load_init(opts: &TrainOptions, path: &Path, data: &Dataset) -> Result<(Grid, Backdrop)> {
     let file = if path.is_dir() {
         let ck = run::dir::plenoxels_checkpoint(path, "--init")?;
         if run::files::is_run(path) {
@@ -75,17 +74,11 @@ fn load_init(opts: &TrainOptions, path: &Path, data: &Dataset) -> Result<(Grid, 
     let spheres = bg.read_spheres(&file, false)?;
     Ok((
         grid,
-        InitBackground {
+        Backdrop {
             record: bg,
             spheres,
         },
     ))
-}
-
-/// A run's background as stage 2 starts from it.
-struct InitBackground {
-    record: BackgroundRecord,
-    spheres: Option<SphereTable>,
 }
 
 /// A new stage-2 grid, its configuration and its background (stage 1's, carried on) from
@@ -93,7 +86,7 @@ struct InitBackground {
 fn fresh_start(
     opts: &TrainOptions,
     data: &Dataset,
-) -> Result<(SurfaceGrid, SurfaceConfig, InitBackground)> {
+) -> Result<(SurfaceGrid, SurfaceConfig, Backdrop)> {
     let init = opts
         .init
         .as_ref()
@@ -139,8 +132,7 @@ pub fn train_surface(
     let (mut backend, cfg, start) = match fresh {
         Some((grid, cfg, bg)) => {
             let mut b = make_backend(gpu, grid)?;
-            b.set_background(bg.record.kernel())?;
-            b.set_spheres(bg.spheres)?;
+            bg.install(b.as_mut())?;
             (b, cfg, 0)
         }
         None => {

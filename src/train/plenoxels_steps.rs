@@ -7,7 +7,7 @@ use super::progress::Progress;
 use super::render::{render_split, RenderedSplit};
 use super::steps::{self, LoopReport, StageSteps};
 use crate::abi::buffers::PlenoxelPerRay;
-use crate::checkpoint::BackgroundRecord;
+use crate::checkpoint::{Backdrop, BackgroundRecord};
 use crate::data::{Dataset, Split};
 use crate::grid::{dilate, upsample, Grid};
 use crate::plenoxel::{PlenoxelsBackend, PlenoxelsStage, PlenoxelsStepParams, TvParams};
@@ -111,9 +111,9 @@ impl<'b> StageSteps<PlenoxelsStage, dyn PlenoxelsBackend + 'b> for PlenoxelsStep
         start_step: u32,
     ) -> Result<()> {
         if start_step == 0 {
-            let bg = BackgroundRecord::start_on(data);
-            backend.set_background(bg.kernel())?;
-            backend.set_spheres(bg.start_spheres(data)?)?;
+            let record = BackgroundRecord::start_on(data);
+            let spheres = record.start_spheres(data)?;
+            Backdrop { record, spheres }.install(backend)?;
         }
         Ok(())
     }
