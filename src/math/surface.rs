@@ -156,6 +156,15 @@ impl TruncationCount {
         }
     }
 
+    /// The count's name in configurations and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            TruncationCount::Ray => "ray",
+            TruncationCount::Structure => "structure",
+            TruncationCount::Through => "through",
+        }
+    }
+
     /// Whether a truncated hit is passed over (while T ≥ `SURF_PASS_MIN_T`) rather than ending
     /// the ray: when a later structure may restart the count.
     pub fn passes_over(self) -> bool {
@@ -413,6 +422,10 @@ mod tests {
             });
             assert_eq!(kept, want, "{count:?}");
             assert_eq!(count.passes_over(), count != TruncationCount::Ray);
+            assert_eq!(
+                serde_json::to_value(count).unwrap(),
+                serde_json::Value::from(count.name())
+            );
         }
         // While a decays above 1, a structure behind the first still keeps one hit.
         let mut rc = RayCount::new(3.4);

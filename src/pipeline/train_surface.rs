@@ -147,7 +147,8 @@ pub fn train_surface(
     };
     run.write_info(&run_info(opts, data, opts.init.clone())?)?;
     eprintln!(
-        "stage 2 on {} ({}): preset {}, category {}, {} steps of {} rays, a {} → {}, δ rate {:.1e}",
+        "stage 2 on {} ({}): preset {}, category {}, {} steps of {} rays, a {} → {}, count {}, \
+         δ rate {:.1e}",
         backend.name(),
         gpu.map_or("rayon".to_string(), |g| g.info().name.clone()),
         cfg.preset,
@@ -156,6 +157,7 @@ pub fn train_surface(
         cfg.batch,
         cfg.a.start,
         cfg.a.end,
+        cfg.truncation_count.name(),
         cfg.lr_delta.init
     );
     let (report, rendered) =
