@@ -152,11 +152,11 @@ pub fn resume<S: Stage, C: Recorded, B: StageBackend<S> + ?Sized>(
     backend
         .load_state(saved.state)
         .with_context(|| format!("{}: optimiser state", path.display()))?;
-    let backdrop = Backdrop {
+    Backdrop {
         record: bg,
         spheres: saved.spheres,
-    };
-    backdrop.install(backend.as_mut())?;
+    }
+    .install(backend.as_mut())?;
     Ok((backend, step, cfg, bg))
 }
 

@@ -8,8 +8,7 @@ use crate::math::dda::ray_unit;
 use crate::math::sh::sh_basis;
 use crate::math::surface::SurfaceParams;
 use crate::math::surface::{
-    surf_alpha, surf_cell_hits, surf_gamma, surf_ray, FaceSigns, RayCount, SurfOut, Truncation,
-    SURF_MAX_LEVELS,
+    surf_alpha, surf_cell_hits, surf_gamma, surf_ray, FaceSigns, RayCount, SurfOut, SURF_MAX_LEVELS,
 };
 use crate::math::surface_blocks::{surf_blocks_per_axis, surf_live_words, SkipRef, SURF_BOX_WORDS};
 use crate::math::surface_walk::CellWalk;
@@ -35,8 +34,8 @@ pub fn render_ray(
     let mut t_acc = 1.0f32;
     let mut j = 0u32;
     // The truncation count: j itself, or per structure the hits since the ray entered level 0.
-    let Truncation { a, count } = p.truncation;
-    let mut rc = RayCount::new(a);
+    let a = p.truncation.a;
+    let mut rc = RayCount::new(p.truncation);
     let mut cnt = SurfCounts::default();
     let mut walk = CellWalk::new(g, og, dn, levels, blocks);
     let mut face = FaceSigns::default();
@@ -51,10 +50,10 @@ pub fn render_ray(
         };
         let mut outer = hits.outer;
         for &s in hits.as_slice() {
-            rc.restart(count, a, s, &mut outer);
+            rc.restart(s, &mut outer);
             if rc.truncated() {
                 cnt.cut += 1;
-                if count.passes_over() && t_acc >= SURF_PASS_MIN_T {
+                if rc.passes_over() && t_acc >= SURF_PASS_MIN_T {
                     continue;
                 }
                 break 'walk;

@@ -35,8 +35,7 @@ use crate::math::sh::sh_basis;
 use crate::math::step::touch_mask;
 use crate::math::surface::SurfaceParams;
 use crate::math::surface::{
-    surf_alpha, surf_cell_hits, surf_gamma, surf_ray, FaceSigns, RayCount, Truncation,
-    SURF_MAX_LEVELS,
+    surf_alpha, surf_cell_hits, surf_gamma, surf_ray, FaceSigns, RayCount, SURF_MAX_LEVELS,
 };
 use crate::math::surface_blocks::SkipRef;
 use crate::math::surface_train::{
@@ -122,8 +121,8 @@ pub fn trace_ray(
     let mut t_acc = 1.0f32;
     // The truncation count: the record index, or per structure the hits since the ray entered
     // level 0.
-    let Truncation { a, count } = p.truncation;
-    let mut rc = RayCount::new(a);
+    let a = p.truncation.a;
+    let mut rc = RayCount::new(p.truncation);
     let mut walk = CellWalk::new(g, og, dn, levels, blocks);
     let mut face = FaceSigns::default();
     'walk: for cell in walk.by_ref() {
@@ -145,10 +144,10 @@ pub fn trace_ray(
             .take(SURF_MAX_HITS)
         {
             let j = tr.n;
-            rc.restart(count, a, s, &mut outer);
+            rc.restart(s, &mut outer);
             if rc.truncated() || j >= SURF_MAX_HITS {
                 cnt.cut += 1;
-                if count.passes_over() && j < SURF_MAX_HITS && t_acc >= SURF_PASS_MIN_T {
+                if rc.passes_over() && j < SURF_MAX_HITS && t_acc >= SURF_PASS_MIN_T {
                     continue;
                 }
                 break 'walk;

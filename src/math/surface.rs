@@ -172,21 +172,24 @@ impl TruncationCount {
     }
 }
 
-/// The truncation count of a ray as it walks: `k` hits counted, a hit truncated (γ = 0) from
-/// `k ≥ limit`; `structures` entered so far. (The GLSL keeps the three in registers.)
+/// The truncation count of a ray as it walks under truncation `t`: `k` hits counted, a hit
+/// truncated (γ = 0) from `k ≥ limit`; `structures` entered so far. (The GLSL keeps the three in
+/// registers.)
 #[derive(Clone, Copy, Debug)]
 pub struct RayCount {
+    t: Truncation,
     pub k: u32,
     pub limit: f32,
     structures: u32,
 }
 
 impl RayCount {
-    /// A ray's count before its first hit, with truncation parameter `a`.
-    pub fn new(a: f32) -> Self {
+    /// A ray's count under `t` before its first hit.
+    pub fn new(t: Truncation) -> Self {
         RayCount {
+            t,
             k: 0,
-            limit: a,
+            limit: t.a,
             structures: 0,
         }
     }
@@ -198,7 +201,8 @@ impl RayCount {
     /// `Through`); each structure along the ray gets its own first hits, and the inner levels of
     /// one structure are still truncated. A matched value is consumed: of two equal hits one
     /// restarts the count. (The GLSL's `surf_restart`: the kernels' hit lists hold s values only.)
-    pub fn restart(&mut self, count: TruncationCount, a: f32, s: f32, outer: &mut [f32; 2]) {
+    pub fn restart(&mut self, s: f32, outer: &mut [f32; 2]) {
+        let Truncation { a, count } = self.t;
         if count == TruncationCount::Ray {
             return;
         }
@@ -221,6 +225,11 @@ impl RayCount {
     /// Whether the next hit is truncated.
     pub fn truncated(&self) -> bool {
         self.k as f32 >= self.limit
+    }
+
+    /// Whether a truncated hit is passed over ([`TruncationCount::passes_over`]).
+    pub fn passes_over(&self) -> bool {
+        self.t.count.passes_over()
     }
 }
 
@@ -408,14 +417,14 @@ mod tests {
             (TruncationCount::Structure, [true, true, false, true, true]),
             (TruncationCount::Through, [true, true, false, true, false]),
         ] {
-            let mut rc = RayCount::new(a);
+            let mut rc = RayCount::new(Truncation { a, count });
             let kept = hits.map(|s| {
                 let mut outer = if s == 0.1 || s == 0.6 {
                     [s, SURF_NO_HIT]
                 } else {
                     [SURF_NO_HIT; 2]
                 };
-                rc.restart(count, a, s, &mut outer);
+                rc.restart(s, &mut outer);
                 let keep = !rc.truncated();
                 rc.k += u32::from(keep);
                 keep
@@ -428,11 +437,14 @@ mod tests {
             );
         }
         // While a decays above 1, a structure behind the first still keeps one hit.
-        let mut rc = RayCount::new(3.4);
+        let mut rc = RayCount::new(Truncation {
+            a: 3.4,
+            count: TruncationCount::Through,
+        });
         let mut outer = [0.5, SURF_NO_HIT];
-        rc.restart(TruncationCount::Through, 3.4, 0.1, &mut [0.1, SURF_NO_HIT]);
+        rc.restart(0.1, &mut [0.1, SURF_NO_HIT]);
         rc.k = 3;
-        rc.restart(TruncationCount::Through, 3.4, 0.5, &mut outer);
+        rc.restart(0.5, &mut outer);
         assert_eq!((rc.k, rc.limit, outer[0]), (0, 1.0, SURF_NO_HIT));
     }
 
