@@ -204,6 +204,8 @@ struct Member {
 enum RustTy {
     Scalar(&'static str, u32),
     Vector(&'static str, u32, u32),
+    /// A `buffer_reference` (PhysicalStorageBuffer pointer): a u64 device address.
+    Address,
 }
 
 impl RustTy {
@@ -211,17 +213,20 @@ impl RustTy {
         match self {
             RustTy::Scalar(_, s) => s,
             RustTy::Vector(_, s, n) => s * n,
+            RustTy::Address => 8,
         }
     }
     fn align(self) -> u32 {
         match self {
             RustTy::Scalar(_, s) | RustTy::Vector(_, s, _) => s,
+            RustTy::Address => 8,
         }
     }
     fn rust(self) -> String {
         match self {
             RustTy::Scalar(t, _) => t.to_string(),
             RustTy::Vector(t, _, n) => format!("[{t}; {n}]"),
+            RustTy::Address => "u64".to_string(),
         }
     }
 }
@@ -372,11 +377,11 @@ fn read_module(words: &[u32]) -> Result<Module, String> {
             OP_TYPE_POINTER => {
                 pointers.insert(a[0], (a[1], a[2]));
                 if a[1] == SC_PHYSICAL_STORAGE_BUFFER {
-                    types.insert(a[0], RustTy::Scalar("u64", 8));
+                    types.insert(a[0], RustTy::Address);
                 }
             }
             OP_TYPE_FORWARD_POINTER if a[1] == SC_PHYSICAL_STORAGE_BUFFER => {
-                types.insert(a[0], RustTy::Scalar("u64", 8));
+                types.insert(a[0], RustTy::Address);
             }
             OP_VARIABLE if a[2] == SC_PUSH_CONSTANT => {
                 let (_, pointee) = pointers[&a[0]];
@@ -519,6 +524,13 @@ fn emit_kernel(out: &mut String, name: &str, spirv: &[u32], info: &Reflection) {
     writeln!(out, "        local_size: {:?},", info.local_size).unwrap();
     writeln!(out, "        push_size: {size},").unwrap();
     writeln!(out, "        float_atomics: {},", info.float_atomics).unwrap();
+    let addresses: Vec<u32> = info
+        .members
+        .iter()
+        .filter(|m| matches!(m.ty, RustTy::Address))
+        .map(|m| m.offset)
+        .collect();
+    writeln!(out, "        addresses: &{addresses:?},").unwrap();
     writeln!(out, "        spirv: &SPIRV,").unwrap();
     writeln!(out, "    }};").unwrap();
     write!(out, "    static SPIRV: [u32; {}] = [", spirv.len()).unwrap();

@@ -12,6 +12,9 @@ pub struct KernelInfo {
     pub push_size: u32,
     /// Whether the kernel uses float atomic add (needs `shaderBufferFloat32AtomicAdd`).
     pub float_atomics: bool,
+    /// Byte offsets of the push constants' device addresses (its `buffer_reference` members):
+    /// a batch checks that each names a live buffer when recorded and when submitted.
+    pub addresses: &'static [u32],
     /// Optimised SPIR-V words.
     pub spirv: &'static [u32],
 }

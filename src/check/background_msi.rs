@@ -230,14 +230,10 @@ pub fn check_step(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
         eps: 1e-8,
     };
     let [lr_sigma, lr_colour] = step.sphere_rates();
+    // Buffers the batch names live until it is submitted (not temporaries of the call).
+    let (bg, step_record) = (gpu.upload(&[Background::default()])?, gpu.zeros::<u32>(1)?);
     let mut b = gpu.batch()?;
-    crate::gpu::record_background_step(
-        &mut b,
-        &gpu.upload(&[Background::default()])?,
-        Some(&bufs),
-        &gpu.zeros::<u32>(1)?,
-        &step,
-    )?;
+    crate::gpu::record_background_step(&mut b, &bg, Some(&bufs), &step_record, &step)?;
     b.submit()?;
     let got = bufs.download()?;
     let got_grad = bufs.take_grad()?;
@@ -287,8 +283,9 @@ pub fn check_tv(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
         .collect();
     let bufs = SphereBuffers::upload(gpu, &t)?;
     bufs.grad.write(&start)?;
+    let step_record = gpu.zeros::<u32>(1)?;
     let mut b = gpu.batch()?;
-    crate::gpu::record_sphere_tv(&mut b, &bufs, &gpu.zeros::<u32>(1)?, lambda)?;
+    crate::gpu::record_sphere_tv(&mut b, &bufs, &step_record, lambda)?;
     b.submit()?;
     let got = bufs.take_grad()?;
     let mut want = start;

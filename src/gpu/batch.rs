@@ -74,6 +74,9 @@ pub struct Batch {
     cmd: vk::CommandBuffer,
     queries: Option<vk::QueryPool>,
     timed: Vec<&'static str>,
+    /// The device addresses in the recorded push constants, with their kernel's name: each
+    /// must still name a live buffer when the batch is submitted.
+    addresses: Vec<(u64, &'static str)>,
 }
 
 /// A submitted batch the host has not waited for yet. Dropping it waits.
@@ -115,6 +118,7 @@ impl Gpu {
             queries: frame.queries,
             frame: Some(frame),
             timed: Vec::new(),
+            addresses: Vec::new(),
         };
         // Order this batch after whatever earlier submissions on the queue still run.
         b.barrier();
@@ -197,6 +201,14 @@ impl Batch {
             bytes.len(),
             k.push_size
         );
+        for &at in k.addresses {
+            let at = at as usize;
+            let a = u64::from_le_bytes(bytes[at..at + 8].try_into().expect("8 bytes"));
+            if a != 0 {
+                self.check_address(a, k.name)?;
+                self.addresses.push((a, k.name));
+            }
+        }
         let (pipeline, layout) = self.gpu.pipeline(k)?;
         let dev = &self.gpu.inner.device;
         let slot = self.timed.len() as u32;
@@ -228,6 +240,18 @@ impl Batch {
             }
         }
         self.barrier();
+        Ok(())
+    }
+
+    /// A kernel given a freed buffer's address would read and write memory that may since belong
+    /// to another buffer: an error instead, when recorded and again when submitted (a buffer
+    /// dropped in between, such as a temporary passed to a `record_*` function).
+    fn check_address(&self, a: u64, kernel: &str) -> Result<()> {
+        ensure!(
+            self.gpu.address_is_live(a),
+            "kernel {kernel}: push-constant address {a:#x} is not inside a live buffer (a \
+             buffer dropped before its batch was submitted?)"
+        );
         Ok(())
     }
 
@@ -315,6 +339,9 @@ impl Batch {
     /// Submit without waiting: the host may record and submit the next batch while this one
     /// runs (batches on the queue run in order; each starts with a full barrier).
     pub fn submit_async(mut self) -> Result<InFlight> {
+        for &(a, kernel) in &self.addresses {
+            self.check_address(a, kernel)?;
+        }
         let mut clock = PhaseClock::start();
         let gpu = self.gpu.clone();
         let dev = &gpu.inner.device;

@@ -8,7 +8,6 @@ use ash::vk;
 use bytemuck::Pod;
 use gpu_allocator::vulkan::{Allocation, AllocationCreateDesc, AllocationScheme};
 use gpu_allocator::MemoryLocation;
-use std::sync::atomic::Ordering;
 
 /// A device address as the kernels' structs hold it (low, high 32 bits).
 pub fn address_words(a: u64) -> [u32; 2] {
@@ -74,7 +73,11 @@ impl GpuBuffer {
                 .device
                 .get_buffer_device_address(&vk::BufferDeviceAddressInfo::default().buffer(buffer))
         };
-        inner.live_buffers.fetch_add(1, Ordering::SeqCst);
+        inner
+            .live_buffers
+            .lock()
+            .unwrap()
+            .insert(address, address + size.max(4));
         let buf = GpuBuffer {
             gpu: gpu.clone(),
             buffer,
@@ -200,7 +203,7 @@ impl Drop for GpuBuffer {
             // A free can only fail on a foreign allocation; nothing to recover in a destructor.
             let _ = inner.allocator.lock().unwrap().free(a);
         }
-        inner.live_buffers.fetch_sub(1, Ordering::SeqCst);
+        inner.live_buffers.lock().unwrap().remove(&self.address);
     }
 }
 

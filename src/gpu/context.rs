@@ -9,9 +9,8 @@ use crate::kernels::KernelInfo;
 use anyhow::{anyhow, bail, Context, Result};
 use ash::vk;
 use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 use std::mem::ManuallyDrop;
-use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 
 /// How to open the Vulkan device.
@@ -40,7 +39,8 @@ pub(super) struct Inner {
     pub pipelines: Mutex<HashMap<&'static str, Pipeline>>,
     /// Spare batch frames (command pool, buffer, queries, fence) for the next batches.
     pub frames: Mutex<Vec<Frame>>,
-    pub live_buffers: AtomicUsize,
+    /// Device address ranges of the buffers allocated and not yet dropped (start → end).
+    pub live_buffers: Mutex<BTreeMap<u64, u64>>,
     pub profile: Profile,
     pub force_staging: bool,
 }
@@ -155,7 +155,7 @@ impl Gpu {
                 allocator: ManuallyDrop::new(Mutex::new(allocator)),
                 pipelines: Mutex::new(HashMap::new()),
                 frames: Mutex::new(Vec::new()),
-                live_buffers: AtomicUsize::new(0),
+                live_buffers: Mutex::new(BTreeMap::new()),
                 profile: Profile::default(),
                 force_staging: opts.force_staging,
             }),
@@ -179,7 +179,15 @@ impl Gpu {
 
     /// Buffers allocated through this context and not yet dropped (leak check in tests).
     pub fn live_buffers(&self) -> usize {
-        self.inner.live_buffers.load(Ordering::SeqCst)
+        self.inner.live_buffers.lock().unwrap().len()
+    }
+
+    /// Whether the device address `a` lies inside a buffer that is still allocated.
+    pub(super) fn address_is_live(&self, a: u64) -> bool {
+        let live = self.inner.live_buffers.lock().unwrap();
+        live.range(..=a)
+            .next_back()
+            .is_some_and(|(_, &end)| a < end)
     }
 
     /// Accumulated per-kernel device times of every batch submitted so far.

@@ -72,6 +72,48 @@ fn push_constant_size_mismatch_is_an_error() {
     assert_validation_clean();
 }
 
+/// A kernel handed a buffer that is dropped before the batch runs would write memory another
+/// buffer may own by then (a parity row once did, through a temporary, and corrupted a row
+/// running beside it): recording a freed address is an error, and so is submitting a batch
+/// whose buffer was dropped after recording.
+#[test]
+fn freed_buffer_address_is_refused_when_recorded_and_when_submitted() {
+    // A context of its own: on the shared one, a buffer of a test running beside this one may
+    // take the freed address.
+    let gpu = &alphasurf::gpu::Gpu::new(&Default::default()).unwrap();
+    let n = 64u32;
+    let push = |dst| Push { dst, n, seed: 1 };
+    let freed = gpu.zeros::<u32>(n as usize).unwrap().address();
+    let mut b = gpu.batch().unwrap();
+    let err = b
+        .dispatch_1d(&kernels::fill_pattern::INFO, &push(freed), n)
+        .unwrap_err();
+    assert!(err.to_string().contains("live buffer"), "{err}");
+    drop(b);
+
+    let buf = gpu.zeros::<u32>(n as usize).unwrap();
+    let mut b = gpu.batch().unwrap();
+    // An address inside the buffer is live too.
+    b.dispatch_1d(
+        &kernels::fill_pattern::INFO,
+        &push(buf.address() + 4),
+        n - 1,
+    )
+    .unwrap();
+    drop(buf);
+    let err = b.submit().unwrap_err();
+    assert!(err.to_string().contains("fill_pattern"), "{err}");
+
+    let kept = gpu.zeros::<u32>(n as usize).unwrap();
+    let mut b = gpu.batch().unwrap();
+    b.dispatch_1d(&kernels::fill_pattern::INFO, &push(kept.address()), n)
+        .unwrap();
+    b.submit().unwrap();
+    let mut want = vec![0u32; n as usize];
+    alphasurf::cpu::fill_pattern(&mut want, 1);
+    assert_eq!(kept.download::<u32>().unwrap(), want);
+}
+
 #[test]
 fn upload_download_roundtrip_and_leak_accounting() {
     let gpu = test_gpu();
