@@ -59,7 +59,8 @@ abi_consts! {
     STEP: f32 = 0.5;
     /// Skips stop this far (voxels) before the block exit.
     SKIP_MARGIN: f32 = 1e-3;
-    /// Occupancy blocks are 2^OCC_SHIFT cells per axis.
+    /// The kernels' occupancy blocks are 2^OCC_SHIFT cells per axis (the CPU twins' edge is
+    /// `math::plenoxel::OCC_SHIFT_CPU`).
     OCC_SHIFT: u32 = 3;
     /// Shaded samples whose indices the forward pass records for the backward replay
     /// (plenoxel_train).

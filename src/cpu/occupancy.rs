@@ -1,16 +1,16 @@
 //! Twin of `glsl/occupancy.comp`: the occupancy words of the stage-1 skip structure.
 
 use crate::grid::row_slots;
-use crate::math::plenoxel::{occ_dims, OCC_SHIFT, SIGMA_EPS};
+use crate::math::plenoxel::{occ_dims, SIGMA_EPS};
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicU32, Ordering};
 
-/// Twin of `occupancy.comp`: 1 for each 2^OCC_SHIFT-cell block whose vertex box (the block's
-/// cells' corners) holds an allocated vertex with density above SIGMA_EPS/2, else 0. The kernel
-/// looks at each block's box; this scatters from the allocated rows instead ([`occupancy_rows`]),
-/// which gives the same words and reads no links.
-pub fn occupancy(links: &[i32], density: &[f32], res: [u32; 3]) -> Vec<u32> {
-    occupancy_rows(&occupancy_slots(links, density.len()), density, res)
+/// Twin of `occupancy.comp` (with `shift` = `OCC_SHIFT`): 1 for each 2^shift-cell block whose
+/// vertex box (the block's cells' corners) holds an allocated vertex with density above
+/// SIGMA_EPS/2, else 0. The kernel looks at each block's box; this scatters from the allocated
+/// rows instead ([`occupancy_rows`]), which gives the same words and reads no links.
+pub fn occupancy(links: &[i32], density: &[f32], res: [u32; 3], shift: u32) -> Vec<u32> {
+    occupancy_rows(&occupancy_slots(links, density.len()), density, res, shift)
 }
 
 /// The slot of each of `rows` rows (`grid::row_slots`), `u32::MAX` for a row no link names: what
@@ -28,24 +28,24 @@ pub fn occupancy_slots(links: &[i32], rows: usize) -> Vec<u32> {
 /// [`occupancy`] from the rows' slots ([`occupancy_slots`]): each row above the threshold that
 /// has a slot marks the blocks whose vertex box holds it — along each axis, the block of its
 /// cell, and the block before when the vertex is that block's far corner (x a multiple of
-/// 2^OCC_SHIFT).
-pub fn occupancy_rows(slots: &[u32], density: &[f32], res: [u32; 3]) -> Vec<u32> {
-    let nb = occ_dims(res);
+/// 2^shift).
+pub fn occupancy_rows(slots: &[u32], density: &[f32], res: [u32; 3], shift: u32) -> Vec<u32> {
+    let nb = occ_dims(res, shift);
     let occ: Vec<AtomicU32> = (0..nb[0] * nb[1] * nb[2])
         .map(|_| AtomicU32::new(0))
         .collect();
-    let mask = (1u32 << OCC_SHIFT) - 1;
+    let mask = (1u32 << shift) - 1;
     slots
         .par_iter()
         .zip(density.par_iter())
         .filter(|&(&s, &d)| s != u32::MAX && d > 0.5 * SIGMA_EPS)
         .for_each(|(&s, _)| {
             let v = [s / (res[1] * res[2]), (s / res[2]) % res[1], s % res[2]];
-            // The blocks along each axis: v >> OCC_SHIFT (when it is a block: the last vertex
+            // The blocks along each axis: v >> shift (when it is a block: the last vertex
             // of an axis whose cells fill the blocks is no block's first corner), and the one
             // before at a block boundary.
             let axis = |i: usize| {
-                let b = v[i] >> OCC_SHIFT;
+                let b = v[i] >> shift;
                 let own = (b < nb[i]).then_some(b);
                 let before = (v[i] & mask == 0 && b > 0).then(|| b - 1);
                 [own, before]
@@ -68,18 +68,19 @@ pub fn occupancy_rows(slots: &[u32], density: &[f32], res: [u32; 3]) -> Vec<u32>
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::math::plenoxel::{OCC_SHIFT, OCC_SHIFT_CPU};
     use rand::{Rng, SeedableRng};
 
     /// Each block's word by its definition: a scan of its vertex box.
-    fn by_definition(links: &[i32], density: &[f32], res: [u32; 3]) -> Vec<u32> {
-        let nb = occ_dims(res);
+    fn by_definition(links: &[i32], density: &[f32], res: [u32; 3], shift: u32) -> Vec<u32> {
+        let nb = occ_dims(res, shift);
         let mut out = Vec::new();
         for bx in 0..nb[0] {
             for by in 0..nb[1] {
                 for bz in 0..nb[2] {
-                    let lo = [bx, by, bz].map(|b| b << OCC_SHIFT);
+                    let lo = [bx, by, bz].map(|b| b << shift);
                     let hi: [u32; 3] =
-                        std::array::from_fn(|i| (lo[i] + (1 << OCC_SHIFT)).min(res[i] - 1));
+                        std::array::from_fn(|i| (lo[i] + (1 << shift)).min(res[i] - 1));
                     let mut any = 0;
                     for x in lo[0]..=hi[0] {
                         for y in lo[1]..=hi[1] {
@@ -124,9 +125,12 @@ mod tests {
                         }
                     })
                     .collect();
-                let want = by_definition(&links, &density, res);
-                assert_eq!(occupancy(&links, &density, res), want, "{res:?} {alloc}");
-                assert!(want.contains(&1) || rows == 0 || above < 0.05);
+                for shift in [OCC_SHIFT, OCC_SHIFT_CPU] {
+                    let want = by_definition(&links, &density, res, shift);
+                    let got = occupancy(&links, &density, res, shift);
+                    assert_eq!(got, want, "{res:?} {alloc} shift {shift}");
+                    assert!(want.contains(&1) || rows == 0 || above < 0.05);
+                }
             }
         }
         // One vertex alone above the threshold, at block boundaries (shared by two blocks per
@@ -144,8 +148,11 @@ mod tests {
             links[((v[0] * res[1] + v[1]) * res[2] + v[2]) as usize] = 0;
             // A second row above the threshold that no link names occupies nothing.
             let density = [SIGMA_EPS; 2];
-            let want = by_definition(&links, &density, res);
-            assert_eq!(occupancy(&links, &density, res), want, "vertex {v:?}");
+            for shift in [OCC_SHIFT, OCC_SHIFT_CPU] {
+                let want = by_definition(&links, &density, res, shift);
+                let got = occupancy(&links, &density, res, shift);
+                assert_eq!(got, want, "vertex {v:?} shift {shift}");
+            }
         }
     }
 }

@@ -16,24 +16,34 @@ pub struct PlenoxelsOptimArrays<'a> {
     pub state_sh: &'a mut [f32],
 }
 
+/// Rows per task of [`rmsprop_sparse`]: a step touches a small share of a large grid's rows, and
+/// a block with no flag set is passed over after one scan of its flags.
+const ROWS_PER_BLOCK: usize = 1024;
+
 /// Update every vertex whose flag is set, and clear the flags.
 pub fn rmsprop_sparse(p: PlenoxelsOptimArrays, touched: &mut [u32], h: &RmsProp) {
+    const B: usize = ROWS_PER_BLOCK;
     p.density
-        .par_iter_mut()
-        .zip(p.grad_density.par_iter_mut())
-        .zip(p.state_density.par_iter_mut())
-        .zip(p.sh.par_chunks_mut(SH_DIM))
-        .zip(p.grad_sh.par_chunks_mut(SH_DIM))
-        .zip(p.state_sh.par_chunks_mut(SH_DIM))
-        .zip(touched.par_iter_mut())
+        .par_chunks_mut(B)
+        .zip(p.grad_density.par_chunks_mut(B))
+        .zip(p.state_density.par_chunks_mut(B))
+        .zip(p.sh.par_chunks_mut(SH_DIM * B))
+        .zip(p.grad_sh.par_chunks_mut(SH_DIM * B))
+        .zip(p.state_sh.par_chunks_mut(SH_DIM * B))
+        .zip(touched.par_chunks_mut(B))
         .for_each(|((((((d, gd), sd), sh), gs), ss), t)| {
-            if *t == 0 {
+            if t.iter().all(|&f| f == 0) {
                 return;
             }
-            rmsprop_one(d, gd, sd, h.lr_sigma, h.beta, h.eps);
-            for k in 0..SH_DIM {
-                rmsprop_one(&mut sh[k], &mut gs[k], &mut ss[k], h.lr_sh, h.beta, h.eps);
+            for (i, f) in t.iter_mut().enumerate() {
+                if *f == 0 {
+                    continue;
+                }
+                rmsprop_one(&mut d[i], &mut gd[i], &mut sd[i], h.lr_sigma, h.beta, h.eps);
+                for k in SH_DIM * i..SH_DIM * (i + 1) {
+                    rmsprop_one(&mut sh[k], &mut gs[k], &mut ss[k], h.lr_sh, h.beta, h.eps);
+                }
+                *f = 0;
             }
-            *t = 0;
         });
 }

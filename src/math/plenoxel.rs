@@ -8,6 +8,13 @@ use crate::abi::consts::REPLAY;
 
 pub use crate::abi::consts::{OCC_SHIFT, SIGMA_EPS, SKIP_MARGIN, STEP};
 
+/// The CPU twins' occupancy blocks are 2^OCC_SHIFT_CPU cells per axis: finer than the kernels'
+/// (`OCC_SHIFT`), because a CPU sample in an empty cell of an occupied block costs its corners'
+/// cache misses, and a skip only a few divisions (docs/tuning.md, "Stage-1 empty-space
+/// skipping"). Skipping passes over only samples with σ ≤ SIGMA_EPS, so the edge changes no
+/// result.
+pub const OCC_SHIFT_CPU: u32 = 2;
+
 /// Borrowed view of a sparse grid and its occupancy volume.
 #[derive(Clone, Copy)]
 pub struct GridRef<'a> {
@@ -16,6 +23,8 @@ pub struct GridRef<'a> {
     pub density: &'a [f32],
     pub sh: &'a [f32],
     pub occ: &'a [u32],
+    /// `occ`'s blocks are 2^occ_shift cells per axis.
+    pub occ_shift: u32,
 }
 
 /// A ray in grid units with its lattice of samples.
@@ -69,20 +78,20 @@ pub fn march_cell(m: &March, t: f32, res: [u32; 3]) -> ([i32; 3], [f32; 3]) {
     (l, p)
 }
 
-/// Blocks per axis of the occupancy volume.
-pub fn occ_dims(res: [u32; 3]) -> [u32; 3] {
-    let b = 1u32 << OCC_SHIFT;
-    res.map(|r| (r - 1 + b - 1) >> OCC_SHIFT)
+/// Blocks per axis of an occupancy volume of 2^shift-cell blocks.
+pub fn occ_dims(res: [u32; 3], shift: u32) -> [u32; 3] {
+    let b = 1u32 << shift;
+    res.map(|r| (r - 1 + b - 1) >> shift)
 }
 
 /// Next sample index to look at when the sample in cell l lies in an empty block, else k.
 pub fn march_skip(g: &GridRef, m: &March, k: u32, l: [i32; 3]) -> u32 {
-    let b = l.map(|x| (x as u32) >> OCC_SHIFT);
-    let nb = occ_dims(g.res);
+    let b = l.map(|x| (x as u32) >> g.occ_shift);
+    let nb = occ_dims(g.res, g.occ_shift);
     if g.occ[((b[0] * nb[1] + b[1]) * nb[2] + b[2]) as usize] != 0 {
         return k;
     }
-    let bs = (1u32 << OCC_SHIFT) as f32;
+    let bs = (1u32 << g.occ_shift) as f32;
     let mut t_exit = f32::MAX;
     for a in 0..3 {
         if m.d[a] != 0.0 {

@@ -15,7 +15,7 @@ use crate::gpu::{Phase, PhaseClock, StepTiming, TrainRays};
 use crate::grid::{Grid, SparseArrays, SH_DIM};
 use crate::math::background_msi::BackgroundView;
 use crate::math::plenoxel::MarchParams;
-use crate::math::plenoxel::{GridRef, PlenoxelCounts};
+use crate::math::plenoxel::{GridRef, PlenoxelCounts, OCC_SHIFT_CPU};
 use crate::stage::{HostRays, HostSteps, StageBackend, StateFn, StepStore};
 use anyhow::{ensure, Result};
 
@@ -52,7 +52,12 @@ impl CpuPlenoxels {
     }
 
     fn refresh_occupancy(&mut self) {
-        self.occ = occupancy_rows(&self.slots, &self.grid.density, self.grid.res);
+        self.occ = occupancy_rows(
+            &self.slots,
+            &self.grid.density,
+            self.grid.res,
+            OCC_SHIFT_CPU,
+        );
     }
 
     fn view(&self) -> GridRef<'_> {
@@ -127,6 +132,7 @@ fn grid_ref<'a>(grid: &'a Grid, occ: &'a [u32]) -> GridRef<'a> {
         density: &grid.density,
         sh: &grid.sh,
         occ,
+        occ_shift: OCC_SHIFT_CPU,
     }
 }
 

@@ -18,7 +18,7 @@ use crate::gpu::{
 };
 use crate::grid::Grid;
 use crate::kernels;
-use crate::math::plenoxel::{occ_dims, PlenoxelCounts};
+use crate::math::plenoxel::{occ_dims, PlenoxelCounts, OCC_SHIFT};
 use crate::stage::{QueuedBackend, QueuedGrid, StateArrays};
 use anyhow::Result;
 
@@ -41,7 +41,7 @@ pub struct VulkanPlenoxels {
 impl VulkanPlenoxels {
     pub fn new(gpu: &Gpu, grid: Grid) -> Result<Self> {
         let n = grid.allocated();
-        let nb = occ_dims(grid.res);
+        let nb = occ_dims(grid.res, OCC_SHIFT);
         // Per step: the squared-error sum (one float), the counters.
         let parts = [4, std::mem::size_of::<PlenoxelCounts>() as u64];
         let step = step_record(n, &[]);
@@ -53,7 +53,7 @@ impl VulkanPlenoxels {
     }
 
     fn record_occupancy(&self, b: &mut Batch) -> Result<()> {
-        let nb = occ_dims(self.core.meta.res);
+        let nb = occ_dims(self.core.meta.res, OCC_SHIFT);
         b.dispatch_1d(
             &kernels::occupancy::INFO,
             &kernels::occupancy::Push {
