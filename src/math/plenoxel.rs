@@ -10,9 +10,9 @@ pub use crate::abi::consts::{OCC_SHIFT, SIGMA_EPS, SKIP_MARGIN, STEP};
 
 /// The CPU twins' occupancy blocks are 2^OCC_SHIFT_CPU cells per axis: finer than the kernels'
 /// (`OCC_SHIFT`), because a CPU sample in an empty cell of an occupied block costs its corners'
-/// cache misses, and a skip only a few divisions (docs/tuning.md, "Stage-1 empty-space
-/// skipping"). Skipping passes over only samples with σ ≤ SIGMA_EPS, so the edge changes no
-/// result.
+/// cache misses, and a skip only a few divisions (docs/results.md, "Stage-1 CPU twins: 4³
+/// occupancy blocks"). Skipping passes over only samples with σ ≤ SIGMA_EPS, so the edge
+/// changes no result.
 pub const OCC_SHIFT_CPU: u32 = 2;
 
 /// Borrowed view of a sparse grid and its occupancy volume.
