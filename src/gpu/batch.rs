@@ -74,9 +74,10 @@ pub struct Batch {
     cmd: vk::CommandBuffer,
     queries: Option<vk::QueryPool>,
     timed: Vec<&'static str>,
-    /// The device addresses in the recorded push constants, with their kernel's name: each
-    /// must still name a live buffer when the batch is submitted.
-    addresses: Vec<(u64, &'static str)>,
+    /// The device addresses in the recorded push constants, with the number of the buffer
+    /// holding each and their kernel's name: each must still be in that buffer when the batch
+    /// is submitted.
+    addresses: Vec<(u64, u64, &'static str)>,
 }
 
 /// A submitted batch the host has not waited for yet. Dropping it waits.
@@ -205,8 +206,13 @@ impl Batch {
             let at = at as usize;
             let a = u64::from_le_bytes(bytes[at..at + 8].try_into().expect("8 bytes"));
             if a != 0 {
-                self.check_address(a, k.name)?;
-                self.addresses.push((a, k.name));
+                let buffer = self.gpu.buffer_at(a).with_context(|| {
+                    format!(
+                        "kernel {}: push-constant address {a:#x} is not inside a live buffer",
+                        k.name
+                    )
+                })?;
+                self.addresses.push((a, buffer, k.name));
             }
         }
         let (pipeline, layout) = self.gpu.pipeline(k)?;
@@ -240,18 +246,6 @@ impl Batch {
             }
         }
         self.barrier();
-        Ok(())
-    }
-
-    /// A kernel given a freed buffer's address would read and write memory that may since belong
-    /// to another buffer: an error instead, when recorded and again when submitted (a buffer
-    /// dropped in between, such as a temporary passed to a `record_*` function).
-    fn check_address(&self, a: u64, kernel: &str) -> Result<()> {
-        ensure!(
-            self.gpu.address_is_live(a),
-            "kernel {kernel}: push-constant address {a:#x} is not inside a live buffer (a \
-             buffer dropped before its batch was submitted?)"
-        );
         Ok(())
     }
 
@@ -339,8 +333,15 @@ impl Batch {
     /// Submit without waiting: the host may record and submit the next batch while this one
     /// runs (batches on the queue run in order; each starts with a full barrier).
     pub fn submit_async(mut self) -> Result<InFlight> {
-        for &(a, kernel) in &self.addresses {
-            self.check_address(a, kernel)?;
+        // A kernel given a freed buffer's address would write memory that may belong to
+        // another buffer by now (even one at the same address): refused, as a dispatch with no
+        // live buffer there is when recorded.
+        for &(a, buffer, kernel) in &self.addresses {
+            ensure!(
+                self.gpu.buffer_at(a) == Some(buffer),
+                "kernel {kernel}: the buffer at push-constant address {a:#x} was dropped before \
+                 its batch was submitted"
+            );
         }
         let mut clock = PhaseClock::start();
         let gpu = self.gpu.clone();

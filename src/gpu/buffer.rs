@@ -200,7 +200,7 @@ impl Drop for GpuBuffer {
         let inner = &self.gpu.inner;
         // Out of the live ranges before the memory is freed: a buffer allocated on another
         // thread right after the free may get the same address.
-        inner.live_buffers.lock().unwrap().remove(&self.address);
+        inner.live_buffers.lock().unwrap().remove(self.address);
         unsafe { inner.device.destroy_buffer(self.buffer, None) };
         if let Some(a) = self.allocation.take() {
             // A free can only fail on a foreign allocation; nothing to recover in a destructor.

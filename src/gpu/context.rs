@@ -39,10 +39,38 @@ pub(super) struct Inner {
     pub pipelines: Mutex<HashMap<&'static str, Pipeline>>,
     /// Spare batch frames (command pool, buffer, queries, fence) for the next batches.
     pub frames: Mutex<Vec<Frame>>,
-    /// Device address ranges of the buffers allocated and not yet dropped (start → end).
-    pub live_buffers: Mutex<BTreeMap<u64, u64>>,
+    pub live_buffers: Mutex<LiveBuffers>,
     pub profile: Profile,
     pub force_staging: bool,
+}
+
+/// The device address ranges of the buffers allocated and not yet dropped, each with a number
+/// no other buffer of the context gets (an address alone may come back with the next buffer).
+#[derive(Default)]
+pub(super) struct LiveBuffers {
+    /// start → (end, number).
+    ranges: BTreeMap<u64, (u64, u64)>,
+    next: u64,
+}
+
+impl LiveBuffers {
+    /// A new buffer's range [start, end); returns its number.
+    pub fn insert(&mut self, start: u64, end: u64) -> u64 {
+        self.next += 1;
+        self.ranges.insert(start, (end, self.next));
+        self.next
+    }
+
+    /// The buffer starting at `start` is dropped.
+    pub fn remove(&mut self, start: u64) {
+        self.ranges.remove(&start);
+    }
+
+    /// The number of the buffer whose range holds `a`.
+    pub fn containing(&self, a: u64) -> Option<u64> {
+        let (_, &(end, number)) = self.ranges.range(..=a).next_back()?;
+        (a < end).then_some(number)
+    }
 }
 
 /// A Vulkan compute device ready to run alphasurf kernels. Cheap to clone (shared handle).
@@ -155,7 +183,7 @@ impl Gpu {
                 allocator: ManuallyDrop::new(Mutex::new(allocator)),
                 pipelines: Mutex::new(HashMap::new()),
                 frames: Mutex::new(Vec::new()),
-                live_buffers: Mutex::new(BTreeMap::new()),
+                live_buffers: Mutex::new(LiveBuffers::default()),
                 profile: Profile::default(),
                 force_staging: opts.force_staging,
             }),
@@ -179,15 +207,12 @@ impl Gpu {
 
     /// Buffers allocated through this context and not yet dropped (leak check in tests).
     pub fn live_buffers(&self) -> usize {
-        self.inner.live_buffers.lock().unwrap().len()
+        self.inner.live_buffers.lock().unwrap().ranges.len()
     }
 
-    /// Whether the device address `a` lies inside a buffer that is still allocated.
-    pub(super) fn address_is_live(&self, a: u64) -> bool {
-        let live = self.inner.live_buffers.lock().unwrap();
-        live.range(..=a)
-            .next_back()
-            .is_some_and(|(_, &end)| a < end)
+    /// The buffer (its [`LiveBuffers`] number) that holds device address `a`, if one does.
+    pub(super) fn buffer_at(&self, a: u64) -> Option<u64> {
+        self.inner.live_buffers.lock().unwrap().containing(a)
     }
 
     /// Accumulated per-kernel device times of every batch submitted so far.

@@ -101,6 +101,9 @@ fn freed_buffer_address_is_refused_when_recorded_and_when_submitted() {
     )
     .unwrap();
     drop(buf);
+    // A buffer of the same size, which the allocator may place at the same address: still the
+    // dropped buffer's dispatch.
+    let _same_size = gpu.zeros::<u32>(n as usize).unwrap();
     let err = b.submit().unwrap_err();
     assert!(err.to_string().contains("fill_pattern"), "{err}");
 
