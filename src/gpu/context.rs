@@ -54,11 +54,10 @@ pub(super) struct LiveBuffers {
 }
 
 impl LiveBuffers {
-    /// A new buffer's range [start, end); returns its number.
-    pub fn insert(&mut self, start: u64, end: u64) -> u64 {
+    /// A new buffer's range [start, end), under the next number.
+    pub fn insert(&mut self, start: u64, end: u64) {
         self.next += 1;
         self.ranges.insert(start, (end, self.next));
-        self.next
     }
 
     /// The buffer starting at `start` is dropped.
