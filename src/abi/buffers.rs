@@ -45,7 +45,7 @@ abi_structs! {
     }
 
     /// The params buffer of `plenoxel_train` (its push block would pass lavapipe's 128-byte
-    /// limit with these): how rays map into the grid, early stop, the loss weight.
+    /// limit with these): how rays map into the grid, early stop, the loss weights.
     struct PlenoxelParams {
         /// grid = p·scale + offset (per axis).
         scale: [f32; 3],
@@ -54,6 +54,9 @@ abi_structs! {
         stop_thresh: f32,
         /// dL/dC = grad_scale·(C − target).
         grad_scale: f32,
+        /// Weight λ of the Cauchy sparsity loss λ·Σ T·log(1 + 2σ²) over the shaded samples of
+        /// the backward march, T each one's transmittance (a constant weight); 0: none.
+        sparsity: f32,
     }
 
     /// The background every render and training kernel composites behind its rays,

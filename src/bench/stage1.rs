@@ -128,6 +128,7 @@ pub fn time_steps(
         tv: None,
         lr_bg: cfg.lr_sh.at(cfg.iters),
         tv_background: cfg.tv_background,
+        sparsity: cfg.sparsity,
     };
     backend.step_sampled(&views, 7, batch as usize, &p)?;
     backend.take_stats()?;

@@ -229,11 +229,29 @@ pub fn check_train_spheres(gpu: &Gpu, seed: u64) -> Result<CheckRow> {
     train_row(gpu, seed, Some(&background_msi::test_spheres(seed)))
 }
 
+/// The sparsity weight of the row without spheres; the row fails if the term changes the twin's
+/// dσ by less than 1 % (relative L2), so that it stays tested.
+const TRAIN_SPARSITY: f32 = 1e-6;
+
 fn train_row(gpu: &Gpu, seed: u64, spheres: Option<&SphereTable>) -> Result<CheckRow> {
     let (g, rays, targets) = test_scene(seed, 40, 4000);
     let (mut cpu, mut vk) = backends(gpu, g, true, spheres)?;
-    let want = cpu.gradients(&rays, &targets, STOP)?;
-    let got = vk.gradients(&rays, &targets, STOP)?;
+    // The row with spheres keeps the sparsity term off, so both branches of the kernel run.
+    let sparsity = if spheres.is_some() {
+        0.0
+    } else {
+        TRAIN_SPARSITY
+    };
+    let want = cpu.gradients(&rays, &targets, STOP, sparsity)?;
+    let got = vk.gradients(&rays, &targets, STOP, sparsity)?;
+    let sparsity_share = if sparsity > 0.0 {
+        rel_l2(
+            &cpu.gradients(&rays, &targets, STOP, 0.0)?.density,
+            &want.density,
+        )
+    } else {
+        0.0
+    };
     // Per-ray losses elementwise; atomically accumulated gradients by aggregate measures, and
     // elementwise against the largest magnitude (summation order differs run to run). Spheres
     // add their bound on B times the loss's slope in B: Σ_ch 2·|C − target| ≤ 3·2·1.4 < 9.
@@ -287,9 +305,14 @@ fn train_row(gpu: &Gpu, seed: u64, spheres: Option<&SphereTable>) -> Result<Chec
             )
         });
     }
+    if sparsity > 0.0 && sparsity_share < 0.01 {
+        cmp.failures += 1;
+        cmp.first_failure
+            .get_or_insert_with(|| format!("sparsity changes dσ by {sparsity_share:.1e} only"));
+    }
     let note = format!(
-        "grad rel L2 {worst:.1e} (≤ 1e-4; elementwise |Δ| ≤ 1e-4·max|g| + 1e-3·|g| for all but 0.1%), \
-         dbg rel L2 {e_bg:.1e} (≤ 1e-4); {}{}",
+        "sparsity {sparsity:e} (its share of dσ {sparsity_share:.2}); grad rel L2 {worst:.1e} (≤ 1e-4; elementwise |Δ| ≤ 1e-4·max|g| + \
+         1e-3·|g| for all but 0.1%), dbg rel L2 {e_bg:.1e} (≤ 1e-4); {}{}",
         counts_note(got.counts, want.counts),
         if spheres.is_some() {
             format!("; {reached} of {} sphere values with a gradient", want.spheres.len())

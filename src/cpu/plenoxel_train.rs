@@ -5,8 +5,8 @@ use crate::abi::consts::REPLAY;
 use crate::math::atomic;
 use crate::math::background_msi::{backward, BackgroundView};
 use crate::math::plenoxel::{
-    forward, march_init, march_next, ray, sample_alpha, sample_at, sample_color_raw, GridRef,
-    MarchParams, PlenoxelCounts,
+    forward, march_init, march_next, ray, sample_alpha, sample_at, sample_color_raw, sparsity_grad,
+    GridRef, LossWeights, MarchParams, PlenoxelCounts,
 };
 use crate::math::sh::sh_basis;
 use crate::math::step::touch;
@@ -25,8 +25,10 @@ pub struct TrainGrads<'a> {
 }
 
 /// Twin of `plenoxel_train.comp`: returns per-ray squared error and the sample counts, adds
-/// dL/dσ and dL/dSH (dL/dC = grad_scale·(C − target), C = C_grid + T·B, B what `bg` puts
-/// behind the ray) into `grads`, dL/dbg = Σ_rays dL/dC·T·T_L when `grads.background` is given,
+/// dL/dσ and dL/dSH (dL/dC = `w.grad_scale`·(C − target), C = C_grid + T·B, B what `bg` puts
+/// behind the ray; dL/dσ += T·`w.sparsity`·4σ/(1 + 2σ²) at every sample of the backward march,
+/// T its transmittance)
+/// into `grads`, dL/dbg = Σ_rays dL/dC·T·T_L when `grads.background` is given,
 /// and the spheres' texel gradient (`math::background_msi::backward` with dL/dB = dL/dC·T) when
 /// `grads.spheres` is.
 pub fn train(
@@ -34,7 +36,7 @@ pub fn train(
     rays: &[f32],
     targets: &[f32],
     mp: &MarchParams,
-    grad_scale: f32,
+    w: LossWeights,
     bg: &BackgroundView,
     grads: TrainGrads,
 ) -> (Vec<f32>, PlenoxelCounts) {
@@ -61,7 +63,7 @@ pub fn train(
             let total: [f32; 3] = std::array::from_fn(|ch| color[ch] + t_acc * behind[ch]);
             let diff: [f32; 3] = std::array::from_fn(|ch| total[ch] - target[ch]);
             let loss = diff[0] * diff[0] + diff[1] * diff[1] + diff[2] * diff[2];
-            let g_c = diff.map(|d| grad_scale * d);
+            let g_c = diff.map(|d| w.grad_scale * d);
             let g_behind = g_c.map(|gc| gc * t_acc);
             let g_bg = g_behind.map(|g| g * t_bg);
             if let (Some(grad), Some((s, table))) = (sphere_grad, bg.spheres) {
@@ -98,7 +100,10 @@ pub fn train(
                 let tn = t_acc * (1.0 - alpha);
                 let dsig3: [f32; 3] =
                     std::array::from_fn(|ch| g_c[ch] * (tn * c[ch] - (total[ch] - accum[ch])));
-                let d_sigma = m.delta * (dsig3[0] + dsig3[1] + dsig3[2]);
+                let mut d_sigma = m.delta * (dsig3[0] + dsig3[1] + dsig3[2]);
+                if w.sparsity > 0.0 {
+                    d_sigma += sparsity_grad(w.sparsity, t_acc, s.sigma);
+                }
                 let d_color: [f32; 3] =
                     std::array::from_fn(|ch| if raw[ch] > 0.0 { g_c[ch] * wt } else { 0.0 });
                 counts.atomic_adds += scatter.add(s.l, &s.lk, &s.w, d_sigma, d_color);

@@ -250,3 +250,22 @@ pub struct MarchParams {
     /// Stop once transmittance falls below this.
     pub stop_thresh: f32,
 }
+
+/// The loss weights of a stage-1 training pass (`plenoxel_train` and its twin).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LossWeights {
+    /// dL/dC = grad_scale·(C − target).
+    pub grad_scale: f32,
+    /// λ of the Cauchy sparsity loss λ·Σ T·log(1 + 2σ²) over the shaded samples of the backward
+    /// march, each weighted by the transmittance T before it, taken as a constant (svox2's
+    /// `lambda_sparsity` weighs every sample alike, which empties the unseen inside of solids);
+    /// 0: none.
+    pub sparsity: f32,
+}
+
+/// d/dσ of the sparsity loss of one sample with transmittance `t` before it: t·λ·4σ/(1 + 2σ²)
+/// (the kernel's arithmetic).
+pub fn sparsity_grad(lambda: f32, t: f32, sigma: f32) -> f32 {
+    let den = 1.0 + 2.0 * (sigma * sigma);
+    t * (lambda * (4.0 * sigma / den))
+}

@@ -14,8 +14,7 @@ use crate::cpu::{rmsprop_sparse, tv, PlenoxelsOptimArrays};
 use crate::gpu::{Phase, PhaseClock, StepTiming, TrainRays};
 use crate::grid::{Grid, SparseArrays, SH_DIM};
 use crate::math::background_msi::BackgroundView;
-use crate::math::plenoxel::MarchParams;
-use crate::math::plenoxel::{GridRef, PlenoxelCounts, OCC_SHIFT_CPU};
+use crate::math::plenoxel::{GridRef, LossWeights, MarchParams, PlenoxelCounts, OCC_SHIFT_CPU};
 use crate::stage::{HostRays, HostSteps, StageBackend, StateFn, StepStore};
 use anyhow::{ensure, Result};
 
@@ -76,10 +75,7 @@ impl CpuPlenoxels {
         for pass in plan.passes() {
             match pass {
                 PlenoxelPass::Occupancy => self.refresh_occupancy(),
-                PlenoxelPass::Train {
-                    stop_thresh,
-                    grad_scale,
-                } => {
+                PlenoxelPass::Train { stop_thresh, loss } => {
                     let (view, background, spheres) = self.steps.train_grads();
                     let grads = TrainGrads {
                         density: &mut self.grad_density,
@@ -93,7 +89,7 @@ impl CpuPlenoxels {
                         &march_params(&self.grid, *stop_thresh),
                         rays,
                         targets,
-                        *grad_scale,
+                        *loss,
                         &view,
                         grads,
                     )?;
@@ -142,7 +138,7 @@ fn data_term(
     mp: &MarchParams,
     rays: &[f32],
     targets: &[f32],
-    grad_scale: f32,
+    loss: LossWeights,
     bg: &BackgroundView,
     grads: TrainGrads,
 ) -> Result<(Vec<f32>, PlenoxelCounts)> {
@@ -152,7 +148,7 @@ fn data_term(
         "batch of {n} rays with {} targets",
         targets.len() / 3
     );
-    Ok(train(g, rays, targets, mp, grad_scale, bg, grads))
+    Ok(train(g, rays, targets, mp, loss, bg, grads))
 }
 
 impl StageBackend<PlenoxelsStage> for CpuPlenoxels {
@@ -228,7 +224,13 @@ impl StageBackend<PlenoxelsStage> for CpuPlenoxels {
 }
 
 impl PlenoxelsBackend for CpuPlenoxels {
-    fn gradients(&mut self, rays: &[f32], targets: &[f32], stop_thresh: f32) -> Result<Gradients> {
+    fn gradients(
+        &mut self,
+        rays: &[f32],
+        targets: &[f32],
+        stop_thresh: f32,
+        sparsity: f32,
+    ) -> Result<Gradients> {
         self.refresh_occupancy();
         let n = self.grid.allocated();
         let (mut density, mut sh, mut touched) = (vec![0.0; n], vec![0.0; n * SH_DIM], vec![0; n]);
@@ -255,7 +257,10 @@ impl PlenoxelsBackend for CpuPlenoxels {
             &march_params(&self.grid, stop_thresh),
             rays,
             targets,
-            batch_grad_scale(rays.len() / 6),
+            LossWeights {
+                grad_scale: batch_grad_scale(rays.len() / 6),
+                sparsity,
+            },
             &st.view(),
             grads,
         )?;

@@ -42,6 +42,9 @@ pub struct PlenoxelsStepParams {
     pub lr_bg: f32,
     /// Weight of the TV on a learned background's spheres (unused without them).
     pub tv_background: f32,
+    /// λ of the Cauchy sparsity loss on the shaded samples of the training rays, each weighted by
+    /// its transmittance (0: none).
+    pub sparsity: f32,
 }
 
 /// What a step reports back.
@@ -163,8 +166,15 @@ pub fn state_bytes_of((res, rows): ([u32; 3], usize)) -> u64 {
 pub trait PlenoxelsBackend: StageBackend<PlenoxelsStage> {
     /// The data-term gradients of a batch without updating anything: per-ray squared error,
     /// dL/dσ, dL/dSH and, when it is learned, dL/dbg (L = mean squared error over rays and
-    /// channels), and the sample counts.
-    fn gradients(&mut self, rays: &[f32], targets: &[f32], stop_thresh: f32) -> Result<Gradients>;
+    /// channels, plus `sparsity`·Σ T·log(1 + 2σ²) over the shaded samples, T their
+    /// transmittance held constant), and the sample counts.
+    fn gradients(
+        &mut self,
+        rays: &[f32],
+        targets: &[f32],
+        stop_thresh: f32,
+        sparsity: f32,
+    ) -> Result<Gradients>;
     /// Render rays (composited on the background): 3 floats per ray, and the sample counts.
     fn render(&mut self, rays: &[f32], stop_thresh: f32) -> Result<(Vec<f32>, PlenoxelCounts)>;
     /// Max over rays and samples of w·w_trilinear per allocated vertex (pruning weights).

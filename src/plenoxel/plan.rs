@@ -8,6 +8,7 @@ use crate::abi::consts::TOUCH_ALL;
 use crate::abi::regularisers::TvChunk;
 use crate::abi::train::{BackgroundStep, RmsProp};
 use crate::grid::SH_DIM;
+use crate::math::plenoxel::LossWeights;
 use anyhow::{ensure, Result};
 
 /// Which parameter group a TV pass regularises.
@@ -23,8 +24,8 @@ pub enum PlenoxelPass {
     /// Rebuild the occupancy volume from σ (`occupancy`).
     Occupancy,
     /// The fused forward/backward pass over the batch (`plenoxel_train`): gradients += data term
-    /// with dL/dC = grad_scale·(C − target).
-    Train { stop_thresh: f32, grad_scale: f32 },
+    /// with dL/dC = loss.grad_scale·(C − target), and the sparsity term when loss.sparsity > 0.
+    Train { stop_thresh: f32, loss: LossWeights },
     /// TV on one parameter group over a chunk of vertex slots (`tv`).
     Tv { field: TvField, chunk: TvChunk },
     /// Sparse RMSProp over the touched vertices (`optim_args` → `rmsprop_sparse`).
@@ -53,7 +54,7 @@ impl PlenoxelPlan {
         n_rays: usize,
         learned_bg: bool,
     ) -> Result<Self> {
-        let mut passes = Self::gradients(p.stop_thresh, n_rays).passes;
+        let mut passes = Self::gradients(p.stop_thresh, p.sparsity, n_rays).passes;
         if let Some(t) = p.tv {
             let slots: u64 = res.iter().map(|&r| r as u64).product();
             ensure!(
@@ -95,14 +96,18 @@ impl PlenoxelPlan {
         Ok(PlenoxelPlan { passes })
     }
 
-    /// The data term alone (no regulariser, no update): occupancy, then the training pass.
-    pub fn gradients(stop_thresh: f32, n_rays: usize) -> Self {
+    /// The data term alone (no regulariser but the per-sample sparsity `sparsity`, no update):
+    /// occupancy, then the training pass.
+    pub fn gradients(stop_thresh: f32, sparsity: f32, n_rays: usize) -> Self {
         PlenoxelPlan {
             passes: vec![
                 PlenoxelPass::Occupancy,
                 PlenoxelPass::Train {
                     stop_thresh,
-                    grad_scale: batch_grad_scale(n_rays),
+                    loss: LossWeights {
+                        grad_scale: batch_grad_scale(n_rays),
+                        sparsity,
+                    },
                 },
             ],
         }
@@ -129,6 +134,7 @@ mod tests {
             tv,
             lr_bg: 1e-2,
             tv_background: 1e-3,
+            sparsity: 1e-9,
         }
     }
 
@@ -173,7 +179,13 @@ mod tests {
         );
         for pass in plan.passes() {
             match pass {
-                PlenoxelPass::Train { grad_scale, .. } => assert_eq!(*grad_scale, 2.0 / 192.0),
+                PlenoxelPass::Train { loss, .. } => assert_eq!(
+                    *loss,
+                    LossWeights {
+                        grad_scale: 2.0 / 192.0,
+                        sparsity: 1e-9
+                    }
+                ),
                 PlenoxelPass::Tv { field, chunk } => {
                     let (channels, lambda) = match field {
                         TvField::Density => (1, 1e-5),

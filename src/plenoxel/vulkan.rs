@@ -18,7 +18,7 @@ use crate::gpu::{
 };
 use crate::grid::Grid;
 use crate::kernels;
-use crate::math::plenoxel::{occ_dims, PlenoxelCounts, OCC_SHIFT};
+use crate::math::plenoxel::{occ_dims, LossWeights, PlenoxelCounts, OCC_SHIFT};
 use crate::stage::{QueuedBackend, QueuedGrid, StateArrays};
 use anyhow::Result;
 
@@ -107,7 +107,7 @@ impl VulkanPlenoxels {
         &self,
         b: &mut Batch,
         stop_thresh: f32,
-        grad_scale: f32,
+        loss: LossWeights,
         rays: BatchRays,
         n: usize,
     ) -> Result<()> {
@@ -119,7 +119,8 @@ impl VulkanPlenoxels {
                 scale: mp.scale,
                 offset: mp.offset,
                 stop_thresh,
-                grad_scale,
+                grad_scale: loss.grad_scale,
+                sparsity: loss.sparsity,
             }],
         )?;
         b.dispatch_1d(
@@ -181,10 +182,9 @@ impl QueuedBackend<PlenoxelsStage> for VulkanPlenoxels {
         for pass in plan.passes() {
             match pass {
                 PlenoxelPass::Occupancy => self.record_occupancy(b)?,
-                PlenoxelPass::Train {
-                    stop_thresh,
-                    grad_scale,
-                } => self.record_train(b, *stop_thresh, *grad_scale, rays, n)?,
+                PlenoxelPass::Train { stop_thresh, loss } => {
+                    self.record_train(b, *stop_thresh, *loss, rays, n)?
+                }
                 PlenoxelPass::Tv { field, chunk } => {
                     let i = match field {
                         TvField::Density => DENSITY,
@@ -218,9 +218,15 @@ impl QueuedBackend<PlenoxelsStage> for VulkanPlenoxels {
 }
 
 impl PlenoxelsBackend for VulkanPlenoxels {
-    fn gradients(&mut self, rays: &[f32], targets: &[f32], stop_thresh: f32) -> Result<Gradients> {
+    fn gradients(
+        &mut self,
+        rays: &[f32],
+        targets: &[f32],
+        stop_thresh: f32,
+        sparsity: f32,
+    ) -> Result<Gradients> {
         let n = rays.len() / 6;
-        let plan = PlenoxelPlan::gradients(stop_thresh, n);
+        let plan = PlenoxelPlan::gradients(stop_thresh, sparsity, n);
         self.run_plan(&plan, rays, targets, None)?;
         let [density, sh] = StateArrays::from_arrays(self.core.bufs.take_grads(&self.core.queue)?)?;
         Ok(Gradients {

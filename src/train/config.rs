@@ -18,6 +18,9 @@ pub const GRID_RES: std::ops::RangeInclusive<u32> = 8..=1024;
 /// (docs/tuning.md), so the regulariser is there for `--plenoxels-set tv_background=…`.
 const TV_BACKGROUND: f32 = 0.0;
 
+/// Both presets' weight of the sparsity loss: none (docs/tuning.md).
+const SPARSITY: f32 = 0.0;
+
 /// The largest final grid at which `fast`'s stage 1 keeps its batch of rays per step.
 const FAST_BATCH_RES: u64 = 128;
 
@@ -45,6 +48,12 @@ pub struct PlenoxelsConfig {
     /// configurations saved before it).
     #[serde(default)]
     pub tv_background: f32,
+    /// λ of the Cauchy sparsity loss λ·Σ T·log(1 + 2σ²) over the shaded samples of the training
+    /// rays, each weighted by its transmittance T taken as a constant (svox2's
+    /// `lambda_sparsity` without that weight empties the unseen inside of solids; 0: none, as in
+    /// configurations saved before it).
+    #[serde(default)]
+    pub sparsity: f32,
     /// σ of the initial sphere-bounded grid.
     pub init_sigma: f32,
     /// Early ray termination: stop when transmittance falls below this.
@@ -95,6 +104,7 @@ impl PlenoxelsConfig {
             tv_fraction: 0.01,
             tv_until_upsample: true,
             tv_background: TV_BACKGROUND,
+            sparsity: SPARSITY,
             init_sigma: 0.1,
             stop_thresh: 1e-7,
             prune_weight: 5e-4,
@@ -136,6 +146,7 @@ impl PlenoxelsConfig {
             tv_fraction: 0.01,
             tv_until_upsample: false,
             tv_background: TV_BACKGROUND,
+            sparsity: SPARSITY,
             init_sigma: 0.1,
             stop_thresh: 1e-4,
             prune_weight: 5e-4,
@@ -182,6 +193,7 @@ impl PlenoxelsConfig {
             ("tv_sigma", self.tv_sigma),
             ("tv_sh", self.tv_sh),
             ("tv_background", self.tv_background),
+            ("sparsity", self.sparsity),
             ("beta", self.beta),
             ("eps", self.eps),
             ("init_sigma", self.init_sigma),
@@ -189,6 +201,11 @@ impl PlenoxelsConfig {
         ] {
             anyhow::ensure!(v.is_finite(), "{name} must be finite, got {v}");
         }
+        anyhow::ensure!(
+            self.sparsity >= 0.0,
+            "sparsity must not be negative, got {}",
+            self.sparsity
+        );
         anyhow::ensure!(
             self.checkpoint_min_seconds >= 0.0,
             "checkpoint_min_seconds must not be negative, got {}",
@@ -288,5 +305,26 @@ impl crate::checkpoint::Recorded for PlenoxelsConfig {
 
     fn iters_mut(&mut self) -> &mut u32 {
         &mut self.iters
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sparsity_must_be_finite_and_not_negative() {
+        let mut c = PlenoxelsConfig::fast();
+        c.sparsity = 1e-8;
+        c.validate().unwrap();
+        for (v, needle) in [
+            (-1e-8, "sparsity must not be negative"),
+            (f32::NAN, "sparsity must be finite"),
+            (f32::INFINITY, "sparsity must be finite"),
+        ] {
+            c.sparsity = v;
+            let e = c.validate().unwrap_err().to_string();
+            assert!(e.contains(needle), "{v}: {e}");
+        }
     }
 }

@@ -158,6 +158,7 @@ impl<'b> StageSteps<PlenoxelsStage, dyn PlenoxelsBackend + 'b> for PlenoxelsStep
             // A learned background is a colour, as the SH are: it steps at their rate.
             lr_bg: cfg.lr_sh.at(step),
             tv_background: cfg.tv_background,
+            sparsity: cfg.sparsity,
         }
     }
 

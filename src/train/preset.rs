@@ -164,6 +164,7 @@ mod tests {
         assert_eq!(s1.preset, Preset::Fast);
         // Written before the background's spheres had a TV: none.
         assert_eq!(s1.tv_background, 0.0);
+        assert_eq!(s1.sparsity, 0.0);
         let again: serde_json::Value = serde_json::to_value(&s1).unwrap();
         assert_eq!(again["preset"], "fast");
         let imported = STAGE1_SAVED.replace(r#""preset":"fast""#, r#""preset":"imported""#);

@@ -913,6 +913,7 @@ fn learned_background_converges_from_grey_on_the_device() {
             tv: None,
             lr_bg: cfg.lr_sh.at(step),
             tv_background: cfg.tv_background,
+            sparsity: cfg.sparsity,
         };
         vk.step_sampled(&views, 3 + step as u64, 2048, &p).unwrap();
     }

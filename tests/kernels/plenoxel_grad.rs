@@ -4,7 +4,7 @@
 //! too).
 
 use alphasurf::abi::buffers::Background;
-use alphasurf::check::TEST_BACKGROUND;
+use alphasurf::check::{rel_l2, TEST_BACKGROUND};
 use alphasurf::grid::{Grid, SH_DIM};
 use alphasurf::plenoxel::{CpuPlenoxels, PlenoxelsBackend};
 use alphasurf::stage::StageBackend;
@@ -12,15 +12,17 @@ use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
 
 /// Independent f64 volume renderer of one ray (method.md §2), same sample lattice, composited on
-/// `bg`.
+/// `bg`; also returns the sparsity loss before its weight, Σ T·log(1 + 2σ²) over its samples,
+/// with the transmittances T taken from `frozen` when given (the loss holds them constant), and
+/// the transmittance before each sample.
 fn render_f64(
     g: &Grid,
     density: &[f64],
     sh: &[f64],
     bg: [f64; 3],
-    ro: [f64; 3],
-    rd: [f64; 3],
-) -> [f64; 3] {
+    (ro, rd): ([f64; 3], [f64; 3]),
+    frozen: Option<&[f64]>,
+) -> ([f64; 3], f64, Vec<f64>) {
     let n = g.res.map(|r| r as f64);
     let scale: [f64; 3] = std::array::from_fn(|i| n[i] / (2.0 * g.radius[i] as f64));
     let offset: [f64; 3] = std::array::from_fn(|i| {
@@ -56,6 +58,8 @@ fn render_f64(
     ];
     let mut color = [0.0f64; 3];
     let mut trans = 1.0f64;
+    let mut cauchy = 0.0f64;
+    let mut ts = Vec::new();
     let mut k = 0;
     loop {
         let t = t0 + 0.5 * k as f64;
@@ -83,6 +87,9 @@ fn render_f64(
             }
         }
         assert!(sigma > 1e-3, "test scene must stay away from the σ ReLU");
+        let t_weight = frozen.map_or(trans, |f| f[ts.len()]);
+        cauchy += t_weight * (1.0 + 2.0 * sigma * sigma).ln();
+        ts.push(trans);
         let alpha = 1.0 - (-sigma * delta).exp();
         for ch in 0..3 {
             let raw: f64 = 0.5 + (0..9).map(|q| basis[q] * c[ch * 9 + q]).sum::<f64>();
@@ -91,13 +98,18 @@ fn render_f64(
         }
         trans *= 1.0 - alpha;
     }
-    std::array::from_fn(|ch| color[ch] + trans * bg[ch])
+    (
+        std::array::from_fn(|ch| color[ch] + trans * bg[ch]),
+        cauchy,
+        ts,
+    )
 }
 
 /// Central differences of the f64 forward against the CPU backward on a res³ grid with σ in
-/// [1, 4], rays entering through the z = −1 face; `stride` > 1 checks every stride-th parameter.
-/// Returns the mean shaded samples per ray.
-fn check_against_finite_differences(res: u32, seed: u64, stride: usize) -> f64 {
+/// [1, 4], rays entering through the z = −1 face, the loss the batch's mean squared error plus
+/// `sparsity`·Σ T·log(1 + 2σ²) over every ray's samples (T the unperturbed transmittances);
+/// `stride` > 1 checks every stride-th parameter. Returns the mean shaded samples per ray.
+fn check_against_finite_differences(res: u32, seed: u64, stride: usize, sparsity: f32) -> f64 {
     let mut rng = Pcg64::seed_from_u64(seed);
     let mut g = Grid::sphere(res, [0.0; 3], [1.0; 3], 10.0, 0.0);
     for v in g.density.iter_mut() {
@@ -132,23 +144,37 @@ fn check_against_finite_differences(res: u32, seed: u64, stride: usize) -> f64 {
     backend
         .set_background(Background::new(TEST_BACKGROUND, true))
         .unwrap();
-    let grads = backend.gradients(&rays, &targets, 0.0).unwrap();
+    let grads = backend.gradients(&rays, &targets, 0.0, sparsity).unwrap();
+    if sparsity > 0.0 {
+        // The sparsity term must weigh in dL/dσ, or the check would not test it.
+        let plain = backend.gradients(&rays, &targets, 0.0, 0.0).unwrap();
+        let share = rel_l2(&plain.density, &grads.density);
+        assert!(share > 0.1, "sparsity's share of dL/dσ only {share:.3}");
+    }
 
-    let loss = |density: &[f64], sh: &[f64], bg: [f64; 3]| -> f64 {
-        let mut total = 0.0;
-        for r in 0..n_rays {
-            let ro = std::array::from_fn(|i| rays[6 * r + i] as f64);
-            let rd = std::array::from_fn(|i| rays[6 * r + 3 + i] as f64);
-            let c = render_f64(&g, density, sh, bg, ro, rd);
-            for ch in 0..3 {
-                total += (c[ch] - targets[3 * r + ch] as f64).powi(2);
-            }
-        }
-        total / (3 * n_rays) as f64
+    let ray_of = |r: usize| -> ([f64; 3], [f64; 3]) {
+        (
+            std::array::from_fn(|i| rays[6 * r + i] as f64),
+            std::array::from_fn(|i| rays[6 * r + 3 + i] as f64),
+        )
     };
     let d64: Vec<f64> = g.density.iter().map(|&x| x as f64).collect();
     let s64: Vec<f64> = g.sh.iter().map(|&x| x as f64).collect();
     let b64 = TEST_BACKGROUND.map(|x| x as f64);
+    let frozen: Vec<Vec<f64>> = (0..n_rays)
+        .map(|r| render_f64(&g, &d64, &s64, b64, ray_of(r), None).2)
+        .collect();
+    let loss = |density: &[f64], sh: &[f64], bg: [f64; 3]| -> f64 {
+        let (mut total, mut cauchy) = (0.0, 0.0);
+        for (r, t) in frozen.iter().enumerate() {
+            let (c, s, _) = render_f64(&g, density, sh, bg, ray_of(r), Some(t));
+            for ch in 0..3 {
+                total += (c[ch] - targets[3 * r + ch] as f64).powi(2);
+            }
+            cauchy += s;
+        }
+        total / (3 * n_rays) as f64 + sparsity as f64 * cauchy
+    };
     let h = 1e-6;
     let fd = |which: usize, i: usize| -> f64 {
         let (mut dp, mut sp, mut bp) = (d64.clone(), s64.clone(), b64);
@@ -197,14 +223,21 @@ fn check_against_finite_differences(res: u32, seed: u64, stride: usize) -> f64 {
 #[test]
 fn cpu_backward_matches_f64_finite_differences() {
     // Few samples per ray: the backward pass replays the forward pass's recorded samples.
-    let shaded = check_against_finite_differences(6, 11, 1);
+    let shaded = check_against_finite_differences(6, 11, 1, 0.0);
     assert!(shaded < 32.0, "{shaded}");
+}
+
+#[test]
+fn cpu_backward_with_sparsity_matches_f64_finite_differences() {
+    // λ such that the sparsity term's dL/dσ (λ·4σ/(1 + 2σ²), σ in [1, 4]) is a sizeable share
+    // of the whole (asserted inside).
+    check_against_finite_differences(6, 13, 1, 1e-3);
 }
 
 #[test]
 fn cpu_backward_matches_finite_differences_on_long_rays() {
     // More shaded samples than the replay record holds: the backward pass marches again.
-    let shaded = check_against_finite_differences(20, 12, 97);
+    let shaded = check_against_finite_differences(20, 12, 97, 1e-3);
     assert!(
         shaded > 32.0,
         "rays must shade more than 32 samples, got {shaded}"

@@ -302,6 +302,7 @@ fn stage1_start() -> (
         tv: None,
         lr_bg: 1e-2,
         tv_background: 0.0,
+        sparsity: 0.0,
     };
     (grid, p)
 }
