@@ -1,8 +1,8 @@
 #version 460
 // plenoxel_train — one stage-1 training pass over a batch of rays: forward march, fused MSE
 // gradient dL/dC = grad_scale·(C − target) (grad_scale = 2/(3B)), then a second march that
-// scatters dL/dσ (with the Cauchy sparsity term T·λ·4σ/(1 + 2σ²) per sample when
-// params.sparsity = λ > 0, T the transmittance before it taken as a constant) and dL/dSH to the 8 corners of each sample's cell (method.md §2; svox2's
+// scatters dL/dσ (with svox2's Cauchy sparsity term λ·4σ/(1 + 2σ²) per sample when
+// params.sparsity = λ > 0) and dL/dSH to the 8 corners of each sample's cell (method.md §2; svox2's
 // backward). Consecutive samples in the same cell are summed in registers and flushed with one
 // float atomic per corner and parameter when the cell changes (SH needs only 3 accumulators per
 // corner: the basis Y_k is constant along a ray).
@@ -148,7 +148,7 @@ void main() {
         precise float d_sigma = m.delta * (dsig3.x + dsig3.y + dsig3.z);
         if (prm.sparsity > 0.0) {
             precise float den = 1.0 + 2.0 * (s.sigma * s.sigma);
-            precise float ds = T * (prm.sparsity * (4.0 * s.sigma / den));
+            precise float ds = prm.sparsity * (4.0 * s.sigma / den);
             d_sigma += ds;
         }
         vec3 d_color = mix(vec3(0.0), g_c * wt, greaterThan(raw, vec3(0.0)));

@@ -54,8 +54,8 @@ abi_structs! {
         stop_thresh: f32,
         /// dL/dC = grad_scale·(C − target).
         grad_scale: f32,
-        /// Weight λ of the Cauchy sparsity loss λ·Σ T·log(1 + 2σ²) over the shaded samples of
-        /// the backward march, T each one's transmittance (a constant weight); 0: none.
+        /// Weight λ of the Cauchy sparsity loss λ·Σ log(1 + 2σ²) over every shaded sample of
+        /// the backward march (svox2's `lambda_sparsity`); 0: none.
         sparsity: f32,
     }
 

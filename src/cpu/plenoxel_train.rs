@@ -26,8 +26,7 @@ pub struct TrainGrads<'a> {
 
 /// Twin of `plenoxel_train.comp`: returns per-ray squared error and the sample counts, adds
 /// dL/dσ and dL/dSH (dL/dC = `w.grad_scale`·(C − target), C = C_grid + T·B, B what `bg` puts
-/// behind the ray; dL/dσ += T·`w.sparsity`·4σ/(1 + 2σ²) at every sample of the backward march,
-/// T its transmittance)
+/// behind the ray; dL/dσ += `w.sparsity`·4σ/(1 + 2σ²) at every sample of the backward march)
 /// into `grads`, dL/dbg = Σ_rays dL/dC·T·T_L when `grads.background` is given,
 /// and the spheres' texel gradient (`math::background_msi::backward` with dL/dB = dL/dC·T) when
 /// `grads.spheres` is.
@@ -102,7 +101,7 @@ pub fn train(
                     std::array::from_fn(|ch| g_c[ch] * (tn * c[ch] - (total[ch] - accum[ch])));
                 let mut d_sigma = m.delta * (dsig3[0] + dsig3[1] + dsig3[2]);
                 if w.sparsity > 0.0 {
-                    d_sigma += sparsity_grad(w.sparsity, t_acc, s.sigma);
+                    d_sigma += sparsity_grad(w.sparsity, s.sigma);
                 }
                 let d_color: [f32; 3] =
                     std::array::from_fn(|ch| if raw[ch] > 0.0 { g_c[ch] * wt } else { 0.0 });

@@ -256,16 +256,13 @@ pub struct MarchParams {
 pub struct LossWeights {
     /// dL/dC = grad_scale·(C − target).
     pub grad_scale: f32,
-    /// λ of the Cauchy sparsity loss λ·Σ T·log(1 + 2σ²) over the shaded samples of the backward
-    /// march, each weighted by the transmittance T before it, taken as a constant (svox2's
-    /// `lambda_sparsity` weighs every sample alike, which empties the unseen inside of solids);
-    /// 0: none.
+    /// λ of the Cauchy sparsity loss λ·Σ log(1 + 2σ²) over every shaded sample of the backward
+    /// march (svox2's `lambda_sparsity`, from SNeRG); 0: none.
     pub sparsity: f32,
 }
 
-/// d/dσ of the sparsity loss of one sample with transmittance `t` before it: t·λ·4σ/(1 + 2σ²)
-/// (the kernel's arithmetic).
-pub fn sparsity_grad(lambda: f32, t: f32, sigma: f32) -> f32 {
+/// d/dσ of the sparsity loss of one sample, λ·4σ/(1 + 2σ²) (the kernel's arithmetic).
+pub fn sparsity_grad(lambda: f32, sigma: f32) -> f32 {
     let den = 1.0 + 2.0 * (sigma * sigma);
-    t * (lambda * (4.0 * sigma / den))
+    lambda * (4.0 * sigma / den)
 }

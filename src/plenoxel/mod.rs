@@ -42,8 +42,7 @@ pub struct PlenoxelsStepParams {
     pub lr_bg: f32,
     /// Weight of the TV on a learned background's spheres (unused without them).
     pub tv_background: f32,
-    /// λ of the Cauchy sparsity loss on the shaded samples of the training rays, each weighted by
-    /// its transmittance (0: none).
+    /// λ of the Cauchy sparsity loss on every shaded sample of the training rays (0: none).
     pub sparsity: f32,
 }
 
@@ -166,8 +165,7 @@ pub fn state_bytes_of((res, rows): ([u32; 3], usize)) -> u64 {
 pub trait PlenoxelsBackend: StageBackend<PlenoxelsStage> {
     /// The data-term gradients of a batch without updating anything: per-ray squared error,
     /// dL/dσ, dL/dSH and, when it is learned, dL/dbg (L = mean squared error over rays and
-    /// channels, plus `sparsity`·Σ T·log(1 + 2σ²) over the shaded samples, T their
-    /// transmittance held constant), and the sample counts.
+    /// channels, plus `sparsity`·Σ log(1 + 2σ²) over the shaded samples), and the sample counts.
     fn gradients(
         &mut self,
         rays: &[f32],

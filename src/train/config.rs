@@ -48,10 +48,8 @@ pub struct PlenoxelsConfig {
     /// configurations saved before it).
     #[serde(default)]
     pub tv_background: f32,
-    /// λ of the Cauchy sparsity loss λ·Σ T·log(1 + 2σ²) over the shaded samples of the training
-    /// rays, each weighted by its transmittance T taken as a constant (svox2's
-    /// `lambda_sparsity` without that weight empties the unseen inside of solids; 0: none, as in
-    /// configurations saved before it).
+    /// λ of svox2's Cauchy sparsity loss λ·Σ log(1 + 2σ²) over every shaded sample of the
+    /// training rays (its `lambda_sparsity`; 0: none, as in configurations saved before it).
     #[serde(default)]
     pub sparsity: f32,
     /// σ of the initial sphere-bounded grid.
