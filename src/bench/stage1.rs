@@ -5,7 +5,7 @@ use crate::abi::buffers::PlenoxelPerRay;
 use crate::data::{Dataset, LoadOptions, TrainViews};
 use crate::gpu::StepTimes;
 use crate::grid::Grid;
-use crate::plenoxel::{PlenoxelsBackend, PlenoxelsStepParams};
+use crate::plenoxel::PlenoxelsBackend;
 use crate::scene::{generate, GenerateOptions, SceneKind};
 use crate::train::progress::READ_EVERY;
 use crate::train::PlenoxelsConfig;
@@ -119,17 +119,7 @@ pub fn time_steps(
     let mut f = Figures::default();
     let mut times = StepFigures::default();
     let views = TrainViews::new(&data.train, &data.scene)?;
-    let p = PlenoxelsStepParams {
-        lr_sigma: cfg.lr_sigma.at(cfg.iters),
-        lr_sh: cfg.lr_sh.at(cfg.iters),
-        beta: cfg.beta,
-        eps: cfg.eps,
-        stop_thresh: cfg.stop_thresh,
-        tv: None,
-        lr_bg: cfg.lr_sh.at(cfg.iters),
-        tv_background: cfg.tv_background,
-        sparsity: cfg.sparsity,
-    };
+    let p = cfg.step_params(cfg.iters, None);
     backend.step_sampled(&views, 7, batch as usize, &p)?;
     backend.take_stats()?;
     let wall = Instant::now();

@@ -4,6 +4,7 @@
 use super::preset::Preset;
 use super::schedule::DelayedExp;
 use super::steps::{loop_schedule, LoopSchedule, Scheduled};
+use crate::plenoxel::{PlenoxelsStepParams, TvParams};
 use serde::{Deserialize, Serialize};
 
 /// The presets' least time between periodic checkpoints (both stages), in seconds.
@@ -155,6 +156,23 @@ impl PlenoxelsConfig {
             checkpoint_every: 500,
             checkpoint_min_seconds: CHECKPOINT_MIN_SECONDS,
             seed: 0,
+        }
+    }
+
+    /// The parameters of the step after `step` steps, with the TV chunk `tv` (drawn by the
+    /// caller).
+    pub fn step_params(&self, step: u32, tv: Option<TvParams>) -> PlenoxelsStepParams {
+        PlenoxelsStepParams {
+            lr_sigma: self.lr_sigma.at(step),
+            lr_sh: self.lr_sh.at(step),
+            beta: self.beta,
+            eps: self.eps,
+            stop_thresh: self.stop_thresh,
+            tv,
+            // A learned background is a colour, as the SH are: it steps at their rate.
+            lr_bg: self.lr_sh.at(step),
+            tv_background: self.tv_background,
+            sparsity: self.sparsity,
         }
     }
 

@@ -148,18 +148,7 @@ impl<'b> StageSteps<PlenoxelsStage, dyn PlenoxelsBackend + 'b> for PlenoxelsStep
             lambda_sigma: cfg.tv_sigma,
             lambda_sh: cfg.tv_sh,
         });
-        PlenoxelsStepParams {
-            lr_sigma: cfg.lr_sigma.at(step),
-            lr_sh: cfg.lr_sh.at(step),
-            beta: cfg.beta,
-            eps: cfg.eps,
-            stop_thresh: cfg.stop_thresh,
-            tv,
-            // A learned background is a colour, as the SH are: it steps at their rate.
-            lr_bg: cfg.lr_sh.at(step),
-            tv_background: cfg.tv_background,
-            sparsity: cfg.sparsity,
-        }
+        cfg.step_params(step, tv)
     }
 
     fn work_before(&self, step: u32) -> bool {

@@ -875,7 +875,7 @@ fn learned_background_converges_from_grey_on_the_device() {
     use alphasurf::abi::buffers::Background;
     use alphasurf::data::{BackgroundMode, Dataset, LoadOptions, TrainViews};
     use alphasurf::grid::Grid;
-    use alphasurf::plenoxel::{PlenoxelsStepParams, VulkanPlenoxels};
+    use alphasurf::plenoxel::VulkanPlenoxels;
     use alphasurf::stage::StageBackend;
     use alphasurf::train::PlenoxelsConfig;
     let dir = tempfile::tempdir().unwrap();
@@ -904,17 +904,7 @@ fn learned_background_converges_from_grey_on_the_device() {
     vk.set_background(Background::new([0.5; 3], true)).unwrap();
     let views = TrainViews::new(&d.train, &d.scene).unwrap();
     for step in 0..200 {
-        let p = PlenoxelsStepParams {
-            lr_sigma: cfg.lr_sigma.at(step),
-            lr_sh: cfg.lr_sh.at(step),
-            beta: cfg.beta,
-            eps: cfg.eps,
-            stop_thresh: cfg.stop_thresh,
-            tv: None,
-            lr_bg: cfg.lr_sh.at(step),
-            tv_background: cfg.tv_background,
-            sparsity: cfg.sparsity,
-        };
+        let p = cfg.step_params(step, None);
         vk.step_sampled(&views, 3 + step as u64, 2048, &p).unwrap();
     }
     let bg = vk.background().unwrap();
