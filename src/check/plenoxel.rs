@@ -311,11 +311,15 @@ fn train_row(gpu: &Gpu, seed: u64, spheres: Option<&SphereTable>) -> Result<Chec
             .get_or_insert_with(|| format!("sparsity changes dσ by {sparsity_share:.1e} only"));
     }
     let note = format!(
-        "sparsity {sparsity:e} (its share of dσ {sparsity_share:.2}); grad rel L2 {worst:.1e} (≤ 1e-4; elementwise |Δ| ≤ 1e-4·max|g| + \
-         1e-3·|g| for all but 0.1%), dbg rel L2 {e_bg:.1e} (≤ 1e-4); {}{}",
+        "sparsity {sparsity:e} (its share of dσ {sparsity_share:.2}); grad rel L2 {worst:.1e} \
+         (≤ 1e-4; elementwise |Δ| ≤ 1e-4·max|g| + 1e-3·|g| for all but 0.1%), dbg rel L2 \
+         {e_bg:.1e} (≤ 1e-4); {}{}",
         counts_note(got.counts, want.counts),
         if spheres.is_some() {
-            format!("; {reached} of {} sphere values with a gradient", want.spheres.len())
+            format!(
+                "; {reached} of {} sphere values with a gradient",
+                want.spheres.len()
+            )
         } else {
             String::new()
         }
