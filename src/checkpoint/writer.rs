@@ -78,6 +78,18 @@ impl BackgroundSave {
         }
     }
 
+    /// Without waiting: the error of a write that has ended and failed (that write is then no
+    /// longer in progress), Ok while one is still running or none failed. A loop calls it each
+    /// step so that a failed write (a full disk) stops the run at once rather than at the next
+    /// checkpoint.
+    pub fn check(&mut self) -> Result<()> {
+        if self.pending.as_ref().is_some_and(|h| h.is_finished()) {
+            self.finish()
+        } else {
+            Ok(())
+        }
+    }
+
     /// Waits for the write in progress; its error if it failed.
     pub fn finish(&mut self) -> Result<()> {
         match self.pending.take() {
@@ -144,6 +156,30 @@ mod tests {
         assert!(format!("{e:#}").contains("disk full"), "{e:#}");
         s.start(|| anyhow::bail!("disk full again")).unwrap();
         assert!(format!("{:#}", s.finish().unwrap_err()).contains("again"));
+        assert!(s.finish().is_ok(), "an error is returned once");
+    }
+
+    #[test]
+    fn check_returns_a_failed_write_without_waiting_for_a_running_one() {
+        let mut s = BackgroundSave::default();
+        assert!(s.check().is_ok(), "nothing written yet");
+        let (go, wait) = std::sync::mpsc::channel::<()>();
+        s.start(move || {
+            wait.recv().ok();
+            anyhow::bail!("disk full")
+        })
+        .unwrap();
+        assert!(s.check().is_ok(), "a write still running is not waited for");
+        go.send(()).unwrap();
+        let deadline = Instant::now() + Duration::from_secs(10);
+        let e = loop {
+            match s.check() {
+                Err(e) => break e,
+                Ok(()) if Instant::now() < deadline => std::thread::sleep(Duration::from_millis(1)),
+                Ok(()) => panic!("the failed write was not reported"),
+            }
+        };
+        assert!(format!("{e:#}").contains("disk full"), "{e:#}");
         assert!(s.finish().is_ok(), "an error is returned once");
     }
 

@@ -189,6 +189,14 @@ where
             progress.step(step as u64 + 1, mse, throughput.rays_per_s());
             report.train_seconds += secs;
         }
+        writer.check().with_context(|| {
+            format!(
+                "a checkpoint of this run could not be written; training stopped after step {} \
+                 rather than go on without one ({} keeps the last one written, if any)",
+                step + 1,
+                ck.path.display()
+            )
+        })?;
         if checkpoint {
             let t = Instant::now();
             train_log::flush(&mut log, &log_path)?;

@@ -262,6 +262,27 @@ fn a_full_disk_leaves_previous_outputs_whole() {
         .all(|e| e.unwrap().metadata().unwrap().len() > 0));
 }
 
+/// A periodic checkpoint that fails (a file-size limit stands in for a full disk) stops the run
+/// with the reason, instead of training on without one until the next checkpoint or the end.
+#[test]
+fn a_checkpoint_that_cannot_be_written_stops_training() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = scene(dir.path());
+    let r = dir.path().join("run");
+    // 64 KiB per file: the run's records and its log fit, a checkpoint of the 32³ grid does not.
+    let mut c = bin_with_limit("-f 128");
+    c.args(train_args(&data, &r))
+        .args(["--iters", "100000", "--checkpoint-every", "5"]);
+    let start = Instant::now();
+    let err = refused(&mut c, &["training stopped after step", "plenoxels.npz"]);
+    assert!(start.elapsed() < Duration::from_secs(120), "{err}");
+    let steps = log_steps(&r.join("train_log.csv"));
+    assert!(
+        !steps.is_empty() && *steps.last().unwrap() < 100_000,
+        "{steps:?}"
+    );
+}
+
 /// The step column of a training log; every row has the header's field count.
 fn log_steps(path: &Path) -> Vec<u32> {
     let text = String::from_utf8(read(path)).unwrap();
