@@ -181,9 +181,9 @@ pub struct SceneResult {
     pub settings: Settings,
     /// Every level of the sweep.
     pub levels: Vec<LevelScore>,
-    /// The same sweep with the levels' hidden cells trimmed (`extract --trim-hidden on`), as
-    /// αSurf's own extraction trims them (thin scenes; empty otherwise): the like-for-like
-    /// baseline.
+    /// The same sweep with αSurf's own extraction rules for thin scenes (hidden cells trimmed,
+    /// `extract --trim-hidden on`; thin sheets centred, `--sheets on`; empty on other
+    /// categories): the like-for-like baseline.
     #[serde(default)]
     pub trimmed_levels: Vec<LevelScore>,
     pub best_level: Option<f32>,
@@ -612,7 +612,8 @@ fn scene(
         &stage1_dir(args, out),
     )?;
     let best = rec.best();
-    // The like-for-like baseline where αSurf's extraction trims hidden cells (thin).
+    // The like-for-like baseline where αSurf's extraction trims hidden cells and centres thin
+    // sheets (thin).
     let t = Instant::now();
     let trimmed_levels = if settings.category == Category::Thin {
         let rows = plenoxels_levels_trimmed(steps, &s1, &gt, &LEVELS, out);

@@ -40,6 +40,7 @@ pub fn run(opts: &ExtractOptions, gpu: Option<&Gpu>) -> Result<()> {
         j["kernel"] = json!(p.kernel);
         j["hidden"] = json!(p.hidden);
         j["outer_dropped"] = json!(p.outer_dropped);
+        j["sheets_moved"] = json!(p.sheets_moved);
         j["thin"] = json!(p.thin);
         j["points"] = json!(p.points);
     }
@@ -76,6 +77,9 @@ fn print_points(p: &PointsReport, levels: &[f32]) {
         println!(
             "outermost level: {n} points dropped around parts thick enough for a higher level"
         );
+    }
+    if let Some(n) = p.sheets_moved {
+        println!("thin sheets: {n} points moved onto the sheet's middle");
     }
     for (l, n) in levels.iter().zip(&p.thin.per_level) {
         println!("  level {l:>8}: {n:>9} points");

@@ -10,6 +10,7 @@ pub mod hidden;
 pub mod metrics;
 pub mod objects;
 pub mod outer_level;
+pub mod sheets;
 pub mod thin;
 
 pub use metrics::{evaluate, evaluate_groups, evaluate_indexed, EvalOptions, Metrics};

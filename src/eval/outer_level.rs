@@ -55,6 +55,29 @@ impl Field<'_> {
         self.reaches(o, p.grad, tau, reach)
     }
 
+    /// The first distance in [`from`, `reach`] cells, on a lattice of `steps_per_cell` per cell,
+    /// along the unit direction `n` from grid position `o` at which the field is below `tau` or
+    /// undefined (an unallocated or outside corner: empty space); None where it stays at or
+    /// above `tau`.
+    pub fn falls_below(
+        &self,
+        o: [f32; 3],
+        n: [f32; 3],
+        tau: f32,
+        from: f32,
+        reach: f32,
+        steps_per_cell: f32,
+    ) -> Option<f32> {
+        let first = (from * steps_per_cell).ceil() as u32;
+        let last = (reach * steps_per_cell).round() as u32;
+        (first..=last)
+            .map(|k| k as f32 / steps_per_cell)
+            .find(|&t| {
+                self.at(std::array::from_fn(|i| o[i] + t * n[i]))
+                    .is_none_or(|x| x < tau)
+            })
+    }
+
     /// Whether the field reaches `tau` within `reach` cells of grid position `o` along the
     /// direction `dir` (grid coordinates, any length).
     pub fn reaches(&self, o: [f32; 3], dir: [f32; 3], tau: f32, reach: f32) -> bool {

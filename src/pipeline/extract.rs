@@ -17,6 +17,7 @@ use crate::eval::extract::{
 };
 use crate::eval::hidden::{kept_cells, HiddenStats, HiddenTrim, Viewpoint};
 use crate::eval::outer_level::{drop_outer_halo, Field as OuterField, REACH};
+use crate::eval::sheets::{centre_sheets as centre_sheets_of, SheetRule};
 use crate::gpu::Gpu;
 use crate::grid::surface::SurfaceGrid;
 use crate::grid::{npz, Grid};
@@ -101,6 +102,16 @@ pub struct ExtractOptions {
     /// good one).
     #[arg(long, value_enum, default_value_t = Switch::Auto)]
     pub trim_outer: Switch,
+    /// Move the points of thin sheets onto the sheet: where, inward along a point's normal, the
+    /// field falls below the lowest level within 4 cells (the part ends: no solid's face) and the
+    /// normals around it are nearly parallel (a sheet, not a wire), the point moves inward by half
+    /// that distance. A part thinner than stage 1 resolves (a blade, a board a cell thick) is a
+    /// bump about four cells wide whose level sets cross it on both sides; this puts both faces
+    /// on its middle. Points only (a `--mesh` is left as extracted). `auto`: on for a stage-2 run
+    /// of category thin in a box, off otherwise (a semi-transparent object's nested shells are
+    /// real surfaces).
+    #[arg(long, value_enum, default_value_t = Switch::Auto)]
+    pub sheets: Switch,
     /// Keep only the points, and the mesh faces whose centroid is, inside this box: dataset units
     /// `xmin,ymin,zmin,xmax,ymax,zmax` (e.g. the object's box in a capture, leaving out the floor
     /// and walls).
@@ -119,7 +130,7 @@ pub struct ExtractOptions {
     pub json: bool,
 }
 
-/// `--trim-hidden`, `--trim-outer`.
+/// `--trim-hidden`, `--trim-outer`, `--sheets`.
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Switch {
@@ -177,6 +188,7 @@ impl ExtractOptions {
             capacity: None,
             trim_hidden: Switch::Auto,
             trim_outer: Switch::Auto,
+            sheets: Switch::Auto,
             keep_box: None,
             data: None,
             json: false,
@@ -218,6 +230,8 @@ pub struct PointsReport {
     pub hidden: Option<HiddenStats>,
     /// Points of the outermost level dropped as a halo (`--trim-outer`), when on.
     pub outer_dropped: Option<usize>,
+    /// Points moved onto a thin sheet's middle (`--sheets`), when on.
+    pub sheets_moved: Option<usize>,
     pub thin: ThinStats,
     /// Points written.
     pub points: usize,
@@ -314,6 +328,7 @@ pub fn extract(opts: &ExtractOptions, gpu: Option<&Gpu>) -> Result<ExtractReport
         frame,
         cameras: trim.as_deref(),
         trim_outer: trim_outer(opts, &field),
+        centre_sheets: centre_sheets(opts, &field, ndc.is_some()),
         keep_box,
     };
     let points = match &opts.out {
@@ -394,6 +409,16 @@ fn keep_box(opts: &ExtractOptions) -> Result<Option<Aabb>> {
         .transpose()
 }
 
+/// Whether thin sheets' points move onto the sheet (`--sheets`; `auto`: thin stage-2 runs in a
+/// box).
+fn centre_sheets(opts: &ExtractOptions, field: &Field, ndc: bool) -> bool {
+    match opts.sheets {
+        Switch::On => true,
+        Switch::Auto => !ndc && matches!(field, Field::Surface(_, Some(Category::Thin))),
+        Switch::Off => false,
+    }
+}
+
 /// Whether the outermost level's halo is dropped (`--trim-outer`; `auto`: thin stage-2 runs).
 fn trim_outer(opts: &ExtractOptions, field: &Field) -> bool {
     match opts.trim_outer {
@@ -435,10 +460,12 @@ impl Field {
 }
 
 /// One cloud of a level sweep: level `level` of a stage-1 grid into `out`, with the cells no
-/// training view sees inside other surfaces trimmed (`extract --trim-hidden on`) or not (`off`).
+/// training view sees inside other surfaces trimmed (`extract --trim-hidden on`) or not (`off`),
+/// and thin sheets' points centred (`--sheets on`) or not.
 pub struct LevelJob {
     pub level: f32,
     pub trim_hidden: bool,
+    pub centre_sheets: bool,
     pub out: PathBuf,
 }
 
@@ -493,6 +520,7 @@ pub fn extract_levels(
                 frame,
                 cameras: trim,
                 trim_outer: outer,
+                centre_sheets: job.centre_sheets,
                 keep_box,
             };
             let report = write_points(opts, &surfaces, &job.out, gpu)?;
@@ -516,6 +544,8 @@ struct Surfaces<'a> {
     cameras: Option<&'a [Viewpoint]>,
     /// Drop the outermost level's halo around thick parts ([`crate::eval::outer_level`]).
     trim_outer: bool,
+    /// Move thin sheets' points onto the sheet ([`crate::eval::sheets`]).
+    centre_sheets: bool,
     /// `--box`: keep only what lies inside it (dataset units).
     keep_box: Option<Aabb>,
 }
@@ -597,6 +627,9 @@ fn write_points(
     let outer_dropped = s
         .trim_outer
         .then(|| drop_outer_halo(&mut points, &s.field(), s.levels, REACH));
+    let sheets_moved = s
+        .centre_sheets
+        .then(|| centre_sheets_of(&mut points, &s.field(), s.levels[0], &SheetRule::default()));
     let (mut cloud, thin) = to_cloud(&points, s.levels, &s.frame, opts.thin_radius)?;
     if let Some(b) = &s.keep_box {
         cloud.retain(|p| b.contains(*p));
@@ -625,6 +658,7 @@ fn write_points(
         kernel,
         hidden,
         outer_dropped,
+        sheets_moved,
         thin,
         points: cloud.points.len(),
         thin_radius: opts.thin_radius,

@@ -215,8 +215,9 @@ pub fn plenoxels_levels(steps: &Steps, s1: &TrainedRun, gt: &Path, levels: &[f32
     level_sweep(steps, s1, gt, levels, None)
 }
 
-/// The same levels with their hidden cells trimmed (`extract --trim-hidden on`), as αSurf's
-/// extraction trims them on thin scenes; the clouds go to `dir`.
+/// The same levels with αSurf's extraction rules for thin scenes: hidden cells trimmed
+/// (`extract --trim-hidden on`) and thin sheets' points centred (`--sheets on`); the clouds go
+/// to `dir`.
 pub fn plenoxels_levels_trimmed(
     steps: &Steps,
     s1: &TrainedRun,
@@ -228,7 +229,7 @@ pub fn plenoxels_levels_trimmed(
 }
 
 /// Extract and evaluate the stage-1 run `s1` at each level (into its run directory; with the
-/// hidden cells trimmed into `trimmed_into` when given): the grid read once, the ground truth
+/// hidden cells trimmed and thin sheets centred into `trimmed_into` when given): the grid read once, the ground truth
 /// read once. Failures are kept in their rows.
 fn level_sweep(
     steps: &Steps,
@@ -242,6 +243,7 @@ fn level_sweep(
         .map(|&level| LevelJob {
             level,
             trim_hidden: trimmed_into.is_some(),
+            centre_sheets: trimmed_into.is_some(),
             out: match trimmed_into {
                 None => s1.dir.join(format!("points_sigma{level}.ply")),
                 Some(dir) => dir.join(format!("points_sigma{level}_trimmed.ply")),
