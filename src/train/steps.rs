@@ -189,14 +189,7 @@ where
             progress.step(step as u64 + 1, mse, throughput.rays_per_s());
             report.train_seconds += secs;
         }
-        writer.check().with_context(|| {
-            format!(
-                "a checkpoint of this run could not be written; training stopped after step {} \
-                 rather than go on without one ({} keeps the last one written, if any)",
-                step + 1,
-                ck.path.display()
-            )
-        })?;
+        stop_on_failed_checkpoint(&mut writer, step, &ck.path)?;
         if checkpoint {
             let t = Instant::now();
             train_log::flush(&mut log, &log_path)?;
@@ -239,4 +232,17 @@ where
     report.test_psnr = rendered.mean_psnr;
     report.per_ray = S::scaled(&totals, 1.0 / throughput.rays().max(1) as f64);
     Ok((report, rendered))
+}
+
+/// The error of a periodic checkpoint that failed to be written, as soon as its thread ends:
+/// the run stops after `step` rather than train on without one.
+fn stop_on_failed_checkpoint(writer: &mut BackgroundSave, step: u32, path: &Path) -> Result<()> {
+    writer.check().with_context(|| {
+        format!(
+            "a checkpoint of this run could not be written; training stopped after step {} \
+             rather than go on without one ({} keeps the last one written, if any)",
+            step + 1,
+            path.display()
+        )
+    })
 }
