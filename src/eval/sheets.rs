@@ -4,9 +4,10 @@
 //! (docs/tuning.md, "the two faces of a thin sheet"). A point is on such a sheet when
 //! - inward along its normal (toward increasing field) the field falls below the lowest level
 //!   within [`SheetRule::reach`] cells: the part ends there, it is no solid's face;
-//! - the normals of the points in the cells around its own are nearly parallel (the largest
-//!   eigenvalue of Σ n nᵀ over their trace at least [`SheetRule::coherence`]): a sheet, not a
-//!   wire, whose level sets are tubes with normals turning round its axis.
+//! - the normals of the points in the 7³ cells around its own mostly share one axis (the
+//!   largest eigenvalue of Σ n nᵀ over their trace at least [`SheetRule::coherence`]): a sheet,
+//!   not a wire, whose level sets are tubes with normals turning round its axis, nor a bar as
+//!   wide as it is thick.
 //!
 //! Such a point moves inward by half the distance at which the field fell below the lowest
 //! level: onto the bump's middle, where its other face's points arrive too.
