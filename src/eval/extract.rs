@@ -11,6 +11,7 @@ use crate::cpu::extract_points::extract_points;
 use crate::data::ndc::Ndc;
 use crate::eval::hidden::Viewpoint;
 use crate::gpu::Gpu;
+use crate::grid::slot_vertex;
 use crate::io::{Extra, ExtraValues, PointCloud};
 use crate::kernels::extract_points::{Push, INFO};
 use anyhow::{ensure, Result};
@@ -276,6 +277,13 @@ pub struct ThinStats {
 /// Normals are ∇field / |∇field|, pointing toward increasing field value (into the object for a
 /// density or δ that grows inward). Thinned with `radius` (Blender units) per level, then on the
 /// union; `radius ≤ 0` keeps every point.
+/// Grid coordinates of an extracted point on a grid of `res` vertices: its cell's corner 000
+/// plus its position inside the cell.
+pub fn grid_position(res: [u32; 3], p: &ExtractPoint) -> [f32; 3] {
+    let v = slot_vertex(res, p.cell as usize);
+    std::array::from_fn(|i| v[i] as f32 + p.local[i])
+}
+
 pub fn to_cloud(
     points: &[ExtractPoint],
     levels: &[f32],
@@ -283,15 +291,9 @@ pub fn to_cloud(
     radius: f64,
 ) -> Result<(PointCloud, ThinStats)> {
     let t0 = Instant::now();
-    let [_, ry, rz] = frame.res.map(|r| r as usize);
-    let grid_at = |p: &ExtractPoint| -> [f32; 3] {
-        let s = p.cell as usize;
-        let v = [s / (ry * rz), (s / rz) % ry, s % rz];
-        std::array::from_fn(|i| v[i] as f32 + p.local[i])
-    };
     let xyz: Vec<[f32; 3]> = points
         .par_iter()
-        .map(|p| frame.to_blender(grid_at(p)))
+        .map(|p| frame.to_blender(grid_position(frame.res, p)))
         .collect();
     let level_idx: Vec<u32> = points.iter().map(|p| p.level).collect();
     let kept = thin_levels(&xyz, &level_idx, levels.len(), radius)?;
@@ -307,7 +309,7 @@ pub fn to_cloud(
         cloud.points.push(xyz[i]);
         lv.push(levels[p.level as usize]);
         al.push(p.alpha);
-        let n = frame.normal(grid_at(p), p.grad);
+        let n = frame.normal(grid_position(frame.res, p), p.grad);
         nx.push(n[0]);
         ny.push(n[1]);
         nz.push(n[2]);

@@ -7,14 +7,15 @@
 //! the only surface there and stays.
 
 use crate::abi::extract::ExtractPoint;
-use crate::grid::slot_vertex;
+use crate::eval::extract::grid_position;
 use crate::math::trilerp::trilerp;
 use rayon::prelude::*;
+use std::ops::RangeInclusive;
 
 /// Cells inward along the normal within which the higher level is looked for.
 pub const REACH: f32 = 1.5;
-/// Steps per cell of that search.
-const STEPS_PER_CELL: f32 = 10.0;
+/// Steps per cell of the searches along a normal (this one and `eval::sheets`').
+pub const STEPS_PER_CELL: f32 = 10.0;
 
 /// The field on a grid of `res` vertices (values by `links`, −1: unallocated).
 pub struct Field<'a> {
@@ -50,12 +51,24 @@ impl Field<'_> {
 
     /// Whether the field reaches `tau` within `reach` cells of point `p` along its gradient.
     fn point_reaches(&self, p: &ExtractPoint, tau: f32, reach: f32) -> bool {
-        let v = slot_vertex(self.res, p.cell as usize);
-        let o: [f32; 3] = std::array::from_fn(|i| v[i] as f32 + p.local[i]);
-        self.reaches(o, p.grad, tau, reach)
+        self.reaches(grid_position(self.res, p), p.grad, tau, reach)
     }
 
-    /// The first distance in [`from`, `reach`] cells, on a lattice of `steps_per_cell` per cell,
+    /// The distances t = k / STEPS_PER_CELL for k in `steps` along the unit direction `n` from
+    /// grid position `o`, each with the field there (None: a corner outside or unallocated).
+    fn along(
+        &self,
+        o: [f32; 3],
+        n: [f32; 3],
+        steps: RangeInclusive<u32>,
+    ) -> impl Iterator<Item = (f32, Option<f32>)> + '_ {
+        steps.map(move |k| {
+            let t = k as f32 / STEPS_PER_CELL;
+            (t, self.at(std::array::from_fn(|i| o[i] + t * n[i])))
+        })
+    }
+
+    /// The first distance in [`from`, `reach`] cells, on the lattice of STEPS_PER_CELL per cell,
     /// along the unit direction `n` from grid position `o` at which the field is below `tau` or
     /// undefined (an unallocated or outside corner: empty space); None where it stays at or
     /// above `tau`.
@@ -66,16 +79,12 @@ impl Field<'_> {
         tau: f32,
         from: f32,
         reach: f32,
-        steps_per_cell: f32,
     ) -> Option<f32> {
-        let first = (from * steps_per_cell).ceil() as u32;
-        let last = (reach * steps_per_cell).round() as u32;
-        (first..=last)
-            .map(|k| k as f32 / steps_per_cell)
-            .find(|&t| {
-                self.at(std::array::from_fn(|i| o[i] + t * n[i]))
-                    .is_none_or(|x| x < tau)
-            })
+        let first = (from * STEPS_PER_CELL).ceil() as u32;
+        let last = (reach * STEPS_PER_CELL).round() as u32;
+        self.along(o, n, first..=last)
+            .find(|(_, x)| x.is_none_or(|x| x < tau))
+            .map(|(t, _)| t)
     }
 
     /// Whether the field reaches `tau` within `reach` cells of grid position `o` along the
@@ -87,11 +96,8 @@ impl Field<'_> {
         }
         let n = dir.map(|g| g / len);
         let steps = (reach * STEPS_PER_CELL).round() as u32;
-        (1..=steps).any(|k| {
-            let t = k as f32 / STEPS_PER_CELL;
-            self.at(std::array::from_fn(|i| o[i] + t * n[i]))
-                .is_some_and(|x| x >= tau)
-        })
+        self.along(o, n, 1..=steps)
+            .any(|(_, x)| x.is_some_and(|x| x >= tau))
     }
 }
 

@@ -13,6 +13,7 @@
 //! level: onto the bump's middle, where its other face's points arrive too.
 
 use crate::abi::extract::ExtractPoint;
+use crate::eval::extract::grid_position;
 use crate::eval::outer_level::Field;
 use crate::grid::slot_vertex;
 use rayon::prelude::*;
@@ -46,9 +47,6 @@ impl Default for SheetRule {
     }
 }
 
-/// Steps per cell of the inward search.
-const STEPS_PER_CELL: f32 = 10.0;
-
 /// Moves the points of thin sheets onto their middle (grid units, `local` may leave [0, 1]³);
 /// `lowest` is the lowest extracted level. Returns how many moved.
 pub fn centre_sheets(
@@ -64,9 +62,13 @@ pub fn centre_sheets(
         .zip(&normals)
         .map(|(p, n)| {
             let n = (*n)?;
-            let v = slot_vertex(field.res, p.cell as usize);
-            let o: [f32; 3] = std::array::from_fn(|i| v[i] as f32 + p.local[i]);
-            field.falls_below(o, n, lowest, rule.skip, rule.reach, STEPS_PER_CELL)
+            field.falls_below(
+                grid_position(field.res, p),
+                n,
+                lowest,
+                rule.skip,
+                rule.reach,
+            )
         })
         .collect();
     let coherence = point_coherence(points, &normals, &exits, field.res, rule);
@@ -218,8 +220,7 @@ mod tests {
     }
 
     fn position(p: &ExtractPoint) -> [f32; 3] {
-        let v = slot_vertex(RES, p.cell as usize);
-        std::array::from_fn(|i| v[i] as f32 + p.local[i])
+        grid_position(RES, p)
     }
 
     /// Points on both faces of a level-`level` crossing of a bump across x = 12 (a sheet), on a

@@ -1,6 +1,6 @@
 //! The CPU stage-1 backend: the kernels' rayon twins over host arrays.
 
-use super::plan::{batch_grad_scale, PlenoxelPass, PlenoxelPlan, TvField};
+use super::plan::{batch_loss, PlenoxelPass, PlenoxelPlan, TvField};
 use super::{
     march_params, state_bytes_of, Gradients, PlenoxelsBackend, PlenoxelsStage, PlenoxelsStepParams,
     PlenoxelsStepStats,
@@ -257,10 +257,7 @@ impl PlenoxelsBackend for CpuPlenoxels {
             &march_params(&self.grid, stop_thresh),
             rays,
             targets,
-            LossWeights {
-                grad_scale: batch_grad_scale(rays.len() / 6),
-                sparsity,
-            },
+            batch_loss(rays.len() / 6, sparsity),
             &st.view(),
             grads,
         )?;

@@ -45,6 +45,14 @@ pub fn batch_grad_scale(n_rays: usize) -> f32 {
     2.0 / (3.0 * n_rays as f32)
 }
 
+/// The loss weights of a training pass over `n_rays` rays with the sparsity weight `sparsity`.
+pub fn batch_loss(n_rays: usize, sparsity: f32) -> LossWeights {
+    LossWeights {
+        grad_scale: batch_grad_scale(n_rays),
+        sparsity,
+    }
+}
+
 impl PlenoxelPlan {
     /// A training step on `n_rays` rays with `p` on a grid of resolution `res` (`learned_bg`: the
     /// background is learned). Refuses a TV chunk past the grid's slots.
@@ -104,10 +112,7 @@ impl PlenoxelPlan {
                 PlenoxelPass::Occupancy,
                 PlenoxelPass::Train {
                     stop_thresh,
-                    loss: LossWeights {
-                        grad_scale: batch_grad_scale(n_rays),
-                        sparsity,
-                    },
+                    loss: batch_loss(n_rays, sparsity),
                 },
             ],
         }
