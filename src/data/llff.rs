@@ -67,6 +67,13 @@ pub fn posed(root: &Path, k: u32) -> Result<Posed, DataError> {
                  positive focal length"
             )));
         }
+        let (near, far) = (row[15], row[16]);
+        if !(near > 0.0 && far > near) {
+            return Err(format(format!(
+                "image {i}: near {near}, far {far}: expected depth bounds 0 < near < far (the \
+                 scene's nearest and farthest depths in that view)"
+            )));
+        }
         let col = |c: usize| Vec3::new(m(0, c), m(1, c), m(2, c));
         let c2w = Mat4::from_cols(
             col(1).extend(0.0),
@@ -99,7 +106,7 @@ pub fn posed(root: &Path, k: u32) -> Result<Posed, DataError> {
             },
             distortion: Distortion::None,
         });
-        depths.push((row[15], row[16]));
+        depths.push((near, far));
     }
     let cameras: Vec<Camera> = views.iter().map(|v| v.camera).collect();
     let foreground = foreground::find(&cameras, &[]);
@@ -117,13 +124,9 @@ pub fn posed(root: &Path, k: u32) -> Result<Posed, DataError> {
     })
 }
 
-/// The smallest positive near bound.
+/// The smallest near bound (each is positive: `posed` checks them).
 fn nearest_bound(depths: &[(f64, f64)]) -> Option<f32> {
-    let near = depths
-        .iter()
-        .map(|d| d.0)
-        .filter(|&d| d > 0.0)
-        .fold(f64::INFINITY, f64::min);
+    let near = depths.iter().map(|d| d.0).fold(f64::INFINITY, f64::min);
     near.is_finite().then_some(near as f32)
 }
 
@@ -138,11 +141,6 @@ fn depth_box(cameras: &[Camera], depths: &[(f64, f64)]) -> Aabb {
         .normalize_or_zero();
     let near = depths.iter().map(|d| d.0).fold(f64::INFINITY, f64::min) as f32;
     let far = depths.iter().map(|d| d.1).fold(0.0, f64::max) as f32;
-    let (near, far) = if near.is_finite() && far > near && near >= 0.0 {
-        (near, far)
-    } else {
-        (0.0, 1.0)
-    };
     let mid = centre + axis * 0.5 * (near + far);
     let half = Vec3::splat(0.5 * (far - near).max(1e-3));
     Aabb::new(mid - half, mid + half)

@@ -108,6 +108,63 @@ fn llff_poses_bounds_load_as_the_colmap_model_does() {
     );
 }
 
+/// A damaged model is refused with the file and the entry named, not trained with a fallback:
+/// an LLFF near bound of 0 (the nearest depth NDC would put its near plane at), and a COLMAP
+/// sparse point at NaN (the points bound the object).
+#[test]
+fn damaged_capture_models_are_refused() {
+    let src = shared_fixture("capture_fan_ff");
+    let load_err = |dir: &std::path::Path| {
+        format!(
+            "{:#}",
+            Dataset::load(dir, &LoadOptions::default()).unwrap_err()
+        )
+    };
+    // LLFF: image 3's near bound set to 0 (npy v1: a 10-byte preamble, then the header).
+    let d = tempfile::tempdir().unwrap();
+    let mut npy = std::fs::read(src.join("poses_bounds.npy")).unwrap();
+    let data = 10 + u16::from_le_bytes([npy[8], npy[9]]) as usize;
+    let at = data + (3 * 17 + 15) * 8;
+    npy[at..at + 8].copy_from_slice(&0f64.to_le_bytes());
+    std::fs::write(d.path().join("poses_bounds.npy"), &npy).unwrap();
+    std::os::unix::fs::symlink(src.join("images"), d.path().join("images")).unwrap();
+    let err = load_err(d.path());
+    assert!(
+        err.contains("poses_bounds.npy") && err.contains("image 3") && err.contains("near 0"),
+        "{err}"
+    );
+    // COLMAP text: the second point's X is NaN.
+    let d = tempfile::tempdir().unwrap();
+    let sparse = d.path().join("sparse/0");
+    std::fs::create_dir_all(&sparse).unwrap();
+    for f in ["cameras.txt", "images.txt"] {
+        std::fs::copy(src.join("sparse/0").join(f), sparse.join(f)).unwrap();
+    }
+    let points = std::fs::read_to_string(src.join("sparse/0/points3D.txt")).unwrap();
+    let mut seen = 0;
+    let damaged: Vec<String> = points
+        .lines()
+        .map(|l| {
+            if l.starts_with('#') || l.trim().is_empty() {
+                return l.to_string();
+            }
+            seen += 1;
+            let mut f: Vec<&str> = l.split_whitespace().collect();
+            if seen == 2 {
+                f[1] = "nan";
+            }
+            f.join(" ")
+        })
+        .collect();
+    std::fs::write(sparse.join("points3D.txt"), damaged.join("\n")).unwrap();
+    std::os::unix::fs::symlink(src.join("images"), d.path().join("images")).unwrap();
+    let err = load_err(d.path());
+    assert!(
+        err.contains("points3D.txt") && err.contains("point 2") && err.contains("NaN"),
+        "{err}"
+    );
+}
+
 /// `--space auto` gives the forward-facing fan NDC (its cameras look within 45° of their mean
 /// direction; the near plane from its sparse points) and the 360° birdcage its box; the object
 /// lies inside the NDC cube and every corner of it maps back; the rays the sampler draws on the

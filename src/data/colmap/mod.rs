@@ -105,6 +105,19 @@ pub fn posed(root: &Path, sparse: &Path, k: u32) -> Result<Posed, DataError> {
             text::points(&pts_file)?,
         )
     };
+    if let Some((i, p)) = points
+        .iter()
+        .enumerate()
+        .find(|(_, p)| !p.iter().all(|v| v.is_finite()))
+    {
+        return Err(DataError::Format {
+            path: pts_file,
+            msg: format!(
+                "point {} (in file order) has a non-finite position {p:?}: the model is damaged",
+                i + 1
+            ),
+        });
+    }
     let mut by_id = HashMap::new();
     for c in &cams {
         let intr = intrinsics(&cam_file, c)?;
@@ -367,10 +380,7 @@ pub fn scene_box<'a>(
                 && (0.0..=c.height as f32).contains(&py)
         })
     };
-    let kept: Vec<&[f64; 3]> = points
-        .iter()
-        .filter(|p| p.iter().all(|v| v.is_finite()) && in_view(p))
-        .collect();
+    let kept: Vec<&[f64; 3]> = points.iter().filter(|p| in_view(p)).collect();
     if kept.is_empty() {
         return None;
     }
