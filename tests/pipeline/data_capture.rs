@@ -110,7 +110,8 @@ fn llff_poses_bounds_load_as_the_colmap_model_does() {
 
 /// A damaged model is refused with the file and the entry named, not trained with a fallback:
 /// an LLFF near bound of 0 (the nearest depth NDC would put its near plane at), and a COLMAP
-/// sparse point at NaN (the points bound the object).
+/// sparse point at NaN (the points bound the object). Poses that are valid but all one pose load
+/// with a warning.
 #[test]
 fn damaged_capture_models_are_refused() {
     let src = shared_fixture("capture_fan_ff");
@@ -134,35 +135,64 @@ fn damaged_capture_models_are_refused() {
         "{err}"
     );
     // COLMAP text: the second point's X is NaN.
-    let d = tempfile::tempdir().unwrap();
-    let sparse = d.path().join("sparse/0");
-    std::fs::create_dir_all(&sparse).unwrap();
-    for f in ["cameras.txt", "images.txt"] {
-        std::fs::copy(src.join("sparse/0").join(f), sparse.join(f)).unwrap();
-    }
-    let points = std::fs::read_to_string(src.join("sparse/0/points3D.txt")).unwrap();
-    let mut seen = 0;
-    let damaged: Vec<String> = points
-        .lines()
-        .map(|l| {
-            if l.starts_with('#') || l.trim().is_empty() {
-                return l.to_string();
-            }
-            seen += 1;
-            let mut f: Vec<&str> = l.split_whitespace().collect();
-            if seen == 2 {
-                f[1] = "nan";
-            }
-            f.join(" ")
-        })
-        .collect();
-    std::fs::write(sparse.join("points3D.txt"), damaged.join("\n")).unwrap();
-    std::os::unix::fs::symlink(src.join("images"), d.path().join("images")).unwrap();
-    let err = load_err(d.path());
+    let (_d, dir) = colmap_copy(&src, |file, n, f| {
+        if file == "points3D.txt" && n == 1 {
+            f[1] = "nan".into();
+        }
+    });
+    let err = load_err(&dir);
     assert!(
         err.contains("points3D.txt") && err.contains("point 2") && err.contains("NaN"),
         "{err}"
     );
+    // Every image given the first one's pose: it loads (nothing in the files is invalid), and
+    // `inspect` warns that the views have no parallax.
+    let mut first: Option<Vec<String>> = None;
+    let (_d, dir) = colmap_copy(&src, |file, _, f| {
+        if file == "images.txt" && f.len() == 10 {
+            let pose = first.get_or_insert_with(|| f[1..8].to_vec());
+            f[1..8].clone_from_slice(pose);
+        }
+    });
+    let ds = Dataset::load(&dir, &LoadOptions::default()).unwrap();
+    let warnings = inspect(&ds).warnings;
+    assert!(
+        warnings.iter().any(|w| w.contains("no parallax")),
+        "{warnings:?}"
+    );
+    let ok = Dataset::load(&src, &LoadOptions::default()).unwrap();
+    assert!(!inspect(&ok).warnings.iter().any(|w| w.contains("parallax")));
+}
+
+/// A copy of `src`'s COLMAP text model with `edit(file, n, fields)` applied to the fields of each
+/// data line (n: its index among the file's data lines), and a link to its images.
+fn colmap_copy(
+    src: &std::path::Path,
+    mut edit: impl FnMut(&str, usize, &mut Vec<String>),
+) -> (tempfile::TempDir, std::path::PathBuf) {
+    let d = tempfile::tempdir().unwrap();
+    let sparse = d.path().join("sparse/0");
+    std::fs::create_dir_all(&sparse).unwrap();
+    for file in ["cameras.txt", "images.txt", "points3D.txt"] {
+        let text = std::fs::read_to_string(src.join("sparse/0").join(file)).unwrap();
+        let mut n = 0;
+        let lines: Vec<String> = text
+            .lines()
+            .map(|l| {
+                if l.starts_with('#') || l.trim().is_empty() {
+                    return l.to_string();
+                }
+                let mut f: Vec<String> = l.split_whitespace().map(String::from).collect();
+                edit(file, n, &mut f);
+                n += 1;
+                f.join(" ")
+            })
+            .collect();
+        std::fs::write(sparse.join(file), lines.join("\n")).unwrap();
+    }
+    std::os::unix::fs::symlink(src.join("images"), d.path().join("images")).unwrap();
+    let dir = d.path().to_path_buf();
+    (d, dir)
 }
 
 /// `--space auto` gives the forward-facing fan NDC (its cameras look within 45° of their mean
