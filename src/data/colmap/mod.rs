@@ -75,6 +75,25 @@ pub struct ImageEntry {
     pub name: String,
 }
 
+/// Every sparse point of `path` has a finite position (the points bound the object, and a NaN
+/// among them is a damaged model, not a point to pass over).
+fn check_points(path: &Path, points: &[[f64; 3]]) -> Result<(), DataError> {
+    match points
+        .iter()
+        .enumerate()
+        .find(|(_, p)| !p.iter().all(|v| v.is_finite()))
+    {
+        None => Ok(()),
+        Some((i, p)) => Err(DataError::Format {
+            path: path.to_path_buf(),
+            msg: format!(
+                "point {} (in file order) has a non-finite position {p:?}: the model is damaged",
+                i + 1
+            ),
+        }),
+    }
+}
+
 /// The posed views and scene box of the COLMAP dataset `root` with its model in `sparse` (`k`:
 /// the requested downscale, which picks the image folder); no image is read.
 pub fn posed(root: &Path, sparse: &Path, k: u32) -> Result<Posed, DataError> {
@@ -105,19 +124,7 @@ pub fn posed(root: &Path, sparse: &Path, k: u32) -> Result<Posed, DataError> {
             text::points(&pts_file)?,
         )
     };
-    if let Some((i, p)) = points
-        .iter()
-        .enumerate()
-        .find(|(_, p)| !p.iter().all(|v| v.is_finite()))
-    {
-        return Err(DataError::Format {
-            path: pts_file,
-            msg: format!(
-                "point {} (in file order) has a non-finite position {p:?}: the model is damaged",
-                i + 1
-            ),
-        });
-    }
+    check_points(&pts_file, &points)?;
     let mut by_id = HashMap::new();
     for c in &cams {
         let intr = intrinsics(&cam_file, c)?;
