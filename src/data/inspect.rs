@@ -182,7 +182,8 @@ pub fn inspect(ds: &Dataset) -> Inspection {
         }
     }
     warnings.extend(room_advice(ds));
-    warnings.extend(no_parallax(&ds.train, box_max - box_min));
+    // `ds.splits()` lists the training split first.
+    warnings.extend(no_parallax(&splits[0], box_max - box_min));
     // Without alpha or masks there is nothing to carve with (the warning above says so).
     let any_alpha = ds.train.frames.iter().any(|f| f.image.had_alpha);
     let object_bounds = any_alpha
@@ -216,18 +217,17 @@ pub fn inspect(ds: &Dataset) -> Inspection {
     }
 }
 
-/// A warning when the training cameras all stand at one point (their centres span less than a
-/// thousandth of the scene box): views from one point have no parallax, so no depth can be
-/// recovered from them (a pose export that repeated one pose, say).
-fn no_parallax(train: &Split, box_size: Vec3) -> Option<String> {
-    let s = summarise(train);
+/// A warning when the training cameras (`s`, their split's summary) all stand at one point
+/// (their centres span less than a thousandth of the scene box): views from one point have no
+/// parallax, so no depth can be recovered from them (a pose export that repeated one pose, say).
+fn no_parallax(s: &SplitSummary, box_size: Vec3) -> Option<String> {
     let span = (s.centre_max - s.centre_min).max_element();
     (s.views > 1 && span <= 1e-3 * box_size.max_element()).then(|| {
         format!(
             "{}: all {} camera centres lie within {span:.2e} of each other (the scene box is \
              {:.3} wide): views from one point have no parallax to recover depth from; check \
              the poses",
-            train.name,
+            s.name,
             s.views,
             box_size.max_element()
         )

@@ -273,10 +273,6 @@ pub struct ThinStats {
     pub wall_ms: f64,
 }
 
-/// Sorted kernel points → PLY cloud in Blender units: x, y, z, level (τ), alpha, nx, ny, nz.
-/// Normals are ∇field / |∇field|, pointing toward increasing field value (into the object for a
-/// density or δ that grows inward). Thinned with `radius` (Blender units) per level, then on the
-/// union; `radius ≤ 0` keeps every point.
 /// Grid coordinates of an extracted point on a grid of `res` vertices: its cell's corner 000
 /// plus its position inside the cell.
 pub fn grid_position(res: [u32; 3], p: &ExtractPoint) -> [f32; 3] {
@@ -284,6 +280,10 @@ pub fn grid_position(res: [u32; 3], p: &ExtractPoint) -> [f32; 3] {
     std::array::from_fn(|i| v[i] as f32 + p.local[i])
 }
 
+/// Sorted kernel points → PLY cloud in Blender units: x, y, z, level (τ), alpha, nx, ny, nz.
+/// Normals are ∇field / |∇field|, pointing toward increasing field value (into the object for a
+/// density or δ that grows inward). Thinned with `radius` (Blender units) per level, then on the
+/// union; `radius ≤ 0` keeps every point.
 pub fn to_cloud(
     points: &[ExtractPoint],
     levels: &[f32],

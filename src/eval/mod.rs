@@ -1,8 +1,9 @@
 //! Extraction and evaluation of point clouds: level-set point extraction with dense virtual rays
 //! ([`extract`]), greedy radius thinning ([`thin`], neighbours through
 //! [`crate::math::knn`]), the trimming of surfaces hidden from every training view ([`hidden`])
-//! and of the outermost level's halo around thick parts ([`outer_level`]), the Chamfer / F-score metrics of method.md §4 ([`metrics`]) and their split over
-//! a scene's objects ([`objects`]).
+//! and of the outermost level's halo around thick parts ([`outer_level`]), thin sheets' two
+//! faces moved onto the sheet ([`sheets`]), the Chamfer / F-score metrics of method.md §4
+//! ([`metrics`]) and their split over a scene's objects ([`objects`]).
 
 pub mod colour;
 pub mod extract;

@@ -90,15 +90,19 @@ impl Field<'_> {
     /// Whether the field reaches `tau` within `reach` cells of grid position `o` along the
     /// direction `dir` (grid coordinates, any length).
     pub fn reaches(&self, o: [f32; 3], dir: [f32; 3], tau: f32, reach: f32) -> bool {
-        let len = dir.iter().map(|g| g * g).sum::<f32>().sqrt();
-        if !(len > 0.0 && len.is_finite()) {
+        let Some(n) = unit(dir) else {
             return false;
-        }
-        let n = dir.map(|g| g / len);
+        };
         let steps = (reach * STEPS_PER_CELL).round() as u32;
         self.along(o, n, 1..=steps)
             .any(|(_, x)| x.is_some_and(|x| x >= tau))
     }
+}
+
+/// `g` scaled to unit length; None for a zero or non-finite vector (no direction to search).
+pub fn unit(g: [f32; 3]) -> Option<[f32; 3]> {
+    let len = g.iter().map(|x| x * x).sum::<f32>().sqrt();
+    (len > 0.0 && len.is_finite()).then(|| g.map(|x| x / len))
 }
 
 /// Keep `points` except the outermost level's where the level two above it lies within `reach`

@@ -14,7 +14,7 @@
 
 use crate::abi::extract::ExtractPoint;
 use crate::eval::extract::grid_position;
-use crate::eval::outer_level::Field;
+use crate::eval::outer_level::{unit, Field};
 use crate::grid::slot_vertex;
 use rayon::prelude::*;
 use std::collections::HashMap;
@@ -86,11 +86,6 @@ pub fn centre_sheets(
         moved += 1;
     }
     moved
-}
-
-fn unit(g: [f32; 3]) -> Option<[f32; 3]> {
-    let len = g.iter().map(|x| x * x).sum::<f32>().sqrt();
-    (len > 0.0 && len.is_finite()).then(|| g.map(|x| x / len))
 }
 
 /// Σ n nᵀ of a set of unit normals: xx, yy, zz, xy, xz, yz.
@@ -258,45 +253,14 @@ mod tests {
         }
     }
 
-    #[test]
-    fn a_solids_face_and_a_wires_tube_stay() {
-        // A solid: the field rises across x = 12 and stays high (no exit within reach).
-        let (links, values) = field_of(|v| if v[0] >= 12.0 { 60.0 } else { 0.0 });
+    /// On the field `profile`, `centre_sheets` (level 10) moves none of `pts`.
+    fn assert_none_move(profile: impl Fn([f32; 3]) -> f32, mut pts: Vec<ExtractPoint>) {
+        let (links, values) = field_of(profile);
         let field = Field {
             res: RES,
             links: &links,
             values: &values,
         };
-        let mut pts: Vec<ExtractPoint> = sheet_points(0.5)
-            .into_iter()
-            .filter(|p| p.grad[0] > 0.0)
-            .collect();
-        let before: Vec<[f32; 3]> = pts.iter().map(position).collect();
-        assert_eq!(
-            centre_sheets(&mut pts, &field, 10.0, &SheetRule::default()),
-            0
-        );
-        assert_eq!(pts.iter().map(position).collect::<Vec<_>>(), before);
-
-        // A wire along z through (12, 12): a radial bump; its level set is a tube of radius
-        // 1.5 whose normals turn round the axis (coherence about ½), so nothing moves although
-        // the field falls below the level within reach.
-        let (links, values) =
-            field_of(|v| 60.0 * (-((v[0] - 12.0).powi(2) + (v[1] - 12.0).powi(2)) / 2.0).exp());
-        let field = Field {
-            res: RES,
-            links: &links,
-            values: &values,
-        };
-        let mut pts = Vec::new();
-        for a in 0..48 {
-            let t = a as f32 * std::f32::consts::TAU / 48.0;
-            let (c, s) = (t.cos(), t.sin());
-            for k in 0..12 {
-                let z = 6.0 + k as f32;
-                pts.push(point([12.0 + 1.5 * c, 12.0 + 1.5 * s, z], [-c, -s, 0.0]));
-            }
-        }
         let before: Vec<[f32; 3]> = pts.iter().map(position).collect();
         assert_eq!(
             centre_sheets(&mut pts, &field, 10.0, &SheetRule::default()),
@@ -306,16 +270,37 @@ mod tests {
     }
 
     #[test]
+    fn a_solids_face_and_a_wires_tube_stay() {
+        // A solid: the field rises across x = 12 and stays high (no exit within reach).
+        let face: Vec<ExtractPoint> = sheet_points(0.5)
+            .into_iter()
+            .filter(|p| p.grad[0] > 0.0)
+            .collect();
+        assert_none_move(|v| if v[0] >= 12.0 { 60.0 } else { 0.0 }, face);
+
+        // A wire along z through (12, 12): a radial bump; its level set is a tube of radius
+        // 1.5 whose normals turn round the axis (coherence about ½), so nothing moves although
+        // the field falls below the level within reach.
+        let mut tube = Vec::new();
+        for a in 0..48 {
+            let t = a as f32 * std::f32::consts::TAU / 48.0;
+            let (c, s) = (t.cos(), t.sin());
+            for k in 0..12 {
+                let z = 6.0 + k as f32;
+                tube.push(point([12.0 + 1.5 * c, 12.0 + 1.5 * s, z], [-c, -s, 0.0]));
+            }
+        }
+        assert_none_move(
+            |v| 60.0 * (-((v[0] - 12.0).powi(2) + (v[1] - 12.0).powi(2)) / 2.0).exp(),
+            tube,
+        );
+    }
+
+    #[test]
     fn a_bar_as_wide_as_it_is_thick_stays() {
         // A square bar 3 cells a side along z (the built-in thin scene's frame at 128³): its
         // field falls below the level 3 cells in, but its side faces lie in the box.
         let inside = |v: [f32; 3]| (v[0] - 12.0).abs() <= 1.5 && (v[1] - 12.0).abs() <= 1.5;
-        let (links, values) = field_of(|v| if inside(v) { 60.0 } else { 0.0 });
-        let field = Field {
-            res: RES,
-            links: &links,
-            values: &values,
-        };
         let mut pts = Vec::new();
         for k in 0..12 {
             let z = 6.0 + k as f32;
@@ -327,10 +312,7 @@ mod tests {
                 pts.push(point([u, 13.5, z], [0.0, -1.0, 0.0]));
             }
         }
-        assert_eq!(
-            centre_sheets(&mut pts, &field, 10.0, &SheetRule::default()),
-            0
-        );
+        assert_none_move(|v| if inside(v) { 60.0 } else { 0.0 }, pts);
     }
 
     #[test]

@@ -40,15 +40,11 @@ pub struct PlenoxelPlan {
     passes: Vec<PlenoxelPass>,
 }
 
-/// dL/dC of the batch mean squared error over `n_rays` rays and their 3 channels.
-pub fn batch_grad_scale(n_rays: usize) -> f32 {
-    2.0 / (3.0 * n_rays as f32)
-}
-
-/// The loss weights of a training pass over `n_rays` rays with the sparsity weight `sparsity`.
+/// The loss weights of a training pass over `n_rays` rays with the sparsity weight `sparsity`;
+/// `grad_scale` is dL/dC of the batch mean squared error over the rays and their 3 channels.
 pub fn batch_loss(n_rays: usize, sparsity: f32) -> LossWeights {
     LossWeights {
-        grad_scale: batch_grad_scale(n_rays),
+        grad_scale: 2.0 / (3.0 * n_rays as f32),
         sparsity,
     }
 }

@@ -229,8 +229,8 @@ pub fn plenoxels_levels_trimmed(
 }
 
 /// Extract and evaluate the stage-1 run `s1` at each level (into its run directory; with the
-/// hidden cells trimmed and thin sheets centred into `trimmed_into` when given): the grid read once, the ground truth
-/// read once. Failures are kept in their rows.
+/// hidden cells trimmed and thin sheets centred into `trimmed_into` when given): the grid read
+/// once, the ground truth read once. Failures are kept in their rows.
 fn level_sweep(
     steps: &Steps,
     s1: &TrainedRun,
