@@ -110,6 +110,37 @@ impl SparseArrays for Grid {
     }
 }
 
+/// Which vertices a new stage-1 grid allocates.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum InitialFill {
+    /// Those inside the box's inscribed sphere (svox2's initialisation, for a box with a margin
+    /// around the object).
+    Sphere,
+    /// Every vertex: a box fitted to the object (a capture's foreground box) has its object's
+    /// corners (a plinth's rim) and what the object stands on in its corners, outside the
+    /// inscribed sphere (docs/results.md).
+    Box,
+}
+
+impl InitialFill {
+    /// The allocated region's radius relative to the box's half-size (√3 takes every vertex:
+    /// they lie inside the box).
+    pub fn radius(self) -> f32 {
+        match self {
+            InitialFill::Sphere => 1.0,
+            InitialFill::Box => 3f32.sqrt(),
+        }
+    }
+
+    /// The share of the grid's vertices allocated (of a fine grid).
+    pub fn share(self) -> f64 {
+        match self {
+            InitialFill::Sphere => std::f64::consts::FRAC_PI_6,
+            InitialFill::Box => 1.0,
+        }
+    }
+}
+
 impl Grid {
     /// Total number of vertex slots in `links`.
     pub fn slots(&self) -> usize {
@@ -143,6 +174,18 @@ impl Grid {
         std::array::from_fn(|i| {
             ((g[i] + 0.5) / self.res[i] as f32 - 0.5) * 2.0 * self.radius[i] + self.center[i]
         })
+    }
+
+    /// A new stage-1 grid of `res`³ vertices over the box (center, radius), allocated as `fill`
+    /// says with σ = `sigma` and SH = 0.
+    pub fn initial(
+        res: u32,
+        center: [f32; 3],
+        radius: [f32; 3],
+        fill: InitialFill,
+        sigma: f32,
+    ) -> Grid {
+        Grid::sphere(res, center, radius, fill.radius(), sigma)
     }
 
     /// A grid of `res`³ vertices over the box (center, radius) with every vertex whose scene
@@ -262,6 +305,21 @@ impl Grid {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `InitialFill::Box` allocates every vertex, `Sphere` those inside the inscribed sphere
+    /// (π/6 of a fine grid): the shares the memory estimate takes.
+    #[test]
+    fn initial_fill_allocates_the_box_or_its_inscribed_sphere() {
+        for (fill, res) in [(InitialFill::Box, 24), (InitialFill::Sphere, 48)] {
+            let g = Grid::initial(res, [0.5, -1.0, 2.0], [3.0; 3], fill, 0.1);
+            let share = g.density.len() as f64 / (res as f64).powi(3);
+            assert!(
+                (share - fill.share()).abs() < 0.01,
+                "{fill:?}: share {share}"
+            );
+            assert!(g.density.iter().all(|&s| s == 0.1) && g.sh.iter().all(|&c| c == 0.0));
+        }
+    }
 
     #[test]
     fn a_training_grid_is_its_links_and_three_floats_per_parameter() {

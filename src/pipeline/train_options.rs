@@ -228,10 +228,11 @@ impl TrainOptions {
         Ok(cfg)
     }
 
-    /// Refuse a new stage-1 run whose grids or batch cannot fit in the memory this process may
-    /// use, naming the flag that sized them.
-    pub fn check_plenoxels_memory(&self, cfg: &PlenoxelsConfig) -> Result<()> {
-        let (grid_bytes, grid_res) = cfg.peak_grid_bytes();
+    /// Refuse a new stage-1 run whose grids (the first with a `share` of its vertices
+    /// allocated) or batch cannot fit in the memory this process may use, naming the flag that
+    /// sized them.
+    pub fn check_plenoxels_memory(&self, cfg: &PlenoxelsConfig, share: f64) -> Result<()> {
+        let (grid_bytes, grid_res) = cfg.peak_grid_bytes(share);
         let res_flag = self.res.map(|r| format!("--res {r}"));
         crate::run::memory::ensure_fits(
             &format!(
@@ -533,7 +534,7 @@ mod tests {
         }
         let huge = opts(&["batch=4000000000"]);
         let cfg = huge.plenoxels_config().unwrap();
-        let e = format!("{:#}", huge.check_plenoxels_memory(&cfg).unwrap_err());
+        let e = format!("{:#}", huge.check_plenoxels_memory(&cfg, 1.0).unwrap_err());
         assert!(
             e.contains("--plenoxels-set batch=4000000000") && e.contains("memory"),
             "{e}"

@@ -4,8 +4,9 @@
 use super::metrics::{PlenoxelsFigures, PlenoxelsMetrics, PlenoxelsSeconds, SamplesPerRay};
 use super::train_options::TrainOptions;
 use super::train_run::{claim, refuse_clashes, resume, run_info, Loaded, Trained, Trainer};
+use crate::data::{Aabb, Dataset};
 use crate::gpu::Gpu;
-use crate::grid::Grid;
+use crate::grid::{Grid, InitialFill};
 use crate::plenoxel::{CpuPlenoxels, PlenoxelsBackend, PlenoxelsStage, VulkanPlenoxels};
 use crate::run::RunStage;
 use crate::train::{plenoxels_steps, PlenoxelsConfig};
@@ -20,11 +21,34 @@ pub fn make_backend(gpu: Option<&Gpu>, grid: Grid) -> Result<Box<dyn PlenoxelsBa
     })
 }
 
-/// The configuration of a new stage-1 run, refused when its grid does not fit in memory.
-fn fresh_config(opts: &TrainOptions) -> Result<PlenoxelsConfig> {
+/// The configuration of a new stage-1 run, refused when its grid (starting as `fill` says)
+/// does not fit in memory.
+fn fresh_config(opts: &TrainOptions, fill: InitialFill) -> Result<PlenoxelsConfig> {
     let cfg = opts.plenoxels_config()?;
-    opts.check_plenoxels_memory(&cfg)?;
+    opts.check_plenoxels_memory(&cfg, fill.share())?;
     Ok(cfg)
+}
+
+/// What a new grid on `data` allocates: the whole box when it is the cube fitted to the
+/// object's bounds the layout found (a capture's foreground box, not `--box`; not NDC), else
+/// the inscribed sphere.
+pub fn initial_fill(data: &Dataset) -> InitialFill {
+    let fitted = data.foreground.as_ref().is_some_and(|f| {
+        let (cube, grid) = (
+            Aabb::of_scene(&f.bounds.scene_box()),
+            Aabb::of_scene(&data.scene),
+        );
+        let off = (cube.lo() - grid.lo())
+            .abs()
+            .max((cube.hi() - grid.hi()).abs());
+        data.scene.ndc.is_none()
+            && off.max_element() <= 1e-4 * (grid.hi() - grid.lo()).max_element()
+    });
+    if fitted {
+        InitialFill::Box
+    } else {
+        InitialFill::Sphere
+    }
 }
 
 /// Train stage 1 into `opts.out` on `gpu` (`None`: the CPU twins).
@@ -35,15 +59,18 @@ pub fn train_plenoxels(
 ) -> Result<Trained<PlenoxelsMetrics>> {
     let timing = (data.seconds, Instant::now());
     // A new run's flags are checked before its folder is claimed.
-    let fresh_cfg = (!opts.resume).then(|| fresh_config(opts)).transpose()?;
+    let fill = initial_fill(&data.data);
+    let fresh_cfg = (!opts.resume)
+        .then(|| fresh_config(opts, fill))
+        .transpose()?;
     let mut run = claim(opts, RunStage::Plenoxels, &[&opts.data], &data.data)?;
     let data = &data.data;
     let (mut backend, cfg, start) = if let Some(cfg) = fresh_cfg {
-        let grid = Grid::sphere(
+        let grid = Grid::initial(
             cfg.res,
             data.scene.centre.to_array(),
             [data.scene.radius; 3],
-            1.0,
+            fill,
             cfg.init_sigma,
         );
         (make_backend(gpu, grid)?, cfg, 0)

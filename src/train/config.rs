@@ -53,7 +53,7 @@ pub struct PlenoxelsConfig {
     /// training rays (its `lambda_sparsity`; 0: none, as in configurations saved before it).
     #[serde(default)]
     pub sparsity: f32,
-    /// σ of the initial sphere-bounded grid.
+    /// σ of the initial grid's vertices (`grid::InitialFill`).
     pub init_sigma: f32,
     /// Early ray termination: stop when transmittance falls below this.
     pub stop_thresh: f32,
@@ -266,13 +266,13 @@ impl PlenoxelsConfig {
         Ok(())
     }
 
-    /// The most memory the schedule's grids take while training: the starting sphere-bounded
-    /// grid's rows and state, or an upsampled grid's dense links (its kept rows are checked when
-    /// it is made); and the resolution that needs it.
-    pub fn peak_grid_bytes(&self) -> (f64, u32) {
+    /// The most memory the schedule's grids take while training: the starting grid's rows (a
+    /// `share` of its vertices allocated: `grid::InitialFill::share`) and state, or an
+    /// upsampled grid's dense links (its kept rows are checked when it is made); and the
+    /// resolution that needs it.
+    pub fn peak_grid_bytes(&self, share: f64) -> (f64, u32) {
         let start = self.res as f64;
-        // The vertices inside the inscribed sphere: π/6 of the grid.
-        let rows = std::f64::consts::FRAC_PI_6 * start * start * start;
+        let rows = share * start * start * start;
         let first = (
             crate::grid::Grid::training_bytes([self.res; 3], rows as usize),
             self.res,

@@ -7,7 +7,10 @@ use alphasurf::abi::rays::key_pixel;
 use alphasurf::cpu::sample_rays::sample_rays;
 use alphasurf::data::inspect::inspect;
 use alphasurf::data::ndc::Space;
+use alphasurf::data::Aabb;
 use alphasurf::data::{BackgroundMode, Dataset, LoadOptions, SplitRule, TrainViews};
+use alphasurf::grid::InitialFill;
+use alphasurf::pipeline::train_plenoxels::initial_fill;
 use glam::Vec3;
 
 /// The object's box from the fixture's `scene.json` (`bbox_min`, `bbox_max`).
@@ -54,7 +57,31 @@ fn capture_foreground_box_bounds_the_object() {
         assert_eq!(ds.split_rule, SplitRule::EveryNth(8));
         let n = ds.train.frames.len() + ds.test.frames.len();
         assert_eq!(ds.test.frames.len(), n.div_ceil(8), "{name}");
+        object_is_allocated(&ds, (lo, hi));
     }
+}
+
+/// A new stage-1 grid on a capture in its foreground box allocates the whole box: the corners of
+/// the birdcage's plinth (its rim on the floor) lie outside the grid's inscribed sphere. In NDC,
+/// and in a box given with `--box`, the inscribed sphere.
+fn object_is_allocated(ds: &Dataset, (lo, hi): (Vec3, Vec3)) {
+    let scene = &ds.scene;
+    if scene.ndc.is_some() {
+        assert_eq!(initial_fill(ds), InitialFill::Sphere);
+        return;
+    }
+    assert_eq!(initial_fill(ds), InitialFill::Box);
+    let rim = scene.to_scaled(Vec3::new(hi.x, 0.5 * (lo.y + hi.y), lo.z));
+    assert!((rim - scene.centre).length() > scene.radius * InitialFill::Sphere.radius());
+    let given = Dataset::load(
+        &ds.root,
+        &LoadOptions {
+            scene: Some(Aabb::new(lo - 0.5, hi + 0.5).scene_box()),
+            ..LoadOptions::default()
+        },
+    )
+    .unwrap();
+    assert_eq!(initial_fill(&given), InitialFill::Sphere);
 }
 
 /// The LLFF layout of the same capture (`poses_bounds.npy` beside `images/`, no COLMAP model)
