@@ -84,6 +84,14 @@ pub struct Dataset {
 }
 
 impl Dataset {
+    /// Whether the grid's box is the cube fitted to the foreground box the layout found (not a
+    /// box given with `--box`, not NDC).
+    pub fn in_foreground_box(&self) -> bool {
+        self.foreground
+            .as_ref()
+            .is_some_and(|f| self.scene == f.bounds.scene_box())
+    }
+
     /// The validation split (the test split when there is none).
     pub fn val(&self) -> &Split {
         self.val_split.as_ref().unwrap_or(&self.test)

@@ -46,6 +46,9 @@ pub struct Inspection {
     pub split_rule: SplitRule,
     /// The foreground box found from the cameras, and how (captures without masks).
     pub foreground: Option<ForegroundBox>,
+    /// Whether the grid's box is the cube fitted to that foreground box (stage 1 then starts
+    /// with every vertex of it allocated: `pipeline::train_plenoxels::initial_fill`).
+    pub in_foreground_box: bool,
     /// Which space the grid lies in and why (`Dataset::space`).
     pub space: String,
     /// The background training composites on (`--background auto` resolved for the data).
@@ -82,11 +85,9 @@ fn cropped_by_downscale(s: &Split) -> Option<String> {
 /// density inside the box can then hold the floor and walls its views see (measured on
 /// `capture_birdcage`, docs/results.md).
 fn room_advice(ds: &Dataset) -> Option<String> {
-    let fg = ds.foreground.as_ref()?;
-    let room = fg.room?;
-    let in_foreground = ds.scene == fg.bounds.scene_box();
+    let room = ds.foreground.as_ref()?.room?;
     let (lo, hi) = (room.lo(), room.hi());
-    (in_foreground && !ds.background.spheres()).then(|| {
+    (ds.in_foreground_box() && !ds.background.spheres()).then(|| {
         format!(
             "the grid is the foreground box on --background {}: the floor and walls these views \
              see can only be density inside the box (capture_birdcage at 128³: Chamfer ×10⁻² \
@@ -208,6 +209,7 @@ pub fn inspect(ds: &Dataset) -> Inspection {
         splits,
         split_rule: ds.split_rule.clone(),
         foreground: ds.foreground.clone(),
+        in_foreground_box: ds.in_foreground_box(),
         space: ds.space.clone(),
         background: ds.background,
         box_min,
@@ -384,6 +386,13 @@ impl std::fmt::Display for Inspection {
                 "foreground box (dataset units): {}\n  found from the cameras: {}",
                 fg.bounds, fg.how
             );
+            if self.in_foreground_box {
+                let _ = writeln!(
+                    s,
+                    "  the grid is the cube around it: stage 1 starts with all of it allocated \
+                     (the object's corners and what it stands on lie outside its inscribed sphere)"
+                );
+            }
         }
         match self.object_bounds {
             Some((lo, hi)) => {

@@ -4,7 +4,7 @@
 use super::metrics::{PlenoxelsFigures, PlenoxelsMetrics, PlenoxelsSeconds, SamplesPerRay};
 use super::train_options::TrainOptions;
 use super::train_run::{claim, refuse_clashes, resume, run_info, Loaded, Trained, Trainer};
-use crate::data::{Aabb, Dataset};
+use crate::data::Dataset;
 use crate::gpu::Gpu;
 use crate::grid::{Grid, InitialFill};
 use crate::plenoxel::{CpuPlenoxels, PlenoxelsBackend, PlenoxelsStage, VulkanPlenoxels};
@@ -33,18 +33,7 @@ fn fresh_config(opts: &TrainOptions, fill: InitialFill) -> Result<PlenoxelsConfi
 /// object's bounds the layout found (a capture's foreground box, not `--box`; not NDC), else
 /// the inscribed sphere.
 pub fn initial_fill(data: &Dataset) -> InitialFill {
-    let fitted = data.foreground.as_ref().is_some_and(|f| {
-        let (cube, grid) = (
-            Aabb::of_scene(&f.bounds.scene_box()),
-            Aabb::of_scene(&data.scene),
-        );
-        let off = (cube.lo() - grid.lo())
-            .abs()
-            .max((cube.hi() - grid.hi()).abs());
-        data.scene.ndc.is_none()
-            && off.max_element() <= 1e-4 * (grid.hi() - grid.lo()).max_element()
-    });
-    if fitted {
+    if data.in_foreground_box() {
         InitialFill::Box
     } else {
         InitialFill::Sphere
