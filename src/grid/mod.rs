@@ -176,18 +176,6 @@ impl Grid {
         })
     }
 
-    /// A new stage-1 grid of `res`³ vertices over the box (center, radius), allocated as `fill`
-    /// says with σ = `sigma` and SH = 0.
-    pub fn initial(
-        res: u32,
-        center: [f32; 3],
-        radius: [f32; 3],
-        fill: InitialFill,
-        sigma: f32,
-    ) -> Grid {
-        Grid::sphere(res, center, radius, fill.radius(), sigma)
-    }
-
     /// A grid of `res`³ vertices over the box (center, radius) with every vertex whose scene
     /// position lies inside the sphere of `sphere_radius` (relative to the box's half-extent)
     /// allocated with σ = `sigma` and SH = 0, as in svox2's sphere-bounded initialisation.
@@ -311,7 +299,7 @@ mod tests {
     #[test]
     fn initial_fill_allocates_the_box_or_its_inscribed_sphere() {
         for (fill, res) in [(InitialFill::Box, 24), (InitialFill::Sphere, 48)] {
-            let g = Grid::initial(res, [0.5, -1.0, 2.0], [3.0; 3], fill, 0.1);
+            let g = Grid::sphere(res, [0.5, -1.0, 2.0], [3.0; 3], fill.radius(), 0.1);
             let share = g.density.len() as f64 / (res as f64).powi(3);
             assert!(
                 (share - fill.share()).abs() < 0.01,

@@ -55,11 +55,11 @@ pub fn train_plenoxels(
     let mut run = claim(opts, RunStage::Plenoxels, &[&opts.data], &data.data)?;
     let data = &data.data;
     let (mut backend, cfg, start) = if let Some(cfg) = fresh_cfg {
-        let grid = Grid::initial(
+        let grid = Grid::sphere(
             cfg.res,
             data.scene.centre.to_array(),
             [data.scene.radius; 3],
-            fill,
+            fill.radius(),
             cfg.init_sigma,
         );
         (make_backend(gpu, grid)?, cfg, 0)
