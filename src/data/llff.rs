@@ -108,11 +108,14 @@ pub fn posed(root: &Path, k: u32) -> Result<Posed, DataError> {
         });
         depths.push((near, far));
     }
+    // At least one row, each with 0 < near < far (checked above): both are finite.
+    let near = depths.iter().map(|d| d.0).fold(f64::INFINITY, f64::min) as f32;
+    let far = depths.iter().map(|d| d.1).fold(0.0, f64::max) as f32;
     let cameras: Vec<Camera> = views.iter().map(|v| v.camera).collect();
     let foreground = foreground::find(&cameras, &[]);
     let scene = match &foreground {
         Some(fg) => fg.bounds.scene_box(),
-        None => depth_box(&cameras, &depths).scene_box(),
+        None => depth_box(&cameras, near, far).scene_box(),
     };
     Ok(Posed {
         views,
@@ -120,18 +123,12 @@ pub fn posed(root: &Path, k: u32) -> Result<Posed, DataError> {
         source: path,
         scene,
         foreground,
-        nearest: nearest_bound(&depths),
+        nearest: Some(near),
     })
 }
 
-/// The smallest near bound (each is positive: `posed` checks them).
-fn nearest_bound(depths: &[(f64, f64)]) -> Option<f32> {
-    let near = depths.iter().map(|d| d.0).fold(f64::INFINITY, f64::min);
-    near.is_finite().then_some(near as f32)
-}
-
-/// The cube from the nearest near depth to the farthest far depth along the mean camera's axis.
-fn depth_box(cameras: &[Camera], depths: &[(f64, f64)]) -> Aabb {
+/// The cube from depth `near` to depth `far` along the mean camera's axis.
+fn depth_box(cameras: &[Camera], near: f32, far: f32) -> Aabb {
     let n = cameras.len() as f32;
     let centre = cameras.iter().map(|c| c.centre()).sum::<Vec3>() / n;
     let axis = cameras
@@ -139,8 +136,6 @@ fn depth_box(cameras: &[Camera], depths: &[(f64, f64)]) -> Aabb {
         .map(|c| c.forward())
         .sum::<Vec3>()
         .normalize_or_zero();
-    let near = depths.iter().map(|d| d.0).fold(f64::INFINITY, f64::min) as f32;
-    let far = depths.iter().map(|d| d.1).fold(0.0, f64::max) as f32;
     let mid = centre + axis * 0.5 * (near + far);
     let half = Vec3::splat(0.5 * (far - near).max(1e-3));
     Aabb::new(mid - half, mid + half)
